@@ -1,0 +1,222 @@
+"""``ipe``: the intuitive physics engine on the command line (no ROS needed).
+
+    ipe predict PATH [--tower NAME ...] [--query fall,direction,far,bump] [--samples K] [--sigma M]
+                [--phi A[,A...]] [--force-direction DEG] [--mu R] [--preset NAME] [--seed N]
+                [--workers W] [--json]
+    ipe generate tower --count N --seed S -o FILE [--pairs RATIO]
+    ipe generate table --configurations N --seed S -o FILE
+    ipe demo
+
+Bad input ends with exit status 2 and one line on stderr naming the problem.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from .engine import (ALL_QUERIES, PRESETS, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError,
+                     WorkerPool, load_scenes, parse_queries, predict, preset)
+from .engine.generators import generate_tables, generate_towers, state_pair
+from .engine.scene_io import write_scenes
+
+EXIT_BAD_INPUT = 2
+
+
+class _OneLineParser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # argparse prints usage + message; we want one line
+        self.exit(EXIT_BAD_INPUT, f"ipe: error: {message}\n")
+
+
+def example_scene_path() -> Path:
+    """The packaged example tower (a generated paper-style tower, 10 blocks)."""
+    return Path(str(resources.files("ipe_ros") / "data" / "example_tower.json"))
+
+
+def _float_list(text: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected numbers separated by commas, got {text!r}") from None
+    if not values or not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"expected finite numbers, got {text!r}")
+    return values
+
+
+def _finite(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _OneLineParser(prog="ipe", description="Intuitive physics engine (Battaglia et al. 2013).")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_OneLineParser)
+
+    p = sub.add_parser("predict", help="predict what will fall in a scene file (JSON or paper CSV)")
+    p.add_argument("path", help="a JSON scene file or a paper-format tower CSV")
+    p.add_argument("--tower", action="append", default=None, metavar="NAME",
+                   help="only this scene/tower (repeatable; default: all in the file)")
+    p.add_argument("--query", type=parse_queries, default=frozenset({"fall", "direction", "far"}),
+                   help=f"comma-separated queries from {','.join(ALL_QUERIES)} (default fall,direction,far)")
+    p.add_argument("--samples", type=int, default=48, help="Monte Carlo samples k (default 48, as the paper)")
+    p.add_argument("--sigma", type=_finite, default=0.04,
+                   help="position noise SD in metres (default 0.04 = 0.2 short sides of 0.2 m blocks)")
+    p.add_argument("--phi", type=_float_list, default=(0.0,),
+                   help="push as support acceleration in m/s^2; several comma-separated values are averaged")
+    p.add_argument("--force-direction", type=_finite, default=None, metavar="DEG",
+                   help="cued push direction in degrees (push drawn within +-45 deg); default: any direction")
+    p.add_argument("--mu", type=_finite, default=None, help="heavy/light density ratio (default: scene's own masses)")
+    p.add_argument("--preset", default="default", choices=sorted(PRESETS), help="simulation settings")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                   help="worker processes (default: CPU count; 0 runs in this process)")
+    p.add_argument("--ground-truth", action="store_true", help="sigma = phi = 0: one deterministic rollout")
+    p.add_argument("--json", action="store_true", help="one JSON object per scene per line")
+
+    g = sub.add_parser("generate", help="write generated scenes (JSON)")
+    gsub = g.add_subparsers(dest="kind", required=True, parser_class=_OneLineParser)
+    t = gsub.add_parser("tower", help="paper-style 10-block towers")
+    t.add_argument("--count", type=int, default=1)
+    t.add_argument("--blocks", type=int, default=10)
+    t.add_argument("--pairs", type=_finite, default=None, metavar="RATIO",
+                   help="also write a heavy/light state pair per tower with this mass ratio")
+    t.add_argument("--seed", type=int, required=True)
+    t.add_argument("-o", "--output", required=True)
+    tb = gsub.add_parser("table", help="Exp. 5 red/yellow block configurations x five tables")
+    tb.add_argument("--configurations", type=int, default=12)
+    tb.add_argument("--seed", type=int, required=True)
+    tb.add_argument("-o", "--output", required=True)
+
+    sub.add_parser("demo", help="predict on the built-in example tower (IPE and ground truth)")
+    return parser
+
+
+def _fmt(value, spec: str = ".3f", none: str = "-") -> str:
+    return none if value is None else format(value, spec)
+
+
+def format_table(predictions: list[Prediction]) -> str:
+    """A readable fixed-width table of predictions."""
+    header = (f"{'scene':<34} {'k':>4} {'P(fall)':>7} {'95% CI':>15} {'dir(deg)':>8} {'decisive':>8} "
+              f"{'far(m)':>7} {'fail':>4} {'wall(s)':>7}")
+    lines = [header, "-" * len(header)]
+    for p in predictions:
+        ci = "-" if p.fall_fraction_ci95 is None else f"[{p.fall_fraction_ci95[0]:.2f}, {p.fall_fraction_ci95[1]:.2f}]"
+        direction = None if p.direction_rad is None else math.degrees(p.direction_rad)
+        lines.append(f"{p.scene[:34]:<34} {p.samples:>4} {_fmt(p.fall_fraction):>7} {ci:>15} "
+                     f"{_fmt(direction, '.0f'):>8} {_fmt(p.direction_decisiveness, '.2f'):>8} "
+                     f"{_fmt(p.far_m, '.2f'):>7} {p.failed_samples:>4} {p.wall_s:>7.2f}")
+        if p.fell_off_fraction_by_group is not None:
+            groups = ", ".join(f"{g}: {v:.2f}" for g, v in p.fell_off_fraction_by_group.items())
+            lines.append(f"{'':<34} fell off by group: {groups}; {p.bump_group} share: {_fmt(p.bump_ratio, '.2f')}")
+        if p.failure_reasons:
+            lines.append(f"{'':<34} failures: {'; '.join(p.failure_reasons)}")
+    return "\n".join(lines)
+
+
+def prediction_json(prediction: Prediction) -> str:
+    return json.dumps(prediction.to_dict(), allow_nan=False, sort_keys=True)
+
+
+def _run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: int, workers: int, emit) -> None:
+    if workers < 0:
+        raise ConfigError("--workers", f"must be >= 0, got {workers}")
+    pool = WorkerPool(min(workers, max(1, model.samples))) if workers > 0 else None
+    try:
+        for scene in scenes:
+            emit(predict(scene, model, sim, query, seed=seed, map_fn=pool.map if pool else None))
+    finally:
+        if pool is not None:
+            pool.close()
+
+
+def cmd_predict(args) -> int:
+    scenes = load_scenes(args.path, towers=args.tower)
+    phi = (0.0,) if args.ground_truth else args.phi
+    sigma = 0.0 if args.ground_truth else args.sigma
+    model = ModelConfig(sigma_m=sigma, phi_m_s2=phi, mu=args.mu, samples=args.samples,
+                        force_direction_rad=None if args.force_direction is None else math.radians(args.force_direction))
+    query = QuerySpec(queries=args.query)
+    sim = preset(args.preset)
+    if args.seed < 0:
+        raise ConfigError("--seed", f"must be >= 0, got {args.seed}")
+    if args.json:
+        _run_predictions(scenes, model, sim, query, args.seed, args.workers,
+                         lambda p: print(prediction_json(p), flush=True))
+    else:
+        collected: list[Prediction] = []
+        print(f"sigma = {sigma:g} m, phi = {','.join(f'{v:g}' for v in phi)} m/s^2, mu = {args.mu}, "
+              f"k = {1 if model.is_deterministic else args.samples}, preset = {sim.name}, seed = {args.seed}")
+        _run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append)
+        print(format_table(collected))
+    return 0
+
+
+def cmd_generate(args) -> int:
+    if args.kind == "tower":
+        if args.count < 1:
+            raise ConfigError("--count", f"must be >= 1, got {args.count}")
+        scenes = generate_towers(args.seed, args.count, n_blocks=args.blocks)
+        if args.pairs is not None:
+            rng = np.random.default_rng(args.seed)
+            scenes = [s for scene in scenes for s in (scene, *state_pair(scene, rng, ratio=args.pairs))]
+    else:
+        if args.configurations < 1:
+            raise ConfigError("--configurations", f"must be >= 1, got {args.configurations}")
+        scenes = generate_tables(args.seed, args.configurations)
+    write_scenes(scenes, args.output)
+    print(f"wrote {len(scenes)} scene(s) to {args.output}", file=sys.stderr)
+    return 0
+
+
+def cmd_demo(_args) -> int:
+    scenes = load_scenes(example_scene_path())
+    workers = os.cpu_count() or 1
+    query = QuerySpec(queries=frozenset({"fall", "direction", "far"}))
+    print(f"Built-in example: {example_scene_path().name} ({len(scenes[0].boxes)} blocks of 0.2 x 0.6 x 0.2 m)\n")
+    for title, model in (("Ground truth (sigma = phi = 0, one deterministic rollout):", ModelConfig()),
+                         ("IPE (sigma = 0.04 m = 0.2 block short sides, phi = 0, k = 48):",
+                          ModelConfig(sigma_m=0.04, samples=48))):
+        rows: list[Prediction] = []
+        _run_predictions(scenes, model, preset("default"), query, 0, workers, rows.append)
+        print(title)
+        print(format_table(rows))
+        p = rows[0]
+        risky = sorted(p.object_fall_probability.items(), key=lambda kv: -kv[1])[:3]
+        print("most likely to fall: " + ", ".join(f"{n} ({v:.2f})" for n, v in risky) + "\n")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        if args.command == "predict":
+            return cmd_predict(args)
+        if args.command == "generate":
+            return cmd_generate(args)
+        return cmd_demo(args)
+    except (SceneError, ConfigError) as exc:
+        print(f"ipe: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except (OSError, ValueError) as exc:
+        print(f"ipe: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("ipe: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,146 @@
+"""A persistent pool of worker processes, each with its own pybullet client.
+
+Workers start with ``forkserver`` (default) or ``spawn``, never ``fork``: forking a process that
+runs rclpy or DDS threads has hung on shutdown. ``map`` keeps input order, so results never depend
+on the worker count or on scheduling. A worker that dies (crash, OOM kill, ``kill -9``) breaks the
+executor; the pool replaces it with a fresh one and runs the lost items once more, and items lost
+twice are answered by ``on_lost`` instead of being dropped.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+import threading
+from concurrent.futures import FIRST_EXCEPTION, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from typing import Callable, Iterable, Sequence, TypeVar
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+START_METHODS = ("forkserver", "spawn")
+
+
+def _init_worker() -> None:
+    # Ctrl-C goes to the whole process group: let the parent decide how to shut down.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    from . import physics
+    physics.client()
+
+
+def _worker_pid() -> int:
+    return os.getpid()
+
+
+class WorkerPool:
+    """``WorkerPool(workers).map(fn, items)``: an ordered, crash-tolerant parallel map."""
+
+    def __init__(self, workers: int, start_method: str = "forkserver"):
+        if not isinstance(workers, int) or workers < 1:
+            raise ValueError(f"workers: must be an integer >= 1, got {workers!r}")
+        if start_method not in START_METHODS:
+            raise ValueError(f"start_method: must be one of {', '.join(START_METHODS)}, got {start_method!r}")
+        self.workers = workers
+        self._context = multiprocessing.get_context(start_method)
+        if start_method == "forkserver":
+            # Import numpy and pybullet once in the fork server rather than in every worker.
+            self._context.set_forkserver_preload(["ipe_ros.engine.rollout"])
+        self._lock = threading.Lock()
+        self._executor: ProcessPoolExecutor | None = None
+        self.replacements = 0  # how many times dead workers forced a new executor
+        self._closed = False
+
+    # -- lifecycle -------------------------------------------------------------------------
+    def _get_executor(self) -> ProcessPoolExecutor:
+        with self._lock:
+            if self._closed:
+                raise RuntimeError("the worker pool is closed")
+            if self._executor is None:
+                self._executor = ProcessPoolExecutor(max_workers=self.workers, mp_context=self._context,
+                                                     initializer=_init_worker)
+            return self._executor
+
+    def _replace_executor(self, broken: ProcessPoolExecutor) -> None:
+        with self._lock:
+            if self._executor is broken:
+                broken.shutdown(wait=True, cancel_futures=True)
+                self._executor = None
+                self.replacements += 1
+
+    def warm(self) -> list[int]:
+        """Start every worker now (imports, pybullet client) and return their process ids."""
+        executor = self._get_executor()
+        futures = [executor.submit(_worker_pid) for _ in range(self.workers * 2)]
+        return sorted({f.result() for f in futures})
+
+    def worker_pids(self) -> list[int]:
+        """Process ids of the live workers (empty before the first use)."""
+        executor = self._executor
+        if executor is None:
+            return []
+        processes = getattr(executor, "_processes", None) or {}
+        return sorted(pid for pid, proc in processes.items() if proc.is_alive())
+
+    def close(self) -> None:
+        """Stop the workers and wait for them to exit; safe to call twice."""
+        with self._lock:
+            self._closed = True
+            executor, self._executor = self._executor, None
+        if executor is not None:
+            executor.shutdown(wait=True, cancel_futures=True)
+
+    def __enter__(self) -> "WorkerPool":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # -- work --------------------------------------------------------------------------------
+    def map(self, fn: Callable[[T], R], items: Iterable[T],
+            on_lost: Callable[[T, str], R] | None = None) -> list[R]:
+        """``[fn(x) for x in items]`` in parallel, in order.
+
+        Items whose worker died are retried once on a replaced pool; items lost a second time are
+        answered by ``on_lost(item, reason)``, or raise BrokenProcessPool when no ``on_lost`` is given.
+        """
+        items = list(items)
+        results: list[R | None] = [None] * len(items)
+        pending = list(range(len(items)))
+        for attempt in (1, 2):
+            if not pending:
+                break
+            executor = self._get_executor()
+            futures: dict[Future, int] = {}
+            try:
+                for i in pending:
+                    futures[executor.submit(fn, items[i])] = i
+            except BrokenProcessPool:
+                pass
+            wait(list(futures), return_when=FIRST_EXCEPTION)
+            wait(list(futures))
+            lost = [i for i in pending if i not in futures.values()]
+            for future, i in futures.items():
+                exc = future.exception()
+                if exc is None:
+                    results[i] = future.result()
+                elif isinstance(exc, BrokenProcessPool):
+                    lost.append(i)
+                else:
+                    raise exc
+            if lost:
+                self._replace_executor(executor)
+            pending = sorted(lost)
+        if pending:
+            reason = "a worker process died twice while running this item"
+            if on_lost is None:
+                raise BrokenProcessPool(reason)
+            for i in pending:
+                results[i] = on_lost(items[i], reason)
+        return results  # type: ignore[return-value]
+
+
+def serial_map(fn: Callable[[T], R], items: Sequence[T], on_lost=None) -> list[R]:
+    """The in-process map with the pool's signature (workers = 0)."""
+    return [fn(x) for x in items]

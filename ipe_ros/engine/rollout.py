@@ -1,0 +1,115 @@
+"""One Monte Carlo sample end to end: draw inputs, build, depenetrate, simulate, query.
+
+``run_sample`` is module-level and takes one picklable :class:`SampleTask`, so worker processes can
+run it. It never raises for physics trouble: a failed or diverged rollout comes back as an outcome
+with ``ok=False`` and the reason, and the sampler counts it.
+"""
+
+from __future__ import annotations
+
+import traceback
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import physics, queries
+from .config import ModelConfig, QuerySpec, SimSettings
+from .errors import PhysicsError
+from .perturb import draw_sample_inputs
+from .scene import Scene, Table
+
+
+@dataclass(frozen=True)
+class SampleTask:
+    """Everything one sample needs; ``seed`` is this sample's own child of SeedSequence(seed)."""
+
+    scene: Scene
+    model: ModelConfig
+    settings: SimSettings
+    query: QuerySpec
+    index: int
+    seed: np.random.SeedSequence
+    record_every: int = 0  # record a trajectory every N steps (0: none; only rerun logging asks)
+
+
+@dataclass(frozen=True)
+class RolloutResult:
+    """One simulated push magnitude of one sample. Arrays follow ``scene.dynamic_boxes``.
+
+    Query fields are None when that query was not asked.
+    """
+
+    phi_m_s2: float
+    final_positions_m: np.ndarray
+    final_orientations_xyzw: np.ndarray
+    fallen: np.ndarray | None
+    direction_rad: float | None
+    far_m: float | None
+    fell_off: np.ndarray | None
+    bump_ratio: float | None
+    trajectory: list | None = None
+
+
+@dataclass(frozen=True)
+class SampleOutcome:
+    """The result of one sample: its initial (noisy, separated) state and one result per phi value."""
+
+    index: int
+    ok: bool
+    error: str | None
+    push_direction_rad: float
+    initial_positions_m: np.ndarray | None
+    initial_orientations_xyzw: np.ndarray | None
+    rollouts: tuple[RolloutResult, ...] = ()
+
+
+def _query(task: SampleTask, initial: np.ndarray, final: np.ndarray, final_orn: np.ndarray,
+           phi: float, trajectory: list | None) -> RolloutResult:
+    scene, spec = task.scene, task.query
+    boxes = scene.dynamic_boxes
+    fallen = direction = far = fell_off = ratio = None
+    needs_fallen = spec.wants("fall") or spec.wants("direction") or spec.wants("far")
+    if needs_fallen:
+        min_extents = np.array([min(b.extents_m) for b in boxes])
+        fallen = queries.fallen_mask(initial, final, min_extents, spec.fall_threshold_fraction)
+    if spec.wants("direction"):
+        direction = queries.fall_direction_rad(initial, final, fallen)
+    if spec.wants("far"):
+        far = queries.far_m(final, fallen, queries.tower_base_xy_m(scene))
+    if spec.wants("bump") and isinstance(scene.support, Table):
+        fell_off = queries.fell_off_mask(final, scene.support.top_height_m)
+        ratio = queries.bump_ratio(fell_off, tuple(b.group for b in boxes), spec.bump_group)
+    return RolloutResult(phi_m_s2=phi, final_positions_m=final, final_orientations_xyzw=final_orn,
+                         fallen=fallen,
+                         direction_rad=direction, far_m=far, fell_off=fell_off, bump_ratio=ratio,
+                         trajectory=trajectory)
+
+
+def run_sample(task: SampleTask) -> SampleOutcome:
+    """Draw, separate and simulate one sample for every phi value; never raises for physics errors."""
+    rng = np.random.default_rng(task.seed)
+    inputs = draw_sample_inputs(task.scene, task.model, rng)
+    try:
+        world = physics.build_world(task.scene, inputs.positions_m, inputs.masses_kg, task.settings)
+        physics.depenetrate(world, task.settings)
+        initial, initial_orn = physics.read_poses(world)
+        results = []
+        for i, phi in enumerate(task.model.phi_m_s2):
+            if i > 0:  # a fresh world per magnitude, from the same separated initial state
+                world = physics.build_world(task.scene, initial, inputs.masses_kg, task.settings)
+            final, final_orn, trajectory = physics.simulate(
+                world, task.scene, task.settings, phi, inputs.push_direction_rad,
+                task.model.push_duration_s, record_every=task.record_every)
+            results.append(_query(task, initial, final, final_orn, phi, trajectory))
+    except PhysicsError as exc:
+        return SampleOutcome(index=task.index, ok=False, error=f"PhysicsError: {exc}",
+                             push_direction_rad=inputs.push_direction_rad, initial_positions_m=None,
+                             initial_orientations_xyzw=None)
+    except Exception as exc:  # noqa: BLE001 - one sample's bug must not end the prediction
+        detail = traceback.format_exception_only(type(exc), exc)[-1].strip()
+        return SampleOutcome(index=task.index, ok=False, error=detail,
+                             push_direction_rad=inputs.push_direction_rad, initial_positions_m=None,
+                             initial_orientations_xyzw=None)
+    return SampleOutcome(index=task.index, ok=True, error=None, push_direction_rad=inputs.push_direction_rad,
+                         initial_positions_m=initial, initial_orientations_xyzw=initial_orn,
+                         rollouts=tuple(results))

@@ -1,0 +1,317 @@
+"""Reading and writing scenes: the engine's JSON format and the paper's tower CSV.
+
+JSON scene format (``"format": "ipe_ros.scene/1"``), all units SI, z up::
+
+    {
+      "format": "ipe_ros.scene/1",
+      "name": "two_blocks",
+      "gravity_m_s2": [0.0, 0.0, -9.81],
+      "support": {"type": "floor", "height_m": 0.0, "friction": 0.9, "restitution": 0.0},
+      "boxes": [
+        {"name": "a", "extents_m": [0.2, 0.6, 0.2], "position_m": [0.0, 0.0, 0.1],
+         "orientation_xyzw": [0.0, 0.0, 0.0, 1.0], "mass_kg": 4.08,
+         "friction": 0.9, "restitution": 0.0, "group": "light", "static": false}
+      ]
+    }
+
+A table support is ``{"type": "table", "top_height_m", "size_m": [x, y], "center_xy_m": [x, y],
+"thickness_m", "friction", "restitution", "floor_z_m" (number or null), "obstacles": [box, ...]}``.
+A box gives exactly one of ``mass_kg`` / ``density_kg_m3``; ``group`` (default "") and ``static``
+(default false) are the only optional fields. Every other field is required, and unknown fields are
+rejected: nothing is guessed. A file may hold one scene object or a list of them.
+
+Round trip: ``scene_from_dict(scene_to_dict(s)) == s`` exactly (floats are written with ``repr``
+precision by the json module).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections import OrderedDict
+from pathlib import Path
+from typing import Any, Iterable
+
+from .errors import SceneError
+from .scene import DEFAULT_MAX_OBJECTS, Box, Floor, Scene, Table, validate_scene
+
+SCENE_FORMAT = "ipe_ros.scene/1"
+
+_BOX_REQUIRED = ("name", "extents_m", "position_m", "orientation_xyzw", "friction", "restitution")
+_BOX_OPTIONAL = ("mass_kg", "density_kg_m3", "group", "static")
+_FLOOR_FIELDS = ("type", "height_m", "friction", "restitution")
+_TABLE_FIELDS = ("type", "top_height_m", "size_m", "center_xy_m", "thickness_m", "friction",
+                 "restitution", "floor_z_m", "obstacles")
+_SCENE_REQUIRED = ("name", "gravity_m_s2", "support", "boxes")
+
+
+# --------------------------------------------------------------------------------------------
+# to JSON
+
+def box_to_dict(box: Box) -> dict[str, Any]:
+    out: dict[str, Any] = {
+        "name": box.name,
+        "extents_m": list(box.extents_m),
+        "position_m": list(box.position_m),
+        "orientation_xyzw": list(box.orientation_xyzw),
+    }
+    if box.mass_kg is not None:
+        out["mass_kg"] = box.mass_kg
+    if box.density_kg_m3 is not None:
+        out["density_kg_m3"] = box.density_kg_m3
+    out.update(friction=box.friction, restitution=box.restitution, group=box.group, static=box.static)
+    return out
+
+
+def scene_to_dict(scene: Scene) -> dict[str, Any]:
+    support = scene.support
+    if isinstance(support, Floor):
+        sup: dict[str, Any] = {"type": "floor", "height_m": support.height_m,
+                               "friction": support.friction, "restitution": support.restitution}
+    else:
+        sup = {"type": "table", "top_height_m": support.top_height_m, "size_m": list(support.size_m),
+               "center_xy_m": list(support.center_xy_m), "thickness_m": support.thickness_m,
+               "friction": support.friction, "restitution": support.restitution,
+               "floor_z_m": support.floor_z_m,
+               "obstacles": [box_to_dict(b) for b in support.obstacles]}
+    return {"format": SCENE_FORMAT, "name": scene.name, "gravity_m_s2": list(scene.gravity_m_s2),
+            "support": sup, "boxes": [box_to_dict(b) for b in scene.boxes]}
+
+
+def scene_to_json(scene: Scene, indent: int | None = None) -> str:
+    return json.dumps(scene_to_dict(scene), indent=indent, allow_nan=False)
+
+
+def write_scenes(scenes: list[Scene], path: str | Path) -> None:
+    """Write one scene as an object, several as a list, in the JSON format."""
+    payload: Any = scene_to_dict(scenes[0]) if len(scenes) == 1 else [scene_to_dict(s) for s in scenes]
+    Path(path).write_text(json.dumps(payload, indent=1, allow_nan=False) + "\n")
+
+
+# --------------------------------------------------------------------------------------------
+# from JSON
+
+def _require_mapping(data: Any, path: str) -> dict:
+    if not isinstance(data, dict):
+        raise SceneError(path or "scene", f"must be a JSON object, got {type(data).__name__}")
+    return data
+
+
+def _check_keys(data: dict, required: Iterable[str], optional: Iterable[str], path: str) -> None:
+    required, optional = tuple(required), tuple(optional)
+    unknown = sorted(set(data) - set(required) - set(optional))
+    if unknown:
+        where = f"{path}.{unknown[0]}" if path else unknown[0]
+        raise SceneError(where, f"unknown field; allowed fields are {', '.join(required + optional)}")
+    for key in required:
+        if key not in data:
+            raise SceneError(f"{path}.{key}" if path else key, "required field is missing")
+
+
+def _vec(value: Any, n: int, path: str) -> tuple[float, ...]:
+    if not isinstance(value, list) or len(value) != n or any(
+            isinstance(v, bool) or not isinstance(v, (int, float)) for v in value):
+        raise SceneError(path, f"must be a list of {n} numbers, got {value!r}")
+    return tuple(float(v) for v in value)
+
+
+def _num(value: Any, path: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SceneError(path, f"must be a number, got {value!r}")
+    return float(value)
+
+
+def box_from_dict(data: Any, path: str) -> Box:
+    data = _require_mapping(data, path)
+    _check_keys(data, _BOX_REQUIRED, _BOX_OPTIONAL, path)
+    name = data["name"]
+    if not isinstance(name, str):
+        raise SceneError(f"{path}.name", f"must be a string, got {name!r}")
+    mass = data.get("mass_kg")
+    density = data.get("density_kg_m3")
+    group = data.get("group", "")
+    static = data.get("static", False)
+    if not isinstance(group, str):
+        raise SceneError(f"{path}.group", f"must be a string, got {group!r}")
+    if not isinstance(static, bool):
+        raise SceneError(f"{path}.static", f"must be true or false, got {static!r}")
+    return Box(
+        name=name,
+        extents_m=_vec(data["extents_m"], 3, f"{path}.extents_m"),  # type: ignore[arg-type]
+        position_m=_vec(data["position_m"], 3, f"{path}.position_m"),  # type: ignore[arg-type]
+        orientation_xyzw=_vec(data["orientation_xyzw"], 4, f"{path}.orientation_xyzw"),  # type: ignore[arg-type]
+        friction=_num(data["friction"], f"{path}.friction"),
+        restitution=_num(data["restitution"], f"{path}.restitution"),
+        mass_kg=None if mass is None else _num(mass, f"{path}.mass_kg"),
+        density_kg_m3=None if density is None else _num(density, f"{path}.density_kg_m3"),
+        group=group,
+        static=static,
+    )
+
+
+def _support_from_dict(data: Any) -> Floor | Table:
+    data = _require_mapping(data, "support")
+    kind = data.get("type")
+    if kind == "floor":
+        _check_keys(data, _FLOOR_FIELDS, (), "support")
+        return Floor(friction=_num(data["friction"], "support.friction"),
+                     restitution=_num(data["restitution"], "support.restitution"),
+                     height_m=_num(data["height_m"], "support.height_m"))
+    if kind == "table":
+        _check_keys(data, _TABLE_FIELDS, (), "support")
+        obstacles = data["obstacles"]
+        if not isinstance(obstacles, list):
+            raise SceneError("support.obstacles", "must be a list of boxes (may be empty)")
+        floor = data["floor_z_m"]
+        return Table(
+            top_height_m=_num(data["top_height_m"], "support.top_height_m"),
+            size_m=_vec(data["size_m"], 2, "support.size_m"),  # type: ignore[arg-type]
+            center_xy_m=_vec(data["center_xy_m"], 2, "support.center_xy_m"),  # type: ignore[arg-type]
+            thickness_m=_num(data["thickness_m"], "support.thickness_m"),
+            friction=_num(data["friction"], "support.friction"),
+            restitution=_num(data["restitution"], "support.restitution"),
+            floor_z_m=None if floor is None else _num(floor, "support.floor_z_m"),
+            obstacles=tuple(box_from_dict(b, f"support.obstacles[{i}]") for i, b in enumerate(obstacles)),
+        )
+    raise SceneError("support.type", f"must be \"floor\" or \"table\", got {kind!r}")
+
+
+def scene_from_dict(data: Any, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scene:
+    """Build and validate a scene from parsed JSON; raises SceneError naming the bad field."""
+    data = _require_mapping(data, "")
+    _check_keys(data, _SCENE_REQUIRED, ("format",), "")
+    fmt = data.get("format", SCENE_FORMAT)
+    if fmt != SCENE_FORMAT:
+        raise SceneError("format", f"unsupported format {fmt!r}; this version reads {SCENE_FORMAT!r}")
+    boxes = data["boxes"]
+    if not isinstance(boxes, list):
+        raise SceneError("boxes", "must be a list of boxes")
+    # Count before parsing so that a 10 000-box message fails fast.
+    if len(boxes) > max_objects:
+        raise SceneError("boxes", f"{len(boxes)} objects exceed the maximum of {max_objects}; "
+                                  "split the scene or raise max_objects")
+    if not isinstance(data["name"], str):
+        raise SceneError("name", f"must be a string, got {data['name']!r}")
+    scene = Scene(
+        name=data["name"],
+        boxes=tuple(box_from_dict(b, f"boxes[{i}]") for i, b in enumerate(boxes)),
+        support=_support_from_dict(data["support"]),
+        gravity_m_s2=_vec(data["gravity_m_s2"], 3, "gravity_m_s2"),  # type: ignore[arg-type]
+    )
+    return validate_scene(scene, max_objects=max_objects)
+
+
+def _reject_constant(token: str) -> None:
+    raise SceneError("json", f"{token} is not a valid number; use finite numbers only")
+
+
+def scenes_from_json(text: str, max_objects: int = DEFAULT_MAX_OBJECTS) -> list[Scene]:
+    """Parse JSON text holding one scene object or a list of them."""
+    try:
+        data = json.loads(text, parse_constant=_reject_constant)
+    except json.JSONDecodeError as exc:
+        raise SceneError("json", f"malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
+    if isinstance(data, list):
+        if not data:
+            raise SceneError("json", "the list of scenes is empty")
+        scenes = []
+        for i, item in enumerate(data):
+            try:
+                scenes.append(scene_from_dict(item, max_objects))
+            except SceneError as exc:
+                raise SceneError(f"scenes[{i}].{exc.field}", exc.problem) from None
+        return scenes
+    return [scene_from_dict(data, max_objects)]
+
+
+# --------------------------------------------------------------------------------------------
+# the paper's tower CSV
+
+_CSV_COLUMNS = ("name", "object", "friction", "mass", "pos_x", "pos_y", "pos_z", "quat_w", "quat_x",
+                "quat_y", "quat_z", "restitution", "scale_x", "scale_y", "scale_z")
+#: The authors' gravity (their README: -9.8).
+PAPER_GRAVITY_M_S2 = (0.0, 0.0, -9.8)
+#: pybullet multiplies the friction of two touching bodies: a floor of 1.0 leaves each block's own
+#: coefficient (0.894) in force against the ground.
+PAPER_FLOOR_FRICTION = 1.0
+
+
+def scenes_from_tower_csv(path: str | Path, towers: Iterable[str] | None = None,
+                          max_objects: int = DEFAULT_MAX_OBJECTS) -> list[Scene]:
+    """Load the paper's tower stimuli (one row per block; see shared/data/battaglia2013/README.md).
+
+    Units are taken as metres and kilograms; blocks with ``blocktype`` 1 get group "heavy", the rest
+    "light". Rows are grouped by (name, ratio): where a file holds a tower at several mass ratios the
+    scene name gets a ``@ratio=R`` suffix. ``towers`` selects by base name or full scene name.
+    """
+    path = Path(path)
+    grouped: "OrderedDict[tuple[str, str], list[dict[str, str]]]" = OrderedDict()
+    with path.open(newline="") as handle:
+        reader = csv.DictReader(handle)
+        missing = [c for c in _CSV_COLUMNS if c not in (reader.fieldnames or [])]
+        if missing:
+            raise SceneError(f"{path.name}", f"not a tower CSV: missing columns {', '.join(missing)}")
+        for row in reader:
+            grouped.setdefault((row["name"], row.get("ratio") or "1"), []).append(row)
+    ratios_per_name: dict[str, int] = {}
+    for name, _ratio in grouped:
+        ratios_per_name[name] = ratios_per_name.get(name, 0) + 1
+
+    wanted = None if towers is None else set(towers)
+    scenes: list[Scene] = []
+    for (name, ratio), rows in grouped.items():
+        scene_name = name if ratios_per_name[name] == 1 else f"{name}@ratio={float(ratio):g}"
+        if wanted is not None and name not in wanted and scene_name not in wanted:
+            continue
+        boxes = []
+        for line, row in enumerate(rows):
+            where = f"{path.name}:{scene_name}:{row['object']}"
+            try:
+                values = {c: float(row[c]) for c in _CSV_COLUMNS[2:]}
+            except ValueError as exc:
+                raise SceneError(where, f"non-numeric value ({exc})") from None
+            blocktype = row.get("blocktype", "0") or "0"
+            boxes.append(Box(
+                name=row["object"],
+                extents_m=(values["scale_x"], values["scale_y"], values["scale_z"]),
+                position_m=(values["pos_x"], values["pos_y"], values["pos_z"]),
+                orientation_xyzw=(values["quat_x"], values["quat_y"], values["quat_z"], values["quat_w"]),
+                friction=values["friction"],
+                restitution=values["restitution"],
+                mass_kg=values["mass"],
+                group="heavy" if blocktype.strip() in ("1", "1.0") else "light",
+            ))
+        scene = Scene(name=scene_name, boxes=tuple(boxes),
+                      support=Floor(friction=PAPER_FLOOR_FRICTION, restitution=0.0),
+                      gravity_m_s2=PAPER_GRAVITY_M_S2)
+        try:
+            scenes.append(validate_scene(scene, max_objects=max_objects))
+        except SceneError as exc:
+            raise SceneError(f"{path.name}:{scene_name}:{exc.field}", exc.problem) from None
+    if wanted is not None:
+        found = {s.name for s in scenes} | {s.name.split("@", 1)[0] for s in scenes}
+        unknown = sorted(wanted - found)
+        if unknown:
+            raise SceneError("--tower", f"no tower named {unknown[0]!r} in {path.name}")
+    if not scenes:
+        raise SceneError(path.name, "the file holds no towers")
+    return scenes
+
+
+def load_scenes(path: str | Path, towers: Iterable[str] | None = None,
+                max_objects: int = DEFAULT_MAX_OBJECTS) -> list[Scene]:
+    """Load a JSON scene file or a paper-format tower CSV, by extension."""
+    path = Path(path)
+    if not path.exists():
+        raise SceneError(str(path), "no such file")
+    if path.suffix.lower() == ".csv":
+        return scenes_from_tower_csv(path, towers, max_objects)
+    scenes = scenes_from_json(path.read_text(), max_objects)
+    if towers is not None:
+        wanted = set(towers)
+        picked = [s for s in scenes if s.name in wanted]
+        missing = sorted(wanted - {s.name for s in picked})
+        if missing:
+            raise SceneError("--tower", f"no scene named {missing[0]!r} in {path.name}")
+        scenes = picked
+    return scenes

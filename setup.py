@@ -1,0 +1,32 @@
+"""ament_python package: builds with colcon in a ROS 2 Jazzy workspace and installs with pip."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "ipe_ros"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*", "msg_bridge", "msg_bridge.*"]),
+    package_data={PACKAGE: ["data/*.json"]},
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/examples", glob("ipe_ros/data/*.json")),
+    ],
+    python_requires=">=3.11",
+    install_requires=["setuptools", "numpy", "pybullet"],
+    zip_safe=True,
+    maintainer="ipe_ros maintainers",
+    maintainer_email="ipe-ros@example.com",
+    description="The intuitive physics engine (Battaglia et al. 2013) as a ROS 2 service",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "ipe = ipe_ros.cli:main",
+        ],
+    },
+)

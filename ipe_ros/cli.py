@@ -25,6 +25,7 @@ import numpy as np
 from .engine import (ALL_QUERIES, PRESETS, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError,
                      WorkerPool, load_scenes, parse_queries, predict, preset)
 from .engine.generators import generate_tables, generate_towers, state_pair
+from .engine.sampler import check_request
 from .engine.scene_io import write_scenes
 
 EXIT_BAD_INPUT = 2
@@ -152,6 +153,8 @@ def cmd_predict(args) -> int:
     sim = preset(args.preset)
     if args.seed < 0:
         raise ConfigError("--seed", f"must be >= 0, got {args.seed}")
+    for scene in scenes:  # reject what cannot be answered before printing anything
+        check_request(scene, query)
     if args.json:
         _run_predictions(scenes, model, sim, query, args.seed, args.workers,
                          lambda p: print(prediction_json(p), flush=True))
@@ -195,7 +198,10 @@ def cmd_demo(_args) -> int:
         print(format_table(rows))
         p = rows[0]
         risky = sorted(p.object_fall_probability.items(), key=lambda kv: -kv[1])[:3]
-        print("most likely to fall: " + ", ".join(f"{n} ({v:.2f})" for n, v in risky) + "\n")
+        if risky[0][1] > 0:
+            print("most likely to fall: " + ", ".join(f"{n} ({v:.2f})" for n, v in risky) + "\n")
+        else:
+            print("no block falls\n")
     return 0
 
 

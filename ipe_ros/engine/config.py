@@ -107,9 +107,10 @@ class SimSettings:
 PRESETS: dict[str, SimSettings] = {
     # The paper's settings: 1 ms steps for the full 2 s, a fully converged solver, no shortcuts.
     "paper": SimSettings(name="paper", time_step_s=0.001, horizon_s=2.0, solver_iterations=50),
-    # The default: same 1 ms steps and horizon with fewer solver iterations (about 2x cheaper,
-    # mean |delta fall fraction| ~0.015 against `paper` on the Exp. 1 towers).
-    "default": SimSettings(name="default", time_step_s=0.001, horizon_s=2.0, solver_iterations=10),
+    # The default: the same 1 ms steps and 2 s with 20 solver iterations: about 1.8x cheaper and the
+    # same stable/unstable verdict as `paper` on all 60 Exp. 1 towers (10 iterations toppled one
+    # delicately balanced tower that stands).
+    "default": SimSettings(name="default", time_step_s=0.001, horizon_s=2.0, solver_iterations=20),
 }
 
 

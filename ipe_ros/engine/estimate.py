@@ -30,7 +30,10 @@ def wilson_interval(p_hat: float, n: int, z: float = Z95) -> tuple[float, float]
     denom = 1 + z * z / n
     centre = (p_hat + z * z / (2 * n)) / denom
     half = z * math.sqrt(max(p_hat * (1 - p_hat) / n + z * z / (4 * n * n), 0.0)) / denom
-    return (max(0.0, centre - half), min(1.0, centre + half))
+    # at p_hat = 0 or 1 the matching bound is exact; avoid returning 1e-17 for it
+    lo = 0.0 if p_hat <= 0 else max(0.0, centre - half)
+    hi = 1.0 if p_hat >= 1 else min(1.0, centre + half)
+    return (lo, hi)
 
 
 def mean_interval(values: np.ndarray, z: float = Z95) -> tuple[float, float]:

@@ -31,25 +31,24 @@ class SampleInputs:
     push_direction_rad: float
 
 
+#: The model's own density for light boxes when it applies mu (paper: "the model then used its
+#: assumption about mu to set each block's individual mass density"). 170 kg/m^3 gives the stimuli's
+#: 4.08 kg per 0.2 x 0.6 x 0.2 m block; under gravity and a push given as an acceleration only the
+#: ratios of masses shape the motion, so the value matters for scale only.
+MODEL_LIGHT_DENSITY_KG_M3 = 170.0
+
+
 def dynamic_masses(scene: Scene, mu: float | None) -> np.ndarray:
     """Masses (kg) of the dynamic boxes under the model's heavy/light density ratio ``mu``.
 
-    With ``mu`` None the scene's own masses are kept. Otherwise every "heavy" box gets ``mu`` times
-    the density of the light boxes (their mean density); with no light box to compare against, the
-    scene's masses are kept, since a ratio needs two kinds of box.
+    With ``mu`` None the scene's own masses are kept. Otherwise the model ignores the scene's masses:
+    light boxes get MODEL_LIGHT_DENSITY_KG_M3 and "heavy" ones ``mu`` times that, so two scenes that
+    differ only in which boxes are heavy get exactly the same masses under mu = 1.
     """
     boxes = scene.dynamic_boxes
-    masses = np.array([b.resolved_mass_kg for b in boxes], dtype=float)
     if mu is None:
-        return masses
-    heavy = np.array([b.is_heavy for b in boxes])
-    if heavy.all() or not heavy.any():
-        return masses
-    volumes = np.array([b.volume_m3 for b in boxes])
-    light_density = float(np.mean(masses[~heavy] / volumes[~heavy]))
-    out = masses.copy()
-    out[heavy] = mu * light_density * volumes[heavy]
-    return out
+        return np.array([b.resolved_mass_kg for b in boxes], dtype=float)
+    return np.array([MODEL_LIGHT_DENSITY_KG_M3 * b.volume_m3 * (mu if b.is_heavy else 1.0) for b in boxes])
 
 
 def draw_push_direction(model: ModelConfig, rng: np.random.Generator) -> float:

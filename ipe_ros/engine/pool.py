@@ -70,10 +70,15 @@ class WorkerPool:
                 self.replacements += 1
 
     def warm(self) -> list[int]:
-        """Start every worker now (imports, pybullet client) and return their process ids."""
+        """Start every worker now (imports, pybullet client) and return their process ids.
+
+        Submitting ``workers`` items back to back makes the executor start ``workers`` processes
+        (it starts one per submission while none is idle), each running the initializer.
+        """
         executor = self._get_executor()
-        futures = [executor.submit(_worker_pid) for _ in range(self.workers * 2)]
-        return sorted({f.result() for f in futures})
+        for future in [executor.submit(_worker_pid) for _ in range(self.workers)]:
+            future.result()
+        return self.worker_pids()
 
     def worker_pids(self) -> list[int]:
         """Process ids of the live workers (empty before the first use)."""

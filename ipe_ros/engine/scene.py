@@ -187,7 +187,7 @@ def box_half_heights(extents_m: np.ndarray, orientations_xyzw: np.ndarray) -> np
 def _finite(values, path: str, what: str) -> None:
     arr = np.asarray(values, dtype=float)
     if not np.all(np.isfinite(arr)):
-        raise SceneError(path, f"{what} must be finite numbers, got {list(np.ravel(arr))}")
+        raise SceneError(path, f"{what} must be finite numbers, got {[float(v) for v in np.ravel(arr)]}")
 
 
 def _check_vector(values, n: int, path: str, what: str) -> None:
@@ -283,10 +283,10 @@ def validate_scene(scene: Scene, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scen
                                  f"must be at or below the table's underside "
                                  f"({support.top_height_m - support.thickness_m:g} m), got {support.floor_z_m!r}")
         for i, obstacle in enumerate(support.obstacles):
-            validate_box(obstacle, f"support.obstacles[{i}]")
-            if not obstacle.static:
+            if obstacle.static is not True:
                 raise SceneError(f"support.obstacles[{i}] ({obstacle.name!r}).static",
                                  "obstacles are attached to the table and must be static: true")
+            validate_box(obstacle, f"support.obstacles[{i}]")
     else:
         raise SceneError("support", f"must be a Floor or a Table, got {type(support).__name__}")
 

@@ -1,0 +1,68 @@
+"""The `ipe` command line: JSON lines, readable table, generators, one-line errors with exit 2."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from ipe_ros.cli import example_scene_path, main
+from ipe_ros.engine import load_scenes
+
+REQUIRED = {"scene", "samples", "fall_fraction", "fall_fraction_ci95", "object_fall_probability",
+            "direction_rad", "direction_decisiveness", "far_m", "failed_samples", "wall_s"}
+
+
+def run_cli(*args):
+    return subprocess.run([sys.executable, "-m", "ipe_ros.cli", *args], capture_output=True, text=True, timeout=300)
+
+
+def test_predict_json_lines_hold_the_documented_fields():
+    out = run_cli("predict", str(example_scene_path()), "--samples", "4", "--workers", "2", "--json")
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.strip().splitlines()
+    assert len(lines) == 1
+    record = json.loads(lines[0])
+    assert REQUIRED <= set(record)
+    assert record["scene"] == "example_tower" and record["samples"] == 4
+    assert out.stderr == ""
+
+
+def test_predict_table_and_ground_truth(capsys):
+    assert main(["predict", str(example_scene_path()), "--ground-truth", "--workers", "0"]) == 0
+    text = capsys.readouterr().out
+    assert "sigma = 0 m" in text and "example_tower" in text and "P(fall)" in text
+
+
+def test_generate_tower_and_table_write_loadable_scenes(tmp_path):
+    towers, tables = tmp_path / "towers.json", tmp_path / "tables.json"
+    assert main(["generate", "tower", "--count", "2", "--pairs", "10", "--seed", "5", "-o", str(towers)]) == 0
+    assert main(["generate", "table", "--configurations", "2", "--seed", "5", "-o", str(tables)]) == 0
+    assert len(load_scenes(towers)) == 6  # each tower and its two heavy/light masks
+    assert len(load_scenes(tables)) == 10  # 2 configurations x 5 tables
+
+
+@pytest.mark.parametrize("args, message", [
+    (["predict", "/nonexistent.json"], "ipe: error: /nonexistent.json: no such file"),
+    (["predict", "EXAMPLE", "--query", "fall,fly"], "ipe: error: argument --query: invalid parse_queries value: 'fall,fly'"),
+    (["predict", "EXAMPLE", "--samples", "0"], "ipe: error: samples: must be an integer in [1, 100000], got 0"),
+    (["predict", "EXAMPLE", "--sigma", "nan"], "ipe: error: argument --sigma: expected a finite number, got 'nan'"),
+    (["predict", "EXAMPLE", "--tower", "nope"], "ipe: error: --tower: no scene named 'nope' in example_tower.json"),
+    (["predict", "EXAMPLE", "--query", "bump"], "ipe: error: queries: the bump query needs a table support (it "
+                                                "counts boxes that fall off the table's edge); drop 'bump' or give "
+                                                "the scene a table"),
+])
+def test_bad_input_exits_2_with_one_line(args, message):
+    args = [str(example_scene_path()) if a == "EXAMPLE" else a for a in args]
+    out = run_cli(*args)
+    assert out.returncode == 2
+    assert out.stderr.strip() == message
+    assert out.stdout == ""
+
+
+def test_bad_json_file_is_one_line(tmp_path):
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"name": "x", "boxes": [], "support": {"type": "floor"}, "gravity_m_s2": [0, 0, -9.8]}))
+    out = run_cli("predict", str(bad))
+    assert out.returncode == 2
+    assert out.stderr.strip() == "ipe: error: support.height_m: required field is missing"

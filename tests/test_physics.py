@@ -1,0 +1,132 @@
+"""Basic physics: rest stays at rest, overhangs fall, noise separation injects no energy, pushes push."""
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
+from ipe_ros.engine import physics
+from ipe_ros.engine.generators import make_table
+from ipe_ros.engine.perturb import draw_sample_inputs
+from ipe_ros.engine.scene import Scene
+
+from .helpers import block, floor_scene
+
+ALL = QuerySpec(queries=frozenset({"fall", "direction", "far"}))
+
+
+@pytest.mark.parametrize("name", ["paper", "default"])
+def test_resting_box_stays_put_for_two_seconds(name):
+    scene = floor_scene(block("a", 0.3, -0.2, 0.1))
+    p = predict(scene, ModelConfig(), preset(name), ALL)
+    assert p.deterministic and p.samples == 1 and p.failed_samples == 0
+    rollout = p.outcomes[0].rollouts[0]
+    assert np.allclose(rollout.final_positions_m, [[0.3, -0.2, 0.1]], atol=1e-4)
+    assert p.fall_fraction == 0.0 and p.direction_rad is None and p.far_m == 0.0
+
+
+def test_block_overhanging_more_than_half_its_length_falls_towards_the_overhang():
+    # bottom block lies along y (0.6 long); the top block sticks out 0.35 m (> half of 0.6) towards +y
+    scene = floor_scene(block("base", 0, 0, 0.1), block("top", 0, 0.35, 0.3))
+    p = predict(scene, ModelConfig(), preset("default"), ALL)
+    assert p.object_fall_probability == {"base": 0.0, "top": 1.0}
+    assert p.direction_rad == pytest.approx(math.pi / 2, abs=0.3)
+    assert p.far_m > 0.3
+
+
+def test_block_overhanging_less_than_half_stays():
+    scene = floor_scene(block("base", 0, 0, 0.1), block("top", 0, 0.25, 0.3))
+    p = predict(scene, ModelConfig(), preset("default"), ALL)
+    assert p.fall_fraction == 0.0
+
+
+def test_deep_interpenetration_is_separated_without_injecting_energy():
+    # two boxes occupying nearly the same space: a naive simulation would launch them apart
+    scene = floor_scene(block("a", 0, 0, 0.1), block("b", 0.02, 0.01, 0.1))
+    settings = preset("default")
+    inputs = draw_sample_inputs(scene, ModelConfig(), np.random.default_rng(0))
+    world = physics.build_world(scene, inputs.positions_m, inputs.masses_kg, settings)
+    physics.depenetrate(world, settings)
+    positions, _ = physics.read_poses(world)
+    gap = abs(positions[0, 0] - positions[1, 0])
+    assert gap >= 0.2 - 1e-3  # side by side now (the 0.2 m x extents no longer overlap)
+    assert np.allclose(positions[:, 2], 0.1, atol=1e-3)  # nothing was lifted or sunk
+    for _ in range(100):
+        physics._pybullet().stepSimulation(physicsClientId=world.client)
+    assert physics.read_speeds(world).max() < 0.05
+
+
+def test_prediction_with_noise_never_reports_energy_gain():
+    scene = floor_scene(block("a", 0, 0, 0.1), block("b", 0.0, 0.0, 0.3), block("c", 0.0, 0.0, 0.5))
+    p = predict(scene, ModelConfig(sigma_m=0.1, samples=6), preset("default"), ALL, seed=3)
+    assert p.failed_samples == 0
+    for outcome in p.outcomes:
+        # separated initial states: no two boxes at one level overlap
+        assert np.all(np.isfinite(outcome.initial_positions_m))
+
+
+def table_scene(kind: str) -> Scene:
+    """Two red cubes 5 cm from the -x edge, two yellow cubes 5 cm from the -y edge (table 2.4 x 1.6 m)."""
+    cube = (0.2, 0.2, 0.2)
+    boxes = [block("r0", -0.95, -0.15, 0.1, extents=cube, group="red"),
+             block("r1", -0.95, 0.15, 0.1, extents=cube, group="red"),
+             block("y0", -0.15, -0.65, 0.1, extents=cube, group="yellow"),
+             block("y1", 0.15, -0.65, 0.1, extents=cube, group="yellow")]
+    boxes = [replace(b, friction=0.5) for b in boxes]
+    return Scene(name=f"bump_{kind}", boxes=tuple(boxes), support=make_table(kind), gravity_m_s2=(0, 0, -9.81))
+
+
+def test_cued_bump_on_a_walled_table_changes_which_colour_falls_off():
+    # The table is bumped towards +x (cue 0 deg, +-45 deg): boxes slide towards -x (+-45 deg) relative to
+    # it, about 0.8 m. On the flat table the red cubes always go over the -x edge and the yellow ones
+    # over the -y edge when the slide has enough -y in it; on T1 a wall along the -x edge holds the reds.
+    model = ModelConfig(sigma_m=0.01, phi_m_s2=(10.0,), force_direction_rad=0.0, samples=16)
+    query = QuerySpec(queries=frozenset({"bump"}))
+    flat = predict(table_scene("T0"), model, preset("default"), query, seed=1)
+    walled = predict(table_scene("T1"), model, preset("default"), query, seed=1)  # walls on the +-x edges
+    assert flat.failed_samples == walled.failed_samples == 0
+    assert flat.fell_off_fraction_by_group["red"] > 0.9
+    assert walled.fell_off_fraction_by_group["red"] < 0.1
+    assert 0.1 < walled.fell_off_fraction_by_group["yellow"] < 0.9
+    assert flat.bump_ratio > 0.6 and walled.bump_ratio < 0.1  # red share of what fell off
+
+
+def test_no_push_machinery_without_phi_and_push_with_phi():
+    scene = floor_scene(block("a", 0, 0, 0.4, extents=(0.2, 0.2, 0.8)))
+    still = predict(scene, ModelConfig(), preset("default"), ALL)
+    pushed = predict(scene, ModelConfig(phi_m_s2=(15.0,), force_direction_rad=0.0, cue_half_width_rad=0.0,
+                                        samples=1), preset("default"), ALL)
+    assert still.fall_fraction == 0.0
+    # a tall narrow box on a floor jerked towards +x topples backwards, towards -x
+    assert pushed.fall_fraction == 1.0
+    assert abs(abs(pushed.direction_rad) - math.pi) < 0.3
+
+
+def test_bump_query_needs_a_table():
+    from ipe_ros.engine import ConfigError
+
+    with pytest.raises(ConfigError, match="^queries: the bump query needs a table support"):
+        predict(floor_scene(block("a", 0, 0, 0.1)), ModelConfig(), preset("default"),
+                QuerySpec(queries=frozenset({"bump"})))
+
+
+def test_failed_rollouts_are_counted_not_raised():
+    scene = floor_scene(block("a", 0, 0, 0.1), block("b", 0.001, 0.0, 0.1))
+    settings = replace(preset("default"), depenetration_max_iterations=1)
+    p = predict(scene, ModelConfig(sigma_m=0.001, samples=3), settings, ALL)
+    assert p.samples == 0 and p.failed_samples == 3 and p.fall_fraction is None
+    assert p.failure_reasons == ("PhysicsError: boxes still overlap after 1 depenetration rounds; lower sigma or "
+                                 "raise depenetration_max_iterations",)
+
+
+def test_mu_sets_the_models_own_densities():
+    from ipe_ros.engine.perturb import MODEL_LIGHT_DENSITY_KG_M3, dynamic_masses
+
+    scene = floor_scene(block("a", 0, 0, 0.1, mass_kg=4.0799, group="light"),
+                        block("b", 0, 0, 0.3, mass_kg=40.8, group="Heavy"))
+    assert dynamic_masses(scene, None).tolist() == [4.0799, 40.8]
+    light = MODEL_LIGHT_DENSITY_KG_M3 * 0.024
+    assert dynamic_masses(scene, 1.0) == pytest.approx([light, light], rel=1e-12)
+    assert dynamic_masses(scene, 6.0) == pytest.approx([light, 6 * light], rel=1e-12)

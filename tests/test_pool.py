@@ -1,0 +1,60 @@
+"""The worker pool keeps order, replaces dead workers, and answers every item."""
+
+import os
+from concurrent.futures.process import BrokenProcessPool
+
+import pytest
+
+from ipe_ros.engine import WorkerPool
+
+
+def square_or_die_once(args):
+    """Kills its worker the first time it sees item 3 (a marker file remembers)."""
+    value, marker = args
+    if value == 3 and not os.path.exists(marker):
+        open(marker, "w").close()
+        os._exit(1)
+    return value * value
+
+
+def always_die_on_three(value):
+    if value == 3:
+        os._exit(1)
+    return value * value
+
+
+def test_map_keeps_order_and_recovers_from_a_dead_worker(tmp_path):
+    marker = str(tmp_path / "died")
+    with WorkerPool(2) as pool:
+        before = pool.warm()
+        assert len(before) == 2
+        results = pool.map(square_or_die_once, [(i, marker) for i in range(8)])
+        assert results == [i * i for i in range(8)]
+        assert pool.replacements == 1
+        after = pool.warm()
+        assert len(after) == 2 and set(after) != set(before)  # fresh workers took over
+
+
+def test_items_lost_twice_are_answered_by_on_lost():
+    with WorkerPool(2) as pool:
+        results = pool.map(always_die_on_three, range(5), on_lost=lambda item, reason: f"lost {item}: {reason}")
+        assert results[3] == "lost 3: a worker process died twice while running this item"
+        assert [r for i, r in enumerate(results) if i != 3] == [0, 1, 4, 16]
+        with pytest.raises(BrokenProcessPool):
+            pool.map(always_die_on_three, [3])
+
+
+def test_workers_end_when_the_pool_closes():
+    pool = WorkerPool(2)
+    pids = pool.warm()
+    pool.close()
+    for pid in pids:
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
+
+
+def test_bad_arguments():
+    with pytest.raises(ValueError, match="^workers: must be an integer >= 1, got 0"):
+        WorkerPool(0)
+    with pytest.raises(ValueError, match="^start_method: must be one of forkserver, spawn, got 'fork'"):
+        WorkerPool(1, start_method="fork")

@@ -1,0 +1,133 @@
+"""Every kind of bad scene gets an error naming the object and field and saying what is allowed."""
+
+import copy
+import json
+
+import pytest
+
+from ipe_ros.engine import SceneError, scene_from_dict, scene_to_dict, scenes_from_json
+from ipe_ros.engine.generators import generate_towers
+
+from .helpers import block, floor_scene
+
+
+@pytest.fixture()
+def good() -> dict:
+    return scene_to_dict(floor_scene(block("a", 0, 0, 0.1), block("b", 0, 0, 0.3)))
+
+
+def error_for(data) -> str:
+    with pytest.raises(SceneError) as info:
+        scene_from_dict(data)
+    return str(info.value)
+
+
+def test_good_scene_loads(good):
+    assert scene_from_dict(good).name == "test"
+
+
+def test_nan_position_names_object_and_field(good):
+    good["boxes"][1]["position_m"][0] = float("nan")
+    assert error_for(good) == "boxes[1] ('b').position_m: position in metres must be finite numbers, got [nan, 0.0, 0.3]"
+
+
+def test_inf_mass(good):
+    good["boxes"][0]["mass_kg"] = float("inf")
+    assert error_for(good) == "boxes[0] ('a').mass_kg: mass in kg must be finite, got inf"
+
+
+def test_zero_size(good):
+    good["boxes"][0]["extents_m"] = [0.2, 0.0, 0.2]
+    assert error_for(good) == "boxes[0] ('a').extents_m: every extent must be > 0 metres, got [0.2, 0.0, 0.2]"
+
+
+def test_negative_mass(good):
+    good["boxes"][1]["mass_kg"] = -1
+    assert error_for(good) == "boxes[1] ('b').mass_kg: mass in kg must be > 0, got -1.0"
+
+
+def test_non_unit_quaternion(good):
+    good["boxes"][0]["orientation_xyzw"] = [0, 0, 0, 0.9]
+    assert error_for(good) == ("boxes[0] ('a').orientation_xyzw: must be a unit quaternion (norm within 0.001 of 1),"
+                               " got norm 0.9; normalise it")
+
+
+def test_object_below_support(good):
+    good["boxes"][0]["position_m"][2] = 0.05
+    assert error_for(good) == ("boxes[0] ('a').position_m: the box's lowest point z = -0.05 m is below the support "
+                               "surface at z = 0 m; raise it by at least 0.05 m")
+
+
+def test_unknown_field(good):
+    good["boxes"][0]["colour"] = "red"
+    assert error_for(good).startswith("boxes[0].colour: unknown field; allowed fields are name, extents_m,")
+
+
+def test_missing_field_is_not_defaulted(good):
+    del good["boxes"][0]["friction"]
+    assert error_for(good) == "boxes[0].friction: required field is missing"
+    data = copy.deepcopy(good)
+    del data["gravity_m_s2"]
+
+
+def test_mass_or_density_not_both(good):
+    good["boxes"][0]["density_kg_m3"] = 500.0
+    assert error_for(good) == "boxes[0] ('a').mass_kg: give mass_kg or density_kg_m3, not both"
+
+
+def test_too_many_objects(good):
+    good["boxes"] = [dict(good["boxes"][0], name=f"b{i}") for i in range(10_000)]
+    assert error_for(good) == "boxes: 10000 objects exceed the maximum of 200; split the scene or raise max_objects"
+
+
+def test_max_objects_is_configurable(good):
+    with pytest.raises(SceneError, match="2 objects exceed the maximum of 1"):
+        scene_from_dict(good, max_objects=1)
+
+
+def test_duplicate_names(good):
+    good["boxes"][1]["name"] = "a"
+    assert error_for(good) == "boxes[1].name: duplicate name 'a'; names must be unique"
+
+
+def test_gravity_must_point_down(good):
+    good["gravity_m_s2"] = [0, 0, 9.81]
+    assert error_for(good) == "gravity_m_s2: z must be negative (z is up), got 9.81"
+
+
+def test_unknown_support_type(good):
+    good["support"]["type"] = "trampoline"
+    assert error_for(good) == "support.type: must be \"floor\" or \"table\", got 'trampoline'"
+
+
+def test_empty_scene(good):
+    good["boxes"] = []
+    assert error_for(good) == "boxes: the scene has no dynamic box: nothing can fall"
+
+
+def test_malformed_json_and_nan_literals():
+    with pytest.raises(SceneError, match=r"^json: malformed JSON at line 1 column 2"):
+        scenes_from_json("{oops")
+    text = json.dumps(scene_to_dict(floor_scene(block("a", 0, 0, 0.1)))).replace("0.9", "NaN", 1)
+    with pytest.raises(SceneError, match="^json: NaN is not a valid number; use finite numbers only"):
+        scenes_from_json(text)
+
+
+def test_obstacles_must_be_static():
+    from dataclasses import replace
+
+    from ipe_ros.engine.generators import generate_tables
+
+    scene = generate_tables(1, configurations=1, tables=("T1",))[0]
+    data = scene_to_dict(scene)
+    data["support"]["obstacles"][0]["static"] = False
+    assert error_for(data) == ("support.obstacles[0] ('wall+x').static: obstacles are attached to the table and "
+                               "must be static: true")
+    assert replace(scene) == scene
+
+
+def test_errors_in_a_list_of_scenes_name_the_scene():
+    scenes = [scene_to_dict(s) for s in generate_towers(3, 2)]
+    scenes[1]["boxes"][2]["extents_m"] = [1, 1, -1]
+    with pytest.raises(SceneError, match=r"^scenes\[1\]\.boxes\[2\] \('block2'\)\.extents_m: every extent"):
+        scenes_from_json(json.dumps(scenes))

@@ -15,7 +15,7 @@ Units:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 from .errors import ConfigError
 
@@ -153,7 +153,3 @@ def parse_queries(text: str) -> frozenset[str]:
     names = frozenset(part.strip() for part in text.split(",") if part.strip())
     QuerySpec(queries=names)  # validates
     return names
-
-
-def with_samples(model: ModelConfig, samples: int) -> ModelConfig:
-    return replace(model, samples=samples)

@@ -24,7 +24,7 @@ import numpy as np
 
 from .config import SimSettings
 from .errors import PhysicsError
-from .scene import Box, Floor, Scene, Table
+from .scene import Box, Floor, Scene
 
 _PYBULLET = None
 _CLIENT: int | None = None

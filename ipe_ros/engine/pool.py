@@ -13,7 +13,7 @@ import multiprocessing
 import os
 import signal
 import threading
-from concurrent.futures import FIRST_EXCEPTION, Future, ProcessPoolExecutor, wait
+from concurrent.futures import Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Callable, Iterable, Sequence, TypeVar
 
@@ -123,7 +123,6 @@ class WorkerPool:
                     futures[executor.submit(fn, items[i])] = i
             except BrokenProcessPool:
                 pass
-            wait(list(futures), return_when=FIRST_EXCEPTION)
             wait(list(futures))
             lost = [i for i in pending if i not in futures.values()]
             for future, i in futures.items():

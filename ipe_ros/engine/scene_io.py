@@ -264,7 +264,7 @@ def scenes_from_tower_csv(path: str | Path, towers: Iterable[str] | None = None,
         if wanted is not None and name not in wanted and scene_name not in wanted:
             continue
         boxes = []
-        for line, row in enumerate(rows):
+        for row in rows:
             where = f"{path.name}:{scene_name}:{row['object']}"
             try:
                 values = {c: float(row[c]) for c in _CSV_COLUMNS[2:]}

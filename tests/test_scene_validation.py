@@ -68,6 +68,7 @@ def test_missing_field_is_not_defaulted(good):
     assert error_for(good) == "boxes[0].friction: required field is missing"
     data = copy.deepcopy(good)
     del data["gravity_m_s2"]
+    assert error_for(data) == "gravity_m_s2: required field is missing"
 
 
 def test_mass_or_density_not_both(good):
@@ -114,8 +115,6 @@ def test_malformed_json_and_nan_literals():
 
 
 def test_obstacles_must_be_static():
-    from dataclasses import replace
-
     from ipe_ros.engine.generators import generate_tables
 
     scene = generate_tables(1, configurations=1, tables=("T1",))[0]
@@ -123,7 +122,6 @@ def test_obstacles_must_be_static():
     data["support"]["obstacles"][0]["static"] = False
     assert error_for(data) == ("support.obstacles[0] ('wall+x').static: obstacles are attached to the table and "
                                "must be static: true")
-    assert replace(scene) == scene
 
 
 def test_errors_in_a_list_of_scenes_name_the_scene():

@@ -1,5 +1,9 @@
-"""ROS message <-> engine value conversions (imports message classes only, never rclpy).
+"""ROS messages <-> the engine's plain values. Imports message classes only, never rclpy.
 
-The converters (MarkerArray / std_msgs String <-> Scene, Prediction -> output messages) arrive with
-the node (issue 3); this package exists now so the layout, setup.py and colcon see it from the start.
+* :mod:`msg_bridge.markers`: ``visualization_msgs/MarkerArray`` <-> Scene; predictions as markers.
+* :mod:`msg_bridge.json_text`: ``std_msgs/String`` JSON <-> Scene and answers.
+* :mod:`msg_bridge.outputs`: Float64, Vector3Stamped and DiagnosticArray from answers and stats.
+* :mod:`msg_bridge.stamps`: nanosecond stamps <-> ``std_msgs/Header``.
+
+Every conversion is a pure function; bad input raises ``ValueError`` (``SceneError``) naming the field.
 """

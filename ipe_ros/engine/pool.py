@@ -13,7 +13,7 @@ import multiprocessing
 import os
 import signal
 import threading
-from concurrent.futures import Future, ProcessPoolExecutor, wait
+from concurrent.futures import CancelledError, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Callable, Iterable, Sequence, TypeVar
 
@@ -109,35 +109,45 @@ class WorkerPool:
 
         Items whose worker died are retried once on a replaced pool; items lost a second time are
         answered by ``on_lost(item, reason)``, or raise BrokenProcessPool when no ``on_lost`` is given.
+        Items cancelled because ``close()`` ran meanwhile (shutdown) are answered by ``on_lost`` too.
         """
         items = list(items)
         results: list[R | None] = [None] * len(items)
         pending = list(range(len(items)))
+        reason = "a worker process died twice while running this item"
         for attempt in (1, 2):
             if not pending:
+                break
+            if self._closed:
+                reason = "cancelled: the worker pool was closed (shutdown)"
                 break
             executor = self._get_executor()
             futures: dict[Future, int] = {}
             try:
                 for i in pending:
                     futures[executor.submit(fn, items[i])] = i
-            except BrokenProcessPool:
-                pass
+            except (BrokenProcessPool, RuntimeError):
+                pass  # broken, or shut down by close() from another thread: the rest counts as lost
             wait(list(futures))
             lost = [i for i in pending if i not in futures.values()]
             for future, i in futures.items():
-                exc = future.exception()
+                try:
+                    exc = future.exception()
+                except CancelledError:
+                    lost.append(i)
+                    continue
                 if exc is None:
                     results[i] = future.result()
                 elif isinstance(exc, BrokenProcessPool):
                     lost.append(i)
                 else:
                     raise exc
-            if lost:
+            if lost and not self._closed:
                 self._replace_executor(executor)
             pending = sorted(lost)
         if pending:
-            reason = "a worker process died twice while running this item"
+            if self._closed:
+                reason = "cancelled: the worker pool was closed (shutdown)"
             if on_lost is None:
                 raise BrokenProcessPool(reason)
             for i in pending:

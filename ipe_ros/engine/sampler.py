@@ -28,12 +28,17 @@ def _lost(task: SampleTask, reason: str) -> SampleOutcome:
 
 
 def make_tasks(scene: Scene, model: ModelConfig, settings: SimSettings, query: QuerySpec, seed: int,
-               record_every: int = 0) -> list[SampleTask]:
-    """k tasks, one child seed each; the ground-truth model (sigma = phi = 0) needs only one."""
+               record_every: int = 0, record_samples: int | None = None) -> list[SampleTask]:
+    """k tasks, one child seed each; the ground-truth model (sigma = phi = 0) needs only one.
+
+    Trajectories (every ``record_every`` steps) are recorded for the first ``record_samples``
+    samples only (None: all), since only the rollouts that rerun will show need them.
+    """
     k = 1 if model.is_deterministic else model.samples
     seeds = np.random.SeedSequence(seed).spawn(k)
+    recorded = k if record_samples is None else record_samples
     return [SampleTask(scene=scene, model=model, settings=settings, query=query, index=i, seed=s,
-                       record_every=record_every) for i, s in enumerate(seeds)]
+                       record_every=record_every if i < recorded else 0) for i, s in enumerate(seeds)]
 
 
 def check_request(scene: Scene, query: QuerySpec, max_objects: int = DEFAULT_MAX_OBJECTS) -> None:
@@ -45,13 +50,17 @@ def check_request(scene: Scene, query: QuerySpec, max_objects: int = DEFAULT_MAX
 
 
 def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: QuerySpec, seed: int = 0,
-            map_fn: MapFn | None = None, record_every: int = 0,
+            map_fn: MapFn | None = None, record_every: int = 0, record_samples: int | None = None,
             max_objects: int = DEFAULT_MAX_OBJECTS) -> Prediction:
-    """Run the IPE on one scene and aggregate (failed rollouts are counted in ``failed_samples``)."""
+    """Run the IPE on one scene and aggregate (failed rollouts are counted in ``failed_samples``).
+
+    ``record_every``/``record_samples``: record trajectories (for rerun) every N simulation steps
+    for the first M samples; recording never changes the outcome.
+    """
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ConfigError("seed", f"must be an integer >= 0, got {seed!r}")
     check_request(scene, query, max_objects)
-    tasks = make_tasks(scene, model, settings, query, seed, record_every)
+    tasks = make_tasks(scene, model, settings, query, seed, record_every, record_samples)
     start = time.perf_counter()
     if map_fn is None:
         outcomes: Sequence[SampleOutcome] = [run_sample(t) for t in tasks]

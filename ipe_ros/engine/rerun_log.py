@@ -1,0 +1,180 @@
+"""What the engine imagined, as a rerun recording: the scene, sampled rollouts, outcomes, the answer.
+
+The only module that imports rerun. Functions take an explicit ``RecordingStream`` (no global
+recording), and rollouts are sent with ``send_columns`` (one call per object and rollout, all its
+frames at once) rather than one ``log`` call per box per frame.
+
+Entity layout (z up, metres):
+    world                          view coordinates RIGHT_HAND_Z_UP
+    world/scene/support            floor / table top / obstacles (static)
+    world/scene/boxes              the scene as received (static)
+    world/rollouts/<i>/<object>    sample i's box over simulated time (timeline ``sim_time``);
+                                   drawn red when it fell in that rollout, in its group colour otherwise;
+                                   <i>-phi<j> when several push magnitudes are simulated per sample
+    world/answer/objects           the scene coloured by each object's fall probability
+    world/answer/direction         arrow of the predicted fall direction, length = decisiveness
+    outcomes/<name>                per-sample outcomes over the ``sample`` timeline
+    answer                         the aggregated prediction as JSON text; answer/fall_probability
+                                   on the ``ros_stamp`` timeline
+
+Replay with ``rerun FILE.rrd``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import rerun as rr
+
+from .estimate import Prediction
+from .palette import SUPPORT_RGB, group_rgb, risk_rgb, to_rgb8
+from .scene import Box, Floor, Scene, Table
+
+FELL_RGB = (0.9, 0.1, 0.1)
+APPLICATION_ID = "ipe_ros"
+
+
+def _part(name: str) -> str:
+    return rr.escape_entity_path_part(name)
+
+
+def _boxes(boxes: tuple[Box, ...], colors) -> rr.Boxes3D:
+    return rr.Boxes3D(
+        centers=[b.position_m for b in boxes], half_sizes=[np.asarray(b.extents_m) / 2 for b in boxes],
+        quaternions=[rr.Quaternion(xyzw=b.orientation_xyzw) for b in boxes],
+        colors=colors, labels=[b.name for b in boxes], fill_mode=rr.components.FillMode.Solid)
+
+
+def log_scene(rec: rr.RecordingStream, scene: Scene) -> None:
+    """The scene as received: support, obstacles and boxes (static data)."""
+    rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    support = scene.support
+    centers, half_sizes, labels = [], [], []
+    extent = max([1.0] + [abs(c) + 1.0 for b in scene.boxes for c in b.position_m[:2]])
+    if isinstance(support, Floor):
+        centers.append((0.0, 0.0, support.height_m - 0.005))
+        half_sizes.append((extent, extent, 0.005))
+        labels.append("floor")
+    else:
+        centers.append((*support.center_xy_m, support.top_height_m - support.thickness_m / 2))
+        half_sizes.append((support.size_m[0] / 2, support.size_m[1] / 2, support.thickness_m / 2))
+        labels.append("table")
+        if support.floor_z_m is not None:
+            centers.append((0.0, 0.0, support.floor_z_m - 0.005))
+            half_sizes.append((extent, extent, 0.005))
+            labels.append("floor")
+    rec.log("world/scene/support", rr.Boxes3D(centers=centers, half_sizes=half_sizes, labels=labels,
+                                              colors=[to_rgb8(SUPPORT_RGB)] * len(centers),
+                                              fill_mode=rr.components.FillMode.Solid), static=True)
+    fixed = scene.static_boxes
+    if fixed:
+        rec.log("world/scene/obstacles", _boxes(fixed, [to_rgb8(SUPPORT_RGB)] * len(fixed)), static=True)
+    dynamic = scene.dynamic_boxes
+    rec.log("world/scene/boxes", _boxes(dynamic, [to_rgb8(group_rgb(b.group)) for b in dynamic]), static=True)
+
+
+def log_rollouts(rec: rr.RecordingStream, scene: Scene, prediction: Prediction, stamp_ns: int,
+                 limit: int) -> int:
+    """Recorded trajectories of up to ``limit`` samples; returns how many rollouts were logged."""
+    boxes = scene.dynamic_boxes
+    logged = 0
+    for outcome in prediction.outcomes:
+        if logged >= limit:
+            break
+        if not outcome.ok or not outcome.rollouts or outcome.rollouts[0].trajectory is None:
+            continue
+        several = len(outcome.rollouts) > 1
+        for j, rollout in enumerate(outcome.rollouts):
+            base = f"world/rollouts/{outcome.index}" + (f"-phi{j}" if several else "")
+            times = np.array([frame[0] for frame in rollout.trajectory])
+            positions = np.stack([frame[1] for frame in rollout.trajectory])      # (frames, boxes, 3)
+            orientations = np.stack([frame[2] for frame in rollout.trajectory])   # (frames, boxes, 4)
+            indexes = [rr.TimeColumn("sim_time", duration=times),
+                       rr.TimeColumn("ros_stamp", timestamp=np.full(len(times), stamp_ns, dtype="datetime64[ns]"))]
+            for b, box in enumerate(boxes):
+                path = f"{base}/{_part(box.name)}"
+                fell = rollout.fallen is not None and bool(rollout.fallen[b])
+                rec.log(path, rr.Boxes3D(half_sizes=[np.asarray(box.extents_m) / 2],
+                                         colors=[to_rgb8(FELL_RGB if fell else group_rgb(box.group))],
+                                         fill_mode=rr.components.FillMode.Solid), static=True)
+                rec.send_columns(path, indexes=indexes,
+                                 columns=rr.Boxes3D.columns(centers=positions[:, b], quaternions=orientations[:, b]))
+        logged += 1
+    return logged
+
+
+def log_outcomes(rec: rr.RecordingStream, prediction: Prediction) -> None:
+    """Per-sample outcomes (first push magnitude's values averaged over magnitudes) on ``sample``."""
+    ok = [o for o in prediction.outcomes if o.ok and o.rollouts]
+    if not ok:
+        return
+    index = [rr.TimeColumn("sample", sequence=[o.index for o in ok])]
+    columns: dict[str, list[float]] = {}
+    first = ok[0].rollouts[0]
+    if first.fallen is not None:
+        columns["fall_fraction"] = [float(np.mean([r.fallen.mean() for r in o.rollouts])) for o in ok]
+    if first.far_m is not None:
+        columns["far_m"] = [float(np.mean([r.far_m for r in o.rollouts])) for o in ok]
+    if "direction" in prediction.settings.get("queries", ()):
+        columns["direction_deg"] = [math.degrees(o.rollouts[0].direction_rad)
+                                    if o.rollouts[0].direction_rad is not None else math.nan for o in ok]
+    if first.fell_off is not None:
+        columns["fell_off_count"] = [float(np.mean([r.fell_off.sum() for r in o.rollouts])) for o in ok]
+    for name, values in columns.items():
+        rec.send_columns(f"outcomes/{name}", indexes=index, columns=rr.Scalars.columns(scalars=values))
+    failed = [o.index for o in prediction.outcomes if not o.ok]
+    if failed:
+        rec.log("outcomes/failed", rr.TextDocument("\n".join(
+            f"sample {o.index}: {o.error}" for o in prediction.outcomes if not o.ok)), static=True)
+
+
+def log_answer(rec: rr.RecordingStream, scene: Scene, prediction: Prediction, answer: dict,
+               stamp_ns: int) -> None:
+    """The aggregated answer: JSON text, risk-coloured objects, direction arrow, P(fall) over stamps."""
+    rec.log("answer", rr.TextDocument("```json\n" + json.dumps(answer, indent=2, sort_keys=True) + "\n```",
+                                      media_type=rr.MediaType.MARKDOWN), static=True)
+    dynamic = scene.dynamic_boxes
+    if prediction.object_fall_probability is not None:
+        colors = [to_rgb8(risk_rgb(prediction.object_fall_probability[b.name])) for b in dynamic]
+        rec.log("world/answer/objects", _boxes(dynamic, colors), static=True)
+    if prediction.direction_rad is not None and dynamic:
+        top = max(dynamic, key=lambda b: b.position_m[2])
+        origin = (float(np.mean([b.position_m[0] for b in dynamic])),
+                  float(np.mean([b.position_m[1] for b in dynamic])), top.position_m[2] + top.extents_m[2])
+        length = prediction.direction_decisiveness or 0.0
+        vector = (length * math.cos(prediction.direction_rad), length * math.sin(prediction.direction_rad), 0.0)
+        rec.log("world/answer/direction", rr.Arrows3D(origins=[origin], vectors=[vector],
+                                                      colors=[to_rgb8(FELL_RGB)], labels=["fall direction"]),
+                static=True)
+    if prediction.fall_fraction is not None:
+        rec.send_columns("answer/fall_probability",
+                         indexes=[rr.TimeColumn("ros_stamp", timestamp=np.array([stamp_ns], dtype="datetime64[ns]"))],
+                         columns=rr.Scalars.columns(scalars=[prediction.fall_fraction]))
+
+
+def write_prediction_rrd(path: str | Path, scene: Scene, prediction: Prediction, *, answer: dict,
+                         stamp_ns: int, rollouts_logged: int, connect_url: str | None = None) -> int:
+    """Write one ``.rrd`` for one prediction (and optionally stream it to a running viewer).
+
+    ``answer`` is the JSON published for this prediction; returns how many rollouts were logged.
+    A viewer is only contacted when ``connect_url`` is given; nothing is ever spawned.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{scene.name}@{stamp_ns}")
+    if connect_url:
+        rec.set_sinks(rr.FileSink(str(path)), rr.GrpcSink(connect_url))
+    else:
+        rec.save(str(path))
+    try:
+        log_scene(rec, scene)
+        logged = log_rollouts(rec, scene, prediction, stamp_ns, rollouts_logged)
+        log_outcomes(rec, prediction)
+        log_answer(rec, scene, prediction, answer, stamp_ns)
+        rec.flush()
+    finally:
+        rec.disconnect()
+    return logged

@@ -1,0 +1,177 @@
+"""``ipe_node``: the intuitive physics engine as a ROS 2 node (the only module that spins rclpy).
+
+Executor callbacks only convert messages (``msg_bridge``) and hand scenes to the ROS-free
+:class:`~ipe_ros.service.PredictionService`, whose own thread runs the Monte Carlo samples in worker
+processes and calls back here to publish. Topics, the service and parameters are listed in README.md.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from typing import Any
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Float64, String
+from std_srvs.srv import Trigger
+from geometry_msgs.msg import Vector3Stamped
+from visualization_msgs.msg import MarkerArray
+
+from msg_bridge.json_text import answer_to_string, string_to_scene
+from msg_bridge.markers import markers_to_scene, prediction_to_markers
+from msg_bridge.outputs import diagnostics_msg, fall_direction_msg, fall_probability_msg
+
+from . import params
+from .engine import ConfigError
+from .service import Answer, NoSceneError, PredictionFailed, PredictionService, StampedScene
+
+#: Outputs are "latched": reliable + transient-local, depth 1, so a late joiner gets the latest answer.
+LATCHED_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+INPUT_QOS = QoSProfile(depth=5, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+DIAGNOSTICS_PERIOD_S = 1.0
+
+
+class IpeNode(Node):
+    """Subscribes to scenes, predicts in worker processes, publishes answers; see the module docstring."""
+
+    def __init__(self, node_name: str = "ipe", *, start_method: str = "forkserver", **node_kwargs: Any):
+        super().__init__(node_name, **node_kwargs)
+        for spec in params.PARAMETERS:
+            self.declare_parameter(spec.name, spec.default, spec.descriptor())
+        values = {spec.name: self.get_parameter(spec.name).value for spec in params.PARAMETERS}
+        settings = params.settings_from_values(values)  # bad overrides end construction with a named error
+        self._values = values
+
+        self._pub_prediction = self.create_publisher(String, "~/prediction", LATCHED_QOS)
+        self._pub_probability = self.create_publisher(Float64, "~/fall_probability", LATCHED_QOS)
+        self._pub_direction = self.create_publisher(Vector3Stamped, "~/fall_direction", LATCHED_QOS)
+        self._pub_markers = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
+        self._pub_diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+
+        self.service = PredictionService(settings, workers=int(values["workers"]), publish=self._publish_answer,
+                                         log_error=self.get_logger().error, log_info=self.get_logger().info,
+                                         start_method=start_method)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        # Inputs, the service and diagnostics in separate groups: a service call waiting for its
+        # answer never holds up scene intake or the 1 Hz health report (with a multi-threaded executor).
+        inputs = MutuallyExclusiveCallbackGroup()
+        self.create_subscription(MarkerArray, "~/scene", self._on_markers, INPUT_QOS, callback_group=inputs)
+        self.create_subscription(String, "~/scene_json", self._on_scene_json, INPUT_QOS, callback_group=inputs)
+        self.create_service(Trigger, "~/predict", self._on_predict, callback_group=MutuallyExclusiveCallbackGroup())
+        self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics,
+                          callback_group=MutuallyExclusiveCallbackGroup())
+        self.service.start()
+        self.get_logger().info(
+            f"ready: k = {settings.model.samples}, sigma = {settings.model.sigma_m:g} m, "
+            f"phi = {settings.model.phi_m_s2[0]:g} m/s^2, preset {settings.sim.name}, {values['workers']} worker(s); "
+            f"scenes on {self.resolve_topic_name('~/scene')} and {self.resolve_topic_name('~/scene_json')}")
+
+    # -- parameters ----------------------------------------------------------------------------
+    def _on_set_parameters(self, changed: list[rclpy.parameter.Parameter]) -> SetParametersResult:
+        values = dict(self._values)
+        values.update({p.name: p.value for p in changed})
+        try:
+            settings = params.settings_from_values(values)
+        except ConfigError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        self._values = values
+        self.service.update_settings(settings)
+        return SetParametersResult(successful=True)
+
+    # -- inputs ----------------------------------------------------------------------------------
+    def _reject(self, topic: str, exc: Exception) -> None:
+        reason = str(exc)
+        self.service.reject(reason)
+        self.get_logger().error(f"rejected scene on {topic}: {reason}")
+
+    def _accept(self, scene, stamp_ns: int, frame_id: str) -> None:
+        item = StampedScene(scene=scene, stamp_ns=stamp_ns, frame_id=frame_id, scene_id=scene.name,
+                            seq=self.service.next_seq(), received_monotonic_s=time.monotonic())
+        if self.service.submit(item):
+            self.get_logger().debug("a waiting scene was replaced by a newer one (keep-latest)")
+
+    def _on_markers(self, msg: MarkerArray) -> None:
+        try:
+            converted = markers_to_scene(msg, max_objects=self.service.settings.max_objects)
+            self.service.check(converted.scene)
+        except ValueError as exc:  # SceneError / ConfigError name the field
+            self._reject(self.resolve_topic_name("~/scene"), exc)
+            return
+        self._accept(converted.scene, converted.stamp_ns, converted.frame_id)
+
+    def _on_scene_json(self, msg: String) -> None:
+        try:
+            scene = string_to_scene(msg, max_objects=self.service.settings.max_objects)
+            self.service.check(scene)
+        except ValueError as exc:
+            self._reject(self.resolve_topic_name("~/scene_json"), exc)
+            return
+        self._accept(scene, self.get_clock().now().nanoseconds, str(self._values["frame_id"]))
+
+    # -- service -----------------------------------------------------------------------------------
+    def _on_predict(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        try:
+            answer = self.service.predict_latest(float(self._values["service_timeout_s"]))
+        except (NoSceneError, PredictionFailed, TimeoutError) as exc:
+            response.success, response.message = False, str(exc)
+            return response
+        response.success, response.message = True, answer_to_string(answer.to_dict()).data
+        return response
+
+    # -- outputs (called from the prediction thread) ----------------------------------------------------
+    def _publish_answer(self, answer: Answer) -> None:
+        source, prediction = answer.source, answer.prediction
+        self._pub_prediction.publish(answer_to_string(answer.to_dict()))
+        probability = fall_probability_msg(prediction)
+        if probability is not None:
+            self._pub_probability.publish(probability)
+        self._pub_direction.publish(fall_direction_msg(prediction, source.frame_id, source.stamp_ns))
+        self._pub_markers.publish(prediction_to_markers(source.scene, prediction, source.frame_id, source.stamp_ns))
+        fall = "-" if prediction.fall_fraction is None else f"{prediction.fall_fraction:.3f}"
+        self.get_logger().info(
+            f"{source.scene_id} #{source.seq}: P(fall) = {fall}, k = {prediction.samples}"
+            f"{f' ({prediction.failed_samples} failed)' if prediction.failed_samples else ''}, "
+            f"{answer.compute_s:.2f} s" + (f", {answer.rrd_path}" if answer.rrd_path else ""))
+
+    def _publish_diagnostics(self) -> None:
+        stats = self.service.stats()
+        self._pub_diagnostics.publish(diagnostics_msg(stats, f"{self.get_name()}: IPE prediction service",
+                                                      self.get_clock().now().nanoseconds, self.get_fully_qualified_name()))
+
+    def destroy_node(self) -> None:
+        self.service.close()
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``ipe_node`` / ``ros2 run ipe_ros ipe_node``; SIGINT and SIGTERM end it cleanly."""
+    rclpy.init(args=args)  # installs SIGINT/SIGTERM handlers that shut the context down
+    node: IpeNode | None = None
+    code = 0
+    try:
+        node = IpeNode()
+        executor = MultiThreadedExecutor(num_threads=4)
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ConfigError, ValueError) as exc:
+        print(f"ipe_node: error: {exc}", file=sys.stderr)
+        code = 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

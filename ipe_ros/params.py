@@ -1,0 +1,114 @@
+"""The node's ROS parameters: declarations with descriptors and ranges, and their mapping to the engine.
+
+``PARAMETERS`` is the single table the node declares, the README documents and the tests check.
+``settings_from_values`` is pure (no rclpy): it turns a {name: value} mapping into
+:class:`~ipe_ros.service.ServiceSettings` or raises ``ConfigError`` naming the parameter.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
+
+from .engine import ALL_QUERIES, PRESETS, ConfigError, ModelConfig, QuerySpec
+from .service import ServiceSettings, default_workers
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    name: str
+    default: Any
+    type: int
+    description: str
+    range: tuple[float, float] | None = None
+    read_only: bool = False
+    constraints: str = ""
+
+    def descriptor(self) -> ParameterDescriptor:
+        d = ParameterDescriptor(name=self.name, type=self.type, description=self.description,
+                                read_only=self.read_only, additional_constraints=self.constraints)
+        if self.range is not None and self.type == ParameterType.PARAMETER_INTEGER:
+            d.integer_range = [IntegerRange(from_value=int(self.range[0]), to_value=int(self.range[1]), step=1)]
+        elif self.range is not None and self.type == ParameterType.PARAMETER_DOUBLE:
+            d.floating_point_range = [FloatingPointRange(from_value=float(self.range[0]),
+                                                         to_value=float(self.range[1]), step=0.0)]
+        return d
+
+
+_INT, _DOUBLE = ParameterType.PARAMETER_INTEGER, ParameterType.PARAMETER_DOUBLE
+_STRING, _STRINGS = ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_STRING_ARRAY
+
+PARAMETERS: tuple[ParamSpec, ...] = (
+    ParamSpec("samples", 48, _INT, "Monte Carlo samples k per prediction (paper: 48)", (1, 10000)),
+    ParamSpec("sigma", 0.04, _DOUBLE, "position noise SD, metres (paper: 0.2 block short sides = 0.04 m "
+                                      "for 0.2 m blocks; 0 with phi 0 is the deterministic ground truth)", (0.0, 10.0)),
+    ParamSpec("phi", 0.0, _DOUBLE, "latent push: horizontal acceleration of the support for 0.2 s, m/s^2 "
+                                   "(0: no push)", (0.0, 100.0)),
+    ParamSpec("force_direction_deg", math.nan, _DOUBLE,
+              "cued push direction in degrees in the scene frame (0 = +x, counter-clockwise), pushes drawn "
+              "within +-45 deg of it; NaN (default) draws the direction uniformly",
+              constraints="finite degrees, or NaN for any direction"),
+    ParamSpec("mu", 0.0, _DOUBLE, "heavy/light density ratio for boxes in group 'heavy'; 0 keeps the scene's "
+                                  "own masses", (0.0, 1000.0)),
+    ParamSpec("queries", ["fall", "direction", "far"], _STRINGS,
+              "queries to answer: any of " + ", ".join(ALL_QUERIES) + " (bump needs a table)",
+              constraints="non-empty subset of " + ", ".join(ALL_QUERIES)),
+    ParamSpec("preset", "default", _STRING, "simulation settings: " + ", ".join(
+        f"{name} ({s.time_step_s * 1000:g} ms steps, {s.horizon_s:g} s, {s.solver_iterations} solver iterations)"
+        for name, s in PRESETS.items()), constraints="one of " + ", ".join(PRESETS)),
+    ParamSpec("seed", 0, _INT, "random seed; a prediction is a function of (scene, parameters, seed)", (0, 2**31 - 1)),
+    ParamSpec("workers", default_workers(), _INT, "simulation worker processes (0: run samples in the node's "
+                                                 "prediction thread); fixed at start", (0, 64), read_only=True),
+    ParamSpec("max_objects", 200, _INT, "scenes with more boxes are rejected", (1, 10000)),
+    ParamSpec("frame_id", "world", _STRING, "frame of scenes received on ~/scene_json (JSON carries no header)"),
+    ParamSpec("service_timeout_s", 60.0, _DOUBLE, "how long ~/predict waits for an answer, seconds", (0.1, 3600.0)),
+    ParamSpec("rerun.save_dir", "", _STRING, "folder for one .rrd recording per prediction; empty: no rerun logging"),
+    ParamSpec("rerun.rollouts_logged", 8, _INT, "sampled rollouts shown in each .rrd", (0, 1000)),
+    ParamSpec("rerun.frame_period_s", 0.02, _DOUBLE, "simulated seconds between logged frames of a rollout",
+              (0.001, 1.0)),
+    ParamSpec("rerun.connect_url", "", _STRING, "also stream recordings to a viewer already running at this "
+                                                "gRPC URL (e.g. rerun+http://127.0.0.1:9876/proxy); empty: never "
+                                                "contact or spawn a viewer"),
+)
+
+SPECS = {spec.name: spec for spec in PARAMETERS}
+
+
+def default_values() -> dict[str, Any]:
+    return {spec.name: spec.default for spec in PARAMETERS}
+
+
+def settings_from_values(values: Mapping[str, Any]) -> ServiceSettings:
+    """Build the engine settings from parameter values; ConfigError names the parameter at fault."""
+    def engine_error(exc: ConfigError, name: str) -> ConfigError:
+        return ConfigError(name, exc.problem)
+
+    direction = float(values["force_direction_deg"])
+    if math.isinf(direction):
+        raise ConfigError("force_direction_deg", f"must be finite degrees or NaN (any direction), got {direction}")
+    queries = values["queries"]
+    unknown = [q for q in queries if q not in ALL_QUERIES]
+    if unknown:
+        raise ConfigError("queries", f"unknown query {unknown[0]!r}; choose from {', '.join(ALL_QUERIES)}")
+    if not queries:
+        raise ConfigError("queries", f"ask for at least one of {', '.join(ALL_QUERIES)}")
+    if values["preset"] not in PRESETS:
+        raise ConfigError("preset", f"unknown preset {values['preset']!r}; choose one of {', '.join(PRESETS)}")
+    mu = float(values["mu"])
+    try:
+        model = ModelConfig(sigma_m=float(values["sigma"]), phi_m_s2=(float(values["phi"]),),
+                            force_direction_rad=None if math.isnan(direction) else math.radians(direction),
+                            mu=None if mu == 0 else mu, samples=int(values["samples"]))
+    except ConfigError as exc:
+        name = {"sigma_m": "sigma", "phi_m_s2": "phi", "force_direction_rad": "force_direction_deg"}.get(exc.field, exc.field)
+        raise engine_error(exc, name) from None
+    save_dir = str(values["rerun.save_dir"]).strip()
+    connect = str(values["rerun.connect_url"]).strip()
+    return ServiceSettings(model=model, sim=PRESETS[values["preset"]], query=QuerySpec(queries=frozenset(queries)),
+                           seed=int(values["seed"]), max_objects=int(values["max_objects"]),
+                           rerun_save_dir=save_dir or None, rerun_rollouts_logged=int(values["rerun.rollouts_logged"]),
+                           rerun_frame_period_s=float(values["rerun.frame_period_s"]),
+                           rerun_connect_url=connect or None)

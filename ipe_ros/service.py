@@ -1,0 +1,363 @@
+"""Prediction as a service, without ROS: a keep-latest scene slot, one prediction thread, the pool.
+
+The ROS node (``ipe_ros.node``) only converts messages and hands scenes to :class:`PredictionService`;
+everything that takes time happens here, off the executor:
+
+* ``submit`` stores a scene in a one-slot queue. A newer scene replaces one still waiting (the
+  replaced one is counted as ``dropped``): a robot wants the answer for the world as it is now,
+  not for a backlog.
+* One prediction thread takes the waiting scene, runs the Monte Carlo IPE in the worker pool,
+  optionally writes a rerun ``.rrd``, and calls ``publish(answer)``. One prediction is in flight
+  at a time: the pool already uses every core for the k samples of one scene, so a second
+  prediction would only make both slower.
+* ``predict_latest`` (the Trigger service) waits for an answer on the newest scene with the current
+  settings, reusing the last answer when it is already that.
+* A worker that dies is replaced by the pool and its samples are run again; samples lost twice
+  are counted as failed in the answer (``failed_samples``), never silently dropped.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import threading
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+from .engine import PRESETS, ModelConfig, Prediction, QuerySpec, Scene, SimSettings, WorkerPool, predict
+from .engine.sampler import check_request
+from .engine.scene import DEFAULT_MAX_OBJECTS
+
+
+@dataclass(frozen=True)
+class ServiceSettings:
+    """Everything a prediction depends on besides the scene; replaced as a whole on updates.
+
+    rerun_save_dir: folder for one ``.rrd`` per prediction, or None for no rerun logging.
+    rerun_rollouts_logged: how many sampled rollouts each ``.rrd`` shows.
+    rerun_frame_period_s: simulated seconds between recorded frames of a logged rollout.
+    rerun_connect_url: also stream to a running viewer at this gRPC URL (never spawns one).
+    """
+
+    model: ModelConfig = ModelConfig(sigma_m=0.04, samples=48)
+    sim: SimSettings = PRESETS["default"]
+    query: QuerySpec = QuerySpec(queries=frozenset({"fall", "direction", "far"}))
+    seed: int = 0
+    max_objects: int = DEFAULT_MAX_OBJECTS
+    rerun_save_dir: str | None = None
+    rerun_rollouts_logged: int = 8
+    rerun_frame_period_s: float = 0.02
+    rerun_connect_url: str | None = None
+
+
+@dataclass(frozen=True)
+class StampedScene:
+    """A scene as received: its header (stamp in ns since the epoch, frame), an id and a sequence number."""
+
+    scene: Scene
+    stamp_ns: int
+    frame_id: str
+    scene_id: str
+    seq: int = 0
+    received_monotonic_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class Answer:
+    """One published prediction: the scene it answers, the prediction, and what it cost.
+
+    compute_s: wall time of the Monte Carlo run (+ rerun logging), seconds.
+    latency_s: from receipt of the scene to the answer, seconds (includes waiting behind another).
+    """
+
+    source: StampedScene
+    prediction: Prediction
+    compute_s: float
+    latency_s: float
+    settings_version: int
+    rrd_path: str | None = None
+    rollouts_logged: int = 0
+
+    def to_dict(self) -> dict[str, Any]:
+        """The published JSON: ``ipe predict --json``'s fields plus stamp, frame, ids and timing."""
+        out = self.prediction.to_dict()
+        sec, nanosec = divmod(self.source.stamp_ns, 1_000_000_000)
+        out.update(stamp={"sec": sec, "nanosec": nanosec}, frame_id=self.source.frame_id,
+                   scene_id=self.source.scene_id, scene_seq=self.source.seq, compute_s=self.compute_s,
+                   latency_s=self.latency_s, rrd_path=self.rrd_path, rollouts_logged=self.rollouts_logged)
+        return out
+
+
+@dataclass(frozen=True)
+class ServiceStats:
+    """Counters for diagnostics. ``dropped``: scenes replaced while waiting (keep-latest)."""
+
+    received: int
+    predicted: int
+    dropped: int
+    rejected: int
+    failed_predictions: int
+    failed_samples: int
+    waiting: int
+    in_flight: bool
+    workers: int
+    workers_alive: int
+    worker_replacements: int
+    last_compute_s: float | None
+    last_error: str | None
+    closed: bool
+
+
+class NoSceneError(RuntimeError):
+    """The service was asked to predict before any valid scene arrived."""
+
+
+class PredictionFailed(RuntimeError):
+    """A prediction could not be made (the reason says why); the service keeps running."""
+
+
+@dataclass
+class _Waiter:
+    seq: int
+    version: int
+    event: threading.Event = field(default_factory=threading.Event)
+    answer: Answer | None = None
+    error: str | None = None
+
+
+class PredictionService:
+    """Keep-latest scene queue + one prediction thread + a worker pool. Thread-safe."""
+
+    def __init__(self, settings: ServiceSettings, *, workers: int, publish: Callable[[Answer], None],
+                 log_error: Callable[[str], None] = lambda _msg: None,
+                 log_info: Callable[[str], None] = lambda _msg: None, start_method: str = "forkserver"):
+        if isinstance(workers, bool) or not isinstance(workers, int) or workers < 0:
+            raise ValueError(f"workers: must be an integer >= 0 (0 runs samples in the prediction thread), got {workers!r}")
+        self._settings = settings
+        self._version = 0
+        self._publish = publish
+        self._log_error = log_error
+        self._log_info = log_info
+        self._pool = WorkerPool(workers, start_method=start_method) if workers > 0 else None
+        self.workers = workers
+        self._cond = threading.Condition()
+        self._pending: StampedScene | None = None
+        self._latest: StampedScene | None = None
+        self._latest_rejected: str | None = None  # why the newest input was refused, if it was
+        self._last_answer: Answer | None = None
+        self._in_flight: tuple[int, int] | None = None  # (seq, settings version) being computed
+        self._waiters: list[_Waiter] = []
+        self._closing = False
+        self._seq = 0
+        self._counts = dict(received=0, predicted=0, dropped=0, rejected=0, failed_predictions=0, failed_samples=0)
+        self._last_compute_s: float | None = None
+        self._last_error: str | None = None
+        self._thread = threading.Thread(target=self._run, name="ipe-prediction", daemon=True)
+
+    # -- lifecycle -----------------------------------------------------------------------------
+    def start(self) -> None:
+        self._thread.start()
+
+    def close(self, timeout_s: float = 30.0) -> None:
+        """Stop taking work, cancel what is queued, stop the workers, join the thread."""
+        with self._cond:
+            self._closing = True
+            self._pending = None
+            for w in self._waiters:
+                w.error = "the node is shutting down"
+                w.event.set()
+            self._waiters.clear()
+            self._cond.notify_all()
+        if self._pool is not None:
+            self._pool.close()  # cancels samples not yet started; running ones finish (< 1 s)
+        if self._thread.is_alive():
+            self._thread.join(timeout_s)
+
+    @property
+    def pool(self) -> WorkerPool | None:
+        return self._pool
+
+    # -- inputs (called from executor callbacks: must return at once) ---------------------------
+    @property
+    def settings(self) -> ServiceSettings:
+        return self._settings
+
+    def update_settings(self, settings: ServiceSettings) -> None:
+        """Applies to the next prediction (the one in flight keeps the settings it started with)."""
+        with self._cond:
+            self._settings = settings
+            self._version += 1
+
+    def next_seq(self) -> int:
+        with self._cond:
+            self._seq += 1
+            return self._seq
+
+    def check(self, scene: Scene) -> None:
+        """Raise SceneError/ConfigError if the current settings cannot answer this scene."""
+        settings = self._settings
+        check_request(scene, settings.query, settings.max_objects)
+
+    def submit(self, item: StampedScene) -> bool:
+        """Queue a checked scene; returns True when it replaced one still waiting."""
+        with self._cond:
+            if self._closing:
+                return False
+            self._counts["received"] += 1
+            replaced = self._pending is not None
+            if replaced:
+                self._counts["dropped"] += 1
+            self._pending = item
+            self._latest = item
+            self._latest_rejected = None
+            self._cond.notify_all()
+            return replaced
+
+    def reject(self, reason: str) -> None:
+        """Count (and remember) a scene that could not be read or validated."""
+        with self._cond:
+            self._counts["rejected"] += 1
+            self._last_error = reason
+            self._latest_rejected = reason
+
+    def predict_latest(self, timeout_s: float) -> Answer:
+        """An answer for the newest scene under the current settings (reused when already made).
+
+        Raises NoSceneError, PredictionFailed (with the reason; also when the newest input was
+        rejected), or TimeoutError.
+        """
+        with self._cond:
+            if self._closing:
+                raise PredictionFailed("the node is shutting down")
+            if self._latest_rejected is not None:
+                raise PredictionFailed(f"the latest scene was rejected: {self._latest_rejected}")
+            latest = self._latest
+            if latest is None:
+                raise NoSceneError("no scene received yet; publish one on ~/scene (MarkerArray) or ~/scene_json")
+            last = self._last_answer
+            if last is not None and last.source.seq >= latest.seq and last.settings_version >= self._version:
+                return last
+            waiter = _Waiter(seq=latest.seq, version=self._version)
+            self._waiters.append(waiter)
+            in_flight_covers = (self._in_flight is not None and self._in_flight[0] >= latest.seq
+                                and self._in_flight[1] >= self._version)
+            if not in_flight_covers and (self._pending is None or self._pending.seq < latest.seq):
+                self._pending = latest  # re-run the newest scene with the new settings
+            self._cond.notify_all()
+        if not waiter.event.wait(timeout_s):
+            with self._cond:
+                if waiter in self._waiters:
+                    self._waiters.remove(waiter)
+            raise TimeoutError(f"no answer within {timeout_s:g} s; the prediction goes on and will be "
+                               "published on ~/prediction")
+        if waiter.error is not None:
+            raise PredictionFailed(waiter.error)
+        assert waiter.answer is not None  # set together with the event
+        return waiter.answer
+
+    def stats(self) -> ServiceStats:
+        with self._cond:
+            pids = self._pool.worker_pids() if self._pool is not None else []
+            return ServiceStats(**self._counts, waiting=int(self._pending is not None),
+                                in_flight=self._in_flight is not None, workers=self.workers,
+                                workers_alive=len(pids) if self._pool is not None else 0,
+                                worker_replacements=self._pool.replacements if self._pool is not None else 0,
+                                last_compute_s=self._last_compute_s, last_error=self._last_error,
+                                closed=self._closing)
+
+    # -- the prediction thread ---------------------------------------------------------------------
+    def _run(self) -> None:
+        if self._pool is not None:
+            try:
+                self._pool.warm()  # start workers now, not on the first scene
+                self._log_info(f"{self.workers} worker process(es) ready: pids {self._pool.worker_pids()}")
+            except RuntimeError:
+                return  # closed before it started
+            except Exception as exc:  # noqa: BLE001 - the first prediction will retry and report
+                self._log_error(f"starting worker processes failed: {exc}")
+        while True:
+            with self._cond:
+                while not self._closing and self._pending is None:
+                    self._cond.wait()
+                if self._closing:
+                    return
+                item, self._pending = self._pending, None
+                settings, version = self._settings, self._version
+                self._in_flight = (item.seq, version)
+            answer, error = self._predict(item, settings, version)
+            with self._cond:
+                self._in_flight = None
+                if self._closing:
+                    for w in self._waiters:
+                        w.error = "the node is shutting down"
+                        w.event.set()
+                    return
+                done = [w for w in self._waiters if item.seq >= w.seq and version >= w.version]
+                for w in done:
+                    self._waiters.remove(w)
+                    w.answer, w.error = answer, error
+                    w.event.set()
+                if answer is not None:
+                    self._last_answer = answer
+                    self._counts["predicted"] += 1
+                    self._counts["failed_samples"] += answer.prediction.failed_samples
+                    self._last_compute_s = answer.compute_s
+                else:
+                    self._counts["failed_predictions"] += 1
+                    self._last_error = error
+            if answer is not None:
+                try:
+                    self._publish(answer)
+                except Exception as exc:  # noqa: BLE001 - a publisher error must not stop the thread
+                    self._log_error(f"publishing the prediction for {item.scene_id} failed: {exc}")
+            else:
+                self._log_error(f"prediction for {item.scene_id} failed: {error}")
+
+    def _predict(self, item: StampedScene, settings: ServiceSettings, version: int) -> tuple[Answer | None, str | None]:
+        start = time.perf_counter()
+        record_every = 0
+        if settings.rerun_save_dir and settings.rerun_rollouts_logged > 0:
+            record_every = max(1, round(settings.rerun_frame_period_s / settings.sim.time_step_s))
+        try:
+            prediction = predict(item.scene, settings.model, settings.sim, settings.query, seed=settings.seed,
+                                 map_fn=self._pool.map if self._pool is not None else None,
+                                 record_every=record_every, record_samples=settings.rerun_rollouts_logged,
+                                 max_objects=settings.max_objects)
+        except ValueError as exc:  # SceneError / ConfigError: the scene no longer fits new settings
+            return None, str(exc)
+        except Exception as exc:  # noqa: BLE001 - report, keep serving
+            return None, "".join(traceback.format_exception_only(type(exc), exc)).strip()
+        if self._closing:
+            return None, "the node is shutting down"
+        answer = Answer(source=item, prediction=prediction, compute_s=time.perf_counter() - start,
+                        latency_s=0.0, settings_version=version)
+        if record_every:
+            answer = self._write_rrd(answer, settings)
+        now = time.monotonic()
+        latency = now - item.received_monotonic_s if item.received_monotonic_s else answer.compute_s
+        return dataclasses.replace(answer, compute_s=time.perf_counter() - start, latency_s=latency), None
+
+    def _write_rrd(self, answer: Answer, settings: ServiceSettings) -> Answer:
+        from .engine import rerun_log  # imported on first use: rerun is only needed when logging
+
+        item = answer.source
+        safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in item.scene_id)[:80]
+        path = Path(settings.rerun_save_dir) / f"ipe_{item.seq:06d}_{safe}.rrd"
+        answer = dataclasses.replace(answer, rrd_path=str(path.resolve()),
+                                     rollouts_logged=min(settings.rerun_rollouts_logged, answer.prediction.samples))
+        try:
+            logged = rerun_log.write_prediction_rrd(path, item.scene, answer.prediction, answer=answer.to_dict(),
+                                                    stamp_ns=item.stamp_ns,
+                                                    rollouts_logged=settings.rerun_rollouts_logged,
+                                                    connect_url=settings.rerun_connect_url)
+        except Exception as exc:  # noqa: BLE001 - logging trouble must not cost the answer
+            self._log_error(f"writing {path} failed: {exc}")
+            return dataclasses.replace(answer, rrd_path=None, rollouts_logged=0)
+        return dataclasses.replace(answer, rollouts_logged=logged)
+
+
+def default_workers() -> int:
+    return max(1, min(os.cpu_count() or 1, 8))

@@ -1,0 +1,41 @@
+"""``std_msgs/String`` carrying JSON <-> scenes and answers (the engine's ``ipe_ros.scene/1`` format)."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+from std_msgs.msg import String
+
+from ipe_ros.engine import Scene, SceneError
+from ipe_ros.engine.scene import DEFAULT_MAX_OBJECTS
+from ipe_ros.engine.scene_io import scene_to_json, scenes_from_json
+
+
+def string_to_scene(msg: String, *, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scene:
+    """Exactly one validated scene from a JSON text (a scene object, or a list holding one)."""
+    if not msg.data.strip():
+        raise SceneError("data", "is empty; publish one scene in the ipe_ros.scene/1 JSON format")
+    scenes = scenes_from_json(msg.data, max_objects=max_objects)
+    if len(scenes) != 1:
+        raise SceneError("data", f"holds {len(scenes)} scenes; publish one scene per message")
+    return scenes[0]
+
+
+def scene_to_string(scene: Scene) -> String:
+    return String(data=scene_to_json(scene))
+
+
+def answer_to_string(answer: dict[str, Any]) -> String:
+    """A prediction answer (``Answer.to_dict()``) as compact JSON; NaN/inf are refused (not JSON)."""
+    return String(data=json.dumps(answer, allow_nan=False, sort_keys=True))
+
+
+def string_to_answer(msg: String) -> dict[str, Any]:
+    try:
+        value = json.loads(msg.data)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"data: not JSON ({exc.msg} at line {exc.lineno} column {exc.colno})") from None
+    if not isinstance(value, dict):
+        raise ValueError(f"data: expected a JSON object, got {type(value).__name__}")
+    return value

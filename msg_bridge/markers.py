@@ -1,0 +1,327 @@
+"""``visualization_msgs/MarkerArray`` <-> :class:`~ipe_ros.engine.Scene`, and predictions as markers.
+
+The mapping (MarkerArray has no notion of mass, friction or support, so some of it rides in
+``Marker.text``):
+
+* Every ``CUBE`` marker with action ``ADD`` is a box: ``pose`` is its centre and orientation in
+  ``header.frame_id``, ``scale`` its FULL extents in metres. An all-zero quaternion (the message
+  default) means identity, as RViz reads it; any other quaternion must have unit norm.
+* Markers in namespace ``support`` are static. ``text`` ``role=floor`` makes an infinite floor whose
+  top is the cube's top face; ``role=table`` makes a table top (axis-aligned; the cube is the slab);
+  ``role=obstacle`` (the default) a static box (a wall on the table, a fixture on the floor). At most
+  one floor or table; with neither, the floor is the plane z = 0 of the scene frame.
+* Every other marker is a dynamic box named ``text``'s ``name`` or else ``<ns>/<id>``.
+* ``text`` holds optional ``key=value`` pairs separated by spaces, commas or semicolons:
+    dynamic boxes: ``name``, ``mass`` (kg) or ``density`` (kg/m^3), ``friction``, ``restitution``,
+    ``group``; without ``group`` a box with a non-zero colour gets the nearest named colour
+    ("red", "yellow", ...), as in the paper's Exp. 5.
+    floor/table: ``friction``, ``restitution``, ``gravity`` (vertical, m/s^2, default -9.81),
+    ``scene`` (the scene's name); tables also ``floor_z`` (metres or ``none``; default: a floor at
+    z = 0 when the slab's underside is at or above 0).
+    obstacles: ``name``, ``friction``, ``restitution``.
+* ``DELETEALL`` and ``DELETE`` markers are ignored: every array is a complete scene, so clearing the
+  previous one is implicit (RViz publishers often start with a DELETEALL). Any other marker type is
+  rejected: silently dropping a sphere or mesh would hide an object from the physics.
+* All markers must share one non-empty ``header.frame_id``. The scene's stamp is the first
+  marker's ``header.stamp``.
+
+Errors are :class:`~ipe_ros.engine.SceneError` (a ValueError) naming ``markers[i]`` and the field.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from dataclasses import dataclass
+
+from geometry_msgs.msg import Point
+from std_msgs.msg import ColorRGBA
+from visualization_msgs.msg import Marker, MarkerArray
+
+from ipe_ros.engine import Box, Floor, Prediction, Scene, SceneError, Table, validate_scene
+from ipe_ros.engine.palette import SUPPORT_RGB, group_rgb, nearest_group_name, risk_rgb
+from ipe_ros.engine.scene import DEFAULT_MAX_OBJECTS
+
+from .stamps import header_to_stamp_ns, stamp_ns_to_header
+
+SUPPORT_NAMESPACE = "support"
+DEFAULT_FRICTION = 0.9
+DEFAULT_RESTITUTION = 0.0
+#: The paper's light blocks (4.08 kg for 0.2 x 0.6 x 0.2 m): used when a box gives no mass or density.
+DEFAULT_DENSITY_KG_M3 = 170.0
+DEFAULT_GRAVITY_M_S2 = -9.81
+DEFAULT_SCENE_NAME = "markers"
+#: Thickness of the cube that stands for an infinite floor when a scene is turned into markers.
+FLOOR_MARKER_THICKNESS_M = 0.01
+FLOOR_MARKER_SIZE_M = 20.0
+
+_DYNAMIC_KEYS = ("name", "mass", "density", "friction", "restitution", "group")
+_FLOOR_KEYS = ("role", "name", "friction", "restitution", "gravity", "scene")
+_TABLE_KEYS = _FLOOR_KEYS + ("floor_z",)
+_OBSTACLE_KEYS = ("role", "name", "friction", "restitution")
+_ROLES = ("floor", "table", "obstacle")
+_TYPE_NAMES = {getattr(Marker, n): n for n in ("ARROW", "CUBE", "SPHERE", "CYLINDER", "LINE_STRIP", "LINE_LIST",
+                                               "CUBE_LIST", "SPHERE_LIST", "POINTS", "TEXT_VIEW_FACING",
+                                               "MESH_RESOURCE", "TRIANGLE_LIST", "ARROW_STRIP")
+               if hasattr(Marker, n)}
+
+
+@dataclass(frozen=True)
+class MarkerScene:
+    """A scene read from a MarkerArray with the header it came with (stamp in ns since the epoch)."""
+
+    scene: Scene
+    frame_id: str
+    stamp_ns: int
+
+
+def parse_properties(text: str, allowed: tuple[str, ...], field: str) -> dict[str, str]:
+    """``"mass=2 group=red"`` -> {"mass": "2", "group": "red"}; unknown keys or bad pairs raise."""
+    props: dict[str, str] = {}
+    for token in (t for t in re.split(r"[\s,;]+", text.strip()) if t):
+        key, sep, value = token.partition("=")
+        if not sep or not key or not value:
+            raise SceneError(field, f"expected key=value pairs, got {token!r}")
+        if key not in allowed:
+            raise SceneError(field, f"unknown key {key!r}; allowed here: {', '.join(allowed)}")
+        if key in props:
+            raise SceneError(field, f"key {key!r} is given twice")
+        props[key] = value
+    return props
+
+
+def _number(props: dict[str, str], key: str, field: str, default: float | None) -> float | None:
+    if key not in props:
+        return default
+    try:
+        value = float(props[key])
+    except ValueError:
+        raise SceneError(f"{field}.{key}", f"expected a number, got {props[key]!r}") from None
+    if not math.isfinite(value):
+        raise SceneError(f"{field}.{key}", f"must be finite, got {props[key]!r}")
+    return value
+
+
+def _orientation(marker: Marker) -> tuple[float, float, float, float]:
+    q = marker.pose.orientation
+    xyzw = (float(q.x), float(q.y), float(q.z), float(q.w))
+    return (0.0, 0.0, 0.0, 1.0) if xyzw == (0.0, 0.0, 0.0, 0.0) else xyzw
+
+
+def _vectors(marker: Marker, field: str) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    p, s = marker.pose.position, marker.scale
+    position = (float(p.x), float(p.y), float(p.z))
+    extents = (float(s.x), float(s.y), float(s.z))
+    if not all(math.isfinite(v) for v in position):
+        raise SceneError(f"{field}.pose.position", f"must be finite, got {list(position)}")
+    if not all(math.isfinite(v) and v > 0 for v in extents):
+        raise SceneError(f"{field}.scale", f"full box extents must be finite and > 0 m, got {list(extents)}")
+    return position, extents
+
+
+def _is_identity(q: tuple[float, float, float, float]) -> bool:
+    return abs(q[0]) < 1e-9 and abs(q[1]) < 1e-9 and abs(q[2]) < 1e-9 and abs(abs(q[3]) - 1) < 1e-9
+
+
+def markers_to_scene(msg: MarkerArray, *, max_objects: int = DEFAULT_MAX_OBJECTS) -> MarkerScene:
+    """Read a scene from a MarkerArray (see the module docstring for the mapping) and validate it."""
+    adds = [(i, m) for i, m in enumerate(msg.markers) if m.action not in (Marker.DELETE, Marker.DELETEALL)]
+    if not adds:
+        raise SceneError("markers", "the array holds no ADD markers; publish at least one CUBE marker per box")
+    # Count before converting anything, so a runaway array costs O(n) and nothing more.
+    if len(adds) > max_objects:
+        raise SceneError("markers", f"{len(adds)} markers exceed max_objects = {max_objects}; "
+                                    "raise the max_objects parameter or publish a smaller scene")
+    frame_id = adds[0][1].header.frame_id
+    if not frame_id:
+        raise SceneError(f"markers[{adds[0][0]}].header.frame_id", "is empty; set the frame the poses are in")
+    seen: dict[tuple[str, int], int] = {}
+    dynamic: list[Box] = []
+    obstacles: list[Box] = []
+    support: Floor | Table | None = None
+    gravity_z, scene_name = DEFAULT_GRAVITY_M_S2, DEFAULT_SCENE_NAME
+    for i, m in adds:
+        field = f"markers[{i}]"
+        if m.action != Marker.ADD:
+            raise SceneError(f"{field}.action", f"must be ADD (0), DELETE (2) or DELETEALL (3), got {m.action}")
+        if m.type != Marker.CUBE:
+            raise SceneError(f"{field}.type", f"only CUBE ({Marker.CUBE}) markers describe boxes, got "
+                                              f"{_TYPE_NAMES.get(m.type, m.type)} (ns {m.ns!r}, id {m.id}); "
+                                              "drop it from the scene array")
+        if m.header.frame_id != frame_id:
+            raise SceneError(f"{field}.header.frame_id", f"is {m.header.frame_id!r} but markers[{adds[0][0]}] is in "
+                                                         f"{frame_id!r}; publish every marker of a scene in one frame")
+        key = (m.ns, m.id)
+        if key in seen:
+            raise SceneError(field, f"ns {m.ns!r} id {m.id} repeats markers[{seen[key]}]; "
+                                    "give each marker a unique (ns, id)")
+        seen[key] = i
+        position, extents = _vectors(m, field)
+        orientation = _orientation(m)
+        if m.ns == SUPPORT_NAMESPACE:
+            role = parse_properties(m.text, _TABLE_KEYS, f"{field}.text").get("role", "obstacle")
+            if role not in _ROLES:
+                raise SceneError(f"{field}.text.role", f"must be one of {', '.join(_ROLES)}, got {role!r}")
+            allowed = {"floor": _FLOOR_KEYS, "table": _TABLE_KEYS, "obstacle": _OBSTACLE_KEYS}[role]
+            props = parse_properties(m.text, allowed, f"{field}.text")
+            friction = _number(props, "friction", f"{field}.text", DEFAULT_FRICTION)
+            restitution = _number(props, "restitution", f"{field}.text", DEFAULT_RESTITUTION)
+            if role == "obstacle":
+                obstacles.append(Box(name=props.get("name", f"{m.ns}/{m.id}"), extents_m=extents,
+                                     position_m=position, orientation_xyzw=orientation, friction=friction,
+                                     restitution=restitution, static=True))
+                continue
+            if support is not None:
+                raise SceneError(f"{field}.text.role", f"a second {role}: a scene has one floor or one table")
+            if not _is_identity(orientation) and role == "table":
+                raise SceneError(f"{field}.pose.orientation", "a table must be axis-aligned in the scene frame "
+                                                              "(identity orientation); rotate the frame instead")
+            if role == "floor" and not _is_identity(orientation):
+                raise SceneError(f"{field}.pose.orientation", "a floor must be horizontal (identity orientation)")
+            gravity_z = _number(props, "gravity", f"{field}.text", DEFAULT_GRAVITY_M_S2)
+            scene_name = props.get("scene", scene_name)
+            top = position[2] + extents[2] / 2
+            if role == "floor":
+                support = Floor(friction=friction, restitution=restitution, height_m=top)
+            else:
+                underside = position[2] - extents[2] / 2
+                if props.get("floor_z", "").lower() == "none":
+                    floor_z = None
+                else:
+                    floor_z = _number(props, "floor_z", f"{field}.text", 0.0 if underside >= 0 else None)
+                support = Table(top_height_m=top, size_m=extents[:2], center_xy_m=position[:2],
+                                thickness_m=extents[2], friction=friction, restitution=restitution,
+                                floor_z_m=floor_z)
+            continue
+        props = parse_properties(m.text, _DYNAMIC_KEYS, f"{field}.text")
+        if "mass" in props and "density" in props:
+            raise SceneError(f"{field}.text", "give mass or density, not both")
+        mass = _number(props, "mass", f"{field}.text", None)
+        density = _number(props, "density", f"{field}.text", None)
+        if mass is None and density is None:
+            density = DEFAULT_DENSITY_KG_M3
+        group = props.get("group")
+        if group is None:
+            c = m.color
+            group = "" if (c.r, c.g, c.b) == (0.0, 0.0, 0.0) and c.a == 0.0 else nearest_group_name(c.r, c.g, c.b)
+        dynamic.append(Box(name=props.get("name", f"{m.ns}/{m.id}"), extents_m=extents, position_m=position,
+                           orientation_xyzw=orientation,
+                           friction=_number(props, "friction", f"{field}.text", DEFAULT_FRICTION),
+                           restitution=_number(props, "restitution", f"{field}.text", DEFAULT_RESTITUTION),
+                           mass_kg=mass, density_kg_m3=None if mass is not None else density, group=group))
+    if not dynamic:
+        raise SceneError("markers", "no dynamic boxes: every CUBE is in the 'support' namespace; "
+                                    "put the objects that may fall in another namespace")
+    if support is None:
+        support = Floor(friction=DEFAULT_FRICTION, restitution=DEFAULT_RESTITUTION, height_m=0.0)
+    if isinstance(support, Table):
+        support = dataclasses.replace(support, obstacles=tuple(obstacles))
+        boxes = tuple(dynamic)
+    else:
+        boxes = tuple(dynamic) + tuple(obstacles)
+    scene = Scene(name=scene_name, boxes=boxes, support=support, gravity_m_s2=(0.0, 0.0, gravity_z))
+    validate_scene(scene, max_objects=max_objects)
+    return MarkerScene(scene=scene, frame_id=frame_id, stamp_ns=header_to_stamp_ns(adds[0][1].header))
+
+
+def _fmt(value: float) -> str:
+    return repr(float(value))  # shortest text that reads back to the same float
+
+
+def _cube(header, ns: str, marker_id: int, position, extents, orientation, rgb, alpha: float, text: str) -> Marker:
+    m = Marker(header=header, ns=ns, id=marker_id, type=Marker.CUBE, action=Marker.ADD, text=text)
+    m.pose.position.x, m.pose.position.y, m.pose.position.z = (float(v) for v in position)
+    q = m.pose.orientation
+    q.x, q.y, q.z, q.w = (float(v) for v in orientation)
+    m.scale.x, m.scale.y, m.scale.z = (float(v) for v in extents)
+    m.color = ColorRGBA(r=float(rgb[0]), g=float(rgb[1]), b=float(rgb[2]), a=float(alpha))
+    return m
+
+
+def scene_to_markers(scene: Scene, frame_id: str, stamp_ns: int = 0) -> MarkerArray:
+    """The inverse of :func:`markers_to_scene`: ``markers_to_scene(scene_to_markers(s, f)).scene == s``
+    (a floor's height up to rounding of ``z + thickness / 2``)."""
+    if not frame_id:
+        raise ValueError("frame_id: must be a non-empty frame name")
+    gx, gy, gz = scene.gravity_m_s2
+    if gx != 0 or gy != 0:
+        raise ValueError(f"scene.gravity_m_s2: a MarkerArray scene carries vertical gravity only, got {scene.gravity_m_s2}")
+    header = stamp_ns_to_header(stamp_ns, frame_id)
+    markers: list[Marker] = []
+    support = scene.support
+    common = f"friction={_fmt(support.friction)} restitution={_fmt(support.restitution)} " \
+             f"gravity={_fmt(gz)} scene={scene.name}"
+    if isinstance(support, Floor):
+        t = FLOOR_MARKER_THICKNESS_M
+        markers.append(_cube(header, SUPPORT_NAMESPACE, 0, (0.0, 0.0, support.height_m - t / 2),
+                             (FLOOR_MARKER_SIZE_M, FLOOR_MARKER_SIZE_M, t), (0, 0, 0, 1), SUPPORT_RGB, 1.0,
+                             f"role=floor {common}"))
+        obstacles = scene.static_boxes
+    else:
+        floor = "none" if support.floor_z_m is None else _fmt(support.floor_z_m)
+        markers.append(_cube(header, SUPPORT_NAMESPACE, 0,
+                             (*support.center_xy_m, support.top_height_m - support.thickness_m / 2),
+                             (*support.size_m, support.thickness_m), (0, 0, 0, 1), SUPPORT_RGB, 1.0,
+                             f"role=table {common} floor_z={floor}"))
+        obstacles = scene.static_boxes
+    for j, box in enumerate(obstacles, start=1):
+        markers.append(_cube(header, SUPPORT_NAMESPACE, j, box.position_m, box.extents_m, box.orientation_xyzw,
+                             SUPPORT_RGB, 1.0, f"role=obstacle name={box.name} friction={_fmt(box.friction)} "
+                                               f"restitution={_fmt(box.restitution)}"))
+    for j, box in enumerate(scene.dynamic_boxes):
+        mass = f"mass={_fmt(box.mass_kg)}" if box.mass_kg is not None else f"density={_fmt(box.density_kg_m3)}"
+        text = f"name={box.name} {mass} friction={_fmt(box.friction)} restitution={_fmt(box.restitution)}"
+        if box.group:
+            text += f" group={box.group}"
+        markers.append(_cube(header, "objects", j, box.position_m, box.extents_m, box.orientation_xyzw,
+                             group_rgb(box.group), 1.0, text))
+    for m in markers:
+        for value in re.split(r"[\s,;]+", m.text):
+            if value.count("=") != 1:
+                raise ValueError(f"name: {m.text!r} cannot ride in Marker.text; scene and box names "
+                                 "must not contain spaces, '=', ',' or ';'")
+    return MarkerArray(markers=markers)
+
+
+def prediction_to_markers(scene: Scene, prediction: Prediction, frame_id: str, stamp_ns: int) -> MarkerArray:
+    """Each dynamic box coloured by its fall probability (green 0 .. red 1), an arrow for the fall
+    direction (length grows with decisiveness) and a text label; starts with a DELETEALL so stale
+    markers of a previous scene disappear in RViz/Foxglove."""
+    header = stamp_ns_to_header(stamp_ns, frame_id)
+    markers = [Marker(header=header, ns="", id=0, action=Marker.DELETEALL)]
+    probabilities = prediction.object_fall_probability or {}
+    dynamic = scene.dynamic_boxes
+    for j, box in enumerate(dynamic):
+        p = probabilities.get(box.name)
+        rgb = risk_rgb(p) if p is not None else group_rgb(box.group)
+        text = f"{box.name}: P(fall) = {p:.2f}" if p is not None else box.name
+        markers.append(_cube(header, "ipe/objects", j, box.position_m, box.extents_m, box.orientation_xyzw,
+                             rgb, 0.9, text))
+    if not dynamic:
+        return MarkerArray(markers=markers)
+    top = max(b.position_m[2] + max(b.extents_m) / 2 for b in dynamic)
+    cx = sum(b.position_m[0] for b in dynamic) / len(dynamic)
+    cy = sum(b.position_m[1] for b in dynamic) / len(dynamic)
+    scale = max(max(b.extents_m) for b in dynamic)
+    if prediction.fall_fraction is not None:
+        label = Marker(header=header, ns="ipe/label", id=0, type=Marker.TEXT_VIEW_FACING, action=Marker.ADD,
+                       text=f"P(fall) = {prediction.fall_fraction:.2f} (k = {prediction.samples})")
+        label.pose.position.x, label.pose.position.y, label.pose.position.z = cx, cy, top + 0.5 * scale
+        label.pose.orientation.w = 1.0
+        label.scale.z = 0.25 * scale
+        label.color = ColorRGBA(r=1.0, g=1.0, b=1.0, a=1.0)
+        markers.append(label)
+    if prediction.direction_rad is not None:
+        length = 2.0 * scale * (prediction.direction_decisiveness or 0.0)
+        arrow = Marker(header=header, ns="ipe/direction", id=0, type=Marker.ARROW, action=Marker.ADD,
+                       text=f"fall direction {math.degrees(prediction.direction_rad):.0f} deg")
+        arrow.pose.orientation.w = 1.0
+        start = Point(x=cx, y=cy, z=top)
+        end = Point(x=cx + length * math.cos(prediction.direction_rad),
+                    y=cy + length * math.sin(prediction.direction_rad), z=top)
+        arrow.points = [start, end]
+        arrow.scale.x, arrow.scale.y, arrow.scale.z = 0.1 * scale, 0.2 * scale, 0.3 * scale
+        arrow.color = ColorRGBA(r=0.95, g=0.1, b=0.1, a=1.0)
+        markers.append(arrow)
+    return MarkerArray(markers=markers)

@@ -30,6 +30,7 @@ Errors are :class:`~ipe_ros.engine.SceneError` (a ValueError) naming ``markers[i
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import re
@@ -230,7 +231,8 @@ def _fmt(value: float) -> str:
 
 
 def _cube(header, ns: str, marker_id: int, position, extents, orientation, rgb, alpha: float, text: str) -> Marker:
-    m = Marker(header=header, ns=ns, id=marker_id, type=Marker.CUBE, action=Marker.ADD, text=text)
+    # each marker its own Header: a shared one would make an edit of one marker change them all
+    m = Marker(header=copy.deepcopy(header), ns=ns, id=marker_id, type=Marker.CUBE, action=Marker.ADD, text=text)
     m.pose.position.x, m.pose.position.y, m.pose.position.z = (float(v) for v in position)
     q = m.pose.orientation
     q.x, q.y, q.z, q.w = (float(v) for v in orientation)

@@ -1,0 +1,250 @@
+"""The ROS 2 node in-process: isolated Context per test, executor in a thread, deadline waits."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+
+import numpy as np
+import pytest
+
+from tests.ros_harness import RosHarness, wait_until
+
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import Vector3Stamped  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.parameter_client import AsyncParameterClient  # noqa: E402
+from std_msgs.msg import Float64, String  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
+
+from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, predict, preset  # noqa: E402
+from ipe_ros.engine.scene_io import scene_to_json  # noqa: E402
+from ipe_ros.node import LATCHED_QOS  # noqa: E402
+from msg_bridge.markers import scene_to_markers  # noqa: E402
+from tests.helpers import block, floor_scene  # noqa: E402
+
+EXAMPLE = "ipe_ros/data/example_tower.json"
+TIMEOUT_S = 90.0
+FAST = dict(samples=6)  # enough samples to be a real Monte Carlo run, few enough to be quick
+
+
+@pytest.fixture
+def ros():
+    harness = RosHarness()
+    yield harness
+    harness.close()
+
+
+@pytest.fixture(scope="module")
+def tower():
+    return load_scenes(EXAMPLE)[0]
+
+
+def answers(ros: RosHarness) -> list[dict]:
+    received = ros.collect(String, "/ipe/prediction", LATCHED_QOS)
+    return _Decoded(received)
+
+
+class _Decoded:
+    """A live view of received prediction messages, decoded on access."""
+
+    def __init__(self, raw: list):
+        self.raw = raw
+
+    def __len__(self) -> int:
+        return len(self.raw)
+
+    def __getitem__(self, i):
+        return json.loads(self.raw[i].data)
+
+
+def set_params(ros: RosHarness, **values):
+    client = AsyncParameterClient(ros.client, "ipe")
+    wait_until(lambda: client.services_are_ready(), 10.0, "the parameter services of /ipe")
+    future = client.set_parameters([Parameter(k, value=v) for k, v in values.items()])
+    wait_until(future.done, 10.0, "set_parameters")
+    return future.result().results
+
+
+def test_marker_tower_in_stamped_prediction_out_matching_the_engine(ros, tower):
+    node = ros.start_ipe_node(**FAST, seed=7)
+    got = answers(ros)
+    probabilities = ros.collect(Float64, "/ipe/fall_probability", LATCHED_QOS)
+    directions = ros.collect(Vector3Stamped, "/ipe/fall_direction", LATCHED_QOS)
+    markers = ros.collect(MarkerArray, "/ipe/markers", LATCHED_QOS)
+    pub = ros.publisher(MarkerArray, "/ipe/scene")
+    stamp_ns = 1_700_000_000_123_456_789
+    pub.publish(scene_to_markers(tower, "odom", stamp_ns))
+    wait_until(lambda: len(got) and len(probabilities) and len(directions) and len(markers), TIMEOUT_S,
+               "a prediction on every output topic")
+    answer = got[0]
+    assert answer["stamp"] == {"sec": 1_700_000_000, "nanosec": 123_456_789}
+    assert answer["frame_id"] == "odom"
+    assert answer["scene_id"] == tower.name and answer["scene_seq"] == 1
+    assert answer["compute_s"] > 0 and answer["latency_s"] >= answer["compute_s"] * 0.5
+
+    # Same scene, settings and seed through the engine API: the same numbers.
+    with WorkerPool(1) as pool:
+        expected = predict(tower, ModelConfig(sigma_m=0.04, samples=6), preset("default"),
+                           QuerySpec(queries=frozenset({"fall", "direction", "far"})), seed=7,
+                           map_fn=pool.map).to_dict()
+    for key in ("fall_fraction", "fall_fraction_ci95", "object_fall_probability", "direction_rad",
+                "direction_decisiveness", "far_m", "samples", "failed_samples"):
+        assert answer[key] == expected[key], key
+
+    assert probabilities[0].data == answer["fall_fraction"]
+    d = directions[0]
+    assert (d.header.frame_id, d.header.stamp.sec, d.header.stamp.nanosec) == ("odom", 1_700_000_000, 123_456_789)
+    if answer["direction_rad"] is None:
+        assert (d.vector.x, d.vector.y, d.vector.z) == (0.0, 0.0, 0.0)
+    else:
+        assert math.hypot(d.vector.x, d.vector.y) == pytest.approx(answer["direction_decisiveness"])
+        assert math.atan2(d.vector.y, d.vector.x) == pytest.approx(answer["direction_rad"])
+    shown = markers[0].markers
+    assert shown[0].action == Marker.DELETEALL
+    cubes = [m for m in shown if m.ns == "ipe/objects"]
+    assert len(cubes) == len(tower.boxes) and all(m.header.frame_id == "odom" for m in cubes)
+    assert node.service.stats().predicted == 1
+
+
+def test_json_topic_uses_the_frame_parameter(ros, tower):
+    ros.start_ipe_node(**FAST, frame_id="map")
+    got = answers(ros)
+    ros.publisher(String, "/ipe/scene_json").publish(String(data=scene_to_json(tower)))
+    wait_until(lambda: len(got), TIMEOUT_S, "a prediction for the JSON scene")
+    assert got[0]["frame_id"] == "map" and got[0]["scene_id"] == tower.name
+    assert got[0]["samples"] == 6 and 0.0 <= got[0]["fall_fraction"] <= 1.0
+
+
+def test_trigger_service_without_and_with_a_scene(ros, tower):
+    node = ros.start_ipe_node(**FAST)
+    response = ros.call(Trigger, "/ipe/predict", Trigger.Request())
+    assert not response.success
+    assert response.message == "no scene received yet; publish one on ~/scene (MarkerArray) or ~/scene_json"
+
+    got = answers(ros)
+    ros.publisher(String, "/ipe/scene_json").publish(String(data=scene_to_json(tower)))
+    wait_until(lambda: node.service.stats().received == 1, TIMEOUT_S, "the scene to arrive")
+    response = ros.call(Trigger, "/ipe/predict", Trigger.Request(), timeout_s=TIMEOUT_S)
+    assert response.success
+    answer = json.loads(response.message)
+    assert answer["scene_id"] == tower.name and answer["samples"] == 6
+    wait_until(lambda: len(got), TIMEOUT_S, "the topic answer")
+    assert got[-1]["fall_fraction"] == answer["fall_fraction"]
+    # Nothing changed: the service answers from the last prediction without simulating again.
+    again = json.loads(ros.call(Trigger, "/ipe/predict", Trigger.Request()).message)
+    assert again == answer and node.service.stats().predicted == 1
+
+
+def test_parameter_updates_accepted_and_rejected(ros, tower):
+    node = ros.start_ipe_node(**FAST)
+    [ok] = set_params(ros, samples=3)
+    assert ok.successful
+    [bad_query] = set_params(ros, queries=["fall", "nope"])
+    assert not bad_query.successful
+    assert bad_query.reason == "queries: unknown query 'nope'; choose from fall, direction, far, bump"
+    [bad_preset] = set_params(ros, preset="fastest")
+    assert bad_preset.reason == "preset: unknown preset 'fastest'; choose one of paper, default"
+    [bad_direction] = set_params(ros, force_direction_deg=math.inf)
+    assert bad_direction.reason == "force_direction_deg: must be finite degrees or NaN (any direction), got inf"
+    [out_of_range] = set_params(ros, samples=0)
+    assert not out_of_range.successful and "samples" in out_of_range.reason
+    [read_only] = set_params(ros, workers=1)
+    assert not read_only.successful and "read-only" in read_only.reason
+    assert node.get_parameter("samples").value == 3
+
+    got = answers(ros)
+    ros.publisher(String, "/ipe/scene_json").publish(String(data=scene_to_json(tower)))
+    wait_until(lambda: len(got), TIMEOUT_S, "a prediction with the new sample count")
+    assert got[0]["samples"] == 3 and got[0]["settings"]["preset"] == "default"
+
+
+def _good_and_bad_inputs(tower):
+    nan_pose = scene_to_markers(tower, "world")
+    nan_pose.markers[3].pose.position.x = math.nan
+    zero_size = scene_to_markers(tower, "world")
+    zero_size.markers[2].scale.y = 0.0
+    mixed_frames = scene_to_markers(tower, "world")
+    mixed_frames.markers[4].header.frame_id = "map"
+    cube = scene_to_markers(tower, "world").markers[1]
+    flood = MarkerArray(markers=[cube] * 10_000)
+    return [
+        ("scene_json", String(data='{"format": "ipe_ros.scene/1", "boxes": ['),
+         "json: malformed JSON at line 1 column 41: Expecting value"),
+        ("scene", nan_pose, "markers[3].pose.position: must be finite, got [nan, 0.025634670161324646, 0.5]"),
+        ("scene", zero_size, "markers[2].scale: full box extents must be finite and > 0 m, got [0.2, 0.0, 0.2]"),
+        ("scene", mixed_frames, "markers[4].header.frame_id: is 'map' but markers[0] is in 'world'; "
+                                "publish every marker of a scene in one frame"),
+        ("scene", flood, "markers: 10000 markers exceed max_objects = 200; raise the max_objects parameter "
+                         "or publish a smaller scene"),
+        ("scene", MarkerArray(), "markers: the array holds no ADD markers; publish at least one CUBE marker per box"),
+    ]
+
+
+def test_bad_inputs_are_rejected_and_the_next_good_scene_is_answered(ros, tower):
+    node = ros.start_ipe_node(**FAST)
+    diagnostics = ros.collect(DiagnosticArray, "/diagnostics", 10)
+    got = answers(ros)
+    pubs = {"scene": ros.publisher(MarkerArray, "/ipe/scene"), "scene_json": ros.publisher(String, "/ipe/scene_json")}
+    bad = _good_and_bad_inputs(tower)
+    for i, (topic, msg, reason) in enumerate(bad, start=1):
+        pubs[topic].publish(msg)
+        wait_until(lambda: node.service.stats().rejected == i, TIMEOUT_S, f"bad input {i} to be rejected")
+        assert node.service.stats().last_error == reason
+    response = ros.call(Trigger, "/ipe/predict", Trigger.Request())
+    assert response.message == ("the latest scene was rejected: markers: the array holds no ADD markers; "
+                                "publish at least one CUBE marker per box")
+    pubs["scene"].publish(scene_to_markers(tower, "world"))
+    wait_until(lambda: len(got), TIMEOUT_S, "the good scene's prediction")
+    stats = node.service.stats()
+    assert (stats.rejected, stats.received, stats.predicted) == (len(bad), 1, 1)
+
+    def rejected_in_diagnostics():
+        for array in list(diagnostics):
+            values = {kv.key: kv.value for kv in array.status[0].values}
+            if values.get("scenes_rejected") == str(len(bad)) and values.get("scenes_predicted") == "1":
+                return values
+        return None
+    values = wait_until(rejected_in_diagnostics, 10.0, "diagnostics counting the rejections")
+    assert values["workers_alive"] == "2"
+
+
+def test_a_killed_worker_is_replaced_and_the_prediction_still_answered(ros, tower):
+    node = ros.start_ipe_node(samples=16)
+    got = answers(ros)
+    pool = node.service.pool
+    pids = wait_until(lambda: len(pool.worker_pids()) == 2 and pool.worker_pids(), 30.0, "two live workers")
+    ros.publisher(String, "/ipe/scene_json").publish(String(data=scene_to_json(tower)))
+    wait_until(lambda: node.service.stats().in_flight, TIMEOUT_S, "the prediction to start")
+    os.kill(pids[0], signal.SIGKILL)
+    wait_until(lambda: len(got), TIMEOUT_S, "the prediction despite the killed worker")
+    assert got[0]["samples"] == 16 and got[0]["failed_samples"] == 0
+    stats = node.service.stats()
+    assert stats.worker_replacements >= 1
+    assert pids[0] not in pool.worker_pids()
+    # And the node keeps serving with the new workers.
+    ros.publisher(String, "/ipe/scene_json").publish(String(data=scene_to_json(tower)))
+    wait_until(lambda: len(got) >= 2, TIMEOUT_S, "a second prediction on the replaced pool")
+    assert got[1]["fall_fraction"] == got[0]["fall_fraction"]
+
+
+def test_rerun_recording_is_written_and_holds_the_rollouts(ros, tower, tmp_path):
+    from rerun.chunk import RrdReader
+
+    ros.start_ipe_node(**FAST, **{"rerun.save_dir": str(tmp_path), "rerun.rollouts_logged": 2})
+    got = answers(ros)
+    ros.publisher(MarkerArray, "/ipe/scene").publish(scene_to_markers(tower, "world", 42))
+    wait_until(lambda: len(got), TIMEOUT_S, "a prediction with a recording")
+    path = got[0]["rrd_path"]
+    assert path and os.path.exists(path) and got[0]["rollouts_logged"] == 2
+    chunks = RrdReader(path).stream().to_chunks()
+    entities = {c.entity_path for c in chunks}
+    name = tower.dynamic_boxes[0].name
+    assert {f"/world/rollouts/0/{name}", f"/world/rollouts/1/{name}", "/world/scene/boxes", "/answer"} <= entities
+    assert f"/world/rollouts/2/{name}" not in entities
+    moving = [c for c in chunks if c.entity_path == f"/world/rollouts/0/{name}" and not c.is_static]
+    assert moving and set(moving[0].timeline_names) == {"sim_time", "ros_stamp"}
+    assert sum(c.num_rows for c in moving) == 101  # 2 s every 20 ms, plus t = 0

@@ -1,0 +1,72 @@
+"""``ipe_node`` as its own process: SIGINT and SIGTERM end it cleanly, with no stray worker processes."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.ros_harness import domain_id_for_tests, wait_until
+
+
+def _children(pid: int) -> set[int]:
+    """Direct children of ``pid``, read from /proc (no psutil needed)."""
+    out = set()
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+        except OSError:
+            continue
+        # the command name may contain spaces or parentheses: the ppid follows the last ')'
+        fields = stat[stat.rfind(")") + 2:].split()
+        if int(fields[1]) == pid:
+            out.add(int(entry.name))
+    return out
+
+
+def _descendants(pid: int) -> set[int]:
+    found, todo = set(), [pid]
+    while todo:
+        for child in _children(todo.pop()):
+            if child not in found:
+                found.add(child)
+                todo.append(child)
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return state[state.rfind(")") + 2] != "Z"  # a zombie has ended
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+def test_signal_ends_the_node_and_its_workers(signum):
+    if sys.platform != "linux":
+        pytest.skip("reads the process tree from /proc")
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(domain_id_for_tests()))
+    proc = subprocess.Popen([sys.executable, "-m", "ipe_ros.node", "--ros-args", "-p", "workers:=2",
+                             "-p", "samples:=4"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True)
+    try:
+        # the pool's workers (forked by the forkserver, itself a child of the node) are up
+        wait_until(lambda: len(_descendants(proc.pid)) >= 3, 60.0, "the node's worker processes")
+        family = _descendants(proc.pid)
+        proc.send_signal(signum)
+        output, _ = proc.communicate(timeout=30.0)
+    finally:
+        if proc.poll() is None:
+            proc.kill()  # only our own child, by its pid
+            proc.wait()
+    assert proc.returncode == 0, output
+    wait_until(lambda: not any(_alive(pid) for pid in family), 20.0,
+               f"the node's child processes {sorted(family)} to end")
+    assert "ready: k = 4" in output

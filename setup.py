@@ -23,7 +23,6 @@ setup(
     maintainer_email="ipe-ros@example.com",
     description="The intuitive physics engine (Battaglia et al. 2013) as a ROS 2 service",
     license="Apache-2.0",
-    tests_require=["pytest"],
     entry_points={
         "console_scripts": [
             "ipe = ipe_ros.cli:main",

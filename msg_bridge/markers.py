@@ -18,7 +18,7 @@ The mapping (MarkerArray has no notion of mass, friction or support, so some of 
     floor/table: ``friction``, ``restitution``, ``gravity`` (vertical, m/s^2, default -9.81),
     ``scene`` (the scene's name); tables also ``floor_z`` (metres or ``none``; default: a floor at
     z = 0 when the slab's underside is at or above 0).
-    obstacles: ``name``, ``friction``, ``restitution``.
+    obstacles: ``name``, ``friction``, ``restitution``, ``group``.
 * ``DELETEALL`` and ``DELETE`` markers are ignored: every array is a complete scene, so clearing the
   previous one is implicit (RViz publishers often start with a DELETEALL). Any other marker type is
   rejected: silently dropping a sphere or mesh would hide an object from the physics.
@@ -60,7 +60,7 @@ FLOOR_MARKER_SIZE_M = 20.0
 _DYNAMIC_KEYS = ("name", "mass", "density", "friction", "restitution", "group")
 _FLOOR_KEYS = ("role", "name", "friction", "restitution", "gravity", "scene")
 _TABLE_KEYS = _FLOOR_KEYS + ("floor_z",)
-_OBSTACLE_KEYS = ("role", "name", "friction", "restitution")
+_OBSTACLE_KEYS = ("role", "name", "friction", "restitution", "group")
 _ROLES = ("floor", "table", "obstacle")
 _TYPE_NAMES = {getattr(Marker, n): n for n in ("ARROW", "CUBE", "SPHERE", "CYLINDER", "LINE_STRIP", "LINE_LIST",
                                                "CUBE_LIST", "SPHERE_LIST", "POINTS", "TEXT_VIEW_FACING",
@@ -161,7 +161,8 @@ def markers_to_scene(msg: MarkerArray, *, max_objects: int = DEFAULT_MAX_OBJECTS
         position, extents = _vectors(m, field)
         orientation = _orientation(m)
         if m.ns == SUPPORT_NAMESPACE:
-            role = parse_properties(m.text, _TABLE_KEYS, f"{field}.text").get("role", "obstacle")
+            every_key = tuple(dict.fromkeys(_TABLE_KEYS + _OBSTACLE_KEYS))
+            role = parse_properties(m.text, every_key, f"{field}.text").get("role", "obstacle")
             if role not in _ROLES:
                 raise SceneError(f"{field}.text.role", f"must be one of {', '.join(_ROLES)}, got {role!r}")
             allowed = {"floor": _FLOOR_KEYS, "table": _TABLE_KEYS, "obstacle": _OBSTACLE_KEYS}[role]
@@ -171,7 +172,7 @@ def markers_to_scene(msg: MarkerArray, *, max_objects: int = DEFAULT_MAX_OBJECTS
             if role == "obstacle":
                 obstacles.append(Box(name=props.get("name", f"{m.ns}/{m.id}"), extents_m=extents,
                                      position_m=position, orientation_xyzw=orientation, friction=friction,
-                                     restitution=restitution, static=True))
+                                     restitution=restitution, group=props.get("group", ""), static=True))
                 continue
             if support is not None:
                 raise SceneError(f"{field}.text.role", f"a second {role}: a scene has one floor or one table")
@@ -270,7 +271,8 @@ def scene_to_markers(scene: Scene, frame_id: str, stamp_ns: int = 0) -> MarkerAr
     for j, box in enumerate(obstacles, start=1):
         markers.append(_cube(header, SUPPORT_NAMESPACE, j, box.position_m, box.extents_m, box.orientation_xyzw,
                              SUPPORT_RGB, 1.0, f"role=obstacle name={box.name} friction={_fmt(box.friction)} "
-                                               f"restitution={_fmt(box.restitution)}"))
+                                               f"restitution={_fmt(box.restitution)}"
+                                               + (f" group={box.group}" if box.group else "")))
     for j, box in enumerate(scene.dynamic_boxes):
         mass = f"mass={_fmt(box.mass_kg)}" if box.mass_kg is not None else f"density={_fmt(box.density_kg_m3)}"
         text = f"name={box.name} {mass} friction={_fmt(box.friction)} restitution={_fmt(box.restitution)}"

@@ -51,6 +51,7 @@ class WorkerPool:
         self._executor: ProcessPoolExecutor | None = None
         self.replacements = 0  # how many times dead workers forced a new executor
         self._closed = False
+        self._shut_down = threading.Event()  # set once close() has stopped the executor
 
     # -- lifecycle -------------------------------------------------------------------------
     def _get_executor(self) -> ProcessPoolExecutor:
@@ -95,6 +96,7 @@ class WorkerPool:
             executor, self._executor = self._executor, None
         if executor is not None:
             executor.shutdown(wait=True, cancel_futures=True)
+        self._shut_down.set()
 
     def __enter__(self) -> "WorkerPool":
         return self
@@ -128,9 +130,18 @@ class WorkerPool:
                     futures[executor.submit(fn, items[i])] = i
             except (BrokenProcessPool, RuntimeError):
                 pass  # broken, or shut down by close() from another thread: the rest counts as lost
-            wait(list(futures))
+            not_done = set(futures)
+            while not_done:
+                _, not_done = wait(not_done, timeout=0.25)
+                if not_done and self._shut_down.is_set():
+                    # close() finished: futures the executor had already handed to its queue may
+                    # never complete now, so stop waiting for them
+                    break
             lost = [i for i in pending if i not in futures.values()]
             for future, i in futures.items():
+                if not future.done():
+                    lost.append(i)
+                    continue
                 try:
                     exc = future.exception()
                 except CancelledError:

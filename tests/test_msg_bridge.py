@@ -1,0 +1,237 @@
+"""msg_bridge: message <-> engine conversions, without rclpy.init (message classes only)."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import pytest
+from std_msgs.msg import ColorRGBA, String
+from visualization_msgs.msg import Marker, MarkerArray
+
+from ipe_ros.engine import Floor, Prediction, SceneError, Table, load_scenes
+from ipe_ros.engine.generators import generate_tables
+from ipe_ros.service import ServiceStats
+from msg_bridge.json_text import answer_to_string, scene_to_string, string_to_answer, string_to_scene
+from msg_bridge.markers import (DEFAULT_DENSITY_KG_M3, markers_to_scene, parse_properties, prediction_to_markers,
+                                scene_to_markers)
+from msg_bridge.outputs import diagnostics_msg, fall_direction_msg, fall_probability_msg
+from msg_bridge.stamps import header_to_stamp_ns, stamp_ns_to_header
+from tests.helpers import block, floor_scene
+
+TOWER = load_scenes("ipe_ros/data/example_tower.json")[0]
+
+
+def cube(ns="objects", marker_id=0, xyz=(0.0, 0.0, 0.1), scale=(0.2, 0.2, 0.2), text="", frame="world",
+         rgba=(0.0, 0.0, 0.0, 0.0)) -> Marker:
+    m = Marker(ns=ns, id=marker_id, type=Marker.CUBE, action=Marker.ADD, text=text)
+    m.header.frame_id = frame
+    m.pose.position.x, m.pose.position.y, m.pose.position.z = xyz
+    m.scale.x, m.scale.y, m.scale.z = scale
+    m.color = ColorRGBA(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
+    return m
+
+
+def read(*markers: Marker, **kw):
+    return markers_to_scene(MarkerArray(markers=list(markers)), **kw)
+
+
+def error_of(*markers: Marker, **kw) -> str:
+    with pytest.raises(SceneError) as info:
+        read(*markers, **kw)
+    return str(info.value)
+
+
+# -- round trips -------------------------------------------------------------------------------
+
+def test_tower_round_trips_exactly_with_its_stamp_and_frame():
+    back = markers_to_scene(scene_to_markers(TOWER, "odom", 1_234_567_890_123))
+    assert back.scene == TOWER
+    assert (back.frame_id, back.stamp_ns) == ("odom", 1_234_567_890_123)
+
+
+def test_tables_with_walls_round_trip():
+    for scene in generate_tables(seed=3, configurations=1):
+        back = markers_to_scene(scene_to_markers(scene, "table_frame")).scene
+        assert isinstance(back.support, Table)
+        assert back == scene, scene.name
+
+
+def test_json_round_trip_and_answer_text():
+    assert string_to_scene(scene_to_string(TOWER)) == TOWER
+    assert string_to_answer(answer_to_string({"fall_fraction": 0.25, "stamp": {"sec": 1}})) == \
+        {"fall_fraction": 0.25, "stamp": {"sec": 1}}
+    with pytest.raises(ValueError, match="Out of range float values are not JSON compliant"):
+        answer_to_string({"fall_fraction": math.nan})
+
+
+def test_stamps_round_trip():
+    header = stamp_ns_to_header(1_700_000_000_999_999_999, "map")
+    assert (header.stamp.sec, header.stamp.nanosec, header.frame_id) == (1_700_000_000, 999_999_999, "map")
+    assert header_to_stamp_ns(header) == 1_700_000_000_999_999_999
+    with pytest.raises(ValueError, match=r"^stamp_ns: must be >= 0"):
+        stamp_ns_to_header(-1, "map")
+
+
+# -- the documented mapping ------------------------------------------------------------------------
+
+def test_defaults_unset_quaternion_and_colour_groups():
+    red = cube(marker_id=1, rgba=(0.9, 0.1, 0.1, 1.0))
+    yellow = cube(marker_id=2, xyz=(1.0, 0.0, 0.1), rgba=(1.0, 0.9, 0.0, 1.0))
+    plain = cube(marker_id=3, xyz=(2.0, 0.0, 0.1))
+    scene = read(red, yellow, plain).scene
+    assert isinstance(scene.support, Floor) and scene.support.height_m == 0.0
+    assert [b.group for b in scene.boxes] == ["red", "yellow", ""]
+    assert [b.name for b in scene.boxes] == ["objects/1", "objects/2", "objects/3"]
+    assert all(b.orientation_xyzw == (0.0, 0.0, 0.0, 1.0) for b in scene.boxes)  # all-zero quaternion = identity
+    assert all(b.density_kg_m3 == DEFAULT_DENSITY_KG_M3 and b.mass_kg is None for b in scene.boxes)
+    assert scene.gravity_m_s2 == (0.0, 0.0, -9.81)
+
+
+def test_text_properties_and_support_roles():
+    table = cube(ns="support", marker_id=0, xyz=(0.0, 0.0, 0.7), scale=(1.0, 0.8, 0.04),
+                 text="role=table friction=0.5 scene=desk gravity=-9.8")
+    wall = cube(ns="support", marker_id=1, xyz=(0.45, 0.0, 0.77), scale=(0.02, 0.8, 0.1), text="name=wall")
+    box = cube(marker_id=7, xyz=(0.0, 0.0, 0.77), scale=(0.1, 0.1, 0.1),
+               text="name=mug mass=0.3, friction=0.6; group=red restitution=0.1")
+    scene = read(table, wall, box).scene
+    assert scene.name == "desk" and scene.gravity_m_s2 == (0.0, 0.0, -9.8)
+    support = scene.support
+    assert isinstance(support, Table)
+    assert (support.top_height_m, support.size_m, support.thickness_m, support.friction) == \
+        (pytest.approx(0.72), (1.0, 0.8), 0.04, 0.5)
+    assert support.floor_z_m == 0.0  # the slab's underside is above z = 0: a floor there
+    assert [o.name for o in support.obstacles] == ["wall"] and support.obstacles[0].static
+    [mug] = scene.boxes
+    assert (mug.name, mug.mass_kg, mug.friction, mug.group, mug.restitution) == ("mug", 0.3, 0.6, "red", 0.1)
+
+
+def test_deleteall_markers_are_ignored():
+    clear = Marker(action=Marker.DELETEALL)
+    assert len(read(clear, cube()).scene.boxes) == 1
+
+
+@pytest.mark.parametrize("markers, expected", [
+    ([], "markers: the array holds no ADD markers; publish at least one CUBE marker per box"),
+    ([cube(frame="")], "markers[0].header.frame_id: is empty; set the frame the poses are in"),
+    ([cube(), cube(marker_id=1, xyz=(1, 0, 0.1), frame="map")],
+     "markers[1].header.frame_id: is 'map' but markers[0] is in 'world'; publish every marker of a scene in one frame"),
+    ([cube(xyz=(math.nan, 0.0, 0.1))], "markers[0].pose.position: must be finite, got [nan, 0.0, 0.1]"),
+    ([cube(scale=(0.2, 0.0, 0.2))], "markers[0].scale: full box extents must be finite and > 0 m, got [0.2, 0.0, 0.2]"),
+    ([cube(), cube(xyz=(1, 0, 0.1))], "markers[1]: ns 'objects' id 0 repeats markers[0]; give each marker a unique (ns, id)"),
+    ([cube(text="mass=1 density=2")], "markers[0].text: give mass or density, not both"),
+    ([cube(text="colour=red")],
+     "markers[0].text: unknown key 'colour'; allowed here: name, mass, density, friction, restitution, group"),
+    ([cube(text="mass=heavy")], "markers[0].text.mass: expected a number, got 'heavy'"),
+    ([cube(text="mass")], "markers[0].text: expected key=value pairs, got 'mass'"),
+    ([cube(ns="support", text="role=floor")],
+     "markers: no dynamic boxes: every CUBE is in the 'support' namespace; put the objects that may fall in another namespace"),
+    ([cube(ns="support", text="role=floor"), cube(ns="support", marker_id=1, text="role=table"), cube()],
+     "markers[1].text.role: a second table: a scene has one floor or one table"),
+    ([cube(ns="support", text="role=shelf"), cube()], "markers[0].text.role: must be one of floor, table, obstacle, got 'shelf'"),
+])
+def test_bad_marker_arrays_name_the_field(markers, expected):
+    assert error_of(*markers) == expected
+
+
+def test_non_cube_markers_are_rejected_by_type_name():
+    sphere = cube()
+    sphere.type = Marker.SPHERE
+    assert error_of(sphere) == ("markers[0].type: only CUBE (1) markers describe boxes, got SPHERE (ns 'objects', "
+                                "id 0); drop it from the scene array")
+
+
+def test_tilted_table_is_rejected():
+    table = cube(ns="support", scale=(1, 1, 0.05), text="role=table")
+    table.pose.orientation.x, table.pose.orientation.w = math.sin(0.1), math.cos(0.1)
+    assert error_of(table, cube(xyz=(0, 0, 0.2))) == (
+        "markers[0].pose.orientation: a table must be axis-aligned in the scene frame (identity orientation); "
+        "rotate the frame instead")
+
+
+def test_ten_thousand_markers_are_refused_before_conversion():
+    flood = [cube(marker_id=i) for i in range(10_000)]
+    assert error_of(*flood) == ("markers: 10000 markers exceed max_objects = 200; raise the max_objects parameter "
+                                "or publish a smaller scene")
+
+
+def test_engine_validation_errors_come_through_with_their_field():
+    floating_below = cube(xyz=(0.0, 0.0, -0.5))
+    message = error_of(floating_below)
+    assert message.startswith("boxes[0]"), message
+
+
+def test_json_text_errors():
+    with pytest.raises(SceneError, match=r"^data: is empty; publish one scene"):
+        string_to_scene(String(data="  "))
+    two = "[" + scene_to_string(TOWER).data + "," + scene_to_string(TOWER).data + "]"
+    with pytest.raises(SceneError, match=r"^data: holds 2 scenes; publish one scene per message$"):
+        string_to_scene(String(data=two))
+    with pytest.raises(ValueError, match=r"^data: expected a JSON object, got list$"):
+        string_to_answer(String(data="[1]"))
+
+
+def test_scene_names_that_cannot_ride_in_text_are_refused():
+    scene = floor_scene(block("two words", 0, 0, 0.1))
+    with pytest.raises(ValueError, match="cannot ride in Marker.text"):
+        scene_to_markers(scene, "world")
+
+
+# -- outputs -----------------------------------------------------------------------------------------
+
+def _prediction(**kw) -> Prediction:
+    base = dict(scene="t", samples=4, samples_requested=4, failed_samples=0, failure_reasons=(), deterministic=False)
+    return Prediction(**{**base, **kw})
+
+
+def test_direction_vector_is_scaled_by_decisiveness_and_zero_when_nothing_falls():
+    msg = fall_direction_msg(_prediction(direction_rad=math.pi / 2, direction_decisiveness=0.75), "map", 5)
+    assert (msg.vector.x, msg.vector.y, msg.vector.z) == (pytest.approx(0.0), pytest.approx(0.75), 0.0)
+    assert (msg.header.frame_id, msg.header.stamp.nanosec) == ("map", 5)
+    still = fall_direction_msg(_prediction(direction_rad=None), "map", 5)
+    assert (still.vector.x, still.vector.y, still.vector.z) == (0.0, 0.0, 0.0)
+    assert fall_probability_msg(_prediction()) is None
+    assert fall_probability_msg(_prediction(fall_fraction=0.5)).data == 0.5
+
+
+def test_prediction_markers_colour_objects_by_risk_and_draw_the_arrow():
+    names = [b.name for b in TOWER.dynamic_boxes]
+    probs = {n: (1.0 if i == 0 else 0.0) for i, n in enumerate(names)}
+    p = _prediction(fall_fraction=0.1, object_fall_probability=probs, direction_rad=0.0, direction_decisiveness=1.0)
+    msg = prediction_to_markers(TOWER, p, "odom", 9)
+    assert msg.markers[0].action == Marker.DELETEALL
+    cubes = [m for m in msg.markers if m.ns == "ipe/objects"]
+    assert cubes[0].color.r > 0.9 and cubes[0].color.g < 0.2      # falls: red
+    assert cubes[1].color.g > 0.7 and cubes[1].color.r < 0.2      # stays: green
+    [arrow] = [m for m in msg.markers if m.ns == "ipe/direction"]
+    assert arrow.type == Marker.ARROW and arrow.points[1].x > arrow.points[0].x
+    no_direction = prediction_to_markers(TOWER, _prediction(fall_fraction=0.0, object_fall_probability=probs),
+                                         "odom", 9)
+    assert not [m for m in no_direction.markers if m.ns == "ipe/direction"]
+
+
+def _stats(**kw) -> ServiceStats:
+    base = dict(received=3, predicted=2, dropped=1, rejected=0, failed_predictions=0, failed_samples=0, waiting=0,
+                in_flight=False, workers=2, workers_alive=2, worker_replacements=0, last_compute_s=0.5,
+                last_error=None, closed=False)
+    return ServiceStats(**{**base, **kw})
+
+
+def test_diagnostics_levels_and_counters():
+    ok = diagnostics_msg(_stats(), "ipe", 7).status[0]
+    assert (ok.level, ok.message) == (b"\x00", "idle")
+    values = {kv.key: kv.value for kv in ok.values}
+    assert (values["scenes_received"], values["scenes_dropped"], values["last_compute_s"]) == ("3", "1", "0.5")
+    warn = diagnostics_msg(_stats(rejected=2, last_error="markers: x"), "ipe", 7).status[0]
+    assert warn.level == b"\x01" and warn.message.endswith("last error: markers: x")
+    dead = diagnostics_msg(_stats(workers_alive=0), "ipe", 7).status[0]
+    assert (dead.level, dead.message) == (b"\x02", "no worker process alive (of 2)")
+
+
+def test_msg_bridge_never_imports_rclpy():
+    code = ("import sys, msg_bridge.markers, msg_bridge.outputs, msg_bridge.json_text, msg_bridge.stamps; "
+            "bad = sorted(m for m in sys.modules if m.split('.')[0] in ('rclpy', 'rpyutils')); "
+            "print(bad); sys.exit(1 if bad else 0)")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stdout + result.stderr

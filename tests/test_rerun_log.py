@@ -1,0 +1,44 @@
+"""Rerun recordings of predictions (engine level, no ROS): what is recorded, and that it changes nothing."""
+
+from __future__ import annotations
+
+import numpy as np
+from rerun.chunk import RrdReader
+
+from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
+from ipe_ros.engine.rerun_log import write_prediction_rrd
+from tests.helpers import block, floor_scene, without_timing
+
+MODEL = ModelConfig(sigma_m=0.04, samples=4)
+QUERY = QuerySpec(queries=frozenset({"fall", "direction", "far"}))
+SCENE = floor_scene(block("base block", 0, 0, 0.1), block("top/overhang", 0.08, 0, 0.3))
+
+
+def test_only_the_logged_samples_record_and_recording_changes_no_outcome():
+    plain = predict(SCENE, MODEL, preset("default"), QUERY, seed=5)
+    recorded = predict(SCENE, MODEL, preset("default"), QUERY, seed=5, record_every=50, record_samples=2)
+    assert without_timing(plain.to_dict()) == without_timing(recorded.to_dict())
+    trajectories = [o.rollouts[0].trajectory for o in recorded.outcomes]
+    assert [t is not None for t in trajectories] == [True, True, False, False]
+    assert len(trajectories[0]) == 41 and trajectories[0][0][0] == 0.0  # 2 s every 50 ms, plus t = 0
+    np.testing.assert_array_equal(trajectories[0][0][1], recorded.outcomes[0].initial_positions_m)
+
+
+def test_recording_holds_scene_rollouts_outcomes_and_answer(tmp_path):
+    prediction = predict(SCENE, MODEL, preset("default"), QUERY, seed=5, record_every=100, record_samples=4)
+    path = tmp_path / "p.rrd"
+    logged = write_prediction_rrd(path, SCENE, prediction, answer={"fall_fraction": prediction.fall_fraction},
+                                  stamp_ns=1_700_000_000_000_000_000, rollouts_logged=3)
+    assert logged == 3
+    chunks = RrdReader(path).stream().to_chunks()
+    by_entity: dict[str, list] = {}
+    for chunk in chunks:
+        by_entity.setdefault(chunk.entity_path, []).append(chunk)
+    # names with spaces and slashes are escaped into one entity path part each
+    assert "/world/rollouts/0/base\\ block" in by_entity and "/world/rollouts/2/top\\/overhang" in by_entity
+    assert not any(e.startswith("/world/rollouts/3") for e in by_entity)
+    frames = sum(c.num_rows for c in by_entity["/world/rollouts/0/base\\ block"] if not c.is_static)
+    assert frames == 21
+    assert sum(c.num_rows for c in by_entity["/outcomes/fall_fraction"]) == 4
+    assert {"/world", "/world/scene/support", "/world/scene/boxes", "/world/answer/objects", "/answer",
+            "/answer/fall_probability"} <= set(by_entity)

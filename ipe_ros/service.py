@@ -154,6 +154,7 @@ class PredictionService:
         self._seq = 0
         self._counts = dict(received=0, predicted=0, dropped=0, rejected=0, failed_predictions=0, failed_samples=0)
         self._last_compute_s: float | None = None
+        self._recordings = 0
         self._last_error: str | None = None
         self._thread = threading.Thread(target=self._run, name="ipe-prediction", daemon=True)
 
@@ -345,7 +346,10 @@ class PredictionService:
 
         item = answer.source
         safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in item.scene_id)[:80]
-        path = Path(settings.rerun_save_dir) / f"ipe_{item.seq:06d}_{safe}.rrd"
+        with self._cond:
+            self._recordings += 1  # one file per prediction, also when a scene is predicted again
+            number = self._recordings
+        path = Path(settings.rerun_save_dir) / f"ipe_{number:06d}_scene{item.seq}_{safe}.rrd"
         answer = dataclasses.replace(answer, rrd_path=str(path.resolve()),
                                      rollouts_logged=min(settings.rerun_rollouts_logged, answer.prediction.samples))
         try:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -70,3 +71,42 @@ def test_signal_ends_the_node_and_its_workers(signum):
     wait_until(lambda: not any(_alive(pid) for pid in family), 20.0,
                f"the node's child processes {sorted(family)} to end")
     assert "ready: k = 4" in output
+
+
+def test_send_scene_helper_gets_the_answer_from_a_running_node(tmp_path):
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(domain_id_for_tests()))
+    node = subprocess.Popen([sys.executable, "-m", "ipe_ros.node", "--ros-args", "-p", "workers:=1",
+                             "-p", "samples:=3"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        sent = subprocess.run([sys.executable, "-m", "ipe_ros.send_scene", "ipe_ros/data/example_tower.json",
+                               "--timeout", "120"], env=env, capture_output=True, text=True, timeout=180)
+    finally:
+        node.send_signal(signal.SIGINT)
+        try:
+            node.communicate(timeout=30.0)
+        finally:
+            if node.poll() is None:
+                node.kill()
+                node.wait()
+    assert sent.returncode == 0, sent.stderr
+    answer = json.loads(sent.stdout)
+    assert answer["scene_id"] == "example_tower" and answer["samples"] == 3 and answer["frame_id"] == "world"
+
+
+def test_send_scene_refuses_a_bad_file_before_publishing(tmp_path):
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"format": "ipe_ros.scene/1"')
+    result = subprocess.run([sys.executable, "-m", "ipe_ros.send_scene", str(bad)], capture_output=True, text=True,
+                            timeout=120, env=dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST"))
+    assert result.returncode == 2
+    assert result.stderr.strip() == "ipe_send_scene: error: json: malformed JSON at line 1 column 29: Expecting ',' delimiter"
+
+
+def test_the_demo_runs_end_to_end_and_writes_recordings(tmp_path):
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(domain_id_for_tests()))
+    result = subprocess.run([sys.executable, "-m", "ipe_ros.demo", "--samples", "4", "--workers", "1",
+                             "--output-dir", str(tmp_path)], env=env, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
+    assert "[/ipe/predict] success: ground truth says fraction fallen = 0.00" in result.stdout
+    assert sorted(p.name for p in tmp_path.glob("*.rrd")) == [
+        "ipe_000001_scene1_example_tower.rrd", "ipe_000002_scene1_example_tower.rrd"]

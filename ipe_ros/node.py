@@ -7,7 +7,6 @@ processes and calls back here to publish. Topics, the service and parameters are
 
 from __future__ import annotations
 
-import math
 import sys
 import time
 from typing import Any
@@ -16,6 +15,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -163,8 +163,8 @@ def main(args: list[str] | None = None) -> int:
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (ConfigError, ValueError) as exc:
-        print(f"ipe_node: error: {exc}", file=sys.stderr)
+    except (ConfigError, ValueError, InvalidParameterValueException, InvalidParameterTypeException) as exc:
+        print(f"ipe_node: error: {exc}", file=sys.stderr)  # a bad -p override: one line, exit 2
         code = 2
     finally:
         if node is not None:

@@ -110,3 +110,16 @@ def test_the_demo_runs_end_to_end_and_writes_recordings(tmp_path):
     assert "[/ipe/predict] success: ground truth says fraction fallen = 0.00" in result.stdout
     assert sorted(p.name for p in tmp_path.glob("*.rrd")) == [
         "ipe_000001_scene1_example_tower.rrd", "ipe_000002_scene1_example_tower.rrd"]
+
+
+@pytest.mark.parametrize("override, message", [
+    ("samples:=0", "ipe_node: error: Invalid parameter value (0) for parameter. Reason: Parameter samples out of "
+                   "range. Min: 1, Max: 10000, value: 0: samples"),
+    ("queries:=[nope]", "ipe_node: error: queries: unknown query 'nope'; choose from fall, direction, far, bump"),
+])
+def test_a_bad_parameter_override_ends_the_node_with_one_line(override, message):
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(domain_id_for_tests()))
+    result = subprocess.run([sys.executable, "-m", "ipe_ros.node", "--ros-args", "-p", override], env=env,
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines()[-1] == message

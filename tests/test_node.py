@@ -147,7 +147,7 @@ def test_parameter_updates_accepted_and_rejected(ros, tower):
     assert not bad_query.successful
     assert bad_query.reason == "queries: unknown query 'nope'; choose from fall, direction, far, bump"
     [bad_preset] = set_params(ros, preset="fastest")
-    assert bad_preset.reason == "preset: unknown preset 'fastest'; choose one of paper, default"
+    assert bad_preset.reason == "preset: unknown preset 'fastest'; choose one of paper, accurate, default"
     [bad_direction] = set_params(ros, force_direction_deg=math.inf)
     assert bad_direction.reason == "force_direction_deg: must be finite degrees or NaN (any direction), got inf"
     [out_of_range] = set_params(ros, samples=0)
@@ -247,4 +247,8 @@ def test_rerun_recording_is_written_and_holds_the_rollouts(ros, tower, tmp_path)
     assert f"/world/rollouts/2/{name}" not in entities
     moving = [c for c in chunks if c.entity_path == f"/world/rollouts/0/{name}" and not c.is_static]
     assert moving and set(moving[0].timeline_names) == {"sim_time", "ros_stamp"}
-    assert sum(c.num_rows for c in moving) == 101  # 2 s every 20 ms, plus t = 0
+    # a frame every 20 ms (rounded to whole steps) of the simulated time, plus t = 0
+    from ipe_ros.engine import preset as get_preset
+    step_s = get_preset("default").time_step_s
+    every = max(1, round(0.02 / step_s))
+    assert 1 + round(0.3 / step_s) // every <= sum(c.num_rows for c in moving) <= 1 + round(2.0 / step_s) // every

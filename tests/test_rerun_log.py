@@ -20,7 +20,9 @@ def test_only_the_logged_samples_record_and_recording_changes_no_outcome():
     assert without_timing(plain.to_dict()) == without_timing(recorded.to_dict())
     trajectories = [o.rollouts[0].trajectory for o in recorded.outcomes]
     assert [t is not None for t in trajectories] == [True, True, False, False]
-    assert len(trajectories[0]) == 41 and trajectories[0][0][0] == 0.0  # 2 s every 50 ms, plus t = 0
+    # a frame every 50 steps of the simulated time (early termination may end a rollout early), plus t = 0
+    steps = round(recorded.outcomes[0].rollouts[0].simulated_s / preset("default").time_step_s)
+    assert len(trajectories[0]) == 1 + steps // 50 and trajectories[0][0][0] == 0.0
     np.testing.assert_array_equal(trajectories[0][0][1], recorded.outcomes[0].initial_positions_m)
 
 
@@ -38,7 +40,8 @@ def test_recording_holds_scene_rollouts_outcomes_and_answer(tmp_path):
     assert "/world/rollouts/0/base\\ block" in by_entity and "/world/rollouts/2/top\\/overhang" in by_entity
     assert not any(e.startswith("/world/rollouts/3") for e in by_entity)
     frames = sum(c.num_rows for c in by_entity["/world/rollouts/0/base\\ block"] if not c.is_static)
-    assert frames == 21
+    steps = round(prediction.outcomes[0].rollouts[0].simulated_s / preset("default").time_step_s)
+    assert frames == 1 + steps // 100
     assert sum(c.num_rows for c in by_entity["/outcomes/fall_fraction"]) == 4
     assert {"/world", "/world/scene/support", "/world/scene/boxes", "/world/answer/objects", "/answer",
             "/answer/fall_probability"} <= set(by_entity)

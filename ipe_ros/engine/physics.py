@@ -89,22 +89,24 @@ class World:
     scale_m: float  # smallest extent of any dynamic box: the scene's length scale
 
 
-def _add_box(p, cid: int, box: Box, position, mass_kg: float) -> int:
+def _add_box(p, cid: int, box: Box, position, mass_kg: float, maximal: bool = False, orientation=None) -> int:
     half = [e / 2 for e in box.extents_m]
     shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=cid)
-    quat = np.asarray(box.orientation_xyzw, float)
+    quat = np.asarray(box.orientation_xyzw if orientation is None else orientation, float)
     quat = quat / np.linalg.norm(quat)
     body = p.createMultiBody(baseMass=mass_kg, baseCollisionShapeIndex=shape,
                              basePosition=list(map(float, position)),
-                             baseOrientation=list(map(float, quat)), physicsClientId=cid)
+                             baseOrientation=list(map(float, quat)), useMaximalCoordinates=maximal,
+                             physicsClientId=cid)
     p.changeDynamics(body, -1, lateralFriction=box.friction, restitution=box.restitution,
                      physicsClientId=cid)
     return body
 
 
 def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
-                settings: SimSettings) -> World:
-    """A fresh world: support, static boxes, and the dynamic boxes at ``positions_m``, at rest."""
+                settings: SimSettings, orientations_xyzw: np.ndarray | None = None) -> World:
+    """A fresh world: support, static boxes, and the dynamic boxes at ``positions_m`` (and
+    ``orientations_xyzw``, default: the scene's), at rest."""
     p = _pybullet()
     cid = client()
     p.resetSimulation(physicsClientId=cid)
@@ -115,6 +117,7 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
         numSolverIterations=settings.solver_iterations,
         # pybullet's threshold is absolute: scale it with the scene so small blocks converge too.
         solverResidualThreshold=settings.solver_residual_threshold * scale / 0.2,
+        warmStartingFactor=settings.warm_start_factor,
         deterministicOverlappingPairs=1,
         physicsClientId=cid)
 
@@ -140,8 +143,9 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
                              physicsClientId=cid)
             support_ids.append(body)
     static_ids = [_add_box(p, cid, b, b.position_m, 0.0) for b in scene.static_boxes]
-    dynamic_ids = [_add_box(p, cid, b, pos, float(m))
-                   for b, pos, m in zip(scene.dynamic_boxes, positions_m, masses_kg)]
+    orientations = [None] * len(positions_m) if orientations_xyzw is None else orientations_xyzw
+    dynamic_ids = [_add_box(p, cid, b, pos, float(m), settings.maximal_coordinates, orn)
+                   for b, pos, m, orn in zip(scene.dynamic_boxes, positions_m, masses_kg, orientations)]
     return World(client=cid, dynamic_ids=dynamic_ids, static_ids=static_ids, support_ids=support_ids,
                  scale_m=scale)
 
@@ -158,9 +162,14 @@ def read_poses(world: World) -> tuple[np.ndarray, np.ndarray]:
 
 def read_speeds(world: World) -> np.ndarray:
     """(n,) linear speeds of the dynamic boxes in m/s."""
+    return read_velocities(world)[0]
+
+
+def read_velocities(world: World) -> tuple[np.ndarray, np.ndarray]:
+    """(n,) linear speeds in m/s and (n,) angular speeds in rad/s of the dynamic boxes."""
     p = _pybullet()
-    return np.array([np.linalg.norm(p.getBaseVelocity(b, physicsClientId=world.client)[0])
-                     for b in world.dynamic_ids])
+    pairs = [p.getBaseVelocity(b, physicsClientId=world.client) for b in world.dynamic_ids]
+    return (np.array([np.linalg.norm(v) for v, _ in pairs]), np.array([np.linalg.norm(w) for _, w in pairs]))
 
 
 def depenetrate(world: World, settings: SimSettings) -> int:
@@ -217,8 +226,14 @@ def speed_limit_m_s(scene: Scene, push_m_s2: float, settings: SimSettings, push_
 
 
 def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float, push_direction_rad: float,
-             push_duration_s: float, record_every: int = 0) -> tuple[np.ndarray, np.ndarray, list | None]:
-    """Run the horizon; return final positions, orientations, and (if asked) a trajectory.
+             push_duration_s: float, record_every: int = 0,
+             fallen_below_z_m: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, list | None, float]:
+    """Run the horizon; return final positions, orientations, (if asked) a trajectory, and the
+    simulated time in seconds (shorter than the horizon when early termination ended the rollout).
+
+    ``fallen_below_z_m`` (per dynamic box, only when the fall query is all that is asked): a box whose
+    centre is below this height has fallen, its outcome is decided, so early termination no longer
+    waits for it to come to rest.
 
     The trajectory, recorded every ``record_every`` steps when > 0, is a list of (time_s, positions,
     orientations). Raises PhysicsError on non-finite states or speeds above ``speed_limit_m_s``.
@@ -236,12 +251,30 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float
     if trajectory is not None:
         trajectory.append((0.0, *read_poses(world)))
     check_every = max(1, int(round(0.1 / settings.time_step_s)))
+    # Early termination: look every 0.05 s whether everything has been at rest for rest_duration_s.
+    rest_every = max(1, int(round(0.05 / settings.time_step_s)))
+    rest_speed = settings.rest_speed_sizes_per_s * world.scale_m
+    earliest_stop = max(push_steps * settings.time_step_s, settings.rest_min_time_s)
+    resting_since: float | None = None
+    step = 0
     for step in range(1, settings.steps + 1):
         p.stepSimulation(physicsClientId=cid)
         if step == push_steps:
             p.setGravity(*gravity.tolist(), physicsClientId=cid)
         if trajectory is not None and step % record_every == 0:
             trajectory.append((step * settings.time_step_s, *read_poses(world)))
+        if settings.early_stop and step % rest_every == 0:
+            t = step * settings.time_step_s
+            speeds, spins = read_velocities(world)
+            settled = (speeds < rest_speed) & (spins < settings.rest_angular_rad_s)
+            if fallen_below_z_m is not None:
+                settled |= read_poses(world)[0][:, 2] < fallen_below_z_m
+            if np.all(settled) and t >= earliest_stop:
+                resting_since = t if resting_since is None else resting_since
+                if t - resting_since >= settings.rest_duration_s - 1e-9:
+                    break
+            else:
+                resting_since = None
         if step % check_every == 0 or step == settings.steps:
             speeds = read_speeds(world)
             if not np.all(np.isfinite(speeds)):
@@ -254,4 +287,4 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float
     positions, orientations = read_poses(world)
     if not (np.all(np.isfinite(positions)) and np.all(np.isfinite(orientations))):
         raise PhysicsError("non-finite final pose; use a smaller time step or more solver iterations")
-    return positions, orientations, trajectory
+    return positions, orientations, trajectory, step * settings.time_step_s

@@ -7,6 +7,7 @@ with ``ok=False`` and the reason, and the sampler counts it.
 
 from __future__ import annotations
 
+import dataclasses
 import traceback
 from dataclasses import dataclass
 
@@ -48,6 +49,7 @@ class RolloutResult:
     fell_off: np.ndarray | None
     bump_ratio: float | None
     trajectory: list | None = None
+    simulated_s: float = 0.0  # simulated time; below the horizon when the rollout ended early
 
 
 @dataclass(frozen=True)
@@ -64,7 +66,7 @@ class SampleOutcome:
 
 
 def _query(task: SampleTask, initial: np.ndarray, final: np.ndarray, final_orn: np.ndarray,
-           phi: float, trajectory: list | None) -> RolloutResult:
+           phi: float, trajectory: list | None, simulated_s: float) -> RolloutResult:
     scene, spec = task.scene, task.query
     boxes = scene.dynamic_boxes
     fallen = direction = far = fell_off = ratio = None
@@ -82,7 +84,18 @@ def _query(task: SampleTask, initial: np.ndarray, final: np.ndarray, final_orn: 
     return RolloutResult(phi_m_s2=phi, final_positions_m=final, final_orientations_xyzw=final_orn,
                          fallen=fallen,
                          direction_rad=direction, far_m=far, fell_off=fell_off, bump_ratio=ratio,
-                         trajectory=trajectory)
+                         trajectory=trajectory, simulated_s=simulated_s)
+
+
+def _decided_height(task: SampleTask, initial: np.ndarray) -> np.ndarray | None:
+    """When only ``fall`` is asked, the height below which each box's outcome is decided (fallen).
+
+    Other queries (direction, far, bump) depend on where boxes end up, so they wait for rest.
+    """
+    if not task.settings.early_stop or task.query.queries != frozenset({"fall"}):
+        return None
+    min_extents = np.array([min(b.extents_m) for b in task.scene.dynamic_boxes])
+    return initial[:, 2] - task.query.fall_threshold_fraction * min_extents
 
 
 def run_sample(task: SampleTask) -> SampleOutcome:
@@ -90,17 +103,22 @@ def run_sample(task: SampleTask) -> SampleOutcome:
     rng = np.random.default_rng(task.seed)
     inputs = draw_sample_inputs(task.scene, task.model, rng)
     try:
-        world = physics.build_world(task.scene, inputs.positions_m, inputs.masses_kg, task.settings)
-        physics.depenetrate(world, task.settings)
+        # Separate in the same body representation whatever the preset, so that every preset starts
+        # from bit-identical initial scenes (maximal-coordinate bodies round differently).
+        separation = dataclasses.replace(task.settings, maximal_coordinates=False)
+        world = physics.build_world(task.scene, inputs.positions_m, inputs.masses_kg, separation)
+        physics.depenetrate(world, separation)
         initial, initial_orn = physics.read_poses(world)
         results = []
         for i, phi in enumerate(task.model.phi_m_s2):
-            if i > 0:  # a fresh world per magnitude, from the same separated initial state
-                world = physics.build_world(task.scene, initial, inputs.masses_kg, task.settings)
-            final, final_orn, trajectory = physics.simulate(
+            if i > 0 or task.settings.maximal_coordinates:  # a fresh world from the separated state
+                world = physics.build_world(task.scene, initial, inputs.masses_kg, task.settings,
+                                            orientations_xyzw=initial_orn)
+            final, final_orn, trajectory, simulated_s = physics.simulate(
                 world, task.scene, task.settings, phi, inputs.push_direction_rad,
-                task.model.push_duration_s, record_every=task.record_every)
-            results.append(_query(task, initial, final, final_orn, phi, trajectory))
+                task.model.push_duration_s, record_every=task.record_every,
+                fallen_below_z_m=_decided_height(task, initial))
+            results.append(_query(task, initial, final, final_orn, phi, trajectory, simulated_s))
     except PhysicsError as exc:
         return SampleOutcome(index=task.index, ok=False, error=f"PhysicsError: {exc}",
                              push_direction_rad=inputs.push_direction_rad, initial_positions_m=None,

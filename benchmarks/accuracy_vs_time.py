@@ -58,6 +58,8 @@ def candidates() -> list[SimSettings]:
         dataclasses.replace(PRESETS["default"], name="default-ws0.85", warm_start_factor=0.85),
         dataclasses.replace(PRESETS["default"], name="default-multibody", maximal_coordinates=False),
         dataclasses.replace(PRESETS["default"], name="default-1/120s", time_step_s=1 / 120),
+        dataclasses.replace(PRESETS["default"], name="default-1.5s-horizon", horizon_s=1.5),
+        dataclasses.replace(PRESETS["default"], name="default-1s-horizon", horizon_s=1.0),
         dataclasses.replace(PRESETS["paper"], name="1ms/20it+early", solver_iterations=20, early_stop=True),
         dataclasses.replace(base, name="1/240s/100it/ws1", time_step_s=1 / 240),
         dataclasses.replace(base, name="1/240s/100it/ws1+early", time_step_s=1 / 240, early_stop=True),
@@ -140,6 +142,7 @@ def compare(result: dict, reference: dict) -> dict:
     n = len(result["predictions"])
     return {
         "wall_s_per_prediction": result["wall_s"] / n,
+        "median_latency_s": float(np.median([p.wall_s for p in result["predictions"]])),
         "rollouts_per_s": result["rollouts"] / result["wall_s"],
         "speedup_vs_paper": reference["wall_s"] / result["wall_s"],
         "mean_abs_dff": float(np.mean(np.abs(ff - ref_ff))),
@@ -208,11 +211,12 @@ def markdown(report: dict) -> str:
     lines = [f"{report['towers']} towers from {report['source']}; k = {report['samples']}, sigma = "
              f"{report['sigma_m']} m, queries {','.join(report['queries'])}, {report['workers']} workers; "
              "reference: `paper` with the same seeds.", "",
-             "| phi m/s² | settings | s / prediction | rollouts/s | speed-up | mean \|ΔFF\| | max \|ΔFF\| | "
+             "| phi m/s² | settings | s / prediction | median s | rollouts/s | speed-up | mean \|ΔFF\| | max \|ΔFF\| | "
              "per-sample agreement | per-box agreement | direction error ° | simulated s | ground truth vs authors |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in report["rows"]:
-        lines.append(f"| {r['phi_m_s2']:g} | {r['config']} | {r['wall_s_per_prediction']:.2f} | {r['rollouts_per_s']:.0f} | "
+        lines.append(f"| {r['phi_m_s2']:g} | {r['config']} | {r['wall_s_per_prediction']:.2f} | "
+                     f"{_fmt(r.get('median_latency_s'), '.2f')} | {r['rollouts_per_s']:.0f} | "
                      f"{r['speedup_vs_paper']:.1f}x | {r['mean_abs_dff']:.3f} | {r['max_abs_dff']:.3f} | "
                      f"{r['per_sample_agreement']:.3f} | {r['per_box_agreement']:.3f} | "
                      f"{_fmt(r['mean_direction_error_deg'], '.1f')} | {r['mean_simulated_s']:.2f} | "

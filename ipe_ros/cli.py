@@ -2,7 +2,7 @@
 
     ipe predict PATH [--tower NAME ...] [--query fall,direction,far,bump] [--samples K] [--sigma M]
                 [--phi A[,A...]] [--force-direction DEG] [--mu R] [--preset NAME] [--seed N]
-                [--workers W] [--json]
+                [--workers W] [--ci-width W] [--deadline S] [--json]
     ipe generate tower --count N --seed S -o FILE [--pairs RATIO]
     ipe generate table --configurations N --seed S -o FILE
     ipe demo
@@ -13,6 +13,7 @@ Bad input ends with exit status 2 and one line on stderr naming the problem.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -22,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .engine import (ALL_QUERIES, PRESETS, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError,
+from .engine import (ALL_QUERIES, PRESETS, AdaptiveStop, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError,
                      WorkerPool, load_scenes, parse_queries, predict, preset)
 from .engine.generators import generate_tables, generate_towers, state_pair
 from .engine.sampler import check_request
@@ -84,6 +85,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
                    help="worker processes (default: CPU count; 0 runs in this process)")
     p.add_argument("--ground-truth", action="store_true", help="sigma = phi = 0: one deterministic rollout")
+    p.add_argument("--ci-width", type=_finite, default=None, metavar="W",
+                   help="anytime sampling: stop once the 95%% interval of P(fall) is at most W wide")
+    p.add_argument("--deadline", type=_finite, default=None, metavar="S",
+                   help="anytime sampling: stop drawing samples before S seconds have passed")
     p.add_argument("--json", action="store_true", help="one JSON object per scene per line")
 
     g = sub.add_parser("generate", help="write generated scenes (JSON)")
@@ -131,13 +136,16 @@ def prediction_json(prediction: Prediction) -> str:
     return json.dumps(prediction.to_dict(), allow_nan=False, sort_keys=True)
 
 
-def _run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: int, workers: int, emit) -> None:
+def _run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: int, workers: int, emit,
+                     stop: AdaptiveStop | None = None) -> None:
     if workers < 0:
         raise ConfigError("--workers", f"must be >= 0, got {workers}")
     pool = WorkerPool(min(workers, max(1, model.samples))) if workers > 0 else None
+    if stop is not None:  # batches of two samples per worker keep every worker busy
+        stop = dataclasses.replace(stop, batch_size=2 * max(1, workers))
     try:
         for scene in scenes:
-            emit(predict(scene, model, sim, query, seed=seed, map_fn=pool.map if pool else None))
+            emit(predict(scene, model, sim, query, seed=seed, map_fn=pool.map if pool else None, stop=stop))
     finally:
         if pool is not None:
             pool.close()
@@ -151,18 +159,21 @@ def cmd_predict(args) -> int:
                         force_direction_rad=None if args.force_direction is None else math.radians(args.force_direction))
     query = QuerySpec(queries=args.query)
     sim = preset(args.preset)
+    stop = None
+    if args.ci_width is not None or args.deadline is not None:
+        stop = AdaptiveStop(ci_width=args.ci_width, deadline_s=args.deadline)
     if args.seed < 0:
         raise ConfigError("--seed", f"must be >= 0, got {args.seed}")
     for scene in scenes:  # reject what cannot be answered before printing anything
         check_request(scene, query)
     if args.json:
         _run_predictions(scenes, model, sim, query, args.seed, args.workers,
-                         lambda p: print(prediction_json(p), flush=True))
+                         lambda p: print(prediction_json(p), flush=True), stop)
     else:
         collected: list[Prediction] = []
         print(f"sigma = {sigma:g} m, phi = {','.join(f'{v:g}' for v in phi)} m/s^2, mu = {args.mu}, "
               f"k = {1 if model.is_deterministic else args.samples}, preset = {sim.name}, seed = {args.seed}")
-        _run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append)
+        _run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append, stop)
         print(format_table(collected))
     return 0
 

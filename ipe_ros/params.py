@@ -13,7 +13,7 @@ from typing import Any, Mapping
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 
-from .engine import ALL_QUERIES, PRESETS, ConfigError, ModelConfig, QuerySpec
+from .engine import ALL_QUERIES, PRESETS, AdaptiveStop, ConfigError, ModelConfig, QuerySpec
 from .service import ServiceSettings, default_workers
 
 
@@ -62,6 +62,11 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("seed", 0, _INT, "random seed; a prediction is a function of (scene, parameters, seed)", (0, 2**31 - 1)),
     ParamSpec("workers", default_workers(), _INT, "simulation worker processes (0: run samples in the node's "
                                                  "prediction thread); fixed at start", (0, 64), read_only=True),
+    ParamSpec("target_ci_width", 0.0, _DOUBLE, "anytime sampling: stop once the 95% interval of the fall "
+                                               "fraction is at most this wide (needs the fall query); 0: off",
+              (0.0, 1.0)),
+    ParamSpec("deadline_s", 0.0, _DOUBLE, "anytime sampling: stop drawing samples before this many seconds; "
+                                          "0: off (all k samples)", (0.0, 3600.0)),
     ParamSpec("max_objects", 200, _INT, "scenes with more boxes are rejected", (1, 10000)),
     ParamSpec("frame_id", "world", _STRING, "frame of scenes received on ~/scene_json (JSON carries no header)"),
     ParamSpec("service_timeout_s", 60.0, _DOUBLE, "how long ~/predict waits for an answer, seconds", (0.1, 3600.0)),
@@ -105,10 +110,18 @@ def settings_from_values(values: Mapping[str, Any]) -> ServiceSettings:
     except ConfigError as exc:
         name = {"sigma_m": "sigma", "phi_m_s2": "phi", "force_direction_rad": "force_direction_deg"}.get(exc.field, exc.field)
         raise engine_error(exc, name) from None
+    width, deadline = float(values["target_ci_width"]), float(values["deadline_s"])
+    stop = None
+    if width > 0 or deadline > 0:
+        if width > 0 and "fall" not in queries:
+            raise ConfigError("target_ci_width", "needs the fall query; add 'fall' to queries or set it to 0")
+        # batches of two samples per worker keep every worker busy between checks
+        stop = AdaptiveStop(ci_width=width or None, deadline_s=deadline or None,
+                            batch_size=2 * max(1, int(values["workers"])))
     save_dir = str(values["rerun.save_dir"]).strip()
     connect = str(values["rerun.connect_url"]).strip()
     return ServiceSettings(model=model, sim=PRESETS[values["preset"]], query=QuerySpec(queries=frozenset(queries)),
                            seed=int(values["seed"]), max_objects=int(values["max_objects"]),
                            rerun_save_dir=save_dir or None, rerun_rollouts_logged=int(values["rerun.rollouts_logged"]),
                            rerun_frame_period_s=float(values["rerun.frame_period_s"]),
-                           rerun_connect_url=connect or None)
+                           rerun_connect_url=connect or None, stop=stop)

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from .engine import PRESETS, ModelConfig, Prediction, QuerySpec, Scene, SimSettings, WorkerPool, predict
+from .engine import PRESETS, AdaptiveStop, ModelConfig, Prediction, QuerySpec, Scene, SimSettings, WorkerPool, predict
 from .engine.sampler import check_request
 from .engine.scene import DEFAULT_MAX_OBJECTS
 
@@ -51,6 +51,7 @@ class ServiceSettings:
     rerun_rollouts_logged: int = 8
     rerun_frame_period_s: float = 0.02
     rerun_connect_url: str | None = None
+    stop: AdaptiveStop | None = None  # anytime sampling (deadline / interval width), None: all k
 
 
 @dataclass(frozen=True)
@@ -326,7 +327,7 @@ class PredictionService:
             prediction = predict(item.scene, settings.model, settings.sim, settings.query, seed=settings.seed,
                                  map_fn=self._pool.map if self._pool is not None else None,
                                  record_every=record_every, record_samples=settings.rerun_rollouts_logged,
-                                 max_objects=settings.max_objects)
+                                 max_objects=settings.max_objects, stop=settings.stop)
         except ValueError as exc:  # SceneError / ConfigError: the scene no longer fits new settings
             return None, str(exc)
         except Exception as exc:  # noqa: BLE001 - report, keep serving

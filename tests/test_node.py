@@ -150,6 +150,8 @@ def test_parameter_updates_accepted_and_rejected(ros, tower):
     assert bad_preset.reason == "preset: unknown preset 'fastest'; choose one of paper, accurate, default"
     [bad_direction] = set_params(ros, force_direction_deg=math.inf)
     assert bad_direction.reason == "force_direction_deg: must be finite degrees or NaN (any direction), got inf"
+    bad_width = set_params(ros, target_ci_width=0.3, queries=["far"])
+    assert bad_width[0].reason == "target_ci_width: needs the fall query; add 'fall' to queries or set it to 0"
     [out_of_range] = set_params(ros, samples=0)
     assert not out_of_range.successful and "samples" in out_of_range.reason
     [read_only] = set_params(ros, workers=1)
@@ -160,6 +162,7 @@ def test_parameter_updates_accepted_and_rejected(ros, tower):
     ros.publisher(String, "/ipe/scene_json").publish(String(data=scene_to_json(tower)))
     wait_until(lambda: len(got), TIMEOUT_S, "a prediction with the new sample count")
     assert got[0]["samples"] == 3 and got[0]["settings"]["preset"] == "default"
+    assert got[0]["stopped_by"] == "samples"
 
 
 def _good_and_bad_inputs(tower):

@@ -58,3 +58,31 @@ def test_bad_arguments():
         WorkerPool(0)
     with pytest.raises(ValueError, match="^start_method: must be one of forkserver, spawn, got 'fork'"):
         WorkerPool(1, start_method="fork")
+
+
+def test_workers_end_by_themselves_when_their_owner_is_killed(tmp_path):
+    """An owner killed with SIGKILL cannot close its pool: the workers notice and exit."""
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    script = tmp_path / "owner.py"
+    script.write_text(
+        "import sys, time\n"
+        "from ipe_ros.engine import WorkerPool\n"
+        "if __name__ == '__main__':\n"
+        "    pool = WorkerPool(2)\n"
+        "    print(' '.join(map(str, pool.warm())), flush=True)\n"
+        "    time.sleep(600)\n")
+    owner = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
+    try:
+        pids = [int(p) for p in owner.stdout.readline().split()]
+        assert len(pids) == 2
+    finally:
+        owner.kill()  # our own child, by pid
+        owner.wait()
+    deadline = time.monotonic() + 20
+    while any(Path(f"/proc/{pid}").exists() for pid in pids):
+        assert time.monotonic() < deadline, f"workers {pids} outlived their owner"
+        time.sleep(0.05)

@@ -7,12 +7,12 @@ from .config import ALL_QUERIES, PRESETS, ModelConfig, QuerySpec, SimSettings, p
 from .errors import ConfigError, PhysicsError, SceneError
 from .estimate import Prediction
 from .pool import WorkerPool, serial_map
-from .sampler import predict
+from .sampler import AdaptiveStop, predict
 from .scene import Box, Floor, Scene, Table, validate_scene
 from .scene_io import load_scenes, scene_from_dict, scene_to_dict, scenes_from_json, scenes_from_tower_csv
 
 __all__ = [
-    "ALL_QUERIES", "PRESETS", "Box", "ConfigError", "Floor", "ModelConfig", "PhysicsError", "Prediction",
+    "ALL_QUERIES", "PRESETS", "AdaptiveStop", "Box", "ConfigError", "Floor", "ModelConfig", "PhysicsError", "Prediction",
     "QuerySpec", "Scene", "SceneError", "SimSettings", "Table", "WorkerPool", "load_scenes",
     "parse_queries", "predict", "preset", "scene_from_dict", "scene_to_dict", "scenes_from_json",
     "scenes_from_tower_csv", "serial_map", "validate_scene",

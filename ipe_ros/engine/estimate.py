@@ -104,6 +104,7 @@ class Prediction:
     bump_ratio: float | None = None
     bump_rollouts: int | None = None
     wall_s: float = 0.0
+    stopped_by: str = "samples"  # "samples" (all k drawn), "ci_width" or "deadline" (anytime sampling)
     settings: dict[str, Any] = field(default_factory=dict)
     outcomes: tuple[SampleOutcome, ...] = field(default=(), repr=False, compare=False)
 

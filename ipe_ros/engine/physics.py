@@ -87,6 +87,7 @@ class World:
     static_ids: list[int]
     support_ids: list[int]
     scale_m: float  # smallest extent of any dynamic box: the scene's length scale
+    time_step_s: float = 0.0  # the step actually used (finer than the preset's for small boxes)
 
 
 def _add_box(p, cid: int, box: Box, position, mass_kg: float, maximal: bool = False, orientation=None) -> int:
@@ -111,8 +112,9 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
     cid = client()
     p.resetSimulation(physicsClientId=cid)
     p.setGravity(*scene.gravity_m_s2, physicsClientId=cid)
-    p.setTimeStep(settings.time_step_s, physicsClientId=cid)
     scale = min(min(b.extents_m) for b in scene.dynamic_boxes)
+    time_step = settings.time_step_for(scale, float(np.linalg.norm(scene.gravity_m_s2)))
+    p.setTimeStep(time_step, physicsClientId=cid)
     p.setPhysicsEngineParameter(
         numSolverIterations=settings.solver_iterations,
         # pybullet's threshold is absolute: scale it with the scene so small blocks converge too.
@@ -147,7 +149,7 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
     dynamic_ids = [_add_box(p, cid, b, pos, float(m), settings.maximal_coordinates, orn)
                    for b, pos, m, orn in zip(scene.dynamic_boxes, positions_m, masses_kg, orientations)]
     return World(client=cid, dynamic_ids=dynamic_ids, static_ids=static_ids, support_ids=support_ids,
-                 scale_m=scale)
+                 scale_m=scale, time_step_s=time_step)
 
 
 def read_poses(world: World) -> tuple[np.ndarray, np.ndarray]:
@@ -240,51 +242,62 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float
     """
     p = _pybullet()
     cid = world.client
+    dt = world.time_step_s
+    steps = int(round(settings.horizon_s / dt))
     gravity = np.asarray(scene.gravity_m_s2, float)
     push_steps = 0
     if push_m_s2 > 0:
-        push_steps = int(round(push_duration_s / settings.time_step_s))
+        push_steps = int(round(push_duration_s / dt))
         tilted = gravity - push_m_s2 * np.array([math.cos(push_direction_rad), math.sin(push_direction_rad), 0.0])
         p.setGravity(*tilted.tolist(), physicsClientId=cid)
     limit = speed_limit_m_s(scene, push_m_s2, settings, push_duration_s)
     trajectory: list | None = [] if record_every > 0 else None
     if trajectory is not None:
         trajectory.append((0.0, *read_poses(world)))
-    check_every = max(1, int(round(0.1 / settings.time_step_s)))
+    check_every = max(1, int(round(0.1 / dt)))
     # Early termination: look every 0.05 s whether everything has been at rest for rest_duration_s.
-    rest_every = max(1, int(round(0.05 / settings.time_step_s)))
+    rest_every = max(1, int(round(0.05 / dt)))
     rest_speed = settings.rest_speed_sizes_per_s * world.scale_m
-    earliest_stop = max(push_steps * settings.time_step_s, settings.rest_min_time_s)
+    earliest_stop = max(push_steps * dt, settings.rest_min_time_s)
     resting_since: float | None = None
+    liveliness_at_start = 0.0
     step = 0
-    for step in range(1, settings.steps + 1):
+    for step in range(1, steps + 1):
         p.stepSimulation(physicsClientId=cid)
         if step == push_steps:
             p.setGravity(*gravity.tolist(), physicsClientId=cid)
         if trajectory is not None and step % record_every == 0:
-            trajectory.append((step * settings.time_step_s, *read_poses(world)))
+            trajectory.append((step * dt, *read_poses(world)))
         if settings.early_stop and step % rest_every == 0:
-            t = step * settings.time_step_s
+            t = step * dt
             speeds, spins = read_velocities(world)
             settled = (speeds < rest_speed) & (spins < settings.rest_angular_rad_s)
             if fallen_below_z_m is not None:
                 settled |= read_poses(world)[0][:, 2] < fallen_below_z_m
+            # how close to moving the liveliest box is (1 = at the rest threshold)
+            liveliness = float(np.max(np.where(settled, np.maximum(speeds / rest_speed,
+                                                                    spins / settings.rest_angular_rad_s), 0.0)))
             if np.all(settled) and t >= earliest_stop:
-                resting_since = t if resting_since is None else resting_since
-                if t - resting_since >= settings.rest_duration_s - 1e-9:
-                    break
+                if resting_since is None:
+                    resting_since, liveliness_at_start = t, liveliness
+                elif t - resting_since >= settings.rest_duration_s - 1e-9:
+                    # A tower that is just starting to tip moves slowly but faster and faster;
+                    # a settling one slows down. Only the latter has come to rest.
+                    if liveliness <= liveliness_at_start:
+                        break
+                    resting_since, liveliness_at_start = t, liveliness
             else:
                 resting_since = None
-        if step % check_every == 0 or step == settings.steps:
+        if step % check_every == 0 or step == steps:
             speeds = read_speeds(world)
             if not np.all(np.isfinite(speeds)):
-                raise PhysicsError(f"non-finite velocity at t = {step * settings.time_step_s:.3f} s; "
+                raise PhysicsError(f"non-finite velocity at t = {step * dt:.3f} s; "
                                    "use a smaller time step or more solver iterations")
             if speeds.max() > limit:
-                raise PhysicsError(f"a box reached {speeds.max():.3g} m/s at t = {step * settings.time_step_s:.3f} s,"
+                raise PhysicsError(f"a box reached {speeds.max():.3g} m/s at t = {step * dt:.3f} s,"
                                    f" above the physical bound {limit:.3g} m/s (solver divergence); "
                                    "use a smaller time step or more solver iterations")
     positions, orientations = read_poses(world)
     if not (np.all(np.isfinite(positions)) and np.all(np.isfinite(orientations))):
         raise PhysicsError("non-finite final pose; use a smaller time step or more solver iterations")
-    return positions, orientations, trajectory, step * settings.time_step_s
+    return positions, orientations, trajectory, step * dt

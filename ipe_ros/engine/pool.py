@@ -13,6 +13,7 @@ import multiprocessing
 import os
 import signal
 import threading
+import time
 from concurrent.futures import CancelledError, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Callable, Iterable, Sequence, TypeVar
@@ -23,11 +24,25 @@ R = TypeVar("R")
 START_METHODS = ("forkserver", "spawn")
 
 
-def _init_worker() -> None:
+def _init_worker(owner_pid: int) -> None:
     # Ctrl-C goes to the whole process group: let the parent decide how to shut down.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # A worker's parent is the fork server, not the process that owns the pool. When the owner dies
+    # without closing the pool (SIGKILL, a crash), end this worker too instead of leaving it behind.
+    threading.Thread(target=_exit_when_gone, args=(owner_pid,), name="owner-watch", daemon=True).start()
     from . import physics
     physics.client()
+
+
+def _exit_when_gone(pid: int, period_s: float = 1.0) -> None:
+    while True:
+        time.sleep(period_s)
+        try:
+            os.kill(pid, 0)  # signal 0: only asks whether the process exists
+        except ProcessLookupError:
+            os._exit(0)
+        except PermissionError:
+            pass  # it exists (owned by someone else after a pid reuse): keep going
 
 
 def _worker_pid() -> int:
@@ -60,7 +75,7 @@ class WorkerPool:
                 raise RuntimeError("the worker pool is closed")
             if self._executor is None:
                 self._executor = ProcessPoolExecutor(max_workers=self.workers, mp_context=self._context,
-                                                     initializer=_init_worker)
+                                                     initializer=_init_worker, initargs=(os.getpid(),))
             return self._executor
 
     def _replace_executor(self, broken: ProcessPoolExecutor) -> None:

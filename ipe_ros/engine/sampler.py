@@ -7,18 +7,50 @@ the sampler neither knows nor cares where samples run. Each sample i gets the i-
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import time
+from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
 
 from .config import ModelConfig, QuerySpec, SimSettings
 from .errors import ConfigError
-from .estimate import Prediction, aggregate
+from .estimate import Prediction, aggregate, wilson_interval
 from .rollout import SampleOutcome, SampleTask, run_sample
 from .scene import DEFAULT_MAX_OBJECTS, Scene, Table, validate_scene
 
 MapFn = Callable[..., list]
+
+
+@dataclass(frozen=True)
+class AdaptiveStop:
+    """Anytime sampling: draw samples in batches and stop early once a rule is met.
+
+    ci_width: stop once the 95% interval of ``fall_fraction`` is at most this wide (needs the
+        ``fall`` query), after at least ``min_samples`` good samples.
+    deadline_s: stop before the next batch would end after this many seconds of sampling (the
+        first batch always runs). Which samples are used depends on timing only through how many:
+        sample i is always the i-th child seed, so n samples give the answer of a k = n run.
+    batch_size: samples per batch; a multiple of the worker count keeps every worker busy.
+    """
+
+    ci_width: float | None = None
+    deadline_s: float | None = None
+    batch_size: int = 4
+    min_samples: int = 4
+
+    def __post_init__(self) -> None:
+        if self.ci_width is not None and not (isinstance(self.ci_width, (int, float)) and 0 < self.ci_width <= 1):
+            raise ConfigError("ci_width", f"must be in (0, 1], got {self.ci_width!r}")
+        if self.deadline_s is not None and not (isinstance(self.deadline_s, (int, float)) and self.deadline_s > 0
+                                                and math.isfinite(self.deadline_s)):
+            raise ConfigError("deadline_s", f"must be a finite number of seconds > 0, got {self.deadline_s!r}")
+        for name in ("batch_size", "min_samples"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ConfigError(name, f"must be an integer >= 1, got {value!r}")
 
 
 def _lost(task: SampleTask, reason: str) -> SampleOutcome:
@@ -51,21 +83,47 @@ def check_request(scene: Scene, query: QuerySpec, max_objects: int = DEFAULT_MAX
 
 def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: QuerySpec, seed: int = 0,
             map_fn: MapFn | None = None, record_every: int = 0, record_samples: int | None = None,
-            max_objects: int = DEFAULT_MAX_OBJECTS) -> Prediction:
+            max_objects: int = DEFAULT_MAX_OBJECTS, stop: AdaptiveStop | None = None) -> Prediction:
     """Run the IPE on one scene and aggregate (failed rollouts are counted in ``failed_samples``).
 
     ``record_every``/``record_samples``: record trajectories (for rerun) every N simulation steps
-    for the first M samples; recording never changes the outcome.
+    for the first M samples; recording never changes the outcome. ``stop``: anytime sampling
+    (a deadline or a target interval width); ``Prediction.stopped_by`` says which rule ended it.
     """
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ConfigError("seed", f"must be an integer >= 0, got {seed!r}")
     check_request(scene, query, max_objects)
+    if stop is not None and stop.ci_width is not None and not query.wants("fall"):
+        raise ConfigError("ci_width", "a target interval width needs the fall query; ask for 'fall' or drop it")
     tasks = make_tasks(scene, model, settings, query, seed, record_every, record_samples)
+
+    def run(batch: list[SampleTask]) -> list[SampleOutcome]:
+        if map_fn is None:
+            return [run_sample(t) for t in batch]
+        return map_fn(run_sample, batch, on_lost=_lost)
+
     start = time.perf_counter()
-    if map_fn is None:
-        outcomes: Sequence[SampleOutcome] = [run_sample(t) for t in tasks]
+    stopped_by = "samples"
+    if stop is None or model.is_deterministic:
+        outcomes: list[SampleOutcome] = run(tasks)
     else:
-        outcomes = map_fn(run_sample, tasks, on_lost=_lost)
+        outcomes = []
+        for first in range(0, len(tasks), stop.batch_size):
+            batch_start = time.perf_counter()
+            outcomes += run(tasks[first:first + stop.batch_size])
+            if len(outcomes) == len(tasks):
+                break
+            now = time.perf_counter()
+            if stop.deadline_s is not None and (now - start) + (now - batch_start) > stop.deadline_s:
+                stopped_by = "deadline"
+                break
+            ok = [o for o in outcomes if o.ok]
+            if stop.ci_width is not None and len(ok) >= stop.min_samples:
+                fall = float(np.mean([np.mean([r.fallen.mean() for r in o.rollouts]) for o in ok]))
+                lo, hi = wilson_interval(fall, len(ok))
+                if hi - lo <= stop.ci_width:
+                    stopped_by = "ci_width"
+                    break
     wall_s = time.perf_counter() - start
     settings_echo = {
         "sigma_m": model.sigma_m, "phi_m_s2": list(model.phi_m_s2),
@@ -73,6 +131,9 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
         "time_step_s": settings.time_step_s, "horizon_s": settings.horizon_s,
         "solver_iterations": settings.solver_iterations, "seed": seed, "queries": sorted(query.queries),
     }
-    return aggregate(scene, outcomes, queries=query.queries, bump_group=query.bump_group,
-                     deterministic=model.is_deterministic, samples_requested=len(tasks),
-                     wall_s=wall_s, settings=settings_echo)
+    if stop is not None:
+        settings_echo.update(ci_width=stop.ci_width, deadline_s=stop.deadline_s)
+    prediction = aggregate(scene, outcomes, queries=query.queries, bump_group=query.bump_group,
+                           deterministic=model.is_deterministic, samples_requested=len(tasks),
+                           wall_s=wall_s, settings=settings_echo)
+    return dataclasses.replace(prediction, stopped_by=stopped_by)

@@ -1,0 +1,172 @@
+"""A named catalogue of hard scenes that must stay numerically stable (issue 4).
+
+Every case runs with the `default` and the `paper` preset and records its trajectories. Each
+trajectory must hold:
+* only finite numbers, and no failed (diverged) samples;
+* no box faster than free fall over the horizon plus what the push can add;
+* no box through the floor or the table top, none resting more than a contact slop inside them,
+  and none overshooting into them by more than one step's travel;
+* potential energy never above the initial one plus the most work the push can have done
+  (kinetic energy is never negative, so this bounds the total).
+Clear-cut cases also state the outcome physics dictates (stays / falls), and both presets must
+reach it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from ipe_ros.engine import Box, Floor, ModelConfig, QuerySpec, Scene, Table, load_scenes, predict, preset
+from ipe_ros.engine.generators import generate_tables
+from ipe_ros.engine.scene import box_half_heights
+from tests.helpers import IDENTITY
+
+G = 9.81
+#: how far a resting box may sink into the floor or table, as a fraction of its smallest extent
+#: (pybullet's contacts are soft: they let bodies overlap slightly while pushing them apart)
+SLOP_FRACTION = 0.1
+
+
+def cube_stack(name: str, size: tuple[float, float, float], count: int, *, masses=None, offset_x: float = 0.0,
+               friction: float = 0.8) -> Scene:
+    """``count`` boxes straight up (each shifted ``offset_x`` from the one below) on a floor at z = 0."""
+    boxes = []
+    for i in range(count):
+        mass = None if masses is None else masses[i]
+        boxes.append(Box(name=f"b{i}", extents_m=size, position_m=(i * offset_x, 0.0, size[2] * (i + 0.5)),
+                         orientation_xyzw=IDENTITY, friction=friction, restitution=0.0,
+                         mass_kg=mass, density_kg_m3=None if mass is not None else 500.0))
+    return Scene(name=name, boxes=tuple(boxes), support=Floor(friction=1.0, restitution=0.0),
+                 gravity_m_s2=(0.0, 0.0, -G))
+
+
+def overhang(name: str, size: float, beyond: float) -> Scene:
+    """A cube on a cube, its centre ``beyond`` x its width past the lower one's edge: it must tip."""
+    s = (size, size, size)
+    boxes = (Box(name="base", extents_m=s, position_m=(0, 0, size / 2), orientation_xyzw=IDENTITY,
+                 friction=0.8, restitution=0.0, density_kg_m3=500.0),
+             Box(name="top", extents_m=s, position_m=(size * (0.5 + beyond), 0, 1.5 * size), orientation_xyzw=IDENTITY,
+                 friction=0.8, restitution=0.0, density_kg_m3=500.0))
+    return Scene(name=name, boxes=boxes, support=Floor(friction=1.0, restitution=0.0), gravity_m_s2=(0, 0, -G))
+
+
+def heavy_on_light(ratio: float) -> Scene:
+    light, heavy = 1.0, ratio
+    size = (0.2, 0.6, 0.2)
+    return cube_stack(f"heavy_on_light_{ratio:g}_to_1", size, 3, masses=[light, light, heavy])
+
+
+@dataclass(frozen=True)
+class Case:
+    scene: Scene
+    expected: str | None  # "stays", "falls", or None when physics does not say
+    model: ModelConfig = ModelConfig()
+    horizon_s: float | None = None
+
+
+def _bumped_table() -> Scene:
+    table = next(s for s in generate_tables(seed=4, configurations=1) if s.name.endswith("T1"))
+    return table
+
+
+CATALOGUE: dict[str, Case] = {
+    "delicately_balanced_tower": Case(load_scenes("ipe_ros/data/example_tower.json")[0], "stays"),
+    "heavy_on_light_10_to_1": Case(heavy_on_light(10), "stays"),
+    "heavy_on_light_16_to_1": Case(heavy_on_light(16), "stays"),
+    "tower_of_30_blocks": Case(cube_stack("tower30", (0.2, 0.6, 0.2), 30), "stays"),
+    "blocks_of_1_cm": Case(cube_stack("cm_blocks", (0.01, 0.01, 0.01), 5), "stays"),
+    "blocks_of_3_mm": Case(cube_stack("mm_blocks", (0.003, 0.003, 0.003), 5), "stays"),
+    "thin_plates": Case(cube_stack("plates", (0.2, 0.2, 0.004), 8), "stays"),
+    "overhang_of_1_cm_blocks": Case(overhang("cm_overhang", 0.01, 0.2), "falls"),
+    "overhang_of_20_cm_blocks": Case(overhang("overhang", 0.2, 0.2), "falls"),
+    "deep_interpenetration_after_noise": Case(cube_stack("noisy", (0.2, 0.6, 0.2), 10),
+                                              None, ModelConfig(sigma_m=0.3, samples=4)),
+    "strong_bump_off_a_walled_table": Case(_bumped_table(), None,
+                                           ModelConfig(phi_m_s2=(60.0,), samples=4, force_direction_rad=0.0)),
+    "long_horizon_stack": Case(cube_stack("long", (0.2, 0.6, 0.2), 6), "stays", horizon_s=10.0),
+}
+
+
+def _masses(scene: Scene) -> np.ndarray:
+    return np.array([b.resolved_mass_kg for b in scene.dynamic_boxes])
+
+
+def check_trajectory(case: Case, settings, outcome, phi: float, trajectory: list) -> None:
+    scene = case.scene
+    boxes = scene.dynamic_boxes
+    extents = np.array([b.extents_m for b in boxes])
+    smallest = extents.min(axis=1)
+    times = np.array([f[0] for f in trajectory])
+    positions = np.stack([f[1] for f in trajectory])       # (frames, boxes, 3)
+    orientations = np.stack([f[2] for f in trajectory])
+    assert np.all(np.isfinite(positions)) and np.all(np.isfinite(orientations))
+
+    # speed: free fall over the horizon plus the push's delta-v (finite differences of positions)
+    dt = np.diff(times)[:, None]
+    speeds = np.linalg.norm(np.diff(positions, axis=0), axis=2) / dt
+    push_s = case.model.push_duration_s if phi > 0 else 0.0
+    bound = G * settings.horizon_s + phi * push_s
+    assert speeds.max() <= bound, f"a box moved at {speeds.max():.3g} m/s, above the bound {bound:.3g}"
+
+    # floor and table. At rest (the last frame) a box may sink by the contact slop only. While
+    # moving, a box may overshoot into a surface by the distance it travels in one step at the speed
+    # bound (the solver resolves contacts at the end of the step), but its centre never goes through.
+    lowest = np.stack([positions[f, :, 2] - box_half_heights(extents, orientations[f]) for f in range(len(times))])
+    slop = SLOP_FRACTION * smallest
+    overshoot = slop + bound * settings.time_step_for(float(smallest.min()), G)
+    support = scene.support
+    floor_z = support.height_m if isinstance(support, Floor) else support.floor_z_m
+    if floor_z is not None:
+        assert np.all(positions[:, :, 2] > floor_z), "a box's centre went through the floor"
+        assert np.all(lowest[-1] >= floor_z - slop), f"a box rests {float((floor_z - lowest[-1]).max()):.3g} m in the floor"
+        assert np.all(lowest >= floor_z - overshoot), f"a box sank {float((floor_z - lowest).max()):.3g} m into the floor"
+    if isinstance(support, Table):
+        half = extents.max(axis=1) / 2
+        cx, cy = support.center_xy_m
+        inside = ((np.abs(positions[:, :, 0] - cx) < support.size_m[0] / 2 - half)
+                  & (np.abs(positions[:, :, 1] - cy) < support.size_m[1] / 2 - half))
+        assert np.all(positions[:, :, 2][inside] > support.top_height_m), "a box's centre went through the table top"
+        assert np.all(lowest[inside] >= support.top_height_m - np.broadcast_to(overshoot, lowest.shape)[inside]), \
+            "a box sank into the table top"
+
+    # energy: potential never above the initial total plus the push's work (|F| x path length)
+    masses = outcome_masses(scene, case.model)
+    potential = (positions[:, :, 2] * masses).sum(axis=1) * G
+    during_push = times <= push_s + 1e-9
+    path = np.linalg.norm(np.diff(positions[:, :, :2], axis=0), axis=2)[during_push[1:]].sum(axis=0)
+    work = float((masses * phi * path).sum())
+    tolerance = 1e-6 * max(1.0, abs(potential[0])) + float((masses * G * slop).sum())
+    assert potential.max() <= potential[0] + work + tolerance, \
+        f"energy grew by {potential.max() - potential[0]:.3g} J (push work bound {work:.3g} J)"
+
+
+def outcome_masses(scene: Scene, model: ModelConfig) -> np.ndarray:
+    if model.mu is None:
+        return _masses(scene)
+    from ipe_ros.engine.perturb import MODEL_LIGHT_DENSITY_KG_M3
+    return np.array([MODEL_LIGHT_DENSITY_KG_M3 * (model.mu if b.is_heavy else 1.0) * b.volume_m3
+                     for b in scene.dynamic_boxes])
+
+
+@pytest.mark.parametrize("preset_name", ["default", "paper"])
+@pytest.mark.parametrize("name", list(CATALOGUE))
+def test_hard_case_stays_numerically_stable(name, preset_name, pool):
+    case = CATALOGUE[name]
+    settings = preset(preset_name)
+    if case.horizon_s is not None:
+        settings = dataclasses.replace(settings, horizon_s=case.horizon_s)
+    query = QuerySpec(queries=frozenset({"fall", "bump"} if isinstance(case.scene.support, Table) else {"fall"}))
+    prediction = predict(case.scene, case.model, settings, query, seed=11, map_fn=pool.map, record_every=1)
+    assert prediction.failed_samples == 0, prediction.failure_reasons
+    for outcome in prediction.outcomes:
+        for rollout in outcome.rollouts:
+            check_trajectory(case, settings, outcome, rollout.phi_m_s2, rollout.trajectory)
+    if case.expected == "stays":
+        assert prediction.fall_fraction == 0.0, prediction.object_fall_probability
+    elif case.expected == "falls":
+        assert prediction.fall_fraction > 0.0

@@ -150,8 +150,11 @@ def test_parameter_updates_accepted_and_rejected(ros, tower):
     assert bad_preset.reason == "preset: unknown preset 'fastest'; choose one of paper, accurate, default"
     [bad_direction] = set_params(ros, force_direction_deg=math.inf)
     assert bad_direction.reason == "force_direction_deg: must be finite degrees or NaN (any direction), got inf"
-    bad_width = set_params(ros, target_ci_width=0.3, queries=["far"])
-    assert bad_width[0].reason == "target_ci_width: needs the fall query; add 'fall' to queries or set it to 0"
+    [width] = set_params(ros, target_ci_width=0.3)
+    assert width.successful
+    [bad_queries] = set_params(ros, queries=["far"])  # the width target needs the fall query
+    assert bad_queries.reason == "target_ci_width: needs the fall query; add 'fall' to queries or set it to 0"
+    assert set_params(ros, target_ci_width=0.0)[0].successful
     [out_of_range] = set_params(ros, samples=0)
     assert not out_of_range.successful and "samples" in out_of_range.reason
     [read_only] = set_params(ros, workers=1)

@@ -268,9 +268,21 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float
             p.setGravity(*gravity.tolist(), physicsClientId=cid)
         if trajectory is not None and step % record_every == 0:
             trajectory.append((step * dt, *read_poses(world)))
-        if settings.early_stop and step % rest_every == 0:
+        rest_due = settings.early_stop and step % rest_every == 0
+        check_due = step % check_every == 0 or step == steps
+        if not (rest_due or check_due):
+            continue
+        speeds, spins = read_velocities(world)  # one read serves both checks
+        if check_due:
+            if not np.all(np.isfinite(speeds)):
+                raise PhysicsError(f"non-finite velocity at t = {step * dt:.3f} s; "
+                                   "use a smaller time step or more solver iterations")
+            if speeds.max() > limit:
+                raise PhysicsError(f"a box reached {speeds.max():.3g} m/s at t = {step * dt:.3f} s,"
+                                   f" above the physical bound {limit:.3g} m/s (solver divergence); "
+                                   "use a smaller time step or more solver iterations")
+        if rest_due:
             t = step * dt
-            speeds, spins = read_velocities(world)
             settled = (speeds < rest_speed) & (spins < settings.rest_angular_rad_s)
             if fallen_below_z_m is not None:
                 settled |= read_poses(world)[0][:, 2] < fallen_below_z_m
@@ -288,15 +300,6 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float
                     resting_since, liveliness_at_start = t, liveliness
             else:
                 resting_since = None
-        if step % check_every == 0 or step == steps:
-            speeds = read_speeds(world)
-            if not np.all(np.isfinite(speeds)):
-                raise PhysicsError(f"non-finite velocity at t = {step * dt:.3f} s; "
-                                   "use a smaller time step or more solver iterations")
-            if speeds.max() > limit:
-                raise PhysicsError(f"a box reached {speeds.max():.3g} m/s at t = {step * dt:.3f} s,"
-                                   f" above the physical bound {limit:.3g} m/s (solver divergence); "
-                                   "use a smaller time step or more solver iterations")
     positions, orientations = read_poses(world)
     if not (np.all(np.isfinite(positions)) and np.all(np.isfinite(orientations))):
         raise PhysicsError("non-finite final pose; use a smaller time step or more solver iterations")

@@ -260,15 +260,13 @@ def scene_to_markers(scene: Scene, frame_id: str, stamp_ns: int = 0) -> MarkerAr
         markers.append(_cube(header, SUPPORT_NAMESPACE, 0, (0.0, 0.0, support.height_m - t / 2),
                              (FLOOR_MARKER_SIZE_M, FLOOR_MARKER_SIZE_M, t), (0, 0, 0, 1), SUPPORT_RGB, 1.0,
                              f"role=floor {common}"))
-        obstacles = scene.static_boxes
     else:
         floor = "none" if support.floor_z_m is None else _fmt(support.floor_z_m)
         markers.append(_cube(header, SUPPORT_NAMESPACE, 0,
                              (*support.center_xy_m, support.top_height_m - support.thickness_m / 2),
                              (*support.size_m, support.thickness_m), (0, 0, 0, 1), SUPPORT_RGB, 1.0,
                              f"role=table {common} floor_z={floor}"))
-        obstacles = scene.static_boxes
-    for j, box in enumerate(obstacles, start=1):
+    for j, box in enumerate(scene.static_boxes, start=1):
         markers.append(_cube(header, SUPPORT_NAMESPACE, j, box.position_m, box.extents_m, box.orientation_xyzw,
                              SUPPORT_RGB, 1.0, f"role=obstacle name={box.name} friction={_fmt(box.friction)} "
                                                f"restitution={_fmt(box.restitution)}"

@@ -70,6 +70,16 @@ def half_circle_decisiveness(angles_rad: np.ndarray) -> float | None:
     return float(inside.sum(axis=1).max() / n)
 
 
+def sample_fall_fraction(outcome: SampleOutcome) -> float:
+    """One sample's fraction of fallen boxes, averaged over its push magnitudes (samples are the units)."""
+    return float(np.mean([r.fallen.mean() for r in outcome.rollouts]))
+
+
+def sample_far_m(outcome: SampleOutcome) -> float:
+    """One sample's far distance, averaged over its push magnitudes."""
+    return float(np.mean([r.far_m for r in outcome.rollouts]))
+
+
 @dataclass(frozen=True)
 class Prediction:
     """The IPE's answer for one scene. Fields are None when their query was not asked.
@@ -83,6 +93,7 @@ class Prediction:
     fell_off_fraction_by_group: per group, expected fraction of its boxes that end below the table top.
     bump_ratio: expected share of ``bump_group`` among boxes that fell off (Exp. 5), over rollouts
         where any fell off.
+    stopped_by: what ended sampling: "samples" (all k), or "ci_width" / "deadline" (anytime sampling).
     """
 
     scene: str
@@ -135,7 +146,7 @@ def aggregate(scene: Scene, outcomes: Sequence[SampleOutcome], *, queries: froze
     rollouts = [r for o in ok for r in o.rollouts]
 
     if "fall" in queries:
-        per_sample = np.array([np.mean([r.fallen.mean() for r in o.rollouts]) for o in ok])
+        per_sample = np.array([sample_fall_fraction(o) for o in ok])
         fall = float(per_sample.mean())
         values["fall_fraction"] = fall
         values["fall_fraction_ci95"] = (fall, fall) if deterministic else wilson_interval(fall, len(ok))
@@ -147,7 +158,7 @@ def aggregate(scene: Scene, outcomes: Sequence[SampleOutcome], *, queries: froze
         values["direction_decisiveness"] = half_circle_decisiveness(angles)
         values["direction_rollouts"] = int(len(angles))
     if "far" in queries:
-        per_sample = np.array([np.mean([r.far_m for r in o.rollouts]) for o in ok])
+        per_sample = np.array([sample_far_m(o) for o in ok])
         values["far_m"] = float(per_sample.mean())
         values["far_m_ci95"] = (values["far_m"],) * 2 if deterministic else mean_interval(per_sample)
     if "bump" in queries:

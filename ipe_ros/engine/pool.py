@@ -131,12 +131,8 @@ class WorkerPool:
         items = list(items)
         results: list[R | None] = [None] * len(items)
         pending = list(range(len(items)))
-        reason = "a worker process died twice while running this item"
         for attempt in (1, 2):
-            if not pending:
-                break
-            if self._closed:
-                reason = "cancelled: the worker pool was closed (shutdown)"
+            if not pending or self._closed:
                 break
             executor = self._get_executor()
             futures: dict[Future, int] = {}
@@ -172,8 +168,8 @@ class WorkerPool:
                 self._replace_executor(executor)
             pending = sorted(lost)
         if pending:
-            if self._closed:
-                reason = "cancelled: the worker pool was closed (shutdown)"
+            reason = ("cancelled: the worker pool was closed (shutdown)" if self._closed
+                      else "a worker process died twice while running this item")
             if on_lost is None:
                 raise BrokenProcessPool(reason)
             for i in pending:

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-from .estimate import Prediction
+from .estimate import Prediction, sample_fall_fraction, sample_far_m
 from .palette import SUPPORT_RGB, group_rgb, risk_rgb, to_rgb8
 from .scene import Box, Floor, Scene, Table
 
@@ -115,9 +115,9 @@ def log_outcomes(rec: rr.RecordingStream, prediction: Prediction) -> None:
     columns: dict[str, list[float]] = {}
     first = ok[0].rollouts[0]
     if first.fallen is not None:
-        columns["fall_fraction"] = [float(np.mean([r.fallen.mean() for r in o.rollouts])) for o in ok]
+        columns["fall_fraction"] = [sample_fall_fraction(o) for o in ok]
     if first.far_m is not None:
-        columns["far_m"] = [float(np.mean([r.far_m for r in o.rollouts])) for o in ok]
+        columns["far_m"] = [sample_far_m(o) for o in ok]
     if "direction" in prediction.settings.get("queries", ()):
         columns["direction_deg"] = [math.degrees(o.rollouts[0].direction_rad)
                                     if o.rollouts[0].direction_rad is not None else math.nan for o in ok]

@@ -109,6 +109,7 @@ def run_sample(task: SampleTask) -> SampleOutcome:
         world = physics.build_world(task.scene, inputs.positions_m, inputs.masses_kg, separation)
         physics.depenetrate(world, separation)
         initial, initial_orn = physics.read_poses(world)
+        decided_below_z = _decided_height(task, initial)
         results = []
         for i, phi in enumerate(task.model.phi_m_s2):
             if i > 0 or task.settings.maximal_coordinates:  # a fresh world from the separated state
@@ -117,7 +118,7 @@ def run_sample(task: SampleTask) -> SampleOutcome:
             final, final_orn, trajectory, simulated_s = physics.simulate(
                 world, task.scene, task.settings, phi, inputs.push_direction_rad,
                 task.model.push_duration_s, record_every=task.record_every,
-                fallen_below_z_m=_decided_height(task, initial))
+                fallen_below_z_m=decided_below_z)
             results.append(_query(task, initial, final, final_orn, phi, trajectory, simulated_s))
     except PhysicsError as exc:
         return SampleOutcome(index=task.index, ok=False, error=f"PhysicsError: {exc}",

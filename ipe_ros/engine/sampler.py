@@ -11,13 +11,13 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from typing import Callable
 
 import numpy as np
 
 from .config import ModelConfig, QuerySpec, SimSettings
 from .errors import ConfigError
-from .estimate import Prediction, aggregate, wilson_interval
+from .estimate import Prediction, aggregate, sample_fall_fraction, wilson_interval
 from .rollout import SampleOutcome, SampleTask, run_sample
 from .scene import DEFAULT_MAX_OBJECTS, Scene, Table, validate_scene
 
@@ -119,7 +119,7 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
                 break
             ok = [o for o in outcomes if o.ok]
             if stop.ci_width is not None and len(ok) >= stop.min_samples:
-                fall = float(np.mean([np.mean([r.fallen.mean() for r in o.rollouts]) for o in ok]))
+                fall = float(np.mean([sample_fall_fraction(o) for o in ok]))
                 lo, hi = wilson_interval(fall, len(ok))
                 if hi - lo <= stop.ci_width:
                     stopped_by = "ci_width"

@@ -6,6 +6,8 @@
     ipe generate tower --count N --seed S -o FILE [--pairs RATIO]
     ipe generate table --configurations N --seed S -o FILE
     ipe demo
+    ipe experiment NAME|all [--quick] [--out DIR] [--data DIR] [--samples K] [--stimuli N] [--seed N]
+                [--workers W] [--preset NAME] [--resamples N] [--human FILE --human-scale SCALE]
 
 Bad input ends with exit status 2 and one line on stderr naming the problem.
 """
@@ -106,6 +108,23 @@ def build_parser() -> argparse.ArgumentParser:
     tb.add_argument("-o", "--output", required=True)
 
     sub.add_parser("demo", help="predict on the built-in example tower (IPE and ground truth)")
+
+    from .analysis.experiments import EXPERIMENTS
+    from .analysis.human import SCALES
+    e = sub.add_parser("experiment", help="rerun one of the paper's model analyses; writes JSON, Markdown, PNG")
+    e.add_argument("name", choices=[*EXPERIMENTS, "all"])
+    e.add_argument("--quick", action="store_true", help="few stimuli and samples (minutes; what CI runs)")
+    e.add_argument("--out", default="experiments", help="output folder (default: ./experiments)")
+    e.add_argument("--data", default=None, help="the authors' stimuli (default: $IPE_SHARED_DATA or "
+                                                "../shared/data/battaglia2013 beside the repository)")
+    e.add_argument("--samples", type=int, default=None, help="k of the model (default 48, quick 6)")
+    e.add_argument("--stimuli", type=int, default=None, help="use the first N stimuli of each set")
+    e.add_argument("--seed", type=int, default=0)
+    e.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes (0: in-process)")
+    e.add_argument("--preset", default="default", choices=sorted(PRESETS))
+    e.add_argument("--resamples", type=int, default=10_000, help="bootstrap resamples (paper: 10 000)")
+    e.add_argument("--human", default=None, help="CSV with columns stimulus,response (people's judgments)")
+    e.add_argument("--human-scale", default=None, choices=SCALES, help="what the responses are measured in")
     return parser
 
 
@@ -216,6 +235,41 @@ def cmd_demo(_args) -> int:
     return 0
 
 
+def cmd_experiment(args) -> int:
+    from .analysis.experiments import EXPERIMENTS, Options
+    from .analysis.human import load_human_responses
+    from .analysis.runs import shared_data_dir
+
+    for name in ("samples", "stimuli"):
+        value = getattr(args, name)
+        if value is not None and value < 1:
+            raise ConfigError(f"--{name}", f"must be >= 1, got {value}")
+    if args.seed < 0:
+        raise ConfigError("--seed", f"must be >= 0, got {args.seed}")
+    if args.resamples < 100:
+        raise ConfigError("--resamples", f"must be >= 100, got {args.resamples}")
+    if args.workers < 0:
+        raise ConfigError("--workers", f"must be >= 0, got {args.workers}")
+    if (args.human is None) != (args.human_scale is None):
+        raise ConfigError("--human-scale", "give --human FILE and --human-scale SCALE together")
+    human = load_human_responses(args.human, args.human_scale) if args.human else None
+    opts = Options(out_dir=Path(args.out), data_dir=Path(args.data) if args.data else shared_data_dir(),
+                   quick=args.quick, seed=args.seed, samples=args.samples, stimuli=args.stimuli,
+                   preset=args.preset, resamples=args.resamples, human=human, human_path=args.human)
+    names = list(EXPERIMENTS) if args.name == "all" else [args.name]
+    pool = WorkerPool(args.workers) if args.workers > 0 else None
+    try:
+        for name in names:
+            print(f"experiment {name}{' (quick)' if args.quick else ''} ...", file=sys.stderr, flush=True)
+            report = EXPERIMENTS[name](opts, pool.map if pool else None)
+            json_path, md_path = report.write(opts.out_dir)
+            print(f"wrote {md_path} and {json_path}" + (f" (+{len(report.figures)} PNG)" if report.figures else ""))
+    finally:
+        if pool is not None:
+            pool.close()
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
@@ -223,6 +277,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_predict(args)
         if args.command == "generate":
             return cmd_generate(args)
+        if args.command == "experiment":
+            return cmd_experiment(args)
         return cmd_demo(args)
     except (SceneError, ConfigError) as exc:
         print(f"ipe: error: {exc}", file=sys.stderr)

@@ -36,7 +36,7 @@ def _footprint(extents: np.ndarray, long_axis: str) -> np.ndarray:
             "z": np.array([short, short, long_])}[long_axis]
 
 
-def _convex_hull(points: np.ndarray) -> np.ndarray:
+def convex_hull(points: np.ndarray) -> np.ndarray:
     """Andrew's monotone chain; returns hull vertices counter-clockwise."""
     pts = sorted(set(map(tuple, np.round(points, 12))))
     if len(pts) <= 2:
@@ -103,7 +103,7 @@ def generate_tower(rng: np.random.Generator, name: str, n_blocks: int = 10, shor
                 break  # on the floor: always stable
             corners = np.array([[x, y] for plo, phi in patches for x in (plo[0], phi[0])
                                 for y in (plo[1], phi[1])])
-            if _inside_hull(xy, _convex_hull(corners), margin):
+            if _inside_hull(xy, convex_hull(corners), margin):
                 break
         else:
             raise RuntimeError(f"could not place block {index} of {name!r} stably in "

@@ -17,7 +17,7 @@ setup(
         (f"share/{PACKAGE}/examples", glob("ipe_ros/data/*.json")),
     ],
     python_requires=">=3.11",
-    install_requires=["setuptools", "numpy", "pybullet"],
+    install_requires=["setuptools", "numpy", "pybullet", "scipy"],
     zip_safe=True,
     maintainer="ipe_ros maintainers",
     maintainer_email="ipe-ros@example.com",

@@ -7,7 +7,8 @@
     ipe generate table --configurations N --seed S -o FILE
     ipe demo
     ipe experiment NAME|all [--quick] [--out DIR] [--data DIR] [--samples K] [--stimuli N] [--seed N]
-                [--workers W] [--preset NAME] [--resamples N] [--human FILE --human-scale SCALE]
+                [--workers W] [--preset NAME] [--resamples N] [--grid-samples K]
+                [--human FILE --human-scale SCALE]
 
 Bad input ends with exit status 2 and one line on stderr naming the problem.
 """
@@ -119,6 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
                                                 "../shared/data/battaglia2013 beside the repository)")
     e.add_argument("--samples", type=int, default=None, help="k of the model (default 48, quick 6)")
     e.add_argument("--stimuli", type=int, default=None, help="use the first N stimuli of each set")
+    e.add_argument("--grid-samples", type=int, default=None, help="k per cell of fall's sigma x phi grid")
     e.add_argument("--seed", type=int, default=0)
     e.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes (0: in-process)")
     e.add_argument("--preset", default="default", choices=sorted(PRESETS))
@@ -240,10 +242,10 @@ def cmd_experiment(args) -> int:
     from .analysis.human import load_human_responses
     from .analysis.runs import shared_data_dir
 
-    for name in ("samples", "stimuli"):
+    for name in ("samples", "stimuli", "grid_samples"):
         value = getattr(args, name)
         if value is not None and value < 1:
-            raise ConfigError(f"--{name}", f"must be >= 1, got {value}")
+            raise ConfigError(f"--{name.replace('_', '-')}", f"must be >= 1, got {value}")
     if args.seed < 0:
         raise ConfigError("--seed", f"must be >= 0, got {args.seed}")
     if args.resamples < 100:
@@ -255,7 +257,8 @@ def cmd_experiment(args) -> int:
     human = load_human_responses(args.human, args.human_scale) if args.human else None
     opts = Options(out_dir=Path(args.out), data_dir=Path(args.data) if args.data else shared_data_dir(),
                    quick=args.quick, seed=args.seed, samples=args.samples, stimuli=args.stimuli,
-                   preset=args.preset, resamples=args.resamples, human=human, human_path=args.human)
+                   preset=args.preset, resamples=args.resamples, grid_samples=args.grid_samples, human=human,
+                   human_path=args.human)
     names = list(EXPERIMENTS) if args.name == "all" else [args.name]
     pool = WorkerPool(args.workers) if args.workers > 0 else None
     try:

@@ -92,6 +92,8 @@ def test_features_report_fits_ridge_to_the_ipe(reports):
     assert set(features["exp1"]["single_feature_r"]) == {"F_F1_height_m", "F_F2_com_height_m",
                                                          "F_F3_critical_angle_rad", "F_F4_min_subtower_angle_rad"}
     assert -1 <= features["exp1"]["ridge_held_out_r"]["median"] <= 1
+    if (SHARED_DATA / "willitfall-mass.csv").exists():  # mass-sensitive features under assumed mu
+        assert set(features["exp3"]["by_mu"]) == {"1", "10"}
 
 
 def test_a_human_table_gets_correlated_with_the_model(tmp_path, reports):

@@ -131,3 +131,10 @@ def test_mu_sets_the_models_own_densities():
     light = MODEL_LIGHT_DENSITY_KG_M3 * 0.024
     assert dynamic_masses(scene, 1.0) == pytest.approx([light, light], rel=1e-12)
     assert dynamic_masses(scene, 6.0) == pytest.approx([light, 6 * light], rel=1e-12)
+
+
+def test_early_termination_ends_a_resting_stack_before_the_horizon():
+    scene = floor_scene(block("b0", 0, 0, 0.1), block("b1", 0, 0, 0.3))
+    p = predict(scene, ModelConfig(), preset("default"), QuerySpec())
+    assert p.fall_fraction == 0.0
+    assert p.outcomes[0].rollouts[0].simulated_s < 1.0  # rest from 0.3 s on, confirmed over 0.2 s

@@ -40,7 +40,9 @@ DECISIVE = 0.8
 @dataclass(frozen=True)
 class Options:
     """quick: CI-sized. samples: k of the main model (paper: 48 for towers, 12 for Exp. 5).
-    stimuli: use the first N stimuli of each set. resamples: bootstrap resamples (paper: 10 000)."""
+    stimuli: use the first N stimuli of each set. resamples: bootstrap resamples (paper: 10 000).
+    grid_samples: k of each cell of the sigma x phi grid (default: ``samples``; 121 cells x 60 towers
+    at k = 48 take hours)."""
 
     out_dir: Path
     data_dir: Path
@@ -50,6 +52,7 @@ class Options:
     stimuli: int | None = None
     preset: str = "default"
     resamples: int = stats.BOOTSTRAP_RESAMPLES
+    grid_samples: int | None = None
     human: HumanResponses | None = None
     human_path: str | None = None
 
@@ -125,7 +128,7 @@ def experiment_fall(opts: Options, map_fn) -> Report:
     settings = preset(opts.preset)
     grid_sigmas = (0.0, 0.2, 0.4) if opts.quick else PAPER_SIGMAS
     grid_phis = (0.0, 0.2, 1.0) if opts.quick else PAPER_TOWER_PHIS
-    grid_k = opts.samples or (3 if opts.quick else 48)
+    grid_k = opts.grid_samples or opts.samples or (3 if opts.quick else 48)
     report = Report("fall", "Exp. 1 and S1 (Will it fall?): the IPE against the ground-truth model",
                     opts.settings(**{"sigma x phi grid k": grid_k}))
     stim = load_tower_stimuli("willitfall.csv", opts.data_dir, opts.limit(None, 6), seed=opts.seed)
@@ -667,6 +670,33 @@ def experiment_features(opts: Options, map_fn) -> Report:
                                       ipe_v, fit.held_out, target, n_resamples=opts.resamples, rng=opts.rng("cmp"))
         report.results["exp1"]["ipe_vs_features"] = cmp
         report.add(f"IPE minus features, r with people: {cmp.difference} (bootstrap P = {cmp.p_value:.4f}).", "")
+
+    # Exp. 3: the same features computed under an assumed mu (mass-sensitive) against the IPE at the
+    # stimuli's true ratio; mu = 1 is the mass-insensitive feature set (the paper's best fit was mu = 6)
+    if (opts.data_dir / "willitfall-mass.csv").exists():
+        mstim = _pair_limited(load_tower_stimuli("willitfall-mass.csv", opts.data_dir, None, ratio="10"),
+                              3 if opts.quick else (None if opts.stimuli is None else max(3, opts.stimuli // 2)))
+        mipe = run_model("IPE fall (mass, mu = 10)", mstim.scenes, _ipe(opts.k, mu=10.0), settings, FALL, opts.seed,
+                         map_fn).mean("fall")
+        mrows, by_mu = [], {}
+        for mu in ((1.0, 10.0) if opts.quick else PAPER_MUS):
+            mx = feature_matrix([tower_features(s, mu=mu) for s in mstim.scenes], TOWER_FEATURES)
+            if len(mipe) >= 10:
+                mfit = cross_validated_ridge(mx, mipe, rng=opts.rng(f"ridge-exp3-{mu}"),
+                                             outer_folds=min(5, len(mipe) // 2))
+                held = float(stats.pearson(mfit.held_out, mipe))
+            else:
+                held = math.nan
+            best = max(TOWER_FEATURES, key=lambda n: abs(np.nan_to_num(stats.pearson(mx[:, TOWER_FEATURES.index(n)], mipe))))
+            by_mu[f"{mu:g}"] = {"ridge_held_out_r": held, "best_single_feature": best,
+                                "best_single_r": stats.pearson(mx[:, TOWER_FEATURES.index(best)], mipe)}
+            mrows.append([f"{mu:g}", held, best, float(by_mu[f"{mu:g}"]["best_single_r"])])
+        report.results["exp3"] = {"stimuli": list(mstim.names), "by_mu": by_mu}
+        report.add(f"## Exp. 3 state pairs ({len(mstim.scenes)} stimuli at ratio 10): features under an assumed mu "
+                   "-> IPE fall fraction (mu = 10)", "",
+                   "mu = 1 gives mass-insensitive features (the same for both members of a pair). Ridge needs at "
+                   "least 10 stimuli.", "")
+        report.table(["assumed mu", "ridge held-out r", "best single feature", "its r"], mrows)
 
     # Exp. 2: direction features (circular: single features only, as in the paper)
     dstim = load_tower_stimuli("whichdirection.csv", opts.data_dir, opts.limit(None, 12), seed=opts.seed + 2)

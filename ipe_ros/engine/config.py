@@ -106,6 +106,11 @@ class SimSettings:
     rest_angular_rad_s: float = 0.05
     rest_duration_s: float = 0.2
     rest_min_time_s: float = 0.3
+    #: "Not growing": the liveliest box may end the rest window up to this factor livelier than it
+    #: began it. Resting contacts creep (a stacked block drifting at ~1 mm/s, 0.3% faster every
+    #: 0.05 s, kept a plain two-block stack running to the horizon with a factor of 1), while a tower
+    #: starting to tip speeds up several-fold in 0.2 s.
+    rest_growth_factor: float = 1.1
     #: The step never exceeds this fraction of the boxes' time scale sqrt(size / g): small boxes
     #: get finer steps (3 mm cubes sank through each other at 1/240 s). 0.03 leaves 0.2 m blocks
     #: at 1/240 s and gives 3 mm cubes ~0.5 ms.
@@ -121,6 +126,8 @@ class SimSettings:
         for name in ("rest_speed_sizes_per_s", "rest_angular_rad_s", "rest_duration_s"):
             _positive(getattr(self, name), name)
         _non_negative(self.rest_min_time_s, "rest_min_time_s")
+        if not isinstance(self.rest_growth_factor, (int, float)) or not 1 <= self.rest_growth_factor < 10:
+            raise ConfigError("rest_growth_factor", f"must be in [1, 10), got {self.rest_growth_factor!r}")
         _positive(self.max_step_fraction_of_time_scale, "max_step_fraction_of_time_scale")
         if self.time_step_s > self.horizon_s:
             raise ConfigError("time_step_s", "must not exceed horizon_s")

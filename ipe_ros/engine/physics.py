@@ -295,7 +295,7 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float
                 elif t - resting_since >= settings.rest_duration_s - 1e-9:
                     # A tower that is just starting to tip moves slowly but faster and faster;
                     # a settling one slows down. Only the latter has come to rest.
-                    if liveliness <= liveliness_at_start:
+                    if liveliness <= liveliness_at_start * settings.rest_growth_factor:
                         break
                     resting_since, liveliness_at_start = t, liveliness
             else:

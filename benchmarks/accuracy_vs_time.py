@@ -42,8 +42,10 @@ SIGMA_M = 0.04
 def candidates() -> list[SimSettings]:
     """The settings swept; the `paper` preset is the reference and is always first."""
     paper = PRESETS["paper"]
+    # The size cap (0.03 sqrt(size / g), 1/233 s for 0.2 m blocks) would silently turn every step
+    # coarser than that back into 1/233 s: the swept settings lift it so each runs the step it names.
     base = dataclasses.replace(paper, name="", solver_iterations=100, solver_residual_threshold=1e-5,
-                               warm_start_factor=1.0)
+                               warm_start_factor=1.0, max_step_fraction_of_time_scale=0.1)
     out = [paper, PRESETS["default"]]
     for name in sorted(PRESETS):
         if name not in ("paper", "default"):
@@ -58,6 +60,10 @@ def candidates() -> list[SimSettings]:
         dataclasses.replace(PRESETS["default"], name="default-ws0.85", warm_start_factor=0.85),
         dataclasses.replace(PRESETS["default"], name="default-multibody", maximal_coordinates=False),
         dataclasses.replace(PRESETS["default"], name="default-1/120s", time_step_s=1 / 120),
+        dataclasses.replace(PRESETS["default"], name="default-1/120s-uncapped", time_step_s=1 / 120,
+                            max_step_fraction_of_time_scale=0.1),
+        dataclasses.replace(PRESETS["default"], name="default-1/180s-uncapped", time_step_s=1 / 180,
+                            max_step_fraction_of_time_scale=0.1),
         dataclasses.replace(PRESETS["default"], name="default-1.5s-horizon", horizon_s=1.5),
         dataclasses.replace(PRESETS["default"], name="default-1s-horizon", horizon_s=1.0),
         dataclasses.replace(PRESETS["paper"], name="1ms/20it+early", solver_iterations=20, early_stop=True),

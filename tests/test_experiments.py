@@ -56,6 +56,10 @@ def test_direction_report_applies_the_decisiveness_rule(reports):
     decisiveness = np.array(d["decisiveness"], dtype=float)
     assert d["decisive"] == int(np.sum(decisiveness >= 0.8)) and d["included"] <= d["decisive"]
     assert np.all((decisiveness >= 0.5) & (decisiveness <= 1.0))  # a half circle holds at least half
+    if d["included"] >= 3:
+        within = d["within_45_deg_included"]
+        assert 0.0 <= within["ci95"][0] <= within["median"] <= within["ci95"][1] <= 1.0
+        assert -1.0 <= d["fisher_lee_r_included"]["median"] <= 1.0
 
 
 def test_mass_insensitive_model_cannot_tell_state_pairs_apart(reports):

@@ -226,6 +226,13 @@ def _direction_analysis(report: Report, opts: Options, names, ipe: ModelRun, tru
     if included.sum() >= 3:
         out["circular_r_included"] = stats.bootstrap_circular(ipe_dir[included], gt_dir[included],
                                                               n_resamples=opts.resamples, rng=opts.rng(key + "-in"))
+        # Stable companions: fall directions spread round the circle, where the J-S r above is erratic.
+        out["fisher_lee_r_included"] = stats.bootstrap_fisher_lee(ipe_dir[included], gt_dir[included],
+                                                                  n_resamples=opts.resamples,
+                                                                  rng=opts.rng(key + "-fl"))
+        out["within_45_deg_included"] = stats.bootstrap_within(ipe_dir[included], gt_dir[included], math.pi / 4,
+                                                               n_resamples=opts.resamples,
+                                                               rng=opts.rng(key + "-45"))
     if defined.sum() >= 3:
         out["circular_r_all"] = stats.bootstrap_circular(ipe_dir[defined], gt_dir[defined],
                                                          n_resamples=opts.resamples, rng=opts.rng(key + "-all"))
@@ -246,12 +253,17 @@ def experiment_direction(opts: Options, map_fn) -> Report:
                f"A tower is kept when at least {DECISIVE:.0%} of the IPE's sampled directions fall in one half "
                f"circle (paper: 47 of 60 kept). Kept here: {out['decisive']} of {len(stim.scenes)} "
                f"({out['included']} with a ground-truth direction too).", "")
-    rows = []
-    for label in ("circular_r_included", "circular_r_all"):
-        if label in out:
-            rows.append([label.replace("_", " "), str(out[label])])
+    labels = {"circular_r_included": "circular r (Jammalamadaka-SenGupta), kept towers",
+              "circular_r_all": "circular r (Jammalamadaka-SenGupta), all towers",
+              "fisher_lee_r_included": "circular r (Fisher-Lee), kept towers",
+              "within_45_deg_included": "fraction within +-45 degrees, kept towers (paper, IPE vs people: 0.89)"}
+    rows = [[text, str(out[label])] for label, text in labels.items() if label in out]
     report.add("## IPE against ground-truth directions", "")
-    report.table(["towers", "circular r (median [95% CI])"], rows)
+    report.table(["statistic", "median [95% CI]"], rows)
+    report.add("", "Fall directions spread round the whole circle, so their circular mean is ill-defined and the "
+               "Jammalamadaka-SenGupta r (which subtracts it) swings between bootstrap resamples: its interval is "
+               "wide and its point value can differ from the median. The Fisher-Lee r uses pairwise differences "
+               "and no mean, and the +-45 degree fraction is the paper's Fig. 3B measure.", "")
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(4.8, 4.5))
     ipe_deg, gt_deg = np.degrees(out["ipe_direction_rad"]), np.degrees(out["ground_truth_direction_rad"])
@@ -313,26 +325,39 @@ def experiment_mass(opts: Options, map_fn) -> Report:
                 diff = np.angle(np.exp(1j * diff))
                 out = _direction_analysis(report, opts, stim.names, run, truth, f"{key}-{mu}")
                 r_all = out.get("circular_r_included")
+                fisher_lee, within = out.get("fisher_lee_r_included"), out.get("within_45_deg_included")
                 both = np.isfinite(diff) & np.isfinite(gt_diff)
                 r_pairs = stats.circular_correlation(diff[both], np.angle(np.exp(1j * gt_diff))[both])
                 extra = f"{out['included']}/{len(stim.scenes)}"
             else:
                 r_all = stats.bootstrap_pearson(values, gt, n_resamples=opts.resamples, rng=opts.rng(f"{key}-{mu}"))
+                fisher_lee = within = None
                 r_pairs = stats.pearson(diff, gt_diff)
-                extra = "-"
+                extra = None
             per_mu[f"{mu:g}"] = {"r_with_ground_truth": r_all, "pair_difference_r": r_pairs,
                                  "mean_abs_pair_difference": float(np.nanmean(np.abs(diff))),
                                  "max_abs_pair_difference": float(np.nanmax(np.abs(diff)))}
-            rows.append([f"{mu:g}", str(r_all) if r_all is not None else "-", float(r_pairs),
-                         float(np.nanmean(np.abs(diff))), extra])
+            row = [f"{mu:g}", str(r_all) if r_all is not None else "-", float(r_pairs),
+                   float(np.nanmean(np.abs(diff))), extra]
+            if query == "direction":
+                per_mu[f"{mu:g}"].update(fisher_lee_r_with_ground_truth=fisher_lee, within_45_deg=within)
+                row[2:2] = [str(fisher_lee) if fisher_lee is not None else "-",
+                            str(within) if within is not None else "-"]
+            else:
+                row.pop()  # no decisiveness rule for Will it fall?
+            rows.append(row)
         report.results[key] = {"stimuli": list(stim.names), "pairs": len(pairs), "by_mu": per_mu}
         unit = "rad" if query == "direction" else "fall fraction"
         report.add(f"## {exp}: {len(stim.scenes)} stimuli ({len(pairs)} state pairs at ratio 10) from {path}", "",
                    "Reference: the ground-truth model with the stimuli's own masses (ratio 10). 'pair r' correlates "
                    "the IPE's within-pair differences with ground truth's. mu = 1 is the mass-insensitive model: "
                    "its pair members share geometry and seeds, so their difference is exactly 0.", "")
-        report.table(["mu", "r with ground truth (circular for directions)", "pair r", f"mean |pair diff| ({unit})",
-                      "decisive kept"], rows)
+        if query == "direction":
+            header = ["mu", "circular r with ground truth (J-S)", "Fisher-Lee r", "within +-45 degrees",
+                      "pair r (J-S)", f"mean absolute pair difference ({unit})", "decisive kept"]
+        else:
+            header = ["mu", "r with ground truth", "pair r", f"mean absolute pair difference ({unit})"]
+        report.table(header, rows)
     return report
 
 
@@ -704,16 +729,22 @@ def experiment_features(opts: Options, map_fn) -> Report:
     drows = [tower_features(s) for s in dstim.scenes]
     direction = dipe.mean("direction")
     decisive = np.array([(p.direction_decisiveness or 0) >= DECISIVE for p in dipe.predictions]) & np.isfinite(direction)
-    dsingle = {}
+    dsingle, dfisher, dwithin = {}, {}, {}
     for name in DIRECTION_FEATURES:
         values = np.array([r[name] for r in drows])
         if decisive.sum() >= 3:
-            dsingle[name] = stats.bootstrap_circular(values[decisive], direction[decisive], n_resamples=opts.resamples,
-                                                     rng=opts.rng(name))
-    report.results["exp2"] = {"towers": list(dstim.names), "decisive": int(decisive.sum()), "circular_r": dsingle}
+            a, b = values[decisive], direction[decisive]
+            dsingle[name] = stats.bootstrap_circular(a, b, n_resamples=opts.resamples, rng=opts.rng(name))
+            dfisher[name] = stats.bootstrap_fisher_lee(a, b, n_resamples=opts.resamples, rng=opts.rng(name + "-fl"))
+            dwithin[name] = stats.bootstrap_within(a, b, math.pi / 4, n_resamples=opts.resamples,
+                                                   rng=opts.rng(name + "-45"))
+    report.results["exp2"] = {"towers": list(dstim.names), "decisive": int(decisive.sum()), "circular_r": dsingle,
+                              "fisher_lee_r": dfisher, "within_45_deg": dwithin}
     report.add(f"## Exp. 2 towers ({len(dstim.scenes)}, {int(decisive.sum())} decisive): direction features -> "
                "IPE direction", "")
-    report.table(["feature", "circular r with the IPE (median [95% CI])"], [[n, str(v)] for n, v in dsingle.items()])
+    report.table(["feature", "circular r, Jammalamadaka-SenGupta (median [95% CI])", "circular r, Fisher-Lee",
+                  "fraction within +-45 degrees"],
+                 [[n, str(v), str(dfisher[n]), str(dwithin[n])] for n, v in dsingle.items()])
 
     # Exp. 5: table features -> uncued bump ratio (random direction, all magnitudes)
     phis = (22.0, 76.0) if opts.quick else PAPER_BUMP_PHIS

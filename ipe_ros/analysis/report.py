@@ -48,8 +48,8 @@ class Report:
         def cell(v: Any) -> str:
             if isinstance(v, float):
                 return "-" if not math.isfinite(v) else f"{v:.3f}"
-            return str(v)
-        self.lines.append("| " + " | ".join(header) + " |")
+            return str(v).replace("|", "\\|")  # a bare | would end the cell
+        self.lines.append("| " + " | ".join(cell(h) for h in header) + " |")
         self.lines.append("|" + "---|" * len(header))
         for row in rows:
             self.lines.append("| " + " | ".join(cell(v) for v in row) + " |")

@@ -74,6 +74,37 @@ def circular_correlation(a, b, axis: int = -1) -> np.ndarray | float:
     return float(r) if np.ndim(r) == 0 else r
 
 
+def fisher_lee_correlation(a, b, axis: int = -1) -> np.ndarray | float:
+    """Fisher-Lee (1983) circular correlation rho_T of two angle arrays (radians), in [-1, 1].
+
+    r = sum_{i<j} sin(a_i - a_j) sin(b_i - b_j) / sqrt(sum sin^2(a_i - a_j) sum sin^2(b_i - b_j)).
+    Built from pairwise differences, it needs no mean direction. That matters for fall directions,
+    which spread round the whole circle: their circular mean is then ill-defined, and the
+    Jammalamadaka-SenGupta r (which subtracts it) jumps between bootstrap resamples.
+    """
+    a, b = np.moveaxis(np.asarray(a, float), axis, -1), np.moveaxis(np.asarray(b, float), axis, -1)
+    da = np.sin(a[..., :, None] - a[..., None, :])
+    db = np.sin(b[..., :, None] - b[..., None, :])
+    # Each unordered pair appears twice with the same sign of the product: the factor cancels.
+    num = (da * db).sum(axis=(-2, -1))
+    den = np.sqrt((da * da).sum(axis=(-2, -1)) * (db * db).sum(axis=(-2, -1)))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = np.where(den > 0, num / np.where(den > 0, den, 1.0), np.nan)
+    return float(r) if np.ndim(r) == 0 else r
+
+
+def angular_difference(a, b) -> np.ndarray:
+    """a - b wrapped to [-pi, pi) (radians)."""
+    return np.mod(np.asarray(a, float) - np.asarray(b, float) + math.pi, 2 * math.pi) - math.pi
+
+
+def fraction_within(a, b, tolerance_rad: float, axis: int = -1) -> np.ndarray | float:
+    """Fraction of stimuli whose two angles differ by at most ``tolerance_rad`` (the paper's "within
+    +-45 degrees" agreement, Fig. 3B)."""
+    out = (np.abs(angular_difference(a, b)) <= tolerance_rad).mean(axis=axis)
+    return float(out) if np.ndim(out) == 0 else out
+
+
 @dataclass(frozen=True)
 class Estimate:
     """A bootstrapped statistic: the paper's median and 2.5/97.5 percentiles of the resamples.
@@ -133,6 +164,18 @@ def bootstrap_pearson(x, y, *, n_resamples: int = BOOTSTRAP_RESAMPLES, rng: np.r
 def bootstrap_circular(a, b, *, n_resamples: int = BOOTSTRAP_RESAMPLES, rng: np.random.Generator) -> Estimate:
     a, b = _as_pair(a, b)
     return bootstrap(circular_correlation, a, b, n_resamples=n_resamples, rng=rng)
+
+
+def bootstrap_fisher_lee(a, b, *, n_resamples: int = BOOTSTRAP_RESAMPLES, rng: np.random.Generator) -> Estimate:
+    a, b = _as_pair(a, b)
+    return bootstrap(fisher_lee_correlation, a, b, n_resamples=n_resamples, rng=rng)
+
+
+def bootstrap_within(a, b, tolerance_rad: float, *, n_resamples: int = BOOTSTRAP_RESAMPLES,
+                     rng: np.random.Generator) -> Estimate:
+    a, b = _as_pair(a, b)
+    return bootstrap(lambda x, y, axis=-1: fraction_within(x, y, tolerance_rad, axis=axis), a, b,
+                     n_resamples=n_resamples, rng=rng)
 
 
 @dataclass(frozen=True)

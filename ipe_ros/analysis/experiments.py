@@ -493,10 +493,15 @@ def experiment_bump(opts: Options, map_fn) -> Report:
                             "obstacle_insensitive_uncued": no_walls_judgment(i, everywhere)})
     table = {key: np.array([s[key] for s in stimuli]) for key in stimuli[0] if key not in ("scene", "cue_deg")}
     comparisons = {}
-    for label, a, b in (("cued vs cue-insensitive", "cued", "cue_insensitive"),
-                        ("cued vs obstacle-insensitive", "cued", "obstacle_insensitive"),
-                        ("uncued vs obstacle-insensitive (uncued)", "uncued", "obstacle_insensitive_uncued")):
-        keep = np.isfinite(table[a]) & np.isfinite(table[b])
+    # Uncued answers do not depend on the cue: compare them once per scene, not once per cue
+    # (duplicated stimuli would make the bootstrap interval too narrow).
+    one_per_scene = np.zeros(len(stimuli), bool)
+    one_per_scene[::2] = True
+    for label, a, b, among in (("cued vs cue-insensitive", "cued", "cue_insensitive", None),
+                               ("cued vs obstacle-insensitive", "cued", "obstacle_insensitive", None),
+                               ("uncued vs obstacle-insensitive (uncued), one per scene", "uncued",
+                                "obstacle_insensitive_uncued", one_per_scene)):
+        keep = np.isfinite(table[a]) & np.isfinite(table[b]) & (True if among is None else among)
         if keep.sum() >= 3:
             comparisons[label] = stats.bootstrap_pearson(table[a][keep], table[b][keep], n_resamples=opts.resamples,
                                                          rng=opts.rng(label))

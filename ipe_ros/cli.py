@@ -1,6 +1,6 @@
 """``ipe``: the intuitive physics engine on the command line (no ROS needed).
 
-    ipe predict PATH [--tower NAME ...] [--query fall,direction,far,bump] [--samples K] [--sigma M]
+    ipe predict PATH [--tower NAME ...] [--query fall,any_fall,direction,far,bump] [--samples K] [--sigma M]
                 [--phi A[,A...]] [--force-direction DEG] [--mu R] [--preset NAME] [--seed N]
                 [--workers W] [--ci-width W] [--deadline S] [--json]
     ipe generate tower --count N --seed S -o FILE [--pairs RATIO]
@@ -145,6 +145,9 @@ def format_table(predictions: list[Prediction]) -> str:
         lines.append(f"{p.scene[:34]:<34} {p.samples:>4} {_fmt(p.fall_fraction):>7} {ci:>15} "
                      f"{_fmt(direction, '.0f'):>8} {_fmt(p.direction_decisiveness, '.2f'):>8} "
                      f"{_fmt(p.far_m, '.2f'):>7} {p.failed_samples:>4} {p.wall_s:>7.2f}")
+        if p.any_fall_probability is not None:
+            lo, hi = p.any_fall_probability_ci95
+            lines.append(f"{'':<34} P(anything falls): {p.any_fall_probability:.3f} [{lo:.2f}, {hi:.2f}]")
         if p.fell_off_fraction_by_group is not None:
             groups = ", ".join(f"{g}: {v:.2f}" for g, v in p.fell_off_fraction_by_group.items())
             lines.append(f"{'':<34} fell off by group: {groups}; {p.bump_group} share: {_fmt(p.bump_ratio, '.2f')}")

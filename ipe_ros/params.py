@@ -113,8 +113,8 @@ def settings_from_values(values: Mapping[str, Any]) -> ServiceSettings:
     width, deadline = float(values["target_ci_width"]), float(values["deadline_s"])
     stop = None
     if width > 0 or deadline > 0:
-        if width > 0 and "fall" not in queries:
-            raise ConfigError("target_ci_width", "needs the fall query; add 'fall' to queries or set it to 0")
+        if width > 0 and "fall" not in queries and "any_fall" not in queries:
+            raise ConfigError("target_ci_width", "needs the fall or any_fall query; add one to queries or set it to 0")
         # batches of two samples per worker keep every worker busy between checks
         stop = AdaptiveStop(ci_width=width or None, deadline_s=deadline or None,
                             batch_size=2 * max(1, int(values["workers"])))

@@ -55,6 +55,6 @@ def test_bad_rules_are_named(kwargs, message):
 
 
 def test_a_width_target_needs_the_fall_query():
-    with pytest.raises(ConfigError, match=r"^ci_width: a target interval width needs the fall query"):
+    with pytest.raises(ConfigError, match=r"^ci_width: a target interval width needs the fall or any_fall query"):
         predict(STANDING, MODEL, preset("default"), QuerySpec(queries=frozenset({"far"})),
                 stop=AdaptiveStop(ci_width=0.2))

@@ -28,6 +28,17 @@ def test_predict_json_lines_hold_the_documented_fields():
     assert out.stderr == ""
 
 
+def test_will_anything_fall_query_reports_a_probability_with_its_interval(capsys):
+    assert main(["predict", str(example_scene_path()), "--query", "any_fall", "--samples", "6", "--workers", "0",
+                 "--json"]) == 0
+    record = json.loads(capsys.readouterr().out)
+    lo, hi = record["any_fall_probability_ci95"]
+    assert 0.0 <= lo <= record["any_fall_probability"] <= hi <= 1.0
+    assert record["fall_fraction"] is None and record["settings"]["queries"] == ["any_fall"]
+    assert main(["predict", str(example_scene_path()), "--query", "any_fall", "--samples", "2", "--workers", "0"]) == 0
+    assert "P(anything falls):" in capsys.readouterr().out
+
+
 def test_predict_table_and_ground_truth(capsys):
     assert main(["predict", str(example_scene_path()), "--ground-truth", "--workers", "0"]) == 0
     text = capsys.readouterr().out

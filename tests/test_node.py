@@ -145,15 +145,15 @@ def test_parameter_updates_accepted_and_rejected(ros, tower):
     assert ok.successful
     [bad_query] = set_params(ros, queries=["fall", "nope"])
     assert not bad_query.successful
-    assert bad_query.reason == "queries: unknown query 'nope'; choose from fall, direction, far, bump"
+    assert bad_query.reason == "queries: unknown query 'nope'; choose from fall, any_fall, direction, far, bump"
     [bad_preset] = set_params(ros, preset="fastest")
     assert bad_preset.reason == "preset: unknown preset 'fastest'; choose one of paper, accurate, default"
     [bad_direction] = set_params(ros, force_direction_deg=math.inf)
     assert bad_direction.reason == "force_direction_deg: must be finite degrees or NaN (any direction), got inf"
     [width] = set_params(ros, target_ci_width=0.3)
     assert width.successful
-    [bad_queries] = set_params(ros, queries=["far"])  # the width target needs the fall query
-    assert bad_queries.reason == "target_ci_width: needs the fall query; add 'fall' to queries or set it to 0"
+    [bad_queries] = set_params(ros, queries=["far"])  # the width target needs the fall or any_fall query
+    assert bad_queries.reason == "target_ci_width: needs the fall or any_fall query; add one to queries or set it to 0"
     assert set_params(ros, target_ci_width=0.0)[0].successful
     [out_of_range] = set_params(ros, samples=0)
     assert not out_of_range.successful and "samples" in out_of_range.reason

@@ -138,3 +138,29 @@ def test_early_termination_ends_a_resting_stack_before_the_horizon():
     p = predict(scene, ModelConfig(), preset("default"), QuerySpec())
     assert p.fall_fraction == 0.0
     assert p.outcomes[0].rollouts[0].simulated_s < 1.0  # rest from 0.3 s on, confirmed over 0.2 s
+
+
+def _three_block_tower_with_a_borderline_top():
+    """A 3-block tower whose top block overhangs by 0.28 of its 0.2 m width: with 2 cm of noise some
+    samples keep it, some drop it, so "will anything fall?" is uncertain."""
+    return floor_scene(block("b0", 0, 0, 0.1, extents=(0.2, 0.2, 0.2)),
+                       block("b1", 0.0, 0, 0.3, extents=(0.2, 0.2, 0.2)),
+                       block("b2", 0.095, 0, 0.5, extents=(0.2, 0.2, 0.2)))
+
+
+def test_will_anything_fall_stops_at_the_first_fall_and_agrees_with_the_full_rollout():
+    scene = _three_block_tower_with_a_borderline_top()
+    model = ModelConfig(sigma_m=0.02, samples=12)
+    yes_no = predict(scene, model, preset("default"), QuerySpec(queries=frozenset({"any_fall"})), seed=3)
+    full = predict(scene, model, preset("default"), QuerySpec(queries=frozenset({"fall", "any_fall"})), seed=3)
+    fell_any = [o.rollouts[0].any_fell for o in yes_no.outcomes]
+    assert fell_any == [bool(o.rollouts[0].fallen.any()) for o in full.outcomes]  # same noisy scenes, same answers
+    assert 0 < sum(fell_any) < len(fell_any), "the scene should be uncertain under this seed"
+    assert yes_no.any_fall_probability == full.any_fall_probability == sum(fell_any) / len(fell_any)
+    lo, hi = yes_no.any_fall_probability_ci95
+    assert lo < yes_no.any_fall_probability < hi
+    # the yes/no rollouts that saw a fall ended early; the fraction query had to wait for rest
+    for quick, slow, fell in zip(yes_no.outcomes, full.outcomes, fell_any):
+        if fell:
+            assert quick.rollouts[0].simulated_s < slow.rollouts[0].simulated_s
+    assert yes_no.fall_fraction is None and yes_no.outcomes[0].rollouts[0].fallen is None

@@ -45,3 +45,13 @@ def test_recording_holds_scene_rollouts_outcomes_and_answer(tmp_path):
     assert sum(c.num_rows for c in by_entity["/outcomes/fall_fraction"]) == 4
     assert {"/world", "/world/scene/support", "/world/scene/boxes", "/world/answer/objects", "/answer",
             "/answer/fall_probability"} <= set(by_entity)
+
+
+def test_will_anything_fall_is_recorded_per_sample(tmp_path):
+    query = QuerySpec(queries=frozenset({"any_fall"}))
+    prediction = predict(SCENE, MODEL, preset("default"), query, seed=5, record_every=100, record_samples=2)
+    path = tmp_path / "any.rrd"
+    write_prediction_rrd(path, SCENE, prediction, answer=prediction.to_dict(),
+                         stamp_ns=1_700_000_000_000_000_000, rollouts_logged=2)
+    entities = {chunk.entity_path for chunk in RrdReader(path).stream().to_chunks()}
+    assert "/outcomes/any_fall" in entities and "/outcomes/fall_fraction" not in entities

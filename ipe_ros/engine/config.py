@@ -20,7 +20,9 @@ from dataclasses import dataclass
 from .errors import ConfigError
 
 #: Every query the engine can answer. ``fall`` includes per-object fall probabilities.
-ALL_QUERIES = ("fall", "direction", "far", "bump")
+#: fall: expected fraction of boxes that fall; any_fall: probability that anything falls (yes/no,
+#: its rollouts stop at the first fall); direction, far: where they fall; bump: what falls off a table.
+ALL_QUERIES = ("fall", "any_fall", "direction", "far", "bump")
 
 
 def _positive(value: float, field: str) -> None:

@@ -75,6 +75,11 @@ def sample_fall_fraction(outcome: SampleOutcome) -> float:
     return float(np.mean([r.fallen.mean() for r in outcome.rollouts]))
 
 
+def sample_any_fall(outcome: SampleOutcome) -> float:
+    """One sample's "did anything fall?" (1 or 0), averaged over its push magnitudes."""
+    return float(np.mean([float(r.any_fell) for r in outcome.rollouts]))
+
+
 def sample_far_m(outcome: SampleOutcome) -> float:
     """One sample's far distance, averaged over its push magnitudes."""
     return float(np.mean([r.far_m for r in outcome.rollouts]))
@@ -87,6 +92,8 @@ class Prediction:
     fall_fraction: expected fraction of dynamic boxes that fall (Exps. 1, 3).
     fall_fraction_ci95: its 95% interval (Wilson; a point for the deterministic ground truth).
     object_fall_probability: per box, the fraction of rollouts in which it fell.
+    any_fall_probability: probability that at least one box falls (the yes/no question), with its
+        95% Wilson interval ``any_fall_probability_ci95``.
     direction_rad: circular mean of the per-rollout fall directions (Exps. 2, 4), None if nothing fell.
     direction_decisiveness: largest fraction of those directions inside one half circle.
     far_m: expected largest horizontal distance of a fallen box from the tower base (Exp. S2).
@@ -105,6 +112,8 @@ class Prediction:
     fall_fraction: float | None = None
     fall_fraction_ci95: tuple[float, float] | None = None
     object_fall_probability: dict[str, float] | None = None
+    any_fall_probability: float | None = None
+    any_fall_probability_ci95: tuple[float, float] | None = None
     direction_rad: float | None = None
     direction_decisiveness: float | None = None
     direction_rollouts: int | None = None
@@ -122,7 +131,7 @@ class Prediction:
     def to_dict(self) -> dict[str, Any]:
         """The JSON-ready fields (everything but the raw outcomes)."""
         out = {name: getattr(self, name) for name in self.__dataclass_fields__ if name != "outcomes"}
-        for key in ("fall_fraction_ci95", "far_m_ci95", "failure_reasons"):
+        for key in ("fall_fraction_ci95", "any_fall_probability_ci95", "far_m_ci95", "failure_reasons"):
             if out[key] is not None:
                 out[key] = list(out[key])
         return out
@@ -152,6 +161,10 @@ def aggregate(scene: Scene, outcomes: Sequence[SampleOutcome], *, queries: froze
         values["fall_fraction_ci95"] = (fall, fall) if deterministic else wilson_interval(fall, len(ok))
         per_object = np.mean([r.fallen for r in rollouts], axis=0)
         values["object_fall_probability"] = {n: float(p) for n, p in zip(names, per_object)}
+    if "any_fall" in queries:
+        anything = float(np.mean([sample_any_fall(o) for o in ok]))
+        values["any_fall_probability"] = anything
+        values["any_fall_probability_ci95"] = (anything, anything) if deterministic else wilson_interval(anything, len(ok))
     if "direction" in queries:
         angles = np.array([r.direction_rad for r in rollouts if r.direction_rad is not None])
         values["direction_rad"] = circular_mean(angles)

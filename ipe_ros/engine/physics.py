@@ -229,13 +229,15 @@ def speed_limit_m_s(scene: Scene, push_m_s2: float, settings: SimSettings, push_
 
 def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float, push_direction_rad: float,
              push_duration_s: float, record_every: int = 0,
-             fallen_below_z_m: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, list | None, float]:
+             fallen_below_z_m: np.ndarray | None = None,
+             stop_at_first_fall: bool = False) -> tuple[np.ndarray, np.ndarray, list | None, float]:
     """Run the horizon; return final positions, orientations, (if asked) a trajectory, and the
     simulated time in seconds (shorter than the horizon when early termination ended the rollout).
 
     ``fallen_below_z_m`` (per dynamic box, only when the fall query is all that is asked): a box whose
     centre is below this height has fallen, its outcome is decided, so early termination no longer
-    waits for it to come to rest.
+    waits for it to come to rest. With ``stop_at_first_fall`` (a yes/no question: will anything
+    fall?) the rollout ends as soon as any box is below its height, checked every 0.05 s.
 
     The trajectory, recorded every ``record_every`` steps when > 0, is a list of (time_s, positions,
     orientations). Raises PhysicsError on non-finite states or speeds above ``speed_limit_m_s``.
@@ -285,7 +287,10 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float
             t = step * dt
             settled = (speeds < rest_speed) & (spins < settings.rest_angular_rad_s)
             if fallen_below_z_m is not None:
-                settled |= read_poses(world)[0][:, 2] < fallen_below_z_m
+                fallen_now = read_poses(world)[0][:, 2] < fallen_below_z_m
+                if stop_at_first_fall and fallen_now.any():
+                    break
+                settled |= fallen_now
             # how close to moving the liveliest box is (1 = at the rest threshold)
             liveliness = float(np.max(np.where(settled, np.maximum(speeds / rest_speed,
                                                                     spins / settings.rest_angular_rad_s), 0.0)))

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-from .estimate import Prediction, sample_fall_fraction, sample_far_m
+from .estimate import Prediction, sample_any_fall, sample_fall_fraction, sample_far_m
 from .palette import SUPPORT_RGB, group_rgb, risk_rgb, to_rgb8
 from .scene import Box, Floor, Scene, Table
 
@@ -116,6 +116,8 @@ def log_outcomes(rec: rr.RecordingStream, prediction: Prediction) -> None:
     first = ok[0].rollouts[0]
     if first.fallen is not None:
         columns["fall_fraction"] = [sample_fall_fraction(o) for o in ok]
+    if first.any_fell is not None:
+        columns["any_fall"] = [sample_any_fall(o) for o in ok]
     if first.far_m is not None:
         columns["far_m"] = [sample_far_m(o) for o in ok]
     if "direction" in prediction.settings.get("queries", ()):

@@ -50,6 +50,7 @@ class RolloutResult:
     bump_ratio: float | None
     trajectory: list | None = None
     simulated_s: float = 0.0  # simulated time; below the horizon when the rollout ended early
+    any_fell: bool | None = None  # the any_fall query: did at least one box fall?
 
 
 @dataclass(frozen=True)
@@ -69,11 +70,15 @@ def _query(task: SampleTask, initial: np.ndarray, final: np.ndarray, final_orn: 
            phi: float, trajectory: list | None, simulated_s: float) -> RolloutResult:
     scene, spec = task.scene, task.query
     boxes = scene.dynamic_boxes
-    fallen = direction = far = fell_off = ratio = None
-    needs_fallen = spec.wants("fall") or spec.wants("direction") or spec.wants("far")
+    fallen = direction = far = fell_off = ratio = any_fell = None
+    needs_fallen = any(spec.wants(q) for q in ("fall", "any_fall", "direction", "far"))
     if needs_fallen:
         min_extents = np.array([min(b.extents_m) for b in boxes])
         fallen = queries.fallen_mask(initial, final, min_extents, spec.fall_threshold_fraction)
+    if spec.wants("any_fall"):
+        any_fell = bool(fallen.any())
+        if not (spec.wants("fall") or spec.wants("direction") or spec.wants("far")):
+            fallen = None  # the rollout may have stopped at the first fall: the rest is undecided
     if spec.wants("direction"):
         direction = queries.fall_direction_rad(initial, final, fallen)
     if spec.wants("far"):
@@ -84,15 +89,16 @@ def _query(task: SampleTask, initial: np.ndarray, final: np.ndarray, final_orn: 
     return RolloutResult(phi_m_s2=phi, final_positions_m=final, final_orientations_xyzw=final_orn,
                          fallen=fallen,
                          direction_rad=direction, far_m=far, fell_off=fell_off, bump_ratio=ratio,
-                         trajectory=trajectory, simulated_s=simulated_s)
+                         trajectory=trajectory, simulated_s=simulated_s, any_fell=any_fell)
 
 
 def _decided_height(task: SampleTask, initial: np.ndarray) -> np.ndarray | None:
-    """When only ``fall`` is asked, the height below which each box's outcome is decided (fallen).
+    """When only ``fall`` / ``any_fall`` are asked, the height below which each box's outcome is
+    decided (fallen).
 
     Other queries (direction, far, bump) depend on where boxes end up, so they wait for rest.
     """
-    if not task.settings.early_stop or task.query.queries != frozenset({"fall"}):
+    if not task.settings.early_stop or not task.query.queries <= frozenset({"fall", "any_fall"}):
         return None
     min_extents = np.array([min(b.extents_m) for b in task.scene.dynamic_boxes])
     return initial[:, 2] - task.query.fall_threshold_fraction * min_extents
@@ -118,7 +124,9 @@ def run_sample(task: SampleTask) -> SampleOutcome:
             final, final_orn, trajectory, simulated_s = physics.simulate(
                 world, task.scene, task.settings, phi, inputs.push_direction_rad,
                 task.model.push_duration_s, record_every=task.record_every,
-                fallen_below_z_m=decided_below_z)
+                fallen_below_z_m=decided_below_z,
+                # "will anything fall?" is decided by the first box that falls
+                stop_at_first_fall=decided_below_z is not None and task.query.queries == frozenset({"any_fall"}))
             results.append(_query(task, initial, final, final_orn, phi, trajectory, simulated_s))
     except PhysicsError as exc:
         return SampleOutcome(index=task.index, ok=False, error=f"PhysicsError: {exc}",

@@ -17,7 +17,7 @@ import numpy as np
 
 from .config import ModelConfig, QuerySpec, SimSettings
 from .errors import ConfigError
-from .estimate import Prediction, aggregate, sample_fall_fraction, wilson_interval
+from .estimate import Prediction, aggregate, sample_any_fall, sample_fall_fraction, wilson_interval
 from .rollout import SampleOutcome, SampleTask, run_sample
 from .scene import DEFAULT_MAX_OBJECTS, Scene, Table, validate_scene
 
@@ -28,8 +28,8 @@ MapFn = Callable[..., list]
 class AdaptiveStop:
     """Anytime sampling: draw samples in batches and stop early once a rule is met.
 
-    ci_width: stop once the 95% interval of ``fall_fraction`` is at most this wide (needs the
-        ``fall`` query), after at least ``min_samples`` good samples.
+    ci_width: stop once the 95% interval of ``fall_fraction`` (or, when only ``any_fall`` is asked,
+        of ``any_fall_probability``) is at most this wide, after at least ``min_samples`` good samples.
     deadline_s: stop before the next batch would end after this many seconds of sampling (the
         first batch always runs). Which samples are used depends on timing only through how many:
         sample i is always the i-th child seed, so n samples give the answer of a k = n run.
@@ -93,8 +93,10 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ConfigError("seed", f"must be an integer >= 0, got {seed!r}")
     check_request(scene, query, max_objects)
-    if stop is not None and stop.ci_width is not None and not query.wants("fall"):
-        raise ConfigError("ci_width", "a target interval width needs the fall query; ask for 'fall' or drop it")
+    if stop is not None and stop.ci_width is not None and not (query.wants("fall") or query.wants("any_fall")):
+        raise ConfigError("ci_width", "a target interval width needs the fall or any_fall query; ask for one "
+                                      "or drop it")
+    per_sample_answer = sample_fall_fraction if query.wants("fall") else sample_any_fall
     tasks = make_tasks(scene, model, settings, query, seed, record_every, record_samples)
 
     def run(batch: list[SampleTask]) -> list[SampleOutcome]:
@@ -119,7 +121,7 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
                 break
             ok = [o for o in outcomes if o.ok]
             if stop.ci_width is not None and len(ok) >= stop.min_samples:
-                fall = float(np.mean([sample_fall_fraction(o) for o in ok]))
+                fall = float(np.mean([per_sample_answer(o) for o in ok]))
                 lo, hi = wilson_interval(fall, len(ok))
                 if hi - lo <= stop.ci_width:
                     stopped_by = "ci_width"

@@ -26,7 +26,7 @@ from visualization_msgs.msg import MarkerArray
 
 from msg_bridge.json_text import answer_to_string, string_to_scene
 from msg_bridge.markers import markers_to_scene, prediction_to_markers
-from msg_bridge.outputs import diagnostics_msg, fall_direction_msg, fall_probability_msg
+from msg_bridge.outputs import any_fall_probability_msg, diagnostics_msg, fall_direction_msg, fall_probability_msg
 
 from . import params
 from .engine import ConfigError
@@ -52,6 +52,7 @@ class IpeNode(Node):
 
         self._pub_prediction = self.create_publisher(String, "~/prediction", LATCHED_QOS)
         self._pub_probability = self.create_publisher(Float64, "~/fall_probability", LATCHED_QOS)
+        self._pub_any_fall = self.create_publisher(Float64, "~/any_fall_probability", LATCHED_QOS)
         self._pub_direction = self.create_publisher(Vector3Stamped, "~/fall_direction", LATCHED_QOS)
         self._pub_markers = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
         self._pub_diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -133,6 +134,9 @@ class IpeNode(Node):
         probability = fall_probability_msg(prediction)
         if probability is not None:
             self._pub_probability.publish(probability)
+        anything = any_fall_probability_msg(prediction)
+        if anything is not None:
+            self._pub_any_fall.publish(anything)
         self._pub_direction.publish(fall_direction_msg(prediction, source.frame_id, source.stamp_ns))
         self._pub_markers.publish(prediction_to_markers(source.scene, prediction, source.frame_id, source.stamp_ns))
         fall = "-" if prediction.fall_fraction is None else f"{prediction.fall_fraction:.3f}"

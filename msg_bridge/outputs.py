@@ -21,6 +21,13 @@ def fall_probability_msg(prediction: Prediction) -> Float64 | None:
     return Float64(data=float(prediction.fall_fraction))
 
 
+def any_fall_probability_msg(prediction: Prediction) -> Float64 | None:
+    """Probability that anything falls; None when the ``any_fall`` query was not asked."""
+    if prediction.any_fall_probability is None:
+        return None
+    return Float64(data=float(prediction.any_fall_probability))
+
+
 def fall_direction_vector(prediction: Prediction) -> tuple[float, float, float]:
     """Unit vector of the mean fall direction scaled by its decisiveness (0.5 .. 1); zero if nothing falls."""
     if prediction.direction_rad is None:

@@ -69,6 +69,20 @@ def set_params(ros: RosHarness, **values):
     return future.result().results
 
 
+def test_will_anything_fall_is_published_on_its_own_topic(ros, tower):
+    ros.start_ipe_node(**FAST, seed=7, queries=["any_fall"])
+    got = answers(ros)
+    anything = ros.collect(Float64, "/ipe/any_fall_probability", LATCHED_QOS)
+    fractions = ros.collect(Float64, "/ipe/fall_probability", LATCHED_QOS)
+    ros.publisher(MarkerArray, "/ipe/scene").publish(scene_to_markers(tower, "odom", 1))
+    wait_until(lambda: len(got) and len(anything), TIMEOUT_S, "an answer and /ipe/any_fall_probability")
+    with WorkerPool(1) as pool:
+        expected = predict(tower, ModelConfig(sigma_m=0.04, samples=6), preset("default"),
+                           QuerySpec(queries=frozenset({"any_fall"})), seed=7, map_fn=pool.map)
+    assert anything[0].data == got[0]["any_fall_probability"] == expected.any_fall_probability
+    assert got[0]["fall_fraction"] is None and len(fractions) == 0  # the fraction was not asked
+
+
 def test_marker_tower_in_stamped_prediction_out_matching_the_engine(ros, tower):
     node = ros.start_ipe_node(**FAST, seed=7)
     got = answers(ros)

@@ -322,30 +322,24 @@ def experiment_mass(opts: Options, map_fn) -> Report:
             values = run.mean(query)
             diff = np.array([values[a] - values[b] for a, b in pairs])
             if query == "direction":
-                diff = np.angle(np.exp(1j * diff))
+                diff = np.angle(np.exp(1j * diff))  # wrapped to (-pi, pi]
+            mean_abs_diff = float(np.nanmean(np.abs(diff)))
+            per_mu[f"{mu:g}"] = {"mean_abs_pair_difference": mean_abs_diff,
+                                 "max_abs_pair_difference": float(np.nanmax(np.abs(diff)))}
+            if query == "direction":
                 out = _direction_analysis(report, opts, stim.names, run, truth, f"{key}-{mu}")
-                r_all = out.get("circular_r_included")
-                fisher_lee, within = out.get("fisher_lee_r_included"), out.get("within_45_deg_included")
                 both = np.isfinite(diff) & np.isfinite(gt_diff)
                 r_pairs = stats.circular_correlation(diff[both], np.angle(np.exp(1j * gt_diff))[both])
-                extra = f"{out['included']}/{len(stim.scenes)}"
+                r_all, fisher_lee, within = (out.get(name) for name in (
+                    "circular_r_included", "fisher_lee_r_included", "within_45_deg_included"))
+                per_mu[f"{mu:g}"].update(fisher_lee_r_with_ground_truth=fisher_lee, within_45_deg=within)
+                rows.append([f"{mu:g}", *(str(v) if v is not None else "-" for v in (r_all, fisher_lee, within)),
+                             float(r_pairs), mean_abs_diff, f"{out['included']}/{len(stim.scenes)}"])
             else:
                 r_all = stats.bootstrap_pearson(values, gt, n_resamples=opts.resamples, rng=opts.rng(f"{key}-{mu}"))
-                fisher_lee = within = None
                 r_pairs = stats.pearson(diff, gt_diff)
-                extra = None
-            per_mu[f"{mu:g}"] = {"r_with_ground_truth": r_all, "pair_difference_r": r_pairs,
-                                 "mean_abs_pair_difference": float(np.nanmean(np.abs(diff))),
-                                 "max_abs_pair_difference": float(np.nanmax(np.abs(diff)))}
-            row = [f"{mu:g}", str(r_all) if r_all is not None else "-", float(r_pairs),
-                   float(np.nanmean(np.abs(diff))), extra]
-            if query == "direction":
-                per_mu[f"{mu:g}"].update(fisher_lee_r_with_ground_truth=fisher_lee, within_45_deg=within)
-                row[2:2] = [str(fisher_lee) if fisher_lee is not None else "-",
-                            str(within) if within is not None else "-"]
-            else:
-                row.pop()  # no decisiveness rule for Will it fall?
-            rows.append(row)
+                rows.append([f"{mu:g}", str(r_all), float(r_pairs), mean_abs_diff])
+            per_mu[f"{mu:g}"].update(r_with_ground_truth=r_all, pair_difference_r=r_pairs)
         report.results[key] = {"stimuli": list(stim.names), "pairs": len(pairs), "by_mu": per_mu}
         unit = "rad" if query == "direction" else "fall fraction"
         report.add(f"## {exp}: {len(stim.scenes)} stimuli ({len(pairs)} state pairs at ratio 10) from {path}", "",

@@ -234,7 +234,7 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float
     """Run the horizon; return final positions, orientations, (if asked) a trajectory, and the
     simulated time in seconds (shorter than the horizon when early termination ended the rollout).
 
-    ``fallen_below_z_m`` (per dynamic box, only when the fall query is all that is asked): a box whose
+    ``fallen_below_z_m`` (per dynamic box, only when nothing but ``fall`` / ``any_fall`` is asked): a box whose
     centre is below this height has fallen, its outcome is decided, so early termination no longer
     waits for it to come to rest. With ``stop_at_first_fall`` (a yes/no question: will anything
     fall?) the rollout ends as soon as any box is below its height, checked every 0.05 s.

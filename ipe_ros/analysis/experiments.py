@@ -214,6 +214,16 @@ def experiment_fall(opts: Options, map_fn) -> Report:
 # Exp. 2: In which direction?
 
 
+def _circular_agreement(a: np.ndarray, b: np.ndarray, opts: Options, rng_keys: tuple[str, str, str]) -> dict:
+    """Agreement of two direction sets: J-S circular r, and its stable companions (fall directions
+    spread round the circle, where the J-S r is erratic): Fisher-Lee r and the +-45 degree fraction."""
+    keys = iter(rng_keys)
+    return {"circular_r": stats.bootstrap_circular(a, b, n_resamples=opts.resamples, rng=opts.rng(next(keys))),
+            "fisher_lee_r": stats.bootstrap_fisher_lee(a, b, n_resamples=opts.resamples, rng=opts.rng(next(keys))),
+            "within_45_deg": stats.bootstrap_within(a, b, math.pi / 4, n_resamples=opts.resamples,
+                                                    rng=opts.rng(next(keys)))}
+
+
 def _direction_analysis(report: Report, opts: Options, names, ipe: ModelRun, truth: ModelRun, key: str) -> dict:
     ipe_dir, gt_dir = ipe.mean("direction"), truth.mean("direction")
     decisiveness = np.array([np.nan if p.direction_decisiveness is None else p.direction_decisiveness
@@ -224,15 +234,9 @@ def _direction_analysis(report: Report, opts: Options, names, ipe: ModelRun, tru
            "ground_truth_direction_defined": int(np.isfinite(gt_dir).sum()),
            "ipe_direction_rad": ipe_dir, "ground_truth_direction_rad": gt_dir, "decisiveness": decisiveness}
     if included.sum() >= 3:
-        out["circular_r_included"] = stats.bootstrap_circular(ipe_dir[included], gt_dir[included],
-                                                              n_resamples=opts.resamples, rng=opts.rng(key + "-in"))
-        # Stable companions: fall directions spread round the circle, where the J-S r above is erratic.
-        out["fisher_lee_r_included"] = stats.bootstrap_fisher_lee(ipe_dir[included], gt_dir[included],
-                                                                  n_resamples=opts.resamples,
-                                                                  rng=opts.rng(key + "-fl"))
-        out["within_45_deg_included"] = stats.bootstrap_within(ipe_dir[included], gt_dir[included], math.pi / 4,
-                                                               n_resamples=opts.resamples,
-                                                               rng=opts.rng(key + "-45"))
+        agreement = _circular_agreement(ipe_dir[included], gt_dir[included], opts,
+                                        (key + "-in", key + "-fl", key + "-45"))
+        out.update({f"{name}_included": est for name, est in agreement.items()})
     if defined.sum() >= 3:
         out["circular_r_all"] = stats.bootstrap_circular(ipe_dir[defined], gt_dir[defined],
                                                          n_resamples=opts.resamples, rng=opts.rng(key + "-all"))
@@ -732,11 +736,10 @@ def experiment_features(opts: Options, map_fn) -> Report:
     for name in DIRECTION_FEATURES:
         values = np.array([r[name] for r in drows])
         if decisive.sum() >= 3:
-            a, b = values[decisive], direction[decisive]
-            dsingle[name] = stats.bootstrap_circular(a, b, n_resamples=opts.resamples, rng=opts.rng(name))
-            dfisher[name] = stats.bootstrap_fisher_lee(a, b, n_resamples=opts.resamples, rng=opts.rng(name + "-fl"))
-            dwithin[name] = stats.bootstrap_within(a, b, math.pi / 4, n_resamples=opts.resamples,
-                                                   rng=opts.rng(name + "-45"))
+            agreement = _circular_agreement(values[decisive], direction[decisive], opts,
+                                            (name, name + "-fl", name + "-45"))
+            dsingle[name], dfisher[name], dwithin[name] = (agreement[k] for k in
+                                                           ("circular_r", "fisher_lee_r", "within_45_deg"))
     report.results["exp2"] = {"towers": list(dstim.names), "decisive": int(decisive.sum()), "circular_r": dsingle,
                               "fisher_lee_r": dfisher, "within_45_deg": dwithin}
     report.add(f"## Exp. 2 towers ({len(dstim.scenes)}, {int(decisive.sum())} decisive): direction features -> "

@@ -161,7 +161,7 @@ def test_parameter_updates_accepted_and_rejected(ros, tower):
     assert not bad_query.successful
     assert bad_query.reason == "queries: unknown query 'nope'; choose from fall, any_fall, direction, far, bump"
     [bad_preset] = set_params(ros, preset="fastest")
-    assert bad_preset.reason == "preset: unknown preset 'fastest'; choose one of paper, accurate, default"
+    assert bad_preset.reason == "preset: unknown preset 'fastest'; choose one of paper, accurate, fine, default"
     [bad_direction] = set_params(ros, force_direction_deg=math.inf)
     assert bad_direction.reason == "force_direction_deg: must be finite degrees or NaN (any direction), got inf"
     [width] = set_params(ros, target_ci_width=0.3)

@@ -164,3 +164,69 @@ def test_will_anything_fall_stops_at_the_first_fall_and_agrees_with_the_full_rol
         if fell:
             assert quick.rollouts[0].simulated_s < slow.rollouts[0].simulated_s
     assert yes_no.fall_fraction is None and yes_no.outcomes[0].rollouts[0].fallen is None
+
+
+def _collapsing(settings, factor: int, iterations: int | None = None):
+    return replace(settings, name=f"{settings.name}-collapse{factor}", collapse_step_factor=factor,
+                   collapse_solver_iterations=iterations)
+
+
+def test_collapse_steps_change_nothing_while_nothing_falls():
+    # a stable stack never triggers the switch: bit-identical to the fine step throughout
+    scene = floor_scene(block("b0", 0, 0, 0.1), block("b1", 0, 0.05, 0.3), block("b2", 0, 0, 0.5))
+    model = ModelConfig(sigma_m=0.005, samples=4)
+    fine = predict(scene, model, _collapsing(preset("default"), 1), QuerySpec(), seed=1)
+    coarse = predict(scene, model, _collapsing(preset("default"), 4, 30), QuerySpec(), seed=1)
+    assert fine.fall_fraction == coarse.fall_fraction == 0.0
+    for a, b in zip(fine.outcomes, coarse.outcomes):
+        assert np.array_equal(a.rollouts[0].final_positions_m, b.rollouts[0].final_positions_m)
+        assert a.rollouts[0].simulated_s == b.rollouts[0].simulated_s
+
+
+def test_collapse_steps_start_at_the_first_fall_and_keep_the_time_grid():
+    # the top block overhangs and falls; the rest of the rollout runs up to 3x coarser steps,
+    # recorded as often as with fine steps, and the rollout ends exactly on the horizon
+    cube = (0.2, 0.2, 0.2)
+    scene = floor_scene(block("base", 0, 0, 0.1, extents=cube), block("top", 0.16, 0, 0.3, extents=cube))
+    no_early = replace(preset("default"), early_stop=False)
+    fine = physics_rollout(scene, _collapsing(no_early, 1))
+    coarse = physics_rollout(scene, _collapsing(no_early, 3))
+    assert coarse.simulated_s == pytest.approx(fine.simulated_s) == pytest.approx(no_early.horizon_s)
+    # one frame per 12 ticks of the fine step, taken at the end of the step that reached it
+    fine_times, coarse_times = (np.array([t for t, *_ in r.trajectory]) for r in (fine, coarse))
+    assert len(coarse_times) == len(fine_times)
+    dt = no_early.time_step_s
+    assert np.all((coarse_times >= fine_times - 1e-12) & (coarse_times < fine_times + 3 * dt - 1e-12))
+    # until the top block clearly fell (dropped by half its 0.2 m height) the two are the same
+    # simulation; afterwards they differ, and agree
+    fell_at = next(i for i, (_, pos, _) in enumerate(fine.trajectory) if pos[1, 2] < 0.3 - 0.5 * 0.2)
+    for (_, a, _), (_, b, _) in zip(fine.trajectory[:fell_at], coarse.trajectory[:fell_at]):
+        assert np.array_equal(a, b)
+    assert not np.array_equal(fine.trajectory[-1][1], coarse.trajectory[-1][1])
+    for rollout in (fine, coarse):
+        assert rollout.fallen.tolist() == [False, True]
+        assert rollout.final_positions_m[1, 2] == pytest.approx(0.1, abs=0.005)  # on the floor
+
+
+def physics_rollout(scene, settings):
+    """The ground-truth rollout of ``scene`` with a trajectory every 12 fine steps (0.05 s)."""
+    from ipe_ros.engine.rollout import SampleTask, run_sample
+
+    task = SampleTask(scene=scene, model=ModelConfig(), settings=settings, query=QuerySpec(), index=0,
+                      seed=np.random.SeedSequence(0), record_every=12)
+    outcome = run_sample(task)
+    assert outcome.ok, outcome.error
+    return outcome.rollouts[0]
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("collapse_step_factor", 0, "collapse_step_factor: must be an integer in [1, 100] (1: no collapse steps), got 0"),
+    ("collapse_step_factor", 2.0, "collapse_step_factor: must be an integer in [1, 100] (1: no collapse steps), got 2.0"),
+    ("collapse_solver_iterations", 0, "collapse_solver_iterations: must be an integer in [1, 10000] or None, got 0"),
+])
+def test_collapse_settings_are_validated(field, value, message):
+    from ipe_ros.engine import ConfigError
+
+    with pytest.raises(ConfigError) as info:
+        replace(preset("default"), **{field: value})
+    assert str(info.value) == message

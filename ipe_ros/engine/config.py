@@ -117,6 +117,21 @@ class SimSettings:
     #: get finer steps (3 mm cubes sank through each other at 1/240 s). 0.03 leaves 0.2 m blocks
     #: at 1/240 s and gives 3 mm cubes ~0.5 ms.
     max_step_fraction_of_time_scale: float = 0.03
+    #: Collapse steps: once any box has clearly fallen (``collapse_drop_fraction``, after the push),
+    #: the scene is collapsing. Falling blocks hitting each other are chaotic at any step size: only the
+    #: statistics of the outcome matter, and they survive coarser steps, while the delicate part
+    #: (does anything start to fall?) ran at the fine step. From then on the step is this integer
+    #: multiple of the fine step, with ``collapse_solver_iterations``. 1 switches this off.
+    collapse_step_factor: int = 1
+    collapse_solver_iterations: int | None = None  # None: keep solver_iterations
+    #: A collapse step is only as coarse as lets no box travel more than this fraction of the
+    #: smallest box extent per step (chosen every 0.05 s from the fastest box): a 30-block tower's
+    #: top blocks hit the floor at 11 m/s and would sink deep into it in one coarse step.
+    collapse_max_travel_fraction: float = 0.5
+    #: The collapse starts when a box's centre has dropped by this fraction of its smallest extent:
+    #: far more than the fall query's 0.125, which a 30-block stack compressing under its own weight
+    #: at coarse steps can reach without anything falling.
+    collapse_drop_fraction: float = 0.5
 
     def __post_init__(self) -> None:
         _positive(self.time_step_s, "time_step_s")
@@ -131,10 +146,21 @@ class SimSettings:
         if not isinstance(self.rest_growth_factor, (int, float)) or not 1 <= self.rest_growth_factor < 10:
             raise ConfigError("rest_growth_factor", f"must be in [1, 10), got {self.rest_growth_factor!r}")
         _positive(self.max_step_fraction_of_time_scale, "max_step_fraction_of_time_scale")
+        _positive(self.collapse_max_travel_fraction, "collapse_max_travel_fraction")
+        _positive(self.collapse_drop_fraction, "collapse_drop_fraction")
         if self.time_step_s > self.horizon_s:
             raise ConfigError("time_step_s", "must not exceed horizon_s")
         if not isinstance(self.solver_iterations, int) or not 1 <= self.solver_iterations <= 10_000:
             raise ConfigError("solver_iterations", f"must be an integer in [1, 10000], got {self.solver_iterations!r}")
+        if isinstance(self.collapse_step_factor, bool) or not isinstance(self.collapse_step_factor, int) \
+                or not 1 <= self.collapse_step_factor <= 100:
+            raise ConfigError("collapse_step_factor",
+                              f"must be an integer in [1, 100] (1: no collapse steps), got {self.collapse_step_factor!r}")
+        if self.collapse_solver_iterations is not None and (
+                isinstance(self.collapse_solver_iterations, bool) or not isinstance(self.collapse_solver_iterations, int)
+                or not 1 <= self.collapse_solver_iterations <= 10_000):
+            raise ConfigError("collapse_solver_iterations",
+                              f"must be an integer in [1, 10000] or None, got {self.collapse_solver_iterations!r}")
 
     @property
     def steps(self) -> int:
@@ -150,14 +176,21 @@ PRESETS: dict[str, SimSettings] = {
     "paper": SimSettings(name="paper", time_step_s=0.001, horizon_s=2.0, solver_iterations=50),
     # 1 ms / 2 s with 20 solver iterations: close to `paper` (mean |dFF| ~0.006) at ~1.8x its speed.
     "accurate": SimSettings(name="accurate", time_step_s=0.001, horizon_s=2.0, solver_iterations=20),
-    # The default: 1/240 s steps, boxes as plain rigid bodies (maximal coordinates) with a full warm
-    # start, up to 100 solver iterations (to a residual of 3e-6: a looser 1e-5 toppled a delicately
-    # balanced tower that stands), and rollouts that end once everything has been at rest (and
-    # slowing down) for 0.2 s. See README for its speed and accuracy against `paper`
-    # (benchmarks/accuracy_vs_time.py).
-    "default": SimSettings(name="default", time_step_s=1 / 240, horizon_s=2.0, solver_iterations=100,
+    # 1/240 s steps throughout (1/233 s for 0.2 m blocks, by the size cap), boxes as plain rigid
+    # bodies (maximal coordinates) with a full warm start, up to 100 solver iterations (to a residual
+    # of 3e-6: a looser 1e-5 toppled a delicately balanced tower that stands), and rollouts that end
+    # once everything has been at rest (and slowing down) for 0.2 s. The default until collapse steps.
+    "fine": SimSettings(name="fine", time_step_s=1 / 240, horizon_s=2.0, solver_iterations=100,
+                        solver_residual_threshold=3e-6, warm_start_factor=1.0, maximal_coordinates=True,
+                        early_stop=True),
+    # The default: `fine`'s solver at 1/180 s steps until something falls, then 4x coarser collapse
+    # steps (the delicate question, does anything start to fall, gets the fine step; the chaotic
+    # collapse only needs its statistics), and a 0.15 s rest window from 0.2 s on. See README for
+    # its speed and accuracy against `paper` (benchmarks/accuracy_vs_time.py).
+    "default": SimSettings(name="default", time_step_s=1 / 180, horizon_s=2.0, solver_iterations=100,
                            solver_residual_threshold=3e-6, warm_start_factor=1.0, maximal_coordinates=True,
-                           early_stop=True),
+                           early_stop=True, max_step_fraction_of_time_scale=0.04, collapse_step_factor=4,
+                           rest_duration_s=0.15, rest_min_time_s=0.2),
 }
 
 

@@ -90,9 +90,16 @@ class World:
     time_step_s: float = 0.0  # the step actually used (finer than the preset's for small boxes)
 
 
-def _add_box(p, cid: int, box: Box, position, mass_kg: float, maximal: bool = False, orientation=None) -> int:
-    half = [e / 2 for e in box.extents_m]
-    shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=cid)
+def _add_box(p, cid: int, box: Box, position, mass_kg: float, maximal: bool = False, orientation=None,
+             shapes: dict | None = None) -> int:
+    """One box body; ``shapes`` caches collision shapes by extents within one world (towers of
+    identical blocks share one shape)."""
+    shape = None if shapes is None else shapes.get(box.extents_m)
+    if shape is None:
+        half = [e / 2 for e in box.extents_m]
+        shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=cid)
+        if shapes is not None:
+            shapes[box.extents_m] = shape
     quat = np.asarray(box.orientation_xyzw if orientation is None else orientation, float)
     quat = quat / np.linalg.norm(quat)
     body = p.createMultiBody(baseMass=mass_kg, baseCollisionShapeIndex=shape,
@@ -102,6 +109,16 @@ def _add_box(p, cid: int, box: Box, position, mass_kg: float, maximal: bool = Fa
     p.changeDynamics(body, -1, lateralFriction=box.friction, restitution=box.restitution,
                      physicsClientId=cid)
     return body
+
+
+def _residual_threshold(settings: SimSettings, scale_m: float, step_factor: int = 1) -> float:
+    """pybullet's solver stops once the largest squared impulse change of an iteration is below this.
+
+    The threshold is absolute: scale it with the scene so small blocks converge too, and with the
+    square of the step, since impulses grow with the step (steps ``step_factor`` times longer are
+    solved to the same relative precision).
+    """
+    return settings.solver_residual_threshold * scale_m / 0.2 * step_factor ** 2
 
 
 def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
@@ -117,8 +134,7 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
     p.setTimeStep(time_step, physicsClientId=cid)
     p.setPhysicsEngineParameter(
         numSolverIterations=settings.solver_iterations,
-        # pybullet's threshold is absolute: scale it with the scene so small blocks converge too.
-        solverResidualThreshold=settings.solver_residual_threshold * scale / 0.2,
+        solverResidualThreshold=_residual_threshold(settings, scale),
         warmStartingFactor=settings.warm_start_factor,
         deterministicOverlappingPairs=1,
         physicsClientId=cid)
@@ -146,7 +162,8 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
             support_ids.append(body)
     static_ids = [_add_box(p, cid, b, b.position_m, 0.0) for b in scene.static_boxes]
     orientations = [None] * len(positions_m) if orientations_xyzw is None else orientations_xyzw
-    dynamic_ids = [_add_box(p, cid, b, pos, float(m), settings.maximal_coordinates, orn)
+    shapes: dict = {}
+    dynamic_ids = [_add_box(p, cid, b, pos, float(m), settings.maximal_coordinates, orn, shapes)
                    for b, pos, m, orn in zip(scene.dynamic_boxes, positions_m, masses_kg, orientations)]
     return World(client=cid, dynamic_ids=dynamic_ids, static_ids=static_ids, support_ids=support_ids,
                  scale_m=scale, time_step_s=time_step)
@@ -170,8 +187,10 @@ def read_speeds(world: World) -> np.ndarray:
 def read_velocities(world: World) -> tuple[np.ndarray, np.ndarray]:
     """(n,) linear speeds in m/s and (n,) angular speeds in rad/s of the dynamic boxes."""
     p = _pybullet()
-    pairs = [p.getBaseVelocity(b, physicsClientId=world.client) for b in world.dynamic_ids]
-    return (np.array([np.linalg.norm(v) for v, _ in pairs]), np.array([np.linalg.norm(w) for _, w in pairs]))
+    pairs = np.array([p.getBaseVelocity(b, physicsClientId=world.client) for b in world.dynamic_ids])
+    pairs = pairs.reshape(len(world.dynamic_ids), 2, 3)
+    speeds = np.sqrt(np.einsum("nkj,nkj->nk", pairs, pairs))
+    return speeds[:, 0], speeds[:, 1]
 
 
 def depenetrate(world: World, settings: SimSettings) -> int:
@@ -230,7 +249,8 @@ def speed_limit_m_s(scene: Scene, push_m_s2: float, settings: SimSettings, push_
 def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float, push_direction_rad: float,
              push_duration_s: float, record_every: int = 0,
              fallen_below_z_m: np.ndarray | None = None,
-             stop_at_first_fall: bool = False) -> tuple[np.ndarray, np.ndarray, list | None, float]:
+             stop_at_first_fall: bool = False,
+             collapse_below_z_m: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, list | None, float]:
     """Run the horizon; return final positions, orientations, (if asked) a trajectory, and the
     simulated time in seconds (shorter than the horizon when early termination ended the rollout).
 
@@ -239,17 +259,26 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float
     waits for it to come to rest. With ``stop_at_first_fall`` (a yes/no question: will anything
     fall?) the rollout ends as soon as any box is below its height, checked every 0.05 s.
 
-    The trajectory, recorded every ``record_every`` steps when > 0, is a list of (time_s, positions,
-    orientations). Raises PhysicsError on non-finite states or speeds above ``speed_limit_m_s``.
+    ``collapse_below_z_m`` (per dynamic box, when ``settings.collapse_step_factor > 1``): once any box
+    is below its height (checked every 0.05 s, after the push), the scene is collapsing and the rest
+    of the rollout runs up to ``collapse_step_factor`` times coarser steps (as coarse as
+    ``collapse_max_travel_fraction`` allows, chosen every 0.05 s) with
+    ``settings.collapse_solver_iterations`` (see SimSettings).
+
+    The trajectory, recorded every ``record_every`` steps of the initial step size when > 0, is a
+    list of (time_s, positions, orientations). Raises PhysicsError on non-finite states or speeds
+    above ``speed_limit_m_s``.
     """
     p = _pybullet()
     cid = world.client
+    # Time runs on a grid of ticks of the initial step dt; a coarse (collapse) step spans several
+    # ticks, so every check, recording and the end of the push stay on the same times.
     dt = world.time_step_s
-    steps = int(round(settings.horizon_s / dt))
+    total_ticks = int(round(settings.horizon_s / dt))
     gravity = np.asarray(scene.gravity_m_s2, float)
-    push_steps = 0
+    push_ticks = 0
     if push_m_s2 > 0:
-        push_steps = int(round(push_duration_s / dt))
+        push_ticks = int(round(push_duration_s / dt))
         tilted = gravity - push_m_s2 * np.array([math.cos(push_direction_rad), math.sin(push_direction_rad), 0.0])
         p.setGravity(*tilted.tolist(), physicsClientId=cid)
     limit = speed_limit_m_s(scene, push_m_s2, settings, push_duration_s)
@@ -260,52 +289,85 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float
     # Early termination: look every 0.05 s whether everything has been at rest for rest_duration_s.
     rest_every = max(1, int(round(0.05 / dt)))
     rest_speed = settings.rest_speed_sizes_per_s * world.scale_m
-    earliest_stop = max(push_steps * dt, settings.rest_min_time_s)
+    earliest_stop = max(push_ticks * dt, settings.rest_min_time_s)
     resting_since: float | None = None
     liveliness_at_start = 0.0
-    step = 0
-    for step in range(1, steps + 1):
+    watch_collapse = collapse_below_z_m is not None and settings.collapse_step_factor > 1
+    collapsing = False
+    g = float(np.linalg.norm(gravity))
+    half_diagonals_m = np.array([np.linalg.norm(b.extents_m) / 2 for b in scene.dynamic_boxes])
+    ticks_per_step = 1
+    tick = 0
+    while tick < total_ticks:
+        # the push ends exactly on its tick, and the last step ends exactly on the horizon
+        step_ticks = min(ticks_per_step, total_ticks - tick)
+        if step_ticks != ticks_per_step:  # a shorter last step (coarse steps only)
+            p.setTimeStep(dt * step_ticks, physicsClientId=cid)
         p.stepSimulation(physicsClientId=cid)
-        if step == push_steps:
+        previous, tick = tick, tick + step_ticks
+        if tick == push_ticks:
             p.setGravity(*gravity.tolist(), physicsClientId=cid)
-        if trajectory is not None and step % record_every == 0:
-            trajectory.append((step * dt, *read_poses(world)))
-        rest_due = settings.early_stop and step % rest_every == 0
-        check_due = step % check_every == 0 or step == steps
+        # a check is due when this step crossed a multiple of its period (in ticks)
+        if trajectory is not None and tick // record_every > previous // record_every:
+            trajectory.append((tick * dt, *read_poses(world)))
+        rest_due = (settings.early_stop or watch_collapse or collapsing) and tick // rest_every > previous // rest_every
+        check_due = tick // check_every > previous // check_every or tick == total_ticks
         if not (rest_due or check_due):
             continue
         speeds, spins = read_velocities(world)  # one read serves both checks
         if check_due:
             if not np.all(np.isfinite(speeds)):
-                raise PhysicsError(f"non-finite velocity at t = {step * dt:.3f} s; "
+                raise PhysicsError(f"non-finite velocity at t = {tick * dt:.3f} s; "
                                    "use a smaller time step or more solver iterations")
             if speeds.max() > limit:
-                raise PhysicsError(f"a box reached {speeds.max():.3g} m/s at t = {step * dt:.3f} s,"
+                raise PhysicsError(f"a box reached {speeds.max():.3g} m/s at t = {tick * dt:.3f} s,"
                                    f" above the physical bound {limit:.3g} m/s (solver divergence); "
                                    "use a smaller time step or more solver iterations")
-        if rest_due:
-            t = step * dt
-            settled = (speeds < rest_speed) & (spins < settings.rest_angular_rad_s)
-            if fallen_below_z_m is not None:
-                fallen_now = read_poses(world)[0][:, 2] < fallen_below_z_m
-                if stop_at_first_fall and fallen_now.any():
+        if not rest_due:
+            continue
+        heights = read_poses(world)[0][:, 2] if (fallen_below_z_m is not None or watch_collapse) else None
+        if watch_collapse and tick >= push_ticks and np.any(heights < collapse_below_z_m):
+            # Something fell: what follows is a collapse, chaotic at any step size, so only its
+            # statistics matter and coarser steps reproduce them (benchmarks/accuracy_vs_time.py).
+            watch_collapse, collapsing = False, True
+            if settings.collapse_solver_iterations is not None:
+                p.setPhysicsEngineParameter(numSolverIterations=settings.collapse_solver_iterations,
+                                            physicsClientId=cid)
+        if collapsing:
+            # Coarse, but no box may travel more than a fraction of the smallest box per step (else
+            # fast blocks sink deep into what they hit): bound the speed until the next look.
+            fastest_m_s = float((speeds + spins * half_diagonals_m).max()) + g * rest_every * dt  # corners
+            allowed = int(settings.collapse_max_travel_fraction * world.scale_m / (fastest_m_s * dt))
+            factor = max(1, min(settings.collapse_step_factor, allowed))
+            if factor != ticks_per_step:
+                ticks_per_step = factor
+                p.setTimeStep(dt * factor, physicsClientId=cid)
+                p.setPhysicsEngineParameter(solverResidualThreshold=_residual_threshold(settings, world.scale_m, factor),
+                                            physicsClientId=cid)
+        if not settings.early_stop:
+            continue
+        t = tick * dt
+        settled = (speeds < rest_speed) & (spins < settings.rest_angular_rad_s)
+        if fallen_below_z_m is not None:
+            fallen_now = heights < fallen_below_z_m
+            if stop_at_first_fall and fallen_now.any():
+                break
+            settled |= fallen_now
+        # how close to moving the liveliest box is (1 = at the rest threshold)
+        liveliness = float(np.max(np.where(settled, np.maximum(speeds / rest_speed,
+                                                                spins / settings.rest_angular_rad_s), 0.0)))
+        if np.all(settled) and t >= earliest_stop:
+            if resting_since is None:
+                resting_since, liveliness_at_start = t, liveliness
+            elif t - resting_since >= settings.rest_duration_s - 1e-9:
+                # A tower that is just starting to tip moves slowly but faster and faster;
+                # a settling one slows down. Only the latter has come to rest.
+                if liveliness <= liveliness_at_start * settings.rest_growth_factor:
                     break
-                settled |= fallen_now
-            # how close to moving the liveliest box is (1 = at the rest threshold)
-            liveliness = float(np.max(np.where(settled, np.maximum(speeds / rest_speed,
-                                                                    spins / settings.rest_angular_rad_s), 0.0)))
-            if np.all(settled) and t >= earliest_stop:
-                if resting_since is None:
-                    resting_since, liveliness_at_start = t, liveliness
-                elif t - resting_since >= settings.rest_duration_s - 1e-9:
-                    # A tower that is just starting to tip moves slowly but faster and faster;
-                    # a settling one slows down. Only the latter has come to rest.
-                    if liveliness <= liveliness_at_start * settings.rest_growth_factor:
-                        break
-                    resting_since, liveliness_at_start = t, liveliness
-            else:
-                resting_since = None
+                resting_since, liveliness_at_start = t, liveliness
+        else:
+            resting_since = None
     positions, orientations = read_poses(world)
     if not (np.all(np.isfinite(positions)) and np.all(np.isfinite(orientations))):
         raise PhysicsError("non-finite final pose; use a smaller time step or more solver iterations")
-    return positions, orientations, trajectory, step * dt
+    return positions, orientations, trajectory, tick * dt

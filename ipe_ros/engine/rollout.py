@@ -92,6 +92,10 @@ def _query(task: SampleTask, initial: np.ndarray, final: np.ndarray, final_orn: 
                          trajectory=trajectory, simulated_s=simulated_s, any_fell=any_fell)
 
 
+def _smallest_extents(task: SampleTask) -> np.ndarray:
+    return np.array([min(b.extents_m) for b in task.scene.dynamic_boxes])
+
+
 def _decided_height(task: SampleTask, initial: np.ndarray) -> np.ndarray | None:
     """When only ``fall`` / ``any_fall`` are asked, the height below which each box's outcome is
     decided (fallen).
@@ -100,8 +104,7 @@ def _decided_height(task: SampleTask, initial: np.ndarray) -> np.ndarray | None:
     """
     if not task.settings.early_stop or not task.query.queries <= frozenset({"fall", "any_fall"}):
         return None
-    min_extents = np.array([min(b.extents_m) for b in task.scene.dynamic_boxes])
-    return initial[:, 2] - task.query.fall_threshold_fraction * min_extents
+    return initial[:, 2] - task.query.fall_threshold_fraction * _smallest_extents(task)
 
 
 def run_sample(task: SampleTask) -> SampleOutcome:
@@ -110,15 +113,19 @@ def run_sample(task: SampleTask) -> SampleOutcome:
     inputs = draw_sample_inputs(task.scene, task.model, rng)
     try:
         # Separate in the same body representation whatever the preset, so that every preset starts
-        # from bit-identical initial scenes (maximal-coordinate bodies round differently).
-        separation = dataclasses.replace(task.settings, maximal_coordinates=False)
+        # from bit-identical initial scenes (the two representations round differently). Plain rigid
+        # bodies are the default's own, so it simulates on in the separated world.
+        separation = dataclasses.replace(task.settings, maximal_coordinates=True)
         world = physics.build_world(task.scene, inputs.positions_m, inputs.masses_kg, separation)
         physics.depenetrate(world, separation)
         initial, initial_orn = physics.read_poses(world)
         decided_below_z = _decided_height(task, initial)
+        collapse_below_z = None
+        if task.settings.collapse_step_factor > 1:
+            collapse_below_z = initial[:, 2] - task.settings.collapse_drop_fraction * _smallest_extents(task)
         results = []
         for i, phi in enumerate(task.model.phi_m_s2):
-            if i > 0 or task.settings.maximal_coordinates:  # a fresh world from the separated state
+            if i > 0 or not task.settings.maximal_coordinates:  # a fresh world from the separated state
                 world = physics.build_world(task.scene, initial, inputs.masses_kg, task.settings,
                                             orientations_xyzw=initial_orn)
             final, final_orn, trajectory, simulated_s = physics.simulate(
@@ -126,7 +133,8 @@ def run_sample(task: SampleTask) -> SampleOutcome:
                 task.model.push_duration_s, record_every=task.record_every,
                 fallen_below_z_m=decided_below_z,
                 # "will anything fall?" is decided by the first box that falls
-                stop_at_first_fall=decided_below_z is not None and task.query.queries == frozenset({"any_fall"}))
+                stop_at_first_fall=decided_below_z is not None and task.query.queries == frozenset({"any_fall"}),
+                collapse_below_z_m=collapse_below_z)
             results.append(_query(task, initial, final, final_orn, phi, trajectory, simulated_s))
     except PhysicsError as exc:
         return SampleOutcome(index=task.index, ok=False, error=f"PhysicsError: {exc}",

@@ -44,6 +44,19 @@ def test_ground_truth_model_agrees_with_the_authors_on_exp1_towers(pool, preset_
     assert r >= 0.85
 
 
+@pytest.mark.parametrize("preset_name", ["default", "fine"])
+def test_early_termination_waits_out_a_slow_tip(preset_name):
+    """tower_01143: the authors' simulation topples one block, which starts to tip slowly while
+    another block is still settling from the start. Early termination must see that block's
+    motion grow (box by box; the liveliest box alone ended the default rollout at 0.35 s)."""
+    (scene,) = load_scenes(shared_file("willitfall.csv"), towers=["tower_01143_0000000000"])
+    assert authors_outcomes("stability_original_fall")[scene.name][1] == 0  # the authors': falls
+    p = predict(scene, ModelConfig(), preset(preset_name), FALL)
+    rollout = p.outcomes[0].rollouts[0]
+    assert rollout.fallen.tolist() == [False] * 8 + [True, False]
+    assert rollout.simulated_s > 1.0
+
+
 def test_ipe_finds_towers_that_are_stable_but_look_likely_to_fall(pool):
     """The paper's 'delicately balanced' illusion: ground truth stable, IPE (sigma = 0.2 sides) says fall."""
     truth = authors_outcomes("stability_original_fall")

@@ -108,7 +108,7 @@ class SimSettings:
     rest_angular_rad_s: float = 0.05
     rest_duration_s: float = 0.2
     rest_min_time_s: float = 0.3
-    #: "Not growing": the liveliest box may end the rest window up to this factor livelier than it
+    #: "Not growing": no box may end the rest window more than this factor livelier than it
     #: began it. Resting contacts creep (a stacked block drifting at ~1 mm/s, 0.3% faster every
     #: 0.05 s, kept a plain two-block stack running to the horizon with a factor of 1), while a tower
     #: starting to tip speeds up several-fold in 0.2 s.

@@ -50,7 +50,18 @@ def candidates() -> list[SimSettings]:
     for name in sorted(PRESETS):
         if name not in ("paper", "default"):
             out.append(PRESETS[name])
+    fine, default = PRESETS["fine"], PRESETS["default"]
     out += [
+        # what each of the default's changes from `fine` does on its own, and variations of them
+        dataclasses.replace(fine, name="fine+collapse4", collapse_step_factor=4),
+        dataclasses.replace(fine, name="fine+1/180s", time_step_s=1 / 180, max_step_fraction_of_time_scale=0.04),
+        dataclasses.replace(fine, name="fine+rest0.15", rest_duration_s=0.15, rest_min_time_s=0.2),
+        dataclasses.replace(default, name="default-no-collapse", collapse_step_factor=1),
+        dataclasses.replace(default, name="default-collapse2", collapse_step_factor=2),
+        dataclasses.replace(default, name="default-collapse6", collapse_step_factor=6),
+        dataclasses.replace(default, name="default-travel0.25", collapse_max_travel_fraction=0.25),
+        dataclasses.replace(default, name="default-drop0.25", collapse_drop_fraction=0.25),
+        dataclasses.replace(default, name="default-res5e-6", solver_residual_threshold=5e-6),
         dataclasses.replace(PRESETS["default"], name="default-no-early", early_stop=False),
         dataclasses.replace(PRESETS["default"], name="default-res1e-5", solver_residual_threshold=1e-5),
         dataclasses.replace(PRESETS["default"], name="default-res1e-6", solver_residual_threshold=1e-6),

@@ -140,6 +140,22 @@ def test_early_termination_ends_a_resting_stack_before_the_horizon():
     assert p.outcomes[0].rollouts[0].simulated_s < 1.0  # rest from 0.3 s on, confirmed over 0.2 s
 
 
+def test_early_termination_does_not_wait_for_a_box_that_cannot_fall():
+    # A slab lying on a slippery floor, pushed: it slides on past the 2 s horizon, but lying flat on
+    # the floor it can never drop, so "does it fall?" is decided from the start. Asking where it
+    # ends up (direction) still waits for it to come to rest.
+    slab = replace(block("slab", 0, 0, 0.05, extents=(0.4, 0.4, 0.1)), friction=0.02)
+    scene = floor_scene(slab)
+    model = ModelConfig(phi_m_s2=(3.0,), force_direction_rad=0.0, cue_half_width_rad=0.0, samples=1)
+    fall_only = predict(scene, model, preset("default"), QuerySpec(queries=frozenset({"fall"})))
+    where_to = predict(scene, model, preset("default"), QuerySpec(queries=frozenset({"fall", "direction"})))
+    assert fall_only.fall_fraction == where_to.fall_fraction == 0.0
+    # the push until 0.2 s, then the 0.15 s rest window, on the ~0.05 s grid of rest checks
+    assert fall_only.outcomes[0].rollouts[0].simulated_s < 0.5
+    assert where_to.outcomes[0].rollouts[0].simulated_s == pytest.approx(2.0, abs=0.01)  # the horizon
+    assert abs(where_to.outcomes[0].rollouts[0].final_positions_m[0, 0]) > 0.5  # it did slide on
+
+
 def _three_block_tower_with_a_borderline_top():
     """A 3-block tower whose top block overhangs by 0.28 of its 0.2 m width: with 2 cm of noise some
     samples keep it, some drop it, so "will anything fall?" is uncertain."""

@@ -255,7 +255,8 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float
              push_duration_s: float, record_every: int = 0,
              fallen_below_z_m: np.ndarray | None = None,
              stop_at_first_fall: bool = False,
-             collapse_below_z_m: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, list | None, float]:
+             collapse_below_z_m: np.ndarray | None = None,
+             never_falls: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, list | None, float]:
     """Run the horizon; return final positions, orientations, (if asked) a trajectory, and the
     simulated time in seconds (shorter than the horizon when early termination ended the rollout).
 
@@ -263,6 +264,10 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float
     centre is below this height has fallen, its outcome is decided, so early termination no longer
     waits for it to come to rest. With ``stop_at_first_fall`` (a yes/no question: will anything
     fall?) the rollout ends as soon as any box is below its height, checked every 0.05 s.
+
+    ``never_falls`` (per dynamic box, with ``fallen_below_z_m``): boxes that cannot drop that far
+    whatever happens (a block lying on the floor), so their outcome is decided from the start and
+    early termination does not wait for them either.
 
     ``collapse_below_z_m`` (per dynamic box, when ``settings.collapse_step_factor > 1``): once any box
     is below its height (checked every 0.05 s, after the push), the scene is collapsing and the rest
@@ -357,11 +362,12 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float
             fallen_now = heights < fallen_below_z_m
             if stop_at_first_fall and fallen_now.any():
                 break
-            settled |= fallen_now
+            decided = fallen_now if never_falls is None else fallen_now | never_falls
         # how close to moving each box is (1 = at the rest threshold); fallen boxes are decided
         liveliness = np.maximum(speeds / rest_speed, spins / settings.rest_angular_rad_s)
         if fallen_below_z_m is not None:
-            liveliness = np.where(fallen_now, 0.0, liveliness)
+            liveliness = np.where(decided, 0.0, liveliness)
+            settled |= decided
         if np.all(settled) and t >= earliest_stop:
             if resting_since is None:
                 resting_since, liveliness_at_start = t, liveliness

@@ -3,8 +3,8 @@
 Workers start with ``forkserver`` (default) or ``spawn``, never ``fork``: forking a process that
 runs rclpy or DDS threads has hung on shutdown. ``map`` keeps input order, so results never depend
 on the worker count or on scheduling. A worker that dies (crash, OOM kill, ``kill -9``) breaks the
-executor; the pool replaces it with a fresh one and runs the lost items once more, and items lost
-twice are answered by ``on_lost`` instead of being dropped.
+executor; the pool replaces it with a fresh one and runs each lost item once more on its own, and
+items lost twice are answered by ``on_lost`` instead of being dropped.
 """
 
 from __future__ import annotations
@@ -124,57 +124,68 @@ class WorkerPool:
             on_lost: Callable[[T, str], R] | None = None) -> list[R]:
         """``[fn(x) for x in items]`` in parallel, in order.
 
-        Items whose worker died are retried once on a replaced pool; items lost a second time are
-        answered by ``on_lost(item, reason)``, or raise BrokenProcessPool when no ``on_lost`` is given.
-        Items cancelled because ``close()`` ran meanwhile (shutdown) are answered by ``on_lost`` too.
+        Items whose worker died are retried once on a replaced pool, each on its own: a dying worker
+        breaks the whole executor and takes every item in flight or queued with it, so only an item
+        that kills a worker while it runs alone is blamed. Items lost a second time are answered by
+        ``on_lost(item, reason)``, or raise BrokenProcessPool when no ``on_lost`` is given. Items
+        cancelled because ``close()`` ran meanwhile (shutdown) are answered by ``on_lost`` too.
         """
         items = list(items)
         results: list[R | None] = [None] * len(items)
-        pending = list(range(len(items)))
-        for attempt in (1, 2):
-            if not pending or self._closed:
-                break
-            executor = self._get_executor()
-            futures: dict[Future, int] = {}
-            try:
-                for i in pending:
-                    futures[executor.submit(fn, items[i])] = i
-            except (BrokenProcessPool, RuntimeError):
-                pass  # broken, or shut down by close() from another thread: the rest counts as lost
-            not_done = set(futures)
-            while not_done:
-                _, not_done = wait(not_done, timeout=0.25)
-                if not_done and self._shut_down.is_set():
-                    # close() finished: futures the executor had already handed to its queue may
-                    # never complete now, so stop waiting for them
-                    break
-            lost = [i for i in pending if i not in futures.values()]
-            for future, i in futures.items():
-                if not future.done():
-                    lost.append(i)
-                    continue
-                try:
-                    exc = future.exception()
-                except CancelledError:
-                    lost.append(i)
-                    continue
-                if exc is None:
-                    results[i] = future.result()
-                elif isinstance(exc, BrokenProcessPool):
-                    lost.append(i)
-                else:
-                    raise exc
-            if lost and not self._closed:
-                self._replace_executor(executor)
-            pending = sorted(lost)
-        if pending:
+        lost_once = self._run_round(fn, items, list(range(len(items))), results) if items else []
+        lost_twice: list[int] = []
+        for i in lost_once:  # one at a time: rare (a crash, an OOM kill), so speed matters less here
+            lost_twice += [i] if self._closed else self._run_round(fn, items, [i], results)
+        if lost_twice:
             reason = ("cancelled: the worker pool was closed (shutdown)" if self._closed
                       else "a worker process died twice while running this item")
             if on_lost is None:
                 raise BrokenProcessPool(reason)
-            for i in pending:
+            for i in lost_twice:
                 results[i] = on_lost(items[i], reason)
         return results  # type: ignore[return-value]
+
+    def _run_round(self, fn: Callable[[T], R], items: list[T], indices: list[int],
+                   results: list) -> list[int]:
+        """Submit ``items[i]`` for every i in ``indices`` together and store their results; return
+        the indices lost to a dead worker or to ``close()`` (the executor is replaced after a death).
+        Exceptions raised by ``fn`` itself propagate."""
+        try:
+            executor = self._get_executor()
+        except RuntimeError:  # closed by another thread meanwhile
+            return list(indices)
+        futures: dict[Future, int] = {}
+        try:
+            for i in indices:
+                futures[executor.submit(fn, items[i])] = i
+        except (BrokenProcessPool, RuntimeError):
+            pass  # broken, or shut down by close() from another thread: the rest counts as lost
+        not_done = set(futures)
+        while not_done:
+            _, not_done = wait(not_done, timeout=0.25)
+            if not_done and self._shut_down.is_set():
+                # close() finished: futures the executor had already handed to its queue may
+                # never complete now, so stop waiting for them
+                break
+        lost = [i for i in indices if i not in futures.values()]
+        for future, i in futures.items():
+            if not future.done():
+                lost.append(i)
+                continue
+            try:
+                exc = future.exception()
+            except CancelledError:
+                lost.append(i)
+                continue
+            if exc is None:
+                results[i] = future.result()
+            elif isinstance(exc, BrokenProcessPool):
+                lost.append(i)
+            else:
+                raise exc
+        if lost and not self._closed:
+            self._replace_executor(executor)
+        return sorted(lost)
 
 
 def serial_map(fn: Callable[[T], R], items: Sequence[T], on_lost=None) -> list[R]:

@@ -48,6 +48,8 @@ def test_items_lost_twice_are_answered_by_on_lost():
         results = pool.map(always_die_on_three, range(5), on_lost=lambda item, reason: f"lost {item}: {reason}")
         assert results[3] == "lost 3: a worker process died twice while running this item"
         assert [r for i, r in enumerate(results) if i != 3] == [0, 1, 4, 16]
+        with pytest.raises(BrokenProcessPool):
+            pool.map(always_die_on_three, [3])
 
 
 def test_only_the_item_that_kills_its_worker_is_lost():

@@ -358,16 +358,16 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float
             continue
         t = tick * dt
         settled = (speeds < rest_speed) & (spins < settings.rest_angular_rad_s)
+        # how close to moving each box is (1 = at the rest threshold)
+        liveliness = np.maximum(speeds / rest_speed, spins / settings.rest_angular_rad_s)
         if fallen_below_z_m is not None:
             fallen_now = heights < fallen_below_z_m
             if stop_at_first_fall and fallen_now.any():
                 break
+            # a fallen box, or one that cannot fall, is decided: its motion no longer matters
             decided = fallen_now if never_falls is None else fallen_now | never_falls
-        # how close to moving each box is (1 = at the rest threshold); fallen boxes are decided
-        liveliness = np.maximum(speeds / rest_speed, spins / settings.rest_angular_rad_s)
-        if fallen_below_z_m is not None:
-            liveliness = np.where(decided, 0.0, liveliness)
             settled |= decided
+            liveliness = np.where(decided, 0.0, liveliness)
         if np.all(settled) and t >= earliest_stop:
             if resting_since is None:
                 resting_since, liveliness_at_start = t, liveliness

@@ -56,6 +56,9 @@ def candidates() -> list[SimSettings]:
         dataclasses.replace(fine, name="fine+collapse4", collapse_step_factor=4),
         dataclasses.replace(fine, name="fine+1/180s", time_step_s=1 / 180, max_step_fraction_of_time_scale=0.04),
         dataclasses.replace(fine, name="fine+rest0.15", rest_duration_s=0.15, rest_min_time_s=0.2),
+        dataclasses.replace(fine, name="fine+rest0.4", rest_speed_sizes_per_s=0.4, rest_angular_rad_s=0.4),
+        # the default before "at rest" was read as 0.4 sizes/s and 0.4 rad/s
+        dataclasses.replace(default, name="default-rest0.05", rest_speed_sizes_per_s=0.05, rest_angular_rad_s=0.05),
         dataclasses.replace(default, name="default-no-collapse", collapse_step_factor=1),
         dataclasses.replace(default, name="default-collapse2", collapse_step_factor=2),
         dataclasses.replace(default, name="default-collapse6", collapse_step_factor=6),

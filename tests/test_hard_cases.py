@@ -123,7 +123,7 @@ def check_trajectory(case: Case, settings, outcome, phi: float, trajectory: list
     slop = SLOP_FRACTION * smallest
     step_s = np.concatenate([[dt[0, 0]], dt[:, 0]])[:, None]  # the step that reached each frame
     overshoot = slop + bound * step_s
-    resting = speeds[-1] < 0.05 * smallest  # the rollouts' own rest threshold: 0.05 sizes per second
+    resting = speeds[-1] < 0.05 * smallest  # at rest: slower than 0.05 sizes per second (`fine`'s rest threshold)
     support = scene.support
     floor_z = support.height_m if isinstance(support, Floor) else support.floor_z_m
     if floor_z is not None:

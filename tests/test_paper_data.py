@@ -4,6 +4,7 @@ Figures printed here (run with -s) are the ones quoted in README.
 """
 
 import csv
+import dataclasses
 
 import numpy as np
 import pytest
@@ -44,14 +45,19 @@ def test_ground_truth_model_agrees_with_the_authors_on_exp1_towers(pool, preset_
     assert r >= 0.85
 
 
-@pytest.mark.parametrize("preset_name", ["default", "fine"])
-def test_early_termination_waits_out_a_slow_tip(preset_name):
+@pytest.mark.parametrize("preset_name, rest_threshold", [("default", None), ("fine", None), ("fine", 1.0)])
+def test_early_termination_waits_out_a_slow_tip(preset_name, rest_threshold):
     """tower_01143: the authors' simulation topples one block, which starts to tip slowly while
     another block is still settling from the start. Early termination must see that block's
-    motion grow (box by box; the liveliest box alone ended the default rollout at 0.35 s)."""
+    motion grow (box by box; the liveliest box alone ended the default rollout at 0.35 s), however
+    loosely "at rest" is read (a noise floor relative to the rest thresholds hid the tip, at
+    1.4 mm/s, once they were 0.2 sizes/s)."""
     (scene,) = load_scenes(shared_file("willitfall.csv"), towers=["tower_01143_0000000000"])
     assert authors_outcomes("stability_original_fall")[scene.name][1] == 0  # the authors': falls
-    p = predict(scene, ModelConfig(), preset(preset_name), FALL)
+    settings = preset(preset_name)
+    if rest_threshold is not None:
+        settings = dataclasses.replace(settings, rest_speed_sizes_per_s=rest_threshold, rest_angular_rad_s=rest_threshold)
+    p = predict(scene, ModelConfig(), settings, FALL)
     rollout = p.outcomes[0].rollouts[0]
     assert rollout.fallen.tolist() == [False] * 8 + [True, False]
     assert rollout.simulated_s > 1.0

@@ -27,11 +27,12 @@ from .errors import PhysicsError
 from .scene import Box, Floor, Scene
 
 _PYBULLET = None
-#: Liveliness (fraction of the rest threshold) below which a box's growth over the rest window
-#: counts as contact jitter, not a tip starting. Boxes of the paper's stable towers still show a
-#: median 0.05 (90th percentile 0.15) after 1 s; the slow tip that the per-box test catches was at
-#: 0.14 -> 0.16 over its window.
-REST_NOISE_FLOOR = 0.05
+#: Motion (linear speed in box sizes per second, or angular speed in rad/s, whichever is larger)
+#: below which a box's growth over the rest window counts as contact jitter, not a tip starting.
+#: Boxes of the paper's stable towers still show a median 0.0025 /s (90th percentile 0.0075 /s)
+#: after 1 s; the slow tip that the per-box test catches was at 0.007 -> 0.008 /s over its window.
+#: Absolute, not a fraction of the rest thresholds: loosening those must not blind this check.
+REST_NOISE_FLOOR_PER_S = 0.0025
 _CLIENT: int | None = None
 _CLIENT_PID: int | None = None
 
@@ -301,7 +302,7 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float
     rest_speed = settings.rest_speed_sizes_per_s * world.scale_m
     earliest_stop = max(push_ticks * dt, settings.rest_min_time_s)
     resting_since: float | None = None
-    liveliness_at_start = np.zeros(len(scene.dynamic_boxes))
+    motion_at_start = np.zeros(len(scene.dynamic_boxes))
     watch_collapse = collapse_below_z_m is not None and settings.collapse_step_factor > 1
     collapsing = False
     g = float(np.linalg.norm(gravity))
@@ -358,8 +359,8 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float
             continue
         t = tick * dt
         settled = (speeds < rest_speed) & (spins < settings.rest_angular_rad_s)
-        # how close to moving each box is (1 = at the rest threshold)
-        liveliness = np.maximum(speeds / rest_speed, spins / settings.rest_angular_rad_s)
+        # how much each box still moves, in 1/s (box sizes per second or rad/s)
+        motion = np.maximum(speeds / world.scale_m, spins)
         if fallen_below_z_m is not None:
             fallen_now = heights < fallen_below_z_m
             if stop_at_first_fall and fallen_now.any():
@@ -367,20 +368,20 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float
             # a fallen box, or one that cannot fall, is decided: its motion no longer matters
             decided = fallen_now if never_falls is None else fallen_now | never_falls
             settled |= decided
-            liveliness = np.where(decided, 0.0, liveliness)
+            motion = np.where(decided, 0.0, motion)
         if np.all(settled) and t >= earliest_stop:
             if resting_since is None:
-                resting_since, liveliness_at_start = t, liveliness
+                resting_since, motion_at_start = t, motion
             elif t - resting_since >= settings.rest_duration_s - 1e-9:
                 # A block that is just starting to tip moves slowly but faster and faster; a
                 # settling one slows down. Only the latter has come to rest. Box by box: another
                 # block still settling from the start masked a slow tip when only the liveliest
-                # box was compared. Below REST_NOISE_FLOOR growth is solver noise, not tipping.
-                growing = (liveliness > liveliness_at_start * settings.rest_growth_factor) \
-                    & (liveliness > REST_NOISE_FLOOR)
+                # box was compared. Below REST_NOISE_FLOOR_PER_S growth is solver noise, not tipping.
+                growing = (motion > motion_at_start * settings.rest_growth_factor) \
+                    & (motion > REST_NOISE_FLOOR_PER_S)
                 if not growing.any():
                     break
-                resting_since, liveliness_at_start = t, liveliness
+                resting_since, motion_at_start = t, motion
         else:
             resting_since = None
     positions, orientations = read_poses(world)

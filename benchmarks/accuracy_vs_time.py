@@ -59,6 +59,9 @@ def candidates() -> list[SimSettings]:
         dataclasses.replace(fine, name="fine+rest0.4", rest_speed_sizes_per_s=0.4, rest_angular_rad_s=0.4),
         # the default before "at rest" was read as 0.4 sizes/s and 0.4 rad/s
         dataclasses.replace(default, name="default-rest0.05", rest_speed_sizes_per_s=0.05, rest_angular_rad_s=0.05),
+        # without settling (the first 0.1 s in half steps)
+        dataclasses.replace(fine, name="fine-no-settle", settle_substeps=1),
+        dataclasses.replace(default, name="default-no-settle", settle_substeps=1),
         dataclasses.replace(default, name="default-no-collapse", collapse_step_factor=1),
         dataclasses.replace(default, name="default-collapse2", collapse_step_factor=2),
         dataclasses.replace(default, name="default-collapse6", collapse_step_factor=6),

@@ -224,6 +224,22 @@ def test_collapse_steps_start_at_the_first_fall_and_keep_the_time_grid():
         assert rollout.final_positions_m[1, 2] == pytest.approx(0.1, abs=0.005)  # on the floor
 
 
+def test_settling_runs_the_first_ticks_in_substeps_on_the_same_time_grid():
+    # the overhanging top block falls with and without settling; frames come at the same times and
+    # the rollout ends on the horizon; one substep is no settling at all (bit-identical)
+    cube = (0.2, 0.2, 0.2)
+    scene = floor_scene(block("base", 0, 0, 0.1, extents=cube), block("top", 0.16, 0, 0.3, extents=cube))
+    base = replace(preset("default"), early_stop=False, collapse_step_factor=1)
+    plain = physics_rollout(scene, replace(base, settle_s=0.0, settle_substeps=1))
+    one = physics_rollout(scene, replace(base, settle_s=0.1, settle_substeps=1))
+    settled = physics_rollout(scene, replace(base, settle_s=0.1, settle_substeps=3))
+    assert np.array_equal(plain.final_positions_m, one.final_positions_m)
+    assert [t for t, *_ in settled.trajectory] == [t for t, *_ in plain.trajectory]
+    assert settled.simulated_s == plain.simulated_s == pytest.approx(base.horizon_s)
+    assert not np.array_equal(settled.trajectory[2][1], plain.trajectory[2][1])  # 0.1 s: a different integration
+    assert settled.fallen.tolist() == plain.fallen.tolist() == [False, True]
+
+
 def physics_rollout(scene, settings):
     """The ground-truth rollout of ``scene`` with a trajectory every 12 fine steps (0.05 s)."""
     from ipe_ros.engine.rollout import SampleTask, run_sample
@@ -239,6 +255,8 @@ def physics_rollout(scene, settings):
     ("collapse_step_factor", 0, "collapse_step_factor: must be an integer in [1, 100] (1: no collapse steps), got 0"),
     ("collapse_step_factor", 2.0, "collapse_step_factor: must be an integer in [1, 100] (1: no collapse steps), got 2.0"),
     ("collapse_solver_iterations", 0, "collapse_solver_iterations: must be an integer in [1, 10000] or None, got 0"),
+    ("settle_substeps", 0, "settle_substeps: must be an integer in [1, 100] (1: no settling substeps), got 0"),
+    ("settle_s", -0.1, "settle_s: must be a finite number >= 0, got -0.1"),
 ])
 def test_collapse_settings_are_validated(field, value, message):
     from ipe_ros.engine import ConfigError

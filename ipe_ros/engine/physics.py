@@ -117,7 +117,7 @@ def _add_box(p, cid: int, box: Box, position, mass_kg: float, maximal: bool = Fa
     return body
 
 
-def _residual_threshold(settings: SimSettings, scale_m: float, step_factor: int = 1) -> float:
+def _residual_threshold(settings: SimSettings, scale_m: float, step_factor: float = 1) -> float:
     """pybullet's solver stops once the largest squared impulse change of an iteration is below this.
 
     The threshold is absolute: scale it with the scene so small blocks converge too, and with the
@@ -309,12 +309,28 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float
     half_diagonals_m = np.array([np.linalg.norm(b.extents_m) / 2 for b in scene.dynamic_boxes])
     ticks_per_step = 1
     tick = 0
+    # Settling (see SimSettings.settle_s): the first ticks in substeps, solved to the same relative
+    # precision (the residual threshold is absolute and impulses shrink with the step).
+    settle_ticks = int(round(settings.settle_s / dt)) if settings.settle_substeps > 1 else 0
+    if settle_ticks:
+        p.setTimeStep(dt / settings.settle_substeps, physicsClientId=cid)
+        p.setPhysicsEngineParameter(
+            solverResidualThreshold=_residual_threshold(settings, world.scale_m, 1 / settings.settle_substeps),
+            physicsClientId=cid)
     while tick < total_ticks:
         # the push ends exactly on its tick, and the last step ends exactly on the horizon
         step_ticks = min(ticks_per_step, total_ticks - tick)
         if step_ticks != ticks_per_step:  # a shorter last step (coarse steps only)
             p.setTimeStep(dt * step_ticks, physicsClientId=cid)
-        p.stepSimulation(physicsClientId=cid)
+        if tick < settle_ticks:  # settling: this tick in finer substeps
+            for _ in range(settings.settle_substeps):
+                p.stepSimulation(physicsClientId=cid)
+            if tick + 1 == settle_ticks:
+                p.setTimeStep(dt, physicsClientId=cid)
+                p.setPhysicsEngineParameter(solverResidualThreshold=_residual_threshold(settings, world.scale_m),
+                                            physicsClientId=cid)
+        else:
+            p.stepSimulation(physicsClientId=cid)
         previous, tick = tick, tick + step_ticks
         if tick == push_ticks:
             p.setGravity(*gravity.tolist(), physicsClientId=cid)
@@ -337,7 +353,7 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push_m_s2: float
         if not rest_due:
             continue
         heights = read_poses(world)[0][:, 2] if (fallen_below_z_m is not None or watch_collapse) else None
-        if watch_collapse and tick >= push_ticks and np.any(heights < collapse_below_z_m):
+        if watch_collapse and tick >= max(push_ticks, settle_ticks) and np.any(heights < collapse_below_z_m):
             # Something fell: what follows is a collapse, chaotic at any step size, so only its
             # statistics matter and coarser steps reproduce them (benchmarks/accuracy_vs_time.py).
             watch_collapse, collapsing = False, True

@@ -236,7 +236,7 @@ def test_settling_runs_the_first_ticks_in_substeps_on_the_same_time_grid():
     assert np.array_equal(plain.final_positions_m, one.final_positions_m)
     assert [t for t, *_ in settled.trajectory] == [t for t, *_ in plain.trajectory]
     assert settled.simulated_s == plain.simulated_s == pytest.approx(base.horizon_s)
-    assert not np.array_equal(settled.trajectory[2][1], plain.trajectory[2][1])  # 0.1 s: a different integration
+    assert not np.array_equal(settled.trajectory[2][1], plain.trajectory[2][1])  # after settling: a different integration
     assert settled.fallen.tolist() == plain.fallen.tolist() == [False, True]
 
 
@@ -258,7 +258,7 @@ def physics_rollout(scene, settings):
     ("settle_substeps", 0, "settle_substeps: must be an integer in [1, 100] (1: no settling substeps), got 0"),
     ("settle_s", -0.1, "settle_s: must be a finite number >= 0, got -0.1"),
 ])
-def test_collapse_settings_are_validated(field, value, message):
+def test_collapse_and_settling_settings_are_validated(field, value, message):
     from ipe_ros.engine import ConfigError
 
     with pytest.raises(ConfigError) as info:

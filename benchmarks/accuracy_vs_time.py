@@ -76,7 +76,6 @@ def candidates() -> list[SimSettings]:
         dataclasses.replace(default, name="default-no-early", early_stop=False),
         dataclasses.replace(default, name="default-res1e-5", solver_residual_threshold=1e-5),
         dataclasses.replace(default, name="default-res1e-6", solver_residual_threshold=1e-6),
-        dataclasses.replace(default, name="default-res3e-6", solver_residual_threshold=3e-6),
         dataclasses.replace(default, name="default-50it", solver_iterations=50),
         dataclasses.replace(default, name="default-30it", solver_iterations=30),
         dataclasses.replace(default, name="default-ws0.85", warm_start_factor=0.85),

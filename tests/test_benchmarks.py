@@ -35,3 +35,30 @@ def test_accuracy_vs_time_writes_table_json_and_plot_with_paper_as_reference(tmp
     assert rows["default-1/120s-uncapped"]["settings"]["max_step_fraction_of_time_scale"] == 0.1
     assert "| paper |" in (tmp_path / "accuracy_vs_time.md").read_text()
     assert (tmp_path / "accuracy_vs_time.png").stat().st_size > 1000
+
+
+def _time_budget(tmp_path, preset_name):
+    out = tmp_path / preset_name
+    result = subprocess.run(
+        [sys.executable, str(REPO / "benchmarks" / "time_budget.py"), "--towers", "2", "--samples", "2",
+         "--preset", preset_name, "--out", str(out)], capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-3000:]
+    report = json.loads((out / "time_budget.json").read_text())
+    assert "| **total** |" in (out / "time_budget.md").read_text()
+    return report["result"], {row["part"]: row for row in report["result"]["parts"]}
+
+
+def test_time_budget_files_every_step_under_the_phase_it_ran_in(tmp_path):
+    # default on 0.2 m blocks: 1/180 s steps, the first 0.1 s (18 ticks) in two substeps each
+    result, parts = _time_budget(tmp_path, "default")
+    assert result["samples_run"] == 4
+    assert parts["settle steps"]["steps_per_sample"] == 36
+    assert parts["fine steps"]["steps_per_sample"] > 0
+    # the parts are the whole: what the timers missed lands in the last row, never below zero
+    assert math.isclose(sum(row["ms_per_sample"] for row in parts.values()), result["ms_per_sample"], rel_tol=1e-9)
+    assert all(row["ms_per_sample"] >= 0 for row in parts.values())
+    assert sum(row["samples"] for row in result["by_outcome"]) == 4
+    # paper: 1 ms steps for the whole 2 s, no settling, no collapse steps
+    result, parts = _time_budget(tmp_path, "paper")
+    assert parts["fine steps"]["steps_per_sample"] == 2000
+    assert parts["settle steps"]["steps_per_sample"] == 0 and parts["collapse steps"]["steps_per_sample"] == 0

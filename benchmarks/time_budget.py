@@ -1,0 +1,199 @@
+"""Where a prediction's time goes: one process, every sample timed part by part.
+
+    .venv/bin/python benchmarks/time_budget.py [--towers N] [--samples 8] [--preset default]
+                                               [--query fall] [--out benchmarks/results/time_budget]
+
+Runs each tower's samples in this process (no worker pool, so the timers see everything) on the
+towers of ../shared/data/battaglia2013/willitfall.csv (IPE_SHARED_DATA overrides) or, without that
+file, on generated paper-style towers; sigma = 0.2 block short sides (0.04 m), phi = 0. pybullet is
+wrapped so that every ``stepSimulation`` is timed and filed by the step it ran at:
+
+- settle: the first ``settle_s`` in substeps (shorter than the world's step),
+- fine: the world's own step, until a collapse,
+- collapse: the coarser steps after something fell,
+
+and the rest of a sample's time is split into building the world, depenetration, and everything
+else (drawing the noise, the rest and divergence checks, reading states, the query). Samples are
+also split by outcome (did anything fall?) with their simulated time and how many ran to the horizon.
+
+The projection to k = 48 on W workers multiplies the per-sample cost by 48 / W: it assumes the
+near-perfect scaling that accuracy_vs_time.py's worker sweep measures (1.95x on two workers). It
+answers "what would have to get cheaper to reach a latency": the ``stepSimulation`` part alone is a
+floor for any setting that keeps the same steps.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from pathlib import Path
+
+os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+import numpy as np  # noqa: E402
+
+from ipe_ros.engine import ModelConfig, QuerySpec, physics, preset, rollout  # noqa: E402
+from ipe_ros.engine.generators import generate_towers  # noqa: E402
+from ipe_ros.engine.sampler import make_tasks  # noqa: E402
+from ipe_ros.engine.scene_io import scenes_from_tower_csv  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = Path(os.environ.get("IPE_SHARED_DATA", REPO.parent / "shared" / "data" / "battaglia2013"))
+SIGMA_M = 0.04
+PHASES = ("settle", "fine", "collapse")
+
+
+class _TimedPybullet:
+    """Stands in for the pybullet module inside ``physics``: times ``stepSimulation`` by the step
+    size in force, relative to the world's own step (set by ``build_world``'s first ``setTimeStep``)."""
+
+    def __init__(self, real) -> None:
+        self._real = real
+        self.world_step_s: float | None = None
+        self.step_s: float | None = None
+        self.steps = dict.fromkeys(PHASES, 0)
+        self.seconds = dict.fromkeys(PHASES, 0.0)
+
+    def __getattr__(self, name):
+        return getattr(self._real, name)
+
+    def setTimeStep(self, step_s, **kwargs):  # noqa: N802 - pybullet's name
+        self.step_s = step_s
+        return self._real.setTimeStep(step_s, **kwargs)
+
+    def stepSimulation(self, **kwargs):  # noqa: N802 - pybullet's name
+        ratio = self.step_s / self.world_step_s
+        phase = "settle" if ratio < 1 - 1e-9 else "fine" if ratio < 1 + 1e-9 else "collapse"
+        start = time.perf_counter()
+        result = self._real.stepSimulation(**kwargs)
+        self.seconds[phase] += time.perf_counter() - start
+        self.steps[phase] += 1
+        return result
+
+
+def load_towers(count: int | None):
+    csv = SHARED / "willitfall.csv"
+    if csv.exists():
+        scenes, source = scenes_from_tower_csv(csv), str(csv)
+    else:
+        scenes, source = generate_towers(2013, count or 20), "generated towers (seed 2013)"
+    return (scenes[:count] if count else scenes), source
+
+
+def measure(scenes, settings_name: str, samples: int, queries: frozenset[str]) -> dict:
+    settings = preset(settings_name)
+    model = ModelConfig(sigma_m=SIGMA_M, samples=samples)
+    query = QuerySpec(queries=queries)
+    real = physics._pybullet()
+    timed = _TimedPybullet(real)
+    build_world, depenetrate = physics.build_world, physics.depenetrate
+    spent = {"build": 0.0, "depenetrate": 0.0}
+
+    def timed_build(*args, **kwargs):
+        start = time.perf_counter()
+        world = build_world(*args, **kwargs)
+        spent["build"] += time.perf_counter() - start
+        timed.world_step_s = world.time_step_s
+        return world
+
+    def timed_depenetrate(*args, **kwargs):
+        start = time.perf_counter()
+        result = depenetrate(*args, **kwargs)
+        spent["depenetrate"] += time.perf_counter() - start
+        return result
+
+    tasks = [t for i, scene in enumerate(scenes) for t in make_tasks(scene, model, settings, query, seed=i)]
+    rollout.run_sample(tasks[0])  # connect and warm up outside the timers
+    outcomes = []  # (anything fell, simulated s, wall s)
+    physics._PYBULLET, physics.build_world, physics.depenetrate = timed, timed_build, timed_depenetrate
+    try:
+        start_all = time.perf_counter()
+        for task in tasks:
+            start = time.perf_counter()
+            outcome = rollout.run_sample(task)
+            wall = time.perf_counter() - start
+            if not outcome.ok:
+                raise RuntimeError(f"sample {task.index} failed: {outcome.error}")
+            result = outcome.rollouts[0]
+            fell = bool(result.fallen.any()) if result.fallen is not None else bool(result.any_fell)
+            outcomes.append((fell, result.simulated_s, wall))
+        total = time.perf_counter() - start_all
+    finally:
+        physics._PYBULLET, physics.build_world, physics.depenetrate = real, build_world, depenetrate
+    n = len(tasks)
+    stepping = sum(timed.seconds.values())
+    parts = {f"{phase} steps": timed.seconds[phase] for phase in PHASES}
+    parts["world build"] = spent["build"]
+    parts["depenetration"] = spent["depenetrate"]
+    parts["checks, reads, noise, query"] = total - stepping - spent["build"] - spent["depenetrate"]
+    rows = [{"part": name, "ms_per_sample": 1e3 * seconds / n, "share": seconds / total,
+             "steps_per_sample": (timed.steps[name.split()[0]] / n if name.endswith("steps") else None),
+             "us_per_step": (1e6 * seconds / timed.steps[name.split()[0]]
+                             if name.endswith("steps") and timed.steps[name.split()[0]] else None)}
+            for name, seconds in parts.items()]
+    horizon = settings.horizon_s
+    by_outcome = []
+    for fell in (False, True):
+        chosen = [o for o in outcomes if o[0] == fell]
+        if not chosen:
+            continue
+        simulated = np.array([o[1] for o in chosen])
+        walls = np.array([o[2] for o in chosen])
+        by_outcome.append({"anything_fell": fell, "samples": len(chosen), "mean_simulated_s": float(simulated.mean()),
+                           "ran_to_horizon": float(np.mean(simulated >= horizon - 1e-9)),
+                           "ms_per_sample": 1e3 * float(walls.mean()), "share_of_time": float(walls.sum() / total)})
+    return {"preset": settings_name, "samples_run": n, "total_s": total, "ms_per_sample": 1e3 * total / n,
+            "step_ms_per_sample": 1e3 * stepping / n, "parts": rows, "by_outcome": by_outcome}
+
+
+def markdown(report: dict) -> str:
+    r = report["result"]
+    lines = [f"# Time budget: `{r['preset']}`, {report['towers']} towers x {report['samples']} samples, "
+             f"queries {', '.join(report['queries'])}",
+             "", f"{report['source']}; sigma = {SIGMA_M} m, phi = 0; one process; {report['machine']}; {report['date']}.",
+             "", "| part | ms per sample | share | steps per sample | µs per step |", "|---|---|---|---|---|"]
+    for row in r["parts"]:
+        steps = "" if row["steps_per_sample"] is None else f"{row['steps_per_sample']:.1f}"
+        per_step = "" if row["us_per_step"] is None else f"{row['us_per_step']:.0f}"
+        lines.append(f"| {row['part']} | {row['ms_per_sample']:.2f} | {row['share']:.0%} | {steps} | {per_step} |")
+    lines.append(f"| **total** | **{r['ms_per_sample']:.2f}** | 100% | | |")
+    lines += ["", "| anything fell | samples | mean simulated s | ran to the horizon | ms per sample | share of time |",
+              "|---|---|---|---|---|---|"]
+    for row in r["by_outcome"]:
+        lines.append(f"| {'yes' if row['anything_fell'] else 'no'} | {row['samples']} | {row['mean_simulated_s']:.2f} | "
+                     f"{row['ran_to_horizon']:.0%} | {row['ms_per_sample']:.1f} | {row['share_of_time']:.0%} |")
+    lines += ["", "Projected k = 48 latency (per-sample cost x 48 / workers, assuming perfect scaling):", "",
+              "| workers | everything s | stepSimulation alone s |", "|---|---|---|"]
+    for row in report["projection_k48"]:
+        lines.append(f"| {row['workers']} | {row['everything_s']:.2f} | {row['steps_only_s']:.2f} |")
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--towers", type=int, default=None, help="first N towers (default: all 60)")
+    parser.add_argument("--samples", type=int, default=8, help="samples per tower")
+    parser.add_argument("--preset", default="default")
+    parser.add_argument("--query", default="fall")
+    parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "time_budget"))
+    args = parser.parse_args()
+    scenes, source = load_towers(args.towers)
+    queries = frozenset(args.query.split(","))
+    result = measure(scenes, args.preset, args.samples, queries)
+    report = {"source": source, "towers": len(scenes), "samples": args.samples, "queries": sorted(queries),
+              "machine": f"{os.cpu_count()} CPUs", "date": time.strftime("%Y-%m-%d"), "result": result,
+              "projection_k48": [{"workers": w, "everything_s": result["ms_per_sample"] * 48 / w / 1e3,
+                                  "steps_only_s": result["step_ms_per_sample"] * 48 / w / 1e3} for w in (1, 2, 4)]}
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "time_budget.json").write_text(json.dumps(report, indent=1))
+    text = markdown(report)
+    (out / "time_budget.md").write_text(text)
+    print(text)
+    print(f"wrote {out}/time_budget.json, .md")
+
+
+if __name__ == "__main__":
+    main()

@@ -34,14 +34,10 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 import numpy as np  # noqa: E402
 
+from accuracy_vs_time import REPO, SIGMA_M, load_towers  # noqa: E402 - the same towers and noise
 from ipe_ros.engine import ModelConfig, QuerySpec, physics, preset, rollout  # noqa: E402
-from ipe_ros.engine.generators import generate_towers  # noqa: E402
 from ipe_ros.engine.sampler import make_tasks  # noqa: E402
-from ipe_ros.engine.scene_io import scenes_from_tower_csv  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
-SHARED = Path(os.environ.get("IPE_SHARED_DATA", REPO.parent / "shared" / "data" / "battaglia2013"))
-SIGMA_M = 0.04
 PHASES = ("settle", "fine", "collapse")
 
 
@@ -71,15 +67,6 @@ class _TimedPybullet:
         self.seconds[phase] += time.perf_counter() - start
         self.steps[phase] += 1
         return result
-
-
-def load_towers(count: int | None):
-    csv = SHARED / "willitfall.csv"
-    if csv.exists():
-        scenes, source = scenes_from_tower_csv(csv), str(csv)
-    else:
-        scenes, source = generate_towers(2013, count or 20), "generated towers (seed 2013)"
-    return (scenes[:count] if count else scenes), source
 
 
 def measure(scenes, settings_name: str, samples: int, queries: frozenset[str]) -> dict:
@@ -124,15 +111,13 @@ def measure(scenes, settings_name: str, samples: int, queries: frozenset[str]) -
         physics._PYBULLET, physics.build_world, physics.depenetrate = real, build_world, depenetrate
     n = len(tasks)
     stepping = sum(timed.seconds.values())
-    parts = {f"{phase} steps": timed.seconds[phase] for phase in PHASES}
-    parts["world build"] = spent["build"]
-    parts["depenetration"] = spent["depenetrate"]
-    parts["checks, reads, noise, query"] = total - stepping - spent["build"] - spent["depenetrate"]
+    parts = [(f"{phase} steps", timed.seconds[phase], timed.steps[phase]) for phase in PHASES]
+    parts += [("world build", spent["build"], None), ("depenetration", spent["depenetrate"], None),
+              ("checks, reads, noise, query", total - stepping - spent["build"] - spent["depenetrate"], None)]
     rows = [{"part": name, "ms_per_sample": 1e3 * seconds / n, "share": seconds / total,
-             "steps_per_sample": (timed.steps[name.split()[0]] / n if name.endswith("steps") else None),
-             "us_per_step": (1e6 * seconds / timed.steps[name.split()[0]]
-                             if name.endswith("steps") and timed.steps[name.split()[0]] else None)}
-            for name, seconds in parts.items()]
+             "steps_per_sample": None if steps is None else steps / n,
+             "us_per_step": 1e6 * seconds / steps if steps else None}
+            for name, seconds, steps in parts]
     horizon = settings.horizon_s
     by_outcome = []
     for fell in (False, True):
@@ -179,7 +164,7 @@ def main() -> None:
     parser.add_argument("--query", default="fall")
     parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "time_budget"))
     args = parser.parse_args()
-    scenes, source = load_towers(args.towers)
+    scenes, _, source = load_towers(args.towers)
     queries = frozenset(args.query.split(","))
     result = measure(scenes, args.preset, args.samples, queries)
     report = {"source": source, "towers": len(scenes), "samples": args.samples, "queries": sorted(queries),

@@ -26,9 +26,9 @@ setup(
     entry_points={
         "console_scripts": [
             "ipe = ipe_ros.cli:main",
-            "ipe_node = ipe_ros.node:main",
-            "ipe_ros_demo = ipe_ros.demo:main",
-            "ipe_send_scene = ipe_ros.send_scene:main",
+            "ipe_node = ipe_ros.ros.node:main",
+            "ipe_ros_demo = ipe_ros.ros.demo:main",
+            "ipe_send_scene = ipe_ros.ros.send_scene:main",
         ],
     },
 )

@@ -33,9 +33,10 @@ import numpy as np  # noqa: E402
 from ipe_ros.engine import PRESETS, ModelConfig, QuerySpec, SimSettings, WorkerPool, predict  # noqa: E402
 from ipe_ros.engine.generators import generate_towers  # noqa: E402
 from ipe_ros.engine.scene_io import scenes_from_tower_csv  # noqa: E402
+from ipe_ros.analysis.paper_data import EXP1_DATASET, authors_outcomes, shared_data_dir  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED = Path(os.environ.get("IPE_SHARED_DATA", REPO.parent / "shared" / "data" / "battaglia2013"))
+SHARED = shared_data_dir()
 SIGMA_M = 0.04
 
 
@@ -44,8 +45,8 @@ def candidates() -> list[SimSettings]:
     paper = PRESETS["paper"]
     # The size cap (0.03 sqrt(size / g), 1/233 s for 0.2 m blocks) would silently turn every step
     # coarser than that back into 1/233 s: the swept settings lift it so each runs the step it names.
-    base = dataclasses.replace(paper, name="", solver_iterations=100, solver_residual_threshold=1e-5,
-                               warm_start_factor=1.0, max_step_fraction_of_time_scale=0.1)
+    base = paper.changed('', max_step_fraction_of_time_scale=0.1,
+                         solver={"iterations": 100, "residual_threshold": 1e-05, "warm_start_factor": 1.0})
     out = [paper, PRESETS["default"]]
     for name in sorted(PRESETS):
         if name not in ("paper", "default"):
@@ -53,62 +54,58 @@ def candidates() -> list[SimSettings]:
     fine, default = PRESETS["fine"], PRESETS["default"]
     out += [
         # what each of the default's changes from `fine` does on its own, and variations of them
-        dataclasses.replace(fine, name="fine+collapse4", collapse_step_factor=4),
-        dataclasses.replace(fine, name="fine+1/180s", time_step_s=1 / 180, max_step_fraction_of_time_scale=0.04),
-        dataclasses.replace(fine, name="fine+rest0.15", rest_duration_s=0.15, rest_min_time_s=0.2),
-        dataclasses.replace(fine, name="fine+rest0.4", rest_speed_sizes_per_s=0.4, rest_angular_rad_s=0.4),
+        fine.changed('fine+collapse4', collapse={"step_factor": 4}),
+        fine.changed('fine+1/180s', time_step_s=1 / 180, max_step_fraction_of_time_scale=0.04),
+        fine.changed('fine+rest0.15', early_stop={"duration_s": 0.15, "min_time_s": 0.2}),
+        fine.changed('fine+rest0.4', early_stop={"speed_sizes_per_s": 0.4, "angular_rad_s": 0.4}),
         # the default before "at rest" was read as 0.4 sizes/s and 0.4 rad/s
-        dataclasses.replace(default, name="default-rest0.05", rest_speed_sizes_per_s=0.05, rest_angular_rad_s=0.05),
+        default.changed('default-rest0.05', early_stop={"speed_sizes_per_s": 0.05, "angular_rad_s": 0.05}),
         # without settling (the first 0.1 s in half steps)
-        dataclasses.replace(fine, name="fine-no-settle", settle_substeps=1),
-        dataclasses.replace(default, name="default-no-settle", settle_substeps=1),
-        dataclasses.replace(default, name="default-no-collapse", collapse_step_factor=1),
-        dataclasses.replace(default, name="default-collapse2", collapse_step_factor=2),
-        dataclasses.replace(default, name="default-collapse6", collapse_step_factor=6),
-        dataclasses.replace(default, name="default-travel0.25", collapse_max_travel_fraction=0.25),
-        dataclasses.replace(default, name="default-drop0.25", collapse_drop_fraction=0.25),
-        dataclasses.replace(default, name="default-res5e-6", solver_residual_threshold=5e-6),
+        fine.changed('fine-no-settle', settling={"substeps": 1}),
+        default.changed('default-no-settle', settling={"substeps": 1}),
+        default.changed('default-no-collapse', collapse={"step_factor": 1}),
+        default.changed('default-collapse2', collapse={"step_factor": 2}),
+        default.changed('default-collapse6', collapse={"step_factor": 6}),
+        default.changed('default-travel0.25', collapse={"max_travel_fraction": 0.25}),
+        default.changed('default-drop0.25', collapse={"drop_fraction": 0.25}),
+        default.changed('default-res5e-6', solver={"residual_threshold": 5e-06}),
         # fewer iterations until the collapse, the full 100 in it
-        dataclasses.replace(default, name="default-50it+collapse100it", solver_iterations=50,
-                            collapse_solver_iterations=100),
-        dataclasses.replace(default, name="default-40it+collapse100it", solver_iterations=40,
-                            collapse_solver_iterations=100),
-        dataclasses.replace(default, name="default-no-early", early_stop=False),
-        dataclasses.replace(default, name="default-res1e-5", solver_residual_threshold=1e-5),
-        dataclasses.replace(default, name="default-res1e-6", solver_residual_threshold=1e-6),
-        dataclasses.replace(default, name="default-50it", solver_iterations=50),
-        dataclasses.replace(default, name="default-30it", solver_iterations=30),
-        dataclasses.replace(default, name="default-ws0.85", warm_start_factor=0.85),
-        dataclasses.replace(default, name="default-multibody", maximal_coordinates=False),
-        dataclasses.replace(default, name="default-1/120s", time_step_s=1 / 120),
-        dataclasses.replace(default, name="default-1/120s-uncapped", time_step_s=1 / 120,
-                            max_step_fraction_of_time_scale=0.1),
-        dataclasses.replace(default, name="default-1/180s-uncapped", time_step_s=1 / 180,
-                            max_step_fraction_of_time_scale=0.1),
-        dataclasses.replace(default, name="default-1.5s-horizon", horizon_s=1.5),
-        dataclasses.replace(default, name="default-1s-horizon", horizon_s=1.0),
-        dataclasses.replace(PRESETS["paper"], name="1ms/20it+early", solver_iterations=20, early_stop=True),
-        dataclasses.replace(base, name="1/240s/100it/ws1", time_step_s=1 / 240),
-        dataclasses.replace(base, name="1/240s/100it/ws1+early", time_step_s=1 / 240, early_stop=True),
-        dataclasses.replace(base, name="1/240s/50it/ws1+early", time_step_s=1 / 240, solver_iterations=50,
-                            early_stop=True),
-        dataclasses.replace(base, name="1/240s/100it/ws0.85", time_step_s=1 / 240, warm_start_factor=0.85),
-        dataclasses.replace(paper, name="1ms/50it/maximal", maximal_coordinates=True),
-        dataclasses.replace(base, name="1/240s/100it/maximal", time_step_s=1 / 240, maximal_coordinates=True),
-        dataclasses.replace(base, name="1/240s/100it/maximal+early", time_step_s=1 / 240, maximal_coordinates=True,
-                            early_stop=True),
-        dataclasses.replace(base, name="1/120s/100it/maximal+early", time_step_s=1 / 120, maximal_coordinates=True,
-                            early_stop=True),
-        dataclasses.replace(base, name="1/240s/50it/maximal+early", time_step_s=1 / 240, maximal_coordinates=True,
-                            solver_iterations=50, early_stop=True),
-        dataclasses.replace(base, name="1/240s/100it/maximal/ws0.85+early", time_step_s=1 / 240,
-                            maximal_coordinates=True, warm_start_factor=0.85, early_stop=True),
-        dataclasses.replace(base, name="1/180s/100it/maximal+early", time_step_s=1 / 180, maximal_coordinates=True,
-                            early_stop=True),
-        dataclasses.replace(base, name="1/240s/100it/maximal+early0.1", time_step_s=1 / 240,
-                            maximal_coordinates=True, early_stop=True, rest_duration_s=0.1, rest_min_time_s=0.2),
-        dataclasses.replace(base, name="1/120s/100it/ws1+early", time_step_s=1 / 120, early_stop=True),
-        dataclasses.replace(base, name="1/240s/100it/ws1/1s", time_step_s=1 / 240, horizon_s=1.0),
+        default.changed('default-50it+collapse100it', solver={"iterations": 50}, collapse={"solver_iterations": 100}),
+        default.changed('default-40it+collapse100it', solver={"iterations": 40}, collapse={"solver_iterations": 100}),
+        default.changed('default-no-early', early_stop={"enabled": False}),
+        default.changed('default-res1e-5', solver={"residual_threshold": 1e-05}),
+        default.changed('default-res1e-6', solver={"residual_threshold": 1e-06}),
+        default.changed('default-50it', solver={"iterations": 50}),
+        default.changed('default-30it', solver={"iterations": 30}),
+        default.changed('default-ws0.85', solver={"warm_start_factor": 0.85}),
+        default.changed('default-multibody', solver={"maximal_coordinates": False}),
+        default.changed('default-1/120s', time_step_s=1 / 120),
+        default.changed('default-1/120s-uncapped', time_step_s=1 / 120, max_step_fraction_of_time_scale=0.1),
+        default.changed('default-1/180s-uncapped', time_step_s=1 / 180, max_step_fraction_of_time_scale=0.1),
+        default.changed('default-1.5s-horizon', horizon_s=1.5),
+        default.changed('default-1s-horizon', horizon_s=1.0),
+        PRESETS['paper'].changed('1ms/20it+early', solver={"iterations": 20}, early_stop={"enabled": True}),
+        base.changed('1/240s/100it/ws1', time_step_s=1 / 240),
+        base.changed('1/240s/100it/ws1+early', time_step_s=1 / 240, early_stop={"enabled": True}),
+        base.changed('1/240s/50it/ws1+early', time_step_s=1 / 240, solver={"iterations": 50},
+                     early_stop={"enabled": True}),
+        base.changed('1/240s/100it/ws0.85', time_step_s=1 / 240, solver={"warm_start_factor": 0.85}),
+        paper.changed('1ms/50it/maximal', solver={"maximal_coordinates": True}),
+        base.changed('1/240s/100it/maximal', time_step_s=1 / 240, solver={"maximal_coordinates": True}),
+        base.changed('1/240s/100it/maximal+early', time_step_s=1 / 240, solver={"maximal_coordinates": True},
+                     early_stop={"enabled": True}),
+        base.changed('1/120s/100it/maximal+early', time_step_s=1 / 120, solver={"maximal_coordinates": True},
+                     early_stop={"enabled": True}),
+        base.changed('1/240s/50it/maximal+early', time_step_s=1 / 240,
+                     solver={"maximal_coordinates": True, "iterations": 50}, early_stop={"enabled": True}),
+        base.changed('1/240s/100it/maximal/ws0.85+early', time_step_s=1 / 240,
+                     solver={"maximal_coordinates": True, "warm_start_factor": 0.85}, early_stop={"enabled": True}),
+        base.changed('1/180s/100it/maximal+early', time_step_s=1 / 180, solver={"maximal_coordinates": True},
+                     early_stop={"enabled": True}),
+        base.changed('1/240s/100it/maximal+early0.1', time_step_s=1 / 240, solver={"maximal_coordinates": True},
+                     early_stop={"enabled": True, "duration_s": 0.1, "min_time_s": 0.2}),
+        base.changed('1/120s/100it/ws1+early', time_step_s=1 / 120, early_stop={"enabled": True}),
+        base.changed('1/240s/100it/ws1/1s', time_step_s=1 / 240, horizon_s=1.0),
     ]
     return out
 
@@ -117,23 +114,12 @@ def load_towers(count: int | None):
     csv = SHARED / "willitfall.csv"
     if csv.exists():
         scenes = scenes_from_tower_csv(csv)
-        truth = _authors_outcomes(csv)
+        # name -> did the authors' ground-truth simulation make the tower fall
+        truth = {name: not outcome.stable for name, outcome in authors_outcomes(EXP1_DATASET, SHARED).items()}
         source = str(csv)
     else:
         scenes, truth, source = generate_towers(2013, count or 20), {}, "generated towers (seed 2013)"
     return (scenes[:count] if count else scenes), truth, source
-
-
-def _authors_outcomes(_csv: Path) -> dict[str, bool]:
-    """name -> did the authors' ground-truth simulation make the tower fall (stable == 0)."""
-    import csv as csv_module
-
-    path = SHARED / "ground_truth_stability.csv"
-    if not path.exists():
-        return {}
-    with open(path, newline="") as handle:
-        return {r["stimulus"]: r["stable"] == "0" for r in csv_module.DictReader(handle)
-                if r["dataset"] == "stability_original_fall"}
 
 
 def run_config(scenes, settings: SimSettings, model: ModelConfig, query: QuerySpec, pool: WorkerPool) -> dict:
@@ -218,7 +204,7 @@ def k_sweep(scenes, reference: dict, model: ModelConfig, query: QuerySpec, pool:
     rows = []
     ref_ff = np.array([answer(p) for p in reference["predictions"]])
     for k in K_VALUES:
-        result = run_config(scenes, PRESETS["default"], dataclasses.replace(model, samples=k), query, pool)
+        result = run_config(scenes, PRESETS["default"], model.changed(samples=k), query, pool)
         ff = np.array([answer(p) for p in result["predictions"]])
         rows.append({"k": k, "wall_s_per_prediction": result["wall_s"] / len(scenes),
                      "speedup_vs_paper": reference["wall_s"] / result["wall_s"],

@@ -6,7 +6,8 @@
 Runs each tower's samples in this process (no worker pool, so the timers see everything) on the
 towers of ../shared/data/battaglia2013/willitfall.csv (IPE_SHARED_DATA overrides) or, without that
 file, on generated paper-style towers; sigma = 0.2 block short sides (0.04 m), phi = 0. pybullet is
-wrapped so that every ``stepSimulation`` is timed and filed by the step it ran at:
+watched through the simulation's probe (``ipe_ros.engine.simulation.Probe``): every pybullet step is
+timed and filed by the step it ran at:
 
 - settle: the first ``settle_s`` in substeps (shorter than the world's step),
 - fine: the world's own step, until a collapse,
@@ -25,6 +26,7 @@ floor for any setting that keeps the same steps.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import time
@@ -35,80 +37,54 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 import numpy as np  # noqa: E402
 
 from accuracy_vs_time import REPO, SIGMA_M, load_towers  # noqa: E402 - the same towers and noise
-from ipe_ros.engine import ModelConfig, QuerySpec, physics, preset, rollout  # noqa: E402
+from ipe_ros.engine import ModelConfig, QuerySpec, preset, rollout  # noqa: E402
 from ipe_ros.engine.sampler import make_tasks  # noqa: E402
+from ipe_ros.engine.simulation import PHASES, Probe  # noqa: E402
 
-PHASES = ("settle", "fine", "collapse")
 
+class TimingProbe(Probe):
+    """Times every pybullet step by the phase it ran in, and the build and depenetration parts."""
 
-class _TimedPybullet:
-    """Stands in for the pybullet module inside ``physics``: times ``stepSimulation`` by the step
-    size in force, relative to the world's own step (set by ``build_world``'s first ``setTimeStep``)."""
-
-    def __init__(self, real) -> None:
-        self._real = real
-        self.world_step_s: float | None = None
-        self.step_s: float | None = None
+    def __init__(self) -> None:
         self.steps = dict.fromkeys(PHASES, 0)
         self.seconds = dict.fromkeys(PHASES, 0.0)
+        self.parts = {"build": 0.0, "depenetrate": 0.0}
 
-    def __getattr__(self, name):
-        return getattr(self._real, name)
-
-    def setTimeStep(self, step_s, **kwargs):  # noqa: N802 - pybullet's name
-        self.step_s = step_s
-        return self._real.setTimeStep(step_s, **kwargs)
-
-    def stepSimulation(self, **kwargs):  # noqa: N802 - pybullet's name
-        ratio = self.step_s / self.world_step_s
-        phase = "settle" if ratio < 1 - 1e-9 else "fine" if ratio < 1 + 1e-9 else "collapse"
+    @contextlib.contextmanager
+    def part(self, name):
         start = time.perf_counter()
-        result = self._real.stepSimulation(**kwargs)
+        try:
+            yield
+        finally:
+            self.parts[name] += time.perf_counter() - start
+
+    def step(self, phase, run):
+        start = time.perf_counter()
+        run()
         self.seconds[phase] += time.perf_counter() - start
         self.steps[phase] += 1
-        return result
 
 
 def measure(scenes, settings_name: str, samples: int, queries: frozenset[str]) -> dict:
     settings = preset(settings_name)
     model = ModelConfig(sigma_m=SIGMA_M, samples=samples)
     query = QuerySpec(queries=queries)
-    real = physics._pybullet()
-    timed = _TimedPybullet(real)
-    build_world, depenetrate = physics.build_world, physics.depenetrate
-    spent = {"build": 0.0, "depenetrate": 0.0}
-
-    def timed_build(*args, **kwargs):
-        start = time.perf_counter()
-        world = build_world(*args, **kwargs)
-        spent["build"] += time.perf_counter() - start
-        timed.world_step_s = world.time_step_s
-        return world
-
-    def timed_depenetrate(*args, **kwargs):
-        start = time.perf_counter()
-        result = depenetrate(*args, **kwargs)
-        spent["depenetrate"] += time.perf_counter() - start
-        return result
-
+    timed = TimingProbe()
     tasks = [t for i, scene in enumerate(scenes) for t in make_tasks(scene, model, settings, query, seed=i)]
     rollout.run_sample(tasks[0])  # connect and warm up outside the timers
     outcomes = []  # (anything fell, simulated s, wall s)
-    physics._PYBULLET, physics.build_world, physics.depenetrate = timed, timed_build, timed_depenetrate
-    try:
-        start_all = time.perf_counter()
-        for task in tasks:
-            start = time.perf_counter()
-            outcome = rollout.run_sample(task)
-            wall = time.perf_counter() - start
-            if not outcome.ok:
-                raise RuntimeError(f"sample {task.index} failed: {outcome.error}")
-            result = outcome.rollouts[0]
-            fell = bool(result.fallen.any()) if result.fallen is not None else bool(result.any_fell)
-            outcomes.append((fell, result.simulated_s, wall))
-        total = time.perf_counter() - start_all
-    finally:
-        physics._PYBULLET, physics.build_world, physics.depenetrate = real, build_world, depenetrate
+    start_all = time.perf_counter()
+    for task in tasks:
+        start = time.perf_counter()
+        outcome = rollout.run_sample(task, probe=timed)
+        wall = time.perf_counter() - start
+        if not outcome.ok:
+            raise RuntimeError(f"sample {task.index} failed: {outcome.error}")
+        result = outcome.rollouts[0]
+        fell = bool(result.fallen.any()) if result.fallen is not None else bool(result.any_fell)
+        outcomes.append((fell, result.simulated_s, wall))
+    total = time.perf_counter() - start_all
+    spent = timed.parts
     n = len(tasks)
     stepping = sum(timed.seconds.values())
     parts = [(f"{phase} steps", timed.seconds[phase], timed.steps[phase]) for phase in PHASES]

@@ -21,13 +21,15 @@ import json
 import math
 import os
 import sys
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
 from .engine import (ALL_QUERIES, PRESETS, AdaptiveStop, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError,
                      WorkerPool, load_scenes, parse_queries, predict, preset)
+from .engine.config import (DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M,
+                            anytime_batch_size)
+from .engine.examples import example_scene_path
 from .engine.generators import generate_tables, generate_towers, state_pair
 from .engine.sampler import check_request
 from .engine.scene_io import write_scenes
@@ -40,9 +42,11 @@ class _OneLineParser(argparse.ArgumentParser):
         self.exit(EXIT_BAD_INPUT, f"ipe: error: {message}\n")
 
 
-def example_scene_path() -> Path:
-    """The packaged example tower (a generated paper-style tower, 10 blocks)."""
-    return Path(str(resources.files("ipe_ros") / "data" / "example_tower.json"))
+def _queries(text: str) -> frozenset[str]:
+    try:
+        return parse_queries(text)
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(exc.problem) from None
 
 
 def _float_list(text: str) -> tuple[float, ...]:
@@ -73,17 +77,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("path", help="a JSON scene file or a paper-format tower CSV")
     p.add_argument("--tower", action="append", default=None, metavar="NAME",
                    help="only this scene/tower (repeatable; default: all in the file)")
-    p.add_argument("--query", type=parse_queries, default=frozenset({"fall", "direction", "far"}),
-                   help=f"comma-separated queries from {','.join(ALL_QUERIES)} (default fall,direction,far)")
-    p.add_argument("--samples", type=int, default=48, help="Monte Carlo samples k (default 48, as the paper)")
-    p.add_argument("--sigma", type=_finite, default=0.04,
-                   help="position noise SD in metres (default 0.04 = 0.2 short sides of 0.2 m blocks)")
+    default_queries = ",".join(q for q in ALL_QUERIES if q in DEFAULT_QUERIES)
+    p.add_argument("--query", type=_queries, default=DEFAULT_QUERIES,
+                   help=f"comma-separated queries from {','.join(ALL_QUERIES)} (default {default_queries})")
+    p.add_argument("--samples", type=int, default=DEFAULT_SAMPLES,
+                   help=f"Monte Carlo samples k (default {DEFAULT_SAMPLES}, as the paper)")
+    p.add_argument("--sigma", type=_finite, default=DEFAULT_SIGMA_M,
+                   help=f"position noise SD in metres (default {DEFAULT_SIGMA_M:g} = 0.2 short sides of 0.2 m blocks)")
     p.add_argument("--phi", type=_float_list, default=(0.0,),
                    help="push as support acceleration in m/s^2; several comma-separated values are averaged")
     p.add_argument("--force-direction", type=_finite, default=None, metavar="DEG",
                    help="cued push direction in degrees (push drawn within +-45 deg); default: any direction")
     p.add_argument("--mu", type=_finite, default=None, help="heavy/light density ratio (default: scene's own masses)")
-    p.add_argument("--preset", default="default", choices=sorted(PRESETS), help="simulation settings")
+    p.add_argument("--preset", default=DEFAULT_PRESET, choices=sorted(PRESETS), help="simulation settings")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
                    help="worker processes (default: CPU count; 0 runs in this process)")
@@ -123,7 +129,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--grid-samples", type=int, default=None, help="k per cell of fall's sigma x phi grid")
     e.add_argument("--seed", type=int, default=0)
     e.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes (0: in-process)")
-    e.add_argument("--preset", default="default", choices=sorted(PRESETS))
+    e.add_argument("--preset", default=DEFAULT_PRESET, choices=sorted(PRESETS))
     e.add_argument("--resamples", type=int, default=10_000, help="bootstrap resamples (paper: 10 000)")
     e.add_argument("--human", default=None, help="CSV with columns stimulus,response (people's judgments)")
     e.add_argument("--human-scale", default=None, choices=SCALES, help="what the responses are measured in")
@@ -165,8 +171,8 @@ def _run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: in
     if workers < 0:
         raise ConfigError("--workers", f"must be >= 0, got {workers}")
     pool = WorkerPool(min(workers, max(1, model.samples))) if workers > 0 else None
-    if stop is not None:  # batches of two samples per worker keep every worker busy
-        stop = dataclasses.replace(stop, batch_size=2 * max(1, workers))
+    if stop is not None:
+        stop = dataclasses.replace(stop, batch_size=anytime_batch_size(workers))
     try:
         for scene in scenes:
             emit(predict(scene, model, sim, query, seed=seed, map_fn=pool.map if pool else None, stop=stop))
@@ -222,13 +228,14 @@ def cmd_generate(args) -> int:
 def cmd_demo(_args) -> int:
     scenes = load_scenes(example_scene_path())
     workers = os.cpu_count() or 1
-    query = QuerySpec(queries=frozenset({"fall", "direction", "far"}))
+    query = QuerySpec(queries=DEFAULT_QUERIES)
     print(f"Built-in example: {example_scene_path().name} ({len(scenes[0].boxes)} blocks of 0.2 x 0.6 x 0.2 m)\n")
+    ipe_title = (f"IPE (sigma = {DEFAULT_MODEL.sigma_m:g} m = 0.2 block short sides, phi = 0, "
+                 f"k = {DEFAULT_MODEL.samples}):")
     for title, model in (("Ground truth (sigma = phi = 0, one deterministic rollout):", ModelConfig()),
-                         ("IPE (sigma = 0.04 m = 0.2 block short sides, phi = 0, k = 48):",
-                          ModelConfig(sigma_m=0.04, samples=48))):
+                         (ipe_title, DEFAULT_MODEL)):
         rows: list[Prediction] = []
-        _run_predictions(scenes, model, preset("default"), query, 0, workers, rows.append)
+        _run_predictions(scenes, model, preset(DEFAULT_PRESET), query, 0, workers, rows.append)
         print(title)
         print(format_table(rows))
         p = rows[0]
@@ -243,7 +250,7 @@ def cmd_demo(_args) -> int:
 def cmd_experiment(args) -> int:
     from .analysis.experiments import EXPERIMENTS, Options
     from .analysis.human import load_human_responses
-    from .analysis.runs import shared_data_dir
+    from .analysis.paper_data import shared_data_dir
 
     for name in ("samples", "stimuli", "grid_samples"):
         value = getattr(args, name)

@@ -1,6 +1,6 @@
 """Prediction as a service, without ROS: a keep-latest scene slot, one prediction thread, the pool.
 
-The ROS node (``ipe_ros.node``) only converts messages and hands scenes to :class:`PredictionService`;
+The ROS node (``ipe_ros.ros.node``) only converts messages and hands scenes to :class:`PredictionService`;
 everything that takes time happens here, off the executor:
 
 * ``submit`` stores a scene in a one-slot queue. A newer scene replaces one still waiting (the
@@ -11,7 +11,7 @@ everything that takes time happens here, off the executor:
   at a time: the pool already uses every core for the k samples of one scene, so a second
   prediction would only make both slower.
 * ``predict_latest`` (the Trigger service) waits for an answer on the newest scene with the current
-  settings, reusing the last answer when it is already that.
+  config, reusing the last answer when it is already that.
 * A worker that dies is replaced by the pool and its samples are run again; samples lost twice
   are counted as failed in the answer (``failed_samples``), never silently dropped.
 """
@@ -19,7 +19,6 @@ everything that takes time happens here, off the executor:
 from __future__ import annotations
 
 import dataclasses
-import os
 import threading
 import time
 import traceback
@@ -27,24 +26,27 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from .engine import PRESETS, AdaptiveStop, ModelConfig, Prediction, QuerySpec, Scene, SimSettings, WorkerPool, predict
+from .engine import AdaptiveStop, ModelConfig, Prediction, QuerySpec, Scene, SimSettings, WorkerPool, predict, preset
+from .engine.config import DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES
 from .engine.sampler import check_request
 from .engine.scene import DEFAULT_MAX_OBJECTS
 
 
 @dataclass(frozen=True)
-class ServiceSettings:
+class ServiceConfig:
     """Everything a prediction depends on besides the scene; replaced as a whole on updates.
 
+    model, settings, query, seed: the IPE's inputs, the simulation settings, the queries, the seed.
+    max_objects: scenes with more objects are refused.
     rerun_save_dir: folder for one ``.rrd`` per prediction, or None for no rerun logging.
     rerun_rollouts_logged: how many sampled rollouts each ``.rrd`` shows.
     rerun_frame_period_s: simulated seconds between recorded frames of a logged rollout.
     rerun_connect_url: also stream to a running viewer at this gRPC URL (never spawns one).
     """
 
-    model: ModelConfig = ModelConfig(sigma_m=0.04, samples=48)
-    sim: SimSettings = PRESETS["default"]
-    query: QuerySpec = QuerySpec(queries=frozenset({"fall", "direction", "far"}))
+    model: ModelConfig = DEFAULT_MODEL
+    settings: SimSettings = preset(DEFAULT_PRESET)
+    query: QuerySpec = QuerySpec(queries=DEFAULT_QUERIES)
     seed: int = 0
     max_objects: int = DEFAULT_MAX_OBJECTS
     rerun_save_dir: str | None = None
@@ -78,7 +80,7 @@ class Answer:
     prediction: Prediction
     compute_s: float
     latency_s: float
-    settings_version: int
+    config_version: int
     rrd_path: str | None = None
     rollouts_logged: int = 0
 
@@ -132,12 +134,12 @@ class _Waiter:
 class PredictionService:
     """Keep-latest scene queue + one prediction thread + a worker pool. Thread-safe."""
 
-    def __init__(self, settings: ServiceSettings, *, workers: int, publish: Callable[[Answer], None],
+    def __init__(self, config: ServiceConfig, *, workers: int, publish: Callable[[Answer], None],
                  log_error: Callable[[str], None] = lambda _msg: None,
                  log_info: Callable[[str], None] = lambda _msg: None, start_method: str = "forkserver"):
         if isinstance(workers, bool) or not isinstance(workers, int) or workers < 0:
             raise ValueError(f"workers: must be an integer >= 0 (0 runs samples in the prediction thread), got {workers!r}")
-        self._settings = settings
+        self._config = config
         self._version = 0
         self._publish = publish
         self._log_error = log_error
@@ -149,7 +151,7 @@ class PredictionService:
         self._latest: StampedScene | None = None
         self._latest_rejected: str | None = None  # why the newest input was refused, if it was
         self._last_answer: Answer | None = None
-        self._in_flight: tuple[int, int] | None = None  # (seq, settings version) being computed
+        self._in_flight: tuple[int, int] | None = None  # (seq, config version) being computed
         self._waiters: list[_Waiter] = []
         self._closing = False
         self._seq = 0
@@ -184,13 +186,13 @@ class PredictionService:
 
     # -- inputs (called from executor callbacks: must return at once) ---------------------------
     @property
-    def settings(self) -> ServiceSettings:
-        return self._settings
+    def config(self) -> ServiceConfig:
+        return self._config
 
-    def update_settings(self, settings: ServiceSettings) -> None:
-        """Applies to the next prediction (the one in flight keeps the settings it started with)."""
+    def update_config(self, config: ServiceConfig) -> None:
+        """Applies to the next prediction (the one in flight keeps the config it started with)."""
         with self._cond:
-            self._settings = settings
+            self._config = config
             self._version += 1
 
     def next_seq(self) -> int:
@@ -199,9 +201,9 @@ class PredictionService:
             return self._seq
 
     def check(self, scene: Scene) -> None:
-        """Raise SceneError/ConfigError if the current settings cannot answer this scene."""
-        settings = self._settings
-        check_request(scene, settings.query, settings.max_objects)
+        """Raise SceneError/ConfigError if the current config cannot answer this scene."""
+        config = self._config
+        check_request(scene, config.query, config.max_objects)
 
     def submit(self, item: StampedScene) -> bool:
         """Queue a checked scene; returns True when it replaced one still waiting."""
@@ -226,7 +228,7 @@ class PredictionService:
             self._latest_rejected = reason
 
     def predict_latest(self, timeout_s: float) -> Answer:
-        """An answer for the newest scene under the current settings (reused when already made).
+        """An answer for the newest scene under the current config (reused when already made).
 
         Raises NoSceneError, PredictionFailed (with the reason; also when the newest input was
         rejected), or TimeoutError.
@@ -240,14 +242,14 @@ class PredictionService:
             if latest is None:
                 raise NoSceneError("no scene received yet; publish one on ~/scene (MarkerArray) or ~/scene_json")
             last = self._last_answer
-            if last is not None and last.source.seq >= latest.seq and last.settings_version >= self._version:
+            if last is not None and last.source.seq >= latest.seq and last.config_version >= self._version:
                 return last
             waiter = _Waiter(seq=latest.seq, version=self._version)
             self._waiters.append(waiter)
             in_flight_covers = (self._in_flight is not None and self._in_flight[0] >= latest.seq
                                 and self._in_flight[1] >= self._version)
             if not in_flight_covers and (self._pending is None or self._pending.seq < latest.seq):
-                self._pending = latest  # re-run the newest scene with the new settings
+                self._pending = latest  # re-run the newest scene with the new config
             self._cond.notify_all()
         if not waiter.event.wait(timeout_s):
             with self._cond:
@@ -287,9 +289,9 @@ class PredictionService:
                 if self._closing:
                     return
                 item, self._pending = self._pending, None
-                settings, version = self._settings, self._version
+                config, version = self._config, self._version
                 self._in_flight = (item.seq, version)
-            answer, error = self._predict(item, settings, version)
+            answer, error = self._predict(item, config, version)
             with self._cond:
                 self._in_flight = None
                 if self._closing:
@@ -318,51 +320,48 @@ class PredictionService:
             else:
                 self._log_error(f"prediction for {item.scene_id} failed: {error}")
 
-    def _predict(self, item: StampedScene, settings: ServiceSettings, version: int) -> tuple[Answer | None, str | None]:
+    def _predict(self, item: StampedScene, config: ServiceConfig, version: int) -> tuple[Answer | None, str | None]:
         start = time.perf_counter()
         record_every = 0
-        if settings.rerun_save_dir and settings.rerun_rollouts_logged > 0:
-            record_every = max(1, round(settings.rerun_frame_period_s / settings.sim.time_step_s))
+        if config.rerun_save_dir and config.rerun_rollouts_logged > 0:
+            record_every = max(1, round(config.rerun_frame_period_s / config.settings.time_step_s))
         try:
-            prediction = predict(item.scene, settings.model, settings.sim, settings.query, seed=settings.seed,
+            prediction = predict(item.scene, config.model, config.settings, config.query, seed=config.seed,
                                  map_fn=self._pool.map if self._pool is not None else None,
-                                 record_every=record_every, record_samples=settings.rerun_rollouts_logged,
-                                 max_objects=settings.max_objects, stop=settings.stop)
-        except ValueError as exc:  # SceneError / ConfigError: the scene no longer fits new settings
+                                 record_every=record_every, record_samples=config.rerun_rollouts_logged,
+                                 max_objects=config.max_objects, stop=config.stop)
+        except ValueError as exc:  # SceneError / ConfigError: the scene no longer fits a new config
             return None, str(exc)
         except Exception as exc:  # noqa: BLE001 - report, keep serving
             return None, "".join(traceback.format_exception_only(type(exc), exc)).strip()
         if self._closing:
             return None, "the node is shutting down"
         answer = Answer(source=item, prediction=prediction, compute_s=time.perf_counter() - start,
-                        latency_s=0.0, settings_version=version)
+                        latency_s=0.0, config_version=version)
         if record_every:
-            answer = self._write_rrd(answer, settings)
+            answer = self._write_rrd(answer, config)
         now = time.monotonic()
         latency = now - item.received_monotonic_s if item.received_monotonic_s else answer.compute_s
         return dataclasses.replace(answer, compute_s=time.perf_counter() - start, latency_s=latency), None
 
-    def _write_rrd(self, answer: Answer, settings: ServiceSettings) -> Answer:
-        from .engine import rerun_log  # imported on first use: rerun is only needed when logging
+    def _write_rrd(self, answer: Answer, config: ServiceConfig) -> Answer:
+        from .viz import rerun_log  # imported on first use: rerun is only needed when logging
 
         item = answer.source
         safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in item.scene_id)[:80]
         with self._cond:
             self._recordings += 1  # one file per prediction, also when a scene is predicted again
             number = self._recordings
-        path = Path(settings.rerun_save_dir) / f"ipe_{number:06d}_scene{item.seq}_{safe}.rrd"
+        path = Path(config.rerun_save_dir) / f"ipe_{number:06d}_scene{item.seq}_{safe}.rrd"
         answer = dataclasses.replace(answer, rrd_path=str(path.resolve()),
-                                     rollouts_logged=min(settings.rerun_rollouts_logged, answer.prediction.samples))
+                                     rollouts_logged=min(config.rerun_rollouts_logged, answer.prediction.samples))
         try:
             logged = rerun_log.write_prediction_rrd(path, item.scene, answer.prediction, answer=answer.to_dict(),
                                                     stamp_ns=item.stamp_ns,
-                                                    rollouts_logged=settings.rerun_rollouts_logged,
-                                                    connect_url=settings.rerun_connect_url)
+                                                    rollouts_logged=config.rerun_rollouts_logged,
+                                                    connect_url=config.rerun_connect_url)
         except Exception as exc:  # noqa: BLE001 - logging trouble must not cost the answer
             self._log_error(f"writing {path} failed: {exc}")
             return dataclasses.replace(answer, rrd_path=None, rollouts_logged=0)
         return dataclasses.replace(answer, rollouts_logged=logged)
 
-
-def default_workers() -> int:
-    return max(1, min(os.cpu_count() or 1, 8))

@@ -41,7 +41,8 @@ from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ipe_ros.engine import Box, Floor, Prediction, Scene, SceneError, Table, validate_scene
-from ipe_ros.engine.palette import SUPPORT_RGB, group_rgb, nearest_group_name, risk_rgb
+from ipe_ros.engine.config import MODEL_LIGHT_DENSITY_KG_M3
+from ipe_ros.viz.palette import SUPPORT_RGB, group_rgb, nearest_group_name, risk_rgb
 from ipe_ros.engine.scene import DEFAULT_MAX_OBJECTS
 
 from .stamps import header_to_stamp_ns, stamp_ns_to_header
@@ -50,7 +51,7 @@ SUPPORT_NAMESPACE = "support"
 DEFAULT_FRICTION = 0.9
 DEFAULT_RESTITUTION = 0.0
 #: The paper's light blocks (4.08 kg for 0.2 x 0.6 x 0.2 m): used when a box gives no mass or density.
-DEFAULT_DENSITY_KG_M3 = 170.0
+DEFAULT_DENSITY_KG_M3 = MODEL_LIGHT_DENSITY_KG_M3
 DEFAULT_GRAVITY_M_S2 = -9.81
 DEFAULT_SCENE_NAME = "markers"
 #: Thickness of the cube that stands for an infinite floor when a scene is turned into markers.

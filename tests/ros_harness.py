@@ -52,7 +52,7 @@ class RosHarness:
         self._nodes: list = []
 
     def start_ipe_node(self, **overrides: Any):
-        from ipe_ros.node import IpeNode
+        from ipe_ros.ros.node import IpeNode
 
         overrides.setdefault("workers", 2)
         node = IpeNode(context=self.context,

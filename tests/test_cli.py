@@ -6,7 +6,8 @@ import sys
 
 import pytest
 
-from ipe_ros.cli import example_scene_path, main
+from ipe_ros.cli import main
+from ipe_ros.engine.examples import example_scene_path
 from ipe_ros.engine import load_scenes
 
 REQUIRED = {"scene", "samples", "fall_fraction", "fall_fraction_ci95", "object_fall_probability",
@@ -34,7 +35,7 @@ def test_will_anything_fall_query_reports_a_probability_with_its_interval(capsys
     record = json.loads(capsys.readouterr().out)
     lo, hi = record["any_fall_probability_ci95"]
     assert 0.0 <= lo <= record["any_fall_probability"] <= hi <= 1.0
-    assert record["fall_fraction"] is None and record["settings"]["queries"] == ["any_fall"]
+    assert record["fall_fraction"] is None and record["request"]["queries"] == ["any_fall"]
     assert main(["predict", str(example_scene_path()), "--query", "any_fall", "--samples", "2", "--workers", "0"]) == 0
     assert "P(anything falls):" in capsys.readouterr().out
 
@@ -55,7 +56,8 @@ def test_generate_tower_and_table_write_loadable_scenes(tmp_path):
 
 @pytest.mark.parametrize("args, message", [
     (["predict", "/nonexistent.json"], "ipe: error: /nonexistent.json: no such file"),
-    (["predict", "EXAMPLE", "--query", "fall,fly"], "ipe: error: argument --query: invalid parse_queries value: 'fall,fly'"),
+    (["predict", "EXAMPLE", "--query", "fall,fly"], "ipe: error: argument --query: unknown query 'fly'; "
+                                                    "choose from fall, any_fall, direction, far, bump"),
     (["predict", "EXAMPLE", "--samples", "0"], "ipe: error: samples: must be an integer in [1, 100000], got 0"),
     (["predict", "EXAMPLE", "--sigma", "nan"], "ipe: error: argument --sigma: expected a finite number, got 'nan'"),
     (["predict", "EXAMPLE", "--tower", "nope"], "ipe: error: --tower: no scene named 'nope' in example_tower.json"),

@@ -37,7 +37,7 @@ def test_colcon_build_installs_the_node_script(tmp_path):
 
     # The installed copy (not this checkout) is what the workspace's scripts import.
     site = next(prefix.glob("lib/python3*/site-packages"))
-    probe = subprocess.run([sys.executable, "-c", "import ipe_ros.node, msg_bridge.markers; print(ipe_ros.node.__file__)"],
+    probe = subprocess.run([sys.executable, "-c", "import ipe_ros.ros.node, msg_bridge.markers; print(ipe_ros.ros.node.__file__)"],
                            env=dict(env, PYTHONPATH=str(site)), cwd=tmp_path, capture_output=True, text=True,
                            timeout=120)
     assert probe.returncode == 0, probe.stderr

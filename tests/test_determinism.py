@@ -5,7 +5,7 @@ import json
 import numpy as np
 
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, predict, preset
-from ipe_ros.cli import example_scene_path
+from ipe_ros.engine.examples import example_scene_path
 
 from .helpers import without_timing
 

@@ -3,7 +3,7 @@
 import numpy as np
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
-from ipe_ros.engine import physics
+from ipe_ros.engine import simulation
 from ipe_ros.engine.generators import generate_tables, generate_towers, state_pair
 
 
@@ -16,8 +16,8 @@ def test_towers_are_seeded_inside_the_column_and_free_of_overlaps():
         xy = np.array([b.position_m[:2] for b in tower.boxes])
         assert np.abs(xy).max() <= 0.3 + 1e-9
         masses = np.array([b.resolved_mass_kg for b in tower.boxes])
-        world = physics.build_world(tower, np.array([b.position_m for b in tower.boxes]), masses, settings)
-        assert physics.depenetrate(world, settings) == 0  # nothing to separate: stacked, not interpenetrating
+        world = simulation.build_world(tower, np.array([b.position_m for b in tower.boxes]), masses, settings)
+        assert simulation.depenetrate(world, settings) == 0  # nothing to separate: stacked, not interpenetrating
 
 
 def test_each_block_stands_on_its_own_support_when_placed():

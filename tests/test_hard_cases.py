@@ -164,8 +164,8 @@ def assert_still_standing_at_the_horizon(case: Case, settings, query: QuerySpec,
     judged it at rest: simulated to the end, no box may have sunk more than a quarter of the
     fall threshold. (Without settling, `default` had the delicately balanced tower 2 cm down, 80%
     of the way to "fallen", at 2 s, and toppled it at 3 s, while `paper` keeps it within 0.1 mm.)"""
-    if settings.early_stop:
-        prediction = predict(case.scene, case.model, dataclasses.replace(settings, early_stop=False), query, seed=11)
+    if settings.early_stop.enabled:
+        prediction = predict(case.scene, case.model, settings.changed(early_stop={"enabled": False}), query, seed=11)
     smallest = np.array([min(b.extents_m) for b in case.scene.dynamic_boxes])
     allowed = 0.25 * query.fall_threshold_fraction * smallest
     for outcome in prediction.outcomes:
@@ -183,7 +183,7 @@ def test_hard_case_stays_numerically_stable(name, preset_name, pool):
     case = CATALOGUE[name]
     settings = preset(preset_name)
     if case.horizon_s is not None:
-        settings = dataclasses.replace(settings, horizon_s=case.horizon_s)
+        settings = settings.changed(horizon_s=case.horizon_s)
     query = QuerySpec(queries=frozenset({"fall", "bump"} if isinstance(case.scene.support, Table) else {"fall"}))
     prediction = predict(case.scene, case.model, settings, query, seed=11, map_fn=pool.map, record_every=1)
     assert prediction.failed_samples == 0, prediction.failure_reasons

@@ -12,11 +12,10 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from ipe_ros.engine import Floor, Prediction, SceneError, Table, load_scenes
 from ipe_ros.engine.generators import generate_tables
-from ipe_ros.service import ServiceStats
 from msg_bridge.json_text import answer_to_string, scene_to_string, string_to_answer, string_to_scene
 from msg_bridge.markers import (DEFAULT_DENSITY_KG_M3, markers_to_scene, parse_properties, prediction_to_markers,
                                 scene_to_markers)
-from msg_bridge.outputs import any_fall_probability_msg, diagnostics_msg, fall_direction_msg, fall_probability_msg
+from msg_bridge.outputs import any_fall_probability_msg, fall_direction_msg, fall_probability_msg
 from msg_bridge.stamps import header_to_stamp_ns, stamp_ns_to_header
 from tests.helpers import block, floor_scene
 
@@ -211,24 +210,6 @@ def test_prediction_markers_colour_objects_by_risk_and_draw_the_arrow():
     no_direction = prediction_to_markers(TOWER, _prediction(fall_fraction=0.0, object_fall_probability=probs),
                                          "odom", 9)
     assert not [m for m in no_direction.markers if m.ns == "ipe/direction"]
-
-
-def _stats(**kw) -> ServiceStats:
-    base = dict(received=3, predicted=2, dropped=1, rejected=0, failed_predictions=0, failed_samples=0, waiting=0,
-                in_flight=False, workers=2, workers_alive=2, worker_replacements=0, last_compute_s=0.5,
-                last_error=None, closed=False)
-    return ServiceStats(**{**base, **kw})
-
-
-def test_diagnostics_levels_and_counters():
-    ok = diagnostics_msg(_stats(), "ipe", 7).status[0]
-    assert (ok.level, ok.message) == (b"\x00", "idle")
-    values = {kv.key: kv.value for kv in ok.values}
-    assert (values["scenes_received"], values["scenes_dropped"], values["last_compute_s"]) == ("3", "1", "0.5")
-    warn = diagnostics_msg(_stats(rejected=2, last_error="markers: x"), "ipe", 7).status[0]
-    assert warn.level == b"\x01" and warn.message.endswith("last error: markers: x")
-    dead = diagnostics_msg(_stats(workers_alive=0), "ipe", 7).status[0]
-    assert (dead.level, dead.message) == (b"\x02", "no worker process alive (of 2)")
 
 
 def test_msg_bridge_never_imports_rclpy():

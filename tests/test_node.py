@@ -22,7 +22,7 @@ from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, predict, preset  # noqa: E402
 from ipe_ros.engine.scene_io import scene_to_json  # noqa: E402
-from ipe_ros.node import LATCHED_QOS  # noqa: E402
+from ipe_ros.ros.node import LATCHED_QOS  # noqa: E402
 from msg_bridge.markers import scene_to_markers  # noqa: E402
 from tests.helpers import block, floor_scene  # noqa: E402
 
@@ -178,7 +178,7 @@ def test_parameter_updates_accepted_and_rejected(ros, tower):
     got = answers(ros)
     ros.publisher(String, "/ipe/scene_json").publish(String(data=scene_to_json(tower)))
     wait_until(lambda: len(got), TIMEOUT_S, "a prediction with the new sample count")
-    assert got[0]["samples"] == 3 and got[0]["settings"]["preset"] == "default"
+    assert got[0]["samples"] == 3 and got[0]["request"]["preset"] == "default"
     assert got[0]["stopped_by"] == "samples"
 
 

@@ -54,7 +54,7 @@ def test_signal_ends_the_node_and_its_workers(signum):
     if sys.platform != "linux":
         pytest.skip("reads the process tree from /proc")
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(domain_id_for_tests()))
-    proc = subprocess.Popen([sys.executable, "-m", "ipe_ros.node", "--ros-args", "-p", "workers:=2",
+    proc = subprocess.Popen([sys.executable, "-m", "ipe_ros.ros.node", "--ros-args", "-p", "workers:=2",
                              "-p", "samples:=4"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                             text=True)
     try:
@@ -75,10 +75,10 @@ def test_signal_ends_the_node_and_its_workers(signum):
 
 def test_send_scene_helper_gets_the_answer_from_a_running_node(tmp_path):
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(domain_id_for_tests()))
-    node = subprocess.Popen([sys.executable, "-m", "ipe_ros.node", "--ros-args", "-p", "workers:=1",
+    node = subprocess.Popen([sys.executable, "-m", "ipe_ros.ros.node", "--ros-args", "-p", "workers:=1",
                              "-p", "samples:=3"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        sent = subprocess.run([sys.executable, "-m", "ipe_ros.send_scene", "ipe_ros/data/example_tower.json",
+        sent = subprocess.run([sys.executable, "-m", "ipe_ros.ros.send_scene", "ipe_ros/data/example_tower.json",
                                "--timeout", "120"], env=env, capture_output=True, text=True, timeout=180)
     finally:
         node.send_signal(signal.SIGINT)
@@ -96,7 +96,7 @@ def test_send_scene_helper_gets_the_answer_from_a_running_node(tmp_path):
 def test_send_scene_refuses_a_bad_file_before_publishing(tmp_path):
     bad = tmp_path / "bad.json"
     bad.write_text('{"format": "ipe_ros.scene/1"')
-    result = subprocess.run([sys.executable, "-m", "ipe_ros.send_scene", str(bad)], capture_output=True, text=True,
+    result = subprocess.run([sys.executable, "-m", "ipe_ros.ros.send_scene", str(bad)], capture_output=True, text=True,
                             timeout=120, env=dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST"))
     assert result.returncode == 2
     assert result.stderr.strip() == "ipe_send_scene: error: json: malformed JSON at line 1 column 29: Expecting ',' delimiter"
@@ -104,7 +104,7 @@ def test_send_scene_refuses_a_bad_file_before_publishing(tmp_path):
 
 def test_the_demo_runs_end_to_end_and_writes_recordings(tmp_path):
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(domain_id_for_tests()))
-    result = subprocess.run([sys.executable, "-m", "ipe_ros.demo", "--samples", "4", "--workers", "1",
+    result = subprocess.run([sys.executable, "-m", "ipe_ros.ros.demo", "--samples", "4", "--workers", "1",
                              "--output-dir", str(tmp_path)], env=env, capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
     assert "[/ipe/predict] success: ground truth says fraction fallen = 0.00" in result.stdout
@@ -119,7 +119,7 @@ def test_the_demo_runs_end_to_end_and_writes_recordings(tmp_path):
 ])
 def test_a_bad_parameter_override_ends_the_node_with_one_line(override, message):
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(domain_id_for_tests()))
-    result = subprocess.run([sys.executable, "-m", "ipe_ros.node", "--ros-args", "-p", override], env=env,
+    result = subprocess.run([sys.executable, "-m", "ipe_ros.ros.node", "--ros-args", "-p", override], env=env,
                             capture_output=True, text=True, timeout=120)
     assert result.returncode == 2
     assert result.stderr.strip().splitlines()[-1] == message

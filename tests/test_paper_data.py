@@ -3,12 +3,12 @@
 Figures printed here (run with -s) are the ones quoted in README.
 """
 
-import csv
 import dataclasses
 
 import numpy as np
 import pytest
 
+from ipe_ros.analysis import paper_data
 from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes, predict, preset
 
 from .conftest import shared_file
@@ -19,8 +19,9 @@ MOVED_M = 0.05
 
 
 def authors_outcomes(dataset: str) -> dict[str, tuple[int, int]]:
-    rows = csv.DictReader(shared_file("ground_truth_stability.csv").open())
-    return {r["stimulus"]: (int(r["nfell"]), int(r["stable"])) for r in rows if r["dataset"] == dataset}
+    """stimulus -> (blocks that fell, stood) under the authors' simulation; skips without the data."""
+    outcomes = paper_data.authors_outcomes(dataset, shared_file(paper_data.OUTCOMES_FILE).parent)
+    return {name: (o.blocks_fell, int(o.stable)) for name, o in outcomes.items()}
 
 
 @pytest.mark.parametrize("preset_name", ["default", "paper"])
@@ -56,7 +57,7 @@ def test_early_termination_waits_out_a_slow_tip(preset_name, rest_threshold):
     assert authors_outcomes("stability_original_fall")[scene.name][1] == 0  # the authors': falls
     settings = preset(preset_name)
     if rest_threshold is not None:
-        settings = dataclasses.replace(settings, rest_speed_sizes_per_s=rest_threshold, rest_angular_rad_s=rest_threshold)
+        settings = settings.changed(early_stop={"speed_sizes_per_s": rest_threshold, "angular_rad_s": rest_threshold})
     p = predict(scene, ModelConfig(), settings, FALL)
     rollout = p.outcomes[0].rollouts[0]
     assert rollout.fallen.tolist() == [False] * 8 + [True, False]

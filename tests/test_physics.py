@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
-from ipe_ros.engine import physics
+from ipe_ros.engine import simulation
 from ipe_ros.engine.generators import make_table
 from ipe_ros.engine.perturb import draw_sample_inputs
 from ipe_ros.engine.scene import Scene
@@ -47,15 +47,15 @@ def test_deep_interpenetration_is_separated_without_injecting_energy():
     scene = floor_scene(block("a", 0, 0, 0.1), block("b", 0.02, 0.01, 0.1))
     settings = preset("default")
     inputs = draw_sample_inputs(scene, ModelConfig(), np.random.default_rng(0))
-    world = physics.build_world(scene, inputs.positions_m, inputs.masses_kg, settings)
-    physics.depenetrate(world, settings)
-    positions, _ = physics.read_poses(world)
+    world = simulation.build_world(scene, inputs.positions_m, inputs.masses_kg, settings)
+    simulation.depenetrate(world, settings)
+    positions, _ = simulation.read_poses(world)
     gap = abs(positions[0, 0] - positions[1, 0])
     assert gap >= 0.2 - 1e-3  # side by side now (the 0.2 m x extents no longer overlap)
     assert np.allclose(positions[:, 2], 0.1, atol=1e-3)  # nothing was lifted or sunk
     for _ in range(100):
-        physics._pybullet().stepSimulation(physicsClientId=world.client)
-    assert physics.read_speeds(world).max() < 0.05
+        simulation.pybullet().stepSimulation(physicsClientId=world.client)
+    assert simulation.read_velocities(world)[0].max() < 0.05
 
 
 def test_large_noise_on_a_stack_separates_and_rolls_out_without_divergence():
@@ -115,11 +115,11 @@ def test_bump_query_needs_a_table():
 
 def test_failed_rollouts_are_counted_not_raised():
     scene = floor_scene(block("a", 0, 0, 0.1), block("b", 0.001, 0.0, 0.1))
-    settings = replace(preset("default"), depenetration_max_iterations=1)
+    settings = preset("default").changed(depenetration={"max_iterations": 1})
     p = predict(scene, ModelConfig(sigma_m=0.001, samples=3), settings, ALL)
     assert p.samples == 0 and p.failed_samples == 3 and p.fall_fraction is None
     assert p.failure_reasons == ("PhysicsError: boxes still overlap after 1 depenetration rounds; lower sigma or "
-                                 "raise depenetration_max_iterations",)
+                                 "raise depenetration.max_iterations",)
 
 
 def test_mu_sets_the_models_own_densities():
@@ -183,8 +183,8 @@ def test_will_anything_fall_stops_at_the_first_fall_and_agrees_with_the_full_rol
 
 
 def _collapsing(settings, factor: int, iterations: int | None = None):
-    return replace(settings, name=f"{settings.name}-collapse{factor}", collapse_step_factor=factor,
-                   collapse_solver_iterations=iterations)
+    return settings.changed(f"{settings.name}-collapse{factor}",
+                            collapse={"step_factor": factor, "solver_iterations": iterations})
 
 
 def test_collapse_steps_change_nothing_while_nothing_falls():
@@ -204,7 +204,7 @@ def test_collapse_steps_start_at_the_first_fall_and_keep_the_time_grid():
     # recorded as often as with fine steps, and the rollout ends exactly on the horizon
     cube = (0.2, 0.2, 0.2)
     scene = floor_scene(block("base", 0, 0, 0.1, extents=cube), block("top", 0.16, 0, 0.3, extents=cube))
-    no_early = replace(preset("default"), early_stop=False)
+    no_early = preset("default").changed(early_stop={"enabled": False})
     fine = physics_rollout(scene, _collapsing(no_early, 1))
     coarse = physics_rollout(scene, _collapsing(no_early, 3))
     assert coarse.simulated_s == pytest.approx(fine.simulated_s) == pytest.approx(no_early.horizon_s)
@@ -229,10 +229,10 @@ def test_settling_runs_the_first_ticks_in_substeps_on_the_same_time_grid():
     # the rollout ends on the horizon; one substep is no settling at all (bit-identical)
     cube = (0.2, 0.2, 0.2)
     scene = floor_scene(block("base", 0, 0, 0.1, extents=cube), block("top", 0.16, 0, 0.3, extents=cube))
-    base = replace(preset("default"), early_stop=False, collapse_step_factor=1)
-    plain = physics_rollout(scene, replace(base, settle_s=0.0, settle_substeps=1))
-    one = physics_rollout(scene, replace(base, settle_s=0.1, settle_substeps=1))
-    settled = physics_rollout(scene, replace(base, settle_s=0.1, settle_substeps=3))
+    base = preset("default").changed(early_stop={"enabled": False}, collapse={"step_factor": 1})
+    plain = physics_rollout(scene, base.changed(settling={"duration_s": 0.0, "substeps": 1}))
+    one = physics_rollout(scene, base.changed(settling={"duration_s": 0.1, "substeps": 1}))
+    settled = physics_rollout(scene, base.changed(settling={"duration_s": 0.1, "substeps": 3}))
     assert np.array_equal(plain.final_positions_m, one.final_positions_m)
     assert [t for t, *_ in settled.trajectory] == [t for t, *_ in plain.trajectory]
     assert settled.simulated_s == plain.simulated_s == pytest.approx(base.horizon_s)
@@ -251,16 +251,30 @@ def physics_rollout(scene, settings):
     return outcome.rollouts[0]
 
 
-@pytest.mark.parametrize("field, value, message", [
-    ("collapse_step_factor", 0, "collapse_step_factor: must be an integer in [1, 100] (1: no collapse steps), got 0"),
-    ("collapse_step_factor", 2.0, "collapse_step_factor: must be an integer in [1, 100] (1: no collapse steps), got 2.0"),
-    ("collapse_solver_iterations", 0, "collapse_solver_iterations: must be an integer in [1, 10000] or None, got 0"),
-    ("settle_substeps", 0, "settle_substeps: must be an integer in [1, 100] (1: no settling substeps), got 0"),
-    ("settle_s", -0.1, "settle_s: must be a finite number >= 0, got -0.1"),
+@pytest.mark.parametrize("group, field, value, message", [
+    ("collapse", "step_factor", 0, "collapse.step_factor: must be an integer in [1, 100] (1: no collapse steps), got 0"),
+    ("collapse", "step_factor", 2.0,
+     "collapse.step_factor: must be an integer in [1, 100] (1: no collapse steps), got 2.0"),
+    ("collapse", "solver_iterations", 0,
+     "collapse.solver_iterations: must be an integer in [1, 10000] or None, got 0"),
+    ("settling", "substeps", 0, "settling.substeps: must be an integer in [1, 100] (1: no settling substeps), got 0"),
+    ("settling", "duration_s", -0.1, "settling.duration_s: must be a finite number >= 0, got -0.1"),
+    ("early_stop", "growth_factor", 0.5, "early_stop.growth_factor: must be in [1, 10), got 0.5"),
+    ("solver", "iterations", 0, "solver.iterations: must be an integer in [1, 10000], got 0"),
 ])
-def test_collapse_and_settling_settings_are_validated(field, value, message):
+def test_each_settings_group_validates_its_own_fields(group, field, value, message):
     from ipe_ros.engine import ConfigError
 
     with pytest.raises(ConfigError) as info:
-        replace(preset("default"), **{field: value})
+        preset("default").changed(**{group: {field: value}})
     assert str(info.value) == message
+
+
+def test_changed_names_the_unknown_field():
+    from ipe_ros.engine import ConfigError
+
+    with pytest.raises(ConfigError, match=r"^collapse: .*unexpected keyword argument 'factor'.*; its fields are "
+                                          r"step_factor, solver_iterations, max_travel_fraction, drop_fraction$"):
+        preset("default").changed(collapse={"factor": 2})
+    with pytest.raises(ConfigError, match="^solver_iterations: not a field of SimSettings$"):
+        preset("default").changed(solver_iterations=2)

@@ -6,7 +6,7 @@ import numpy as np
 from rerun.chunk import RrdReader
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
-from ipe_ros.engine.rerun_log import write_prediction_rrd
+from ipe_ros.viz.rerun_log import write_prediction_rrd
 from tests.helpers import block, floor_scene, without_timing
 
 MODEL = ModelConfig(sigma_m=0.04, samples=4)

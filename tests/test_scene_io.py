@@ -29,7 +29,7 @@ def test_json_round_trip_is_exact_for_towers_pairs_and_tables(tmp_path):
 
 
 def test_example_file_loads():
-    from ipe_ros.cli import example_scene_path
+    from ipe_ros.engine.examples import example_scene_path
 
     (scene,) = load_scenes(example_scene_path())
     assert scene.name == "example_tower" and len(scene.boxes) == 10

@@ -9,11 +9,11 @@ import time
 import pytest
 
 from ipe_ros.engine import ModelConfig, load_scenes
-from ipe_ros.service import NoSceneError, PredictionFailed, PredictionService, ServiceSettings, StampedScene
+from ipe_ros.service import NoSceneError, PredictionFailed, PredictionService, ServiceConfig, StampedScene
 from tests.ros_harness import wait_until
 
 TOWER = load_scenes("ipe_ros/data/example_tower.json")[0]
-SETTINGS = ServiceSettings(model=ModelConfig(sigma_m=0.04, samples=4))
+SETTINGS = ServiceConfig(model=ModelConfig(sigma_m=0.04, samples=4))
 
 
 def item(seq: int, scene=TOWER) -> StampedScene:
@@ -50,9 +50,9 @@ def test_trigger_semantics(service):
     first = service.predict_latest(60.0)
     assert first.source.seq == 1 and first.prediction.samples == 4
     assert service.predict_latest(60.0) is first          # nothing changed: no new simulation
-    service.update_settings(dataclasses.replace(SETTINGS, model=ModelConfig(sigma_m=0.04, samples=2)))
+    service.update_config(dataclasses.replace(SETTINGS, model=ModelConfig(sigma_m=0.04, samples=2)))
     second = service.predict_latest(60.0)                   # new settings: predicted again
-    assert second.prediction.samples == 2 and second.settings_version == 1
+    assert second.prediction.samples == 2 and second.config_version == 1
     service.reject("markers: bad")
     with pytest.raises(PredictionFailed, match=r"^the latest scene was rejected: markers: bad$"):
         service.predict_latest(1.0)
@@ -61,7 +61,7 @@ def test_trigger_semantics(service):
 
 def test_trigger_timeout_says_the_answer_will_still_come(service):
     slow = dataclasses.replace(SETTINGS, model=ModelConfig(sigma_m=0.04, samples=40))
-    service.update_settings(slow)
+    service.update_config(slow)
     service.submit(item(1))
     with pytest.raises(TimeoutError, match=r"^no answer within 0.01 s; the prediction goes on and will be "
                                            r"published on ~/prediction$"):
@@ -71,11 +71,11 @@ def test_trigger_timeout_says_the_answer_will_still_come(service):
 
 def test_a_failing_prediction_is_reported_and_the_service_goes_on(service):
     bump = dataclasses.replace(SETTINGS, query=dataclasses.replace(SETTINGS.query, queries=frozenset({"bump"})))
-    service.update_settings(bump)  # the tower stands on a floor: bump cannot be answered
+    service.update_config(bump)  # the tower stands on a floor: bump cannot be answered
     service.submit(item(1))
     wait_until(lambda: service.stats().failed_predictions == 1, 30.0, "the failure to be counted")
     assert service.stats().last_error.startswith("queries: the bump query needs a table support")
-    service.update_settings(SETTINGS)
+    service.update_config(SETTINGS)
     service.submit(item(2))
     wait_until(lambda: service.stats().predicted == 1, 60.0, "the next prediction")
 

@@ -8,7 +8,6 @@ seed, and which stimulus file (or generated set) it used.
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import math
 from dataclasses import dataclass
@@ -19,7 +18,7 @@ import numpy as np
 
 from ..engine import ModelConfig, QuerySpec, predict, preset
 from ..engine.generators import generate_tables
-from . import stats
+from . import paper_data, stats
 from .features import (DIRECTION_FEATURES, TABLE_FEATURES, TOWER_FEATURES, feature_matrix, table_features,
                        tower_features)
 from .human import HumanResponses
@@ -88,11 +87,7 @@ def _ground_truth(mu: float | None = None) -> ModelConfig:
 
 
 def _authors_stable(data_dir: Path, dataset: str) -> dict[str, bool]:
-    path = data_dir / "ground_truth_stability.csv"
-    if not path.exists():
-        return {}
-    with path.open(newline="") as handle:
-        return {r["stimulus"]: r["stable"] == "1" for r in csv.DictReader(handle) if r["dataset"] == dataset}
+    return {name: outcome.stable for name, outcome in paper_data.authors_outcomes(dataset, data_dir).items()}
 
 
 def _human_against(report: Report, opts: Options, names: tuple[str, ...], model: dict[str, np.ndarray],

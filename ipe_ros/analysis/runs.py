@@ -19,7 +19,6 @@ Units and the paper's parameters:
 from __future__ import annotations
 
 import math
-import os
 import sys
 import zlib
 from dataclasses import dataclass
@@ -53,14 +52,6 @@ def sigma_m(sides: float) -> float:
 
 def phi_m_s2(paper_phi: float) -> float:
     return paper_phi * PHI_M_S2_PER_PAPER_UNIT
-
-
-def shared_data_dir() -> Path:
-    """``IPE_SHARED_DATA`` or ../shared/data/battaglia2013 beside the repository."""
-    env = os.environ.get("IPE_SHARED_DATA")
-    if env:
-        return Path(env)
-    return Path(__file__).resolve().parents[2].parent / "shared" / "data" / "battaglia2013"
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ Importing this package never imports rclpy or any ROS message package (a test ch
 from .config import ALL_QUERIES, PRESETS, ModelConfig, QuerySpec, SimSettings, parse_queries, preset
 from .errors import ConfigError, PhysicsError, SceneError
 from .estimate import Prediction
-from .pool import WorkerPool, serial_map
+from .pool import WorkerPool
 from .sampler import AdaptiveStop, predict
 from .scene import Box, Floor, Scene, Table, validate_scene
 from .scene_io import load_scenes, scene_from_dict, scene_to_dict, scenes_from_json, scenes_from_tower_csv
@@ -15,5 +15,5 @@ __all__ = [
     "ALL_QUERIES", "PRESETS", "AdaptiveStop", "Box", "ConfigError", "Floor", "ModelConfig", "PhysicsError", "Prediction",
     "QuerySpec", "Scene", "SceneError", "SimSettings", "Table", "WorkerPool", "load_scenes",
     "parse_queries", "predict", "preset", "scene_from_dict", "scene_to_dict", "scenes_from_json",
-    "scenes_from_tower_csv", "serial_map", "validate_scene",
+    "scenes_from_tower_csv", "validate_scene",
 ]

@@ -1,4 +1,6 @@
-"""Model inputs (sigma, phi, mu), simulation presets and query selection, validated on construction.
+"""Every input, preset, default and rule of the engine, validated on construction: one home for all.
+
+The CLI, the node's parameters, the service and the message bridge take their defaults from here.
 
 Units:
     sigma_m           standard deviation of the horizontal position noise, metres (paper: 0.2 block
@@ -10,12 +12,17 @@ Units:
                       None for a direction uniform over the circle.
     mu                heavy/light density ratio for boxes whose group is "heavy", or None to keep
                       the scene's own masses.
+
+"Settings" in this package always means :class:`SimSettings`: how one rollout is integrated.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import os
 from dataclasses import dataclass
+from typing import Any
 
 from .errors import ConfigError
 
@@ -23,6 +30,30 @@ from .errors import ConfigError
 #: fall: expected fraction of boxes that fall; any_fall: probability that anything falls (yes/no,
 #: its rollouts stop at the first fall); direction, far: where they fall; bump: what falls off a table.
 ALL_QUERIES = ("fall", "any_fall", "direction", "far", "bump")
+
+#: The paper's IPE, as the CLI, the node and the service answer by default: sigma = 0.2 block short
+#: sides (0.04 m for 0.2 m blocks), k = 48 samples, the fall fraction with its direction and reach.
+DEFAULT_SIGMA_M = 0.04
+DEFAULT_SAMPLES = 48
+DEFAULT_QUERIES: frozenset[str] = frozenset({"fall", "direction", "far"})
+DEFAULT_PRESET = "default"
+
+#: The model's own density for light boxes when it applies mu (paper: "the model then used its
+#: assumption about mu to set each block's individual mass density"); also the density the message
+#: bridge gives boxes that arrive without a mass. 170 kg/m^3 gives the stimuli's 4.08 kg per
+#: 0.2 x 0.6 x 0.2 m block; under gravity and a push given as an acceleration only the ratios of
+#: masses shape the motion, so the value matters for scale only.
+MODEL_LIGHT_DENSITY_KG_M3 = 170.0
+
+
+def anytime_batch_size(workers: int) -> int:
+    """Samples per batch of anytime sampling: two per worker keep every worker busy between checks."""
+    return 2 * max(1, workers)
+
+
+def default_workers() -> int:
+    """Worker processes when none are asked for: one per core, at most 8."""
+    return max(1, min(os.cpu_count() or 1, 8))
 
 
 def _positive(value: float, field: str) -> None:
@@ -37,6 +68,11 @@ def _non_negative(value: float, field: str) -> None:
         raise ConfigError(field, f"must be a finite number >= 0, got {value!r}")
 
 
+def _integer(value: Any, field: str, lo: int, hi: int, meaning: str = "") -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+        raise ConfigError(field, f"must be an integer in [{lo}, {hi}]{meaning}, got {value!r}")
+
+
 @dataclass(frozen=True)
 class ModelConfig:
     """The IPE's inputs (paper SI, "Inputs") and its sample count k."""
@@ -47,7 +83,7 @@ class ModelConfig:
     cue_half_width_rad: float = math.pi / 4
     push_duration_s: float = 0.2
     mu: float | None = None
-    samples: int = 48
+    samples: int = DEFAULT_SAMPLES
 
     def __post_init__(self) -> None:
         _non_negative(self.sigma_m, "sigma_m")
@@ -63,8 +99,7 @@ class ModelConfig:
         _positive(self.push_duration_s, "push_duration_s")
         if self.mu is not None:
             _positive(self.mu, "mu")
-        if isinstance(self.samples, bool) or not isinstance(self.samples, int) or not 1 <= self.samples <= 100_000:
-            raise ConfigError("samples", f"must be an integer in [1, 100000], got {self.samples!r}")
+        _integer(self.samples, "samples", 1, 100_000)
 
     @property
     def pushes(self) -> bool:
@@ -76,144 +111,221 @@ class ModelConfig:
         return self.sigma_m == 0 and not self.pushes
 
 
+#: The paper's IPE with the default sigma and k (phi = 0, the scene's own masses).
+DEFAULT_MODEL = ModelConfig(sigma_m=DEFAULT_SIGMA_M, samples=DEFAULT_SAMPLES)
+
+
+# --------------------------------------------------------------------------------------------
+# simulation settings: one group per concern of the stepper (see engine/simulation/)
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """pybullet's constraint solver.
+
+    iterations: solver iterations per step (the most; it stops earlier at the residual).
+    residual_threshold: pybullet stops iterating once the residual is below this (scaled by scene
+        size and step, see ``simulation.world.residual_threshold``).
+    warm_start_factor: warm start of the solver from the last step's impulses (pybullet's default
+        0.85); 1.0 carries resting contacts over fully, which keeps stacks quiet at coarse steps.
+    maximal_coordinates: boxes as plain rigid bodies (pybullet's ``useMaximalCoordinates``) instead
+        of one-link multibodies: the classic sequential-impulse solver, cheaper per contact.
+    """
+
+    iterations: int
+    residual_threshold: float = 1e-7
+    warm_start_factor: float = 0.85
+    maximal_coordinates: bool = False
+
+    def __post_init__(self) -> None:
+        _integer(self.iterations, "solver.iterations", 1, 10_000)
+        _positive(self.residual_threshold, "solver.residual_threshold")
+        if not 0 <= self.warm_start_factor <= 1:
+            raise ConfigError("solver.warm_start_factor", f"must be in [0, 1], got {self.warm_start_factor!r}")
+
+
+@dataclass(frozen=True)
+class DepenetrationSettings:
+    """Removing the overlaps that position noise creates (paper: "remove interpenetrations").
+
+    tolerance_fraction: stop once no pair of boxes overlaps by more than this fraction of the
+        smallest box extent.
+    max_iterations: rounds before giving up with a PhysicsError.
+    """
+
+    tolerance_fraction: float = 1e-3
+    max_iterations: int = 200
+
+    def __post_init__(self) -> None:
+        _positive(self.tolerance_fraction, "depenetration.tolerance_fraction")
+        _integer(self.max_iterations, "depenetration.max_iterations", 1, 100_000)
+
+
+@dataclass(frozen=True)
+class SettlingSettings:
+    """The first ``duration_s`` of a rollout run each step as ``substeps`` finer steps.
+
+    Contacts start cold: a box on the floor plane starts with one contact point and Bullet adds the
+    rest over the next steps. At coarse steps that start kicks resting blocks, enough to topple a
+    delicately balanced tower that stands at 1 ms steps. ``substeps`` = 1 switches this off.
+    """
+
+    duration_s: float = 0.0
+    substeps: int = 1
+
+    def __post_init__(self) -> None:
+        _non_negative(self.duration_s, "settling.duration_s")
+        _integer(self.substeps, "settling.substeps", 1, 100, " (1: no settling substeps)")
+
+
+@dataclass(frozen=True)
+class CollapseSettings:
+    """Coarser steps once the scene is collapsing.
+
+    Once any box has clearly fallen (its centre dropped by ``drop_fraction`` of its smallest extent,
+    after the push), falling blocks hitting each other are chaotic at any step size: only the
+    statistics of the outcome matter, and they survive coarser steps, while the delicate part (does
+    anything start to fall?) ran at the fine step. From then on the step is up to ``step_factor``
+    times the fine step, with ``solver_iterations`` (None: keep the solver's), but never so coarse
+    that a box travels more than ``max_travel_fraction`` of the smallest box extent per step (fast
+    blocks would sink deep into what they hit). ``drop_fraction`` is far above the fall query's
+    0.125, which a 30-block stack compressing under its own weight can reach without anything falling.
+    ``step_factor`` = 1 switches this off.
+    """
+
+    step_factor: int = 1
+    solver_iterations: int | None = None
+    max_travel_fraction: float = 0.5
+    drop_fraction: float = 0.5
+
+    def __post_init__(self) -> None:
+        _integer(self.step_factor, "collapse.step_factor", 1, 100, " (1: no collapse steps)")
+        if self.solver_iterations is not None:
+            _integer(self.solver_iterations, "collapse.solver_iterations", 1, 10_000, " or None")
+        _positive(self.max_travel_fraction, "collapse.max_travel_fraction")
+        _positive(self.drop_fraction, "collapse.drop_fraction")
+
+    @property
+    def enabled(self) -> bool:
+        return self.step_factor > 1
+
+
+@dataclass(frozen=True)
+class EarlyStopSettings:
+    """Ending a rollout once nothing can change any more (the task's business, not the physics').
+
+    A rollout ends once every dynamic box has been at rest for ``duration_s`` (after the push and
+    ``min_time_s``). "At rest": slower than ``speed_sizes_per_s`` box sizes (the scene's smallest
+    extent) per second and ``angular_rad_s``, and not speeding up: no box may end the window more
+    than ``growth_factor`` livelier than it began it. What guards the answer is that growth test,
+    not the thresholds: a block that will still fall speeds up (a tower starting to tip is slow but
+    accelerating), while resting contacts creep slowly at a near-constant rate. When only ``fall``
+    is asked, a box that has fallen (or cannot fall) counts as settled.
+    """
+
+    enabled: bool = False
+    speed_sizes_per_s: float = 0.05
+    angular_rad_s: float = 0.05
+    duration_s: float = 0.2
+    min_time_s: float = 0.3
+    growth_factor: float = 1.1
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.enabled, bool):
+            raise ConfigError("early_stop.enabled", f"must be true or false, got {self.enabled!r}")
+        for name in ("speed_sizes_per_s", "angular_rad_s", "duration_s"):
+            _positive(getattr(self, name), f"early_stop.{name}")
+        _non_negative(self.min_time_s, "early_stop.min_time_s")
+        if not isinstance(self.growth_factor, (int, float)) or not 1 <= self.growth_factor < 10:
+            raise ConfigError("early_stop.growth_factor", f"must be in [1, 10), got {self.growth_factor!r}")
+
+
+_GROUPS = {"solver": SolverSettings, "depenetration": DepenetrationSettings, "settling": SettlingSettings,
+           "collapse": CollapseSettings, "early_stop": EarlyStopSettings}
+
+
 @dataclass(frozen=True)
 class SimSettings:
-    """How each rollout is integrated. ``paper`` reproduces the authors' 1 ms / 2 s settings."""
+    """How each rollout is integrated: the step, the horizon, and one group per concern.
+
+    time_step_s: the fine step; never more than ``max_step_fraction_of_time_scale`` of the boxes'
+        time scale sqrt(size / g), so small boxes get finer steps (3 mm cubes sank through each
+        other at 1/240 s; 0.03 leaves 0.2 m blocks at 1/240 s and gives 3 mm cubes ~0.5 ms).
+    horizon_s: simulated time of a rollout (the paper's 2 s), unless early termination ends it.
+    """
 
     name: str
     time_step_s: float
     horizon_s: float
-    solver_iterations: int
-    #: pybullet stops iterating the solver once the residual is below this (scaled by scene size).
-    solver_residual_threshold: float = 1e-7
-    #: Depenetration: stop once no pair of boxes overlaps by more than this fraction of the
-    #: smallest box extent.
-    depenetration_tolerance_fraction: float = 1e-3
-    depenetration_max_iterations: int = 200
-    #: pybullet's warm start of the solver from the last step's impulses (its default is 0.85);
-    #: 1.0 carries resting contacts over fully, which keeps stacks quiet at coarse steps.
-    warm_start_factor: float = 0.85
-    #: Boxes as plain rigid bodies (pybullet's ``useMaximalCoordinates``) instead of one-link
-    #: multibodies: the classic sequential-impulse solver, cheaper per contact for free boxes.
-    maximal_coordinates: bool = False
-    #: Early termination: end a rollout once every dynamic box has been at rest for
-    #: ``rest_duration_s`` (after the push and ``rest_min_time_s``): nothing can move any more.
-    #: When ``fall`` is the only query, a box that has already fallen counts as settled too. The
-    #: motion must also not have grown over the window: a tower just starting to tip is slow but
-    #: accelerating (ending it at 0.5 s kept a tower standing that the authors' simulation topples).
-    early_stop: bool = False
-    #: "At rest": linear speed below this many box sizes (the scene's smallest extent) per second
-    #: and angular speed below ``rest_angular_rad_s``. What guards the answer is the growth test
-    #: below, not these thresholds: a block that will still fall speeds up. ``default`` uses
-    #: 0.4 / 0.4 (debris rocking after a collapse counts as settled unless it speeds up).
-    rest_speed_sizes_per_s: float = 0.05
-    rest_angular_rad_s: float = 0.05
-    rest_duration_s: float = 0.2
-    rest_min_time_s: float = 0.3
-    #: "Not growing": no box may end the rest window more than this factor livelier than it
-    #: began it. Resting contacts creep (a stacked block drifting at ~1 mm/s, 0.3% faster every
-    #: 0.05 s, kept a plain two-block stack running to the horizon with a factor of 1), while a tower
-    #: starting to tip speeds up several-fold in 0.2 s. Motion below
-    #: ``physics.REST_NOISE_FLOOR_PER_S`` never counts as growing.
-    rest_growth_factor: float = 1.1
-    #: The step never exceeds this fraction of the boxes' time scale sqrt(size / g): small boxes
-    #: get finer steps (3 mm cubes sank through each other at 1/240 s). 0.03 leaves 0.2 m blocks
-    #: at 1/240 s and gives 3 mm cubes ~0.5 ms.
+    solver: SolverSettings
     max_step_fraction_of_time_scale: float = 0.03
-    #: Collapse steps: once any box has clearly fallen (``collapse_drop_fraction``, after the push),
-    #: the scene is collapsing. Falling blocks hitting each other are chaotic at any step size: only the
-    #: statistics of the outcome matter, and they survive coarser steps, while the delicate part
-    #: (does anything start to fall?) ran at the fine step. From then on the step is this integer
-    #: multiple of the fine step, with ``collapse_solver_iterations``. 1 switches this off.
-    collapse_step_factor: int = 1
-    collapse_solver_iterations: int | None = None  # None: keep solver_iterations
-    #: A collapse step is only as coarse as lets no box travel more than this fraction of the
-    #: smallest box extent per step (chosen every 0.05 s from the fastest box): a 30-block tower's
-    #: top blocks hit the floor at 11 m/s and would sink deep into it in one coarse step.
-    collapse_max_travel_fraction: float = 0.5
-    #: The collapse starts when a box's centre has dropped by this fraction of its smallest extent:
-    #: far more than the fall query's 0.125, which a 30-block stack compressing under its own weight
-    #: at coarse steps can reach without anything falling.
-    collapse_drop_fraction: float = 0.5
-
-    #: Settling: the first ``settle_s`` of a rollout run each step as ``settle_substeps`` finer
-    #: steps. Contacts start cold (a box on the floor plane starts with one contact point, Bullet
-    #: adds the rest over the next steps), and at coarse steps that start kicks resting blocks: at
-    #: 1/180 s a delicately balanced tower, static at 1 ms steps, crept 2 cm in 2 s and toppled
-    #: at 3 s. 1 switches this off.
-    settle_s: float = 0.0
-    settle_substeps: int = 1
+    depenetration: DepenetrationSettings = DepenetrationSettings()
+    settling: SettlingSettings = SettlingSettings()
+    collapse: CollapseSettings = CollapseSettings()
+    early_stop: EarlyStopSettings = EarlyStopSettings()
 
     def __post_init__(self) -> None:
-        _non_negative(self.settle_s, "settle_s")
-        if isinstance(self.settle_substeps, bool) or not isinstance(self.settle_substeps, int) \
-                or not 1 <= self.settle_substeps <= 100:
-            raise ConfigError("settle_substeps",
-                              f"must be an integer in [1, 100] (1: no settling substeps), got {self.settle_substeps!r}")
         _positive(self.time_step_s, "time_step_s")
         _positive(self.horizon_s, "horizon_s")
-        _positive(self.solver_residual_threshold, "solver_residual_threshold")
-        _positive(self.depenetration_tolerance_fraction, "depenetration_tolerance_fraction")
-        if not 0 <= self.warm_start_factor <= 1:
-            raise ConfigError("warm_start_factor", f"must be in [0, 1], got {self.warm_start_factor!r}")
-        for name in ("rest_speed_sizes_per_s", "rest_angular_rad_s", "rest_duration_s"):
-            _positive(getattr(self, name), name)
-        _non_negative(self.rest_min_time_s, "rest_min_time_s")
-        if not isinstance(self.rest_growth_factor, (int, float)) or not 1 <= self.rest_growth_factor < 10:
-            raise ConfigError("rest_growth_factor", f"must be in [1, 10), got {self.rest_growth_factor!r}")
         _positive(self.max_step_fraction_of_time_scale, "max_step_fraction_of_time_scale")
-        _positive(self.collapse_max_travel_fraction, "collapse_max_travel_fraction")
-        _positive(self.collapse_drop_fraction, "collapse_drop_fraction")
         if self.time_step_s > self.horizon_s:
             raise ConfigError("time_step_s", "must not exceed horizon_s")
-        if not isinstance(self.solver_iterations, int) or not 1 <= self.solver_iterations <= 10_000:
-            raise ConfigError("solver_iterations", f"must be an integer in [1, 10000], got {self.solver_iterations!r}")
-        if isinstance(self.collapse_step_factor, bool) or not isinstance(self.collapse_step_factor, int) \
-                or not 1 <= self.collapse_step_factor <= 100:
-            raise ConfigError("collapse_step_factor",
-                              f"must be an integer in [1, 100] (1: no collapse steps), got {self.collapse_step_factor!r}")
-        if self.collapse_solver_iterations is not None and (
-                isinstance(self.collapse_solver_iterations, bool) or not isinstance(self.collapse_solver_iterations, int)
-                or not 1 <= self.collapse_solver_iterations <= 10_000):
-            raise ConfigError("collapse_solver_iterations",
-                              f"must be an integer in [1, 10000] or None, got {self.collapse_solver_iterations!r}")
+        for group, kind in _GROUPS.items():
+            if not isinstance(getattr(self, group), kind):
+                raise ConfigError(group, f"must be a {kind.__name__}, got {getattr(self, group)!r}")
 
     @property
     def steps(self) -> int:
         return int(round(self.horizon_s / self.time_step_s))
 
     def time_step_for(self, scale_m: float, gravity_m_s2: float) -> float:
-        """The step for a scene whose smallest box extent is ``scale_m`` (see the field above)."""
+        """The step for a scene whose smallest box extent is ``scale_m`` (see ``time_step_s``)."""
         return min(self.time_step_s, self.max_step_fraction_of_time_scale * math.sqrt(scale_m / gravity_m_s2))
+
+    def changed(self, name: str | None = None, **changes: Any) -> SimSettings:
+        """A copy with some fields changed; a group takes a dict of its own fields.
+
+        ``preset("default").changed("default-50it", solver={"iterations": 50}, horizon_s=1.0)``
+        """
+        top: dict[str, Any] = {} if name is None else {"name": name}
+        for key, value in changes.items():
+            if key in _GROUPS and isinstance(value, dict):
+                try:
+                    value = dataclasses.replace(getattr(self, key), **value)
+                except TypeError as exc:
+                    raise ConfigError(key, f"{exc}; its fields are "
+                                           f"{', '.join(f.name for f in dataclasses.fields(_GROUPS[key]))}") from None
+            elif key not in {f.name for f in dataclasses.fields(self)}:
+                raise ConfigError(key, "not a field of SimSettings")
+            top[key] = value
+        return dataclasses.replace(self, **top)
 
 
 PRESETS: dict[str, SimSettings] = {
     # The paper's settings: 1 ms steps for the full 2 s, a fully converged solver, no shortcuts.
-    "paper": SimSettings(name="paper", time_step_s=0.001, horizon_s=2.0, solver_iterations=50),
+    "paper": SimSettings(name="paper", time_step_s=0.001, horizon_s=2.0, solver=SolverSettings(iterations=50)),
     # 1 ms / 2 s with 20 solver iterations: close to `paper` (mean |dFF| ~0.006) at ~1.8x its speed.
-    "accurate": SimSettings(name="accurate", time_step_s=0.001, horizon_s=2.0, solver_iterations=20),
-    # 1/240 s steps throughout (1/233 s for 0.2 m blocks, by the size cap), boxes as plain rigid
-    # bodies (maximal coordinates) with a full warm start, up to 100 solver iterations (to a residual
-    # of 3e-6: a looser 1e-5 toppled a delicately balanced tower that stands), the first 0.1 s in
-    # half steps (settling, see SimSettings), and rollouts that end once everything has been at rest
-    # (and slowing down) for 0.2 s. The default until collapse steps.
-    "fine": SimSettings(name="fine", time_step_s=1 / 240, horizon_s=2.0, solver_iterations=100,
-                        solver_residual_threshold=3e-6, warm_start_factor=1.0, maximal_coordinates=True,
-                        early_stop=True, settle_s=0.1, settle_substeps=2),
-    # The default: `fine`'s solver at 1/180 s steps until something falls, then 4x coarser collapse
-    # steps (the delicate question, does anything start to fall, gets the fine step; the chaotic
-    # collapse only needs its statistics); the first 0.1 s in half steps (settling); a 0.15 s rest
-    # window from 0.2 s on, "at rest" read as slower than 0.4 sizes/s and 0.4 rad/s and not
-    # speeding up. See README for its speed and accuracy against `paper`
-    # (benchmarks/accuracy_vs_time.py). Without settling the delicately balanced tower creeps (2 cm
-    # in 2 s, toppling at 3 s); fewer solver iterations (85, 70) or coarser fine steps (1/160 s)
-    # turn towers the authors' simulation keeps standing into falls; shorter rest windows or an
-    # earlier collapse fail other hard cases (tests/test_hard_cases.py, tests/test_paper_data.py).
-    "default": SimSettings(name="default", time_step_s=1 / 180, horizon_s=2.0, solver_iterations=100,
-                           solver_residual_threshold=3e-6, warm_start_factor=1.0, maximal_coordinates=True,
-                           early_stop=True, max_step_fraction_of_time_scale=0.04, collapse_step_factor=4,
-                           rest_duration_s=0.15, rest_min_time_s=0.2,
-                           rest_speed_sizes_per_s=0.4, rest_angular_rad_s=0.4, settle_s=0.1, settle_substeps=2),
+    "accurate": SimSettings(name="accurate", time_step_s=0.001, horizon_s=2.0, solver=SolverSettings(iterations=20)),
+    # 1/240 s steps (1/233 s for 0.2 m blocks, by the size cap), plain rigid bodies with a full warm
+    # start, up to 100 solver iterations to a residual of 3e-6 (a looser 1e-5 topples a delicately
+    # balanced tower that stands), the first 0.1 s in half steps, and rollouts that end once
+    # everything has been at rest (and slowing down) for 0.2 s.
+    "fine": SimSettings(name="fine", time_step_s=1 / 240, horizon_s=2.0,
+                        solver=SolverSettings(iterations=100, residual_threshold=3e-6, warm_start_factor=1.0,
+                                              maximal_coordinates=True),
+                        settling=SettlingSettings(duration_s=0.1, substeps=2),
+                        early_stop=EarlyStopSettings(enabled=True)),
+    # The default: `fine`'s solver at 1/180 s steps until something falls, then up to 4x coarser
+    # collapse steps; settling as `fine`; a 0.15 s rest window from 0.2 s on, "at rest" read as
+    # slower than 0.4 sizes/s and 0.4 rad/s and not speeding up. Each of these is the coarsest
+    # setting that keeps the hard cases (tests/test_hard_cases.py) and the authors' outcomes
+    # (tests/test_paper_data.py); speed and accuracy against `paper` in benchmarks/README.md.
+    "default": SimSettings(name="default", time_step_s=1 / 180, horizon_s=2.0, max_step_fraction_of_time_scale=0.04,
+                           solver=SolverSettings(iterations=100, residual_threshold=3e-6, warm_start_factor=1.0,
+                                                 maximal_coordinates=True),
+                           settling=SettlingSettings(duration_s=0.1, substeps=2),
+                           collapse=CollapseSettings(step_factor=4),
+                           early_stop=EarlyStopSettings(enabled=True, speed_sizes_per_s=0.4, angular_rad_s=0.4,
+                                                        duration_s=0.15, min_time_s=0.2)),
 }
 
 
@@ -240,6 +352,8 @@ class QuerySpec:
     bump_group: str = "red"
 
     def __post_init__(self) -> None:
+        if not isinstance(self.queries, frozenset) or not all(isinstance(q, str) for q in self.queries):
+            raise ConfigError("queries", f"must be a set of query names from {', '.join(ALL_QUERIES)}")
         unknown = sorted(set(self.queries) - set(ALL_QUERIES))
         if unknown:
             raise ConfigError("queries", f"unknown query {unknown[0]!r}; choose from {', '.join(ALL_QUERIES)}")
@@ -249,6 +363,11 @@ class QuerySpec:
 
     def wants(self, name: str) -> bool:
         return name in self.queries
+
+    @property
+    def only_fall(self) -> bool:
+        """Only whether boxes fall is asked (not where they end up): rollouts may end once it is decided."""
+        return self.queries <= frozenset({"fall", "any_fall"})
 
 
 def parse_queries(text: str) -> frozenset[str]:

@@ -125,7 +125,7 @@ class Prediction:
     bump_rollouts: int | None = None
     wall_s: float = 0.0
     stopped_by: str = "samples"  # "samples" (all k drawn), "ci_width" or "deadline" (anytime sampling)
-    settings: dict[str, Any] = field(default_factory=dict)
+    request: dict[str, Any] = field(default_factory=dict)
     outcomes: tuple[SampleOutcome, ...] = field(default=(), repr=False, compare=False)
 
     def to_dict(self) -> dict[str, Any]:
@@ -139,14 +139,14 @@ class Prediction:
 
 def aggregate(scene: Scene, outcomes: Sequence[SampleOutcome], *, queries: frozenset[str],
               bump_group: str, deterministic: bool, samples_requested: int, wall_s: float,
-              settings: dict[str, Any]) -> Prediction:
+              request: dict[str, Any]) -> Prediction:
     """Combine per-sample outcomes into a :class:`Prediction` (failed samples are counted, not used)."""
     ok = [o for o in outcomes if o.ok]
     failed = [o for o in outcomes if not o.ok]
     reasons = tuple(dict.fromkeys(o.error or "unknown" for o in failed))[:5]
     base = dict(scene=scene.name, samples=len(ok), samples_requested=samples_requested,
                 failed_samples=len(failed), failure_reasons=reasons, deterministic=deterministic,
-                wall_s=wall_s, settings=settings, outcomes=tuple(outcomes))
+                wall_s=wall_s, request=request, outcomes=tuple(outcomes))
     if not ok:
         return Prediction(**base)
     names = [b.name for b in scene.dynamic_boxes]

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import ModelConfig
+from .config import MODEL_LIGHT_DENSITY_KG_M3, ModelConfig
 from .scene import Scene
 
 
@@ -29,13 +29,6 @@ class SampleInputs:
     positions_m: np.ndarray
     masses_kg: np.ndarray
     push_direction_rad: float
-
-
-#: The model's own density for light boxes when it applies mu (paper: "the model then used its
-#: assumption about mu to set each block's individual mass density"). 170 kg/m^3 gives the stimuli's
-#: 4.08 kg per 0.2 x 0.6 x 0.2 m block; under gravity and a push given as an acceleration only the
-#: ratios of masses shape the motion, so the value matters for scale only.
-MODEL_LIGHT_DENSITY_KG_M3 = 170.0
 
 
 def dynamic_masses(scene: Scene, mu: float | None) -> np.ndarray:

@@ -16,7 +16,7 @@ import threading
 import time
 from concurrent.futures import CancelledError, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
-from typing import Callable, Iterable, Sequence, TypeVar
+from typing import Callable, Iterable, TypeVar
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -30,8 +30,8 @@ def _init_worker(owner_pid: int) -> None:
     # A worker's parent is the fork server, not the process that owns the pool. When the owner dies
     # without closing the pool (SIGKILL, a crash), end this worker too instead of leaving it behind.
     threading.Thread(target=_exit_when_gone, args=(owner_pid,), name="owner-watch", daemon=True).start()
-    from . import physics
-    physics.client()
+    from .simulation import world
+    world.client()  # connect pybullet now, not in the first sample
 
 
 def _exit_when_gone(pid: int, period_s: float = 1.0) -> None:
@@ -101,7 +101,9 @@ class WorkerPool:
         executor = self._executor
         if executor is None:
             return []
-        processes = getattr(executor, "_processes", None) or {}
+        # A copy first: the executor's management thread adds and removes processes meanwhile
+        # (iterating the live dict raised "dictionary changed size during iteration").
+        processes = dict(getattr(executor, "_processes", None) or {})
         return sorted(pid for pid, proc in processes.items() if proc.is_alive())
 
     def close(self) -> None:
@@ -186,8 +188,3 @@ class WorkerPool:
         if lost and not self._closed:
             self._replace_executor(executor)
         return sorted(lost)
-
-
-def serial_map(fn: Callable[[T], R], items: Sequence[T], on_lost=None) -> list[R]:
-    """The in-process map with the pool's signature (workers = 0)."""
-    return [fn(x) for x in items]

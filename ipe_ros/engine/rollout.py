@@ -7,17 +7,17 @@ with ``ok=False`` and the reason, and the sampler counts it.
 
 from __future__ import annotations
 
-import dataclasses
 import traceback
 from dataclasses import dataclass
 
 import numpy as np
 
-from . import physics, queries
+from . import queries, simulation
 from .config import ModelConfig, QuerySpec, SimSettings
 from .errors import PhysicsError
 from .perturb import draw_sample_inputs
 from .scene import Floor, Scene, Table
+from .simulation import NO_PROBE, DecidedHeights, Probe
 
 
 @dataclass(frozen=True)
@@ -96,15 +96,18 @@ def _smallest_extents(task: SampleTask) -> np.ndarray:
     return np.array([min(b.extents_m) for b in task.scene.dynamic_boxes])
 
 
-def _decided_height(task: SampleTask, initial: np.ndarray) -> np.ndarray | None:
+def _decided_heights(task: SampleTask, initial: np.ndarray) -> DecidedHeights | None:
     """When only ``fall`` / ``any_fall`` are asked, the height below which each box's outcome is
-    decided (fallen).
+    decided (fallen), and the boxes that can never get there.
 
     Other queries (direction, far, bump) depend on where boxes end up, so they wait for rest.
     """
-    if not task.settings.early_stop or not task.query.queries <= frozenset({"fall", "any_fall"}):
+    if not task.settings.early_stop.enabled or not task.query.only_fall:
         return None
-    return initial[:, 2] - task.query.fall_threshold_fraction * _smallest_extents(task)
+    fallen_below_z = initial[:, 2] - task.query.fall_threshold_fraction * _smallest_extents(task)
+    # "will anything fall?" is decided by the first box that falls
+    return DecidedHeights(fallen_below_z_m=fallen_below_z, never_falls=_never_falls(task, fallen_below_z),
+                          stop_at_first_fall=task.query.queries == frozenset({"any_fall"}))
 
 
 def _never_falls(task: SampleTask, decided_below_z: np.ndarray) -> np.ndarray | None:
@@ -122,35 +125,38 @@ def _never_falls(task: SampleTask, decided_below_z: np.ndarray) -> np.ndarray | 
     return decided_below_z < lowest_surface_z + 0.45 * smallest
 
 
-def run_sample(task: SampleTask) -> SampleOutcome:
-    """Draw, separate and simulate one sample for every phi value; never raises for physics errors."""
+def run_sample(task: SampleTask, probe: Probe = NO_PROBE) -> SampleOutcome:
+    """Draw, separate and simulate one sample for every phi value; never raises for physics errors.
+
+    ``probe`` watches the parts (benchmarks/time_budget.py); it never changes the outcome.
+    """
     rng = np.random.default_rng(task.seed)
     inputs = draw_sample_inputs(task.scene, task.model, rng)
     try:
         # Separate in the same body representation whatever the preset, so that every preset starts
         # from bit-identical initial scenes (the two representations round differently). Plain rigid
         # bodies are the default's own, so it simulates on in the separated world.
-        separation = dataclasses.replace(task.settings, maximal_coordinates=True)
-        world = physics.build_world(task.scene, inputs.positions_m, inputs.masses_kg, separation)
-        physics.depenetrate(world, separation)
-        initial, initial_orn = physics.read_poses(world)
-        decided_below_z = _decided_height(task, initial)
-        never_falls = None if decided_below_z is None else _never_falls(task, decided_below_z)
+        separation = task.settings.changed(solver={"maximal_coordinates": True})
+        with probe.part("build"):
+            world = simulation.build_world(task.scene, inputs.positions_m, inputs.masses_kg, separation)
+        with probe.part("depenetrate"):
+            simulation.depenetrate(world, separation)
+        initial, initial_orn = simulation.read_poses(world)
+        decided = _decided_heights(task, initial)
         collapse_below_z = None
-        if task.settings.collapse_step_factor > 1:
-            collapse_below_z = initial[:, 2] - task.settings.collapse_drop_fraction * _smallest_extents(task)
+        if task.settings.collapse.enabled:
+            collapse_below_z = initial[:, 2] - task.settings.collapse.drop_fraction * _smallest_extents(task)
         results = []
         for i, phi in enumerate(task.model.phi_m_s2):
-            if i > 0 or not task.settings.maximal_coordinates:  # a fresh world from the separated state
-                world = physics.build_world(task.scene, initial, inputs.masses_kg, task.settings,
-                                            orientations_xyzw=initial_orn)
-            final, final_orn, trajectory, simulated_s = physics.simulate(
-                world, task.scene, task.settings, phi, inputs.push_direction_rad,
-                task.model.push_duration_s, record_every=task.record_every,
-                fallen_below_z_m=decided_below_z,
-                # "will anything fall?" is decided by the first box that falls
-                stop_at_first_fall=decided_below_z is not None and task.query.queries == frozenset({"any_fall"}),
-                collapse_below_z_m=collapse_below_z, never_falls=never_falls)
+            if i > 0 or not task.settings.solver.maximal_coordinates:  # a fresh world from the separated state
+                with probe.part("build"):
+                    world = simulation.build_world(task.scene, initial, inputs.masses_kg, task.settings,
+                                                   orientations_xyzw=initial_orn)
+            push = simulation.Push(phi, inputs.push_direction_rad, task.model.push_duration_s)
+            end = simulation.simulate(world, task.scene, task.settings, push, record_every=task.record_every,
+                                      decided=decided, collapse_below_z_m=collapse_below_z, probe=probe)
+            final, final_orn, trajectory, simulated_s = end.positions_m, end.orientations_xyzw, end.trajectory, \
+                end.simulated_s
             results.append(_query(task, initial, final, final_orn, phi, trajectory, simulated_s))
     except PhysicsError as exc:
         return SampleOutcome(index=task.index, ok=False, error=f"PhysicsError: {exc}",

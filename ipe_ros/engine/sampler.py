@@ -1,7 +1,8 @@
 """The Monte Carlo IPE (paper Eq. S5): one seed per sample, an injected map, aggregation.
 
-Parallelism is a ``map`` argument (the builtin for in-process, ``WorkerPool.map`` for workers):
-the sampler neither knows nor cares where samples run. Each sample i gets the i-th child of
+Parallelism is an injected ``map_fn(fn, items, on_lost=...)`` (``WorkerPool.map`` for worker
+processes; None runs samples in this process): the sampler neither knows nor cares where samples
+run. ``on_lost(item, reason)`` answers for an item whose worker died twice. Each sample i gets the i-th child of
 ``SeedSequence(seed)``, so a prediction is a function of (scene, settings, seed) alone.
 """
 
@@ -127,15 +128,15 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
                     stopped_by = "ci_width"
                     break
     wall_s = time.perf_counter() - start
-    settings_echo = {
+    request = {
         "sigma_m": model.sigma_m, "phi_m_s2": list(model.phi_m_s2),
         "force_direction_rad": model.force_direction_rad, "mu": model.mu, "preset": settings.name,
         "time_step_s": settings.time_step_s, "horizon_s": settings.horizon_s,
-        "solver_iterations": settings.solver_iterations, "seed": seed, "queries": sorted(query.queries),
+        "solver_iterations": settings.solver.iterations, "seed": seed, "queries": sorted(query.queries),
     }
     if stop is not None:
-        settings_echo.update(ci_width=stop.ci_width, deadline_s=stop.deadline_s)
+        request.update(ci_width=stop.ci_width, deadline_s=stop.deadline_s)
     prediction = aggregate(scene, outcomes, queries=query.queries, bump_group=query.bump_group,
                            deterministic=model.is_deterministic, samples_requested=len(tasks),
-                           wall_s=wall_s, settings=settings_echo)
+                           wall_s=wall_s, request=request)
     return dataclasses.replace(prediction, stopped_by=stopped_by)

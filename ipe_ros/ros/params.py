@@ -1,8 +1,9 @@
 """The node's ROS parameters: declarations with descriptors and ranges, and their mapping to the engine.
 
-``PARAMETERS`` is the single table the node declares, the README documents and the tests check.
-``settings_from_values`` is pure (no rclpy): it turns a {name: value} mapping into
-:class:`~ipe_ros.service.ServiceSettings` or raises ``ConfigError`` naming the parameter.
+``PARAMETERS`` is the single table the node declares, the README documents and the tests check; its
+defaults come from the engine's config. ``config_from_values`` is pure (no rclpy): it turns a
+{name: value} mapping into :class:`~ipe_ros.service.ServiceConfig` or raises ``ConfigError`` naming the
+parameter. The engine's own types do the checking; only ROS-specific fields are checked here.
 """
 
 from __future__ import annotations
@@ -13,8 +14,11 @@ from typing import Any, Mapping
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 
-from .engine import ALL_QUERIES, PRESETS, AdaptiveStop, ConfigError, ModelConfig, QuerySpec
-from .service import ServiceSettings, default_workers
+from ..engine import ALL_QUERIES, PRESETS, AdaptiveStop, ConfigError, ModelConfig, QuerySpec, preset
+from ..engine.config import (DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M, anytime_batch_size,
+                             default_workers)
+from ..engine.scene import DEFAULT_MAX_OBJECTS
+from ..service import ServiceConfig
 
 
 @dataclass(frozen=True)
@@ -42,8 +46,8 @@ _INT, _DOUBLE = ParameterType.PARAMETER_INTEGER, ParameterType.PARAMETER_DOUBLE
 _STRING, _STRINGS = ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_STRING_ARRAY
 
 PARAMETERS: tuple[ParamSpec, ...] = (
-    ParamSpec("samples", 48, _INT, "Monte Carlo samples k per prediction (paper: 48)", (1, 10000)),
-    ParamSpec("sigma", 0.04, _DOUBLE, "position noise SD, metres (paper: 0.2 block short sides = 0.04 m "
+    ParamSpec("samples", DEFAULT_SAMPLES, _INT, "Monte Carlo samples k per prediction (paper: 48)", (1, 10000)),
+    ParamSpec("sigma", DEFAULT_SIGMA_M, _DOUBLE, "position noise SD, metres (paper: 0.2 block short sides = 0.04 m "
                                       "for 0.2 m blocks; 0 with phi 0 is the deterministic ground truth)", (0.0, 10.0)),
     ParamSpec("phi", 0.0, _DOUBLE, "latent push: horizontal acceleration of the support for 0.2 s, m/s^2 "
                                    "(0: no push)", (0.0, 100.0)),
@@ -53,11 +57,11 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               constraints="finite degrees, or NaN for any direction"),
     ParamSpec("mu", 0.0, _DOUBLE, "heavy/light density ratio for boxes in group 'heavy'; 0 keeps the scene's "
                                   "own masses", (0.0, 1000.0)),
-    ParamSpec("queries", ["fall", "direction", "far"], _STRINGS,
+    ParamSpec("queries", [q for q in ALL_QUERIES if q in DEFAULT_QUERIES], _STRINGS,
               "queries to answer: any of " + ", ".join(ALL_QUERIES) + " (bump needs a table)",
               constraints="non-empty subset of " + ", ".join(ALL_QUERIES)),
-    ParamSpec("preset", "default", _STRING, "simulation settings: " + ", ".join(
-        f"{name} ({s.time_step_s * 1000:g} ms steps, {s.horizon_s:g} s, {s.solver_iterations} solver iterations)"
+    ParamSpec("preset", DEFAULT_PRESET, _STRING, "simulation settings: " + ", ".join(
+        f"{name} ({s.time_step_s * 1000:g} ms steps, {s.horizon_s:g} s, {s.solver.iterations} solver iterations)"
         for name, s in PRESETS.items()), constraints="one of " + ", ".join(PRESETS)),
     ParamSpec("seed", 0, _INT, "random seed; a prediction is a function of (scene, parameters, seed)", (0, 2**31 - 1)),
     ParamSpec("workers", default_workers(), _INT, "simulation worker processes (0: run samples in the node's "
@@ -67,7 +71,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               (0.0, 1.0)),
     ParamSpec("deadline_s", 0.0, _DOUBLE, "anytime sampling: stop drawing samples before this many seconds; "
                                           "0: off (all k samples)", (0.0, 3600.0)),
-    ParamSpec("max_objects", 200, _INT, "scenes with more boxes are rejected", (1, 10000)),
+    ParamSpec("max_objects", DEFAULT_MAX_OBJECTS, _INT, "scenes with more boxes are rejected", (1, 10000)),
     ParamSpec("frame_id", "world", _STRING, "frame of scenes received on ~/scene_json (JSON carries no header)"),
     ParamSpec("service_timeout_s", 60.0, _DOUBLE, "how long ~/predict waits for an answer, seconds", (0.1, 3600.0)),
     ParamSpec("rerun.save_dir", "", _STRING, "folder for one .rrd recording per prediction; empty: no rerun logging"),
@@ -79,29 +83,14 @@ PARAMETERS: tuple[ParamSpec, ...] = (
                                                 "contact or spawn a viewer"),
 )
 
-SPECS = {spec.name: spec for spec in PARAMETERS}
-
-
-def default_values() -> dict[str, Any]:
-    return {spec.name: spec.default for spec in PARAMETERS}
-
-
-def settings_from_values(values: Mapping[str, Any]) -> ServiceSettings:
-    """Build the engine settings from parameter values; ConfigError names the parameter at fault."""
-    def engine_error(exc: ConfigError, name: str) -> ConfigError:
-        return ConfigError(name, exc.problem)
-
+def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
+    """Build the service config from parameter values; ConfigError names the parameter at fault."""
     direction = float(values["force_direction_deg"])
     if math.isinf(direction):
         raise ConfigError("force_direction_deg", f"must be finite degrees or NaN (any direction), got {direction}")
     queries = values["queries"]
-    unknown = [q for q in queries if q not in ALL_QUERIES]
-    if unknown:
-        raise ConfigError("queries", f"unknown query {unknown[0]!r}; choose from {', '.join(ALL_QUERIES)}")
-    if not queries:
-        raise ConfigError("queries", f"ask for at least one of {', '.join(ALL_QUERIES)}")
-    if values["preset"] not in PRESETS:
-        raise ConfigError("preset", f"unknown preset {values['preset']!r}; choose one of {', '.join(PRESETS)}")
+    query = QuerySpec(queries=frozenset(queries))
+    settings = preset(values["preset"])
     mu = float(values["mu"])
     try:
         model = ModelConfig(sigma_m=float(values["sigma"]), phi_m_s2=(float(values["phi"]),),
@@ -109,19 +98,18 @@ def settings_from_values(values: Mapping[str, Any]) -> ServiceSettings:
                             mu=None if mu == 0 else mu, samples=int(values["samples"]))
     except ConfigError as exc:
         name = {"sigma_m": "sigma", "phi_m_s2": "phi", "force_direction_rad": "force_direction_deg"}.get(exc.field, exc.field)
-        raise engine_error(exc, name) from None
+        raise ConfigError(name, exc.problem) from None
     width, deadline = float(values["target_ci_width"]), float(values["deadline_s"])
     stop = None
     if width > 0 or deadline > 0:
         if width > 0 and "fall" not in queries and "any_fall" not in queries:
             raise ConfigError("target_ci_width", "needs the fall or any_fall query; add one to queries or set it to 0")
-        # batches of two samples per worker keep every worker busy between checks
         stop = AdaptiveStop(ci_width=width or None, deadline_s=deadline or None,
-                            batch_size=2 * max(1, int(values["workers"])))
+                            batch_size=anytime_batch_size(int(values["workers"])))
     save_dir = str(values["rerun.save_dir"]).strip()
     connect = str(values["rerun.connect_url"]).strip()
-    return ServiceSettings(model=model, sim=PRESETS[values["preset"]], query=QuerySpec(queries=frozenset(queries)),
-                           seed=int(values["seed"]), max_objects=int(values["max_objects"]),
-                           rerun_save_dir=save_dir or None, rerun_rollouts_logged=int(values["rerun.rollouts_logged"]),
-                           rerun_frame_period_s=float(values["rerun.frame_period_s"]),
-                           rerun_connect_url=connect or None, stop=stop)
+    return ServiceConfig(model=model, settings=settings, query=query,
+                         seed=int(values["seed"]), max_objects=int(values["max_objects"]),
+                         rerun_save_dir=save_dir or None, rerun_rollouts_logged=int(values["rerun.rollouts_logged"]),
+                         rerun_frame_period_s=float(values["rerun.frame_period_s"]),
+                         rerun_connect_url=connect or None, stop=stop)

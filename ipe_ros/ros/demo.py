@@ -30,10 +30,10 @@ from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from msg_bridge.markers import scene_to_markers  # noqa: E402
 
-from .cli import example_scene_path  # noqa: E402
-from .engine import load_scenes  # noqa: E402
+from ..engine import load_scenes  # noqa: E402
+from ..engine.config import DEFAULT_SAMPLES, DEFAULT_SIGMA_M, default_workers  # noqa: E402
+from ..engine.examples import example_scene_path  # noqa: E402
 from .node import LATCHED_QOS, IpeNode  # noqa: E402
-from .service import default_workers  # noqa: E402
 
 
 class DemoFailed(RuntimeError):
@@ -99,7 +99,7 @@ def run(output_dir: Path, samples: int, workers: int, timeout_s: float) -> list[
 
         tower = load_scenes(example_scene_path())[0]
         print(f"publishing {tower.name} ({len(tower.boxes)} blocks, a paper-style tower) as a MarkerArray on "
-              f"/ipe/scene; IPE with sigma = 0.04 m (0.2 block short sides), k = {samples}", flush=True)
+              f"/ipe/scene; IPE with sigma = {DEFAULT_SIGMA_M:g} m (0.2 block short sides), k = {samples}", flush=True)
         scene_pub.publish(scene_to_markers(tower, "world", robot.get_clock().now().nanoseconds))
         _wait(lambda: len(answers) >= 1, timeout_s, "the IPE prediction")
 
@@ -132,7 +132,8 @@ def run(output_dir: Path, samples: int, workers: int, timeout_s: float) -> list[
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="ipe_ros_demo", description=__doc__.split("\n")[0])
     parser.add_argument("--output-dir", default="ipe_demo_output", help="where the .rrd recordings go")
-    parser.add_argument("--samples", type=int, default=48, help="Monte Carlo samples k (default 48)")
+    parser.add_argument("--samples", type=int, default=DEFAULT_SAMPLES,
+                        help=f"Monte Carlo samples k (default {DEFAULT_SAMPLES})")
     parser.add_argument("--workers", type=int, default=default_workers(), help="worker processes (default: CPUs)")
     parser.add_argument("--timeout", type=float, default=300.0, help="give up after this many seconds per step")
     args = parser.parse_args(argv)

@@ -26,7 +26,7 @@ from std_msgs.msg import String  # noqa: E402
 
 from msg_bridge.json_text import scene_to_string  # noqa: E402
 
-from .engine import load_scenes  # noqa: E402
+from ..engine import load_scenes  # noqa: E402
 from .node import LATCHED_QOS  # noqa: E402
 
 EXIT_NO_ANSWER, EXIT_BAD_INPUT = 1, 2

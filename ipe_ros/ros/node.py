@@ -1,4 +1,4 @@
-"""``ipe_node``: the intuitive physics engine as a ROS 2 node (the only module that spins rclpy).
+"""``ipe_node``: the intuitive physics engine as a ROS 2 node.
 
 Executor callbacks only convert messages (``msg_bridge``) and hand scenes to the ROS-free
 :class:`~ipe_ros.service.PredictionService`, whose own thread runs the Monte Carlo samples in worker
@@ -26,11 +26,12 @@ from visualization_msgs.msg import MarkerArray
 
 from msg_bridge.json_text import answer_to_string, string_to_scene
 from msg_bridge.markers import markers_to_scene, prediction_to_markers
-from msg_bridge.outputs import any_fall_probability_msg, diagnostics_msg, fall_direction_msg, fall_probability_msg
+from msg_bridge.outputs import any_fall_probability_msg, fall_direction_msg, fall_probability_msg
 
+from ..engine import ConfigError
+from ..service import Answer, NoSceneError, PredictionFailed, PredictionService, StampedScene
 from . import params
-from .engine import ConfigError
-from .service import Answer, NoSceneError, PredictionFailed, PredictionService, StampedScene
+from .diagnostics import diagnostics_msg
 
 #: Outputs are "latched": reliable + transient-local, depth 1, so a late joiner gets the latest answer.
 LATCHED_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
@@ -47,7 +48,7 @@ class IpeNode(Node):
         for spec in params.PARAMETERS:
             self.declare_parameter(spec.name, spec.default, spec.descriptor())
         values = {spec.name: self.get_parameter(spec.name).value for spec in params.PARAMETERS}
-        settings = params.settings_from_values(values)  # bad overrides end construction with a named error
+        config = params.config_from_values(values)  # bad overrides end construction with a named error
         self._values = values
 
         self._pub_prediction = self.create_publisher(String, "~/prediction", LATCHED_QOS)
@@ -57,7 +58,7 @@ class IpeNode(Node):
         self._pub_markers = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
         self._pub_diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
 
-        self.service = PredictionService(settings, workers=int(values["workers"]), publish=self._publish_answer,
+        self.service = PredictionService(config, workers=int(values["workers"]), publish=self._publish_answer,
                                          log_error=self.get_logger().error, log_info=self.get_logger().info,
                                          start_method=start_method)
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -71,8 +72,8 @@ class IpeNode(Node):
                           callback_group=MutuallyExclusiveCallbackGroup())
         self.service.start()
         self.get_logger().info(
-            f"ready: k = {settings.model.samples}, sigma = {settings.model.sigma_m:g} m, "
-            f"phi = {settings.model.phi_m_s2[0]:g} m/s^2, preset {settings.sim.name}, {values['workers']} worker(s); "
+            f"ready: k = {config.model.samples}, sigma = {config.model.sigma_m:g} m, "
+            f"phi = {config.model.phi_m_s2[0]:g} m/s^2, preset {config.settings.name}, {values['workers']} worker(s); "
             f"scenes on {self.resolve_topic_name('~/scene')} and {self.resolve_topic_name('~/scene_json')}")
 
     # -- parameters ----------------------------------------------------------------------------
@@ -80,11 +81,11 @@ class IpeNode(Node):
         values = dict(self._values)
         values.update({p.name: p.value for p in changed})
         try:
-            settings = params.settings_from_values(values)
+            config = params.config_from_values(values)
         except ConfigError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         self._values = values
-        self.service.update_settings(settings)
+        self.service.update_config(config)
         return SetParametersResult(successful=True)
 
     # -- inputs ----------------------------------------------------------------------------------
@@ -101,7 +102,7 @@ class IpeNode(Node):
 
     def _on_markers(self, msg: MarkerArray) -> None:
         try:
-            converted = markers_to_scene(msg, max_objects=self.service.settings.max_objects)
+            converted = markers_to_scene(msg, max_objects=self.service.config.max_objects)
             self.service.check(converted.scene)
         except ValueError as exc:  # SceneError / ConfigError name the field
             self._reject(self.resolve_topic_name("~/scene"), exc)
@@ -110,7 +111,7 @@ class IpeNode(Node):
 
     def _on_scene_json(self, msg: String) -> None:
         try:
-            scene = string_to_scene(msg, max_objects=self.service.settings.max_objects)
+            scene = string_to_scene(msg, max_objects=self.service.config.max_objects)
             self.service.check(scene)
         except ValueError as exc:
             self._reject(self.resolve_topic_name("~/scene_json"), exc)

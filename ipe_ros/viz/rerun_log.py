@@ -29,9 +29,9 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-from .estimate import Prediction, sample_any_fall, sample_fall_fraction, sample_far_m
+from ..engine.estimate import Prediction, sample_any_fall, sample_fall_fraction, sample_far_m
 from .palette import SUPPORT_RGB, group_rgb, risk_rgb, to_rgb8
-from .scene import Box, Floor, Scene, Table
+from ..engine.scene import Box, Floor, Scene, Table
 
 FELL_RGB = (0.9, 0.1, 0.1)
 APPLICATION_ID = "ipe_ros"
@@ -120,7 +120,7 @@ def log_outcomes(rec: rr.RecordingStream, prediction: Prediction) -> None:
         columns["any_fall"] = [sample_any_fall(o) for o in ok]
     if first.far_m is not None:
         columns["far_m"] = [sample_far_m(o) for o in ok]
-    if "direction" in prediction.settings.get("queries", ()):
+    if "direction" in prediction.request.get("queries", ()):
         columns["direction_deg"] = [math.degrees(o.rollouts[0].direction_rad)
                                     if o.rollouts[0].direction_rad is not None else math.nan for o in ok]
     if first.fell_off is not None:

@@ -1,0 +1,15 @@
+"""The simulation of one rollout with pybullet, in parts (see stepper.py for how they fit).
+
+world.py builds and reads pybullet worlds; depenetration.py separates overlapping boxes; stepper.py
+runs the loop that settling.py, collapse.py, termination.py and health.py each take part in;
+probe.py lets a benchmark watch the parts.
+"""
+
+from .depenetration import depenetrate
+from .probe import NO_PROBE, PHASES, Probe
+from .stepper import Push, RolloutEnd, simulate
+from .termination import DecidedHeights
+from .world import World, build_world, client, pybullet, read_poses, read_velocities
+
+__all__ = ["NO_PROBE", "PHASES", "DecidedHeights", "Probe", "Push", "RolloutEnd", "World", "build_world", "client",
+           "depenetrate", "pybullet", "read_poses", "read_velocities", "simulate"]

@@ -1,0 +1,115 @@
+"""The layers of the package and the imports each may make (ipe_ros/__init__.py draws the map).
+
+Read statically from the source (every import statement, also inside functions), and checked at run
+time for the ROS-free layers: importing and running them loads no ROS module.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+ROS_PACKAGES = ("rclpy", "rcl_interfaces", "builtin_interfaces", "rosidl_runtime_py", "rpyutils")
+
+#: layer -> (its files, the internal modules it must never import)
+LAYERS = {
+    "engine": ("ipe_ros/engine", ("ipe_ros.ros", "ipe_ros.service", "ipe_ros.cli", "ipe_ros.analysis", "ipe_ros.viz",
+                                  "msg_bridge", "rerun")),
+    "viz": ("ipe_ros/viz", ("ipe_ros.ros", "ipe_ros.service", "ipe_ros.cli", "ipe_ros.analysis", "msg_bridge")),
+    "analysis": ("ipe_ros/analysis", ("ipe_ros.ros", "ipe_ros.service", "ipe_ros.cli", "msg_bridge")),
+    "service": ("ipe_ros/service.py", ("ipe_ros.ros", "ipe_ros.cli", "ipe_ros.analysis", "msg_bridge")),
+    "cli": ("ipe_ros/cli.py", ("ipe_ros.ros", "ipe_ros.service", "msg_bridge")),
+    "msg_bridge": ("msg_bridge", ("ipe_ros.ros", "ipe_ros.service", "ipe_ros.cli", "ipe_ros.analysis", "rclpy")),
+}
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(REPO).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def imports_of(path: Path) -> set[str]:
+    """Absolute names of every module a file imports (relative imports resolved)."""
+    package = _module_name(path) if path.name == "__init__.py" else _module_name(path).rpartition(".")[0]
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[:len(package.split(".")) - (node.level - 1)]
+                base = ".".join(anchor + ([base] if base else []))
+            found.add(base)
+            found.update(f"{base}.{alias.name}" for alias in node.names)
+    return found
+
+
+def files_of(layer_path: str) -> list[Path]:
+    path = REPO / layer_path
+    return [path] if path.is_file() else sorted(path.rglob("*.py"))
+
+
+def _is_ros(module: str) -> bool:
+    top = module.split(".")[0]
+    return top in ROS_PACKAGES or top.endswith("_msgs") or top.endswith("_srvs")
+
+
+def _within(module: str, prefix: str) -> bool:
+    return module == prefix or module.startswith(prefix + ".")
+
+
+@pytest.mark.parametrize("layer", sorted(LAYERS))
+def test_each_layer_imports_only_what_it_may(layer):
+    layer_path, forbidden = LAYERS[layer]
+    ros_free = layer != "msg_bridge"
+    bad = []
+    for path in files_of(layer_path):
+        for module in sorted(imports_of(path)):
+            if any(_within(module, f) for f in forbidden) or (ros_free and _is_ros(module)):
+                bad.append(f"{path.relative_to(REPO)} imports {module}")
+    assert bad == [], f"layer {layer!r} breaks its import rule"
+
+
+def test_only_the_ros_layer_imports_rclpy():
+    users = sorted(str(path.relative_to(REPO)) for path in [*REPO.joinpath("ipe_ros").rglob("*.py"),
+                                                              *REPO.joinpath("msg_bridge").rglob("*.py")]
+                   if any(_within(m, "rclpy") for m in imports_of(path)))
+    assert users and all(u.startswith("ipe_ros/ros/") for u in users), users
+
+
+def test_the_rule_reader_sees_relative_and_nested_imports():
+    # the checker itself must not be blind: a relative import inside a function is found
+    package = REPO / "ipe_ros" / "engine"
+    probe = package / "_layer_probe_tmp.py"
+    probe.write_text("def f():\n    from ..ros import node\n    import rclpy.node\n")
+    try:
+        assert {"ipe_ros.ros", "ipe_ros.ros.node", "rclpy.node"} <= imports_of(probe)
+    finally:
+        probe.unlink()
+
+
+RUNTIME_CHECK = r"""
+import json, sys
+from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes, predict, preset
+from ipe_ros.engine.examples import example_scene_path
+import ipe_ros.analysis.experiments, ipe_ros.cli, ipe_ros.service, ipe_ros.viz.palette
+scene = load_scenes(example_scene_path())[0]
+p = predict(scene, ModelConfig(sigma_m=0.04, samples=2), preset("default"), QuerySpec())
+ros = sorted(m for m in sys.modules if m.split(".")[0] in {"rclpy", "rosidl_runtime_py", "rpyutils"}
+             or m.split(".")[0].endswith("_msgs") or m.split(".")[0].endswith("_srvs")
+             or m.split(".")[0] in {"msg_bridge", "rcl_interfaces", "builtin_interfaces"})
+print(json.dumps({"ros": ros, "samples": p.samples}))
+"""
+
+
+def test_engine_cli_service_and_analyses_run_without_loading_ros():
+    out = subprocess.run([sys.executable, "-c", RUNTIME_CHECK], capture_output=True, text=True, timeout=120, check=True)
+    result = json.loads(out.stdout.strip().splitlines()[-1])
+    assert result == {"ros": [], "samples": 2}

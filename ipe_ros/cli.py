@@ -136,7 +136,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _fmt(value, spec: str = ".3f", none: str = "-") -> str:
+def _number_or_dash(value, spec: str = ".3f", none: str = "-") -> str:
     return none if value is None else format(value, spec)
 
 
@@ -148,15 +148,15 @@ def format_table(predictions: list[Prediction]) -> str:
     for p in predictions:
         ci = "-" if p.fall_fraction_ci95 is None else f"[{p.fall_fraction_ci95[0]:.2f}, {p.fall_fraction_ci95[1]:.2f}]"
         direction = None if p.direction_rad is None else math.degrees(p.direction_rad)
-        lines.append(f"{p.scene[:34]:<34} {p.samples:>4} {_fmt(p.fall_fraction):>7} {ci:>15} "
-                     f"{_fmt(direction, '.0f'):>8} {_fmt(p.direction_decisiveness, '.2f'):>8} "
-                     f"{_fmt(p.far_m, '.2f'):>7} {p.failed_samples:>4} {p.wall_s:>7.2f}")
+        lines.append(f"{p.scene[:34]:<34} {p.samples:>4} {_number_or_dash(p.fall_fraction):>7} {ci:>15} "
+                     f"{_number_or_dash(direction, '.0f'):>8} {_number_or_dash(p.direction_decisiveness, '.2f'):>8} "
+                     f"{_number_or_dash(p.far_m, '.2f'):>7} {p.failed_samples:>4} {p.wall_s:>7.2f}")
         if p.any_fall_probability is not None:
             lo, hi = p.any_fall_probability_ci95
             lines.append(f"{'':<34} P(anything falls): {p.any_fall_probability:.3f} [{lo:.2f}, {hi:.2f}]")
         if p.fell_off_fraction_by_group is not None:
             groups = ", ".join(f"{g}: {v:.2f}" for g, v in p.fell_off_fraction_by_group.items())
-            lines.append(f"{'':<34} fell off by group: {groups}; {p.bump_group} share: {_fmt(p.bump_ratio, '.2f')}")
+            lines.append(f"{'':<34} fell off by group: {groups}; {p.bump_group} share: {_number_or_dash(p.bump_ratio, '.2f')}")
         if p.failure_reasons:
             lines.append(f"{'':<34} failures: {'; '.join(p.failure_reasons)}")
     return "\n".join(lines)

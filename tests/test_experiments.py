@@ -32,9 +32,9 @@ def test_every_report_writes_json_markdown_and_its_figures(reports):
     out, data = reports
     for name, report in data.items():
         assert report["experiment"] == name
-        assert report["settings"]["seed"] == 0 and report["settings"]["quick"] is True
+        assert report["parameters"]["seed"] == 0 and report["parameters"]["quick"] is True
         text = (out / f"{name}.md").read_text()
-        assert text.startswith("# ") and "Settings: seed = 0" in text
+        assert text.startswith("# ") and "Parameters: seed = 0" in text
         for figure in report["figures"]:
             assert (out / figure).stat().st_size > 1000
     assert {"fall_sigma_phi_grid.png", "bump_disks.png", "samples_by_k.png"} <= {

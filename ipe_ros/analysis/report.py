@@ -1,4 +1,4 @@
-"""A report: settings, results (JSON-ready), Markdown text and figures, written side by side."""
+"""A report: its parameters, results (JSON-ready), Markdown text and figures, written side by side."""
 
 from __future__ import annotations
 
@@ -36,7 +36,7 @@ class Report:
 
     name: str
     title: str
-    settings: dict[str, Any]
+    parameters: dict[str, Any]
     results: dict[str, Any] = field(default_factory=dict)
     lines: list[str] = field(default_factory=list)
     figures: list[str] = field(default_factory=list)
@@ -68,10 +68,10 @@ class Report:
         out_dir.mkdir(parents=True, exist_ok=True)
         json_path, md_path = out_dir / f"{self.name}.json", out_dir / f"{self.name}.md"
         json_path.write_text(json.dumps(_jsonable({"experiment": self.name, "title": self.title,
-                                                   "settings": self.settings, "results": self.results,
+                                                   "parameters": self.parameters, "results": self.results,
                                                    "figures": self.figures}), indent=1) + "\n")
-        settings = ", ".join(f"{k} = {v}" for k, v in self.settings.items())
-        md_path.write_text(f"# {self.title}\n\nSettings: {settings}.\n\n" + "\n".join(self.lines) + "\n")
+        parameters = ", ".join(f"{k} = {v}" for k, v in self.parameters.items())
+        md_path.write_text(f"# {self.title}\n\nParameters: {parameters}.\n\n" + "\n".join(self.lines) + "\n")
         return json_path, md_path
 
 

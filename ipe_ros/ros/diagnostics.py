@@ -9,7 +9,7 @@ from msg_bridge.stamps import stamp_ns_to_header
 from ..service import ServiceStats
 
 
-def _fmt(value) -> str:
+def _diagnostic_value(value) -> str:
     if value is None:
         return "none"
     if isinstance(value, float):
@@ -39,5 +39,5 @@ def diagnostics_msg(stats: ServiceStats, name: str, stamp_ns: int, hardware_id: 
         "last_compute_s": stats.last_compute_s, "last_error": stats.last_error,
     }
     status = DiagnosticStatus(level=level, name=name, message=message, hardware_id=hardware_id,
-                              values=[KeyValue(key=k, value=_fmt(v)) for k, v in values.items()])
+                              values=[KeyValue(key=k, value=_diagnostic_value(v)) for k, v in values.items()])
     return DiagnosticArray(header=stamp_ns_to_header(stamp_ns, ""), status=[status])

@@ -10,8 +10,10 @@ import pytest
 # DDS stays on loopback for any test that starts rclpy (set before rclpy is imported anywhere).
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
+from ipe_ros.analysis.paper_data import shared_data_dir  # noqa: E402 - after the DDS setting
+
 REPO = Path(__file__).resolve().parents[1]
-SHARED_DATA = Path(os.environ.get("IPE_SHARED_DATA", REPO.parent / "shared" / "data" / "battaglia2013"))
+SHARED_DATA = shared_data_dir()
 
 
 def shared_file(name: str) -> Path:

@@ -1,0 +1,95 @@
+"""Digests of predictions with fixed seeds: a refactoring that must not change answers shows it.
+
+    .venv/bin/python benchmarks/bit_identity.py OUT.json          # write the digests
+    .venv/bin/python benchmarks/bit_identity.py OUT.json --against BEFORE.json   # and compare
+
+Each case is one prediction (paper towers from ../shared/data/battaglia2013/stability_all_towers.csv,
+or generated towers without it; generated Exp. 5 tables): presets default, fine and paper, the fall,
+any_fall, direction/far and bump queries, phi > 0, mu, the ground truth and recorded trajectories.
+A digest hashes every sample's initial and final poses, simulated time and trajectory, and the
+answer's fields, so equal digests mean bit-identical answers. Exit status 1 when any digest differs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import sys
+
+os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+from ipe_ros.analysis.paper_data import shared_data_dir  # noqa: E402
+from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes, predict, preset  # noqa: E402
+from ipe_ros.engine.generators import generate_tables, generate_towers  # noqa: E402
+
+ANSWER_FIELDS = ("fall_fraction", "fall_fraction_ci95", "object_fall_probability", "any_fall_probability",
+                 "direction_rad", "direction_decisiveness", "far_m", "far_m_ci95", "fell_off_fraction_by_group",
+                 "bump_ratio", "samples", "failed_samples", "failure_reasons")
+
+
+def digest(prediction) -> str:
+    h = hashlib.sha256()
+    for o in prediction.outcomes:
+        h.update(repr((o.index, o.ok, o.error, o.push_direction_rad)).encode())
+        if o.ok:
+            h.update(o.initial_positions_m.tobytes())
+            h.update(o.initial_orientations_xyzw.tobytes())
+            for r in o.rollouts:
+                h.update(r.final_positions_m.tobytes())
+                h.update(r.final_orientations_xyzw.tobytes())
+                h.update(repr(r.simulated_s).encode())
+                for t, positions, _ in r.trajectory or ():
+                    h.update(repr(t).encode())
+                    h.update(positions.tobytes())
+    answer = {k: getattr(prediction, k) for k in ANSWER_FIELDS}
+    h.update(json.dumps(answer, sort_keys=True, default=list).encode())
+    return h.hexdigest()[:16]
+
+
+def cases():
+    path = shared_data_dir() / "stability_all_towers.csv"
+    towers = load_scenes(path)[:6] if path.exists() else generate_towers(2013, 6)
+    tables = generate_tables(3, 1)[:2]
+    sigma = ModelConfig(sigma_m=0.04, samples=6)
+    for name in ("default", "fine", "paper"):
+        for tower in towers[:(6 if name != "paper" else 2)]:
+            yield f"{name}/{tower.name}/fall", tower, sigma, name, {"fall"}, 0
+    for tower in towers[:4]:
+        yield f"default/{tower.name}/gt", tower, ModelConfig(), "default", {"fall", "direction", "far"}, 0
+        yield f"default/{tower.name}/any", tower, sigma, "default", {"any_fall"}, 0
+        yield (f"default/{tower.name}/phi2", tower, ModelConfig(sigma_m=0.04, phi_m_s2=(2.0,), samples=4), "default",
+               {"fall", "direction", "far"}, 0)
+        yield f"fine/{tower.name}/mu", tower, ModelConfig(sigma_m=0.04, mu=8.0, samples=4), "fine", {"fall", "direction"}, 0
+        yield (f"default/{tower.name}/rec", tower, ModelConfig(sigma_m=0.04, samples=3), "default",
+               {"fall", "direction", "far"}, 4)
+    for table in tables:
+        model = ModelConfig(sigma_m=0.02, phi_m_s2=(1.0, 3.0), samples=4, force_direction_rad=0.5)
+        yield f"default/{table.name}/bump", table, model, "default", {"bump"}, 0
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("out")
+    parser.add_argument("--against", default=None, help="digests of an earlier run to compare with")
+    args = parser.parse_args()
+    result = {}
+    for key, scene, model, preset_name, queries, record_every in cases():
+        p = predict(scene, model, preset(preset_name), QuerySpec(queries=frozenset(queries)), seed=7,
+                    record_every=record_every)
+        result[key] = digest(p)
+        print(key, result[key], flush=True)
+    with open(args.out, "w") as handle:
+        json.dump(result, handle, indent=1)
+    if args.against is None:
+        return 0
+    with open(args.against) as handle:
+        before = json.load(handle)
+    differ = sorted(k for k in before if before[k] != result.get(k))
+    print(f"{len(before) - len(differ)} of {len(before)} cases bit-identical" + (f"; differ: {differ}" if differ else ""))
+    return 1 if differ else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -66,7 +66,7 @@ def candidates() -> list[SimSettings]:
         default.changed('default-no-collapse', collapse={"step_factor": 1}),
         default.changed('default-collapse2', collapse={"step_factor": 2}),
         default.changed('default-collapse6', collapse={"step_factor": 6}),
-        default.changed('default-travel0.25', collapse={"max_travel_fraction": 0.25}),
+        default.changed('default-travel0.25', max_travel_fraction=0.25),
         default.changed('default-drop0.25', collapse={"drop_fraction": 0.25}),
         default.changed('default-res5e-6', solver={"residual_threshold": 5e-06}),
         # fewer iterations until the collapse, the full 100 in it

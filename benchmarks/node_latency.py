@@ -44,8 +44,8 @@ def _wait(condition, timeout_s: float, what: str) -> None:
 def shifted(scene, i: int):
     """The scene moved by i micrometres in x: a new scene each time (no cached answer), same physics."""
     boxes = tuple(dataclasses.replace(b, position_m=(b.position_m[0] + 1e-6 * i, *b.position_m[1:]))
-                  for b in scene.boxes)
-    return dataclasses.replace(scene, boxes=boxes)
+                  for b in scene.objects)
+    return dataclasses.replace(scene, objects=boxes)
 
 
 def engine_times(scene, k: int, workers: int, repeats: int) -> list[float]:

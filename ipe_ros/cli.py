@@ -229,7 +229,7 @@ def cmd_demo(_args) -> int:
     scenes = load_scenes(example_scene_path())
     workers = os.cpu_count() or 1
     query = QuerySpec(queries=DEFAULT_QUERIES)
-    print(f"Built-in example: {example_scene_path().name} ({len(scenes[0].boxes)} blocks of 0.2 x 0.6 x 0.2 m)\n")
+    print(f"Built-in example: {example_scene_path().name} ({len(scenes[0].objects)} blocks of 0.2 x 0.6 x 0.2 m)\n")
     ipe_title = (f"IPE (sigma = {DEFAULT_MODEL.sigma_m:g} m = 0.2 block short sides, phi = 0, "
                  f"k = {DEFAULT_MODEL.samples}):")
     for title, model in (("Ground truth (sigma = phi = 0, one deterministic rollout):", ModelConfig()),

@@ -40,7 +40,7 @@ from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ipe_ros.engine import Box, Floor, Prediction, Scene, SceneError, Table, validate_scene
+from ipe_ros.engine import Body, Box, Floor, Prediction, Scene, SceneError, Table, validate_scene
 from ipe_ros.engine.config import MODEL_LIGHT_DENSITY_KG_M3
 from ipe_ros.viz.palette import SUPPORT_RGB, group_rgb, nearest_group_name, risk_rgb
 from ipe_ros.engine.scene import DEFAULT_MAX_OBJECTS
@@ -139,8 +139,8 @@ def markers_to_scene(msg: MarkerArray, *, max_objects: int = DEFAULT_MAX_OBJECTS
     if not frame_id:
         raise SceneError(f"markers[{adds[0][0]}].header.frame_id", "is empty; set the frame the poses are in")
     seen: dict[tuple[str, int], int] = {}
-    dynamic: list[Box] = []
-    obstacles: list[Box] = []
+    dynamic: list[Body] = []
+    obstacles: list[Body] = []
     support: Floor | Table | None = None
     gravity_z, scene_name = DEFAULT_GRAVITY_M_S2, DEFAULT_SCENE_NAME
     for i, m in adds:
@@ -223,7 +223,7 @@ def markers_to_scene(msg: MarkerArray, *, max_objects: int = DEFAULT_MAX_OBJECTS
         boxes = tuple(dynamic)
     else:
         boxes = tuple(dynamic) + tuple(obstacles)
-    scene = Scene(name=scene_name, boxes=boxes, support=support, gravity_m_s2=(0.0, 0.0, gravity_z))
+    scene = Scene(name=scene_name, objects=boxes, support=support, gravity_m_s2=(0.0, 0.0, gravity_z))
     validate_scene(scene, max_objects=max_objects)
     return MarkerScene(scene=scene, frame_id=frame_id, stamp_ns=header_to_stamp_ns(adds[0][1].header))
 
@@ -267,12 +267,12 @@ def scene_to_markers(scene: Scene, frame_id: str, stamp_ns: int = 0) -> MarkerAr
                              (*support.center_xy_m, support.top_height_m - support.thickness_m / 2),
                              (*support.size_m, support.thickness_m), (0, 0, 0, 1), SUPPORT_RGB, 1.0,
                              f"role=table {common} floor_z={floor}"))
-    for j, box in enumerate(scene.static_boxes, start=1):
+    for j, box in enumerate(scene.static_objects, start=1):
         markers.append(_cube(header, SUPPORT_NAMESPACE, j, box.position_m, box.extents_m, box.orientation_xyzw,
                              SUPPORT_RGB, 1.0, f"role=obstacle name={box.name} friction={_fmt(box.friction)} "
                                                f"restitution={_fmt(box.restitution)}"
                                                + (f" group={box.group}" if box.group else "")))
-    for j, box in enumerate(scene.dynamic_boxes):
+    for j, box in enumerate(scene.dynamic_objects):
         mass = f"mass={_fmt(box.mass_kg)}" if box.mass_kg is not None else f"density={_fmt(box.density_kg_m3)}"
         text = f"name={box.name} {mass} friction={_fmt(box.friction)} restitution={_fmt(box.restitution)}"
         if box.group:
@@ -294,7 +294,7 @@ def prediction_to_markers(scene: Scene, prediction: Prediction, frame_id: str, s
     header = stamp_ns_to_header(stamp_ns, frame_id)
     markers = [Marker(header=header, ns="", id=0, action=Marker.DELETEALL)]
     probabilities = prediction.object_fall_probability or {}
-    dynamic = scene.dynamic_boxes
+    dynamic = scene.dynamic_objects
     for j, box in enumerate(dynamic):
         p = probabilities.get(box.name)
         rgb = risk_rgb(p) if p is not None else group_rgb(box.group)

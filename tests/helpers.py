@@ -14,7 +14,7 @@ def block(name: str, x: float, y: float, z: float, extents=(0.2, 0.6, 0.2), **kw
 
 
 def floor_scene(*boxes: Box, name: str = "test") -> Scene:
-    return Scene(name=name, boxes=tuple(boxes), support=Floor(friction=1.0, restitution=0.0),
+    return Scene(name=name, objects=tuple(boxes), support=Floor(friction=1.0, restitution=0.0),
                  gravity_m_s2=(0.0, 0.0, -9.81))
 
 

@@ -152,7 +152,7 @@ def _box(name, ext, pos, group="light"):
 
 
 def _tower(*boxes):
-    return Scene(name="hand_built", boxes=tuple(boxes), support=Floor(friction=1.0, restitution=0.0),
+    return Scene(name="hand_built", objects=tuple(boxes), support=Floor(friction=1.0, restitution=0.0),
                  gravity_m_s2=(0.0, 0.0, -9.8))
 
 
@@ -203,7 +203,7 @@ def test_table_features_compare_red_blocks_with_all_blocks():
     table = make_table("T1")  # walls along +x and -x
     red = _box("r", (0.2, 0.2, 0.2), (0.0, 0.0, 0.1), group="red")
     yellow = _box("y", (0.2, 0.2, 0.2), (0.0, 0.65, 0.1), group="yellow")  # near the open +y edge
-    scene = Scene(name="t", boxes=(red, yellow), support=table, gravity_m_s2=(0.0, 0.0, -9.8))
+    scene = Scene(name="t", objects=(red, yellow), support=table, gravity_m_s2=(0.0, 0.0, -9.8))
     f = table_features(scene, group="red")
     assert f["F_B2"] == pytest.approx(0.0 / 0.325)  # red at the centre, mean xy distance of all 0.325
     assert f["F_B3"] == pytest.approx(1.0)  # same heights

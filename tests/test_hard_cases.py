@@ -24,7 +24,7 @@ import pytest
 
 from ipe_ros.engine import Box, Floor, ModelConfig, QuerySpec, Scene, Table, load_scenes, predict, preset
 from ipe_ros.engine.generators import generate_tables
-from ipe_ros.engine.scene import box_half_heights
+from ipe_ros.engine.scene import half_heights_m
 from tests.helpers import IDENTITY
 
 G = 9.81
@@ -42,7 +42,7 @@ def cube_stack(name: str, size: tuple[float, float, float], count: int, *, masse
         boxes.append(Box(name=f"b{i}", extents_m=size, position_m=(i * offset_x, 0.0, size[2] * (i + 0.5)),
                          orientation_xyzw=IDENTITY, friction=friction, restitution=0.0,
                          mass_kg=mass, density_kg_m3=None if mass is not None else 500.0))
-    return Scene(name=name, boxes=tuple(boxes), support=Floor(friction=1.0, restitution=0.0),
+    return Scene(name=name, objects=tuple(boxes), support=Floor(friction=1.0, restitution=0.0),
                  gravity_m_s2=(0.0, 0.0, -G))
 
 
@@ -53,7 +53,7 @@ def overhang(name: str, size: float, beyond: float) -> Scene:
                  friction=0.8, restitution=0.0, density_kg_m3=500.0),
              Box(name="top", extents_m=s, position_m=(size * (0.5 + beyond), 0, 1.5 * size), orientation_xyzw=IDENTITY,
                  friction=0.8, restitution=0.0, density_kg_m3=500.0))
-    return Scene(name=name, boxes=boxes, support=Floor(friction=1.0, restitution=0.0), gravity_m_s2=(0, 0, -G))
+    return Scene(name=name, objects=boxes, support=Floor(friction=1.0, restitution=0.0), gravity_m_s2=(0, 0, -G))
 
 
 def heavy_on_light(ratio: float) -> Scene:
@@ -94,12 +94,12 @@ CATALOGUE: dict[str, Case] = {
 
 
 def _masses(scene: Scene) -> np.ndarray:
-    return np.array([b.resolved_mass_kg for b in scene.dynamic_boxes])
+    return np.array([b.resolved_mass_kg for b in scene.dynamic_objects])
 
 
 def check_trajectory(case: Case, settings, outcome, phi: float, trajectory: list) -> None:
     scene = case.scene
-    boxes = scene.dynamic_boxes
+    boxes = scene.dynamic_objects
     extents = np.array([b.extents_m for b in boxes])
     smallest = extents.min(axis=1)
     times = np.array([f[0] for f in trajectory])
@@ -119,7 +119,7 @@ def check_trajectory(case: Case, settings, outcome, phi: float, trajectory: list
     # overshoot into a surface by the distance it travels in one step at the speed bound (the solver
     # resolves contacts at the end of the step; every frame here is one step, fine or collapse-coarse),
     # but its centre never goes through.
-    lowest = np.stack([positions[f, :, 2] - box_half_heights(extents, orientations[f]) for f in range(len(times))])
+    lowest = np.stack([positions[f, :, 2] - half_heights_m(scene.dynamic_objects, orientations[f]) for f in range(len(times))])
     slop = SLOP_FRACTION * smallest
     step_s = np.concatenate([[dt[0, 0]], dt[:, 0]])[:, None]  # the step that reached each frame
     overshoot = slop + bound * step_s
@@ -156,7 +156,7 @@ def outcome_masses(scene: Scene, model: ModelConfig) -> np.ndarray:
         return _masses(scene)
     from ipe_ros.engine.perturb import MODEL_LIGHT_DENSITY_KG_M3
     return np.array([MODEL_LIGHT_DENSITY_KG_M3 * (model.mu if b.is_heavy else 1.0) * b.volume_m3
-                     for b in scene.dynamic_boxes])
+                     for b in scene.dynamic_objects])
 
 
 def assert_still_standing_at_the_horizon(case: Case, settings, query: QuerySpec, prediction) -> None:
@@ -166,7 +166,7 @@ def assert_still_standing_at_the_horizon(case: Case, settings, query: QuerySpec,
     of the way to "fallen", at 2 s, and toppled it at 3 s, while `paper` keeps it within 0.1 mm.)"""
     if settings.early_stop.enabled:
         prediction = predict(case.scene, case.model, settings.changed(early_stop={"enabled": False}), query, seed=11)
-    smallest = np.array([min(b.extents_m) for b in case.scene.dynamic_boxes])
+    smallest = np.array([min(b.extents_m) for b in case.scene.dynamic_objects])
     allowed = 0.25 * query.fall_threshold_fraction * smallest
     for outcome in prediction.outcomes:
         for rollout in outcome.rollouts:

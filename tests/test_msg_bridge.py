@@ -81,10 +81,10 @@ def test_defaults_unset_quaternion_and_colour_groups():
     plain = cube(marker_id=3, xyz=(2.0, 0.0, 0.1))
     scene = read(red, yellow, plain).scene
     assert isinstance(scene.support, Floor) and scene.support.height_m == 0.0
-    assert [b.group for b in scene.boxes] == ["red", "yellow", ""]
-    assert [b.name for b in scene.boxes] == ["objects/1", "objects/2", "objects/3"]
-    assert all(b.orientation_xyzw == (0.0, 0.0, 0.0, 1.0) for b in scene.boxes)  # all-zero quaternion = identity
-    assert all(b.density_kg_m3 == DEFAULT_DENSITY_KG_M3 and b.mass_kg is None for b in scene.boxes)
+    assert [b.group for b in scene.objects] == ["red", "yellow", ""]
+    assert [b.name for b in scene.objects] == ["objects/1", "objects/2", "objects/3"]
+    assert all(b.orientation_xyzw == (0.0, 0.0, 0.0, 1.0) for b in scene.objects)  # all-zero quaternion = identity
+    assert all(b.density_kg_m3 == DEFAULT_DENSITY_KG_M3 and b.mass_kg is None for b in scene.objects)
     assert scene.gravity_m_s2 == (0.0, 0.0, -9.81)
 
 
@@ -102,13 +102,13 @@ def test_text_properties_and_support_roles():
         (pytest.approx(0.72), (1.0, 0.8), 0.04, 0.5)
     assert support.floor_z_m == 0.0  # the slab's underside is above z = 0: a floor there
     assert [o.name for o in support.obstacles] == ["wall"] and support.obstacles[0].static
-    [mug] = scene.boxes
+    [mug] = scene.objects
     assert (mug.name, mug.mass_kg, mug.friction, mug.group, mug.restitution) == ("mug", 0.3, 0.6, "red", 0.1)
 
 
 def test_deleteall_markers_are_ignored():
     clear = Marker(action=Marker.DELETEALL)
-    assert len(read(clear, cube()).scene.boxes) == 1
+    assert len(read(clear, cube()).scene.objects) == 1
 
 
 @pytest.mark.parametrize("markers, expected", [
@@ -158,7 +158,7 @@ def test_ten_thousand_markers_are_refused_before_conversion():
 def test_engine_validation_errors_come_through_with_their_field():
     floating_below = cube(xyz=(0.0, 0.0, -0.5))
     message = error_of(floating_below)
-    assert message.startswith("boxes[0]"), message
+    assert message.startswith("objects[0]"), message
 
 
 def test_json_text_errors():
@@ -197,7 +197,7 @@ def test_direction_vector_is_scaled_by_decisiveness_and_zero_when_nothing_falls(
 
 
 def test_prediction_markers_colour_objects_by_risk_and_draw_the_arrow():
-    names = [b.name for b in TOWER.dynamic_boxes]
+    names = [b.name for b in TOWER.dynamic_objects]
     probs = {n: (1.0 if i == 0 else 0.0) for i, n in enumerate(names)}
     p = _prediction(fall_fraction=0.1, object_fall_probability=probs, direction_rad=0.0, direction_decisiveness=1.0)
     msg = prediction_to_markers(TOWER, p, "odom", 9)

@@ -120,7 +120,7 @@ def test_marker_tower_in_stamped_prediction_out_matching_the_engine(ros, tower):
     shown = markers[0].markers
     assert shown[0].action == Marker.DELETEALL
     cubes = [m for m in shown if m.ns == "ipe/objects"]
-    assert len(cubes) == len(tower.boxes) and all(m.header.frame_id == "odom" for m in cubes)
+    assert len(cubes) == len(tower.objects) and all(m.header.frame_id == "odom" for m in cubes)
     assert node.service.stats().predicted == 1
 
 
@@ -262,7 +262,7 @@ def test_rerun_recording_is_written_and_holds_the_rollouts(ros, tower, tmp_path)
     assert path and os.path.exists(path) and got[0]["rollouts_logged"] == 2
     chunks = RrdReader(path).stream().to_chunks()
     entities = {c.entity_path for c in chunks}
-    name = tower.dynamic_boxes[0].name
+    name = tower.dynamic_objects[0].name
     assert {f"/world/rollouts/0/{name}", f"/world/rollouts/1/{name}", "/world/scene/boxes", "/answer"} <= entities
     assert f"/world/rollouts/2/{name}" not in entities
     moving = [c for c in chunks if c.entity_path == f"/world/rollouts/0/{name}" and not c.is_static]

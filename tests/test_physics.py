@@ -76,7 +76,7 @@ def table_scene(kind: str) -> Scene:
              block("y0", -0.15, -0.65, 0.1, extents=cube, group="yellow"),
              block("y1", 0.15, -0.65, 0.1, extents=cube, group="yellow")]
     boxes = [replace(b, friction=0.5) for b in boxes]
-    return Scene(name=f"bump_{kind}", boxes=tuple(boxes), support=make_table(kind), gravity_m_s2=(0, 0, -9.81))
+    return Scene(name=f"bump_{kind}", objects=tuple(boxes), support=make_table(kind), gravity_m_s2=(0, 0, -9.81))
 
 
 def test_cued_bump_on_a_walled_table_changes_which_colour_falls_off():
@@ -274,7 +274,7 @@ def test_changed_names_the_unknown_field():
     from ipe_ros.engine import ConfigError
 
     with pytest.raises(ConfigError, match=r"^collapse: .*unexpected keyword argument 'factor'.*; its fields are "
-                                          r"step_factor, solver_iterations, max_travel_fraction, drop_fraction$"):
+                                          r"step_factor, solver_iterations, drop_fraction$"):
         preset("default").changed(collapse={"factor": 2})
     with pytest.raises(ConfigError, match="^solver_iterations: not a field of SimSettings$"):
         preset("default").changed(solver_iterations=2)

@@ -32,7 +32,7 @@ def test_example_file_loads():
     from ipe_ros.engine.examples import example_scene_path
 
     (scene,) = load_scenes(example_scene_path())
-    assert scene.name == "example_tower" and len(scene.boxes) == 10
+    assert scene.name == "example_tower" and len(scene.objects) == 10
 
 
 def write_csv(path, rows):
@@ -51,9 +51,9 @@ def test_tower_csv_groups_by_name_and_ratio(tmp_path):
     write_csv(path, rows)
     scenes = scenes_from_tower_csv(path)
     assert [s.name for s in scenes] == ["tower_1_01@ratio=0.1", "tower_1_01@ratio=10"]
-    heavy = scenes[1].boxes[1]
+    heavy = scenes[1].objects[1]
     assert heavy.group == "heavy" and heavy.mass_kg == pytest.approx(40.8)
-    assert scenes[1].boxes[0].group == "light"
+    assert scenes[1].objects[0].group == "light"
     # quaternion columns are (w, x, y, z); the engine stores (x, y, z, w)
     assert heavy.orientation_xyzw == (0.0, 0.0, 0.0, 1.0)
     assert [s.name for s in scenes_from_tower_csv(path, towers=["tower_1_01"])] == [s.name for s in scenes]
@@ -65,15 +65,15 @@ def test_tower_csv_groups_by_name_and_ratio(tmp_path):
 def test_tower_csv_rejects_bad_rows(tmp_path):
     path = tmp_path / "bad.csv"
     write_csv(path, [("t", "block0", 0, 0, 0.05, 0, 1)])
-    with pytest.raises(SceneError, match=r"^bad.csv:t:boxes\[0\] \('block0'\).position_m: the box's lowest point"):
+    with pytest.raises(SceneError, match=r"^bad.csv:t:objects\[0\] \('block0'\).position_m: the body's lowest point"):
         scenes_from_tower_csv(path)
 
 
 def test_paper_csv_loads_all_60_towers():
     scenes = load_scenes(shared_file("willitfall.csv"))
     assert len(scenes) == 60
-    assert all(len(s.boxes) == 10 for s in scenes)
+    assert all(len(s.objects) == 10 for s in scenes)
     for scene in scenes:
-        for box in scene.boxes:
+        for box in scene.objects:
             assert box.extents_m == pytest.approx((0.2, 0.6, 0.2), abs=1e-6)
             assert box.group == "light"

@@ -27,58 +27,60 @@ def test_good_scene_loads(good):
 
 
 def test_nan_position_names_object_and_field(good):
-    good["boxes"][1]["position_m"][0] = float("nan")
-    assert error_for(good) == "boxes[1] ('b').position_m: position in metres must be finite numbers, got [nan, 0.0, 0.3]"
+    good["objects"][1]["position_m"][0] = float("nan")
+    assert error_for(good) == ("objects[1] ('b').position_m: position in metres must be finite numbers, "
+                               "got [nan, 0.0, 0.3]")
 
 
 def test_inf_mass(good):
-    good["boxes"][0]["mass_kg"] = float("inf")
-    assert error_for(good) == "boxes[0] ('a').mass_kg: mass in kg must be finite, got inf"
+    good["objects"][0]["mass_kg"] = float("inf")
+    assert error_for(good) == "objects[0] ('a').mass_kg: mass in kg must be finite, got inf"
 
 
 def test_zero_size(good):
-    good["boxes"][0]["extents_m"] = [0.2, 0.0, 0.2]
-    assert error_for(good) == "boxes[0] ('a').extents_m: every extent must be > 0 metres, got [0.2, 0.0, 0.2]"
+    good["objects"][0]["shape"]["extents_m"] = [0.2, 0.0, 0.2]
+    assert error_for(good) == ("objects[0] ('a').shape.extents_m: every extent must be a finite number > 0 metres, "
+                               "got [0.2, 0.0, 0.2]")
 
 
 def test_negative_mass(good):
-    good["boxes"][1]["mass_kg"] = -1
-    assert error_for(good) == "boxes[1] ('b').mass_kg: mass in kg must be > 0, got -1.0"
+    good["objects"][1]["mass_kg"] = -1
+    assert error_for(good) == "objects[1] ('b').mass_kg: mass in kg must be > 0, got -1.0"
 
 
 def test_non_unit_quaternion(good):
-    good["boxes"][0]["orientation_xyzw"] = [0, 0, 0, 0.9]
-    assert error_for(good) == ("boxes[0] ('a').orientation_xyzw: must be a unit quaternion (norm within 0.001 of 1),"
+    good["objects"][0]["orientation_xyzw"] = [0, 0, 0, 0.9]
+    assert error_for(good) == ("objects[0] ('a').orientation_xyzw: must be a unit quaternion (norm within 0.001 of 1),"
                                " got norm 0.9; normalise it")
 
 
 def test_object_below_support(good):
-    good["boxes"][0]["position_m"][2] = 0.05
-    assert error_for(good) == ("boxes[0] ('a').position_m: the box's lowest point z = -0.05 m is below the support "
+    good["objects"][0]["position_m"][2] = 0.05
+    assert error_for(good) == ("objects[0] ('a').position_m: the body's lowest point z = -0.05 m is below the support "
                                "surface at z = 0 m; raise it by at least 0.05 m")
 
 
 def test_unknown_field(good):
-    good["boxes"][0]["colour"] = "red"
-    assert error_for(good).startswith("boxes[0].colour: unknown field; allowed fields are name, extents_m,")
+    good["objects"][0]["colour"] = "red"
+    assert error_for(good).startswith("objects[0].colour: unknown field; allowed fields are name, shape,")
 
 
 def test_missing_field_is_not_defaulted(good):
-    del good["boxes"][0]["friction"]
-    assert error_for(good) == "boxes[0].friction: required field is missing"
+    del good["objects"][0]["friction"]
+    assert error_for(good) == "objects[0].friction: required field is missing"
     data = copy.deepcopy(good)
     del data["gravity_m_s2"]
     assert error_for(data) == "gravity_m_s2: required field is missing"
 
 
 def test_mass_or_density_not_both(good):
-    good["boxes"][0]["density_kg_m3"] = 500.0
-    assert error_for(good) == "boxes[0] ('a').mass_kg: give mass_kg or density_kg_m3, not both"
+    good["objects"][0]["density_kg_m3"] = 500.0
+    assert error_for(good) == "objects[0] ('a').mass_kg: give mass_kg or density_kg_m3, not both"
 
 
 def test_too_many_objects(good):
-    good["boxes"] = [dict(good["boxes"][0], name=f"b{i}") for i in range(10_000)]
-    assert error_for(good) == "boxes: 10000 objects exceed the maximum of 200; split the scene or raise max_objects"
+    good["objects"] = [dict(good["objects"][0], name=f"b{i}") for i in range(10_000)]
+    assert error_for(good) == "objects: 10000 objects exceed the maximum of 200; split the scene or raise max_objects"
 
 
 def test_max_objects_is_configurable(good):
@@ -87,8 +89,8 @@ def test_max_objects_is_configurable(good):
 
 
 def test_duplicate_names(good):
-    good["boxes"][1]["name"] = "a"
-    assert error_for(good) == "boxes[1].name: duplicate name 'a'; names must be unique"
+    good["objects"][1]["name"] = "a"
+    assert error_for(good) == "objects[1].name: duplicate name 'a'; names must be unique"
 
 
 def test_gravity_must_point_down(good):
@@ -102,8 +104,8 @@ def test_unknown_support_type(good):
 
 
 def test_empty_scene(good):
-    good["boxes"] = []
-    assert error_for(good) == "boxes: the scene has no dynamic box: nothing can fall"
+    good["objects"] = []
+    assert error_for(good) == "objects: the scene has no dynamic object: nothing can fall"
 
 
 def test_malformed_json_and_nan_literals():
@@ -126,6 +128,6 @@ def test_obstacles_must_be_static():
 
 def test_errors_in_a_list_of_scenes_name_the_scene():
     scenes = [scene_to_dict(s) for s in generate_towers(3, 2)]
-    scenes[1]["boxes"][2]["extents_m"] = [1, 1, -1]
-    with pytest.raises(SceneError, match=r"^scenes\[1\]\.boxes\[2\] \('block2'\)\.extents_m: every extent"):
+    scenes[1]["objects"][2]["shape"]["extents_m"] = [1, 1, -1]
+    with pytest.raises(SceneError, match=r"^scenes\[1\]\.objects\[2\] \('block2'\)\.shape\.extents_m: every extent"):
         scenes_from_json(json.dumps(scenes))

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..engine.generators import convex_hull
 from ..engine.perturb import dynamic_masses
-from ..engine.scene import Box, Scene, Table, box_corners, quaternion_to_matrix, support_top_below
+from ..engine.scene import Body, Box, Scene, Table, box_corners, quaternion_to_matrix, support_top_below
 
 #: Boxes closer than this fraction of the smallest box extent count as touching.
 CONTACT_TOLERANCE_FRACTION = 0.02
@@ -48,7 +48,7 @@ class CriticalAngle:
     direction_rad: float
 
 
-def _corners(box: Box) -> np.ndarray:
+def _corners(box: Body) -> np.ndarray:
     return box_corners(np.asarray(box.extents_m, float), np.asarray(box.position_m, float),
                        np.asarray(box.orientation_xyzw, float))
 
@@ -58,7 +58,7 @@ def _support_top(scene: Scene, x: float, y: float) -> float:
     return scene.support.top_m if top is None else top
 
 
-def footprint_xy(scene: Scene, boxes: tuple[Box, ...], tolerance_m: float) -> np.ndarray:
+def footprint_xy(scene: Scene, boxes: tuple[Body, ...], tolerance_m: float) -> np.ndarray:
     """xy corners of the box faces that rest on the support (empty (0, 2) when none does)."""
     points = []
     for box in boxes:
@@ -105,7 +105,7 @@ def critical_angle(base_xy: np.ndarray, com_xyz: np.ndarray, base_z_m: float) ->
     return CriticalAngle(angle_rad=math.atan2(-outside_distance, height), direction_rad=outside_dir)
 
 
-def _obb_gap(a: Box, b: Box) -> float:
+def _obb_gap(a: Body, b: Body) -> float:
     """Largest separation (m) along the 15 separating axes of two boxes; <= 0 means they overlap."""
     ra, rb = quaternion_to_matrix(a.orientation_xyzw), quaternion_to_matrix(b.orientation_xyzw)
     ha, hb = np.asarray(a.extents_m) / 2, np.asarray(b.extents_m) / 2
@@ -124,9 +124,9 @@ def _obb_gap(a: Box, b: Box) -> float:
     return gap
 
 
-def subtowers(scene: Scene) -> list[tuple[Box, ...]]:
+def subtowers(scene: Scene) -> list[tuple[Body, ...]]:
     """Groups of dynamic boxes connected by contact (paper: disjoint, non-contacting subsets)."""
-    boxes = scene.dynamic_boxes
+    boxes = scene.dynamic_objects
     tolerance = CONTACT_TOLERANCE_FRACTION * min(min(b.extents_m) for b in boxes)
     parent = list(range(len(boxes)))
 
@@ -140,20 +140,20 @@ def subtowers(scene: Scene) -> list[tuple[Box, ...]]:
         for j in range(i + 1, len(boxes)):
             if _obb_gap(boxes[i], boxes[j]) <= tolerance:
                 parent[find(i)] = find(j)
-    groups: dict[int, list[Box]] = {}
+    groups: dict[int, list[Body]] = {}
     for i, box in enumerate(boxes):
         groups.setdefault(find(i), []).append(box)
     return [tuple(g) for g in groups.values()]
 
 
-def _com(boxes: tuple[Box, ...], masses: np.ndarray) -> np.ndarray:
+def _com(boxes: tuple[Body, ...], masses: np.ndarray) -> np.ndarray:
     positions = np.array([b.position_m for b in boxes], float)
     return (positions * masses[:, None]).sum(axis=0) / masses.sum()
 
 
 def tower_features(scene: Scene, mu: float | None = None) -> dict[str, float]:
     """F_F(1..4) and F_D(1..2) of one tower; ``mu`` as in ModelConfig (None: the scene's masses)."""
-    boxes = scene.dynamic_boxes
+    boxes = scene.dynamic_objects
     masses = dynamic_masses(scene, mu)
     mass_of = {b.name: m for b, m in zip(boxes, masses)}
     tolerance = CONTACT_TOLERANCE_FRACTION * min(min(b.extents_m) for b in boxes)
@@ -198,7 +198,7 @@ def _edge_distances_xy(table: Table, xy: np.ndarray) -> tuple[np.ndarray, np.nda
     return all_edges, nearest_open
 
 
-def _table_quantities(scene: Scene, boxes: tuple[Box, ...]) -> dict[int, np.ndarray]:
+def _table_quantities(scene: Scene, boxes: tuple[Body, ...]) -> dict[int, np.ndarray]:
     table = scene.support
     assert isinstance(table, Table)  # checked by table_features
     pos = np.array([b.position_m for b in boxes], float)
@@ -220,10 +220,10 @@ def table_features(scene: Scene, group: str = "red") -> dict[str, float]:
     """F_B(1..14) of one Exp. 5 scene: value over ``group`` boxes / value over all boxes."""
     if not isinstance(scene.support, Table):
         raise ValueError(f"scene {scene.name!r}: table features need a Table support")
-    members = tuple(b for b in scene.dynamic_boxes if b.group == group)
+    members = tuple(b for b in scene.dynamic_objects if b.group == group)
     if not members:
         raise ValueError(f"scene {scene.name!r}: no box in group {group!r}")
-    sub, every = _table_quantities(scene, members), _table_quantities(scene, scene.dynamic_boxes)
+    sub, every = _table_quantities(scene, members), _table_quantities(scene, scene.dynamic_objects)
     out = {}
     for i in range(1, 8):
         out[f"F_B{i}"] = float(np.mean(sub[i]) / np.mean(every[i]))

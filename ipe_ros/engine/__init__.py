@@ -8,11 +8,13 @@ from .errors import ConfigError, PhysicsError, SceneError
 from .estimate import Prediction
 from .pool import WorkerPool
 from .sampler import AdaptiveStop, predict
-from .scene import Box, Floor, Scene, Table, validate_scene
+from .scene import Body, Box, Floor, Scene, Table, validate_scene
+from .shapes import BoxShape, Capsule, Compound, CompoundPart, ConvexHull, Cylinder, Sphere
 from .scene_io import load_scenes, scene_from_dict, scene_to_dict, scenes_from_json, scenes_from_tower_csv
 
 __all__ = [
-    "ALL_QUERIES", "PRESETS", "AdaptiveStop", "Box", "ConfigError", "Floor", "ModelConfig", "PhysicsError", "Prediction",
+    "ALL_QUERIES", "PRESETS", "AdaptiveStop", "Body", "Box", "BoxShape", "Capsule", "Compound", "CompoundPart",
+    "ConvexHull", "Cylinder", "Sphere", "ConfigError", "Floor", "ModelConfig", "PhysicsError", "Prediction",
     "QuerySpec", "Scene", "SceneError", "SimSettings", "Table", "WorkerPool", "load_scenes",
     "parse_queries", "predict", "preset", "scene_from_dict", "scene_to_dict", "scenes_from_json",
     "scenes_from_tower_csv", "validate_scene",

@@ -129,15 +129,24 @@ class SolverSettings:
         0.85); 1.0 carries resting contacts over fully, which keeps stacks quiet at coarse steps.
     maximal_coordinates: boxes as plain rigid bodies (pybullet's ``useMaximalCoordinates``) instead
         of one-link multibodies: the classic sequential-impulse solver, cheaper per contact.
+    iterations_per_mass_ratio: the iterative solver passes impulses from body to body, and needs
+        about as many iterations as the heaviest body outweighs the lightest: a 1000:1 heavy box on a
+        light one drove it into the floor at 100 iterations and stands at 1000. So a scene gets at
+        least this many iterations per unit of its mass ratio (up to ``max_iterations``); the residual
+        threshold ends the iterations as soon as the contacts are solved, so easy steps cost nothing more.
     """
 
     iterations: int
     residual_threshold: float = 1e-7
     warm_start_factor: float = 0.85
     maximal_coordinates: bool = False
+    iterations_per_mass_ratio: float = 1.0
+    max_iterations: int = 2000
 
     def __post_init__(self) -> None:
         _integer(self.iterations, "solver.iterations", 1, 10_000)
+        _non_negative(self.iterations_per_mass_ratio, "solver.iterations_per_mass_ratio")
+        _integer(self.max_iterations, "solver.max_iterations", 1, 100_000)
         _positive(self.residual_threshold, "solver.residual_threshold")
         if not 0 <= self.warm_start_factor <= 1:
             raise ConfigError("solver.warm_start_factor", f"must be in [0, 1], got {self.warm_start_factor!r}")
@@ -185,23 +194,20 @@ class CollapseSettings:
     after the push), falling blocks hitting each other are chaotic at any step size: only the
     statistics of the outcome matter, and they survive coarser steps, while the delicate part (does
     anything start to fall?) ran at the fine step. From then on the step is up to ``step_factor``
-    times the fine step, with ``solver_iterations`` (None: keep the solver's), but never so coarse
-    that a box travels more than ``max_travel_fraction`` of the smallest box extent per step (fast
-    blocks would sink deep into what they hit). ``drop_fraction`` is far above the fall query's
-    0.125, which a 30-block stack compressing under its own weight can reach without anything falling.
-    ``step_factor`` = 1 switches this off.
+    times the fine step, with ``solver_iterations`` (None: keep the solver's), but never coarser
+    than the travel limit allows (``SimSettings.max_travel_fraction``). ``drop_fraction`` is far above
+    the fall query's 0.125, which a 30-block stack compressing under its own weight can reach
+    without anything falling. ``step_factor`` = 1 switches this off.
     """
 
     step_factor: int = 1
     solver_iterations: int | None = None
-    max_travel_fraction: float = 0.5
     drop_fraction: float = 0.5
 
     def __post_init__(self) -> None:
         _integer(self.step_factor, "collapse.step_factor", 1, 100, " (1: no collapse steps)")
         if self.solver_iterations is not None:
             _integer(self.solver_iterations, "collapse.solver_iterations", 1, 10_000, " or None")
-        _positive(self.max_travel_fraction, "collapse.max_travel_fraction")
         _positive(self.drop_fraction, "collapse.drop_fraction")
 
     @property
@@ -250,7 +256,12 @@ class SimSettings:
     time_step_s: the fine step; never more than ``max_step_fraction_of_time_scale`` of the boxes'
         time scale sqrt(size / g), so small boxes get finer steps (3 mm cubes sank through each
         other at 1/240 s; 0.03 leaves 0.2 m blocks at 1/240 s and gives 3 mm cubes ~0.5 ms).
-    horizon_s: simulated time of a rollout (the paper's 2 s), unless early termination ends it.
+    horizon_s: simulated time of a rollout (the paper's 2 s), unless early termination ends it or
+        the scene asks for its own.
+    max_travel_fraction: the travel limit: no body may move more than this fraction of the smallest
+        extent in one step, or it sinks deep into (or through) what it hits. Checked at every look
+        (from the fastest corner, plus what gravity adds until the next look): a fast body gets
+        substeps, at most ``max_substeps`` per step, and collapse steps are never coarser than this.
     """
 
     name: str
@@ -258,6 +269,8 @@ class SimSettings:
     horizon_s: float
     solver: SolverSettings
     max_step_fraction_of_time_scale: float = 0.03
+    max_travel_fraction: float = 0.5
+    max_substeps: int = 32
     depenetration: DepenetrationSettings = DepenetrationSettings()
     settling: SettlingSettings = SettlingSettings()
     collapse: CollapseSettings = CollapseSettings()
@@ -267,6 +280,8 @@ class SimSettings:
         _positive(self.time_step_s, "time_step_s")
         _positive(self.horizon_s, "horizon_s")
         _positive(self.max_step_fraction_of_time_scale, "max_step_fraction_of_time_scale")
+        _positive(self.max_travel_fraction, "max_travel_fraction")
+        _integer(self.max_substeps, "max_substeps", 1, 1000)
         if self.time_step_s > self.horizon_s:
             raise ConfigError("time_step_s", "must not exceed horizon_s")
         for group, kind in _GROUPS.items():
@@ -277,9 +292,23 @@ class SimSettings:
     def steps(self) -> int:
         return int(round(self.horizon_s / self.time_step_s))
 
-    def time_step_for(self, scale_m: float, gravity_m_s2: float) -> float:
-        """The step for a scene whose smallest box extent is ``scale_m`` (see ``time_step_s``)."""
-        return min(self.time_step_s, self.max_step_fraction_of_time_scale * math.sqrt(scale_m / gravity_m_s2))
+    def time_step_for(self, scale_m: float, gravity_m_s2: float, fastest_m_s: float = 0.0) -> float:
+        """The step for a scene whose smallest extent is ``scale_m`` and whose fastest body starts
+        at ``fastest_m_s`` (see ``time_step_s`` and ``max_travel_fraction``)."""
+        step = min(self.time_step_s, self.max_step_fraction_of_time_scale * math.sqrt(scale_m / gravity_m_s2))
+        if fastest_m_s > 0:
+            step = min(step, self.max_travel_fraction * scale_m / fastest_m_s)
+        return step
+
+    def iterations_for(self, mass_ratio: float, iterations: int | None = None) -> int:
+        """Solver iterations for a scene whose heaviest body outweighs its lightest ``mass_ratio`` times."""
+        base = self.solver.iterations if iterations is None else iterations
+        needed = math.ceil(self.solver.iterations_per_mass_ratio * mass_ratio)
+        return max(base, min(needed, self.solver.max_iterations))
+
+    def horizon_for(self, scene_horizon_s: float | None) -> float:
+        """The scene's own horizon when it gives one, else these settings'."""
+        return self.horizon_s if scene_horizon_s is None else scene_horizon_s
 
     def changed(self, name: str | None = None, **changes: Any) -> SimSettings:
         """A copy with some fields changed; a group takes a dict of its own fields.

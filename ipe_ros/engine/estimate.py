@@ -125,6 +125,8 @@ class Prediction:
     bump_rollouts: int | None = None
     wall_s: float = 0.0
     stopped_by: str = "samples"  # "samples" (all k drawn), "ci_width" or "deadline" (anytime sampling)
+    max_penetration_fraction: float | None = None
+    max_energy_gain_j: float | None = None
     request: dict[str, Any] = field(default_factory=dict)
     outcomes: tuple[SampleOutcome, ...] = field(default=(), repr=False, compare=False)
 
@@ -149,10 +151,12 @@ def aggregate(scene: Scene, outcomes: Sequence[SampleOutcome], *, queries: froze
                 wall_s=wall_s, request=request, outcomes=tuple(outcomes))
     if not ok:
         return Prediction(**base)
-    names = [b.name for b in scene.dynamic_boxes]
-    groups = [b.group for b in scene.dynamic_boxes]
+    names = [b.name for b in scene.dynamic_objects]
+    groups = [b.group for b in scene.dynamic_objects]
     values: dict[str, Any] = {}
     rollouts = [r for o in ok for r in o.rollouts]
+    values["max_penetration_fraction"] = float(max(r.penetration_fraction for r in rollouts))
+    values["max_energy_gain_j"] = float(max(r.energy_gain_j for r in rollouts))
 
     if "fall" in queries:
         per_sample = np.array([sample_fall_fraction(o) for o in ok])

@@ -17,7 +17,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from .scene import Box, Floor, Scene, Table, validate_scene
+from .scene import Body, Box, Floor, Scene, Table, validate_scene
 
 _IDENTITY = (0.0, 0.0, 0.0, 1.0)
 _HALF = math.sqrt(0.5)
@@ -120,7 +120,7 @@ def generate_tower(rng: np.random.Generator, name: str, n_blocks: int = 10, shor
             mass_kg=mass_kg * (heavy_ratio if mask[i] == "1" else 1.0),
             group="heavy" if mask[i] == "1" else "light")
         for i, (centre, _size, axis) in enumerate(placed))
-    return validate_scene(Scene(name=name, boxes=boxes, support=Floor(friction=1.0, restitution=0.0),
+    return validate_scene(Scene(name=name, objects=boxes, support=Floor(friction=1.0, restitution=0.0),
                                 gravity_m_s2=(0.0, 0.0, -9.8)))
 
 
@@ -134,7 +134,7 @@ def generate_towers(seed: int, count: int, **kwargs) -> list[Scene]:
 def state_pair(scene: Scene, rng: np.random.Generator, ratio: float = 10.0,
                n_heavy: int | None = None) -> tuple[Scene, Scene]:
     """The same geometry with two complementary heavy/light assignments (paper Exps. 3-4)."""
-    boxes = scene.dynamic_boxes
+    boxes = scene.dynamic_objects
     n = len(boxes)
     n_heavy = n // 2 if n_heavy is None else n_heavy
     chosen = set(rng.choice(n, size=n_heavy, replace=False).tolist())
@@ -145,7 +145,7 @@ def state_pair(scene: Scene, rng: np.random.Generator, ratio: float = 10.0,
     for mask in masks:
         new_boxes = tuple(replace(b, mass_kg=light_mass * (ratio if m == "1" else 1.0), density_kg_m3=None,
                                   group="heavy" if m == "1" else "light") for b, m in zip(boxes, mask))
-        out.append(replace(scene, name=f"{scene.name}_{mask}", boxes=new_boxes))
+        out.append(replace(scene, name=f"{scene.name}_{mask}", objects=new_boxes))
     return out[0], out[1]
 
 
@@ -184,12 +184,12 @@ def make_table(kind: str, size_m: tuple[float, float] = (2.4, 1.6), wall_height_
 
 
 def generate_block_configuration(rng: np.random.Generator, cube_m: float = 0.2,
-                                 table_size_m: tuple[float, float] = (2.4, 1.6)) -> list[Box]:
+                                 table_size_m: tuple[float, float] = (2.4, 1.6)) -> list[Body]:
     """Red/yellow blocks in stacks: random number (2-4) and heights (1-4) of stacks, random
     positions, and per stack a random shape (cube, or a box 2 cubes long); half red, half yellow."""
     n_stacks = int(rng.integers(2, 5))
     usable = np.array(table_size_m) / 2 - 2.5 * cube_m
-    boxes: list[Box] = []
+    boxes: list[Body] = []
     centres: list[np.ndarray] = []
     for stack in range(n_stacks):
         for _ in range(100):
@@ -217,7 +217,7 @@ def generate_tables(seed: int, configurations: int = 12, tables: tuple[str, ...]
     for i, child in enumerate(children):
         blocks = tuple(generate_block_configuration(np.random.default_rng(child), cube_m))
         for kind in tables:
-            scene = Scene(name=f"gen_table_{seed}_c{i:02d}_{kind}", boxes=blocks, support=make_table(kind),
+            scene = Scene(name=f"gen_table_{seed}_c{i:02d}_{kind}", objects=blocks, support=make_table(kind),
                           gravity_m_s2=(0.0, 0.0, -9.81))
             scenes.append(validate_scene(scene))
     return scenes

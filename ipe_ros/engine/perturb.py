@@ -1,8 +1,10 @@
 """The IPE's input distributions (paper SI "Inputs"): pure functions of (scene, config, rng).
 
-The draw order is fixed (position noise first, then the push direction), and both are always drawn,
-so a sample's noisy scene depends on its seed and sigma only: never on phi, the preset, or which
-queries were asked.
+The draw order is fixed (horizontal position noise first, then the push direction; then vertical and
+yaw noise, only when some body asks for them), and the first two are always drawn, so a sample's noisy
+scene depends on its seed and the noise SDs only: never on phi, the preset, or which queries were
+asked. Each body's noise is the model's sigma unless the body gives its own (``position_sigma_m``,
+``yaw_sigma_rad``: 0 for a body known exactly, such as one the robot holds).
 """
 
 from __future__ import annotations
@@ -21,27 +23,56 @@ class SampleInputs:
     """One Monte Carlo draw of the model's inputs.
 
     Attributes:
-        positions_m: (n_dynamic, 3) noisy centres of the dynamic boxes (before depenetration).
+        positions_m: (n_dynamic, 3) noisy centres of mass of the dynamic bodies (before depenetration).
+        orientations_xyzw: (n_dynamic, 4) their orientations (turned by the yaw noise, if any).
         masses_kg: (n_dynamic,) masses after the mass ratio mu.
         push_direction_rad: direction of the support's acceleration in the scene's xy plane.
     """
 
     positions_m: np.ndarray
+    orientations_xyzw: np.ndarray
     masses_kg: np.ndarray
     push_direction_rad: float
 
 
 def dynamic_masses(scene: Scene, mu: float | None) -> np.ndarray:
-    """Masses (kg) of the dynamic boxes under the model's heavy/light density ratio ``mu``.
+    """Masses (kg) of the dynamic bodies under the model's heavy/light density ratio ``mu``.
 
     With ``mu`` None the scene's own masses are kept. Otherwise the model ignores the scene's masses:
-    light boxes get MODEL_LIGHT_DENSITY_KG_M3 and "heavy" ones ``mu`` times that, so two scenes that
-    differ only in which boxes are heavy get exactly the same masses under mu = 1.
+    light bodies get MODEL_LIGHT_DENSITY_KG_M3 and "heavy" ones ``mu`` times that, so two scenes that
+    differ only in which bodies are heavy get exactly the same masses under mu = 1.
     """
-    boxes = scene.dynamic_boxes
+    bodies = scene.dynamic_objects
     if mu is None:
-        return np.array([b.resolved_mass_kg for b in boxes], dtype=float)
-    return np.array([MODEL_LIGHT_DENSITY_KG_M3 * b.volume_m3 * (mu if b.is_heavy else 1.0) for b in boxes])
+        return np.array([b.resolved_mass_kg for b in bodies], dtype=float)
+    return np.array([MODEL_LIGHT_DENSITY_KG_M3 * b.volume_m3 * (mu if b.is_heavy else 1.0) for b in bodies])
+
+
+def position_sigmas_m(scene: Scene, model: ModelConfig) -> np.ndarray:
+    """(n_dynamic, 3) position noise SDs: each body's own, else the model's sigma horizontally."""
+    out = np.zeros((len(scene.dynamic_objects), 3))
+    for i, body in enumerate(scene.dynamic_objects):
+        own = body.position_sigma_m
+        if own is None:
+            out[i, :2] = model.sigma_m
+        elif isinstance(own, (tuple, list)):
+            out[i] = own
+        else:
+            out[i, :2] = own
+    return out
+
+
+def _yaw_quaternions(yaw_rad: np.ndarray) -> np.ndarray:
+    half = yaw_rad / 2
+    return np.stack([np.zeros_like(half), np.zeros_like(half), np.sin(half), np.cos(half)], axis=1)
+
+
+def _quaternion_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise a * b for (n, 4) xyzw quaternions (b applied first)."""
+    ax, ay, az, aw = a.T
+    bx, by, bz, bw = b.T
+    return np.stack([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz], axis=1)
 
 
 def draw_push_direction(model: ModelConfig, rng: np.random.Generator) -> float:
@@ -53,11 +84,20 @@ def draw_push_direction(model: ModelConfig, rng: np.random.Generator) -> float:
 
 
 def draw_sample_inputs(scene: Scene, model: ModelConfig, rng: np.random.Generator) -> SampleInputs:
-    """Draw one sample: horizontal N(0, sigma) noise on every dynamic box, then a push direction."""
-    boxes = scene.dynamic_boxes
-    positions = np.array([b.position_m for b in boxes], dtype=float)
-    noise = rng.standard_normal((len(boxes), 2))
-    positions[:, :2] += model.sigma_m * noise
+    """Draw one sample: horizontal N(0, sigma) noise on every dynamic body, then a push direction,
+    then vertical and yaw noise where bodies ask for them."""
+    bodies = scene.dynamic_objects
+    positions = np.array([b.centre_of_mass_m for b in bodies], dtype=float)
+    orientations = np.array([b.orientation_xyzw for b in bodies], dtype=float)
+    sigmas = position_sigmas_m(scene, model)
+    noise = rng.standard_normal((len(bodies), 2))
+    positions[:, :2] += sigmas[:, :2] * noise
     direction = draw_push_direction(model, rng)
-    return SampleInputs(positions_m=positions, masses_kg=dynamic_masses(scene, model.mu),
-                        push_direction_rad=float(direction))
+    if sigmas[:, 2].any():
+        positions[:, 2] += sigmas[:, 2] * rng.standard_normal(len(bodies))
+    yaw_sigmas = np.array([b.yaw_sigma_rad or 0.0 for b in bodies])
+    if yaw_sigmas.any():  # about each body's centre of mass
+        turn = _yaw_quaternions(yaw_sigmas * rng.standard_normal(len(bodies)))
+        orientations = _quaternion_product(turn, orientations)
+    return SampleInputs(positions_m=positions, orientations_xyzw=orientations,
+                        masses_kg=dynamic_masses(scene, model.mu), push_direction_rad=float(direction))

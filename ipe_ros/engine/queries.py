@@ -1,6 +1,8 @@
 """Query predicates on (initial, final) states of one rollout (paper SI "Query definitions").
 
-Pure numpy. Positions are (n, 3) arrays in metres for the dynamic boxes, in scene order.
+Pure numpy. Positions are (n, 3) arrays in metres of the dynamic bodies' centres of mass, in scene
+order. "Smallest extent" is the smallest side of a body's bounding box in its own frame (a sphere's
+diameter, a cylinder's diameter or length).
 """
 
 from __future__ import annotations
@@ -9,7 +11,7 @@ import math
 
 import numpy as np
 
-from .scene import Scene, Table, box_half_heights
+from .scene import Scene, Table, half_heights_m
 
 
 def fallen_mask(initial_m: np.ndarray, final_m: np.ndarray, min_extents_m: np.ndarray,
@@ -51,13 +53,12 @@ def bump_ratio(fell_off: np.ndarray, groups: tuple[str, ...], group: str) -> flo
 
 
 def tower_base_xy_m(scene: Scene) -> np.ndarray:
-    """Horizontal centroid of the dynamic boxes that rest directly on the support (the tower's base)."""
-    boxes = scene.dynamic_boxes
-    positions = np.array([b.position_m for b in boxes], float)
-    lows = positions[:, 2] - box_half_heights(np.array([b.extents_m for b in boxes], float),
-                                              np.array([b.orientation_xyzw for b in boxes], float))
+    """Horizontal centroid of the dynamic bodies that rest directly on the support (the tower's base)."""
+    bodies = scene.dynamic_objects
+    positions = np.array([b.centre_of_mass_m for b in bodies], float)
+    lows = positions[:, 2] - half_heights_m(bodies, np.array([b.orientation_xyzw for b in bodies], float))
     top = scene.support.top_m
-    scale = min(min(b.extents_m) for b in boxes)
+    scale = min(b.smallest_extent_m for b in bodies)
     on_support = np.abs(lows - top) <= 0.05 * scale
     if isinstance(scene.support, Table):
         on_support &= np.array([scene.support.covers_xy(x, y) for x, y in positions[:, :2]])

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import queries, simulation
+from . import queries, shapes, simulation
 from .config import ModelConfig, QuerySpec, SimSettings
 from .errors import PhysicsError
 from .perturb import draw_sample_inputs
@@ -35,7 +35,7 @@ class SampleTask:
 
 @dataclass(frozen=True)
 class RolloutResult:
-    """One simulated push magnitude of one sample. Arrays follow ``scene.dynamic_boxes``.
+    """One simulated push magnitude of one sample. Arrays follow ``scene.dynamic_objects``.
 
     Query fields are None when that query was not asked.
     """
@@ -50,7 +50,9 @@ class RolloutResult:
     bump_ratio: float | None
     trajectory: list | None = None
     simulated_s: float = 0.0  # simulated time; below the horizon when the rollout ended early
-    any_fell: bool | None = None  # the any_fall query: did at least one box fall?
+    any_fell: bool | None = None  # the any_fall query: did at least one body fall?
+    energy_gain_j: float = 0.0  # the most energy gained beyond what the push and initial velocities put in
+    penetration_fraction: float = 0.0  # the deepest any body ends inside another, / its smallest extent
 
 
 @dataclass(frozen=True)
@@ -66,14 +68,14 @@ class SampleOutcome:
     rollouts: tuple[RolloutResult, ...] = ()
 
 
-def _query(task: SampleTask, initial: np.ndarray, final: np.ndarray, final_orn: np.ndarray,
-           phi: float, trajectory: list | None, simulated_s: float) -> RolloutResult:
+def _query(task: SampleTask, initial: np.ndarray, phi: float, end: simulation.RolloutEnd) -> RolloutResult:
     scene, spec = task.scene, task.query
-    boxes = scene.dynamic_boxes
+    final, final_orn = end.positions_m, end.orientations_xyzw
+    boxes = scene.dynamic_objects
     fallen = direction = far = fell_off = ratio = any_fell = None
     needs_fallen = any(spec.wants(q) for q in ("fall", "any_fall", "direction", "far"))
     if needs_fallen:
-        min_extents = np.array([min(b.extents_m) for b in boxes])
+        min_extents = np.array([b.smallest_extent_m for b in boxes])
         fallen = queries.fallen_mask(initial, final, min_extents, spec.fall_threshold_fraction)
     if spec.wants("any_fall"):
         any_fell = bool(fallen.any())
@@ -89,11 +91,12 @@ def _query(task: SampleTask, initial: np.ndarray, final: np.ndarray, final_orn: 
     return RolloutResult(phi_m_s2=phi, final_positions_m=final, final_orientations_xyzw=final_orn,
                          fallen=fallen,
                          direction_rad=direction, far_m=far, fell_off=fell_off, bump_ratio=ratio,
-                         trajectory=trajectory, simulated_s=simulated_s, any_fell=any_fell)
+                         trajectory=end.trajectory, simulated_s=end.simulated_s, any_fell=any_fell,
+                         energy_gain_j=end.energy_gain_j, penetration_fraction=end.penetration_fraction)
 
 
 def _smallest_extents(task: SampleTask) -> np.ndarray:
-    return np.array([min(b.extents_m) for b in task.scene.dynamic_boxes])
+    return np.array([b.smallest_extent_m for b in task.scene.dynamic_objects])
 
 
 def _decided_heights(task: SampleTask, initial: np.ndarray) -> DecidedHeights | None:
@@ -111,10 +114,10 @@ def _decided_heights(task: SampleTask, initial: np.ndarray) -> DecidedHeights | 
 
 
 def _never_falls(task: SampleTask, decided_below_z: np.ndarray) -> np.ndarray | None:
-    """Boxes that cannot end below their fallen height whatever happens: even lying on their
-    smallest face on the lowest surface there is (the floor, also under a table) their centre stays
+    """Bodies that cannot end below their fallen height whatever happens: even resting in their
+    lowest way on the lowest surface there is (the floor, also under a table) their centre stays
     above it, with 5% of the smallest extent to spare for contact penetration. A tower's bottom
-    blocks are such boxes; without this, early termination waited for them to stop being shoved
+    blocks are such bodies; without this, early termination waited for them to stop being shoved
     around by a collapse although their outcome (not fallen) was never in doubt.
     """
     support = task.scene.support
@@ -122,7 +125,8 @@ def _never_falls(task: SampleTask, decided_below_z: np.ndarray) -> np.ndarray | 
     if lowest_surface_z is None:  # a table with nothing under it: boxes can drop without limit
         return None
     smallest = _smallest_extents(task)
-    return decided_below_z < lowest_surface_z + 0.45 * smallest
+    lowest_rest = np.array([shapes.min_rest_height_m(b.shape) for b in task.scene.dynamic_objects])
+    return decided_below_z < lowest_surface_z + lowest_rest - 0.05 * smallest
 
 
 def run_sample(task: SampleTask, probe: Probe = NO_PROBE) -> SampleOutcome:
@@ -138,7 +142,8 @@ def run_sample(task: SampleTask, probe: Probe = NO_PROBE) -> SampleOutcome:
         # bodies are the default's own, so it simulates on in the separated world.
         separation = task.settings.changed(solver={"maximal_coordinates": True})
         with probe.part("build"):
-            world = simulation.build_world(task.scene, inputs.positions_m, inputs.masses_kg, separation)
+            world = simulation.build_world(task.scene, inputs.positions_m, inputs.masses_kg, separation,
+                                           orientations_xyzw=inputs.orientations_xyzw)
         with probe.part("depenetrate"):
             simulation.depenetrate(world, separation)
         initial, initial_orn = simulation.read_poses(world)
@@ -155,9 +160,7 @@ def run_sample(task: SampleTask, probe: Probe = NO_PROBE) -> SampleOutcome:
             push = simulation.Push(phi, inputs.push_direction_rad, task.model.push_duration_s)
             end = simulation.simulate(world, task.scene, task.settings, push, record_every=task.record_every,
                                       decided=decided, collapse_below_z_m=collapse_below_z, probe=probe)
-            final, final_orn, trajectory, simulated_s = end.positions_m, end.orientations_xyzw, end.trajectory, \
-                end.simulated_s
-            results.append(_query(task, initial, final, final_orn, phi, trajectory, simulated_s))
+            results.append(_query(task, initial, phi, end))
     except PhysicsError as exc:
         return SampleOutcome(index=task.index, ok=False, error=f"PhysicsError: {exc}",
                              push_direction_rad=inputs.push_direction_rad, initial_positions_m=None,

@@ -1,8 +1,8 @@
-"""Scenes as plain typed values: rigid boxes on a floor or a table.
+"""Scenes as plain typed values: rigid bodies of any shape on a floor or a table.
 
 Conventions: SI units (metres, kilograms, seconds), z up, right-handed. Orientations are unit
-quaternions in (x, y, z, w) order, as pybullet and ROS use them. Extents are FULL box sizes along
-the box's own axes (not half extents).
+quaternions in (x, y, z, w) order, as pybullet and ROS use them. A body's pose is its own frame's
+(the frame its shape is given in, see shapes.py); extents are FULL sizes (not half extents).
 
 Everything here is a frozen dataclass: scenes pass between layers and processes by value.
 ``validate_scene`` checks a scene once, where it enters the engine; it raises
@@ -17,10 +17,14 @@ from typing import Union
 
 import numpy as np
 
+from . import shapes
 from .errors import SceneError
+from .shapes import BoxShape, Shape
 
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
+#: The longest horizon a scene may ask for: a prediction's cost grows with it.
+MAX_HORIZON_S = 60.0
 
 #: A quaternion whose norm differs from 1 by more than this is rejected (not renormalised silently).
 QUATERNION_NORM_TOLERANCE = 1e-3
@@ -31,24 +35,30 @@ HEAVY_GROUP = "heavy"
 
 
 @dataclass(frozen=True)
-class Box:
-    """One rigid cuboid.
+class Body:
+    """One rigid body.
 
     Attributes:
         name: unique within the scene; used in per-object outputs.
-        extents_m: full edge lengths along the box's x, y, z axes, metres.
-        position_m: centre of the box in the scene frame, metres.
-        orientation_xyzw: unit quaternion (x, y, z, w) of the box frame in the scene frame.
-        mass_kg: mass in kg, or None when ``density_kg_m3`` is given instead.
+        shape: its shape in its own frame (shapes.BoxShape, Sphere, Cylinder, Capsule, ConvexHull, Compound).
+        position_m: origin of the body's frame in the scene frame, metres (a box's, sphere's,
+            cylinder's and capsule's centre; a hull's or compound's centre of mass may lie elsewhere).
+        orientation_xyzw: unit quaternion (x, y, z, w) of the body frame in the scene frame.
+        mass_kg: mass in kg, or None when ``density_kg_m3`` is given instead (mass = density x the
+            shape's true volume).
         density_kg_m3: uniform density in kg/m^3, or None when ``mass_kg`` is given.
         friction: Coulomb friction coefficient (pybullet multiplies the two bodies' values).
         restitution: coefficient of restitution in [0, 1].
-        group: free-text label ("red", "heavy", ...); ``heavy`` marks the boxes mu scales.
-        static: True for fixed geometry (walls, obstacles); static boxes never move or fall.
+        group: free-text label ("red", "heavy", ...); ``heavy`` marks the bodies mu scales.
+        static: True for fixed geometry (walls, obstacles); static bodies never move or fall.
+        linear_velocity_m_s, angular_velocity_rad_s: the state at t = 0 (scene frame).
+        position_sigma_m: this body's own position noise (SD, metres), overriding the model's sigma:
+            a number (horizontal, as the paper's) or (sx, sy, sz); 0 = known exactly. None: the model's.
+        yaw_sigma_rad: SD of a rotation about the vertical, radians; None or 0: none.
     """
 
     name: str
-    extents_m: Vec3
+    shape: Shape
     position_m: Vec3
     orientation_xyzw: Quat
     friction: float
@@ -57,14 +67,40 @@ class Box:
     density_kg_m3: float | None = None
     group: str = ""
     static: bool = False
+    linear_velocity_m_s: Vec3 = (0.0, 0.0, 0.0)
+    angular_velocity_rad_s: Vec3 = (0.0, 0.0, 0.0)
+    position_sigma_m: float | Vec3 | None = None
+    yaw_sigma_rad: float | None = None
+
+    @property
+    def extents_m(self) -> Vec3:
+        """Full sizes of the shape's bounding box along the body's own axes."""
+        return shapes.extents_m(self.shape)
+
+    @property
+    def smallest_extent_m(self) -> float:
+        return min(self.extents_m)
 
     @property
     def volume_m3(self) -> float:
-        return float(self.extents_m[0] * self.extents_m[1] * self.extents_m[2])
+        return shapes.volume_m3(self.shape)
+
+    @property
+    def centre_of_mass_m(self) -> np.ndarray:
+        """The centre of mass in the scene frame."""
+        local = shapes.centre_of_mass_m(self.shape)
+        if not local.any():
+            return np.asarray(self.position_m, float)
+        return np.asarray(self.position_m, float) + quaternion_to_matrix(self.orientation_xyzw) @ local
+
+    @property
+    def moving(self) -> bool:
+        """Given an initial velocity."""
+        return any(self.linear_velocity_m_s) or any(self.angular_velocity_rad_s)
 
     @property
     def resolved_mass_kg(self) -> float:
-        """Mass in kg whichever of mass or density was given (0 for a static box without either)."""
+        """Mass in kg whichever of mass or density was given (0 for a static body without either)."""
         if self.mass_kg is not None:
             return float(self.mass_kg)
         if self.density_kg_m3 is not None:
@@ -74,6 +110,13 @@ class Box:
     @property
     def is_heavy(self) -> bool:
         return self.group.strip().lower() == HEAVY_GROUP
+
+
+def Box(name: str, extents_m: Vec3, position_m: Vec3, orientation_xyzw: Quat, friction: float, restitution: float,
+        **fields) -> Body:  # noqa: N802 - reads as the type it makes
+    """A body whose shape is a box of full ``extents_m``: the paper's blocks."""
+    return Body(name=name, shape=BoxShape(tuple(extents_m)), position_m=position_m,
+                orientation_xyzw=orientation_xyzw, friction=friction, restitution=restitution, **fields)
 
 
 @dataclass(frozen=True)
@@ -100,7 +143,7 @@ class Table:
         thickness_m: thickness of the top slab, metres.
         friction, restitution: surface properties of the top.
         floor_z_m: z of an infinite floor under the table, or None for no floor.
-        obstacles: static boxes attached to the table (short walls); each must be ``static``.
+        obstacles: static bodies attached to the table (short walls); each must be ``static``.
     """
 
     top_height_m: float
@@ -110,7 +153,7 @@ class Table:
     friction: float
     restitution: float
     floor_z_m: float | None
-    obstacles: tuple[Box, ...] = ()
+    obstacles: tuple[Body, ...] = ()
 
     @property
     def top_m(self) -> float:
@@ -127,41 +170,36 @@ Support = Union[Floor, Table]
 
 @dataclass(frozen=True)
 class Scene:
-    """Boxes on a support under gravity.
+    """Rigid bodies on a support under gravity.
 
     Attributes:
         name: identifies the scene in outputs (a tower name, a file stem, a ROS scene id).
-        boxes: the rigid boxes, dynamic and static.
+        objects: the rigid bodies, dynamic and static.
         support: a :class:`Floor` or a :class:`Table`.
         gravity_m_s2: gravity vector in m/s^2; z must be negative (z is up).
+        horizon_s: how long to simulate this scene, or None for the settings' horizon.
     """
 
     name: str
-    boxes: tuple[Box, ...]
+    objects: tuple[Body, ...]
     support: Support
     gravity_m_s2: Vec3 = (0.0, 0.0, -9.81)
+    horizon_s: float | None = None
 
     @property
-    def dynamic_boxes(self) -> tuple[Box, ...]:
-        return tuple(b for b in self.boxes if not b.static)
+    def dynamic_objects(self) -> tuple[Body, ...]:
+        return tuple(b for b in self.objects if not b.static)
 
     @property
-    def static_boxes(self) -> tuple[Box, ...]:
+    def static_objects(self) -> tuple[Body, ...]:
         obstacles = self.support.obstacles if isinstance(self.support, Table) else ()
-        return tuple(b for b in self.boxes if b.static) + tuple(obstacles)
+        return tuple(b for b in self.objects if b.static) + tuple(obstacles)
 
 
 # --------------------------------------------------------------------------------------------
 # geometry helpers (pure numpy)
 
-def quaternion_to_matrix(q_xyzw) -> np.ndarray:
-    """Rotation matrix of a (normalised here) quaternion in (x, y, z, w) order."""
-    x, y, z, w = np.asarray(q_xyzw, dtype=float) / np.linalg.norm(q_xyzw)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+quaternion_to_matrix = shapes.rotation_matrix
 
 
 def box_corners(extents_m, position_m, orientation_xyzw) -> np.ndarray:
@@ -172,13 +210,9 @@ def box_corners(extents_m, position_m, orientation_xyzw) -> np.ndarray:
     return np.asarray(position_m, float) + (signs * half) @ rot.T
 
 
-def box_half_heights(extents_m: np.ndarray, orientations_xyzw: np.ndarray) -> np.ndarray:
-    """Vertical half-extent of each box (n,), i.e. centre-to-lowest-point distance."""
-    out = np.empty(len(extents_m))
-    for i, (ext, q) in enumerate(zip(extents_m, orientations_xyzw)):
-        rot = quaternion_to_matrix(q)
-        out[i] = 0.5 * np.abs(rot[2, :]) @ np.asarray(ext, float)
-    return out
+def half_heights_m(bodies, orientations_xyzw: np.ndarray) -> np.ndarray:
+    """How far each body reaches below its centre of mass (n,), at the given orientations."""
+    return np.array([shapes.half_height_m(b.shape, q) for b, q in zip(bodies, orientations_xyzw)])
 
 
 # --------------------------------------------------------------------------------------------
@@ -212,49 +246,64 @@ def _check_number(value, path: str, what: str, *, lo: float | None = None, lo_op
         raise SceneError(path, f"{what} must be <= {hi:g}, got {value!r}")
 
 
-def validate_box(box: Box, path: str) -> None:
-    """Check one box's own fields; raises SceneError naming ``path`` + the field."""
-    if not isinstance(box.name, str) or not box.name.strip():
+def validate_body(body: Body, path: str) -> None:
+    """Check one body's own fields; raises SceneError naming ``path`` + the field."""
+    if not isinstance(body.name, str) or not body.name.strip():
         raise SceneError(f"{path}.name", "must be a non-empty string")
-    path = f"{path} ({box.name!r})"
-    _check_vector(box.extents_m, 3, f"{path}.extents_m", "full extents in metres")
-    if min(box.extents_m) <= 0:
-        raise SceneError(f"{path}.extents_m",
-                         f"every extent must be > 0 metres, got {list(box.extents_m)}")
-    _check_vector(box.position_m, 3, f"{path}.position_m", "position in metres")
-    _check_vector(box.orientation_xyzw, 4, f"{path}.orientation_xyzw", "quaternion (x, y, z, w)")
-    norm = math.sqrt(sum(c * c for c in box.orientation_xyzw))
+    path = f"{path} ({body.name!r})"
+    shapes.validate_shape(body.shape, f"{path}.shape")
+    _check_vector(body.position_m, 3, f"{path}.position_m", "position in metres")
+    _check_vector(body.orientation_xyzw, 4, f"{path}.orientation_xyzw", "quaternion (x, y, z, w)")
+    norm = math.sqrt(sum(c * c for c in body.orientation_xyzw))
     if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
         raise SceneError(f"{path}.orientation_xyzw",
                          f"must be a unit quaternion (norm within {QUATERNION_NORM_TOLERANCE:g} of 1),"
                          f" got norm {norm:.6g}; normalise it")
-    _check_number(box.friction, f"{path}.friction", "friction", lo=0.0)
-    _check_number(box.restitution, f"{path}.restitution", "restitution", lo=0.0, hi=1.0)
-    if not isinstance(box.group, str):
-        raise SceneError(f"{path}.group", f"must be a string, got {box.group!r}")
-    if not isinstance(box.static, bool):
-        raise SceneError(f"{path}.static", f"must be true or false, got {box.static!r}")
-    if box.mass_kg is not None and box.density_kg_m3 is not None:
+    _check_number(body.friction, f"{path}.friction", "friction", lo=0.0)
+    _check_number(body.restitution, f"{path}.restitution", "restitution", lo=0.0, hi=1.0)
+    if not isinstance(body.group, str):
+        raise SceneError(f"{path}.group", f"must be a string, got {body.group!r}")
+    if not isinstance(body.static, bool):
+        raise SceneError(f"{path}.static", f"must be true or false, got {body.static!r}")
+    if body.mass_kg is not None and body.density_kg_m3 is not None:
         raise SceneError(f"{path}.mass_kg", "give mass_kg or density_kg_m3, not both")
-    if box.mass_kg is None and box.density_kg_m3 is None and not box.static:
-        raise SceneError(f"{path}.mass_kg", "a dynamic box needs mass_kg or density_kg_m3 (> 0)")
-    if box.mass_kg is not None:
-        _check_number(box.mass_kg, f"{path}.mass_kg", "mass in kg", lo=0.0, lo_open=True)
-    if box.density_kg_m3 is not None:
-        _check_number(box.density_kg_m3, f"{path}.density_kg_m3", "density in kg/m^3", lo=0.0,
+    if body.mass_kg is None and body.density_kg_m3 is None and not body.static:
+        raise SceneError(f"{path}.mass_kg", "a dynamic body needs mass_kg or density_kg_m3 (> 0)")
+    if body.mass_kg is not None:
+        _check_number(body.mass_kg, f"{path}.mass_kg", "mass in kg", lo=0.0, lo_open=True)
+    if body.density_kg_m3 is not None:
+        _check_number(body.density_kg_m3, f"{path}.density_kg_m3", "density in kg/m^3", lo=0.0,
                       lo_open=True)
+    _check_vector(body.linear_velocity_m_s, 3, f"{path}.linear_velocity_m_s", "velocity in m/s")
+    _check_vector(body.angular_velocity_rad_s, 3, f"{path}.angular_velocity_rad_s", "angular velocity in rad/s")
+    if body.static and body.moving:
+        raise SceneError(f"{path}.linear_velocity_m_s", "a static body cannot move; drop its velocity or make it "
+                                                        "dynamic")
+    sigma = body.position_sigma_m
+    if sigma is not None:
+        if isinstance(sigma, (tuple, list)):
+            _check_vector(sigma, 3, f"{path}.position_sigma_m", "position noise SDs (x, y, z) in metres")
+            if min(sigma) < 0:
+                raise SceneError(f"{path}.position_sigma_m", f"noise SDs must be >= 0, got {list(sigma)}")
+        else:
+            _check_number(sigma, f"{path}.position_sigma_m", "position noise SD in metres", lo=0.0)
+    if body.yaw_sigma_rad is not None:
+        _check_number(body.yaw_sigma_rad, f"{path}.yaw_sigma_rad", "yaw noise SD in radians", lo=0.0, hi=math.pi)
 
 
-def _lowest_z(box: Box) -> float:
-    return float(box_corners(box.extents_m, box.position_m, box.orientation_xyzw)[:, 2].min())
+def lowest_z_m(body: Body) -> float:
+    """The lowest point of the body in the scene frame."""
+    points = shapes.surface_points(body.shape) @ quaternion_to_matrix(body.orientation_xyzw).T
+    return float(points[:, 2].min() + body.position_m[2])
 
 
 def validate_scene(scene: Scene, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scene:
     """Check a whole scene; return it unchanged or raise :class:`SceneError`.
 
-    Checks: finite numbers, positive sizes and masses, unit quaternions, unique names, at least one
-    dynamic box, no more than ``max_objects`` boxes, gravity pointing down, and no box starting below
-    its support (a tolerance of 1% of the box's smallest extent absorbs rounding in the input).
+    Checks: well-formed shapes, finite numbers, positive sizes and masses, unit quaternions, unique
+    names, at least one dynamic body, no more than ``max_objects`` bodies, gravity pointing down, a
+    horizon within MAX_HORIZON_S, and no body starting below its support (a tolerance of 1% of the
+    body's smallest extent absorbs rounding in the input).
     """
     if not isinstance(scene.name, str) or not scene.name.strip():
         raise SceneError("name", "must be a non-empty string")
@@ -286,33 +335,36 @@ def validate_scene(scene: Scene, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scen
             if obstacle.static is not True:
                 raise SceneError(f"support.obstacles[{i}] ({obstacle.name!r}).static",
                                  "obstacles are attached to the table and must be static: true")
-            validate_box(obstacle, f"support.obstacles[{i}]")
+            validate_body(obstacle, f"support.obstacles[{i}]")
     else:
         raise SceneError("support", f"must be a Floor or a Table, got {type(support).__name__}")
 
-    n_objects = len(scene.boxes) + (len(support.obstacles) if isinstance(support, Table) else 0)
+    if scene.horizon_s is not None:
+        _check_number(scene.horizon_s, "horizon_s", "the simulated time in seconds", lo=0.0, lo_open=True,
+                      hi=MAX_HORIZON_S)
+    n_objects = len(scene.objects) + (len(support.obstacles) if isinstance(support, Table) else 0)
     if n_objects > max_objects:
-        raise SceneError("boxes", f"{n_objects} objects exceed the maximum of {max_objects}; "
-                                  "split the scene or raise max_objects")
-    if not scene.dynamic_boxes:
-        raise SceneError("boxes", "the scene has no dynamic box: nothing can fall")
+        raise SceneError("objects", f"{n_objects} objects exceed the maximum of {max_objects}; "
+                                    "split the scene or raise max_objects")
+    if not scene.dynamic_objects:
+        raise SceneError("objects", "the scene has no dynamic object: nothing can fall")
 
     seen: set[str] = set()
-    all_boxes = [(f"boxes[{i}]", b) for i, b in enumerate(scene.boxes)]
+    everything = [(f"objects[{i}]", b) for i, b in enumerate(scene.objects)]
     if isinstance(support, Table):
-        all_boxes += [(f"support.obstacles[{i}]", b) for i, b in enumerate(support.obstacles)]
-    for path, box in all_boxes:
-        if path.startswith("boxes"):
-            validate_box(box, path)
-        if box.name in seen:
-            raise SceneError(f"{path}.name", f"duplicate name {box.name!r}; names must be unique")
-        seen.add(box.name)
-        lowest = _lowest_z(box)
-        tolerance = 0.01 * min(box.extents_m)
-        ground = support_top_below(support, box.position_m[0], box.position_m[1])
+        everything += [(f"support.obstacles[{i}]", b) for i, b in enumerate(support.obstacles)]
+    for path, body in everything:
+        if path.startswith("objects"):
+            validate_body(body, path)
+        if body.name in seen:
+            raise SceneError(f"{path}.name", f"duplicate name {body.name!r}; names must be unique")
+        seen.add(body.name)
+        lowest = lowest_z_m(body)
+        tolerance = 0.01 * body.smallest_extent_m
+        ground = support_top_below(support, body.position_m[0], body.position_m[1])
         if ground is not None and lowest < ground - tolerance:
-            raise SceneError(f"{path} ({box.name!r}).position_m",
-                             f"the box's lowest point z = {lowest:.6g} m is below the support surface "
+            raise SceneError(f"{path} ({body.name!r}).position_m",
+                             f"the body's lowest point z = {lowest:.6g} m is below the support surface "
                              f"at z = {ground:.6g} m; raise it by at least {ground - lowest:.6g} m")
     return scene
 

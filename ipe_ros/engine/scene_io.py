@@ -1,24 +1,38 @@
 """Reading and writing scenes: the engine's JSON format and the paper's tower CSV.
 
-JSON scene format (``"format": "ipe_ros.scene/1"``), all units SI, z up::
+JSON scene format ``ipe_ros.scene/2`` (written by this version; ``/1`` files are read unchanged), SI
+units, z up; docs/scene-format.md gives it in full::
 
     {
-      "format": "ipe_ros.scene/1",
-      "name": "two_blocks",
+      "format": "ipe_ros.scene/2",
+      "name": "capped_tower",
       "gravity_m_s2": [0.0, 0.0, -9.81],
+      "horizon_s": 3.0,
       "support": {"type": "floor", "height_m": 0.0, "friction": 0.9, "restitution": 0.0},
-      "boxes": [
-        {"name": "a", "extents_m": [0.2, 0.6, 0.2], "position_m": [0.0, 0.0, 0.1],
-         "orientation_xyzw": [0.0, 0.0, 0.0, 1.0], "mass_kg": 4.08,
-         "friction": 0.9, "restitution": 0.0, "group": "light", "static": false}
+      "objects": [
+        {"name": "base", "shape": {"type": "box", "extents_m": [0.4, 0.4, 0.4]},
+         "position_m": [0.0, 0.0, 0.2], "orientation_xyzw": [0.0, 0.0, 0.0, 1.0], "mass_kg": 2.0,
+         "friction": 0.6, "restitution": 0.2},
+        {"name": "ball", "shape": {"type": "sphere", "radius_m": 0.1}, "position_m": [-1.0, 0.0, 0.1],
+         "orientation_xyzw": [0.0, 0.0, 0.0, 1.0], "density_kg_m3": 500.0, "friction": 0.5,
+         "restitution": 0.5, "linear_velocity_m_s": [3.0, 0.0, 0.0], "position_sigma_m": 0.0}
       ]
     }
 
-A table support is ``{"type": "table", "top_height_m", "size_m": [x, y], "center_xy_m": [x, y],
-"thickness_m", "friction", "restitution", "floor_z_m" (number or null), "obstacles": [box, ...]}``.
-A box gives exactly one of ``mass_kg`` / ``density_kg_m3``; ``group`` (default "") and ``static``
-(default false) are the only optional fields. Every other field is required, and unknown fields are
-rejected: nothing is guessed. A file may hold one scene object or a list of them.
+Shapes: ``{"type": "box", "extents_m": [x, y, z]}``, ``{"type": "sphere", "radius_m": r}``,
+``{"type": "cylinder", "radius_m": r, "length_m": l}`` (axis = object z), ``{"type": "capsule",
+"radius_m": r, "length_m": l}`` (l: the straight section between the caps), ``{"type": "convex",
+"vertices_m": [[x, y, z], ...]}`` (the hull of the points, object frame), ``{"type": "compound",
+"parts": [{"shape": {...}, "position_m": [...], "orientation_xyzw": [...]}, ...]}``.
+
+An object gives exactly one of ``mass_kg`` / ``density_kg_m3`` (density x the shape's true volume);
+optional: ``group`` (""), ``static`` (false), ``linear_velocity_m_s`` and ``angular_velocity_rad_s``
+(zero), ``position_sigma_m`` (a number: horizontal SD, or [sx, sy, sz]) and ``yaw_sigma_rad``, the
+object's own noise (absent: the model's sigma). A table support is ``{"type": "table",
+"top_height_m", "size_m": [x, y], "center_xy_m": [x, y], "thickness_m", "friction", "restitution",
+"floor_z_m" (number or null), "obstacles": [object, ...]}``. Unknown fields are rejected: nothing is
+guessed. A file may hold one scene object or a list of them. In ``/1`` files objects are
+``"boxes"`` with ``"extents_m"`` instead of a shape.
 
 Round trip: ``scene_from_dict(scene_to_dict(s)) == s`` exactly (floats are written with ``repr``
 precision by the json module).
@@ -33,33 +47,63 @@ from pathlib import Path
 from typing import Any, Iterable
 
 from .errors import SceneError
-from .scene import DEFAULT_MAX_OBJECTS, Box, Floor, Scene, Table, validate_scene
+from .scene import DEFAULT_MAX_OBJECTS, Body, Box, Floor, Scene, Table, validate_scene
+from .shapes import SHAPE_TYPES, BoxShape, Capsule, Compound, CompoundPart, ConvexHull, Cylinder, Sphere
 
-SCENE_FORMAT = "ipe_ros.scene/1"
+SCENE_FORMAT = "ipe_ros.scene/2"
+SCENE_FORMAT_V1 = "ipe_ros.scene/1"
 
 _BOX_REQUIRED = ("name", "extents_m", "position_m", "orientation_xyzw", "friction", "restitution")
 _BOX_OPTIONAL = ("mass_kg", "density_kg_m3", "group", "static")
+_OBJECT_REQUIRED = ("name", "shape", "position_m", "orientation_xyzw", "friction", "restitution")
+_OBJECT_OPTIONAL = ("mass_kg", "density_kg_m3", "group", "static", "linear_velocity_m_s", "angular_velocity_rad_s",
+                    "position_sigma_m", "yaw_sigma_rad")
+_SHAPE_FIELDS = {"box": ("extents_m",), "sphere": ("radius_m",), "cylinder": ("radius_m", "length_m"),
+                 "capsule": ("radius_m", "length_m"), "convex": ("vertices_m",), "compound": ("parts",)}
 _FLOOR_FIELDS = ("type", "height_m", "friction", "restitution")
 _TABLE_FIELDS = ("type", "top_height_m", "size_m", "center_xy_m", "thickness_m", "friction",
                  "restitution", "floor_z_m", "obstacles")
-_SCENE_REQUIRED = ("name", "gravity_m_s2", "support", "boxes")
+_SCENE_REQUIRED = ("name", "gravity_m_s2", "support", "objects")
+_SCENE_REQUIRED_V1 = ("name", "gravity_m_s2", "support", "boxes")
 
 
 # --------------------------------------------------------------------------------------------
 # to JSON
 
-def box_to_dict(box: Box) -> dict[str, Any]:
+def shape_to_dict(shape) -> dict[str, Any]:
+    if isinstance(shape, BoxShape):
+        return {"type": "box", "extents_m": list(shape.extents_m)}
+    if isinstance(shape, Sphere):
+        return {"type": "sphere", "radius_m": shape.radius_m}
+    if isinstance(shape, (Cylinder, Capsule)):
+        return {"type": shape.type, "radius_m": shape.radius_m, "length_m": shape.length_m}
+    if isinstance(shape, ConvexHull):
+        return {"type": "convex", "vertices_m": [list(v) for v in shape.vertices_m]}
+    return {"type": "compound", "parts": [{"shape": shape_to_dict(p.shape), "position_m": list(p.position_m),
+                                           "orientation_xyzw": list(p.orientation_xyzw)} for p in shape.parts]}
+
+
+def object_to_dict(body: Body) -> dict[str, Any]:
     out: dict[str, Any] = {
-        "name": box.name,
-        "extents_m": list(box.extents_m),
-        "position_m": list(box.position_m),
-        "orientation_xyzw": list(box.orientation_xyzw),
+        "name": body.name,
+        "shape": shape_to_dict(body.shape),
+        "position_m": list(body.position_m),
+        "orientation_xyzw": list(body.orientation_xyzw),
     }
-    if box.mass_kg is not None:
-        out["mass_kg"] = box.mass_kg
-    if box.density_kg_m3 is not None:
-        out["density_kg_m3"] = box.density_kg_m3
-    out.update(friction=box.friction, restitution=box.restitution, group=box.group, static=box.static)
+    if body.mass_kg is not None:
+        out["mass_kg"] = body.mass_kg
+    if body.density_kg_m3 is not None:
+        out["density_kg_m3"] = body.density_kg_m3
+    out.update(friction=body.friction, restitution=body.restitution, group=body.group, static=body.static)
+    if any(body.linear_velocity_m_s):
+        out["linear_velocity_m_s"] = list(body.linear_velocity_m_s)
+    if any(body.angular_velocity_rad_s):
+        out["angular_velocity_rad_s"] = list(body.angular_velocity_rad_s)
+    if body.position_sigma_m is not None:
+        sigma = body.position_sigma_m
+        out["position_sigma_m"] = list(sigma) if isinstance(sigma, (tuple, list)) else sigma
+    if body.yaw_sigma_rad is not None:
+        out["yaw_sigma_rad"] = body.yaw_sigma_rad
     return out
 
 
@@ -73,9 +117,12 @@ def scene_to_dict(scene: Scene) -> dict[str, Any]:
                "center_xy_m": list(support.center_xy_m), "thickness_m": support.thickness_m,
                "friction": support.friction, "restitution": support.restitution,
                "floor_z_m": support.floor_z_m,
-               "obstacles": [box_to_dict(b) for b in support.obstacles]}
-    return {"format": SCENE_FORMAT, "name": scene.name, "gravity_m_s2": list(scene.gravity_m_s2),
-            "support": sup, "boxes": [box_to_dict(b) for b in scene.boxes]}
+               "obstacles": [object_to_dict(b) for b in support.obstacles]}
+    out = {"format": SCENE_FORMAT, "name": scene.name, "gravity_m_s2": list(scene.gravity_m_s2)}
+    if scene.horizon_s is not None:
+        out["horizon_s"] = scene.horizon_s
+    out.update(support=sup, objects=[object_to_dict(b) for b in scene.objects])
+    return out
 
 
 def scene_to_json(scene: Scene, indent: int | None = None) -> str:
@@ -93,8 +140,23 @@ def write_scenes(scenes: list[Scene], path: str | Path) -> None:
 
 def _require_mapping(data: Any, path: str) -> dict:
     if not isinstance(data, dict):
-        raise SceneError(path or "scene", f"must be a JSON object, got {type(data).__name__}")
+        raise SceneError(path or "scene", f"must be a JSON object, got {_json_type(data)}")
     return data
+
+
+def _json_type(value: Any) -> str:
+    """The JSON name of a value's type (what the sender wrote, not Python's name for it)."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, (int, float)):
+        return "a number"
+    if isinstance(value, str):
+        return "a string"
+    if isinstance(value, list):
+        return "an array"
+    return "an object"
 
 
 def _check_keys(data: dict, required: Iterable[str], optional: Iterable[str], path: str) -> None:
@@ -121,9 +183,41 @@ def _num(value: Any, path: str) -> float:
     return float(value)
 
 
-def box_from_dict(data: Any, path: str) -> Box:
+def shape_from_dict(data: Any, path: str, *, nested: bool = False):
     data = _require_mapping(data, path)
-    _check_keys(data, _BOX_REQUIRED, _BOX_OPTIONAL, path)
+    kind = data.get("type")
+    if kind not in _SHAPE_FIELDS or (nested and kind == "compound"):
+        allowed = [t for t in SHAPE_TYPES if not (nested and t == "compound")]
+        raise SceneError(f"{path}.type", f"must be one of {', '.join(allowed)}, got {kind!r}")
+    _check_keys(data, ("type", *_SHAPE_FIELDS[kind]), (), path)
+    if kind == "box":
+        return BoxShape(_vec(data["extents_m"], 3, f"{path}.extents_m"))  # type: ignore[arg-type]
+    if kind == "sphere":
+        return Sphere(_num(data["radius_m"], f"{path}.radius_m"))
+    if kind in ("cylinder", "capsule"):
+        cls = Cylinder if kind == "cylinder" else Capsule
+        return cls(_num(data["radius_m"], f"{path}.radius_m"), _num(data["length_m"], f"{path}.length_m"))
+    if kind == "convex":
+        vertices = data["vertices_m"]
+        if not isinstance(vertices, list):
+            raise SceneError(f"{path}.vertices_m", "must be a list of [x, y, z] points")
+        return ConvexHull(tuple(_vec(v, 3, f"{path}.vertices_m[{i}]") for i, v in enumerate(vertices)))
+    parts = data["parts"]
+    if not isinstance(parts, list):
+        raise SceneError(f"{path}.parts", "must be a list of {shape, position_m, orientation_xyzw} parts")
+    out = []
+    for i, part in enumerate(parts):
+        where = f"{path}.parts[{i}]"
+        part = _require_mapping(part, where)
+        _check_keys(part, ("shape",), ("position_m", "orientation_xyzw"), where)
+        out.append(CompoundPart(shape=shape_from_dict(part["shape"], f"{where}.shape", nested=True),
+                                position_m=_vec(part.get("position_m", [0.0, 0.0, 0.0]), 3, f"{where}.position_m"),
+                                orientation_xyzw=_vec(part.get("orientation_xyzw", [0.0, 0.0, 0.0, 1.0]), 4,
+                                                      f"{where}.orientation_xyzw")))
+    return Compound(tuple(out))
+
+
+def _common_fields(data: dict, path: str) -> dict[str, Any]:
     name = data["name"]
     if not isinstance(name, str):
         raise SceneError(f"{path}.name", f"must be a string, got {name!r}")
@@ -135,21 +229,44 @@ def box_from_dict(data: Any, path: str) -> Box:
         raise SceneError(f"{path}.group", f"must be a string, got {group!r}")
     if not isinstance(static, bool):
         raise SceneError(f"{path}.static", f"must be true or false, got {static!r}")
-    return Box(
-        name=name,
-        extents_m=_vec(data["extents_m"], 3, f"{path}.extents_m"),  # type: ignore[arg-type]
-        position_m=_vec(data["position_m"], 3, f"{path}.position_m"),  # type: ignore[arg-type]
-        orientation_xyzw=_vec(data["orientation_xyzw"], 4, f"{path}.orientation_xyzw"),  # type: ignore[arg-type]
-        friction=_num(data["friction"], f"{path}.friction"),
-        restitution=_num(data["restitution"], f"{path}.restitution"),
-        mass_kg=None if mass is None else _num(mass, f"{path}.mass_kg"),
-        density_kg_m3=None if density is None else _num(density, f"{path}.density_kg_m3"),
-        group=group,
-        static=static,
-    )
+    return dict(name=name,
+                position_m=_vec(data["position_m"], 3, f"{path}.position_m"),
+                orientation_xyzw=_vec(data["orientation_xyzw"], 4, f"{path}.orientation_xyzw"),
+                friction=_num(data["friction"], f"{path}.friction"),
+                restitution=_num(data["restitution"], f"{path}.restitution"),
+                mass_kg=None if mass is None else _num(mass, f"{path}.mass_kg"),
+                density_kg_m3=None if density is None else _num(density, f"{path}.density_kg_m3"),
+                group=group, static=static)
 
 
-def _support_from_dict(data: Any) -> Floor | Table:
+def box_from_dict(data: Any, path: str) -> Body:
+    """A ``/1`` box."""
+    data = _require_mapping(data, path)
+    _check_keys(data, _BOX_REQUIRED, _BOX_OPTIONAL, path)
+    return Box(extents_m=_vec(data["extents_m"], 3, f"{path}.extents_m"), **_common_fields(data, path))
+
+
+def object_from_dict(data: Any, path: str) -> Body:
+    """A ``/2`` object."""
+    data = _require_mapping(data, path)
+    _check_keys(data, _OBJECT_REQUIRED, _OBJECT_OPTIONAL, path)
+    fields = _common_fields(data, path)
+    sigma = data.get("position_sigma_m")
+    if sigma is not None and not isinstance(sigma, list):
+        sigma = _num(sigma, f"{path}.position_sigma_m")
+    elif sigma is not None:
+        sigma = _vec(sigma, 3, f"{path}.position_sigma_m")
+    yaw = data.get("yaw_sigma_rad")
+    return Body(shape=shape_from_dict(data["shape"], f"{path}.shape"),
+                linear_velocity_m_s=_vec(data.get("linear_velocity_m_s", [0.0, 0.0, 0.0]), 3,
+                                         f"{path}.linear_velocity_m_s"),  # type: ignore[arg-type]
+                angular_velocity_rad_s=_vec(data.get("angular_velocity_rad_s", [0.0, 0.0, 0.0]), 3,
+                                            f"{path}.angular_velocity_rad_s"),  # type: ignore[arg-type]
+                position_sigma_m=sigma, yaw_sigma_rad=None if yaw is None else _num(yaw, f"{path}.yaw_sigma_rad"),
+                **fields)
+
+
+def _support_from_dict(data: Any, read_object) -> Floor | Table:
     data = _require_mapping(data, "support")
     kind = data.get("type")
     if kind == "floor":
@@ -161,7 +278,7 @@ def _support_from_dict(data: Any) -> Floor | Table:
         _check_keys(data, _TABLE_FIELDS, (), "support")
         obstacles = data["obstacles"]
         if not isinstance(obstacles, list):
-            raise SceneError("support.obstacles", "must be a list of boxes (may be empty)")
+            raise SceneError("support.obstacles", "must be a list of objects (may be empty)")
         floor = data["floor_z_m"]
         return Table(
             top_height_m=_num(data["top_height_m"], "support.top_height_m"),
@@ -171,34 +288,49 @@ def _support_from_dict(data: Any) -> Floor | Table:
             friction=_num(data["friction"], "support.friction"),
             restitution=_num(data["restitution"], "support.restitution"),
             floor_z_m=None if floor is None else _num(floor, "support.floor_z_m"),
-            obstacles=tuple(box_from_dict(b, f"support.obstacles[{i}]") for i, b in enumerate(obstacles)),
+            obstacles=tuple(read_object(b, f"support.obstacles[{i}]") for i, b in enumerate(obstacles)),
         )
     raise SceneError("support.type", f"must be \"floor\" or \"table\", got {kind!r}")
 
 
 def scene_from_dict(data: Any, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scene:
-    """Build and validate a scene from parsed JSON; raises SceneError naming the bad field."""
+    """Build and validate a scene from parsed JSON (``/2``, or ``/1``); raises SceneError naming the bad field."""
     data = _require_mapping(data, "")
-    _check_keys(data, _SCENE_REQUIRED, ("format",), "")
-    fmt = data.get("format", SCENE_FORMAT)
-    if fmt != SCENE_FORMAT:
-        raise SceneError("format", f"unsupported format {fmt!r}; this version reads {SCENE_FORMAT!r}")
-    boxes = data["boxes"]
-    if not isinstance(boxes, list):
-        raise SceneError("boxes", "must be a list of boxes")
-    # Count before parsing so that a 10 000-box message fails fast.
-    if len(boxes) > max_objects:
-        raise SceneError("boxes", f"{len(boxes)} objects exceed the maximum of {max_objects}; "
-                                  "split the scene or raise max_objects")
+    # without a "format", a scene with "boxes" and no "objects" is a /1 scene
+    fmt = data.get("format", SCENE_FORMAT_V1 if "boxes" in data and "objects" not in data else SCENE_FORMAT)
+    if fmt == SCENE_FORMAT_V1:
+        _check_keys(data, _SCENE_REQUIRED_V1, ("format",), "")
+        key, read_object = "boxes", box_from_dict
+    elif fmt == SCENE_FORMAT:
+        _check_keys(data, _SCENE_REQUIRED, ("format", "horizon_s"), "")
+        key, read_object = "objects", object_from_dict
+    else:
+        raise SceneError("format", f"unsupported format {fmt!r}; this version reads {SCENE_FORMAT!r} and "
+                                   f"{SCENE_FORMAT_V1!r}")
+    items = data[key]
+    if not isinstance(items, list):
+        raise SceneError(key, f"must be a list of {key}")
+    # Count before parsing so that a 10 000-object message fails fast.
+    if len(items) > max_objects:
+        raise SceneError(key, f"{len(items)} objects exceed the maximum of {max_objects}; "
+                              "split the scene or raise max_objects")
     if not isinstance(data["name"], str):
         raise SceneError("name", f"must be a string, got {data['name']!r}")
+    horizon = data.get("horizon_s")
     scene = Scene(
         name=data["name"],
-        boxes=tuple(box_from_dict(b, f"boxes[{i}]") for i, b in enumerate(boxes)),
-        support=_support_from_dict(data["support"]),
+        objects=tuple(read_object(b, f"{key}[{i}]") for i, b in enumerate(items)),
+        support=_support_from_dict(data["support"], read_object),
         gravity_m_s2=_vec(data["gravity_m_s2"], 3, "gravity_m_s2"),  # type: ignore[arg-type]
+        horizon_s=None if horizon is None else _num(horizon, "horizon_s"),
     )
-    return validate_scene(scene, max_objects=max_objects)
+    try:
+        return validate_scene(scene, max_objects=max_objects)
+    except SceneError as exc:
+        if key == "boxes" and exc.field.startswith("objects"):  # name the field as the file does
+            raise SceneError("boxes" + exc.field[len("objects"):].replace(".shape.extents_m", ".extents_m"),
+                             exc.problem) from None
+        raise
 
 
 def _reject_constant(token: str) -> None:
@@ -281,7 +413,7 @@ def scenes_from_tower_csv(path: str | Path, towers: Iterable[str] | None = None,
                 mass_kg=values["mass"],
                 group="heavy" if blocktype.strip() in ("1", "1.0") else "light",
             ))
-        scene = Scene(name=scene_name, boxes=tuple(boxes),
+        scene = Scene(name=scene_name, objects=tuple(boxes),
                       support=Floor(friction=PAPER_FLOOR_FRICTION, restitution=0.0),
                       gravity_m_s2=PAPER_GRAVITY_M_S2)
         try:

@@ -98,7 +98,7 @@ def run(output_dir: Path, samples: int, workers: int, timeout_s: float) -> list[
         _wait(lambda: scene_pub.get_subscription_count() > 0, 30.0, "the node's /ipe/scene subscription")
 
         tower = load_scenes(example_scene_path())[0]
-        print(f"publishing {tower.name} ({len(tower.boxes)} blocks, a paper-style tower) as a MarkerArray on "
+        print(f"publishing {tower.name} ({len(tower.objects)} blocks, a paper-style tower) as a MarkerArray on "
               f"/ipe/scene; IPE with sigma = {DEFAULT_SIGMA_M:g} m (0.2 block short sides), k = {samples}", flush=True)
         scene_pub.publish(scene_to_markers(tower, "world", robot.get_clock().now().nanoseconds))
         _wait(lambda: len(answers) >= 1, timeout_s, "the IPE prediction")

@@ -31,7 +31,7 @@ import rerun as rr
 
 from ..engine.estimate import Prediction, sample_any_fall, sample_fall_fraction, sample_far_m
 from .palette import SUPPORT_RGB, group_rgb, risk_rgb, to_rgb8
-from ..engine.scene import Box, Floor, Scene, Table
+from ..engine.scene import Body, Box, Floor, Scene, Table
 
 FELL_RGB = (0.9, 0.1, 0.1)
 APPLICATION_ID = "ipe_ros"
@@ -41,7 +41,7 @@ def _part(name: str) -> str:
     return rr.escape_entity_path_part(name)
 
 
-def _boxes(boxes: tuple[Box, ...], colors) -> rr.Boxes3D:
+def _boxes(boxes: tuple[Body, ...], colors) -> rr.Boxes3D:
     return rr.Boxes3D(
         centers=[b.position_m for b in boxes], half_sizes=[np.asarray(b.extents_m) / 2 for b in boxes],
         quaternions=[rr.Quaternion(xyzw=b.orientation_xyzw) for b in boxes],
@@ -53,7 +53,7 @@ def log_scene(rec: rr.RecordingStream, scene: Scene) -> None:
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     support = scene.support
     centers, half_sizes, labels = [], [], []
-    extent = max([1.0] + [abs(c) + 1.0 for b in scene.boxes for c in b.position_m[:2]])
+    extent = max([1.0] + [abs(c) + 1.0 for b in scene.objects for c in b.position_m[:2]])
     if isinstance(support, Floor):
         centers.append((0.0, 0.0, support.height_m - 0.005))
         half_sizes.append((extent, extent, 0.005))
@@ -69,17 +69,17 @@ def log_scene(rec: rr.RecordingStream, scene: Scene) -> None:
     rec.log("world/scene/support", rr.Boxes3D(centers=centers, half_sizes=half_sizes, labels=labels,
                                               colors=[to_rgb8(SUPPORT_RGB)] * len(centers),
                                               fill_mode=rr.components.FillMode.Solid), static=True)
-    fixed = scene.static_boxes
+    fixed = scene.static_objects
     if fixed:
         rec.log("world/scene/obstacles", _boxes(fixed, [to_rgb8(SUPPORT_RGB)] * len(fixed)), static=True)
-    dynamic = scene.dynamic_boxes
+    dynamic = scene.dynamic_objects
     rec.log("world/scene/boxes", _boxes(dynamic, [to_rgb8(group_rgb(b.group)) for b in dynamic]), static=True)
 
 
 def log_rollouts(rec: rr.RecordingStream, scene: Scene, prediction: Prediction, stamp_ns: int,
                  limit: int) -> int:
     """Recorded trajectories of up to ``limit`` samples; returns how many rollouts were logged."""
-    boxes = scene.dynamic_boxes
+    boxes = scene.dynamic_objects
     logged = 0
     for outcome in prediction.outcomes:
         if logged >= limit:
@@ -138,7 +138,7 @@ def log_answer(rec: rr.RecordingStream, scene: Scene, prediction: Prediction, an
     """The aggregated answer: JSON text, risk-coloured objects, direction arrow, P(fall) over stamps."""
     rec.log("answer", rr.TextDocument("```json\n" + json.dumps(answer, indent=2, sort_keys=True) + "\n```",
                                       media_type=rr.MediaType.MARKDOWN), static=True)
-    dynamic = scene.dynamic_boxes
+    dynamic = scene.dynamic_objects
     if prediction.object_fall_probability is not None:
         colors = [to_rgb8(risk_rgb(prediction.object_fall_probability[b.name])) for b in dynamic]
         rec.log("world/answer/objects", _boxes(dynamic, colors), static=True)

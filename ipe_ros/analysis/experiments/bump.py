@@ -136,7 +136,7 @@ def compute(opts: Options, map_fn) -> BumpResult:
             comparisons[label] = stats.bootstrap_pearson(variants[a][keep], variants[b][keep],
                                                          n_resamples=opts.resamples, rng=opts.rng(label))
             compared[label] = int(keep.sum())
-    n_blocks = np.array([len(s.dynamic_boxes) for s in scenes])[:, None]
+    n_blocks = np.array([len(s.dynamic_objects) for s in scenes])[:, None]
     names = tuple(f"{s['scene']}@cue={s['cue_deg']:g}" for s in stimuli)
     people = compare_with_people(opts, names, {"IPE (cued)": variants["cued"],
                                                "cue-insensitive": variants["cue_insensitive"],

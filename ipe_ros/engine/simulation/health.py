@@ -29,3 +29,65 @@ def check_speeds(speeds_m_s: np.ndarray, limit_m_s: float, t_s: float) -> None:
 def check_final_poses(positions_m: np.ndarray, orientations_xyzw: np.ndarray) -> None:
     if not (np.all(np.isfinite(positions_m)) and np.all(np.isfinite(orientations_xyzw))):
         raise PhysicsError(f"non-finite final pose; {_FIX}")
+
+
+def energy_j(masses_kg: np.ndarray, inertia_kg_m2: np.ndarray, gravity_m_s2: np.ndarray, positions_m: np.ndarray,
+             orientations_xyzw: np.ndarray, velocities_m_s: np.ndarray, spins_rad_s: np.ndarray) -> float:
+    """Kinetic (linear and rotational) plus potential energy of the dynamic bodies, joules.
+
+    ``inertia_kg_m2``: (n, 3) principal moments about each body's own axes; ``spins_rad_s``: (n, 3)
+    angular velocities in the scene frame.
+    """
+    from ..shapes import rotation_matrix
+
+    linear = 0.5 * float(np.sum(masses_kg * np.einsum("ij,ij->i", velocities_m_s, velocities_m_s)))
+    rotational = 0.0
+    for q, inertia, w in zip(orientations_xyzw, inertia_kg_m2, spins_rad_s):
+        if w.any():
+            local = rotation_matrix(q).T @ w
+            rotational += 0.5 * float(np.sum(inertia * local * local))
+    potential = -float(np.sum(masses_kg * (positions_m @ gravity_m_s2)))
+    return linear + rotational + potential
+
+
+class EnergyWatch:
+    """The most energy a rollout gained beyond what the push and the initial velocities put in.
+
+    Once the push is over nothing outside the scene does work on it, so its energy can only fall
+    (collisions, friction): any rise is the solver's doing (a body squeezed out of a penetration is
+    launched). The reference is the energy at t = 0, or at the end of the push when there is one.
+    """
+
+    def __init__(self, masses_kg: np.ndarray, inertia_kg_m2: np.ndarray, gravity_m_s2: np.ndarray):
+        self._masses, self._inertia, self._gravity = masses_kg, inertia_kg_m2, gravity_m_s2
+        self._reference: float | None = None
+        self.max_gain_j = 0.0
+
+    def energy(self, positions, orientations, velocities, spins) -> float:
+        return energy_j(self._masses, self._inertia, self._gravity, positions, orientations, velocities, spins)
+
+    def reference(self, energy: float) -> None:
+        self._reference = energy
+
+    def look(self, energy: float) -> None:
+        if self._reference is not None:
+            self.max_gain_j = max(self.max_gain_j, energy - self._reference)
+
+
+def deepest_penetration_fraction(world, smallest_extents_m: np.ndarray) -> float:
+    """The deepest any dynamic body is inside the support or another body now, as a fraction of its
+    own smallest extent (0 when nothing overlaps)."""
+    from .world import pybullet
+
+    p = pybullet()
+    p.performCollisionDetection(physicsClientId=world.client)
+    index = {handle: i for i, handle in enumerate(world.dynamic_ids)}
+    deepest = 0.0
+    for contact in p.getContactPoints(physicsClientId=world.client):
+        depth = -contact[8]
+        if depth <= 0:
+            continue
+        for handle in (contact[1], contact[2]):
+            if handle in index:
+                deepest = max(deepest, depth / smallest_extents_m[index[handle]])
+    return float(deepest)

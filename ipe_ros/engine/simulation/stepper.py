@@ -6,8 +6,10 @@ step. The parts, each in its own module:
 
 - settling.py: the first ticks in finer substeps;
 - collapse.py: coarser steps once something has clearly fallen;
+- steps.py: the step in force, within the travel limit (fast bodies get substeps);
 - termination.py: ending the rollout once nothing can change any more;
-- health.py: divergence and non-finite states as a PhysicsError.
+- health.py: divergence and non-finite states as a PhysicsError, and the rollout's numerical health
+  (energy gained after the inputs stopped, penetration left at the end).
 
 The push (phi) is simulated in the support's own frame: while the support accelerates at ``a`` every
 free body feels the inertial force ``-m a``, which is exactly a tilt of gravity by ``-a`` for the
@@ -26,11 +28,13 @@ import numpy as np
 from ..config import SimSettings
 from ..scene import Scene
 from . import health
-from .collapse import CollapseSteps
+from .collapse import CollapseWatch
 from .probe import NO_PROBE, Probe
 from .settling import Settling
+from .steps import StepControl, substeps_for, ticks_allowed
 from .termination import DecidedHeights, RestWatch
-from .world import World, pybullet, read_poses, read_velocities
+from .world import (World, mass_ratio, pybullet, read_poses, read_velocity_vectors, set_initial_velocities,
+                    speeds_of)
 
 #: Seconds between health checks (divergence, non-finite speeds), and between looks for rest and collapse.
 HEALTH_PERIOD_S = 0.1
@@ -48,16 +52,22 @@ class Push:
 
 @dataclass(frozen=True)
 class RolloutEnd:
-    """Final poses of the dynamic boxes, the recorded trajectory (if asked) and the simulated time.
+    """Final poses of the dynamic bodies (centres of mass), the recorded trajectory (if asked), the
+    simulated time and the rollout's numerical health.
 
     trajectory: (time_s, positions, orientations) every ``record_every`` ticks, or None.
     simulated_s: below the horizon when early termination ended the rollout.
+    energy_gain_j: the most energy gained beyond what the push and the initial velocities put in.
+    penetration_fraction: the deepest any body ends inside another or the support, as a fraction of
+        its smallest extent.
     """
 
     positions_m: np.ndarray
     orientations_xyzw: np.ndarray
     trajectory: list | None
     simulated_s: float
+    energy_gain_j: float = 0.0
+    penetration_fraction: float = 0.0
 
 
 def _crossed(tick: int, previous: int, period: int) -> bool:
@@ -68,7 +78,8 @@ def _crossed(tick: int, previous: int, period: int) -> bool:
 def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, record_every: int = 0,
              decided: DecidedHeights | None = None, collapse_below_z_m: np.ndarray | None = None,
              probe: Probe = NO_PROBE) -> RolloutEnd:
-    """Run a built world to the horizon or until early termination ends it.
+    """Run a built world (bodies at rest; the scene's initial velocities are given here) to the
+    horizon, or until early termination ends it.
 
     ``decided``: outcomes already settled by height (only fall / any_fall asked); ``collapse_below_z_m``:
     heights that start the collapse steps (when ``settings.collapse`` is enabled). Raises
@@ -77,62 +88,96 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
     p = pybullet()
     cid = world.client
     dt = world.time_step_s
-    total_ticks = int(round(settings.horizon_s / dt))
+    total_ticks = int(round(settings.horizon_for(scene.horizon_s) / dt))
     gravity = np.asarray(scene.gravity_m_s2, float)
     g = float(np.linalg.norm(gravity))
+    set_initial_velocities(world, scene)
+    energy = health.EnergyWatch(world.masses_kg, world.inertia_kg_m2, gravity)
+    initial_velocities = read_velocity_vectors(world)
+    initial_energy = energy.energy(*read_poses(world), initial_velocities[:, 0], initial_velocities[:, 1])
     push_ticks = 0
     if push.acceleration_m_s2 > 0:
         push_ticks = int(round(push.duration_s / dt))
         tilt = push.acceleration_m_s2 * np.array([math.cos(push.direction_rad), math.sin(push.direction_rad), 0.0])
         p.setGravity(*(gravity - tilt).tolist(), physicsClientId=cid)
-    limit = health.speed_limit_m_s(g, settings.horizon_s, push.acceleration_m_s2, push.duration_s)
+    else:
+        energy.reference(initial_energy)
+    fastest_start_m_s = float(np.max(speeds_of(initial_velocities)[0], initial=0.0))
+    limit = health.speed_limit_m_s(g, settings.horizon_for(scene.horizon_s), push.acceleration_m_s2,
+                                   push.duration_s) + 2 * fastest_start_m_s
     trajectory: list | None = [] if record_every > 0 else None
     if trajectory is not None:
         trajectory.append((0.0, *read_poses(world)))
     health_every = max(1, int(round(HEALTH_PERIOD_S / dt)))
     look_every = max(1, int(round(LOOK_PERIOD_S / dt)))
 
-    settling = Settling(settings, world)
-    half_diagonals_m = np.array([np.linalg.norm(b.extents_m) / 2 for b in scene.dynamic_boxes])
-    collapse = CollapseSteps(settings, world, collapse_below_z_m, half_diagonals_m, g, look_every)
+    settling = Settling(settings, dt)
+    half_diagonals_m = np.array([np.linalg.norm(b.extents_m) / 2 for b in scene.dynamic_objects])
+    collapse = CollapseWatch(settings, collapse_below_z_m)
+    steps = StepControl(settings, world)
     rest = RestWatch(settings.early_stop, world.scale_m, max(push_ticks * dt, settings.early_stop.min_time_s),
-                     decided, len(scene.dynamic_boxes))
+                     decided, len(scene.dynamic_objects))
+    travel_substeps = substeps_for(fastest_start_m_s + g * look_every * dt, settings, world) if fastest_start_m_s else 1
 
     def step() -> None:
         p.stepSimulation(physicsClientId=cid)
 
     tick = 0
-    settling.begin()
+    if settling.ticks or travel_substeps > 1:
+        steps.set(1, max(travel_substeps, settling.substeps if settling.ticks else 1))
     while tick < total_ticks:
         # the push ends exactly on its tick, and the last step ends exactly on the horizon
-        step_ticks = min(collapse.ticks_per_step, total_ticks - tick)
-        if step_ticks != collapse.ticks_per_step:  # a shorter last step (coarse steps only)
+        step_ticks = min(steps.ticks, total_ticks - tick)
+        if step_ticks != steps.ticks:  # a shorter last step (coarse steps only)
             p.setTimeStep(dt * step_ticks, physicsClientId=cid)
-        if settling.covers(tick):
-            for _ in range(settling.substeps):
-                probe.step("settle", step)
-            if tick + 1 == settling.ticks:
-                settling.end()
-        else:
-            probe.step("collapse" if collapse.collapsing else "fine", step)
+        settling_now = settling.covers(tick)
+        phase = "settle" if settling_now else "collapse" if collapse.collapsing else "fine"
+        for _ in range(steps.substeps):
+            probe.step(phase, step)
+        if settling_now and tick + 1 == settling.ticks:
+            steps.set(1, travel_substeps)
         previous, tick = tick, tick + step_ticks
         if tick == push_ticks:
             p.setGravity(*gravity.tolist(), physicsClientId=cid)
+            velocities = read_velocity_vectors(world)
+            energy.reference(energy.energy(*read_poses(world), velocities[:, 0], velocities[:, 1]))
         if trajectory is not None and _crossed(tick, previous, record_every):
             trajectory.append((tick * dt, *read_poses(world)))
         look_due = (rest.enabled or collapse.active) and _crossed(tick, previous, look_every)
         health_due = _crossed(tick, previous, health_every) or tick == total_ticks
         if not (look_due or health_due):
             continue
-        speeds, spins = read_velocities(world)  # one read serves every part
+        velocities = read_velocity_vectors(world)  # one read serves every part
+        speeds, spins = speeds_of(velocities)
         if health_due:
             health.check_speeds(speeds, limit, tick * dt)
+        # the fastest any corner can get until the next read
+        period_ticks = look_every if look_due else health_every
+        fastest_m_s = float((speeds + spins * half_diagonals_m).max()) + g * period_ticks * dt
+        travel_substeps = substeps_for(fastest_m_s, settings, world)
+        positions, orientations = read_poses(world)
+        energy.look(energy.energy(positions, orientations, velocities[:, 0], velocities[:, 1]))
         if not look_due:
+            if not settling.covers(tick):
+                steps.set(steps.ticks, travel_substeps if steps.ticks == 1 else 1)
             continue
-        heights = read_poses(world)[0][:, 2] if (rest.needs_heights or collapse.watching) else None
-        collapse.look(tick, max(push_ticks, settling.ticks), heights, speeds, spins)
+        heights = positions[:, 2]
+        if collapse.look(tick, max(push_ticks, settling.ticks), heights) \
+                and settings.collapse.solver_iterations is not None:
+            iterations = settings.iterations_for(mass_ratio(world.masses_kg), settings.collapse.solver_iterations)
+            p.setPhysicsEngineParameter(numSolverIterations=iterations, physicsClientId=cid)
+        if collapse.collapsing:
+            # coarse, but no body may travel more than the travel limit per step
+            ticks = collapse.coarse_factor(ticks_allowed(fastest_m_s, settings, world))
+            steps.set(ticks, travel_substeps if ticks == 1 else 1)
+        elif not settling.covers(tick):
+            steps.set(1, travel_substeps)
         if rest.enabled and rest.should_stop(tick * dt, speeds, spins, heights):
             break
     positions, orientations = read_poses(world)
     health.check_final_poses(positions, orientations)
-    return RolloutEnd(positions, orientations, trajectory, tick * dt)
+    velocities = read_velocity_vectors(world)
+    energy.look(energy.energy(positions, orientations, velocities[:, 0], velocities[:, 1]))
+    smallest = np.array([b.smallest_extent_m for b in scene.dynamic_objects])
+    return RolloutEnd(positions, orientations, trajectory, tick * dt, energy_gain_j=energy.max_gain_j,
+                      penetration_fraction=health.deepest_penetration_fraction(world, smallest))

@@ -19,7 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import SimSettings
-from ..scene import Box, Floor, Scene
+from .. import shapes as shapes_module
+from ..scene import Body, Box, Floor, Scene
+from ..shapes import BoxShape, Capsule, ConvexHull, Cylinder, Sphere
 
 _PYBULLET = None
 _CLIENT: int | None = None
@@ -75,33 +77,122 @@ def client() -> int:
 
 @dataclass
 class World:
-    """Handles of one built world. ``dynamic_ids`` follow ``scene.dynamic_boxes`` order."""
+    """Handles of one built world. ``dynamic_ids`` follow ``scene.dynamic_objects`` order."""
 
     client: int
     dynamic_ids: list[int]
-    scale_m: float  # smallest extent of any dynamic box: the scene's length scale
-    time_step_s: float = 0.0  # the step actually used (finer than the preset's for small boxes)
+    scale_m: float  # smallest extent of any dynamic body: the scene's length scale
+    time_step_s: float = 0.0  # the step actually used (finer than the preset's for small or fast bodies)
+    masses_kg: np.ndarray | None = None  # of the dynamic bodies
+    inertia_kg_m2: np.ndarray | None = None  # (n, 3) their principal moments (pybullet's)
 
 
-def _add_box(p, cid: int, box: Box, position, mass_kg: float, maximal: bool = False, orientation=None,
-             shapes: dict | None = None) -> int:
-    """One box body; ``shapes`` caches collision shapes by extents within one world (towers of
-    identical blocks share one shape)."""
-    shape = None if shapes is None else shapes.get(box.extents_m)
+_HULL_FILES: dict[tuple, str] = {}
+
+
+def _hull_file(vertices_m: np.ndarray) -> str:
+    """A Wavefront file of one convex hull: pybullet takes compound parts that are meshes only as
+    files. One per distinct hull and process, in a temporary folder removed at exit."""
+    key = tuple(map(tuple, np.round(vertices_m, 12)))
+    path = _HULL_FILES.get(key)
+    if path is None:
+        from scipy.spatial import ConvexHull as QHull
+
+        folder = _hull_folder()
+        path = os.path.join(folder, f"hull_{len(_HULL_FILES)}.obj")
+        faces = QHull(vertices_m).simplices
+        with open(path, "w") as handle:
+            handle.writelines(f"v {float(x)!r} {float(y)!r} {float(z)!r}\n" for x, y, z in vertices_m)
+            handle.writelines(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces)
+        _HULL_FILES[key] = path
+    return path
+
+
+def _hull_folder() -> str:
+    global _HULL_FOLDER
+    if _HULL_FOLDER is None or not os.path.isdir(_HULL_FOLDER):
+        import atexit
+        import shutil
+        import tempfile
+
+        _HULL_FOLDER = tempfile.mkdtemp(prefix="ipe_hulls_")
+        atexit.register(shutil.rmtree, _HULL_FOLDER, True)
+        _HULL_FILES.clear()
+    return _HULL_FOLDER
+
+
+_HULL_FOLDER: str | None = None
+
+
+def _collision_shape(p, cid: int, shape, offset_m: np.ndarray) -> int:
+    """A pybullet collision shape for ``shape``, its frame moved by ``offset_m`` (the body's frame in
+    pybullet is its centre of mass, so a shape whose centre of mass is off its origin shifts by -com)."""
+    # Only a real offset is passed: pybullet wraps any shape given a frame in a compound (slower).
+    moved = {"collisionFramePosition": [float(v) for v in offset_m]} if np.any(offset_m) else {}
+    if isinstance(shape, BoxShape):
+        return p.createCollisionShape(p.GEOM_BOX, halfExtents=[e / 2 for e in shape.extents_m], **moved,
+                                      physicsClientId=cid)
+    if isinstance(shape, Sphere):
+        return p.createCollisionShape(p.GEOM_SPHERE, radius=shape.radius_m, **moved, physicsClientId=cid)
+    if isinstance(shape, Cylinder):
+        return p.createCollisionShape(p.GEOM_CYLINDER, radius=shape.radius_m, height=shape.length_m, **moved,
+                                      physicsClientId=cid)
+    if isinstance(shape, Capsule):
+        return p.createCollisionShape(p.GEOM_CAPSULE, radius=shape.radius_m, height=shape.length_m, **moved,
+                                      physicsClientId=cid)
+    if isinstance(shape, ConvexHull):
+        return p.createCollisionShape(p.GEOM_MESH, vertices=[list(map(float, v)) for v in shape.vertices_m],
+                                      **moved, physicsClientId=cid)
+    # a compound: each part a child shape at its pose
+    types, half_extents, radii, lengths, files, positions, orientations = [], [], [], [], [], [], []
+    for part in shape.parts:
+        sub = part.shape
+        half, radius, length, file = [0.0, 0.0, 0.0], 0.0, 0.0, ""
+        if isinstance(sub, BoxShape):
+            kind, half = p.GEOM_BOX, [e / 2 for e in sub.extents_m]
+        elif isinstance(sub, Sphere):
+            kind, radius = p.GEOM_SPHERE, sub.radius_m
+        elif isinstance(sub, Cylinder):
+            kind, radius, length = p.GEOM_CYLINDER, sub.radius_m, sub.length_m
+        elif isinstance(sub, Capsule):
+            kind, radius, length = p.GEOM_CAPSULE, sub.radius_m, sub.length_m
+        else:
+            kind, file = p.GEOM_MESH, _hull_file(np.asarray(sub.vertices_m, float))
+        types.append(kind)
+        half_extents.append(half)
+        radii.append(radius)
+        lengths.append(length)
+        files.append(file)
+        positions.append([float(a + b) for a, b in zip(part.position_m, offset_m)])
+        orientations.append([float(v) for v in part.orientation_xyzw])
+    return p.createCollisionShapeArray(shapeTypes=types, halfExtents=half_extents, radii=radii, lengths=lengths,
+                                       fileNames=files, meshScales=[[1.0, 1.0, 1.0]] * len(types),
+                                       collisionFramePositions=positions, collisionFrameOrientations=orientations,
+                                       physicsClientId=cid)
+
+
+def _add_body(p, cid: int, body: Body, position, mass_kg: float, maximal: bool = False, orientation=None,
+              shapes: dict | None = None) -> int:
+    """One pybullet body. A dynamic body's pybullet frame is its centre of mass (``position`` is
+    where that is); a static body's is its own frame. ``shapes`` caches collision shapes within one
+    world (towers of identical blocks share one)."""
+    centred = mass_kg > 0
+    key = (body.shape, centred)
+    shape = None if shapes is None else shapes.get(key)
     if shape is None:
-        half = [e / 2 for e in box.extents_m]
-        shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=cid)
+        offset = -shapes_module.centre_of_mass_m(body.shape) if centred else np.zeros(3)
+        shape = _collision_shape(p, cid, body.shape, offset)
         if shapes is not None:
-            shapes[box.extents_m] = shape
-    quat = np.asarray(box.orientation_xyzw if orientation is None else orientation, float)
+            shapes[key] = shape
+    quat = np.asarray(body.orientation_xyzw if orientation is None else orientation, float)
     quat = quat / np.linalg.norm(quat)
-    body = p.createMultiBody(baseMass=mass_kg, baseCollisionShapeIndex=shape,
-                             basePosition=list(map(float, position)),
-                             baseOrientation=list(map(float, quat)), useMaximalCoordinates=maximal,
-                             physicsClientId=cid)
-    p.changeDynamics(body, -1, lateralFriction=box.friction, restitution=box.restitution,
+    handle = p.createMultiBody(baseMass=mass_kg, baseCollisionShapeIndex=shape,
+                               basePosition=list(map(float, position)),
+                               baseOrientation=list(map(float, quat)), useMaximalCoordinates=maximal,
+                               physicsClientId=cid)
+    p.changeDynamics(handle, -1, lateralFriction=body.friction, restitution=body.restitution,
                      physicsClientId=cid)
-    return body
+    return handle
 
 
 def residual_threshold(settings: SimSettings, scale_m: float, step_factor: float = 1) -> float:
@@ -124,17 +215,18 @@ def set_step(world: World, step_s: float, residual: float | None = None) -> None
 
 def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
                 settings: SimSettings, orientations_xyzw: np.ndarray | None = None) -> World:
-    """A fresh world: support, static boxes, and the dynamic boxes at ``positions_m`` (and
-    ``orientations_xyzw``, default: the scene's), at rest."""
+    """A fresh world: support, static bodies, and the dynamic bodies with their centres of mass at
+    ``positions_m`` (and ``orientations_xyzw``, default: the scene's), at rest."""
     p = pybullet()
     cid = client()
     p.resetSimulation(physicsClientId=cid)
     p.setGravity(*scene.gravity_m_s2, physicsClientId=cid)
-    scale = min(min(b.extents_m) for b in scene.dynamic_boxes)
-    time_step = settings.time_step_for(scale, float(np.linalg.norm(scene.gravity_m_s2)))
+    scale = min(b.smallest_extent_m for b in scene.dynamic_objects)
+    time_step = settings.time_step_for(scale, float(np.linalg.norm(scene.gravity_m_s2)),
+                                       fastest_initial_speed_m_s(scene))
     p.setTimeStep(time_step, physicsClientId=cid)
     p.setPhysicsEngineParameter(
-        numSolverIterations=settings.solver.iterations,
+        numSolverIterations=settings.iterations_for(mass_ratio(masses_kg)),
         solverResidualThreshold=residual_threshold(settings, scale),
         warmStartingFactor=settings.solver.warm_start_factor,
         deterministicOverlappingPairs=1,
@@ -152,23 +244,47 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
                               support.top_height_m - support.thickness_m / 2),
                   orientation_xyzw=(0.0, 0.0, 0.0, 1.0), friction=support.friction,
                   restitution=support.restitution, static=True)
-        _add_box(p, cid, top, top.position_m, 0.0)
+        _add_body(p, cid, top, top.position_m, 0.0)
         if support.floor_z_m is not None:
             plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=cid)
             body = p.createMultiBody(0, plane, basePosition=[0, 0, support.floor_z_m], physicsClientId=cid)
             p.changeDynamics(body, -1, lateralFriction=support.friction, restitution=support.restitution,
                              physicsClientId=cid)
-    for b in scene.static_boxes:
-        _add_box(p, cid, b, b.position_m, 0.0)
+    for b in scene.static_objects:
+        _add_body(p, cid, b, b.position_m, 0.0)
     orientations = [None] * len(positions_m) if orientations_xyzw is None else orientations_xyzw
     shapes: dict = {}
-    dynamic_ids = [_add_box(p, cid, b, pos, float(m), settings.solver.maximal_coordinates, orn, shapes)
-                   for b, pos, m, orn in zip(scene.dynamic_boxes, positions_m, masses_kg, orientations)]
-    return World(client=cid, dynamic_ids=dynamic_ids, scale_m=scale, time_step_s=time_step)
+    dynamic_ids = [_add_body(p, cid, b, pos, float(m), settings.solver.maximal_coordinates, orn, shapes)
+                   for b, pos, m, orn in zip(scene.dynamic_objects, positions_m, masses_kg, orientations)]
+    inertia = np.array([p.getDynamicsInfo(h, -1, physicsClientId=cid)[2] for h in dynamic_ids], float)
+    return World(client=cid, dynamic_ids=dynamic_ids, scale_m=scale, time_step_s=time_step,
+                 masses_kg=np.asarray(masses_kg, float), inertia_kg_m2=inertia.reshape(len(dynamic_ids), 3))
+
+
+def mass_ratio(masses_kg) -> float:
+    """How many times the heaviest dynamic body outweighs the lightest."""
+    masses = np.asarray(masses_kg, float)
+    return float(masses.max() / masses.min()) if len(masses) else 1.0
+
+
+def fastest_initial_speed_m_s(scene: Scene) -> float:
+    """The fastest any point of a dynamic body moves at t = 0 (linear speed + spin x half diagonal)."""
+    return max((float(np.linalg.norm(b.linear_velocity_m_s))
+                + float(np.linalg.norm(b.angular_velocity_rad_s)) * float(np.linalg.norm(b.extents_m)) / 2
+                for b in scene.dynamic_objects if b.moving), default=0.0)
+
+
+def set_initial_velocities(world: World, scene: Scene) -> None:
+    """Give the dynamic bodies the scene's velocities at t = 0 (separation never sets any)."""
+    p = pybullet()
+    for handle, body in zip(world.dynamic_ids, scene.dynamic_objects):
+        if body.moving:
+            p.resetBaseVelocity(handle, list(map(float, body.linear_velocity_m_s)),
+                                list(map(float, body.angular_velocity_rad_s)), physicsClientId=world.client)
 
 
 def read_poses(world: World) -> tuple[np.ndarray, np.ndarray]:
-    """(n, 3) positions in metres and (n, 4) xyzw orientations of the dynamic boxes."""
+    """(n, 3) centres of mass in metres and (n, 4) xyzw orientations of the dynamic bodies."""
     p = pybullet()
     pos = np.empty((len(world.dynamic_ids), 3))
     orn = np.empty((len(world.dynamic_ids), 4))
@@ -177,10 +293,19 @@ def read_poses(world: World) -> tuple[np.ndarray, np.ndarray]:
     return pos, orn
 
 
-def read_velocities(world: World) -> tuple[np.ndarray, np.ndarray]:
-    """(n,) linear speeds in m/s and (n,) angular speeds in rad/s of the dynamic boxes."""
+def read_velocity_vectors(world: World) -> np.ndarray:
+    """(n, 2, 3): each dynamic body's linear (m/s) and angular (rad/s) velocity in the scene frame."""
     p = pybullet()
     pairs = np.array([p.getBaseVelocity(b, physicsClientId=world.client) for b in world.dynamic_ids])
-    pairs = pairs.reshape(len(world.dynamic_ids), 2, 3)
-    speeds = np.sqrt(np.einsum("nkj,nkj->nk", pairs, pairs))
+    return pairs.reshape(len(world.dynamic_ids), 2, 3)
+
+
+def speeds_of(velocities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(n,) linear speeds and (n,) angular speeds from ``read_velocity_vectors``' vectors."""
+    speeds = np.sqrt(np.einsum("nkj,nkj->nk", velocities, velocities))
     return speeds[:, 0], speeds[:, 1]
+
+
+def read_velocities(world: World) -> tuple[np.ndarray, np.ndarray]:
+    """(n,) linear speeds in m/s and (n,) angular speeds in rad/s of the dynamic bodies."""
+    return speeds_of(read_velocity_vectors(world))

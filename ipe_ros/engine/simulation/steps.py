@@ -1,0 +1,41 @@
+"""How long the next step is: ticks per step (collapse) and substeps per tick (settling, travel).
+
+Time runs on a grid of ticks of the world's step dt. A step spans ``ticks`` ticks cut into
+``substeps`` pybullet steps of dt * ticks / substeps, solved to the same relative precision (the
+solver's residual threshold is absolute and velocity errors grow with the step).
+"""
+
+from __future__ import annotations
+
+import math
+
+from ..config import SimSettings
+from .world import World, residual_threshold, set_step
+
+
+def substeps_for(fastest_m_s: float, settings: SimSettings, world: World) -> int:
+    """Substeps per tick that keep the fastest corner within the travel limit."""
+    travel = fastest_m_s * world.time_step_s / (settings.max_travel_fraction * world.scale_m)
+    return max(1, math.ceil(travel - 1e-9))
+
+
+def ticks_allowed(fastest_m_s: float, settings: SimSettings, world: World) -> int:
+    """The most ticks one step may span within the travel limit (0: not even one)."""
+    return int(settings.max_travel_fraction * world.scale_m / (fastest_m_s * world.time_step_s))
+
+
+class StepControl:
+    """Holds the step in force and sets pybullet's when it changes."""
+
+    def __init__(self, settings: SimSettings, world: World):
+        self._settings, self._world = settings, world
+        self.ticks, self.substeps = 1, 1
+
+    def set(self, ticks: int, substeps: int) -> None:
+        substeps = min(substeps, self._settings.max_substeps)
+        if (ticks, substeps) == (self.ticks, self.substeps):
+            return
+        self.ticks, self.substeps = ticks, substeps
+        world = self._world
+        factor = ticks / substeps
+        set_step(world, world.time_step_s * ticks / substeps, residual_threshold(self._settings, world.scale_m, factor))

@@ -2,9 +2,11 @@
 
     ipe predict PATH [--tower NAME ...] [--query fall,any_fall,direction,far,bump] [--samples K] [--sigma M]
                 [--phi A[,A...]] [--force-direction DEG] [--mu R] [--preset NAME] [--seed N]
-                [--workers W] [--ci-width W] [--deadline S] [--json]
+                [--workers W] [--ci-width W] [--deadline S] [--horizon S] [--until-rest] [--json]
     ipe generate tower --count N --seed S -o FILE [--pairs RATIO]
     ipe generate table --configurations N --seed S -o FILE
+    ipe generate catalogue --count N --seed S -o FILE
+    ipe generate capped-tower [--ball-speed M_S] -o FILE
     ipe demo
     ipe experiment NAME|all [--quick] [--out DIR] [--data DIR] [--samples K] [--stimuli N] [--seed N]
                 [--workers W] [--preset NAME] [--resamples N] [--grid-samples K]
@@ -30,11 +32,14 @@ from .engine import (ALL_QUERIES, PRESETS, AdaptiveStop, ConfigError, ModelConfi
 from .engine.config import (DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M,
                             anytime_batch_size)
 from .engine.examples import example_scene_path
+from .engine.catalogue import capped_tower, scene_catalogue
 from .engine.generators import generate_tables, generate_towers, state_pair
 from .engine.sampler import check_request
 from .engine.scene_io import write_scenes
 
 EXIT_BAD_INPUT = 2
+#: End penetrations above this (of a body's smallest extent) are shown in the table.
+NOTABLE_PENETRATION = 0.01
 
 
 class _OneLineParser(argparse.ArgumentParser):
@@ -98,6 +103,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="anytime sampling: stop once the 95%% interval of P(fall) is at most W wide")
     p.add_argument("--deadline", type=_finite, default=None, metavar="S",
                    help="anytime sampling: stop drawing samples before S seconds have passed")
+    p.add_argument("--horizon", type=_finite, default=None, metavar="S",
+                   help="simulate S seconds (scenes that give their own horizon_s keep it); default: the preset's")
+    p.add_argument("--until-rest", action="store_true",
+                   help="end each rollout once everything is at rest (early termination, also for presets "
+                        "without it); with --horizon S: until at rest, at most S seconds")
     p.add_argument("--json", action="store_true", help="one JSON object per scene per line")
 
     g = sub.add_parser("generate", help="write generated scenes (JSON)")
@@ -113,6 +123,13 @@ def build_parser() -> argparse.ArgumentParser:
     tb.add_argument("--configurations", type=int, default=12)
     tb.add_argument("--seed", type=int, required=True)
     tb.add_argument("-o", "--output", required=True)
+    cat = gsub.add_parser("catalogue", help="random scenes of mixed shapes, 5 mm to 1 m, thrown bodies (tests' catalogue)")
+    cat.add_argument("--count", type=int, default=10)
+    cat.add_argument("--seed", type=int, required=True)
+    cat.add_argument("-o", "--output", required=True)
+    cap = gsub.add_parser("capped-tower", help="three boxes, a cone on top, a ball rolled at the base (the guide's example)")
+    cap.add_argument("--ball-speed", type=_finite, default=5.0, metavar="M_S", help="the ball's speed (default 5 m/s)")
+    cap.add_argument("-o", "--output", required=True)
 
     sub.add_parser("demo", help="predict on the built-in example tower (IPE and ground truth)")
 
@@ -159,6 +176,9 @@ def format_table(predictions: list[Prediction]) -> str:
             lines.append(f"{'':<34} fell off by group: {groups}; {p.bump_group} share: {_number_or_dash(p.bump_ratio, '.2f')}")
         if p.failure_reasons:
             lines.append(f"{'':<34} failures: {'; '.join(p.failure_reasons)}")
+        if (p.max_penetration_fraction or 0) > NOTABLE_PENETRATION or (p.max_energy_gain_j or 0) > 0:
+            lines.append(f"{'':<34} numerical health: a body ended {p.max_penetration_fraction:.1%} of its size inside "
+                         f"another; a rollout gained {p.max_energy_gain_j:.3g} J")
     return "\n".join(lines)
 
 
@@ -189,6 +209,10 @@ def cmd_predict(args) -> int:
                         force_direction_rad=None if args.force_direction is None else math.radians(args.force_direction))
     query = QuerySpec(queries=args.query)
     sim = preset(args.preset)
+    if args.horizon is not None:
+        sim = sim.changed(horizon_s=args.horizon)
+    if args.until_rest:
+        sim = sim.changed(early_stop={"enabled": True})
     stop = None
     if args.ci_width is not None or args.deadline is not None:
         stop = AdaptiveStop(ci_width=args.ci_width, deadline_s=args.deadline)
@@ -216,10 +240,16 @@ def cmd_generate(args) -> int:
         if args.pairs is not None:
             rng = np.random.default_rng(args.seed)
             scenes = [s for scene in scenes for s in (scene, *state_pair(scene, rng, ratio=args.pairs))]
-    else:
+    elif args.kind == "table":
         if args.configurations < 1:
             raise ConfigError("--configurations", f"must be >= 1, got {args.configurations}")
         scenes = generate_tables(args.seed, args.configurations)
+    elif args.kind == "catalogue":
+        if args.count < 1:
+            raise ConfigError("--count", f"must be >= 1, got {args.count}")
+        scenes = scene_catalogue(args.seed, args.count)
+    else:
+        scenes = [capped_tower(args.ball_speed)]
     write_scenes(scenes, args.output)
     print(f"wrote {len(scenes)} scene(s) to {args.output}", file=sys.stderr)
     return 0

@@ -3,17 +3,23 @@
 The mapping (MarkerArray has no notion of mass, friction or support, so some of it rides in
 ``Marker.text``):
 
-* Every ``CUBE`` marker with action ``ADD`` is a box: ``pose`` is its centre and orientation in
-  ``header.frame_id``, ``scale`` its FULL extents in metres. An all-zero quaternion (the message
-  default) means identity, as RViz reads it; any other quaternion must have unit norm.
+* Every marker with action ``ADD`` is a body, ``pose`` its frame in ``header.frame_id`` (an all-zero
+  quaternion, the message default, means identity, as RViz reads it; any other must have unit norm):
+  ``CUBE``: a box, ``scale`` its FULL extents in metres; ``SPHERE``: a sphere of diameter ``scale``
+  (all three equal: an ellipsoid is refused); ``CYLINDER``: a cylinder along its z, diameter
+  ``scale.x`` (= ``scale.y``), length ``scale.z``; ``TRIANGLE_LIST``: the convex hull of its
+  ``points`` (each multiplied by ``scale``, as RViz draws them): cones, pyramids, wedges. Capsules
+  and non-convex compounds have no marker: publish them on ``~/scene_json``.
 * Markers in namespace ``support`` are static. ``text`` ``role=floor`` makes an infinite floor whose
   top is the cube's top face; ``role=table`` makes a table top (axis-aligned; the cube is the slab);
   ``role=obstacle`` (the default) a static box (a wall on the table, a fixture on the floor). At most
   one floor or table; with neither, the floor is the plane z = 0 of the scene frame.
 * Every other marker is a dynamic box named ``text``'s ``name`` or else ``<ns>/<id>``.
 * ``text`` holds optional ``key=value`` pairs separated by spaces, commas or semicolons:
-    dynamic boxes: ``name``, ``mass`` (kg) or ``density`` (kg/m^3), ``friction``, ``restitution``,
-    ``group``; without ``group`` a box with a non-zero colour gets the nearest named colour
+    dynamic bodies: ``name``, ``mass`` (kg) or ``density`` (kg/m^3, of the true volume),
+    ``friction``, ``restitution``, ``group``; ``vx vy vz`` (m/s) and ``wx wy wz`` (rad/s), the
+    velocity at t = 0; ``sigma`` (m) and ``yaw_sigma`` (rad), the body's own position noise (0: known
+    exactly); without ``group`` a body with a non-zero colour gets the nearest named colour
     ("red", "yellow", ...), as in the paper's Exp. 5.
     floor/table: ``friction``, ``restitution``, ``gravity`` (vertical, m/s^2, default -9.81),
     ``scene`` (the scene's name); tables also ``floor_z`` (metres or ``none``; default: a floor at
@@ -21,7 +27,7 @@ The mapping (MarkerArray has no notion of mass, friction or support, so some of 
     obstacles: ``name``, ``friction``, ``restitution``, ``group``.
 * ``DELETEALL`` and ``DELETE`` markers are ignored: every array is a complete scene, so clearing the
   previous one is implicit (RViz publishers often start with a DELETEALL). Any other marker type is
-  rejected: silently dropping a sphere or mesh would hide an object from the physics.
+  rejected: silently dropping a mesh would hide an object from the physics.
 * All markers must share one non-empty ``header.frame_id``. The scene's stamp is the first
   marker's ``header.stamp``.
 
@@ -36,11 +42,15 @@ import math
 import re
 from dataclasses import dataclass
 
+import numpy as np
+
 from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ipe_ros.engine import Body, Box, Floor, Prediction, Scene, SceneError, Table, validate_scene
+from ipe_ros.engine import (Body, Box, BoxShape, ConvexHull, Cylinder, Floor, Prediction, Scene, SceneError, Sphere, Table,
+                            validate_scene)
+from ipe_ros.engine import shapes
 from ipe_ros.engine.config import MODEL_LIGHT_DENSITY_KG_M3
 from ipe_ros.viz.palette import SUPPORT_RGB, group_rgb, nearest_group_name, risk_rgb
 from ipe_ros.engine.scene import DEFAULT_MAX_OBJECTS
@@ -58,7 +68,8 @@ DEFAULT_SCENE_NAME = "markers"
 FLOOR_MARKER_THICKNESS_M = 0.01
 FLOOR_MARKER_SIZE_M = 20.0
 
-_DYNAMIC_KEYS = ("name", "mass", "density", "friction", "restitution", "group")
+_DYNAMIC_KEYS = ("name", "mass", "density", "friction", "restitution", "group", "vx", "vy", "vz", "wx", "wy", "wz",
+                 "sigma", "yaw_sigma")
 _FLOOR_KEYS = ("role", "name", "friction", "restitution", "gravity", "scene")
 _TABLE_KEYS = _FLOOR_KEYS + ("floor_z",)
 _OBSTACLE_KEYS = ("role", "name", "friction", "restitution", "group")
@@ -118,8 +129,44 @@ def _vectors(marker: Marker, field: str) -> tuple[tuple[float, float, float], tu
     if not all(math.isfinite(v) for v in position):
         raise SceneError(f"{field}.pose.position", f"must be finite, got {list(position)}")
     if not all(math.isfinite(v) and v > 0 for v in extents):
-        raise SceneError(f"{field}.scale", f"full box extents must be finite and > 0 m, got {list(extents)}")
+        raise SceneError(f"{field}.scale", f"full sizes must be finite and > 0 m, got {list(extents)}")
     return position, extents
+
+
+_BODY_TYPES = ("CUBE", "SPHERE", "CYLINDER", "TRIANGLE_LIST")
+
+
+def _shape(marker: Marker, extents: tuple[float, float, float], field: str):
+    """The body's shape from the marker's type and scale."""
+    if marker.type == Marker.CUBE:
+        return BoxShape(extents)
+    if marker.type == Marker.SPHERE:
+        if max(extents) - min(extents) > 1e-9 * max(extents):
+            raise SceneError(f"{field}.scale", f"a SPHERE needs three equal scales (its diameter), got {list(extents)}; "
+                                               "an ellipsoid cannot be simulated: approximate it by a TRIANGLE_LIST")
+        return Sphere(extents[0] / 2)
+    if marker.type == Marker.CYLINDER:
+        if abs(extents[0] - extents[1]) > 1e-9 * max(extents):
+            raise SceneError(f"{field}.scale", f"a CYLINDER needs scale.x = scale.y (its diameter), got {list(extents)}")
+        return Cylinder(extents[0] / 2, extents[2])
+    points = tuple((float(p.x) * extents[0], float(p.y) * extents[1], float(p.z) * extents[2]) for p in marker.points)
+    if not all(math.isfinite(v) for point in points for v in point):
+        raise SceneError(f"{field}.points", "must be finite")
+    return ConvexHull(points)
+
+
+def _triangles(shape) -> list[tuple[float, float, float]]:
+    """The faces of a hull (or of each hull of a compound) as TRIANGLE_LIST points in the body frame."""
+    from scipy.spatial import ConvexHull as QHull
+
+    parts = shape.parts if isinstance(shape, shapes.Compound) else (shapes.CompoundPart(shape),)
+    out: list[tuple[float, float, float]] = []
+    for part in parts:
+        points = shapes.surface_points(part.shape) @ shapes.rotation_matrix(part.orientation_xyzw).T \
+            + np.asarray(part.position_m)
+        for face in QHull(points).simplices:
+            out.extend(tuple(float(v) for v in points[k]) for k in face)
+    return out
 
 
 def _is_identity(q: tuple[float, float, float, float]) -> bool:
@@ -130,7 +177,8 @@ def markers_to_scene(msg: MarkerArray, *, max_objects: int = DEFAULT_MAX_OBJECTS
     """Read a scene from a MarkerArray (see the module docstring for the mapping) and validate it."""
     adds = [(i, m) for i, m in enumerate(msg.markers) if m.action not in (Marker.DELETE, Marker.DELETEALL)]
     if not adds:
-        raise SceneError("markers", "the array holds no ADD markers; publish at least one CUBE marker per box")
+        raise SceneError("markers", "the array holds no ADD markers; publish one CUBE, SPHERE, CYLINDER or "
+                                    "TRIANGLE_LIST marker per body")
     # Count before converting anything, so a runaway array costs O(n) and nothing more.
     if len(adds) > max_objects:
         raise SceneError("markers", f"{len(adds)} markers exceed max_objects = {max_objects}; "
@@ -147,8 +195,9 @@ def markers_to_scene(msg: MarkerArray, *, max_objects: int = DEFAULT_MAX_OBJECTS
         field = f"markers[{i}]"
         if m.action != Marker.ADD:
             raise SceneError(f"{field}.action", f"must be ADD (0), DELETE (2) or DELETEALL (3), got {m.action}")
-        if m.type != Marker.CUBE:
-            raise SceneError(f"{field}.type", f"only CUBE ({Marker.CUBE}) markers describe boxes, got "
+        if _TYPE_NAMES.get(m.type) not in _BODY_TYPES or (m.ns == SUPPORT_NAMESPACE and m.type != Marker.CUBE):
+            allowed = "CUBE" if m.ns == SUPPORT_NAMESPACE else ", ".join(_BODY_TYPES)
+            raise SceneError(f"{field}.type", f"only {allowed} markers describe bodies here, got "
                                               f"{_TYPE_NAMES.get(m.type, m.type)} (ns {m.ns!r}, id {m.id}); "
                                               "drop it from the scene array")
         if m.header.frame_id != frame_id:
@@ -198,6 +247,7 @@ def markers_to_scene(msg: MarkerArray, *, max_objects: int = DEFAULT_MAX_OBJECTS
                                 floor_z_m=floor_z)
             continue
         props = parse_properties(m.text, _DYNAMIC_KEYS, f"{field}.text")
+        shape = _shape(m, extents, field)
         if "mass" in props and "density" in props:
             raise SceneError(f"{field}.text", "give mass or density, not both")
         mass = _number(props, "mass", f"{field}.text", None)
@@ -208,13 +258,18 @@ def markers_to_scene(msg: MarkerArray, *, max_objects: int = DEFAULT_MAX_OBJECTS
         if group is None:
             c = m.color
             group = "" if (c.r, c.g, c.b) == (0.0, 0.0, 0.0) and c.a == 0.0 else nearest_group_name(c.r, c.g, c.b)
-        dynamic.append(Box(name=props.get("name", f"{m.ns}/{m.id}"), extents_m=extents, position_m=position,
-                           orientation_xyzw=orientation,
-                           friction=_number(props, "friction", f"{field}.text", DEFAULT_FRICTION),
-                           restitution=_number(props, "restitution", f"{field}.text", DEFAULT_RESTITUTION),
-                           mass_kg=mass, density_kg_m3=None if mass is not None else density, group=group))
+        velocity = tuple(_number(props, k, f"{field}.text", 0.0) for k in ("vx", "vy", "vz"))
+        spin = tuple(_number(props, k, f"{field}.text", 0.0) for k in ("wx", "wy", "wz"))
+        dynamic.append(Body(name=props.get("name", f"{m.ns}/{m.id}"), shape=shape, position_m=position,
+                            orientation_xyzw=orientation,
+                            friction=_number(props, "friction", f"{field}.text", DEFAULT_FRICTION),
+                            restitution=_number(props, "restitution", f"{field}.text", DEFAULT_RESTITUTION),
+                            mass_kg=mass, density_kg_m3=None if mass is not None else density, group=group,
+                            linear_velocity_m_s=velocity, angular_velocity_rad_s=spin,
+                            position_sigma_m=_number(props, "sigma", f"{field}.text", None),
+                            yaw_sigma_rad=_number(props, "yaw_sigma", f"{field}.text", None)))
     if not dynamic:
-        raise SceneError("markers", "no dynamic boxes: every CUBE is in the 'support' namespace; "
+        raise SceneError("markers", "no dynamic bodies: every marker is in the 'support' namespace; "
                                     "put the objects that may fall in another namespace")
     if support is None:
         support = Floor(friction=DEFAULT_FRICTION, restitution=DEFAULT_RESTITUTION, height_m=0.0)
@@ -243,6 +298,33 @@ def _cube(header, ns: str, marker_id: int, position, extents, orientation, rgb, 
     return m
 
 
+def _body_marker(header, ns: str, marker_id: int, body: Body, rgb, alpha: float, text: str, *,
+                 exact: bool = True) -> Marker:
+    """A marker in the body's own shape. ``exact``: refuse shapes no marker carries (capsules,
+    compounds), else draw them as triangles."""
+    shape = body.shape
+    m = _cube(header, ns, marker_id, body.position_m, (1.0, 1.0, 1.0), body.orientation_xyzw, rgb, alpha, text)
+    if isinstance(shape, BoxShape):
+        m.scale.x, m.scale.y, m.scale.z = (float(v) for v in shape.extents_m)
+    elif isinstance(shape, Sphere):
+        m.type = Marker.SPHERE
+        m.scale.x = m.scale.y = m.scale.z = 2 * float(shape.radius_m)
+    elif isinstance(shape, Cylinder):
+        m.type = Marker.CYLINDER
+        m.scale.x = m.scale.y = 2 * float(shape.radius_m)
+        m.scale.z = float(shape.length_m)
+    elif isinstance(shape, ConvexHull) and exact:
+        m.type = Marker.TRIANGLE_LIST
+        m.points = [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in shape.vertices_m]
+    elif exact:
+        raise ValueError(f"objects ({body.name!r}).shape: a {shape.type} has no marker; publish the scene on "
+                         "~/scene_json (the JSON format carries every shape)")
+    else:
+        m.type = Marker.TRIANGLE_LIST
+        m.points = [Point(x=x, y=y, z=z) for x, y, z in _triangles(shape)]
+    return m
+
+
 def scene_to_markers(scene: Scene, frame_id: str, stamp_ns: int = 0) -> MarkerArray:
     """The inverse of :func:`markers_to_scene`: ``markers_to_scene(scene_to_markers(s, f)).scene == s``
     (a floor's height up to rounding of ``z + thickness / 2``)."""
@@ -268,17 +350,28 @@ def scene_to_markers(scene: Scene, frame_id: str, stamp_ns: int = 0) -> MarkerAr
                              (*support.size_m, support.thickness_m), (0, 0, 0, 1), SUPPORT_RGB, 1.0,
                              f"role=table {common} floor_z={floor}"))
     for j, box in enumerate(scene.static_objects, start=1):
+        if not isinstance(box.shape, BoxShape):
+            raise ValueError(f"objects ({box.name!r}).shape: a static {box.shape.type} has no marker (the support "
+                             "namespace holds CUBEs); publish the scene on ~/scene_json")
         markers.append(_cube(header, SUPPORT_NAMESPACE, j, box.position_m, box.extents_m, box.orientation_xyzw,
                              SUPPORT_RGB, 1.0, f"role=obstacle name={box.name} friction={_fmt(box.friction)} "
                                                f"restitution={_fmt(box.restitution)}"
                                                + (f" group={box.group}" if box.group else "")))
-    for j, box in enumerate(scene.dynamic_objects):
-        mass = f"mass={_fmt(box.mass_kg)}" if box.mass_kg is not None else f"density={_fmt(box.density_kg_m3)}"
-        text = f"name={box.name} {mass} friction={_fmt(box.friction)} restitution={_fmt(box.restitution)}"
-        if box.group:
-            text += f" group={box.group}"
-        markers.append(_cube(header, "objects", j, box.position_m, box.extents_m, box.orientation_xyzw,
-                             group_rgb(box.group), 1.0, text))
+    for j, body in enumerate(scene.dynamic_objects):
+        mass = f"mass={_fmt(body.mass_kg)}" if body.mass_kg is not None else f"density={_fmt(body.density_kg_m3)}"
+        text = f"name={body.name} {mass} friction={_fmt(body.friction)} restitution={_fmt(body.restitution)}"
+        if body.group:
+            text += f" group={body.group}"
+        for keys, values in ((("vx", "vy", "vz"), body.linear_velocity_m_s), (("wx", "wy", "wz"), body.angular_velocity_rad_s)):
+            text += "".join(f" {k}={_fmt(v)}" for k, v in zip(keys, values) if v)
+        if isinstance(body.position_sigma_m, (tuple, list)):
+            raise ValueError(f"objects ({body.name!r}).position_sigma_m: a marker carries one horizontal sigma; "
+                             "publish the scene on ~/scene_json")
+        if body.position_sigma_m is not None:
+            text += f" sigma={_fmt(body.position_sigma_m)}"
+        if body.yaw_sigma_rad is not None:
+            text += f" yaw_sigma={_fmt(body.yaw_sigma_rad)}"
+        markers.append(_body_marker(header, "objects", j, body, group_rgb(body.group), 1.0, text))
     for m in markers:
         for value in re.split(r"[\s,;]+", m.text):
             if value.count("=") != 1:
@@ -288,19 +381,18 @@ def scene_to_markers(scene: Scene, frame_id: str, stamp_ns: int = 0) -> MarkerAr
 
 
 def prediction_to_markers(scene: Scene, prediction: Prediction, frame_id: str, stamp_ns: int) -> MarkerArray:
-    """Each dynamic box coloured by its fall probability (green 0 .. red 1), an arrow for the fall
+    """Each dynamic body in its own shape, coloured by its fall probability (green 0 .. red 1), an arrow for the fall
     direction (length grows with decisiveness) and a text label; starts with a DELETEALL so stale
     markers of a previous scene disappear in RViz/Foxglove."""
     header = stamp_ns_to_header(stamp_ns, frame_id)
     markers = [Marker(header=header, ns="", id=0, action=Marker.DELETEALL)]
     probabilities = prediction.object_fall_probability or {}
     dynamic = scene.dynamic_objects
-    for j, box in enumerate(dynamic):
-        p = probabilities.get(box.name)
-        rgb = risk_rgb(p) if p is not None else group_rgb(box.group)
-        text = f"{box.name}: P(fall) = {p:.2f}" if p is not None else box.name
-        markers.append(_cube(header, "ipe/objects", j, box.position_m, box.extents_m, box.orientation_xyzw,
-                             rgb, 0.9, text))
+    for j, body in enumerate(dynamic):
+        p = probabilities.get(body.name)
+        rgb = risk_rgb(p) if p is not None else group_rgb(body.group)
+        text = f"{body.name}: P(fall) = {p:.2f}" if p is not None else body.name
+        markers.append(_body_marker(header, "ipe/objects", j, body, rgb, 0.9, text, exact=False))
     if not dynamic:
         return MarkerArray(markers=markers)
     top = max(b.position_m[2] + max(b.extents_m) / 2 for b in dynamic)

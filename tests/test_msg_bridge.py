@@ -10,14 +10,14 @@ import pytest
 from std_msgs.msg import ColorRGBA, String
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ipe_ros.engine import Floor, Prediction, SceneError, Table, load_scenes
+from ipe_ros.engine import Body, Floor, Prediction, Scene, SceneError, Table, load_scenes
 from ipe_ros.engine.generators import generate_tables
 from msg_bridge.json_text import answer_to_string, scene_to_string, string_to_answer, string_to_scene
 from msg_bridge.markers import (DEFAULT_DENSITY_KG_M3, markers_to_scene, parse_properties, prediction_to_markers,
                                 scene_to_markers)
 from msg_bridge.outputs import any_fall_probability_msg, fall_direction_msg, fall_probability_msg
 from msg_bridge.stamps import header_to_stamp_ns, stamp_ns_to_header
-from tests.helpers import block, floor_scene
+from tests.helpers import IDENTITY, block, floor_scene
 
 TOWER = load_scenes("ipe_ros/data/example_tower.json")[0]
 
@@ -112,20 +112,22 @@ def test_deleteall_markers_are_ignored():
 
 
 @pytest.mark.parametrize("markers, expected", [
-    ([], "markers: the array holds no ADD markers; publish at least one CUBE marker per box"),
+    ([], "markers: the array holds no ADD markers; publish one CUBE, SPHERE, CYLINDER or TRIANGLE_LIST marker per "
+         "body"),
     ([cube(frame="")], "markers[0].header.frame_id: is empty; set the frame the poses are in"),
     ([cube(), cube(marker_id=1, xyz=(1, 0, 0.1), frame="map")],
      "markers[1].header.frame_id: is 'map' but markers[0] is in 'world'; publish every marker of a scene in one frame"),
     ([cube(xyz=(math.nan, 0.0, 0.1))], "markers[0].pose.position: must be finite, got [nan, 0.0, 0.1]"),
-    ([cube(scale=(0.2, 0.0, 0.2))], "markers[0].scale: full box extents must be finite and > 0 m, got [0.2, 0.0, 0.2]"),
+    ([cube(scale=(0.2, 0.0, 0.2))], "markers[0].scale: full sizes must be finite and > 0 m, got [0.2, 0.0, 0.2]"),
     ([cube(), cube(xyz=(1, 0, 0.1))], "markers[1]: ns 'objects' id 0 repeats markers[0]; give each marker a unique (ns, id)"),
     ([cube(text="mass=1 density=2")], "markers[0].text: give mass or density, not both"),
     ([cube(text="colour=red")],
-     "markers[0].text: unknown key 'colour'; allowed here: name, mass, density, friction, restitution, group"),
+     "markers[0].text: unknown key 'colour'; allowed here: name, mass, density, friction, restitution, group, vx, vy, "
+     "vz, wx, wy, wz, sigma, yaw_sigma"),
     ([cube(text="mass=heavy")], "markers[0].text.mass: expected a number, got 'heavy'"),
     ([cube(text="mass")], "markers[0].text: expected key=value pairs, got 'mass'"),
     ([cube(ns="support", text="role=floor")],
-     "markers: no dynamic boxes: every CUBE is in the 'support' namespace; put the objects that may fall in another namespace"),
+     "markers: no dynamic bodies: every marker is in the 'support' namespace; put the objects that may fall in another namespace"),
     ([cube(ns="support", text="role=floor"), cube(ns="support", marker_id=1, text="role=table"), cube()],
      "markers[1].text.role: a second table: a scene has one floor or one table"),
     ([cube(ns="support", text="role=shelf"), cube()], "markers[0].text.role: must be one of floor, table, obstacle, got 'shelf'"),
@@ -134,11 +136,15 @@ def test_bad_marker_arrays_name_the_field(markers, expected):
     assert error_of(*markers) == expected
 
 
-def test_non_cube_markers_are_rejected_by_type_name():
-    sphere = cube()
-    sphere.type = Marker.SPHERE
-    assert error_of(sphere) == ("markers[0].type: only CUBE (1) markers describe boxes, got SPHERE (ns 'objects', "
-                                "id 0); drop it from the scene array")
+def test_other_marker_types_are_rejected_by_type_name():
+    arrow = cube()
+    arrow.type = Marker.ARROW
+    assert error_of(arrow) == ("markers[0].type: only CUBE, SPHERE, CYLINDER, TRIANGLE_LIST markers describe bodies "
+                               "here, got ARROW (ns 'objects', id 0); drop it from the scene array")
+    support_ball = cube(ns="support", text="role=obstacle")
+    support_ball.type = Marker.SPHERE
+    assert error_of(support_ball, cube()) == ("markers[0].type: only CUBE markers describe bodies here, got SPHERE "
+                                              "(ns 'support', id 0); drop it from the scene array")
 
 
 def test_tilted_table_is_rejected():
@@ -218,3 +224,52 @@ def test_msg_bridge_never_imports_rclpy():
             "print(bad); sys.exit(1 if bad else 0)")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_spheres_cylinders_and_triangle_lists_are_bodies_of_their_shape():
+    from ipe_ros.engine import ConvexHull, Cylinder, Sphere
+    from ipe_ros.engine.catalogue import cone
+
+    ball = Body(name="ball", shape=Sphere(0.1), position_m=(1.0, 0.0, 0.1), orientation_xyzw=IDENTITY, friction=0.5,
+                restitution=0.4, mass_kg=2.0, linear_velocity_m_s=(3.0, 0.0, 0.0), position_sigma_m=0.0, group="red")
+    can = Body(name="can", shape=Cylinder(0.05, 0.12), position_m=(0.0, 0.5, 0.06), orientation_xyzw=IDENTITY,
+               friction=0.5, restitution=0.0, density_kg_m3=300.0, yaw_sigma_rad=0.2, group="yellow")
+    spike = Body(name="cone", shape=cone(0.1, 0.2), position_m=(0.0, 0.0, 0.0), orientation_xyzw=IDENTITY,
+                 friction=0.5, restitution=0.0, mass_kg=1.0, angular_velocity_rad_s=(0.0, 0.0, 1.5), group="red")
+    scene = Scene(name="shapes", objects=(ball, can, spike), support=Floor(friction=0.9, restitution=0.0))
+    array = scene_to_markers(scene, "odom")
+    types = [m.type for m in array.markers[1:]]
+    assert types == [Marker.SPHERE, Marker.CYLINDER, Marker.TRIANGLE_LIST]
+    assert "vx=3.0" in array.markers[1].text and "sigma=0.0" in array.markers[1].text
+    back = markers_to_scene(array).scene
+    assert back == scene
+
+
+def test_an_ellipsoid_and_an_elliptic_cylinder_are_refused_with_the_fix():
+    m = cube()
+    m.type = Marker.SPHERE
+    m.scale.x, m.scale.y, m.scale.z = 0.2, 0.2, 0.3
+    assert error_of(m) == ("markers[0].scale: a SPHERE needs three equal scales (its diameter), got [0.2, 0.2, 0.3]; "
+                           "an ellipsoid cannot be simulated: approximate it by a TRIANGLE_LIST")
+    m.type = Marker.CYLINDER
+    m.scale.x, m.scale.y, m.scale.z = 0.2, 0.1, 0.3
+    assert error_of(m) == "markers[0].scale: a CYLINDER needs scale.x = scale.y (its diameter), got [0.2, 0.1, 0.3]"
+
+
+def test_prediction_markers_draw_capsules_and_compounds_as_triangles():
+    from ipe_ros.engine import Capsule, ModelConfig, QuerySpec, predict, preset
+    from ipe_ros.engine.catalogue import l_bracket
+
+    pill = Body(name="pill", shape=Capsule(0.03, 0.1), position_m=(0.0, 0.0, 0.03),
+                orientation_xyzw=(0.0, 0.7071067811865476, 0.0, 0.7071067811865476), friction=0.5, restitution=0.0,
+                mass_kg=0.1)
+    bracket = Body(name="bracket", shape=l_bracket(0.2, 0.04), position_m=(0.5, 0.0, 0.0), orientation_xyzw=IDENTITY,
+                   friction=0.5, restitution=0.0, mass_kg=0.5)
+    scene = Scene(name="odd", objects=(pill, bracket), support=Floor(friction=0.9, restitution=0.0))
+    with pytest.raises(ValueError, match=r"^objects \('pill'\)\.shape: a capsule has no marker; publish the scene on "
+                                         r"~/scene_json"):
+        scene_to_markers(scene, "odom")
+    prediction = predict(scene, ModelConfig(), preset("default"), QuerySpec())
+    drawn = [m for m in prediction_to_markers(scene, prediction, "odom", 0).markers if m.ns == "ipe/objects"]
+    assert [m.type for m in drawn] == [Marker.TRIANGLE_LIST] * 2
+    assert all(len(m.points) % 3 == 0 and len(m.points) >= 12 for m in drawn)

@@ -195,12 +195,13 @@ def _good_and_bad_inputs(tower):
         ("scene_json", String(data='{"format": "ipe_ros.scene/1", "boxes": ['),
          "json: malformed JSON at line 1 column 41: Expecting value"),
         ("scene", nan_pose, "markers[3].pose.position: must be finite, got [nan, 0.025634670161324646, 0.5]"),
-        ("scene", zero_size, "markers[2].scale: full box extents must be finite and > 0 m, got [0.2, 0.0, 0.2]"),
+        ("scene", zero_size, "markers[2].scale: full sizes must be finite and > 0 m, got [0.2, 0.0, 0.2]"),
         ("scene", mixed_frames, "markers[4].header.frame_id: is 'map' but markers[0] is in 'world'; "
                                 "publish every marker of a scene in one frame"),
         ("scene", flood, "markers: 10000 markers exceed max_objects = 200; raise the max_objects parameter "
                          "or publish a smaller scene"),
-        ("scene", MarkerArray(), "markers: the array holds no ADD markers; publish at least one CUBE marker per box"),
+        ("scene", MarkerArray(), "markers: the array holds no ADD markers; publish one CUBE, SPHERE, CYLINDER or "
+                                 "TRIANGLE_LIST marker per body"),
     ]
 
 
@@ -216,7 +217,7 @@ def test_bad_inputs_are_rejected_and_the_next_good_scene_is_answered(ros, tower)
         assert node.service.stats().last_error == reason
     response = ros.call(Trigger, "/ipe/predict", Trigger.Request())
     assert response.message == ("the latest scene was rejected: markers: the array holds no ADD markers; "
-                                "publish at least one CUBE marker per box")
+                                "publish one CUBE, SPHERE, CYLINDER or TRIANGLE_LIST marker per body")
     pubs["scene"].publish(scene_to_markers(tower, "world"))
     wait_until(lambda: len(got), TIMEOUT_S, "the good scene's prediction")
     stats = node.service.stats()
@@ -263,7 +264,8 @@ def test_rerun_recording_is_written_and_holds_the_rollouts(ros, tower, tmp_path)
     chunks = RrdReader(path).stream().to_chunks()
     entities = {c.entity_path for c in chunks}
     name = tower.dynamic_objects[0].name
-    assert {f"/world/rollouts/0/{name}", f"/world/rollouts/1/{name}", "/world/scene/boxes", "/answer"} <= entities
+    assert {f"/world/rollouts/0/{name}", f"/world/rollouts/1/{name}", f"/world/scene/objects/{name}",
+            "/answer"} <= entities
     assert f"/world/rollouts/2/{name}" not in entities
     moving = [c for c in chunks if c.entity_path == f"/world/rollouts/0/{name}" and not c.is_static]
     assert moving and set(moving[0].timeline_names) == {"sim_time", "ros_stamp"}

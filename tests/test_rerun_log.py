@@ -43,7 +43,8 @@ def test_recording_holds_scene_rollouts_outcomes_and_answer(tmp_path):
     steps = round(prediction.outcomes[0].rollouts[0].simulated_s / preset("default").time_step_s)
     assert frames == 1 + steps // 100
     assert sum(c.num_rows for c in by_entity["/outcomes/fall_fraction"]) == 4
-    assert {"/world", "/world/scene/support", "/world/scene/boxes", "/world/answer/objects", "/answer",
+    assert {"/world", "/world/scene/support", "/world/scene/objects/base\\ block", "/world/answer/objects/base\\ block",
+            "/answer",
             "/answer/fall_probability"} <= set(by_entity)
 
 
@@ -55,3 +56,25 @@ def test_will_anything_fall_is_recorded_per_sample(tmp_path):
                          stamp_ns=1_700_000_000_000_000_000, rollouts_logged=2)
     entities = {chunk.entity_path for chunk in RrdReader(path).stream().to_chunks()}
     assert "/outcomes/any_fall" in entities and "/outcomes/fall_fraction" not in entities
+
+
+def test_recordings_draw_every_body_in_its_own_shape(tmp_path):
+    from ipe_ros.engine.catalogue import capped_tower
+
+    scene = capped_tower()
+    prediction = predict(scene, ModelConfig(sigma_m=0.02, samples=2), preset("default"), QUERY, seed=1,
+                         record_every=20, record_samples=1)
+    path = tmp_path / "capped.rrd"
+    write_prediction_rrd(path, scene, prediction, answer=prediction.to_dict(), stamp_ns=1, rollouts_logged=1)
+    columns: dict[str, set] = {}
+    for chunk in RrdReader(path).stream().to_chunks():
+        names = set(chunk.to_record_batch().schema.names)
+        columns.setdefault(chunk.entity_path, set()).update(names)
+
+    def has(entity: str, archetype: str) -> bool:
+        return any(archetype in name for name in columns.get(entity, ()))
+
+    for base in ("/world/scene/objects", "/world/rollouts/0"):
+        assert has(f"{base}/box0", "Boxes3D") and has(f"{base}/ball", "Ellipsoids3D")
+        assert has(f"{base}/cone", "Mesh3D")  # a convex hull: its faces
+        assert has(f"{base}/cone", "Transform3D")  # moved by a transform, drawn in its own frame

@@ -133,7 +133,7 @@ def scene_catalogue(seed: int, count: int) -> list[Scene]:
     return [random_scene(np.random.default_rng([seed, i]), f"catalogue_{seed}_{i:03d}") for i in range(count)]
 
 
-def capped_tower(ball_speed_m_s: float = 3.0) -> Scene:
+def capped_tower(ball_speed_m_s: float = 5.0) -> Scene:
     """Three 0.3 m boxes, a cone on top, and a 0.1 m ball rolling at the base: the guide's worked example."""
     side = 0.3
     bodies = [Body(f"box{i}", BoxShape((side, side, side)), (0.0, 0.0, side / 2 + i * side), _IDENTITY,

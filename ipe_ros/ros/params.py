@@ -63,6 +63,11 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("preset", DEFAULT_PRESET, _STRING, "simulation settings: " + ", ".join(
         f"{name} ({s.time_step_s * 1000:g} ms steps, {s.horizon_s:g} s, {s.solver.iterations} solver iterations)"
         for name, s in PRESETS.items()), constraints="one of " + ", ".join(PRESETS)),
+    ParamSpec("horizon_s", 0.0, _DOUBLE, "simulated seconds per rollout for scenes that give no horizon_s of their "
+                                         "own; 0: the preset's (2 s)", (0.0, 60.0)),
+    ParamSpec("until_rest", False, ParameterType.PARAMETER_BOOL,
+              "end each rollout once everything is at rest (early termination, also for presets without it); "
+              "with horizon_s: until at rest, at most that long"),
     ParamSpec("seed", 0, _INT, "random seed; a prediction is a function of (scene, parameters, seed)", (0, 2**31 - 1)),
     ParamSpec("workers", default_workers(), _INT, "simulation worker processes (0: run samples in the node's "
                                                  "prediction thread); fixed at start", (0, 64), read_only=True),
@@ -91,6 +96,14 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
     queries = values["queries"]
     query = QuerySpec(queries=frozenset(queries))
     settings = preset(values["preset"])
+    horizon = float(values["horizon_s"])
+    if horizon > 0:
+        try:
+            settings = settings.changed(horizon_s=horizon)
+        except ConfigError as exc:
+            raise ConfigError("horizon_s", exc.problem) from None
+    if values["until_rest"]:
+        settings = settings.changed(early_stop={"enabled": True})
     mu = float(values["mu"])
     try:
         model = ModelConfig(sigma_m=float(values["sigma"]), phi_m_s2=(float(values["phi"]),),

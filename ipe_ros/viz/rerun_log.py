@@ -31,7 +31,8 @@ import rerun as rr
 
 from ..engine.estimate import Prediction, sample_any_fall, sample_fall_fraction, sample_far_m
 from .palette import SUPPORT_RGB, group_rgb, risk_rgb, to_rgb8
-from ..engine.scene import Body, Box, Floor, Scene, Table
+from ..engine import shapes
+from ..engine.scene import Body, Floor, Scene, Table
 
 FELL_RGB = (0.9, 0.1, 0.1)
 APPLICATION_ID = "ipe_ros"
@@ -41,11 +42,44 @@ def _part(name: str) -> str:
     return rr.escape_entity_path_part(name)
 
 
-def _boxes(boxes: tuple[Body, ...], colors) -> rr.Boxes3D:
-    return rr.Boxes3D(
-        centers=[b.position_m for b in boxes], half_sizes=[np.asarray(b.extents_m) / 2 for b in boxes],
-        quaternions=[rr.Quaternion(xyzw=b.orientation_xyzw) for b in boxes],
-        colors=colors, labels=[b.name for b in boxes], fill_mode=rr.components.FillMode.Solid)
+def shape_archetype(body: Body, rgb, *, about_centre_of_mass: bool = False):
+    """The body's shape drawn in its own frame (or about its centre of mass, as the engine's
+    rollouts place bodies): a box, an ellipsoid, a cylinder, a capsule, or a mesh of hull faces."""
+    shape = body.shape
+    offset = -shapes.centre_of_mass_m(shape) if about_centre_of_mass else np.zeros(3)
+    color, solid = [to_rgb8(rgb)], rr.components.FillMode.Solid
+    if isinstance(shape, shapes.BoxShape):
+        return rr.Boxes3D(centers=[offset], half_sizes=[np.asarray(shape.extents_m) / 2], colors=color,
+                          labels=[body.name], fill_mode=solid)
+    if isinstance(shape, shapes.Sphere):
+        return rr.Ellipsoids3D(centers=[offset], half_sizes=[[shape.radius_m] * 3], colors=color, labels=[body.name],
+                               fill_mode=solid)
+    if isinstance(shape, shapes.Cylinder):
+        return rr.Cylinders3D(centers=[offset], lengths=[shape.length_m], radii=[shape.radius_m], colors=color,
+                              labels=[body.name], fill_mode=solid)
+    if isinstance(shape, shapes.Capsule):  # rerun's capsule starts at its origin and runs along +z
+        return rr.Capsules3D(translations=[offset - [0.0, 0.0, shape.length_m / 2]], lengths=[shape.length_m],
+                             radii=[shape.radius_m], colors=color, labels=[body.name], fill_mode=solid)
+    from scipy.spatial import ConvexHull as QHull
+
+    parts = shape.parts if isinstance(shape, shapes.Compound) else (shapes.CompoundPart(shape),)
+    vertices, triangles = [], []
+    for part in parts:
+        points = shapes.surface_points(part.shape) @ shapes.rotation_matrix(part.orientation_xyzw).T \
+            + np.asarray(part.position_m) + offset
+        triangles.append(QHull(points).simplices + sum(len(v) for v in vertices))
+        vertices.append(points)
+    return rr.Mesh3D(vertex_positions=np.vstack(vertices), triangle_indices=np.vstack(triangles),
+                     albedo_factor=color[0])
+
+
+def _log_bodies(rec: rr.RecordingStream, base: str, bodies, colors) -> None:
+    """Each body at ``base/<name>``: its shape under a transform to its pose (static)."""
+    for body, rgb in zip(bodies, colors):
+        path = f"{base}/{_part(body.name)}"
+        rec.log(path, rr.Transform3D(translation=body.position_m, quaternion=rr.Quaternion(xyzw=body.orientation_xyzw)),
+                static=True)
+        rec.log(path, shape_archetype(body, rgb), static=True)
 
 
 def log_scene(rec: rr.RecordingStream, scene: Scene) -> None:
@@ -70,10 +104,9 @@ def log_scene(rec: rr.RecordingStream, scene: Scene) -> None:
                                               colors=[to_rgb8(SUPPORT_RGB)] * len(centers),
                                               fill_mode=rr.components.FillMode.Solid), static=True)
     fixed = scene.static_objects
-    if fixed:
-        rec.log("world/scene/obstacles", _boxes(fixed, [to_rgb8(SUPPORT_RGB)] * len(fixed)), static=True)
+    _log_bodies(rec, "world/scene/obstacles", fixed, [SUPPORT_RGB] * len(fixed))
     dynamic = scene.dynamic_objects
-    rec.log("world/scene/boxes", _boxes(dynamic, [to_rgb8(group_rgb(b.group)) for b in dynamic]), static=True)
+    _log_bodies(rec, "world/scene/objects", dynamic, [group_rgb(b.group) for b in dynamic])
 
 
 def log_rollouts(rec: rr.RecordingStream, scene: Scene, prediction: Prediction, stamp_ns: int,
@@ -94,14 +127,15 @@ def log_rollouts(rec: rr.RecordingStream, scene: Scene, prediction: Prediction, 
             orientations = np.stack([frame[2] for frame in rollout.trajectory])   # (frames, boxes, 4)
             indexes = [rr.TimeColumn("sim_time", duration=times),
                        rr.TimeColumn("ros_stamp", timestamp=np.full(len(times), stamp_ns, dtype="datetime64[ns]"))]
-            for b, box in enumerate(boxes):
-                path = f"{base}/{_part(box.name)}"
+            for b, body in enumerate(boxes):
+                path = f"{base}/{_part(body.name)}"
                 fell = rollout.fallen is not None and bool(rollout.fallen[b])
-                rec.log(path, rr.Boxes3D(half_sizes=[np.asarray(box.extents_m) / 2],
-                                         colors=[to_rgb8(FELL_RGB if fell else group_rgb(box.group))],
-                                         fill_mode=rr.components.FillMode.Solid), static=True)
+                # trajectories hold centres of mass: the shape is drawn about it, moved by a transform
+                rec.log(path, shape_archetype(body, FELL_RGB if fell else group_rgb(body.group),
+                                              about_centre_of_mass=True), static=True)
                 rec.send_columns(path, indexes=indexes,
-                                 columns=rr.Boxes3D.columns(centers=positions[:, b], quaternions=orientations[:, b]))
+                                 columns=rr.Transform3D.columns(translation=positions[:, b],
+                                                                quaternion=orientations[:, b]))
         logged += 1
     return logged
 
@@ -140,8 +174,8 @@ def log_answer(rec: rr.RecordingStream, scene: Scene, prediction: Prediction, an
                                       media_type=rr.MediaType.MARKDOWN), static=True)
     dynamic = scene.dynamic_objects
     if prediction.object_fall_probability is not None:
-        colors = [to_rgb8(risk_rgb(prediction.object_fall_probability[b.name])) for b in dynamic]
-        rec.log("world/answer/objects", _boxes(dynamic, colors), static=True)
+        colors = [risk_rgb(prediction.object_fall_probability[b.name]) for b in dynamic]
+        _log_bodies(rec, "world/answer/objects", dynamic, colors)
     if prediction.direction_rad is not None and dynamic:
         top = max(dynamic, key=lambda b: b.position_m[2])
         origin = (float(np.mean([b.position_m[0] for b in dynamic])),

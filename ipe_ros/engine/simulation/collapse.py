@@ -33,6 +33,10 @@ class CollapseWatch:
             return True
         return False
 
+    def end(self) -> None:
+        """Back to fine steps for the rest of the rollout."""
+        self.watching = self.collapsing = False
+
     def coarse_factor(self, allowed_ticks: int) -> int:
         """Ticks per step while collapsing: as coarse as the preset and the travel limit allow."""
         return max(1, min(self._group.step_factor, allowed_ticks))

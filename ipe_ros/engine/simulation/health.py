@@ -74,14 +74,14 @@ class EnergyWatch:
             self.max_gain_j = max(self.max_gain_j, energy - self._reference)
 
 
-def deepest_penetration_fraction(world, smallest_extents_m: np.ndarray) -> float:
-    """The deepest any dynamic body is inside the support or another body now, as a fraction of its
-    own smallest extent (0 when nothing overlaps)."""
+def deepest_penetration_fraction(world, smallest_extents_m: np.ndarray, among: np.ndarray | None = None) -> float:
+    """The deepest any dynamic body (of ``among``, default all) is inside the support or another body
+    now, as a fraction of its own smallest extent (0 when nothing overlaps)."""
     from .world import pybullet
 
     p = pybullet()
     p.performCollisionDetection(physicsClientId=world.client)
-    index = {handle: i for i, handle in enumerate(world.dynamic_ids)}
+    index = {handle: i for i, handle in enumerate(world.dynamic_ids) if among is None or among[i]}
     deepest = 0.0
     for contact in p.getContactPoints(physicsClientId=world.client):
         depth = -contact[8]

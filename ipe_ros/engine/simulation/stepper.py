@@ -109,10 +109,12 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
     if trajectory is not None:
         trajectory.append((0.0, *read_poses(world)))
     health_every = max(1, int(round(HEALTH_PERIOD_S / dt)))
+    fine_from_tick = total_ticks - int(round(settings.collapse.fine_before_end_s / dt))
     look_every = max(1, int(round(LOOK_PERIOD_S / dt)))
 
     settling = Settling(settings, dt)
     half_diagonals_m = np.array([np.linalg.norm(b.extents_m) / 2 for b in scene.dynamic_objects])
+    smallest = np.array([b.smallest_extent_m for b in scene.dynamic_objects])
     collapse = CollapseWatch(settings, collapse_below_z_m)
     steps = StepControl(settings, world)
     rest = RestWatch(settings.early_stop, world.scale_m, max(push_ticks * dt, settings.early_stop.min_time_s),
@@ -167,17 +169,26 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
             iterations = settings.iterations_for(mass_ratio(world.masses_kg), settings.collapse.solver_iterations)
             p.setPhysicsEngineParameter(numSolverIterations=iterations, physicsClientId=cid)
         if collapse.collapsing:
-            # coarse, but no body may travel more than the travel limit per step
+            # coarse, but no body may travel more than the travel limit per step, and none while a
+            # body is deep inside another: the solver pushes it out by a fraction per step, so coarse
+            # steps leave it there (a heavy body on a light one, a landing at a coarse step)
             ticks = collapse.coarse_factor(ticks_allowed(fastest_m_s, settings, world))
+            if ticks > 1 and (tick >= fine_from_tick or health.deepest_penetration_fraction(world, smallest)
+                              > settings.early_stop.max_penetration_fraction):
+                ticks = 1
             steps.set(ticks, travel_substeps if ticks == 1 else 1)
         elif not settling.covers(tick):
             steps.set(1, travel_substeps)
         if rest.enabled and rest.should_stop(tick * dt, speeds, spins, heights):
-            break
+            # only bodies whose outcome is still open must be out of the others
+            deepest = health.deepest_penetration_fraction(world, smallest, rest.undecided)
+            if deepest <= settings.early_stop.max_penetration_fraction:
+                break
+            collapse.end()  # at rest but still inside another body: push it out at the fine step
+            steps.set(1, travel_substeps)
     positions, orientations = read_poses(world)
     health.check_final_poses(positions, orientations)
     velocities = read_velocity_vectors(world)
     energy.look(energy.energy(positions, orientations, velocities[:, 0], velocities[:, 1]))
-    smallest = np.array([b.smallest_extent_m for b in scene.dynamic_objects])
     return RolloutEnd(positions, orientations, trajectory, tick * dt, energy_gain_j=energy.max_gain_j,
                       penetration_fraction=health.deepest_penetration_fraction(world, smallest))

@@ -39,3 +39,4 @@ class StepControl:
         world = self._world
         factor = ticks / substeps
         set_step(world, world.time_step_s * ticks / substeps, residual_threshold(self._settings, world.scale_m, factor))
+

@@ -46,6 +46,8 @@ class RestWatch:
         self._decided = decided
         self._resting_since: float | None = None
         self._motion_at_start = np.zeros(n_boxes)
+        #: the bodies whose outcome is not decided yet (as of the last look): only they must be at rest
+        self.undecided = np.ones(n_boxes, bool)
 
     @property
     def enabled(self) -> bool:
@@ -67,6 +69,7 @@ class RestWatch:
                 return True
             never = self._decided.never_falls
             decided = fallen_now if never is None else fallen_now | never
+            self.undecided = ~decided
             settled |= decided
             motion = np.where(decided, 0.0, motion)
         if not (np.all(settled) and t_s >= self._earliest_stop_s):

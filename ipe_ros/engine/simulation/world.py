@@ -229,6 +229,7 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
         numSolverIterations=settings.iterations_for(mass_ratio(masses_kg)),
         solverResidualThreshold=residual_threshold(settings, scale),
         warmStartingFactor=settings.solver.warm_start_factor,
+        contactBreakingThreshold=settings.max_travel_fraction * scale,
         deterministicOverlappingPairs=1,
         physicsClientId=cid)
 

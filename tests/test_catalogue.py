@@ -1,0 +1,92 @@
+"""Numerical health beyond the paper's towers: a seeded catalogue of random scenes, every preset.
+
+Stacks and piles of mixed shapes from 5 mm to 1 m, mass ratios up to 1000:1 either way, restitution
+up to 0.9, friction 0-2, bodies thrown at up to 10 m/s, bodies resting tilted on others
+(ipe_ros.engine.catalogue). For every preset: no failed sample, finite states, every rollout ending
+with no body more than 5% of its size inside another or the support, and `default` agreeing with
+`paper` on "did anything fall?" in >= 97% of samples (the same figure as on the paper's towers; the
+noisy initial scenes are the same for every preset, so differences are the simulator's alone).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
+from ipe_ros.engine.catalogue import scene_catalogue
+
+SCENES = 40
+SAMPLES = 4
+#: where bodies end up matters too: the rest must be real, not "decided" by a fall
+QUERY = QuerySpec(queries=frozenset({"fall", "direction"}))
+MAX_END_PENETRATION = 0.05
+MAX_ENERGY_GAIN = 0.01
+MIN_AGREEMENT = 0.97
+
+
+def _model(scene) -> ModelConfig:
+    return ModelConfig(sigma_m=0.05 * min(b.smallest_extent_m for b in scene.objects), samples=SAMPLES)
+
+
+@pytest.fixture(scope="module")
+def catalogue():
+    return scene_catalogue(2026, SCENES)
+
+
+@pytest.fixture(scope="module")
+def answers(catalogue, pool):
+    return {name: [predict(s, _model(s), preset(name), QUERY, seed=3, map_fn=pool.map) for s in catalogue]
+            for name in ("paper", "accurate", "fine", "default")}
+
+
+def energy_scale_j(scene) -> float:
+    """The scene's energy scale: each body's weight times its size, plus its initial kinetic energy."""
+    return sum(b.resolved_mass_kg * (9.81 * max(b.extents_m) + 0.5 * float(np.dot(b.linear_velocity_m_s,
+                                                                                    b.linear_velocity_m_s)))
+               for b in scene.dynamic_objects)
+
+
+def test_the_catalogue_spans_what_it_promises(catalogue):
+    sizes = [b.smallest_extent_m for s in catalogue for b in s.objects]
+    ratios = [max(b.resolved_mass_kg for b in s.objects) / min(b.resolved_mass_kg for b in s.objects)
+              for s in catalogue]
+    assert min(sizes) < 0.01 and max(max(b.extents_m) for s in catalogue for b in s.objects) > 0.5
+    assert max(ratios) > 100
+    assert any(b.moving for s in catalogue for b in s.objects)
+    assert {type(b.shape).__name__ for s in catalogue for b in s.objects} >= {
+        "BoxShape", "Sphere", "Cylinder", "Capsule", "ConvexHull", "Compound"}
+    assert scene_catalogue(2026, 2) == catalogue[:2]  # scene i depends on (seed, i) only
+
+
+@pytest.mark.parametrize("name", ["paper", "accurate", "fine", "default"])
+def test_every_rollout_ends_healthy(answers, name):
+    for prediction in answers[name]:
+        assert prediction.failed_samples == 0, (prediction.scene, prediction.failure_reasons)
+        for outcome in prediction.outcomes:
+            for rollout in outcome.rollouts:
+                assert np.all(np.isfinite(rollout.final_positions_m))
+                assert rollout.penetration_fraction <= MAX_END_PENETRATION, (prediction.scene, outcome.index)
+
+
+def test_default_agrees_with_paper_on_anything_falling(answers):
+    agree = [bool(a.rollouts[0].fallen.any()) == bool(b.rollouts[0].fallen.any())
+             for fast, slow in zip(answers["default"], answers["paper"])
+             for a, b in zip(fast.outcomes, slow.outcomes)]
+    assert np.mean(agree) >= MIN_AGREEMENT, f"{np.mean(agree):.3f} of {len(agree)} samples"
+
+
+@pytest.mark.parametrize("name", ["paper", "accurate", "fine", "default"])
+def test_no_rollout_gains_energy(answers, catalogue, name):
+    for scene, prediction in zip(catalogue, answers[name]):
+        assert prediction.max_energy_gain_j <= MAX_ENERGY_GAIN * energy_scale_j(scene), prediction.scene
+
+
+@pytest.mark.xfail(strict=True, reason="known, open: Bullet's restitution adds energy when a thrown body wedges "
+                                       "under a heavier tilted one (paper gains 8 J, default 20 J, against 12 J in the scene); zero "
+                                       "restitution, no throw, equal masses or a box for the cylinder each remove it")
+@pytest.mark.parametrize("name", ["paper", "default"])
+def test_a_ball_wedged_under_a_heavier_cylinder_gains_no_energy(name):
+    scene = scene_catalogue(1, 2)[1]  # a 9 m/s ball into the foot of a tilted 3.7 kg cylinder
+    prediction = predict(scene, ModelConfig(), preset(name), QUERY)
+    assert prediction.max_energy_gain_j <= MAX_ENERGY_GAIN * energy_scale_j(scene)

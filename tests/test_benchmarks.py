@@ -62,3 +62,17 @@ def test_time_budget_files_every_step_under_the_phase_it_ran_in(tmp_path):
     result, parts = _time_budget(tmp_path, "paper")
     assert parts["fine steps"]["steps_per_sample"] == 2000
     assert parts["settle steps"]["steps_per_sample"] == 0 and parts["collapse steps"]["steps_per_sample"] == 0
+
+
+def test_catalogue_benchmark_writes_every_preset_against_paper(tmp_path):
+    result = subprocess.run(
+        [sys.executable, str(REPO / "benchmarks" / "catalogue.py"), "--scenes", "2", "--samples", "1",
+         "--workers", "1", "--out", str(tmp_path)], capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-3000:]
+    data = json.loads((tmp_path / "catalogue.json").read_text())
+    rows = {row["preset"]: row for row in data["rows"]}
+    assert [row["preset"] for row in data["rows"]] == ["paper", "accurate", "fine", "default"]
+    assert rows["paper"]["speedup_vs_paper"] == 1.0 and rows["paper"]["per_sample_agreement"] == 1.0
+    for row in rows.values():
+        assert row["failed_samples"] == 0 and 0 <= row["max_end_penetration_fraction"] < 1
+    assert "| default |" in (tmp_path / "catalogue.md").read_text()

@@ -227,7 +227,7 @@ def test_msg_bridge_never_imports_rclpy():
 
 
 def test_spheres_cylinders_and_triangle_lists_are_bodies_of_their_shape():
-    from ipe_ros.engine import ConvexHull, Cylinder, Sphere
+    from ipe_ros.engine import Cylinder, Sphere
     from ipe_ros.engine.catalogue import cone
 
     ball = Body(name="ball", shape=Sphere(0.1), position_m=(1.0, 0.0, 0.1), orientation_xyzw=IDENTITY, friction=0.5,

@@ -3,7 +3,6 @@
 Figures printed here (run with -s) are the ones quoted in README.
 """
 
-import dataclasses
 
 import numpy as np
 import pytest

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from ipe_ros.engine import (Body, BoxShape, Capsule, Compound, CompoundPart, ConvexHull, Cylinder, Floor, ModelConfig,
+from ipe_ros.engine import (Body, BoxShape, Capsule, ConvexHull, Cylinder, Floor, ModelConfig,
                             QuerySpec, Scene, SceneError, Sphere, load_scenes, predict, preset, scene_from_dict,
                             scene_to_dict)
 from ipe_ros.engine import shapes

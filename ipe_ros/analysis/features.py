@@ -29,7 +29,7 @@ import numpy as np
 
 from ..engine.generators import convex_hull
 from ..engine.perturb import dynamic_masses
-from ..engine.scene import Body, Box, Scene, Table, box_corners, quaternion_to_matrix, support_top_below
+from ..engine.scene import Body, Scene, Table, box_corners, quaternion_to_matrix, support_top_below
 
 #: Boxes closer than this fraction of the smallest box extent count as touching.
 CONTACT_TOLERANCE_FRACTION = 0.02

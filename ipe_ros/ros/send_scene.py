@@ -79,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
             executor.spin_once(timeout_sec=0.05)
         sent_ns = node.get_clock().now().nanoseconds
         pub.publish(scene_to_string(scene))
-        print(f"sent {scene.name} ({len(scene.objects)} boxes) to {node_name}/scene_json; waiting for the answer",
+        print(f"sent {scene.name} ({len(scene.objects)} objects) to {node_name}/scene_json; waiting for the answer",
               file=sys.stderr)
         while answer is None:
             if time.monotonic() > deadline:

@@ -32,7 +32,7 @@ import rerun as rr
 from ..engine.estimate import Prediction, sample_any_fall, sample_fall_fraction, sample_far_m
 from .palette import SUPPORT_RGB, group_rgb, risk_rgb, to_rgb8
 from ..engine import shapes
-from ..engine.scene import Body, Floor, Scene, Table
+from ..engine.scene import Body, Floor, Scene
 
 FELL_RGB = (0.9, 0.1, 0.1)
 APPLICATION_ID = "ipe_ros"

@@ -1,0 +1,84 @@
+"""The rollout loop's parts, each on its own: settling, collapse watch, step sizes, rest watch, health."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ipe_ros.engine import PhysicsError, preset
+from ipe_ros.engine.simulation import health
+from ipe_ros.engine.simulation.collapse import CollapseWatch
+from ipe_ros.engine.simulation.settling import Settling
+from ipe_ros.engine.simulation.steps import substeps_for, ticks_allowed
+from ipe_ros.engine.simulation.termination import REST_NOISE_FLOOR_PER_S, DecidedHeights, RestWatch
+from ipe_ros.engine.simulation.world import World
+
+DEFAULT = preset("default")
+
+
+def test_settling_covers_the_first_ticks_only_when_it_has_substeps():
+    settling = Settling(DEFAULT, 1 / 180)
+    assert settling.ticks == 18 and settling.substeps == 2
+    assert settling.covers(17) and not settling.covers(18)
+    assert Settling(DEFAULT.changed(settling={"substeps": 1}), 1 / 180).ticks == 0
+
+
+def test_collapse_starts_at_the_first_clear_fall_after_the_quiet_period():
+    watch = CollapseWatch(DEFAULT, np.array([0.5, 0.5]))
+    assert watch.watching and not watch.collapsing
+    assert not watch.look(10, 36, np.array([0.4, 0.6]))  # below, but still in the push / settling
+    assert not watch.look(40, 36, np.array([0.6, 0.6]))
+    assert watch.look(45, 36, np.array([0.6, 0.49])) and watch.collapsing and not watch.watching
+    assert watch.coarse_factor(10) == 4 and watch.coarse_factor(2) == 2 and watch.coarse_factor(0) == 1
+    assert not CollapseWatch(preset("fine"), np.array([0.5])).active  # no collapse steps in `fine`
+
+
+def test_the_travel_limit_sets_substeps_and_coarse_steps():
+    world = World(client=-1, dynamic_ids=[], scale_m=0.2, time_step_s=0.01)
+    # 0.5 x 0.2 m per step: 10 m/s fits one step exactly, 25 m/s needs 3 substeps, 2 m/s allows 5 ticks
+    assert substeps_for(10.0, DEFAULT, world) == 1
+    assert substeps_for(25.0, DEFAULT, world) == 3
+    assert ticks_allowed(2.0, DEFAULT, world) == 5 and ticks_allowed(50.0, DEFAULT, world) == 0
+
+
+def _rest(decided=None):
+    return RestWatch(DEFAULT.early_stop, scale_m=0.2, earliest_stop_s=0.2, decided=decided, n_boxes=2)
+
+
+def test_rest_needs_a_whole_window_without_growing_motion():
+    rest, slow = _rest(), np.array([0.01, 0.01])
+    assert not rest.should_stop(0.1, slow, slow, None)  # before the earliest stop
+    assert not rest.should_stop(0.2, slow, slow, None)  # the window starts
+    assert not rest.should_stop(0.3, slow, slow, None)  # 0.1 s of 0.15
+    assert rest.should_stop(0.35, slow, slow, None)
+    tipping = _rest()
+    tipping.should_stop(0.2, slow, slow, None)
+    assert not tipping.should_stop(0.35, slow * 3, slow, None)  # still slow but speeding up: no rest
+    assert not _rest().should_stop(0.5, np.array([1.0, 0.0]), slow, None)  # too fast
+    assert REST_NOISE_FLOOR_PER_S > 0
+
+
+def test_decided_bodies_do_not_hold_up_the_end_and_a_yes_no_question_ends_at_the_first_fall():
+    decided = DecidedHeights(fallen_below_z_m=np.array([0.1, 0.3]))
+    rest = _rest(decided)
+    moving = np.array([0.0, 5.0])
+    heights = np.array([0.2, 0.05])  # the second body fell: its motion no longer matters
+    assert not rest.should_stop(0.2, moving, np.zeros(2), heights)
+    assert rest.should_stop(0.35, moving, np.zeros(2), heights)
+    assert rest.undecided.tolist() == [True, False]
+    first_fall = _rest(DecidedHeights(fallen_below_z_m=np.array([0.1, 0.3]), stop_at_first_fall=True))
+    assert first_fall.should_stop(0.05, moving, np.zeros(2), heights)
+
+
+def test_health_names_divergence_and_watches_energy_after_the_inputs():
+    health.check_speeds(np.array([1.0, 2.0]), 10.0, 0.5)
+    with pytest.raises(PhysicsError, match=r"^a box reached 12 m/s at t = 0\.500 s, above the physical bound 10 m/s"):
+        health.check_speeds(np.array([1.0, 12.0]), 10.0, 0.5)
+    with pytest.raises(PhysicsError, match="^non-finite velocity at t = 0.500 s"):
+        health.check_speeds(np.array([np.nan]), 10.0, 0.5)
+    watch = health.EnergyWatch(np.ones(1), np.ones((1, 3)), np.array([0.0, 0.0, -10.0]))
+    watch.look(100.0)  # before the reference (during the push) nothing counts
+    watch.reference(5.0)
+    watch.look(4.0)
+    watch.look(5.5)
+    assert watch.max_gain_j == pytest.approx(0.5)

@@ -82,11 +82,22 @@ def test_no_rollout_gains_energy(answers, catalogue, name):
         assert prediction.max_energy_gain_j <= MAX_ENERGY_GAIN * energy_scale_j(scene), prediction.scene
 
 
-@pytest.mark.xfail(strict=True, reason="known, open: Bullet's restitution adds energy when a thrown body wedges "
-                                       "under a heavier tilted one (paper gains 8 J, default 20 J, against 12 J in the scene); zero "
-                                       "restitution, no throw, equal masses or a box for the cylinder each remove it")
 @pytest.mark.parametrize("name", ["paper", "default"])
 def test_a_ball_wedged_under_a_heavier_cylinder_gains_no_energy(name):
-    scene = scene_catalogue(1, 2)[1]  # a 9 m/s ball into the foot of a tilted 3.7 kg cylinder
+    # A 9 m/s ball into the foot of a tilted 3.7 kg cylinder, against the floor, everything bouncy.
+    # The sequential-impulse solver, giving each contact its restitution in turn, added more energy
+    # than the ball brought (paper +8 J, default +20 J, of 12 J); the direct solver adds none.
+    scene = scene_catalogue(1, 2)[1]
     prediction = predict(scene, ModelConfig(), preset(name), QUERY)
+    assert prediction.max_energy_gain_j <= MAX_ENERGY_GAIN * energy_scale_j(scene)
+    sequential = preset(name).changed(solver={"direct_solver_for_restitution": False})
+    assert predict(scene, ModelConfig(), sequential, QUERY).max_energy_gain_j > energy_scale_j(scene) / 2
+
+
+def test_a_heavy_bouncy_cylinder_on_a_light_one_gains_no_energy():
+    # 1168 kg on 47 kg, restitution 0.86 on 0.62, floor 0.38: with contacts found 10 cm ahead all the
+    # time (not only as far as bodies travel) the direct solver gave it 2% of the scene's energy
+    scene = scene_catalogue(2, 13)[12]
+    model = ModelConfig(sigma_m=0.05 * min(b.smallest_extent_m for b in scene.objects), samples=4)
+    prediction = predict(scene, model, preset("default"), QUERY)
     assert prediction.max_energy_gain_j <= MAX_ENERGY_GAIN * energy_scale_j(scene)

@@ -31,6 +31,15 @@ def check_final_poses(positions_m: np.ndarray, orientations_xyzw: np.ndarray) ->
         raise PhysicsError(f"non-finite final pose; {_FIX}")
 
 
+def _rotations(orientations_xyzw: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) rotation matrices of (n, 4) xyzw quaternions, vectorised."""
+    q = orientations_xyzw / np.linalg.norm(orientations_xyzw, axis=1, keepdims=True)
+    x, y, z, w = q.T
+    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=1),
+                     np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=1),
+                     np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=1)], axis=1)
+
+
 def energy_j(masses_kg: np.ndarray, inertia_kg_m2: np.ndarray, gravity_m_s2: np.ndarray, positions_m: np.ndarray,
              orientations_xyzw: np.ndarray, velocities_m_s: np.ndarray, spins_rad_s: np.ndarray) -> float:
     """Kinetic (linear and rotational) plus potential energy of the dynamic bodies, joules.
@@ -38,14 +47,9 @@ def energy_j(masses_kg: np.ndarray, inertia_kg_m2: np.ndarray, gravity_m_s2: np.
     ``inertia_kg_m2``: (n, 3) principal moments about each body's own axes; ``spins_rad_s``: (n, 3)
     angular velocities in the scene frame.
     """
-    from ..shapes import rotation_matrix
-
     linear = 0.5 * float(np.sum(masses_kg * np.einsum("ij,ij->i", velocities_m_s, velocities_m_s)))
-    rotational = 0.0
-    for q, inertia, w in zip(orientations_xyzw, inertia_kg_m2, spins_rad_s):
-        if w.any():
-            local = rotation_matrix(q).T @ w
-            rotational += 0.5 * float(np.sum(inertia * local * local))
+    local_spins = np.einsum("nji,nj->ni", _rotations(orientations_xyzw), spins_rad_s)  # R^T w
+    rotational = 0.5 * float(np.sum(inertia_kg_m2 * local_spins * local_spins))
     potential = -float(np.sum(masses_kg * (positions_m @ gravity_m_s2)))
     return linear + rotational + potential
 
@@ -74,13 +78,16 @@ class EnergyWatch:
             self.max_gain_j = max(self.max_gain_j, energy - self._reference)
 
 
-def deepest_penetration_fraction(world, smallest_extents_m: np.ndarray, among: np.ndarray | None = None) -> float:
-    """The deepest any dynamic body (of ``among``, default all) is inside the support or another body
-    now, as a fraction of its own smallest extent (0 when nothing overlaps)."""
+def deepest_penetration_fraction(world, smallest_extents_m: np.ndarray, among: np.ndarray | None = None,
+                                 detect: bool = True) -> float:
+    """The deepest any dynamic body (of ``among``, default all) is inside the support or another body,
+    as a fraction of its own smallest extent (0 when nothing overlaps). ``detect``: find the contacts
+    of the state now; else read the ones the last step found (cheaper, one step old)."""
     from .world import pybullet
 
     p = pybullet()
-    p.performCollisionDetection(physicsClientId=world.client)
+    if detect:
+        p.performCollisionDetection(physicsClientId=world.client)
     index = {handle: i for i, handle in enumerate(world.dynamic_ids) if among is None or among[i]}
     deepest = 0.0
     for contact in p.getContactPoints(physicsClientId=world.client):

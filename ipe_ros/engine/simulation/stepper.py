@@ -33,8 +33,8 @@ from .probe import NO_PROBE, Probe
 from .settling import Settling
 from .steps import StepControl, substeps_for, ticks_allowed
 from .termination import DecidedHeights, RestWatch
-from .world import (World, mass_ratio, pybullet, read_poses, read_velocity_vectors, set_initial_velocities,
-                    speeds_of)
+from .world import (World, contact_distance_m, mass_ratio, pybullet, read_poses, read_velocity_vectors,
+                    set_initial_velocities, speeds_of)
 
 #: Seconds between health checks (divergence, non-finite speeds), and between looks for rest and collapse.
 HEALTH_PERIOD_S = 0.1
@@ -116,7 +116,7 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
     half_diagonals_m = np.array([np.linalg.norm(b.extents_m) / 2 for b in scene.dynamic_objects])
     smallest = np.array([b.smallest_extent_m for b in scene.dynamic_objects])
     collapse = CollapseWatch(settings, collapse_below_z_m)
-    steps = StepControl(settings, world)
+    steps = StepControl(settings, world, contact_distance_m(settings, world.scale_m, fastest_start_m_s * dt))
     rest = RestWatch(settings.early_stop, world.scale_m, max(push_ticks * dt, settings.early_stop.min_time_s),
                      decided, len(scene.dynamic_objects))
     travel_substeps = substeps_for(fastest_start_m_s + g * look_every * dt, settings, world) if fastest_start_m_s else 1
@@ -162,6 +162,7 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
         if not look_due:
             if not settling.covers(tick):
                 steps.set(steps.ticks, travel_substeps if steps.ticks == 1 else 1)
+            steps.find_contacts_ahead(fastest_m_s)
             continue
         heights = positions[:, 2]
         if collapse.look(tick, max(push_ticks, settling.ticks), heights) \
@@ -173,12 +174,14 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
             # body is deep inside another: the solver pushes it out by a fraction per step, so coarse
             # steps leave it there (a heavy body on a light one, a landing at a coarse step)
             ticks = collapse.coarse_factor(ticks_allowed(fastest_m_s, settings, world))
-            if ticks > 1 and (tick >= fine_from_tick or health.deepest_penetration_fraction(world, smallest)
-                              > settings.early_stop.max_penetration_fraction):
+            deep = ticks > 1 and tick < fine_from_tick and health.deepest_penetration_fraction(
+                world, smallest, detect=False) > settings.early_stop.max_penetration_fraction
+            if ticks > 1 and (tick >= fine_from_tick or deep):
                 ticks = 1
             steps.set(ticks, travel_substeps if ticks == 1 else 1)
         elif not settling.covers(tick):
             steps.set(1, travel_substeps)
+        steps.find_contacts_ahead(fastest_m_s)
         if rest.enabled and rest.should_stop(tick * dt, speeds, spins, heights):
             # only bodies whose outcome is still open must be out of the others
             deepest = health.deepest_penetration_fraction(world, smallest, rest.undecided)

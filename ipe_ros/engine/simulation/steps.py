@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 
 from ..config import SimSettings
-from .world import World, residual_threshold, set_step
+from .world import World, contact_distance_m, residual_threshold, set_contact_distance, set_step
 
 
 def substeps_for(fastest_m_s: float, settings: SimSettings, world: World) -> int:
@@ -27,9 +27,20 @@ def ticks_allowed(fastest_m_s: float, settings: SimSettings, world: World) -> in
 class StepControl:
     """Holds the step in force and sets pybullet's when it changes."""
 
-    def __init__(self, settings: SimSettings, world: World):
+    def __init__(self, settings: SimSettings, world: World, contact_distance_m: float):
         self._settings, self._world = settings, world
         self.ticks, self.substeps = 1, 1
+        self._contact_distance_m = contact_distance_m
+
+    def find_contacts_ahead(self, fastest_m_s: float) -> None:
+        """Contacts as far ahead as the fastest corner travels in the step in force (changed only
+        when that moves by more than a quarter, to keep the contact cache)."""
+        world = self._world
+        step_s = world.time_step_s * self.ticks / self.substeps
+        distance = contact_distance_m(self._settings, world.scale_m, fastest_m_s * step_s)
+        if abs(distance - self._contact_distance_m) > 0.25 * self._contact_distance_m:
+            self._contact_distance_m = distance
+            set_contact_distance(world, distance)
 
     def set(self, ticks: int, substeps: int) -> None:
         substeps = min(substeps, self._settings.max_substeps)

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..config import SimSettings
 from .. import shapes as shapes_module
-from ..scene import Body, Box, Floor, Scene
+from ..scene import Body, Box, Floor, Scene, Table
 from ..shapes import BoxShape, Capsule, ConvexHull, Cylinder, Sphere
 
 _PYBULLET = None
@@ -228,9 +228,13 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
         numSolverIterations=settings.iterations_for(mass_ratio(masses_kg)),
         solverResidualThreshold=residual_threshold(settings, scale),
         warmStartingFactor=settings.solver.warm_start_factor,
-        contactBreakingThreshold=settings.max_travel_fraction * scale,
+        contactBreakingThreshold=contact_distance_m(settings, scale, fastest_initial_speed_m_s(scene) * time_step),
         deterministicOverlappingPairs=1,
         physicsClientId=cid)
+    solver = settings.solver
+    if solver.direct_solver_for_restitution and can_bounce(scene) \
+            and mass_ratio(masses_kg) <= solver.direct_solver_max_mass_ratio:
+        _use_direct_solver(p, cid)
 
     support = scene.support
     if isinstance(support, Floor):
@@ -259,6 +263,35 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
     inertia = np.array([p.getDynamicsInfo(h, -1, physicsClientId=cid)[2] for h in dynamic_ids], float)
     return World(client=cid, dynamic_ids=dynamic_ids, scale_m=scale, time_step_s=time_step,
                  masses_kg=np.asarray(masses_kg, float), inertia_kg_m2=inertia.reshape(len(dynamic_ids), 3))
+
+
+def can_bounce(scene: Scene) -> bool:
+    """Whether two surfaces that may touch both have restitution (Bullet multiplies the two): a
+    bouncing dynamic body against the support, a static body or another bouncing one."""
+    bouncy = [b for b in scene.dynamic_objects if b.restitution > 0]
+    if not bouncy:
+        return False
+    support = scene.support
+    others = [support.restitution] + [b.restitution for b in scene.static_objects]
+    if isinstance(support, Table) and support.floor_z_m is not None:
+        others.append(support.restitution)
+    return len(bouncy) > 1 or any(e > 0 for e in others)
+
+
+def _use_direct_solver(p, cid: int) -> None:
+    """pybullet's MLCP (Dantzig) solver for this world; ``resetSimulation`` puts back the
+    sequential-impulse one. Quietly: pybullet prints on every switch."""
+    with _quiet_c_output():
+        p.setPhysicsEngineParameter(constraintSolverType=p.CONSTRAINT_SOLVER_LCP_DANTZIG, physicsClientId=cid)
+
+
+def contact_distance_m(settings: SimSettings, scale_m: float, travel_m: float) -> float:
+    """How far ahead contacts are found: as far as the fastest body travels in a step, within bounds."""
+    return min(max(settings.min_contact_fraction * scale_m, travel_m), settings.max_travel_fraction * scale_m)
+
+
+def set_contact_distance(world: World, distance_m: float) -> None:
+    pybullet().setPhysicsEngineParameter(contactBreakingThreshold=distance_m, physicsClientId=world.client)
 
 
 def mass_ratio(masses_kg) -> float:

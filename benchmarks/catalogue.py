@@ -23,19 +23,13 @@ from pathlib import Path
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
-import numpy as np  # noqa: E402
 
 from accuracy_vs_time import REPO, compare, run_config  # noqa: E402 - the same comparison as the towers'
 from ipe_ros.engine import PRESETS, ModelConfig, QuerySpec, WorkerPool  # noqa: E402
 from ipe_ros.engine.catalogue import scene_catalogue  # noqa: E402
+from ipe_ros.engine.simulation.health import energy_scale_j  # noqa: E402
 
 QUERY = QuerySpec(queries=frozenset({"fall", "direction"}))
-
-
-def energy_scale_j(scene) -> float:
-    return sum(b.resolved_mass_kg * (9.81 * max(b.extents_m) + 0.5 * float(np.dot(b.linear_velocity_m_s,
-                                                                                    b.linear_velocity_m_s)))
-               for b in scene.dynamic_objects)
 
 
 def run_catalogue(scenes, settings, samples: int, pool: WorkerPool) -> dict:

@@ -42,8 +42,6 @@ import math
 import re
 from dataclasses import dataclass
 
-import numpy as np
-
 from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
@@ -157,16 +155,8 @@ def _shape(marker: Marker, extents: tuple[float, float, float], field: str):
 
 def _triangles(shape) -> list[tuple[float, float, float]]:
     """The faces of a hull (or of each hull of a compound) as TRIANGLE_LIST points in the body frame."""
-    from scipy.spatial import ConvexHull as QHull
-
-    parts = shape.parts if isinstance(shape, shapes.Compound) else (shapes.CompoundPart(shape),)
-    out: list[tuple[float, float, float]] = []
-    for part in parts:
-        points = shapes.surface_points(part.shape) @ shapes.rotation_matrix(part.orientation_xyzw).T \
-            + np.asarray(part.position_m)
-        for face in QHull(points).simplices:
-            out.extend(tuple(float(v) for v in points[k]) for k in face)
-    return out
+    vertices, triangles = shapes.hull_faces(shape)
+    return [tuple(float(v) for v in vertices[k]) for face in triangles for k in face]
 
 
 def _is_identity(q: tuple[float, float, float, float]) -> bool:

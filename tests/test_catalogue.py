@@ -15,6 +15,7 @@ import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
 from ipe_ros.engine.catalogue import scene_catalogue
+from ipe_ros.engine.simulation.health import energy_scale_j
 
 SCENES = 40
 SAMPLES = 4
@@ -38,13 +39,6 @@ def catalogue():
 def answers(catalogue, pool):
     return {name: [predict(s, _model(s), preset(name), QUERY, seed=3, map_fn=pool.map) for s in catalogue]
             for name in ("paper", "accurate", "fine", "default")}
-
-
-def energy_scale_j(scene) -> float:
-    """The scene's energy scale: each body's weight times its size, plus its initial kinetic energy."""
-    return sum(b.resolved_mass_kg * (9.81 * max(b.extents_m) + 0.5 * float(np.dot(b.linear_velocity_m_s,
-                                                                                    b.linear_velocity_m_s)))
-               for b in scene.dynamic_objects)
 
 
 def test_the_catalogue_spans_what_it_promises(catalogue):

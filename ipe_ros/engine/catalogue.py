@@ -14,8 +14,8 @@ import math
 import numpy as np
 
 from .scene import Body, Floor, Scene, validate_scene
-from .shapes import BoxShape, Capsule, Compound, CompoundPart, ConvexHull, Cylinder, Sphere, surface_points
-from .shapes import rotation_matrix
+from .shapes import (BoxShape, Capsule, Compound, CompoundPart, ConvexHull, Cylinder, Sphere, quaternion_product,
+                     rotation_matrix, surface_points)
 
 _IDENTITY = (0.0, 0.0, 0.0, 1.0)
 #: Each scene has its own length scale (log-uniform in this range, metres; its bodies' smallest
@@ -70,10 +70,7 @@ def _yaw_tilt(rng: np.random.Generator, tilt_rad: float) -> tuple[float, float, 
     half = tilt_rad / 2
     turn_z = np.array([0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)])
     tilt = np.array([*(axis * math.sin(half)), math.cos(half)])
-    x1, y1, z1, w1 = tilt
-    x2, y2, z2, w2 = turn_z
-    q = np.array([w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2, w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-                  w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2, w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2])
+    q = quaternion_product(tilt[None], turn_z[None])[0]
     return tuple(float(v) for v in q / np.linalg.norm(q))
 
 

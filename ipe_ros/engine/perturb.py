@@ -16,6 +16,7 @@ import numpy as np
 
 from .config import MODEL_LIGHT_DENSITY_KG_M3, ModelConfig
 from .scene import Scene
+from .shapes import quaternion_product
 
 
 @dataclass(frozen=True)
@@ -67,14 +68,6 @@ def _yaw_quaternions(yaw_rad: np.ndarray) -> np.ndarray:
     return np.stack([np.zeros_like(half), np.zeros_like(half), np.sin(half), np.cos(half)], axis=1)
 
 
-def _quaternion_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise a * b for (n, 4) xyzw quaternions (b applied first)."""
-    ax, ay, az, aw = a.T
-    bx, by, bz, bw = b.T
-    return np.stack([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz], axis=1)
-
-
 def draw_push_direction(model: ModelConfig, rng: np.random.Generator) -> float:
     """Uniform over the circle, or within +-cue_half_width of the cued direction."""
     u = rng.random()
@@ -98,6 +91,6 @@ def draw_sample_inputs(scene: Scene, model: ModelConfig, rng: np.random.Generato
     yaw_sigmas = np.array([b.yaw_sigma_rad or 0.0 for b in bodies])
     if yaw_sigmas.any():  # about each body's centre of mass
         turn = _yaw_quaternions(yaw_sigmas * rng.standard_normal(len(bodies)))
-        orientations = _quaternion_product(turn, orientations)
+        orientations = quaternion_product(turn, orientations)
     return SampleInputs(positions_m=positions, orientations_xyzw=orientations,
                         masses_kg=dynamic_masses(scene, model.mu), push_direction_rad=float(direction))

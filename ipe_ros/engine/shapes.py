@@ -82,14 +82,27 @@ Shape = Union[BoxShape, Sphere, Cylinder, Capsule, ConvexHull, Compound]
 SHAPE_TYPES = ("box", "sphere", "cylinder", "capsule", "convex", "compound")
 
 
+def rotation_matrices(q_xyzw) -> np.ndarray:
+    """(n, 3, 3) rotation matrices of (n, 4) quaternions in (x, y, z, w) order (normalised here)."""
+    q = np.asarray(q_xyzw, dtype=float)
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    x, y, z, w = q.T
+    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=1),
+                     np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=1),
+                     np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=1)], axis=1)
+
+
 def rotation_matrix(q_xyzw) -> np.ndarray:
-    """Rotation matrix of a (normalised here) quaternion in (x, y, z, w) order."""
-    x, y, z, w = np.asarray(q_xyzw, dtype=float) / np.linalg.norm(q_xyzw)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    """Rotation matrix of one (normalised here) quaternion in (x, y, z, w) order."""
+    return rotation_matrices(np.asarray(q_xyzw, dtype=float)[None])[0]
+
+
+def quaternion_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise a * b for (n, 4) xyzw quaternions (b applied first)."""
+    ax, ay, az, aw = np.asarray(a, float).T
+    bx, by, bz, bw = np.asarray(b, float).T
+    return np.stack([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz], axis=1)
 
 
 # --------------------------------------------------------------------------------------------
@@ -165,7 +178,8 @@ def validate_shape(shape, path: str) -> None:
                 raise SceneError(f"{path}.parts[{i}].position_m", "must be 3 finite numbers (metres)")
             norm = math.sqrt(sum(c * c for c in part.orientation_xyzw))
             if len(part.orientation_xyzw) != 4 or abs(norm - 1.0) > 1e-3:
-                raise SceneError(f"{path}.parts[{i}].orientation_xyzw", f"must be a unit quaternion, got norm {norm:.6g}")
+                raise SceneError(f"{path}.parts[{i}].orientation_xyzw",
+                                 f"must be a unit quaternion, got norm {norm:.6g}")
     else:
         raise SceneError(f"{path}.type", f"unknown shape; choose one of {', '.join(SHAPE_TYPES)}")
 
@@ -211,6 +225,21 @@ def surface_points(shape) -> np.ndarray:
         return np.vstack([surface_points(p.shape) @ rotation_matrix(p.orientation_xyzw).T + np.asarray(p.position_m)
                           for p in shape.parts])
     raise TypeError(f"not a shape: {shape!r}")
+
+
+def hull_faces(shape) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices (n, 3), triangles (m, 3) indexing them) of the shape's convex hull in its own frame,
+    or of each part's hull for a compound (a non-convex object drawn as its convex parts)."""
+    from scipy.spatial import ConvexHull as QHull
+
+    parts = shape.parts if isinstance(shape, Compound) else (CompoundPart(shape),)
+    vertices, triangles, count = [], [], 0
+    for part in parts:
+        points = surface_points(part.shape) @ rotation_matrix(part.orientation_xyzw).T + np.asarray(part.position_m)
+        triangles.append(QHull(points).simplices + count)
+        vertices.append(points)
+        count += len(points)
+    return np.vstack(vertices), np.vstack(triangles)
 
 
 def volume_m3(shape) -> float:

@@ -60,17 +60,8 @@ def shape_archetype(body: Body, rgb, *, about_centre_of_mass: bool = False):
     if isinstance(shape, shapes.Capsule):  # rerun's capsule starts at its origin and runs along +z
         return rr.Capsules3D(translations=[offset - [0.0, 0.0, shape.length_m / 2]], lengths=[shape.length_m],
                              radii=[shape.radius_m], colors=color, labels=[body.name], fill_mode=solid)
-    from scipy.spatial import ConvexHull as QHull
-
-    parts = shape.parts if isinstance(shape, shapes.Compound) else (shapes.CompoundPart(shape),)
-    vertices, triangles = [], []
-    for part in parts:
-        points = shapes.surface_points(part.shape) @ shapes.rotation_matrix(part.orientation_xyzw).T \
-            + np.asarray(part.position_m) + offset
-        triangles.append(QHull(points).simplices + sum(len(v) for v in vertices))
-        vertices.append(points)
-    return rr.Mesh3D(vertex_positions=np.vstack(vertices), triangle_indices=np.vstack(triangles),
-                     albedo_factor=color[0])
+    vertices, triangles = shapes.hull_faces(shape)
+    return rr.Mesh3D(vertex_positions=vertices + offset, triangle_indices=triangles, albedo_factor=color[0])
 
 
 def _log_bodies(rec: rr.RecordingStream, base: str, bodies, colors) -> None:

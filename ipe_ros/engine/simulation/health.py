@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import PhysicsError
+from ..shapes import rotation_matrices
 
 _FIX = "use a smaller time step or more solver iterations"
 
@@ -31,15 +32,6 @@ def check_final_poses(positions_m: np.ndarray, orientations_xyzw: np.ndarray) ->
         raise PhysicsError(f"non-finite final pose; {_FIX}")
 
 
-def _rotations(orientations_xyzw: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) rotation matrices of (n, 4) xyzw quaternions, vectorised."""
-    q = orientations_xyzw / np.linalg.norm(orientations_xyzw, axis=1, keepdims=True)
-    x, y, z, w = q.T
-    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=1),
-                     np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=1),
-                     np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=1)], axis=1)
-
-
 def energy_j(masses_kg: np.ndarray, inertia_kg_m2: np.ndarray, gravity_m_s2: np.ndarray, positions_m: np.ndarray,
              orientations_xyzw: np.ndarray, velocities_m_s: np.ndarray, spins_rad_s: np.ndarray) -> float:
     """Kinetic (linear and rotational) plus potential energy of the dynamic bodies, joules.
@@ -48,10 +40,19 @@ def energy_j(masses_kg: np.ndarray, inertia_kg_m2: np.ndarray, gravity_m_s2: np.
     angular velocities in the scene frame.
     """
     linear = 0.5 * float(np.sum(masses_kg * np.einsum("ij,ij->i", velocities_m_s, velocities_m_s)))
-    local_spins = np.einsum("nji,nj->ni", _rotations(orientations_xyzw), spins_rad_s)  # R^T w
+    local_spins = np.einsum("nji,nj->ni", rotation_matrices(orientations_xyzw), spins_rad_s)  # R^T w
     rotational = 0.5 * float(np.sum(inertia_kg_m2 * local_spins * local_spins))
     potential = -float(np.sum(masses_kg * (positions_m @ gravity_m_s2)))
     return linear + rotational + potential
+
+
+def energy_scale_j(scene) -> float:
+    """A scene's energy scale, the yardstick for ``max_energy_gain_j``: each dynamic body's weight
+    times its largest extent, plus its initial kinetic energy."""
+    g = float(np.linalg.norm(scene.gravity_m_s2))
+    return sum(b.resolved_mass_kg * (g * max(b.extents_m) + 0.5 * float(np.dot(b.linear_velocity_m_s,
+                                                                             b.linear_velocity_m_s)))
+               for b in scene.dynamic_objects)
 
 
 class EnergyWatch:

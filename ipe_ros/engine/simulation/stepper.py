@@ -33,8 +33,7 @@ from .probe import NO_PROBE, Probe
 from .settling import Settling
 from .steps import StepControl, substeps_for, ticks_allowed
 from .termination import DecidedHeights, RestWatch
-from .world import (World, contact_distance_m, mass_ratio, pybullet, read_poses, read_velocity_vectors,
-                    set_initial_velocities, speeds_of)
+from .world import World, mass_ratio, pybullet, read_poses, read_velocity_vectors, set_initial_velocities, speeds_of
 
 #: Seconds between health checks (divergence, non-finite speeds), and between looks for rest and collapse.
 HEALTH_PERIOD_S = 0.1
@@ -88,7 +87,8 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
     p = pybullet()
     cid = world.client
     dt = world.time_step_s
-    total_ticks = int(round(settings.horizon_for(scene.horizon_s) / dt))
+    horizon_s = settings.horizon_for(scene.horizon_s)
+    total_ticks = int(round(horizon_s / dt))
     gravity = np.asarray(scene.gravity_m_s2, float)
     g = float(np.linalg.norm(gravity))
     set_initial_velocities(world, scene)
@@ -103,8 +103,7 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
     else:
         energy.reference(initial_energy)
     fastest_start_m_s = float(np.max(speeds_of(initial_velocities)[0], initial=0.0))
-    limit = health.speed_limit_m_s(g, settings.horizon_for(scene.horizon_s), push.acceleration_m_s2,
-                                   push.duration_s) + 2 * fastest_start_m_s
+    limit = health.speed_limit_m_s(g, horizon_s, push.acceleration_m_s2, push.duration_s) + 2 * fastest_start_m_s
     trajectory: list | None = [] if record_every > 0 else None
     if trajectory is not None:
         trajectory.append((0.0, *read_poses(world)))
@@ -116,7 +115,7 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
     half_diagonals_m = np.array([np.linalg.norm(b.extents_m) / 2 for b in scene.dynamic_objects])
     smallest = np.array([b.smallest_extent_m for b in scene.dynamic_objects])
     collapse = CollapseWatch(settings, collapse_below_z_m)
-    steps = StepControl(settings, world, contact_distance_m(settings, world.scale_m, fastest_start_m_s * dt))
+    steps = StepControl(settings, world)
     rest = RestWatch(settings.early_stop, world.scale_m, max(push_ticks * dt, settings.early_stop.min_time_s),
                      decided, len(scene.dynamic_objects))
     travel_substeps = substeps_for(fastest_start_m_s + g * look_every * dt, settings, world) if fastest_start_m_s else 1

@@ -27,10 +27,10 @@ def ticks_allowed(fastest_m_s: float, settings: SimSettings, world: World) -> in
 class StepControl:
     """Holds the step in force and sets pybullet's when it changes."""
 
-    def __init__(self, settings: SimSettings, world: World, contact_distance_m: float):
+    def __init__(self, settings: SimSettings, world: World):
         self._settings, self._world = settings, world
         self.ticks, self.substeps = 1, 1
-        self._contact_distance_m = contact_distance_m
+        self._contact_distance_m = world.contact_distance_m
 
     def find_contacts_ahead(self, fastest_m_s: float) -> None:
         """Contacts as far ahead as the fastest corner travels in the step in force (changed only

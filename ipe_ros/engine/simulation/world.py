@@ -19,7 +19,7 @@ import numpy as np
 
 from ..config import SimSettings
 from .. import shapes as shapes_module
-from ..scene import Body, Box, Floor, Scene, Table
+from ..scene import Body, Box, Floor, Scene
 from ..shapes import BoxShape, Capsule, ConvexHull, Cylinder, Sphere
 
 _PYBULLET = None
@@ -82,6 +82,7 @@ class World:
     dynamic_ids: list[int]
     scale_m: float  # smallest extent of any dynamic body: the scene's length scale
     time_step_s: float = 0.0  # the step actually used (finer than the preset's for small or fast bodies)
+    contact_distance_m: float = 0.0  # how far ahead contacts are found (Bullet's breaking threshold), as built
     masses_kg: np.ndarray | None = None  # of the dynamic bodies
     inertia_kg_m2: np.ndarray | None = None  # (n, 3) their principal moments (pybullet's)
 
@@ -224,11 +225,12 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
     time_step = settings.time_step_for(scale, float(np.linalg.norm(scene.gravity_m_s2)),
                                        fastest_initial_speed_m_s(scene))
     p.setTimeStep(time_step, physicsClientId=cid)
+    contact_distance = contact_distance_m(settings, scale, fastest_initial_speed_m_s(scene) * time_step)
     p.setPhysicsEngineParameter(
         numSolverIterations=settings.iterations_for(mass_ratio(masses_kg)),
         solverResidualThreshold=residual_threshold(settings, scale),
         warmStartingFactor=settings.solver.warm_start_factor,
-        contactBreakingThreshold=contact_distance_m(settings, scale, fastest_initial_speed_m_s(scene) * time_step),
+        contactBreakingThreshold=contact_distance,
         deterministicOverlappingPairs=1,
         physicsClientId=cid)
     solver = settings.solver
@@ -262,6 +264,7 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
                    for b, pos, m, orn in zip(scene.dynamic_objects, positions_m, masses_kg, orientations)]
     inertia = np.array([p.getDynamicsInfo(h, -1, physicsClientId=cid)[2] for h in dynamic_ids], float)
     return World(client=cid, dynamic_ids=dynamic_ids, scale_m=scale, time_step_s=time_step,
+                 contact_distance_m=contact_distance,
                  masses_kg=np.asarray(masses_kg, float), inertia_kg_m2=inertia.reshape(len(dynamic_ids), 3))
 
 
@@ -271,10 +274,7 @@ def can_bounce(scene: Scene) -> bool:
     bouncy = [b for b in scene.dynamic_objects if b.restitution > 0]
     if not bouncy:
         return False
-    support = scene.support
-    others = [support.restitution] + [b.restitution for b in scene.static_objects]
-    if isinstance(support, Table) and support.floor_z_m is not None:
-        others.append(support.restitution)
+    others = [scene.support.restitution] + [b.restitution for b in scene.static_objects]  # a table's floor too
     return len(bouncy) > 1 or any(e > 0 for e in others)
 
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import PhysicsError
-from ..shapes import rotation_matrices
 
 _FIX = "use a smaller time step or more solver iterations"
 
@@ -40,10 +39,21 @@ def energy_j(masses_kg: np.ndarray, inertia_kg_m2: np.ndarray, gravity_m_s2: np.
     angular velocities in the scene frame.
     """
     linear = 0.5 * float(np.sum(masses_kg * np.einsum("ij,ij->i", velocities_m_s, velocities_m_s)))
-    local_spins = np.einsum("nji,nj->ni", rotation_matrices(orientations_xyzw), spins_rad_s)  # R^T w
+    local_spins = _rotate_into_body(orientations_xyzw, spins_rad_s)
     rotational = 0.5 * float(np.sum(inertia_kg_m2 * local_spins * local_spins))
     potential = -float(np.sum(masses_kg * (positions_m @ gravity_m_s2)))
     return linear + rotational + potential
+
+
+def _rotate_into_body(q_xyzw: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """R^T v for each row: ``vectors`` in the scene frame to each body's own frame. The quaternion
+    form (v - 2w (u x v) + 2 u x (u x v)), without building matrices: this runs at every look."""
+    q = q_xyzw / np.sqrt(np.einsum("ij,ij->i", q_xyzw, q_xyzw))[:, None]
+    ux, uy, uz, w = q.T
+    vx, vy, vz = vectors.T
+    tx, ty, tz = 2 * (uy * vz - uz * vy), 2 * (uz * vx - ux * vz), 2 * (ux * vy - uy * vx)  # 2 u x v
+    return np.stack([vx - w * tx + (uy * tz - uz * ty), vy - w * ty + (uz * tx - ux * tz),
+                     vz - w * tz + (ux * ty - uy * tx)], axis=1)
 
 
 def energy_scale_j(scene) -> float:

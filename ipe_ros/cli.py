@@ -29,12 +29,12 @@ import numpy as np
 
 from .engine import (ALL_QUERIES, PRESETS, AdaptiveStop, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError,
                      WorkerPool, load_scenes, parse_queries, predict, preset)
-from .engine.config import (DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M,
+from .engine.config import (DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M,
                             anytime_batch_size)
 from .engine.examples import example_scene_path
 from .engine.catalogue import capped_tower, scene_catalogue
 from .engine.generators import generate_tables, generate_towers, state_pair
-from .engine.sampler import check_request
+from .engine.sampler import check_budget, check_request
 from .engine.scene_io import write_scenes
 
 EXIT_BAD_INPUT = 2
@@ -108,6 +108,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--until-rest", action="store_true",
                    help="end each rollout once everything is at rest (early termination, also for presets "
                         "without it); with --horizon S: until at rest, at most S seconds")
+    p.add_argument("--budget", type=_finite, default=DEFAULT_BUDGET_S, metavar="S",
+                   help=f"compute budget per prediction in seconds (default {DEFAULT_BUDGET_S:g}): samples still "
+                        "running then are cut off (stopped_by: budget); scenes whose one rollout cannot fit are refused")
     p.add_argument("--json", action="store_true", help="one JSON object per scene per line")
 
     g = sub.add_parser("generate", help="write generated scenes (JSON)")
@@ -187,7 +190,7 @@ def prediction_json(prediction: Prediction) -> str:
 
 
 def _run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: int, workers: int, emit,
-                     stop: AdaptiveStop | None = None) -> None:
+                     stop: AdaptiveStop | None = None, budget_s: float | None = None) -> None:
     if workers < 0:
         raise ConfigError("--workers", f"must be >= 0, got {workers}")
     pool = WorkerPool(min(workers, max(1, model.samples))) if workers > 0 else None
@@ -195,7 +198,8 @@ def _run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: in
         stop = dataclasses.replace(stop, batch_size=anytime_batch_size(workers))
     try:
         for scene in scenes:
-            emit(predict(scene, model, sim, query, seed=seed, map_fn=pool.map if pool else None, stop=stop))
+            emit(predict(scene, model, sim, query, seed=seed, map_fn=pool.map if pool else None, stop=stop,
+                         budget_s=budget_s))
     finally:
         if pool is not None:
             pool.close()
@@ -218,16 +222,23 @@ def cmd_predict(args) -> int:
         stop = AdaptiveStop(ci_width=args.ci_width, deadline_s=args.deadline)
     if args.seed < 0:
         raise ConfigError("--seed", f"must be >= 0, got {args.seed}")
+    try:
+        check_budget(args.budget)
+    except ConfigError as exc:
+        raise ConfigError("--budget", exc.problem) from None
     for scene in scenes:  # reject what cannot be answered before printing anything
-        check_request(scene, query)
+        try:
+            check_request(scene, query, model=model, settings=sim, budget_s=args.budget)
+        except ConfigError as exc:
+            raise ConfigError(f"--budget ({scene.name})" if exc.field == "budget_s" else exc.field, exc.problem) from None
     if args.json:
         _run_predictions(scenes, model, sim, query, args.seed, args.workers,
-                         lambda p: print(prediction_json(p), flush=True), stop)
+                         lambda p: print(prediction_json(p), flush=True), stop, args.budget)
     else:
         collected: list[Prediction] = []
         print(f"sigma = {sigma:g} m, phi = {','.join(f'{v:g}' for v in phi)} m/s^2, mu = {args.mu}, "
               f"k = {1 if model.is_deterministic else args.samples}, preset = {sim.name}, seed = {args.seed}")
-        _run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append, stop)
+        _run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append, stop, args.budget)
         print(format_table(collected))
     return 0
 

@@ -18,6 +18,7 @@ everything that takes time happens here, off the executor:
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import threading
 import time
@@ -27,7 +28,8 @@ from pathlib import Path
 from typing import Any, Callable
 
 from .engine import AdaptiveStop, ModelConfig, Prediction, QuerySpec, Scene, SimSettings, WorkerPool, predict, preset
-from .engine.config import DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES
+from .engine.config import DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES
+from .engine.errors import clip
 from .engine.sampler import check_request
 from .engine.scene import DEFAULT_MAX_OBJECTS
 
@@ -54,6 +56,7 @@ class ServiceConfig:
     rerun_frame_period_s: float = 0.02
     rerun_connect_url: str | None = None
     stop: AdaptiveStop | None = None  # anytime sampling (deadline / interval width), None: all k
+    budget_s: float = DEFAULT_BUDGET_S  # wall seconds a prediction may take (see engine.predict)
 
 
 @dataclass(frozen=True)
@@ -83,6 +86,7 @@ class Answer:
     config_version: int
     rrd_path: str | None = None
     rollouts_logged: int = 0
+    rrd_error: str | None = None  # why the recording could not be written, if it could not
 
     def to_dict(self) -> dict[str, Any]:
         """The published JSON: ``ipe predict --json``'s fields plus stamp, frame, ids and timing."""
@@ -90,28 +94,54 @@ class Answer:
         sec, nanosec = divmod(self.source.stamp_ns, 1_000_000_000)
         out.update(stamp={"sec": sec, "nanosec": nanosec}, frame_id=self.source.frame_id,
                    scene_id=self.source.scene_id, scene_seq=self.source.seq, compute_s=self.compute_s,
-                   latency_s=self.latency_s, rrd_path=self.rrd_path, rollouts_logged=self.rollouts_logged)
+                   latency_s=self.latency_s, rrd_path=self.rrd_path, rollouts_logged=self.rollouts_logged,
+                   rrd_error=self.rrd_error)
         return out
+
+
+def error_answer(source: StampedScene, error: str) -> dict[str, Any]:
+    """What ~/prediction carries when a prediction failed: the scene it was for and why."""
+    sec, nanosec = divmod(source.stamp_ns, 1_000_000_000)
+    return {"error": error, "scene": source.scene.name, "scene_id": source.scene_id, "scene_seq": source.seq,
+            "stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": source.frame_id}
+
+
+#: How many recent inputs and predictions the health level looks back on.
+RECENT_EVENTS = 10
 
 
 @dataclass(frozen=True)
 class ServiceStats:
-    """Counters for diagnostics. ``dropped``: scenes replaced while waiting (keep-latest)."""
+    """Counters for diagnostics.
+
+    received: scenes accepted; predicted: distinct scenes answered (never more than received);
+    predictions: answers made (a scene is predicted again after a parameter change); dropped:
+    scenes replaced while waiting (keep-latest); budget_stops: answers cut short by the budget.
+    recent: the last RECENT_EVENTS inputs and predictions, oldest first: "ok", "rejected",
+    "failed", "partial" (some samples failed or were cut by the budget) or "rrd_failed".
+    in_flight_s: how long the prediction in flight has run (None: none in flight).
+    """
 
     received: int
     predicted: int
+    predictions: int
     dropped: int
     rejected: int
     failed_predictions: int
     failed_samples: int
+    budget_stops: int
+    rrd_failures: int
     waiting: int
     in_flight: bool
+    in_flight_s: float | None
     workers: int
     workers_alive: int
     worker_replacements: int
     last_compute_s: float | None
     last_error: str | None
     closed: bool
+    recent: tuple[str, ...] = ()
+    budget_s: float | None = None
 
 
 class NoSceneError(RuntimeError):
@@ -136,12 +166,14 @@ class PredictionService:
 
     def __init__(self, config: ServiceConfig, *, workers: int, publish: Callable[[Answer], None],
                  log_error: Callable[[str], None] = lambda _msg: None,
-                 log_info: Callable[[str], None] = lambda _msg: None, start_method: str = "forkserver"):
+                 log_info: Callable[[str], None] = lambda _msg: None, start_method: str = "forkserver",
+                 publish_error: Callable[[StampedScene, str], None] = lambda _source, _error: None):
         if isinstance(workers, bool) or not isinstance(workers, int) or workers < 0:
             raise ValueError(f"workers: must be an integer >= 0 (0 runs samples in the prediction thread), got {workers!r}")
         self._config = config
         self._version = 0
         self._publish = publish
+        self._publish_error = publish_error
         self._log_error = log_error
         self._log_info = log_info
         self._pool = WorkerPool(workers, start_method=start_method) if workers > 0 else None
@@ -155,7 +187,11 @@ class PredictionService:
         self._waiters: list[_Waiter] = []
         self._closing = False
         self._seq = 0
-        self._counts = dict(received=0, predicted=0, dropped=0, rejected=0, failed_predictions=0, failed_samples=0)
+        self._counts = dict(received=0, predicted=0, predictions=0, dropped=0, rejected=0, failed_predictions=0,
+                            failed_samples=0, budget_stops=0, rrd_failures=0)
+        self._recent: collections.deque[str] = collections.deque(maxlen=RECENT_EVENTS)
+        self._last_predicted_seq = 0
+        self._in_flight_since: float | None = None
         self._last_compute_s: float | None = None
         self._recordings = 0
         self._last_error: str | None = None
@@ -165,8 +201,9 @@ class PredictionService:
     def start(self) -> None:
         self._thread.start()
 
-    def close(self, timeout_s: float = 30.0) -> None:
-        """Stop taking work, cancel what is queued, stop the workers, join the thread."""
+    def close(self, timeout_s: float = 1.5) -> None:
+        """Stop taking work, cancel what is queued, stop the workers (those still busy after a
+        second are terminated), join the thread: done within ~``timeout_s``."""
         with self._cond:
             self._closing = True
             self._pending = None
@@ -176,7 +213,7 @@ class PredictionService:
             self._waiters.clear()
             self._cond.notify_all()
         if self._pool is not None:
-            self._pool.close()  # cancels samples not yet started; running ones finish (< 1 s)
+            self._pool.close(grace_s=1.0)  # cancels samples not yet started; running ones get a second
         if self._thread.is_alive():
             self._thread.join(timeout_s)
 
@@ -203,7 +240,8 @@ class PredictionService:
     def check(self, scene: Scene) -> None:
         """Raise SceneError/ConfigError if the current config cannot answer this scene."""
         config = self._config
-        check_request(scene, config.query, config.max_objects)
+        check_request(scene, config.query, config.max_objects, model=config.model, settings=config.settings,
+                      budget_s=config.budget_s)
 
     def submit(self, item: StampedScene) -> bool:
         """Queue a checked scene; returns True when it replaced one still waiting."""
@@ -226,6 +264,7 @@ class PredictionService:
             self._counts["rejected"] += 1
             self._last_error = reason
             self._latest_rejected = reason
+            self._recent.append("rejected")
 
     def predict_latest(self, timeout_s: float) -> Answer:
         """An answer for the newest scene under the current config (reused when already made).
@@ -265,8 +304,11 @@ class PredictionService:
     def stats(self) -> ServiceStats:
         with self._cond:
             pids = self._pool.worker_pids() if self._pool is not None else []
+            since = self._in_flight_since
             return ServiceStats(**self._counts, waiting=int(self._pending is not None),
-                                in_flight=self._in_flight is not None, workers=self.workers,
+                                in_flight=self._in_flight is not None,
+                                in_flight_s=None if since is None else time.monotonic() - since,
+                                recent=tuple(self._recent), budget_s=self._config.budget_s, workers=self.workers,
                                 workers_alive=len(pids) if self._pool is not None else 0,
                                 worker_replacements=self._pool.replacements if self._pool is not None else 0,
                                 last_compute_s=self._last_compute_s, last_error=self._last_error,
@@ -291,34 +333,74 @@ class PredictionService:
                 item, self._pending = self._pending, None
                 config, version = self._config, self._version
                 self._in_flight = (item.seq, version)
-            answer, error = self._predict(item, config, version)
-            with self._cond:
-                self._in_flight = None
-                if self._closing:
-                    for w in self._waiters:
-                        w.error = "the node is shutting down"
-                        w.event.set()
-                    return
-                done = [w for w in self._waiters if item.seq >= w.seq and version >= w.version]
-                for w in done:
-                    self._waiters.remove(w)
-                    w.answer, w.error = answer, error
-                    w.event.set()
-                if answer is not None:
-                    self._last_answer = answer
-                    self._counts["predicted"] += 1
-                    self._counts["failed_samples"] += answer.prediction.failed_samples
-                    self._last_compute_s = answer.compute_s
-                else:
+                self._in_flight_since = time.monotonic()
+            try:
+                self._serve(item, config, version)
+            except Exception as exc:  # noqa: BLE001 - the thread must outlive any one prediction
+                error = clip(f"internal error: {''.join(traceback.format_exception_only(type(exc), exc)).strip()}", 600)
+                with self._cond:
+                    self._in_flight = self._in_flight_since = None
                     self._counts["failed_predictions"] += 1
                     self._last_error = error
+                    self._recent.append("failed")
+                    for w in list(self._waiters):  # nobody waits for an answer that will not come
+                        if item.seq >= w.seq:
+                            self._waiters.remove(w)
+                            w.error = error
+                            w.event.set()
+                self._report_failure(item, error)
+            if self._closing:
+                return
+
+    def _report_failure(self, item: StampedScene, error: str) -> None:
+        for report in (lambda: self._log_error(f"prediction for {item.scene_id} failed: {error}"),
+                       lambda: self._publish_error(item, error)):
+            try:
+                report()
+            except Exception:  # noqa: BLE001 - reporting trouble (a logger refusing text) must not stop the thread
+                pass
+
+    def _serve(self, item: StampedScene, config: ServiceConfig, version: int) -> None:
+        """One prediction: compute, hand to waiters, count, publish."""
+        answer, error = self._predict(item, config, version)
+        with self._cond:
+            self._in_flight = self._in_flight_since = None
+            if self._closing:
+                for w in self._waiters:
+                    w.error = "the node is shutting down"
+                    w.event.set()
+                return
+            done = [w for w in self._waiters if item.seq >= w.seq and version >= w.version]
+            for w in done:
+                self._waiters.remove(w)
+                w.answer, w.error = answer, error
+                w.event.set()
             if answer is not None:
-                try:
-                    self._publish(answer)
-                except Exception as exc:  # noqa: BLE001 - a publisher error must not stop the thread
-                    self._log_error(f"publishing the prediction for {item.scene_id} failed: {exc}")
+                prediction = answer.prediction
+                self._last_answer = answer
+                self._counts["predictions"] += 1
+                if item.seq > self._last_predicted_seq:  # a scene predicted again is not a new scene
+                    self._counts["predicted"] += 1
+                    self._last_predicted_seq = item.seq
+                self._counts["failed_samples"] += prediction.failed_samples
+                self._counts["budget_stops"] += prediction.stopped_by == "budget"
+                self._counts["rrd_failures"] += answer.rrd_error is not None
+                self._last_compute_s = answer.compute_s
+                if answer.rrd_error is not None:
+                    self._last_error = answer.rrd_error
+                partial = prediction.failed_samples or prediction.stopped_by == "budget" or not prediction.samples
+                self._recent.append("rrd_failed" if answer.rrd_error else "partial" if partial else "ok")
             else:
-                self._log_error(f"prediction for {item.scene_id} failed: {error}")
+                self._counts["failed_predictions"] += 1
+                self._last_error = error
+                self._recent.append("failed")
+        if answer is not None:
+            try:
+                self._publish(answer)
+            except Exception as exc:  # noqa: BLE001 - a publisher error must not stop the thread
+                self._report_failure(item, f"publishing the prediction failed: {exc}")
+        else:
+            self._report_failure(item, error or "unknown error")
 
     def _predict(self, item: StampedScene, config: ServiceConfig, version: int) -> tuple[Answer | None, str | None]:
         start = time.perf_counter()
@@ -329,7 +411,7 @@ class PredictionService:
             prediction = predict(item.scene, config.model, config.settings, config.query, seed=config.seed,
                                  map_fn=self._pool.map if self._pool is not None else None,
                                  record_every=record_every, record_samples=config.rerun_rollouts_logged,
-                                 max_objects=config.max_objects, stop=config.stop)
+                                 max_objects=config.max_objects, stop=config.stop, budget_s=config.budget_s)
         except ValueError as exc:  # SceneError / ConfigError: the scene no longer fits a new config
             return None, str(exc)
         except Exception as exc:  # noqa: BLE001 - report, keep serving
@@ -361,7 +443,8 @@ class PredictionService:
                                                     rollouts_logged=config.rerun_rollouts_logged,
                                                     connect_url=config.rerun_connect_url)
         except Exception as exc:  # noqa: BLE001 - logging trouble must not cost the answer
-            self._log_error(f"writing {path} failed: {exc}")
-            return dataclasses.replace(answer, rrd_path=None, rollouts_logged=0)
+            error = clip(f"writing {path} failed: {exc}", 600)
+            self._log_error(error)
+            return dataclasses.replace(answer, rrd_path=None, rollouts_logged=0, rrd_error=error)
         return dataclasses.replace(answer, rollouts_logged=logged)
 

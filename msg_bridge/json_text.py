@@ -8,6 +8,7 @@ from typing import Any
 from std_msgs.msg import String
 
 from ipe_ros.engine import Scene, SceneError
+from ipe_ros.engine.errors import json_type
 from ipe_ros.engine.scene import DEFAULT_MAX_OBJECTS
 from ipe_ros.engine.scene_io import scene_to_json, scenes_from_json
 
@@ -34,8 +35,10 @@ def answer_to_string(answer: dict[str, Any]) -> String:
 def string_to_answer(msg: String) -> dict[str, Any]:
     try:
         value = json.loads(msg.data)
+    except RecursionError:
+        raise ValueError("data: JSON nested too deeply to read") from None
     except json.JSONDecodeError as exc:
         raise ValueError(f"data: not JSON ({exc.msg} at line {exc.lineno} column {exc.colno})") from None
     if not isinstance(value, dict):
-        raise ValueError(f"data: expected a JSON object, got {type(value).__name__}")
+        raise ValueError(f"data: expected a JSON object, got {json_type(value)}")
     return value

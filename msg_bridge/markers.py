@@ -51,6 +51,7 @@ from ipe_ros.engine import (Body, Box, BoxShape, ConvexHull, Cylinder, Floor, Pr
 from ipe_ros.engine import shapes
 from ipe_ros.engine.config import MODEL_LIGHT_DENSITY_KG_M3
 from ipe_ros.viz.palette import SUPPORT_RGB, group_rgb, nearest_group_name, risk_rgb
+from ipe_ros.engine.errors import shown
 from ipe_ros.engine.scene import DEFAULT_MAX_OBJECTS
 
 from .stamps import header_to_stamp_ns, stamp_ns_to_header
@@ -93,11 +94,11 @@ def parse_properties(text: str, allowed: tuple[str, ...], field: str) -> dict[st
     for token in (t for t in re.split(r"[\s,;]+", text.strip()) if t):
         key, sep, value = token.partition("=")
         if not sep or not key or not value:
-            raise SceneError(field, f"expected key=value pairs, got {token!r}")
+            raise SceneError(field, f"expected key=value pairs, got {shown(token)}")
         if key not in allowed:
-            raise SceneError(field, f"unknown key {key!r}; allowed here: {', '.join(allowed)}")
+            raise SceneError(field, f"unknown key {shown(key)}; allowed here: {', '.join(allowed)}")
         if key in props:
-            raise SceneError(field, f"key {key!r} is given twice")
+            raise SceneError(field, f"key {shown(key)} is given twice")
         props[key] = value
     return props
 
@@ -108,9 +109,9 @@ def _number(props: dict[str, str], key: str, field: str, default: float | None) 
     try:
         value = float(props[key])
     except ValueError:
-        raise SceneError(f"{field}.{key}", f"expected a number, got {props[key]!r}") from None
+        raise SceneError(f"{field}.{key}", f"expected a number, got {shown(props[key])}") from None
     if not math.isfinite(value):
-        raise SceneError(f"{field}.{key}", f"must be finite, got {props[key]!r}")
+        raise SceneError(f"{field}.{key}", f"must be finite, got {shown(props[key])}")
     return value
 
 
@@ -188,14 +189,14 @@ def markers_to_scene(msg: MarkerArray, *, max_objects: int = DEFAULT_MAX_OBJECTS
         if _TYPE_NAMES.get(m.type) not in _BODY_TYPES or (m.ns == SUPPORT_NAMESPACE and m.type != Marker.CUBE):
             allowed = "CUBE" if m.ns == SUPPORT_NAMESPACE else ", ".join(_BODY_TYPES)
             raise SceneError(f"{field}.type", f"only {allowed} markers describe bodies here, got "
-                                              f"{_TYPE_NAMES.get(m.type, m.type)} (ns {m.ns!r}, id {m.id}); "
+                                              f"{_TYPE_NAMES.get(m.type, m.type)} (ns {shown(m.ns)}, id {m.id}); "
                                               "drop it from the scene array")
         if m.header.frame_id != frame_id:
-            raise SceneError(f"{field}.header.frame_id", f"is {m.header.frame_id!r} but markers[{adds[0][0]}] is in "
-                                                         f"{frame_id!r}; publish every marker of a scene in one frame")
+            raise SceneError(f"{field}.header.frame_id", f"is {shown(m.header.frame_id)} but markers[{adds[0][0]}] is in "
+                                                         f"{shown(frame_id)}; publish every marker of a scene in one frame")
         key = (m.ns, m.id)
         if key in seen:
-            raise SceneError(field, f"ns {m.ns!r} id {m.id} repeats markers[{seen[key]}]; "
+            raise SceneError(field, f"ns {shown(m.ns)} id {m.id} repeats markers[{seen[key]}]; "
                                     "give each marker a unique (ns, id)")
         seen[key] = i
         position, extents = _vectors(m, field)
@@ -204,7 +205,7 @@ def markers_to_scene(msg: MarkerArray, *, max_objects: int = DEFAULT_MAX_OBJECTS
             every_key = tuple(dict.fromkeys(_TABLE_KEYS + _OBSTACLE_KEYS))
             role = parse_properties(m.text, every_key, f"{field}.text").get("role", "obstacle")
             if role not in _ROLES:
-                raise SceneError(f"{field}.text.role", f"must be one of {', '.join(_ROLES)}, got {role!r}")
+                raise SceneError(f"{field}.text.role", f"must be one of {', '.join(_ROLES)}, got {shown(role)}")
             allowed = {"floor": _FLOOR_KEYS, "table": _TABLE_KEYS, "obstacle": _OBSTACLE_KEYS}[role]
             props = parse_properties(m.text, allowed, f"{field}.text")
             friction = _number(props, "friction", f"{field}.text", DEFAULT_FRICTION)
@@ -307,7 +308,7 @@ def _body_marker(header, ns: str, marker_id: int, body: Body, rgb, alpha: float,
         m.type = Marker.TRIANGLE_LIST
         m.points = [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in shape.vertices_m]
     elif exact:
-        raise ValueError(f"objects ({body.name!r}).shape: a {shape.type} has no marker; publish the scene on "
+        raise ValueError(f"objects ({shown(body.name)}).shape: a {shape.type} has no marker; publish the scene on "
                          "~/scene_json (the JSON format carries every shape)")
     else:
         m.type = Marker.TRIANGLE_LIST
@@ -341,7 +342,7 @@ def scene_to_markers(scene: Scene, frame_id: str, stamp_ns: int = 0) -> MarkerAr
                              f"role=table {common} floor_z={floor}"))
     for j, box in enumerate(scene.static_objects, start=1):
         if not isinstance(box.shape, BoxShape):
-            raise ValueError(f"objects ({box.name!r}).shape: a static {box.shape.type} has no marker (the support "
+            raise ValueError(f"objects ({shown(box.name)}).shape: a static {box.shape.type} has no marker (the support "
                              "namespace holds CUBEs); publish the scene on ~/scene_json")
         markers.append(_cube(header, SUPPORT_NAMESPACE, j, box.position_m, box.extents_m, box.orientation_xyzw,
                              SUPPORT_RGB, 1.0, f"role=obstacle name={box.name} friction={_fmt(box.friction)} "
@@ -355,7 +356,7 @@ def scene_to_markers(scene: Scene, frame_id: str, stamp_ns: int = 0) -> MarkerAr
         for keys, values in ((("vx", "vy", "vz"), body.linear_velocity_m_s), (("wx", "wy", "wz"), body.angular_velocity_rad_s)):
             text += "".join(f" {k}={_fmt(v)}" for k, v in zip(keys, values) if v)
         if isinstance(body.position_sigma_m, (tuple, list)):
-            raise ValueError(f"objects ({body.name!r}).position_sigma_m: a marker carries one horizontal sigma; "
+            raise ValueError(f"objects ({shown(body.name)}).position_sigma_m: a marker carries one horizontal sigma; "
                              "publish the scene on ~/scene_json")
         if body.position_sigma_m is not None:
             text += f" sigma={_fmt(body.position_sigma_m)}"
@@ -365,7 +366,7 @@ def scene_to_markers(scene: Scene, frame_id: str, stamp_ns: int = 0) -> MarkerAr
     for m in markers:
         for value in re.split(r"[\s,;]+", m.text):
             if value.count("=") != 1:
-                raise ValueError(f"name: {m.text!r} cannot ride in Marker.text; scene and box names "
+                raise ValueError(f"name: {shown(m.text)} cannot ride in Marker.text; scene and box names "
                                  "must not contain spaces, '=', ',' or ';'")
     return MarkerArray(markers=markers)
 

@@ -6,6 +6,7 @@ reference is the first row, the swept settings are the ones named, and the outpu
 
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -76,3 +77,14 @@ def test_catalogue_benchmark_writes_every_preset_against_paper(tmp_path):
     for row in rows.values():
         assert row["failed_samples"] == 0 and 0 <= row["max_end_penetration_fraction"] < 1
     assert "| default |" in (tmp_path / "catalogue.md").read_text()
+
+
+def test_soak_benchmark_runs_the_node_under_mixed_input_and_reports(tmp_path):
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    result = subprocess.run([sys.executable, "benchmarks/soak.py", "--minutes", "0.4", "--settle-s", "5",
+                             "--out", str(tmp_path)], env=env, capture_output=True, text=True, timeout=300, cwd=REPO)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    report = json.loads((tmp_path / "soak.json").read_text())
+    assert report["node_alive_until_the_end"] and report["processes_left"] == [] and report["exit_code"] == 0
+    assert report["answers"]["ok"] >= 1 and report["sigint_exit_s"] < 2.0
+    assert int(report["diagnostics_at_end"]["scenes_rejected"]) >= 1 or report["sent"]["bad"] == 0

@@ -26,7 +26,8 @@ def test_wilson_interval_covers_the_truth_about_95_percent():
 def test_mean_interval():
     assert mean_interval(np.array([1.0])) == (1.0, 1.0)
     lo, hi = mean_interval(np.array([0.0, 2.0]))
-    assert lo == pytest.approx(1 - 1.96 * math.sqrt(2) / math.sqrt(2), abs=1e-2) and hi == pytest.approx(2 - lo)
+    # Student t with 1 degree of freedom: 12.706, not the normal 1.96
+    assert lo == pytest.approx(1 - 12.7062047 * math.sqrt(2) / math.sqrt(2), abs=1e-6) and hi == pytest.approx(2 - lo)
 
 
 def test_circular_mean_wraps_around():

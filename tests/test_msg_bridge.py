@@ -173,7 +173,7 @@ def test_json_text_errors():
     two = "[" + scene_to_string(TOWER).data + "," + scene_to_string(TOWER).data + "]"
     with pytest.raises(SceneError, match=r"^data: holds 2 scenes; publish one scene per message$"):
         string_to_scene(String(data=two))
-    with pytest.raises(ValueError, match=r"^data: expected a JSON object, got list$"):
+    with pytest.raises(ValueError, match=r"^data: expected a JSON object, got an array$"):
         string_to_answer(String(data="[1]"))
 
 

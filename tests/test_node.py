@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -74,8 +75,11 @@ def test_will_anything_fall_is_published_on_its_own_topic(ros, tower):
     got = answers(ros)
     anything = ros.collect(Float64, "/ipe/any_fall_probability", LATCHED_QOS)
     fractions = ros.collect(Float64, "/ipe/fall_probability", LATCHED_QOS)
+    directions = ros.collect(Vector3Stamped, "/ipe/fall_direction", LATCHED_QOS)
     ros.publisher(MarkerArray, "/ipe/scene").publish(scene_to_markers(tower, "odom", 1))
     wait_until(lambda: len(got) and len(anything), TIMEOUT_S, "an answer and /ipe/any_fall_probability")
+    # direction was not asked: no zero vector that would read as "nothing falls"
+    assert len(directions) == 0
     with WorkerPool(1) as pool:
         expected = predict(tower, ModelConfig(sigma_m=0.04, samples=6), preset("default"),
                            QuerySpec(queries=frozenset({"any_fall"})), seed=7, map_fn=pool.map)
@@ -171,6 +175,10 @@ def test_parameter_updates_accepted_and_rejected(ros, tower):
     assert set_params(ros, target_ci_width=0.0)[0].successful
     [out_of_range] = set_params(ros, samples=0)
     assert not out_of_range.successful and "samples" in out_of_range.reason
+    [empty_frame] = set_params(ros, frame_id="")
+    assert empty_frame.reason == "frame_id: must be a non-empty frame name without surrounding spaces, got ''"
+    [budget] = set_params(ros, budget_s=30.0)
+    assert budget.successful and node.service.config.budget_s == 30.0
     [read_only] = set_params(ros, workers=1)
     assert not read_only.successful and "read-only" in read_only.reason
     assert node.get_parameter("samples").value == 3
@@ -200,6 +208,10 @@ def _good_and_bad_inputs(tower):
                                 "publish every marker of a scene in one frame"),
         ("scene", flood, "markers: 10000 markers exceed max_objects = 200; raise the max_objects parameter "
                          "or publish a smaller scene"),
+        ("scene_json", String(data="[" * 5000 + "]" * 5000),
+         "json: nested too deeply to read; a scene nests a few levels (objects, shapes, parts), not hundreds"),
+        ("scene_json", String(data=scene_to_json(dataclasses.replace(tower, name="\ud800"))),
+         "name: must be valid Unicode text (it holds a lone surrogate), got '\\ud800'"),
         ("scene", MarkerArray(), "markers: the array holds no ADD markers; publish one CUBE, SPHERE, CYLINDER or "
                                  "TRIANGLE_LIST marker per body"),
     ]
@@ -231,6 +243,7 @@ def test_bad_inputs_are_rejected_and_the_next_good_scene_is_answered(ros, tower)
         return None
     values = wait_until(rejected_in_diagnostics, 10.0, "diagnostics counting the rejections")
     assert values["workers_alive"] == "2"
+    assert diagnostics[-1].status[0].name == "/ipe: IPE prediction service"  # namespaced by the node's name
 
 
 def test_a_killed_worker_is_replaced_and_the_prediction_still_answered(ros, tower):

@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -71,6 +72,36 @@ def test_signal_ends_the_node_and_its_workers(signum):
     wait_until(lambda: not any(_alive(pid) for pid in family), 20.0,
                f"the node's child processes {sorted(family)} to end")
     assert "ready: k = 4" in output
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_mid_prediction_ends_the_node_within_2_s_leaving_no_process(signum):
+    """A long prediction (paper settings, k = 400) is running when the signal comes: the node must
+    not wait for it; workers still busy are terminated."""
+    if sys.platform != "linux":
+        pytest.skip("reads the process tree from /proc")
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(domain_id_for_tests()))
+    proc = subprocess.Popen([sys.executable, "-m", "ipe_ros.ros.node", "--ros-args", "-p", "workers:=2",
+                             "-p", "samples:=400", "-p", "preset:=paper", "-p", "budget_s:=600.0"],
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        wait_until(lambda: len(_descendants(proc.pid)) >= 3, 60.0, "the node's worker processes")
+        sent = subprocess.run([sys.executable, "-m", "ipe_ros.ros.send_scene", "ipe_ros/data/example_tower.json",
+                               "--timeout", "5"], env=env, capture_output=True, text=True, timeout=120)
+        assert "sent example_tower" in sent.stderr and sent.returncode != 0, sent.stderr  # ~90 s of work runs
+        family = _descendants(proc.pid)
+        sent_at = time.monotonic()
+        proc.send_signal(signum)
+        output, _ = proc.communicate(timeout=30.0)
+        took = time.monotonic() - sent_at
+    finally:
+        if proc.poll() is None:
+            proc.kill()  # only our own child, by its pid
+            proc.wait()
+    assert proc.returncode == 0, output
+    assert took < 2.0, f"the node took {took:.1f} s to end"
+    wait_until(lambda: not any(_alive(pid) for pid in family), 5.0, f"the node's child processes {sorted(family)} to end")
+    assert "Traceback" not in output, output
 
 
 def test_send_scene_helper_gets_the_answer_from_a_running_node(tmp_path):

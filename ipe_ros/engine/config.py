@@ -24,7 +24,8 @@ import os
 from dataclasses import dataclass
 from typing import Any
 
-from .errors import ConfigError
+from . import limits
+from .errors import ConfigError, shown
 
 #: Every query the engine can answer. ``fall`` includes per-object fall probabilities.
 #: fall: expected fraction of boxes that fall; any_fall: probability that anything falls (yes/no,
@@ -37,6 +38,9 @@ DEFAULT_SIGMA_M = 0.04
 DEFAULT_SAMPLES = 48
 DEFAULT_QUERIES: frozenset[str] = frozenset({"fall", "direction", "far"})
 DEFAULT_PRESET = "default"
+#: Wall seconds one prediction may take in the node and ``ipe predict`` (the paper's own settings
+#: answer a 10-block tower at k = 48 in ~11 s on two workers).
+DEFAULT_BUDGET_S = 60.0
 
 #: The model's own density for light boxes when it applies mu (paper: "the model then used its
 #: assumption about mu to set each block's individual mass density"); also the density the message
@@ -59,18 +63,23 @@ def default_workers() -> int:
 def _positive(value: float, field: str) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
             or value <= 0:
-        raise ConfigError(field, f"must be a finite number > 0, got {value!r}")
+        raise ConfigError(field, f"must be a finite number > 0, got {shown(value)}")
 
 
 def _non_negative(value: float, field: str) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
             or value < 0:
-        raise ConfigError(field, f"must be a finite number >= 0, got {value!r}")
+        raise ConfigError(field, f"must be a finite number >= 0, got {shown(value)}")
+
+
+def _at_most(value: float, field: str, limit: float, unit: str) -> None:
+    if value > limit:
+        raise ConfigError(field, f"must be at most {limit:g} {unit}, got {shown(value)}")
 
 
 def _integer(value: Any, field: str, lo: int, hi: int, meaning: str = "") -> None:
     if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
-        raise ConfigError(field, f"must be an integer in [{lo}, {hi}]{meaning}, got {value!r}")
+        raise ConfigError(field, f"must be an integer in [{lo}, {hi}]{meaning}, got {shown(value)}")
 
 
 @dataclass(frozen=True)
@@ -87,18 +96,21 @@ class ModelConfig:
 
     def __post_init__(self) -> None:
         _non_negative(self.sigma_m, "sigma_m")
+        _at_most(self.sigma_m, "sigma_m", limits.MAX_SIGMA_M, "m (check the units)")
         if not isinstance(self.phi_m_s2, tuple) or not self.phi_m_s2:
-            raise ConfigError("phi_m_s2", f"must be a non-empty tuple of accelerations, got {self.phi_m_s2!r}")
+            raise ConfigError("phi_m_s2", f"must be a non-empty tuple of accelerations, got {shown(self.phi_m_s2)}")
         for value in self.phi_m_s2:
             _non_negative(value, "phi_m_s2")
+            _at_most(value, "phi_m_s2", limits.MAX_PHI_M_S2, "m/s^2 (10 g)")
         if self.force_direction_rad is not None and (
                 isinstance(self.force_direction_rad, bool) or not math.isfinite(self.force_direction_rad)):
-            raise ConfigError("force_direction_rad", f"must be a finite angle or None, got {self.force_direction_rad!r}")
+            raise ConfigError("force_direction_rad", f"must be a finite angle or None, got {shown(self.force_direction_rad)}")
         if not 0 <= self.cue_half_width_rad <= math.pi:
-            raise ConfigError("cue_half_width_rad", f"must be in [0, pi], got {self.cue_half_width_rad!r}")
+            raise ConfigError("cue_half_width_rad", f"must be in [0, pi], got {shown(self.cue_half_width_rad)}")
         _positive(self.push_duration_s, "push_duration_s")
         if self.mu is not None:
             _positive(self.mu, "mu")
+            _at_most(self.mu, "mu", limits.MAX_MASS_RATIO, "(the solver's mass-ratio limit)")
         _integer(self.samples, "samples", 1, 100_000)
 
     @property
@@ -161,7 +173,7 @@ class SolverSettings:
 
         _positive(self.residual_threshold, "solver.residual_threshold")
         if not 0 <= self.warm_start_factor <= 1:
-            raise ConfigError("solver.warm_start_factor", f"must be in [0, 1], got {self.warm_start_factor!r}")
+            raise ConfigError("solver.warm_start_factor", f"must be in [0, 1], got {shown(self.warm_start_factor)}")
 
 
 @dataclass(frozen=True)
@@ -260,12 +272,12 @@ class EarlyStopSettings:
     def __post_init__(self) -> None:
         _positive(self.max_penetration_fraction, "early_stop.max_penetration_fraction")
         if not isinstance(self.enabled, bool):
-            raise ConfigError("early_stop.enabled", f"must be true or false, got {self.enabled!r}")
+            raise ConfigError("early_stop.enabled", f"must be true or false, got {shown(self.enabled)}")
         for name in ("speed_sizes_per_s", "angular_rad_s", "duration_s"):
             _positive(getattr(self, name), f"early_stop.{name}")
         _non_negative(self.min_time_s, "early_stop.min_time_s")
         if not isinstance(self.growth_factor, (int, float)) or not 1 <= self.growth_factor < 10:
-            raise ConfigError("early_stop.growth_factor", f"must be in [1, 10), got {self.growth_factor!r}")
+            raise ConfigError("early_stop.growth_factor", f"must be in [1, 10), got {shown(self.growth_factor)}")
 
 
 _GROUPS = {"solver": SolverSettings, "depenetration": DepenetrationSettings, "settling": SettlingSettings,
@@ -317,7 +329,7 @@ class SimSettings:
             raise ConfigError("time_step_s", "must not exceed horizon_s")
         for group, kind in _GROUPS.items():
             if not isinstance(getattr(self, group), kind):
-                raise ConfigError(group, f"must be a {kind.__name__}, got {getattr(self, group)!r}")
+                raise ConfigError(group, f"must be a {kind.__name__}, got {shown(getattr(self, group))}")
 
     @property
     def steps(self) -> int:
@@ -393,7 +405,7 @@ def preset(name: str) -> SimSettings:
     try:
         return PRESETS[name]
     except KeyError:
-        raise ConfigError("preset", f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}") from None
+        raise ConfigError("preset", f"unknown preset {shown(name)}; choose one of {', '.join(PRESETS)}") from None
 
 
 @dataclass(frozen=True)
@@ -416,7 +428,7 @@ class QuerySpec:
             raise ConfigError("queries", f"must be a set of query names from {', '.join(ALL_QUERIES)}")
         unknown = sorted(set(self.queries) - set(ALL_QUERIES))
         if unknown:
-            raise ConfigError("queries", f"unknown query {unknown[0]!r}; choose from {', '.join(ALL_QUERIES)}")
+            raise ConfigError("queries", f"unknown query {shown(unknown[0])}; choose from {', '.join(ALL_QUERIES)}")
         if not self.queries:
             raise ConfigError("queries", f"ask for at least one of {', '.join(ALL_QUERIES)}")
         _positive(self.fall_threshold_fraction, "fall_threshold_fraction")

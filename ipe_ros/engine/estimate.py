@@ -36,12 +36,15 @@ def wilson_interval(p_hat: float, n: int, z: float = Z95) -> tuple[float, float]
     return (lo, hi)
 
 
-def mean_interval(values: np.ndarray, z: float = Z95) -> tuple[float, float]:
-    """Normal-approximation 95% interval of a mean (degenerate for fewer than 2 values)."""
+def mean_interval(values: np.ndarray) -> tuple[float, float]:
+    """Student-t 95% interval of a mean (degenerate for fewer than 2 values): at k = 8-16 the normal
+    z = 1.96 would be 5-15% too narrow."""
+    from scipy.special import stdtrit  # the t quantile; scipy is already needed for hull meshes
+
     m = float(np.mean(values))
     if len(values) < 2:
         return (m, m)
-    half = z * float(np.std(values, ddof=1)) / math.sqrt(len(values))
+    half = float(stdtrit(len(values) - 1, 0.975)) * float(np.std(values, ddof=1)) / math.sqrt(len(values))
     return (m - half, m + half)
 
 
@@ -100,7 +103,9 @@ class Prediction:
     fell_off_fraction_by_group: per group, expected fraction of its boxes that end below the table top.
     bump_ratio: expected share of ``bump_group`` among boxes that fell off (Exp. 5), over rollouts
         where any fell off.
-    stopped_by: what ended sampling: "samples" (all k), or "ci_width" / "deadline" (anytime sampling).
+    stopped_by: what ended sampling: "samples" (all k), "ci_width" / "deadline" (anytime sampling),
+        or "budget" (the compute budget ran out: ``samples`` says how many were used; the samples cut
+        off are ``budget_skipped_samples``, neither used nor counted as failed).
     """
 
     scene: str
@@ -124,7 +129,8 @@ class Prediction:
     bump_ratio: float | None = None
     bump_rollouts: int | None = None
     wall_s: float = 0.0
-    stopped_by: str = "samples"  # "samples" (all k drawn), "ci_width" or "deadline" (anytime sampling)
+    stopped_by: str = "samples"  # "samples" (all k drawn), "ci_width", "deadline" (anytime sampling), "budget"
+    budget_skipped_samples: int = 0
     max_penetration_fraction: float | None = None
     max_energy_gain_j: float | None = None
     request: dict[str, Any] = field(default_factory=dict)
@@ -144,11 +150,14 @@ def aggregate(scene: Scene, outcomes: Sequence[SampleOutcome], *, queries: froze
               request: dict[str, Any]) -> Prediction:
     """Combine per-sample outcomes into a :class:`Prediction` (failed samples are counted, not used)."""
     ok = [o for o in outcomes if o.ok]
-    failed = [o for o in outcomes if not o.ok]
+    skipped = [o for o in outcomes if o.budget_stopped]
+    failed = [o for o in outcomes if not o.ok and not o.budget_stopped]
     reasons = tuple(dict.fromkeys(o.error or "unknown" for o in failed))[:5]
     base = dict(scene=scene.name, samples=len(ok), samples_requested=samples_requested,
                 failed_samples=len(failed), failure_reasons=reasons, deterministic=deterministic,
-                wall_s=wall_s, request=request, outcomes=tuple(outcomes))
+                wall_s=wall_s, request=request, outcomes=tuple(outcomes), budget_skipped_samples=len(skipped))
+    if skipped:
+        base["stopped_by"] = "budget"
     if not ok:
         return Prediction(**base)
     names = [b.name for b in scene.dynamic_objects]

@@ -106,13 +106,30 @@ class WorkerPool:
         processes = dict(getattr(executor, "_processes", None) or {})
         return sorted(pid for pid, proc in processes.items() if proc.is_alive())
 
-    def close(self) -> None:
-        """Stop the workers and wait for them to exit; safe to call twice."""
+    def close(self, grace_s: float | None = None) -> None:
+        """Stop the workers and wait for them to exit; safe to call twice.
+
+        ``grace_s``: how long running items may go on; workers still busy then are terminated (by
+        their process id: they are this pool's own children). None waits for them however long.
+        """
         with self._lock:
             self._closed = True
             executor, self._executor = self._executor, None
         if executor is not None:
-            executor.shutdown(wait=True, cancel_futures=True)
+            processes = list(dict(getattr(executor, "_processes", None) or {}).values())
+            executor.shutdown(wait=grace_s is None, cancel_futures=True)
+            if grace_s is not None:
+                end = time.monotonic() + grace_s
+                for process in processes:
+                    process.join(max(0.0, end - time.monotonic()))
+                for process in processes:
+                    if process.is_alive():
+                        process.terminate()
+                        process.join(1.0)
+                    if process.is_alive():
+                        process.kill()
+                        process.join()
+                executor.shutdown(wait=True)
         self._shut_down.set()
 
     def __enter__(self) -> "WorkerPool":

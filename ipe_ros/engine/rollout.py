@@ -7,6 +7,7 @@ with ``ok=False`` and the reason, and the sampler counts it.
 
 from __future__ import annotations
 
+import time
 import traceback
 from dataclasses import dataclass
 
@@ -14,7 +15,7 @@ import numpy as np
 
 from . import queries, shapes, simulation
 from .config import ModelConfig, QuerySpec, SimSettings
-from .errors import PhysicsError
+from .errors import BudgetExceeded, PhysicsError
 from .perturb import draw_sample_inputs
 from .scene import Floor, Scene, Table
 from .simulation import NO_PROBE, DecidedHeights, Probe
@@ -31,6 +32,10 @@ class SampleTask:
     index: int
     seed: np.random.SeedSequence
     record_every: int = 0  # record a trajectory every N steps (0: none; only rerun logging asks)
+    #: the prediction's compute budget ends at this time.time(); a sample still running then (or not
+    #: yet started) is cut off and left out of the answer. Wall-clock time, so that worker processes
+    #: share it; None: no budget.
+    deadline_unix_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -66,6 +71,7 @@ class SampleOutcome:
     initial_positions_m: np.ndarray | None
     initial_orientations_xyzw: np.ndarray | None
     rollouts: tuple[RolloutResult, ...] = ()
+    budget_stopped: bool = False  # cut off by the compute budget: neither used nor a failure
 
 
 def _query(task: SampleTask, initial: np.ndarray, phi: float, end: simulation.RolloutEnd) -> RolloutResult:
@@ -129,11 +135,19 @@ def _never_falls(task: SampleTask, decided_below_z: np.ndarray) -> np.ndarray | 
     return decided_below_z < lowest_surface_z + lowest_rest - 0.05 * smallest
 
 
+def _cut_off(task: SampleTask, push_direction_rad: float, why: str) -> SampleOutcome:
+    return SampleOutcome(index=task.index, ok=False, error=f"BudgetExceeded: {why}",
+                         push_direction_rad=push_direction_rad, initial_positions_m=None,
+                         initial_orientations_xyzw=None, budget_stopped=True)
+
+
 def run_sample(task: SampleTask, probe: Probe = NO_PROBE) -> SampleOutcome:
     """Draw, separate and simulate one sample for every phi value; never raises for physics errors.
 
     ``probe`` watches the parts (benchmarks/time_budget.py); it never changes the outcome.
     """
+    if task.deadline_unix_s is not None and time.time() >= task.deadline_unix_s:
+        return _cut_off(task, float("nan"), "the budget was spent before this sample started")
     rng = np.random.default_rng(task.seed)
     inputs = draw_sample_inputs(task.scene, task.model, rng)
     try:
@@ -159,8 +173,11 @@ def run_sample(task: SampleTask, probe: Probe = NO_PROBE) -> SampleOutcome:
                                                    orientations_xyzw=initial_orn)
             push = simulation.Push(phi, inputs.push_direction_rad, task.model.push_duration_s)
             end = simulation.simulate(world, task.scene, task.settings, push, record_every=task.record_every,
-                                      decided=decided, collapse_below_z_m=collapse_below_z, probe=probe)
+                                      decided=decided, collapse_below_z_m=collapse_below_z, probe=probe,
+                                      deadline_unix_s=task.deadline_unix_s)
             results.append(_query(task, initial, phi, end))
+    except BudgetExceeded as exc:
+        return _cut_off(task, inputs.push_direction_rad, str(exc))
     except PhysicsError as exc:
         return SampleOutcome(index=task.index, ok=False, error=f"PhysicsError: {exc}",
                              push_direction_rad=inputs.push_direction_rad, initial_positions_m=None,

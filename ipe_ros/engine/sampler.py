@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 
 from .config import ModelConfig, QuerySpec, SimSettings
-from .errors import ConfigError
+from .errors import ConfigError, shown
 from .estimate import Prediction, aggregate, sample_any_fall, sample_fall_fraction, wilson_interval
 from .rollout import SampleOutcome, SampleTask, run_sample
 from .scene import DEFAULT_MAX_OBJECTS, Scene, Table, validate_scene
@@ -44,14 +44,14 @@ class AdaptiveStop:
 
     def __post_init__(self) -> None:
         if self.ci_width is not None and not (isinstance(self.ci_width, (int, float)) and 0 < self.ci_width <= 1):
-            raise ConfigError("ci_width", f"must be in (0, 1], got {self.ci_width!r}")
+            raise ConfigError("ci_width", f"must be in (0, 1], got {shown(self.ci_width)}")
         if self.deadline_s is not None and not (isinstance(self.deadline_s, (int, float)) and self.deadline_s > 0
                                                 and math.isfinite(self.deadline_s)):
-            raise ConfigError("deadline_s", f"must be a finite number of seconds > 0, got {self.deadline_s!r}")
+            raise ConfigError("deadline_s", f"must be a finite number of seconds > 0, got {shown(self.deadline_s)}")
         for name in ("batch_size", "min_samples"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ConfigError(name, f"must be an integer >= 1, got {value!r}")
+                raise ConfigError(name, f"must be an integer >= 1, got {shown(value)}")
 
 
 def _lost(task: SampleTask, reason: str) -> SampleOutcome:
@@ -74,31 +74,84 @@ def make_tasks(scene: Scene, model: ModelConfig, settings: SimSettings, query: Q
                        record_every=record_every if i < recorded else 0) for i, s in enumerate(seeds)]
 
 
-def check_request(scene: Scene, query: QuerySpec, max_objects: int = DEFAULT_MAX_OBJECTS) -> None:
-    """Reject what cannot be answered before any simulation starts."""
+#: Wall seconds per pybullet step and dynamic body, for the up-front cost estimate (a 10-block
+#: tower steps in ~150 us on this project's 2-core machine: benchmarks/time_budget.py). An
+#: estimate, not a promise: the deadline enforces the budget.
+SECONDS_PER_BODY_STEP = 15e-6
+
+
+@dataclass(frozen=True)
+class RolloutCost:
+    """The most work one rollout of a scene can take: it runs to the horizon without early stop."""
+
+    steps: int
+    bodies: int
+    seconds: float
+
+
+def rollout_cost(scene: Scene, model: ModelConfig, settings: SimSettings) -> RolloutCost:
+    """Steps x bodies of one sample (every phi value) at the step the scene gets, and its estimated time."""
+    from .simulation.world import fastest_initial_speed_m_s
+
+    g = math.sqrt(sum(v * v for v in scene.gravity_m_s2))
+    scale = min(b.smallest_extent_m for b in scene.dynamic_objects)
+    dt = settings.time_step_for(scale, g, fastest_initial_speed_m_s(scene))
+    ticks = math.ceil(settings.horizon_for(scene.horizon_s) / dt)
+    settle_ticks = math.ceil(settings.settling.duration_s / dt)
+    steps = (ticks + settle_ticks * (settings.settling.substeps - 1)) * len(model.phi_m_s2)
+    bodies = len(scene.dynamic_objects)
+    return RolloutCost(steps=steps, bodies=bodies, seconds=steps * bodies * SECONDS_PER_BODY_STEP)
+
+
+def check_request(scene: Scene, query: QuerySpec, max_objects: int = DEFAULT_MAX_OBJECTS, *,
+                  model: ModelConfig | None = None, settings: SimSettings | None = None,
+                  budget_s: float | None = None) -> None:
+    """Reject what cannot be answered before any simulation starts: a bad scene, a query it cannot
+    answer, or (given a budget) a scene whose single rollout is estimated to take longer than it."""
     validate_scene(scene, max_objects=max_objects)
     if query.wants("bump") and not isinstance(scene.support, Table):
         raise ConfigError("queries", "the bump query needs a table support (it counts boxes that fall "
                                      "off the table's edge); drop 'bump' or give the scene a table")
+    if budget_s is not None and model is not None and settings is not None:
+        cost = rollout_cost(scene, model, settings)
+        if cost.seconds > budget_s:
+            raise ConfigError("budget_s", f"one rollout of this scene takes up to {cost.steps} steps x {cost.bodies} "
+                                          f"bodies (~{cost.seconds:.3g} s), more than the budget of {budget_s:g} s; "
+                                          "raise the budget, shorten horizon_s, or simplify the scene")
+
+
+def check_budget(budget_s: float | None) -> None:
+    if budget_s is not None and (isinstance(budget_s, bool) or not isinstance(budget_s, (int, float))
+                                 or not math.isfinite(budget_s) or budget_s <= 0):
+        raise ConfigError("budget_s", f"must be a finite number of seconds > 0 (or none), got {shown(budget_s)}")
 
 
 def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: QuerySpec, seed: int = 0,
             map_fn: MapFn | None = None, record_every: int = 0, record_samples: int | None = None,
-            max_objects: int = DEFAULT_MAX_OBJECTS, stop: AdaptiveStop | None = None) -> Prediction:
+            max_objects: int = DEFAULT_MAX_OBJECTS, stop: AdaptiveStop | None = None,
+            budget_s: float | None = None) -> Prediction:
     """Run the IPE on one scene and aggregate (failed rollouts are counted in ``failed_samples``).
 
     ``record_every``/``record_samples``: record trajectories (for rerun) every N simulation steps
     for the first M samples; recording never changes the outcome. ``stop``: anytime sampling
     (a deadline or a target interval width); ``Prediction.stopped_by`` says which rule ended it.
+    ``budget_s``: the most wall seconds the prediction may take. A scene whose one rollout cannot
+    fit is refused (ConfigError naming budget_s); samples still running when it runs out are cut
+    off and the answer uses the rest (``stopped_by: "budget"``). Which samples finish in time is
+    the one thing here that depends on timing.
     """
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ConfigError("seed", f"must be an integer >= 0, got {seed!r}")
-    check_request(scene, query, max_objects)
+        raise ConfigError("seed", f"must be an integer >= 0, got {shown(seed)}")
+    check_budget(budget_s)
+    check_request(scene, query, max_objects, model=model, settings=settings, budget_s=budget_s)
     if stop is not None and stop.ci_width is not None and not (query.wants("fall") or query.wants("any_fall")):
         raise ConfigError("ci_width", "a target interval width needs the fall or any_fall query; ask for one "
                                       "or drop it")
     per_sample_answer = sample_fall_fraction if query.wants("fall") else sample_any_fall
     tasks = make_tasks(scene, model, settings, query, seed, record_every, record_samples)
+    if budget_s is not None:
+        deadline = time.time() + budget_s
+        tasks = [dataclasses.replace(t, deadline_unix_s=deadline) for t in tasks]
 
     def run(batch: list[SampleTask]) -> list[SampleOutcome]:
         if map_fn is None:
@@ -136,7 +189,11 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
     }
     if stop is not None:
         request.update(ci_width=stop.ci_width, deadline_s=stop.deadline_s)
+    if budget_s is not None:
+        request.update(budget_s=budget_s)
     prediction = aggregate(scene, outcomes, queries=query.queries, bump_group=query.bump_group,
                            deterministic=model.is_deterministic, samples_requested=len(tasks),
                            wall_s=wall_s, request=request)
+    if prediction.stopped_by == "budget":
+        return prediction
     return dataclasses.replace(prediction, stopped_by=stopped_by)

@@ -46,7 +46,8 @@ from collections import OrderedDict
 from pathlib import Path
 from typing import Any, Iterable
 
-from .errors import SceneError
+from .errors import SceneError, json_type as _json_type, shown
+from .limits import MAX_JSON_CHARS
 from .scene import DEFAULT_MAX_OBJECTS, Body, Box, Floor, Scene, Table, validate_scene
 from .shapes import SHAPE_TYPES, BoxShape, Capsule, Compound, CompoundPart, ConvexHull, Cylinder, Sphere
 
@@ -144,26 +145,14 @@ def _require_mapping(data: Any, path: str) -> dict:
     return data
 
 
-def _json_type(value: Any) -> str:
-    """The JSON name of a value's type (what the sender wrote, not Python's name for it)."""
-    if value is None:
-        return "null"
-    if isinstance(value, bool):
-        return "a boolean"
-    if isinstance(value, (int, float)):
-        return "a number"
-    if isinstance(value, str):
-        return "a string"
-    if isinstance(value, list):
-        return "an array"
-    return "an object"
-
-
 def _check_keys(data: dict, required: Iterable[str], optional: Iterable[str], path: str) -> None:
     required, optional = tuple(required), tuple(optional)
     unknown = sorted(set(data) - set(required) - set(optional))
     if unknown:
-        where = f"{path}.{unknown[0]}" if path else unknown[0]
+        key = unknown[0]
+        # a key that is not a plain name ("", "a b", 5 MB of text) is shown quoted and cut
+        name = key if key.isidentifier() and len(key) <= 64 else f"[{shown(key)}]"
+        where = f"{path}.{name}" if path and not name.startswith("[") else f"{path}{name}"
         raise SceneError(where, f"unknown field; allowed fields are {', '.join(required + optional)}")
     for key in required:
         if key not in data:
@@ -173,22 +162,22 @@ def _check_keys(data: dict, required: Iterable[str], optional: Iterable[str], pa
 def _vec(value: Any, n: int, path: str) -> tuple[float, ...]:
     if not isinstance(value, list) or len(value) != n or any(
             isinstance(v, bool) or not isinstance(v, (int, float)) for v in value):
-        raise SceneError(path, f"must be a list of {n} numbers, got {value!r}")
+        raise SceneError(path, f"must be a list of {n} numbers, got {shown(value)}")
     return tuple(float(v) for v in value)
 
 
 def _num(value: Any, path: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SceneError(path, f"must be a number, got {value!r}")
+        raise SceneError(path, f"must be a number, got {shown(value)}")
     return float(value)
 
 
 def shape_from_dict(data: Any, path: str, *, nested: bool = False):
     data = _require_mapping(data, path)
     kind = data.get("type")
-    if kind not in _SHAPE_FIELDS or (nested and kind == "compound"):
+    if not isinstance(kind, str) or kind not in _SHAPE_FIELDS or (nested and kind == "compound"):
         allowed = [t for t in SHAPE_TYPES if not (nested and t == "compound")]
-        raise SceneError(f"{path}.type", f"must be one of {', '.join(allowed)}, got {kind!r}")
+        raise SceneError(f"{path}.type", f"must be one of {', '.join(allowed)}, got {shown(kind)}")
     _check_keys(data, ("type", *_SHAPE_FIELDS[kind]), (), path)
     if kind == "box":
         return BoxShape(_vec(data["extents_m"], 3, f"{path}.extents_m"))  # type: ignore[arg-type]
@@ -220,15 +209,15 @@ def shape_from_dict(data: Any, path: str, *, nested: bool = False):
 def _common_fields(data: dict, path: str) -> dict[str, Any]:
     name = data["name"]
     if not isinstance(name, str):
-        raise SceneError(f"{path}.name", f"must be a string, got {name!r}")
+        raise SceneError(f"{path}.name", f"must be a string, got {shown(name)}")
     mass = data.get("mass_kg")
     density = data.get("density_kg_m3")
     group = data.get("group", "")
     static = data.get("static", False)
     if not isinstance(group, str):
-        raise SceneError(f"{path}.group", f"must be a string, got {group!r}")
+        raise SceneError(f"{path}.group", f"must be a string, got {shown(group)}")
     if not isinstance(static, bool):
-        raise SceneError(f"{path}.static", f"must be true or false, got {static!r}")
+        raise SceneError(f"{path}.static", f"must be true or false, got {shown(static)}")
     return dict(name=name,
                 position_m=_vec(data["position_m"], 3, f"{path}.position_m"),
                 orientation_xyzw=_vec(data["orientation_xyzw"], 4, f"{path}.orientation_xyzw"),
@@ -290,7 +279,7 @@ def _support_from_dict(data: Any, read_object) -> Floor | Table:
             floor_z_m=None if floor is None else _num(floor, "support.floor_z_m"),
             obstacles=tuple(read_object(b, f"support.obstacles[{i}]") for i, b in enumerate(obstacles)),
         )
-    raise SceneError("support.type", f"must be \"floor\" or \"table\", got {kind!r}")
+    raise SceneError("support.type", f"must be \"floor\" or \"table\", got {shown(kind)}")
 
 
 def scene_from_dict(data: Any, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scene:
@@ -305,8 +294,8 @@ def scene_from_dict(data: Any, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scene:
         _check_keys(data, _SCENE_REQUIRED, ("format", "horizon_s"), "")
         key, read_object = "objects", object_from_dict
     else:
-        raise SceneError("format", f"unsupported format {fmt!r}; this version reads {SCENE_FORMAT!r} and "
-                                   f"{SCENE_FORMAT_V1!r}")
+        raise SceneError("format", f"unsupported format {shown(fmt)}; this version reads {shown(SCENE_FORMAT)} and "
+                                   f"{shown(SCENE_FORMAT_V1)}")
     items = data[key]
     if not isinstance(items, list):
         raise SceneError(key, f"must be a list of {key}")
@@ -315,7 +304,7 @@ def scene_from_dict(data: Any, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scene:
         raise SceneError(key, f"{len(items)} objects exceed the maximum of {max_objects}; "
                               "split the scene or raise max_objects")
     if not isinstance(data["name"], str):
-        raise SceneError("name", f"must be a string, got {data['name']!r}")
+        raise SceneError("name", f"must be a string, got {shown(data['name'])}")
     horizon = data.get("horizon_s")
     scene = Scene(
         name=data["name"],
@@ -328,7 +317,8 @@ def scene_from_dict(data: Any, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scene:
         return validate_scene(scene, max_objects=max_objects)
     except SceneError as exc:
         if key == "boxes" and exc.field.startswith("objects"):  # name the field as the file does
-            raise SceneError("boxes" + exc.field[len("objects"):].replace(".shape.extents_m", ".extents_m"),
+            field = "boxes" + exc.field[len("objects"):].replace(".shape.extents_m", ".extents_m")
+            raise SceneError(field[:-len(".shape")] + ".extents_m" if field.endswith(".shape") else field,
                              exc.problem) from None
         raise
 
@@ -339,10 +329,15 @@ def _reject_constant(token: str) -> None:
 
 def scenes_from_json(text: str, max_objects: int = DEFAULT_MAX_OBJECTS) -> list[Scene]:
     """Parse JSON text holding one scene object or a list of them."""
+    if len(text) > MAX_JSON_CHARS:
+        raise SceneError("json", f"{len(text)} characters exceed the maximum of {MAX_JSON_CHARS}; split the scene")
     try:
         data = json.loads(text, parse_constant=_reject_constant)
     except json.JSONDecodeError as exc:
         raise SceneError("json", f"malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
+    except RecursionError:
+        raise SceneError("json", "nested too deeply to read; a scene nests a few levels (objects, shapes, "
+                                 "parts), not hundreds") from None
     if isinstance(data, list):
         if not data:
             raise SceneError("json", "the list of scenes is empty")
@@ -361,6 +356,7 @@ def scenes_from_json(text: str, max_objects: int = DEFAULT_MAX_OBJECTS) -> list[
 
 _CSV_COLUMNS = ("name", "object", "friction", "mass", "pos_x", "pos_y", "pos_z", "quat_w", "quat_x",
                 "quat_y", "quat_z", "restitution", "scale_x", "scale_y", "scale_z")
+_CSV_OPTIONAL = ("", "shape", "blocktype", "ratio")
 #: The authors' gravity (their README: -9.8).
 PAPER_GRAVITY_M_S2 = (0.0, 0.0, -9.8)
 #: pybullet multiplies the friction of two touching bodies: a floor of 1.0 leaves each block's own
@@ -379,12 +375,31 @@ def scenes_from_tower_csv(path: str | Path, towers: Iterable[str] | None = None,
     path = Path(path)
     grouped: "OrderedDict[tuple[str, str], list[dict[str, str]]]" = OrderedDict()
     with path.open(newline="") as handle:
-        reader = csv.DictReader(handle)
-        missing = [c for c in _CSV_COLUMNS if c not in (reader.fieldnames or [])]
-        if missing:
-            raise SceneError(f"{path.name}", f"not a tower CSV: missing columns {', '.join(missing)}")
-        for row in reader:
-            grouped.setdefault((row["name"], row.get("ratio") or "1"), []).append(row)
+        reader = csv.DictReader(handle, strict=True)
+        try:
+            columns = reader.fieldnames or []
+            missing = [c for c in _CSV_COLUMNS if c not in columns]
+            if missing:
+                raise SceneError(f"{path.name}", f"not a tower CSV: missing columns {', '.join(missing)}")
+            unknown = [c for c in columns if c not in _CSV_COLUMNS + _CSV_OPTIONAL]
+            if unknown:
+                raise SceneError(f"{path.name}", f"unknown column {shown(unknown[0])}; the columns are "
+                                                 f"{', '.join(_CSV_COLUMNS + _CSV_OPTIONAL[1:])} (and an unnamed index)")
+            for row in reader:
+                where = f"{path.name}:{reader.line_num}"
+                if None in row:
+                    raise SceneError(where, f"{len(columns) + len(row[None])} values on a row of a "
+                                            f"{len(columns)}-column file; remove the extra values")
+                if any(value is None for value in row.values()):
+                    raise SceneError(where, f"fewer values than the {len(columns)} columns; complete the row")
+                ratio = row.get("ratio") or "1"
+                try:
+                    float(ratio)
+                except ValueError:
+                    raise SceneError(f"{where}.ratio", f"must be a number, got {shown(ratio)}") from None
+                grouped.setdefault((row["name"], ratio), []).append(row)
+        except csv.Error as exc:
+            raise SceneError(path.name, f"not readable as CSV after line {reader.line_num} ({exc})") from None
     ratios_per_name: dict[str, int] = {}
     for name, _ratio in grouped:
         ratios_per_name[name] = ratios_per_name.get(name, 0) + 1
@@ -424,7 +439,7 @@ def scenes_from_tower_csv(path: str | Path, towers: Iterable[str] | None = None,
         found = {s.name for s in scenes} | {s.name.split("@", 1)[0] for s in scenes}
         unknown = sorted(wanted - found)
         if unknown:
-            raise SceneError("--tower", f"no tower named {unknown[0]!r} in {path.name}")
+            raise SceneError("--tower", f"no tower named {shown(unknown[0])} in {path.name}")
     if not scenes:
         raise SceneError(path.name, "the file holds no towers")
     return scenes
@@ -444,6 +459,6 @@ def load_scenes(path: str | Path, towers: Iterable[str] | None = None,
         picked = [s for s in scenes if s.name in wanted]
         missing = sorted(wanted - {s.name for s in picked})
         if missing:
-            raise SceneError("--tower", f"no scene named {missing[0]!r} in {path.name}")
+            raise SceneError("--tower", f"no scene named {shown(missing[0])} in {path.name}")
         scenes = picked
     return scenes

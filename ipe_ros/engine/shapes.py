@@ -15,7 +15,7 @@ from typing import Union
 
 import numpy as np
 
-from .errors import SceneError
+from .errors import SceneError, shown
 
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
@@ -110,7 +110,7 @@ def quaternion_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def _positive(value, path: str, what: str) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-        raise SceneError(path, f"{what} must be a finite number > 0, got {value!r}")
+        raise SceneError(path, f"{what} must be a finite number > 0, got {shown(value)}")
 
 
 @lru_cache(maxsize=256)
@@ -150,7 +150,7 @@ def validate_shape(shape, path: str) -> None:
     if isinstance(shape, BoxShape):
         ext = shape.extents_m
         if not isinstance(ext, tuple) or len(ext) != 3:
-            raise SceneError(f"{path}.extents_m", f"must be 3 full extents in metres, got {ext!r}")
+            raise SceneError(f"{path}.extents_m", f"must be 3 full extents in metres, got {shown(ext)}")
         if any(isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0 for v in ext):
             raise SceneError(f"{path}.extents_m", f"every extent must be a finite number > 0 metres, got {list(ext)}")
     elif isinstance(shape, Sphere):
@@ -161,7 +161,7 @@ def validate_shape(shape, path: str) -> None:
             if isinstance(shape.length_m, bool) or not isinstance(shape.length_m, (int, float)) \
                     or not math.isfinite(shape.length_m) or shape.length_m < 0:
                 raise SceneError(f"{path}.length_m", f"the straight section must be a finite number >= 0 "
-                                                     f"(0: a sphere), got {shape.length_m!r}")
+                                                     f"(0: a sphere), got {shown(shape.length_m)}")
         else:
             _positive(shape.length_m, f"{path}.length_m", "the length")
     elif isinstance(shape, ConvexHull):
@@ -224,7 +224,7 @@ def surface_points(shape) -> np.ndarray:
     if isinstance(shape, Compound):
         return np.vstack([surface_points(p.shape) @ rotation_matrix(p.orientation_xyzw).T + np.asarray(p.position_m)
                           for p in shape.parts])
-    raise TypeError(f"not a shape: {shape!r}")
+    raise TypeError(f"not a shape: {shown(shape)}")
 
 
 def hull_faces(shape) -> tuple[np.ndarray, np.ndarray]:
@@ -256,7 +256,7 @@ def volume_m3(shape) -> float:
         return _hull_properties(tuple(map(tuple, surface_points(shape))))[0]
     if isinstance(shape, Compound):
         return float(sum(volume_m3(p.shape) for p in shape.parts))
-    raise TypeError(f"not a shape: {shape!r}")
+    raise TypeError(f"not a shape: {shown(shape)}")
 
 
 def centre_of_mass_m(shape) -> np.ndarray:
@@ -270,7 +270,7 @@ def centre_of_mass_m(shape) -> np.ndarray:
         centres = np.array([rotation_matrix(p.orientation_xyzw) @ centre_of_mass_m(p.shape) + np.asarray(p.position_m)
                             for p in shape.parts])
         return (centres * vols[:, None]).sum(axis=0) / vols.sum()
-    raise TypeError(f"not a shape: {shape!r}")
+    raise TypeError(f"not a shape: {shown(shape)}")
 
 
 def extents_m(shape) -> Vec3:

@@ -29,7 +29,8 @@ from msg_bridge.markers import markers_to_scene, prediction_to_markers
 from msg_bridge.outputs import any_fall_probability_msg, fall_direction_msg, fall_probability_msg
 
 from ..engine import ConfigError
-from ..service import Answer, NoSceneError, PredictionFailed, PredictionService, StampedScene
+from ..engine.errors import clip
+from ..service import Answer, NoSceneError, PredictionFailed, PredictionService, StampedScene, error_answer
 from . import params
 from .diagnostics import diagnostics_msg
 
@@ -59,8 +60,8 @@ class IpeNode(Node):
         self._pub_diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
 
         self.service = PredictionService(config, workers=int(values["workers"]), publish=self._publish_answer,
-                                         log_error=self.get_logger().error, log_info=self.get_logger().info,
-                                         start_method=start_method)
+                                         log_error=self._log_error, log_info=self._log_info,
+                                         start_method=start_method, publish_error=self._publish_error)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         # Inputs, the service and diagnostics in separate groups: a service call waiting for its
         # answer never holds up scene intake or the 1 Hz health report (with a multi-threaded executor).
@@ -76,6 +77,13 @@ class IpeNode(Node):
             f"phi = {config.model.phi_m_s2[0]:g} m/s^2, preset {config.settings.name}, {values['workers']} worker(s); "
             f"scenes on {self.resolve_topic_name('~/scene')} and {self.resolve_topic_name('~/scene_json')}")
 
+    # -- logging: whatever text an input carried, the logger gets printable text ----------------
+    def _log_error(self, text: str) -> None:
+        self.get_logger().error(clip(text, 2000))
+
+    def _log_info(self, text: str) -> None:
+        self.get_logger().info(clip(text, 2000))
+
     # -- parameters ----------------------------------------------------------------------------
     def _on_set_parameters(self, changed: list[rclpy.parameter.Parameter]) -> SetParametersResult:
         values = dict(self._values)
@@ -90,9 +98,9 @@ class IpeNode(Node):
 
     # -- inputs ----------------------------------------------------------------------------------
     def _reject(self, topic: str, exc: Exception) -> None:
-        reason = str(exc)
+        reason = clip(str(exc), 1000)
         self.service.reject(reason)
-        self.get_logger().error(f"rejected scene on {topic}: {reason}")
+        self._log_error(f"rejected scene on {topic}: {reason}")
 
     def _accept(self, scene, stamp_ns: int, frame_id: str) -> None:
         item = StampedScene(scene=scene, stamp_ns=stamp_ns, frame_id=frame_id, scene_id=scene.name,
@@ -107,6 +115,9 @@ class IpeNode(Node):
         except ValueError as exc:  # SceneError / ConfigError name the field
             self._reject(self.resolve_topic_name("~/scene"), exc)
             return
+        except Exception as exc:  # noqa: BLE001 - no input may end the node; name what happened
+            self._reject(self.resolve_topic_name("~/scene"), RuntimeError(f"unreadable input ({type(exc).__name__})"))
+            return
         self._accept(converted.scene, converted.stamp_ns, converted.frame_id)
 
     def _on_scene_json(self, msg: String) -> None:
@@ -116,6 +127,9 @@ class IpeNode(Node):
         except ValueError as exc:
             self._reject(self.resolve_topic_name("~/scene_json"), exc)
             return
+        except Exception as exc:  # noqa: BLE001 - no input may end the node; name what happened
+            self._reject(self.resolve_topic_name("~/scene_json"), RuntimeError(f"data: unreadable input ({type(exc).__name__})"))
+            return
         self._accept(scene, self.get_clock().now().nanoseconds, str(self._values["frame_id"]))
 
     # -- service -----------------------------------------------------------------------------------
@@ -123,7 +137,7 @@ class IpeNode(Node):
         try:
             answer = self.service.predict_latest(float(self._values["service_timeout_s"]))
         except (NoSceneError, PredictionFailed, TimeoutError) as exc:
-            response.success, response.message = False, str(exc)
+            response.success, response.message = False, clip(str(exc), 1000)
             return response
         response.success, response.message = True, answer_to_string(answer.to_dict()).data
         return response
@@ -138,18 +152,23 @@ class IpeNode(Node):
         anything = any_fall_probability_msg(prediction)
         if anything is not None:
             self._pub_any_fall.publish(anything)
-        self._pub_direction.publish(fall_direction_msg(prediction, source.frame_id, source.stamp_ns))
+        if "direction" in prediction.request.get("queries", ()):  # a zero vector means "nothing falls"
+            self._pub_direction.publish(fall_direction_msg(prediction, source.frame_id, source.stamp_ns))
         self._pub_markers.publish(prediction_to_markers(source.scene, prediction, source.frame_id, source.stamp_ns))
         fall = "-" if prediction.fall_fraction is None else f"{prediction.fall_fraction:.3f}"
-        self.get_logger().info(
+        self._log_info(
             f"{source.scene_id} #{source.seq}: P(fall) = {fall}, k = {prediction.samples}"
             f"{f' ({prediction.failed_samples} failed)' if prediction.failed_samples else ''}, "
             f"{answer.compute_s:.2f} s" + (f", {answer.rrd_path}" if answer.rrd_path else ""))
 
+    def _publish_error(self, source: StampedScene, error: str) -> None:
+        self._pub_prediction.publish(answer_to_string(error_answer(source, clip(error, 1000))))
+
     def _publish_diagnostics(self) -> None:
         stats = self.service.stats()
-        self._pub_diagnostics.publish(diagnostics_msg(stats, f"{self.get_name()}: IPE prediction service",
-                                                      self.get_clock().now().nanoseconds, self.get_fully_qualified_name()))
+        name = self.get_fully_qualified_name()  # namespaced: two nodes never share a status name
+        self._pub_diagnostics.publish(diagnostics_msg(stats, f"{name}: IPE prediction service",
+                                                      self.get_clock().now().nanoseconds, name))
 
     def destroy_node(self) -> None:
         self.service.close()

@@ -15,7 +15,7 @@ from typing import Any, Mapping
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 
 from ..engine import ALL_QUERIES, PRESETS, AdaptiveStop, ConfigError, ModelConfig, QuerySpec, preset
-from ..engine.config import (DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M, anytime_batch_size,
+from ..engine.config import (DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M, anytime_batch_size,
                              default_workers)
 from ..engine.scene import DEFAULT_MAX_OBJECTS
 from ..service import ServiceConfig
@@ -76,8 +76,13 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               (0.0, 1.0)),
     ParamSpec("deadline_s", 0.0, _DOUBLE, "anytime sampling: stop drawing samples before this many seconds; "
                                           "0: off (all k samples)", (0.0, 3600.0)),
+    ParamSpec("budget_s", DEFAULT_BUDGET_S, _DOUBLE, "compute budget: the most wall seconds one prediction may "
+                                                   "take; samples still running then are cut off (stopped_by: "
+                                                   "budget) and scenes whose one rollout cannot fit are rejected",
+              (0.1, 3600.0)),
     ParamSpec("max_objects", DEFAULT_MAX_OBJECTS, _INT, "scenes with more boxes are rejected", (1, 10000)),
-    ParamSpec("frame_id", "world", _STRING, "frame of scenes received on ~/scene_json (JSON carries no header)"),
+    ParamSpec("frame_id", "world", _STRING, "frame of scenes received on ~/scene_json (JSON carries no header)",
+              constraints="a non-empty frame name"),
     ParamSpec("service_timeout_s", 60.0, _DOUBLE, "how long ~/predict waits for an answer, seconds", (0.1, 3600.0)),
     ParamSpec("rerun.save_dir", "", _STRING, "folder for one .rrd recording per prediction; empty: no rerun logging"),
     ParamSpec("rerun.rollouts_logged", 8, _INT, "sampled rollouts shown in each .rrd", (0, 1000)),
@@ -90,6 +95,12 @@ PARAMETERS: tuple[ParamSpec, ...] = (
 
 def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
     """Build the service config from parameter values; ConfigError names the parameter at fault."""
+    frame = values["frame_id"]
+    if not isinstance(frame, str) or not frame.strip() or frame != frame.strip():
+        raise ConfigError("frame_id", f"must be a non-empty frame name without surrounding spaces, got {frame!r}")
+    budget = float(values["budget_s"])
+    if not (math.isfinite(budget) and budget > 0):
+        raise ConfigError("budget_s", f"must be a finite number of seconds > 0, got {budget!r}")
     direction = float(values["force_direction_deg"])
     if math.isinf(direction):
         raise ConfigError("force_direction_deg", f"must be finite degrees or NaN (any direction), got {direction}")
@@ -125,4 +136,4 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
                          seed=int(values["seed"]), max_objects=int(values["max_objects"]),
                          rerun_save_dir=save_dir or None, rerun_rollouts_logged=int(values["rerun.rollouts_logged"]),
                          rerun_frame_period_s=float(values["rerun.frame_period_s"]),
-                         rerun_connect_url=connect or None, stop=stop)
+                         rerun_connect_url=connect or None, stop=stop, budget_s=budget)

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import json
 import math
+import uuid
 from pathlib import Path
 
 import numpy as np
@@ -191,7 +192,9 @@ def write_prediction_rrd(path: str | Path, scene: Scene, prediction: Prediction,
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{scene.name}@{stamp_ns}")
+    # one id per recording: a scene predicted twice (same name and stamp, new parameters) must not
+    # be merged with its earlier recording by the viewer
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{scene.name}@{stamp_ns}/{uuid.uuid4().hex[:12]}")
     if connect_url:
         rec.set_sinks(rr.FileSink(str(path)), rr.GrpcSink(connect_url))
     else:

@@ -21,11 +21,13 @@ inertial again. With phi = 0 nothing about the push is simulated.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..config import SimSettings
+from ..errors import BudgetExceeded
 from ..scene import Scene
 from . import health
 from .collapse import CollapseWatch
@@ -76,13 +78,14 @@ def _crossed(tick: int, previous: int, period: int) -> bool:
 
 def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, record_every: int = 0,
              decided: DecidedHeights | None = None, collapse_below_z_m: np.ndarray | None = None,
-             probe: Probe = NO_PROBE) -> RolloutEnd:
+             probe: Probe = NO_PROBE, deadline_unix_s: float | None = None) -> RolloutEnd:
     """Run a built world (bodies at rest; the scene's initial velocities are given here) to the
     horizon, or until early termination ends it.
 
     ``decided``: outcomes already settled by height (only fall / any_fall asked); ``collapse_below_z_m``:
     heights that start the collapse steps (when ``settings.collapse`` is enabled). Raises
-    PhysicsError on non-finite states or speeds above ``health.speed_limit_m_s``.
+    PhysicsError on non-finite states or speeds above ``health.speed_limit_m_s``, and
+    BudgetExceeded once ``time.time()`` passes ``deadline_unix_s``.
     """
     p = pybullet()
     cid = world.client
@@ -127,6 +130,8 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
     if settling.ticks or travel_substeps > 1:
         steps.set(1, max(travel_substeps, settling.substeps if settling.ticks else 1))
     while tick < total_ticks:
+        if deadline_unix_s is not None and time.time() > deadline_unix_s:
+            raise BudgetExceeded(f"the compute budget ran out at t = {tick * dt:.3f} s of the rollout")
         # the push ends exactly on its tick, and the last step ends exactly on the horizon
         step_ticks = min(steps.ticks, total_ticks - tick)
         if step_ticks != steps.ticks:  # a shorter last step (coarse steps only)

@@ -1,0 +1,257 @@
+"""Soak: ``ipe_node`` as its own process under mixed good, bad and flooding input for a long while.
+
+    .venv/bin/python benchmarks/soak.py [--minutes 30] [--out benchmarks/results/soak]
+
+Every second or so the driver sends one of: a good scene (the example tower, the capped tower, a
+catalogue scene) on ``~/scene_json`` or ``~/scene``; a bad one (malformed or deeply nested JSON, a
+lone-surrogate name, a 1 MB list, NaN poses, 1e15 m positions, gravity 1e8, a 1e-9 m box, a marker
+of 1e-320 m); or a flood (20 scenes back to back, of which only the newest should be answered).
+Each good scene has a unique name, so its answer on ``~/prediction`` gives its latency (send to
+answer). The node's resident memory (itself and its worker processes, from /proc) is sampled every
+10 s. At the end the node gets SIGINT; the time it takes to exit and whether any process is left
+are recorded. Results: JSON and Markdown in ``--out``. DDS stays on loopback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+import numpy as np  # noqa: E402
+import rclpy  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from std_msgs.msg import String  # noqa: E402
+from visualization_msgs.msg import MarkerArray  # noqa: E402
+
+from ipe_ros.engine import load_scenes  # noqa: E402
+from ipe_ros.engine.catalogue import capped_tower, scene_catalogue  # noqa: E402
+from ipe_ros.engine.examples import example_scene_path  # noqa: E402
+from ipe_ros.engine.scene_io import scene_to_dict, scene_to_json  # noqa: E402
+from ipe_ros.ros.node import LATCHED_QOS  # noqa: E402
+from msg_bridge.markers import scene_to_markers  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _family(pid: int) -> list[int]:
+    """pid and all its descendants, from /proc."""
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            children.setdefault(int(stat[stat.rfind(")") + 2:].split()[1]), []).append(int(entry.name))
+    found, todo = [pid], [pid]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            found.append(child)
+            todo.append(child)
+    return found
+
+
+def _rss_mb(pids: list[int]) -> float:
+    total = 0
+    for pid in pids:
+        try:
+            for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+                if line.startswith("VmRSS:"):
+                    total += int(line.split()[1])
+        except OSError:
+            pass
+    return total / 1024
+
+
+def _bad_inputs(tower) -> list[tuple[str, object]]:
+    base = scene_to_dict(tower)
+
+    def changed(**fields):
+        scene = json.loads(json.dumps(base))
+        for path, value in fields.items():
+            node = scene
+            keys = path.split(".")
+            for key in keys[:-1]:
+                node = node[int(key)] if key.isdigit() else node[key]
+            node[keys[-1]] = value
+        return String(data=json.dumps(scene))
+
+    nan_markers = scene_to_markers(tower, "world")
+    nan_markers.markers[1].pose.position.x = float("nan")
+    tiny_marker = scene_to_markers(tower, "world")
+    tiny_marker.markers[1].scale.x = 1e-320
+    return [
+        ("json", String(data='{"format": "ipe_ros.scene/2", "objects": [')),
+        ("json", String(data="[" * 5000 + "]" * 5000)),
+        ("json", changed(name="\ud800")),
+        ("json", changed(**{"objects.0.shape.extents_m": [0.1] * 100_000})),
+        ("json", changed(**{"objects.0.position_m": [1e15, 0.0, 0.1]})),
+        ("json", changed(gravity_m_s2=[0.0, 0.0, -1e8])),
+        ("json", changed(**{"objects.0.shape.extents_m": [1e-9, 1e-9, 1e-9]})),
+        ("markers", nan_markers),
+        ("markers", tiny_marker),
+    ]
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--minutes", type=float, default=30.0)
+    parser.add_argument("--out", default=str(REPO / "benchmarks/results/soak"))
+    parser.add_argument("--seed", type=int, default=2026)
+    parser.add_argument("--settle-s", type=float, default=15.0, help="wait for the last answers before SIGINT")
+    args = parser.parse_args()
+    rng = random.Random(args.seed)
+    domain = 150 + os.getpid() % 80
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(domain))
+    node = subprocess.Popen([sys.executable, "-m", "ipe_ros.ros.node", "--ros-args", "-p", "workers:=2",
+                             "-p", "samples:=8", "-p", "budget_s:=10.0", "--log-level", "warn"],
+                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    client = rclpy.create_node("ipe_soak_driver", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(client)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+
+    sent_at: dict[str, float] = {}
+    latencies: list[float] = []
+    answers = {"ok": 0, "error": 0, "budget": 0}
+    diagnostics: list[dict] = []
+    lock = threading.Lock()
+
+    def on_answer(msg: String) -> None:
+        data = json.loads(msg.data)
+        with lock:
+            if "error" in data:
+                answers["error"] += 1
+                return
+            answers["ok"] += 1
+            answers["budget"] += data.get("stopped_by") == "budget"
+            start = sent_at.pop(data.get("scene_id"), None)
+            if start is not None:
+                latencies.append(time.monotonic() - start)
+
+    def on_diagnostics(msg: DiagnosticArray) -> None:
+        if msg.status and msg.status[0].name.startswith("/ipe"):
+            with lock:
+                diagnostics[:] = [{kv.key: kv.value for kv in msg.status[0].values}
+                                  | {"level": int.from_bytes(msg.status[0].level, "little")}]
+
+    client.create_subscription(String, "/ipe/prediction", on_answer, LATCHED_QOS)
+    client.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
+    json_pub = client.create_publisher(String, "/ipe/scene_json", 10)
+    marker_pub = client.create_publisher(MarkerArray, "/ipe/scene", 10)
+    deadline = time.monotonic() + 120
+    while json_pub.get_subscription_count() == 0 or marker_pub.get_subscription_count() == 0:
+        if time.monotonic() > deadline:
+            raise SystemExit("the node did not subscribe within 120 s")
+        time.sleep(0.1)
+
+    tower = load_scenes(example_scene_path())[0]
+    goods = [tower, capped_tower(3.0)] + [s for s in scene_catalogue(7, 12) if len(s.objects) <= 12]
+    bads = _bad_inputs(capped_tower(3.0))
+    counts = {"good": 0, "bad": 0, "flood": 0}
+    memory: list[tuple[float, float]] = []
+    start = time.monotonic()
+    end = start + 60 * args.minutes
+    next_memory = start
+    serial = 0
+
+    def send_good(via_markers: bool) -> None:
+        nonlocal serial
+        serial += 1
+        scene = dataclasses.replace(rng.choice(goods), name=f"soak_{serial}")
+        with lock:
+            sent_at[scene.name] = time.monotonic()
+        if via_markers and all(b.shape.type in ("box", "sphere", "cylinder", "convex") for b in scene.objects):
+            marker_pub.publish(scene_to_markers(scene, "world", time.time_ns()))
+        else:
+            json_pub.publish(String(data=scene_to_json(scene)))
+
+    while time.monotonic() < end:
+        now = time.monotonic()
+        if now >= next_memory:
+            memory.append((now - start, _rss_mb(_family(node.pid))))
+            next_memory += 10.0
+        draw = rng.random()
+        if draw < 0.6:
+            send_good(rng.random() < 0.3)
+            counts["good"] += 1
+        elif draw < 0.9:
+            kind, msg = rng.choice(bads)
+            (json_pub if kind == "json" else marker_pub).publish(msg)
+            counts["bad"] += 1
+        else:
+            for _ in range(20):
+                send_good(False)
+            counts["flood"] += 1
+        time.sleep(rng.uniform(0.5, 1.5))
+        if node.poll() is not None:
+            break
+    alive_at_end = node.poll() is None
+    time.sleep(args.settle_s)  # let the last answers and diagnostics arrive
+    family = _family(node.pid)
+    stop_started = time.monotonic()
+    node.send_signal(signal.SIGINT)
+    try:
+        code = node.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        node.kill()  # our own child, by pid
+        code = node.wait()
+    exit_s = time.monotonic() - stop_started
+    time.sleep(1.0)
+    left = [pid for pid in family if Path(f"/proc/{pid}").exists()
+            and Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"]
+    executor.shutdown()
+    client.destroy_node()
+    rclpy.try_shutdown(context=context)
+
+    lat = np.array(latencies) if latencies else np.array([np.nan])
+    rss = np.array([m for _, m in memory])
+    result = {
+        "minutes": args.minutes, "date": time.strftime("%Y-%m-%d"), "sent": counts,
+        "good_scenes_sent": counts["good"] + 20 * counts["flood"], "answers": answers,
+        "answered_distinct_scenes": len(latencies), "node_alive_until_the_end": alive_at_end,
+        "latency_s": {f"p{q}": float(np.percentile(lat, q)) for q in (50, 90, 99)} | {"max": float(lat.max())},
+        "rss_mb": {"first": float(rss[0]), "last": float(rss[-1]), "max": float(rss.max()),
+                   "samples": [[round(t, 1), round(m, 1)] for t, m in memory]},
+        "diagnostics_at_end": diagnostics[0] if diagnostics else None,
+        "sigint_exit_s": exit_s, "exit_code": code, "processes_left": left,
+    }
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "soak.json").write_text(json.dumps(result, indent=1) + "\n")
+    d = result["diagnostics_at_end"] or {}
+    md = [f"# Soak: ipe_node for {args.minutes:g} min of mixed input ({result['date']})", "",
+          "`.venv/bin/python benchmarks/soak.py --minutes "
+          f"{args.minutes:g}`; 2 workers, k = 8, budget 10 s, on this project's 2-core machine.", "",
+          "| what | value |", "|---|---|",
+          f"| sent | {counts['good']} good scenes, {counts['bad']} bad inputs, {counts['flood']} floods of 20 |",
+          f"| answers | {answers['ok']} ({answers['budget']} cut by the budget), {answers['error']} error answers |",
+          f"| scenes rejected (diagnostics) | {d.get('scenes_rejected', '-')} |",
+          f"| scenes dropped by keep-latest (diagnostics) | {d.get('scenes_dropped', '-')} |",
+          f"| node up the whole time | {alive_at_end} |",
+          f"| latency send -> answer, s | p50 {result['latency_s']['p50']:.2f}, p90 {result['latency_s']['p90']:.2f}, "
+          f"p99 {result['latency_s']['p99']:.2f}, max {result['latency_s']['max']:.2f} |",
+          f"| resident memory (node + workers), MB | first {rss[0]:.0f}, last {rss[-1]:.0f}, max {rss.max():.0f} |",
+          f"| SIGINT -> exit | {exit_s:.2f} s, exit code {code}, processes left: {len(left)} |", ""]
+    (out / "soak.md").write_text("\n".join(md))
+    print("\n".join(md))
+    return 0 if alive_at_end and not left and code == 0 else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

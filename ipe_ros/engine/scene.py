@@ -279,7 +279,7 @@ def validate_body(body: Body, path: str) -> None:
     if min(extents) < limits.MIN_SIZE_M or max(extents) > limits.MAX_SIZE_M:
         raise SceneError(f"{path}.shape", f"every extent must be within [{limits.MIN_SIZE_M:g}, {limits.MAX_SIZE_M:g}] m "
                                           f"(smaller bodies need ever finer steps; check the units), got "
-                                          f"{shown([round(e, 12) for e in extents])}")
+                                          f"{shown(list(extents))}")
     _check_vector(body.position_m, 3, f"{path}.position_m", "position in metres", **_COORDINATE)
     _check_vector(body.orientation_xyzw, 4, f"{path}.orientation_xyzw", "quaternion (x, y, z, w)")
     norm = math.sqrt(sum(c * c for c in body.orientation_xyzw))

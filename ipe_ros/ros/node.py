@@ -190,6 +190,11 @@ def main(args: list[str] | None = None) -> int:
     except (ConfigError, ValueError, InvalidParameterValueException, InvalidParameterTypeException) as exc:
         print(f"ipe_node: error: {exc}", file=sys.stderr)  # a bad -p override: one line, exit 2
         code = 2
+    except Exception:  # noqa: BLE001
+        # SIGTERM's handler shuts the context down under the executor's feet: its next wait fails.
+        # That is a clean stop; anything while the context is still up is a real error.
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
             node.destroy_node()

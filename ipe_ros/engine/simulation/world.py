@@ -268,6 +268,31 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
                  masses_kg=np.asarray(masses_kg, float), inertia_kg_m2=inertia.reshape(len(dynamic_ids), 3))
 
 
+def add_fixed_body(world: World, body: Body, position_m, orientation_xyzw) -> int:
+    """Add ``body`` as fixed geometry at this pose (its own frame): a probe for geometric questions
+    such as where an object would rest, never simulated."""
+    return _add_body(pybullet(), world.client, body, position_m, 0.0, orientation=orientation_xyzw)
+
+
+def move_body(world: World, handle: int, position_m, orientation_xyzw) -> None:
+    pybullet().resetBasePositionAndOrientation(handle, [float(v) for v in position_m],
+                                               [float(v) for v in orientation_xyzw], physicsClientId=world.client)
+
+
+def gap_to_others_m(world: World, handle: int, within_m: float) -> float:
+    """The smallest distance from body ``handle`` to any other body or the support (negative:
+    overlapping), or ``within_m`` when nothing is that close."""
+    p = pybullet()
+    gap = within_m
+    for other in range(p.getNumBodies(physicsClientId=world.client)):
+        other = p.getBodyUniqueId(other, physicsClientId=world.client)
+        if other == handle:
+            continue
+        for point in p.getClosestPoints(handle, other, within_m, physicsClientId=world.client):
+            gap = min(gap, point[8])
+    return gap
+
+
 def can_bounce(scene: Scene) -> bool:
     """Whether two surfaces that may touch both have restitution (Bullet multiplies the two): a
     bouncing dynamic body against the support, a static body or another bouncing one."""

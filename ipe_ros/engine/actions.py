@@ -1,0 +1,664 @@
+"""Questions about a robot's own next action: remove, place or push an object, and what follows.
+
+Every question is a set of *variants* of one scene (the scene as it is, without object i, with a
+new object here, with object j pushed) answered by the same Monte Carlo IPE. Variants share their
+random numbers: sample s of every variant starts from the same noisy, separated scene (drawn and
+de-penetrated once, from the s-th child seed), so the difference between "remove block 3" and
+"remove block 5" is the removal's, not Monte Carlo noise. A variant that adds something draws the
+added randomness (where the new object lands, how hard the push is) from a second stream of the same
+seed, leaving the shared draw untouched.
+
+``ask`` runs variants; ``remove``, ``support_graph``, ``clear_order``, ``place``, ``best_place`` and
+``push`` are the questions built on it. A removal that cannot change anything (nothing rests on the
+object, directly or through others, in the scene as given) is answered from the scene's own samples
+without simulating, and says so (``simulated: False``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import time
+import traceback
+from dataclasses import dataclass
+from typing import Union
+
+import numpy as np
+
+from . import queries, simulation
+from .config import ModelConfig, QuerySpec, SimSettings, SolverSettings
+from .errors import BudgetExceeded, ConfigError, PhysicsError
+from .estimate import wilson_interval, circular_mean
+from .perturb import draw_sample_inputs, position_sigmas_m
+from .rollout import SampleTask, _decided_heights, _smallest_extents
+from .sampler import MapFn, check_budget, rollout_cost
+from .scene import Body, Scene, lowest_z_m, validate_scene
+from .shapes import rotation_matrix
+
+#: P(anything else falls) below this makes an object safe to remove now.
+DEFAULT_SAFE_BELOW = 0.05
+#: Removing i makes j fall with at least this probability: i supports j.
+DEFAULT_SUPPORT_THRESHOLD = 0.5
+
+
+# -- actions ----------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Remove:
+    """Take these objects away at t = 0 (lifted straight up: deleted before anything moves)."""
+
+    names: tuple[str, ...]
+
+    @property
+    def label(self) -> str:
+        return "remove/" + "+".join(self.names)
+
+
+@dataclass(frozen=True)
+class Place:
+    """Add ``body`` at its pose; its own ``position_sigma_m`` / ``yaw_sigma_rad`` (else the model's
+    sigma) say how precisely the robot puts it there."""
+
+    body: Body
+
+    @property
+    def label(self) -> str:
+        return f"place/{self.body.name}@{','.join(f'{v:.3f}' for v in self.body.position_m)}"
+
+
+@dataclass(frozen=True)
+class Push:
+    """Push one object horizontally: at t = 0 it moves at ``velocity_m_s`` (the velocity the push
+    gives the point it is pushed at; ``point_m`` in the scene frame, None: its centre of mass, no
+    spin). ``direction_sigma_rad`` and ``speed_sigma_fraction``: the push's own uncertainty."""
+
+    name: str
+    velocity_m_s: tuple[float, float, float]
+    point_m: tuple[float, float, float] | None = None
+    direction_sigma_rad: float = 0.0
+    speed_sigma_fraction: float = 0.0
+
+    @property
+    def label(self) -> str:
+        return f"push/{self.name}"
+
+
+Action = Union[Remove, Place, Push, None]  # None: the scene as it is
+
+
+def _label(action: Action) -> str:
+    return "as_is" if action is None else action.label
+
+
+def _check_action(scene: Scene, action: Action, path: str) -> None:
+    names = {b.name for b in scene.objects}
+    if isinstance(action, Remove):
+        if not action.names:
+            raise ConfigError(f"{path}.names", "name at least one object to remove")
+        for name in action.names:
+            if name not in names:
+                raise ConfigError(f"{path}.names", f"no object named {name!r} in {scene.name!r}")
+            if next(b for b in scene.objects if b.name == name).static:
+                raise ConfigError(f"{path}.names", f"{name!r} is static (fixed geometry) and cannot be removed")
+        if not [b for b in scene.dynamic_objects if b.name not in action.names]:
+            raise ConfigError(f"{path}.names", "removing these leaves nothing that could fall")
+    elif isinstance(action, Place):
+        if action.body.name in names:
+            raise ConfigError(f"{path}.body.name", f"{action.body.name!r} is already in the scene; give the new object "
+                                                   "a name of its own")
+        if action.body.static:
+            raise ConfigError(f"{path}.body.static", "a placed object must be dynamic")
+        validate_scene(dataclasses.replace(scene, objects=scene.objects + (action.body,)))
+    elif isinstance(action, Push):
+        if action.name not in {b.name for b in scene.dynamic_objects}:
+            raise ConfigError(f"{path}.name", f"no dynamic object named {action.name!r} in {scene.name!r}")
+        v = np.asarray(action.velocity_m_s, float)
+        if v.shape != (3,) or not np.all(np.isfinite(v)) or abs(v[2]) > 0 or not np.any(v):
+            raise ConfigError(f"{path}.velocity_m_s", f"must be a finite horizontal velocity (vz = 0), not zero, "
+                                                      f"got {list(action.velocity_m_s)}")
+        if np.linalg.norm(v) > 100:
+            raise ConfigError(f"{path}.velocity_m_s", "a push faster than 100 m/s is a projectile, not a push")
+        if action.point_m is not None and not (len(action.point_m) == 3 and np.all(np.isfinite(action.point_m))):
+            raise ConfigError(f"{path}.point_m", "must be 3 finite numbers (metres, scene frame) or null")
+        if not (0 <= action.direction_sigma_rad <= math.pi) or not (0 <= action.speed_sigma_fraction <= 1):
+            raise ConfigError(f"{path}", "direction_sigma_rad must be in [0, pi] and speed_sigma_fraction in [0, 1]")
+    elif action is not None:
+        raise ConfigError(path, f"not an action: {type(action).__name__}")
+
+
+# -- one sample of every variant ----------------------------------------------------------------------
+@dataclass(frozen=True)
+class VariantTask:
+    """Sample ``index`` of every variant: the shared draw, then one rollout per action."""
+
+    scene: Scene
+    model: ModelConfig
+    settings: SimSettings
+    query: QuerySpec
+    index: int
+    seed: np.random.SeedSequence
+    actions: tuple[Action, ...]
+    deadline_unix_s: float | None = None
+    #: per action, the dynamic objects worth simulating (None: all); the rest cannot be reached
+    regions: tuple[frozenset[str] | None, ...] | None = None
+
+
+@dataclass(frozen=True)
+class VariantResult:
+    """One variant of one sample: which objects fell (names in the variant's order), the direction."""
+
+    names: tuple[str, ...]
+    fallen: np.ndarray | None
+    direction_rad: float | None
+    error: str | None = None
+    budget_stopped: bool = False
+
+
+def _action_rng(task: VariantTask, variant: int) -> np.random.Generator:
+    """The second stream: variant v's own randomness, independent of the shared draw."""
+    return np.random.default_rng(np.random.SeedSequence(task.seed.entropy, spawn_key=task.seed.spawn_key + (1, variant)))
+
+
+def _push_velocities(body: Body, push: Push, rng: np.random.Generator, centre_m: np.ndarray, orientation: np.ndarray,
+                     inertia_kg_m2: np.ndarray, mass_kg: float) -> tuple[tuple, tuple]:
+    v = np.asarray(push.velocity_m_s, float)
+    speed, angle = float(np.linalg.norm(v)), math.atan2(v[1], v[0])
+    if push.direction_sigma_rad:
+        angle += push.direction_sigma_rad * rng.standard_normal()
+    if push.speed_sigma_fraction:
+        speed *= max(0.0, 1 + push.speed_sigma_fraction * rng.standard_normal())
+    v = np.array([speed * math.cos(angle), speed * math.sin(angle), 0.0])
+    if push.point_m is None:
+        return tuple(v), (0.0, 0.0, 0.0)
+    # an impulse J = m v at r from the centre of mass also spins the body: w = I^-1 (r x J)
+    r = np.asarray(push.point_m, float) - centre_m
+    rot = rotation_matrix(orientation)
+    inertia_world = rot @ np.diag(inertia_kg_m2) @ rot.T
+    spin = np.linalg.solve(inertia_world, np.cross(r, mass_kg * v))
+    return tuple(v), tuple(spin)
+
+
+def _simulate_variant(task: VariantTask, scene: Scene, positions, orientations, masses, push_direction: float,
+                      separate: bool) -> tuple[np.ndarray, np.ndarray, simulation.RolloutEnd]:
+    """Build ``scene`` at the given state, optionally separate it, simulate (phi values in turn: the
+    last one's end is returned; actions are asked with one phi in practice)."""
+    sub = SampleTask(scene=scene, model=task.model, settings=task.settings, query=task.query, index=task.index,
+                     seed=task.seed, deadline_unix_s=task.deadline_unix_s)
+    world = simulation.build_world(scene, positions, masses, task.settings, orientations_xyzw=orientations)
+    if separate:
+        simulation.depenetrate(world, task.settings)
+    initial, initial_orn = simulation.read_poses(world)
+    decided = _decided_heights(sub, initial)
+    collapse_below = None
+    if task.settings.collapse.enabled:
+        collapse_below = initial[:, 2] - task.settings.collapse.drop_fraction * _smallest_extents(sub)
+    end = None
+    for i, phi in enumerate(task.model.phi_m_s2):
+        if i > 0:
+            world = simulation.build_world(scene, initial, masses, task.settings, orientations_xyzw=initial_orn)
+        end = simulation.simulate(world, scene, task.settings, simulation.Push(phi, push_direction,
+                                                                              task.model.push_duration_s),
+                                  decided=decided, collapse_below_z_m=collapse_below,
+                                  deadline_unix_s=task.deadline_unix_s)
+    return initial, initial_orn, end
+
+
+def run_variants(task: VariantTask) -> list[VariantResult]:
+    """Sample ``task.index`` of every variant; never raises for physics trouble (a failed variant
+    carries its error)."""
+    names = tuple(b.name for b in task.scene.dynamic_objects)
+    if task.deadline_unix_s is not None and time.time() >= task.deadline_unix_s:
+        return [VariantResult(names, None, None, "BudgetExceeded: not started", True) for _ in task.actions]
+    rng = np.random.default_rng(task.seed)
+    inputs = draw_sample_inputs(task.scene, task.model, rng)
+    try:
+        separation = task.settings.changed(solver={"maximal_coordinates": True})
+        world = simulation.build_world(task.scene, inputs.positions_m, inputs.masses_kg, separation,
+                                       orientations_xyzw=inputs.orientations_xyzw)
+        simulation.depenetrate(world, separation)
+        shared, shared_orn = simulation.read_poses(world)
+    except PhysicsError as exc:
+        return [VariantResult(names, None, None, f"PhysicsError: {exc}") for _ in task.actions]
+    results = []
+    for v, action in enumerate(task.actions):
+        region = None if task.regions is None else task.regions[v]
+        try:
+            results.append(_one_variant(task, v, action, shared, shared_orn, inputs, region))
+        except BudgetExceeded as exc:
+            results.append(VariantResult(names, None, None, f"BudgetExceeded: {exc}", True))
+        except PhysicsError as exc:
+            results.append(VariantResult(names, None, None, f"PhysicsError: {exc}"))
+        except Exception as exc:  # noqa: BLE001 - one variant's trouble must not end the others
+            results.append(VariantResult(names, None, None, traceback.format_exception_only(type(exc), exc)[-1].strip()))
+    return results
+
+
+def _one_variant(task: VariantTask, v: int, action: Action, shared, shared_orn, inputs,
+                 region: frozenset[str] | None) -> VariantResult:
+    scene = task.scene
+    bodies = scene.dynamic_objects
+    positions, orientations, masses = shared, shared_orn, inputs.masses_kg
+    if region is not None:  # objects the action cannot reach are left out of the simulation
+        keep = np.array([b.name in region for b in bodies])
+        scene = dataclasses.replace(scene, objects=tuple(b for b in scene.objects if b.static or b.name in region))
+        bodies = scene.dynamic_objects
+        positions, orientations, masses = positions[keep], orientations[keep], masses[keep]
+        shared, shared_orn = positions, orientations
+    separate = False
+    if isinstance(action, Remove):
+        keep = np.array([b.name not in action.names for b in bodies])
+        scene = dataclasses.replace(scene, objects=tuple(b for b in scene.objects if b.name not in action.names))
+        positions, orientations, masses = shared[keep], shared_orn[keep], masses[keep]
+    elif isinstance(action, Place):
+        rng = _action_rng(task, v)
+        new = action.body
+        added = dataclasses.replace(scene, objects=(new,))
+        drawn = draw_sample_inputs(added, task.model, rng)  # the new object's own noise, second stream
+        scene = dataclasses.replace(scene, objects=scene.objects + (new,))
+        positions = np.vstack([shared, drawn.positions_m])
+        orientations = np.vstack([shared_orn, drawn.orientations_xyzw])
+        masses = np.concatenate([masses, drawn.masses_kg])
+        separate = True  # the new object may overlap what is there
+    elif isinstance(action, Push):
+        i = next(k for k, b in enumerate(bodies) if b.name == action.name)
+        world = simulation.build_world(scene, shared, masses, task.settings, orientations_xyzw=shared_orn)
+        inertia = world.inertia_kg_m2[i]
+        velocity, spin = _push_velocities(bodies[i], action, _action_rng(task, v), shared[i], shared_orn[i], inertia,
+                                          float(masses[i]))
+        pushed = dataclasses.replace(bodies[i], linear_velocity_m_s=velocity, angular_velocity_rad_s=spin)
+        scene = dataclasses.replace(scene, objects=tuple(pushed if b.name == action.name else b
+                                                         for b in scene.objects))
+    initial, _, end = _simulate_variant(task, scene, positions, orientations, masses, inputs.push_direction_rad,
+                                        separate)
+    variant_bodies = scene.dynamic_objects
+    smallest = np.array([b.smallest_extent_m for b in variant_bodies])
+    fallen = queries.fallen_mask(initial, end.positions_m, smallest, task.query.fall_threshold_fraction)
+    direction = queries.fall_direction_rad(initial, end.positions_m, fallen)
+    return VariantResult(tuple(b.name for b in variant_bodies), fallen, direction)
+
+
+# -- the answers ----------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class VariantAnswer:
+    """What one variant of a question does to the scene.
+
+    any_fall_probability: P(at least one object falls), objects the action removed not counted;
+        with its 95% Wilson interval.
+    object_fall_probability: per remaining (or added) object.
+    simulated: False when the answer was read from the scene's own samples because the action
+        cannot change anything (a removal that nothing rests on).
+    samples / failed_samples: samples used / samples whose rollout failed (budget cuts are neither).
+    """
+
+    label: str
+    action: Action
+    any_fall_probability: float | None
+    any_fall_probability_ci95: tuple[float, float] | None
+    object_fall_probability: dict[str, float]
+    direction_rad: float | None
+    samples: int
+    failed_samples: int
+    simulated: bool = True
+    not_simulated: tuple[str, ...] = ()  # objects the action cannot reach, left out of its rollouts
+
+    def to_dict(self) -> dict:
+        return {"label": self.label, "any_fall_probability": self.any_fall_probability,
+                "any_fall_probability_ci95": None if self.any_fall_probability_ci95 is None
+                else list(self.any_fall_probability_ci95),
+                "object_fall_probability": self.object_fall_probability, "direction_rad": self.direction_rad,
+                "samples": self.samples, "failed_samples": self.failed_samples, "simulated": self.simulated,
+                "not_simulated": list(self.not_simulated)}
+
+
+def _aggregate(label: str, action: Action, results: list[VariantResult], simulated: bool = True) -> VariantAnswer:
+    ok = [r for r in results if r.error is None]
+    failed = [r for r in results if r.error is not None and not r.budget_stopped]
+    if not ok:
+        return VariantAnswer(label, action, None, None, {}, None, 0, len(failed), simulated)
+    names = ok[0].names
+    fallen = np.array([r.fallen for r in ok], bool)
+    anything = float(fallen.any(axis=1).mean())
+    directions = np.array([r.direction_rad for r in ok if r.direction_rad is not None])
+    return VariantAnswer(label, action, anything, wilson_interval(anything, len(ok)),
+                         {n: float(p) for n, p in zip(names, fallen.mean(axis=0))},
+                         circular_mean(directions), len(ok), len(failed), simulated)
+
+
+#: A world built only to look at the scene's geometry (contacts, rays, bounds): never stepped.
+_GEOMETRY_SETTINGS = SimSettings(name="geometry", time_step_s=1 / 240, horizon_s=1.0,
+                                 solver=SolverSettings(iterations=10))
+
+
+def _geometry_world(scene: Scene):
+    bodies = scene.dynamic_objects
+    return simulation.build_world(scene, np.array([b.centre_of_mass_m for b in bodies]),
+                                  np.array([max(b.resolved_mass_kg, 1e-6) for b in bodies]), _GEOMETRY_SETTINGS)
+
+
+def resting_on(scene: Scene, margin_m: float = 0.0) -> dict[str, set[str]]:
+    """name -> the dynamic objects that may rest or lean on it, in the scene as given (no noise):
+    they touch it (within ``margin_m``) and their centre of mass is above its lowest point.
+    Deliberately generous (a plank leaning on a post's side counts), since it decides what need not
+    be simulated."""
+    bodies = scene.dynamic_objects
+    world = _geometry_world(scene)
+    p = simulation.world.pybullet()
+    by_id = dict(zip(world.dynamic_ids, bodies))
+    out: dict[str, set[str]] = {b.name: set() for b in bodies}
+    reach = margin_m + 0.01 * world.scale_m
+    for a, b in itertools.combinations(world.dynamic_ids, 2):
+        if not p.getClosestPoints(a, b, reach, physicsClientId=world.client):
+            continue
+        body_a, body_b = by_id[a], by_id[b]
+        if body_a.centre_of_mass_m[2] > lowest_z_m(body_b):
+            out[body_b.name].add(body_a.name)
+        if body_b.centre_of_mass_m[2] > lowest_z_m(body_a):
+            out[body_a.name].add(body_b.name)
+    return out
+
+
+def groups(scene: Scene, margin_m: float = 0.0) -> list[frozenset[str]]:
+    """The dynamic objects in groups that cannot affect each other within a rollout: objects that
+    touch (within ``margin_m``) are one group, and groups closer to each other horizontally than
+    the taller one's height are merged, since it could topple onto the other."""
+    bodies = scene.dynamic_objects
+    world = _geometry_world(scene)
+    p = simulation.world.pybullet()
+    names = [b.name for b in bodies]
+    parent = list(range(len(bodies)))
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    reach = margin_m + 0.01 * world.scale_m
+    for (i, a), (j, b) in itertools.combinations(enumerate(world.dynamic_ids), 2):
+        if p.getClosestPoints(a, b, reach, physicsClientId=world.client):
+            parent[root(i)] = root(j)
+    boxes = [np.array(p.getAABB(h, physicsClientId=world.client)) for h in world.dynamic_ids]
+    ground = scene.support.top_m
+    while True:
+        members: dict[int, list[int]] = {}
+        for i in range(len(bodies)):
+            members.setdefault(root(i), []).append(i)
+        bounds = {r: (np.min([boxes[i][0] for i in m], axis=0), np.max([boxes[i][1] for i in m], axis=0))
+                  for r, m in members.items()}
+        for r, q in itertools.combinations(bounds, 2):
+            (lo_r, hi_r), (lo_q, hi_q) = bounds[r], bounds[q]
+            gap = np.maximum(0.0, np.maximum(lo_r[:2] - hi_q[:2], lo_q[:2] - hi_r[:2]))
+            if float(np.linalg.norm(gap)) < max(hi_r[2], hi_q[2]) - ground + margin_m:
+                parent[root(r)] = root(q)
+                break
+        else:
+            return [frozenset(names[i] for i in m) for m in members.values()]
+
+
+def dependents(resting: dict[str, set[str]], name: str) -> set[str]:
+    """Everything that rests on ``name``, directly or through others."""
+    found, todo = set(), [name]
+    while todo:
+        for above in resting.get(todo.pop(), ()):
+            if above not in found:
+                found.add(above)
+                todo.append(above)
+    return found
+
+
+@dataclass(frozen=True)
+class Answers:
+    """The variants of one question, in the order asked, and what they cost."""
+
+    scene: str
+    variants: tuple[VariantAnswer, ...]
+    samples_requested: int
+    wall_s: float
+    stopped_by: str = "samples"
+
+    def to_dict(self) -> dict:
+        return {"scene": self.scene, "variants": [v.to_dict() for v in self.variants],
+                "samples_requested": self.samples_requested, "wall_s": self.wall_s, "stopped_by": self.stopped_by}
+
+
+def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSettings, seed: int = 0,
+        map_fn: MapFn | None = None, budget_s: float | None = None,
+        fall_threshold_fraction: float = 0.125) -> Answers:
+    """Answer every variant with common random numbers (see the module docstring). Removals that
+    cannot change anything are answered from the scene's own samples (a variant "as is" is added
+    for them when it is not asked)."""
+    validate_scene(scene)
+    check_budget(budget_s)
+    for i, action in enumerate(actions):
+        _check_action(scene, action, f"actions[{i}]")
+    margin = 3 * float(position_sigmas_m(scene, model).max(initial=0.0))  # noise can close gaps this wide
+    resting = resting_on(scene, margin_m=margin)
+    moving = any(b.moving for b in scene.dynamic_objects)
+    trivial = [isinstance(a, Remove) and not moving and not set().union(*(dependents(resting, n) for n in a.names))
+               for a in actions]
+    simulated_actions = [a for a, t in zip(actions, trivial) if not t]
+    if any(trivial) and None not in simulated_actions:
+        simulated_actions.append(None)
+    if budget_s is not None:
+        cost = rollout_cost(scene, model, settings)
+        if cost.seconds * max(1, len(simulated_actions)) > budget_s:
+            raise ConfigError("budget_s", f"one sample of these {len(simulated_actions)} variants takes up to "
+                                          f"~{cost.seconds * len(simulated_actions):.3g} s, more than the budget of "
+                                          f"{budget_s:g} s; ask fewer variants or raise the budget")
+    regions = _regions(scene, simulated_actions, margin)
+    query = QuerySpec(queries=frozenset({"fall", "direction"}), fall_threshold_fraction=fall_threshold_fraction)
+    k = model.samples if not model.is_deterministic else 1
+    deadline = None if budget_s is None else time.time() + budget_s
+    tasks = [VariantTask(scene=scene, model=model, settings=settings, query=query, index=i, seed=s,
+                         actions=tuple(simulated_actions), deadline_unix_s=deadline, regions=regions)
+             for i, s in enumerate(np.random.SeedSequence(seed).spawn(k))]
+    start = time.perf_counter()
+    if map_fn is None:
+        per_sample = [run_variants(t) for t in tasks]
+    else:
+        names = tuple(b.name for b in scene.dynamic_objects)
+        lost = lambda task, reason: [VariantResult(names, None, None, f"WorkerLost: {reason}")  # noqa: E731
+                                     for _ in task.actions]
+        per_sample = map_fn(run_variants, tasks, on_lost=lost)
+    everything = {b.name for b in scene.dynamic_objects}
+    by_variant = {_label(a): dataclasses.replace(
+        _aggregate(_label(a), a, [s[j] for s in per_sample]),
+        not_simulated=() if regions[j] is None else tuple(sorted(everything - regions[j])))
+        for j, a in enumerate(simulated_actions)}
+    answers = []
+    for action, is_trivial in zip(actions, trivial):
+        if not is_trivial:
+            answers.append(by_variant[_label(action)])
+            continue
+        # nothing rests on it: the rest of the scene does what it does anyway, read from "as is"
+        others = [j for j, n in enumerate(b.name for b in scene.dynamic_objects) if n not in action.names]
+        results = [VariantResult(tuple(r.names[j] for j in others), None if r.fallen is None else r.fallen[others],
+                                 r.direction_rad, r.error, r.budget_stopped) for r in (s[simulated_actions.index(None)]
+                                                                                     for s in per_sample)]
+        answers.append(dataclasses.replace(_aggregate(_label(action), action, results), simulated=False))
+    stopped = "budget" if any(r.budget_stopped for s in per_sample for r in s) else "samples"
+    return Answers(scene.name, tuple(answers), k, time.perf_counter() - start, stopped)
+
+
+def _regions(scene: Scene, actions: list[Action], margin_m: float) -> tuple[frozenset[str] | None, ...]:
+    """Per action, the groups of objects it can affect (None: the whole scene)."""
+    everything = frozenset(b.name for b in scene.dynamic_objects)
+    scene_groups = None
+    out = []
+    for action in actions:
+        region = None
+        if isinstance(action, Remove):
+            scene_groups = scene_groups or groups(scene, margin_m)
+            region = frozenset().union(*(g for g in scene_groups if g & set(action.names)))
+        elif isinstance(action, Place):
+            with_it = dataclasses.replace(scene, objects=scene.objects + (action.body,))
+            region = next(g for g in groups(with_it, margin_m) if action.body.name in g) - {action.body.name}
+            region = region | {action.body.name}
+        out.append(None if region is None or region >= everything else region)
+    return tuple(out)
+
+
+# -- the questions ----------------------------------------------------------------------------------------
+def remove(scene: Scene, names: list[str] | None, model: ModelConfig, settings: SimSettings, **kw) -> Answers:
+    """P(anything else falls) and per-object probabilities if each named object (None: every
+    dynamic object, one at a time) is taken away; the scene as it is comes first."""
+    names = [b.name for b in scene.dynamic_objects] if names is None else list(names)
+    return ask(scene, [None] + [Remove((n,)) for n in names], model, settings, **kw)
+
+
+@dataclass(frozen=True)
+class SupportGraph:
+    """``edges``: (supporter, supported, P(supported falls when supporter is removed)) at or above
+    ``threshold``; ``safe``: objects whose removal makes anything else fall with probability below
+    ``safe_below`` (upper end of the 95% interval reported with it)."""
+
+    scene: str
+    edges: tuple[tuple[str, str, float], ...]
+    safe: tuple[tuple[str, float, float], ...]
+    threshold: float
+    safe_below: float
+    answers: Answers
+
+    def to_dict(self) -> dict:
+        return {"scene": self.scene, "edges": [list(e) for e in self.edges],
+                "safe_to_remove": [{"name": n, "p_anything_falls": p, "ci95_high": hi} for n, p, hi in self.safe],
+                "threshold": self.threshold, "safe_below": self.safe_below, "answers": self.answers.to_dict()}
+
+
+def support_graph(scene: Scene, model: ModelConfig, settings: SimSettings, threshold: float = DEFAULT_SUPPORT_THRESHOLD,
+                  safe_below: float = DEFAULT_SAFE_BELOW, **kw) -> SupportGraph:
+    for name, value in (("threshold", threshold), ("safe_below", safe_below)):
+        if not 0 < value <= 1:
+            raise ConfigError(name, f"must be in (0, 1], got {value!r}")
+    answers = remove(scene, None, model, settings, **kw)
+    edges, safe = [], []
+    for variant in answers.variants[1:]:
+        (removed,) = variant.action.names
+        for name, p in variant.object_fall_probability.items():
+            if p >= threshold:
+                edges.append((removed, name, p))
+        if variant.any_fall_probability is not None and variant.any_fall_probability < safe_below:
+            safe.append((removed, variant.any_fall_probability, variant.any_fall_probability_ci95[1]))
+    return SupportGraph(scene.name, tuple(edges), tuple(safe), threshold, safe_below, answers)
+
+
+@dataclass(frozen=True)
+class ClearStep:
+    name: str
+    p_anything_falls: float
+    ci95: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class ClearOrder:
+    """Objects in the order to take them away, each step's risk, and the total
+    1 - prod(1 - risk): the chance that some step makes something fall."""
+
+    scene: str
+    steps: tuple[ClearStep, ...]
+    total_risk: float
+    target: str | None
+
+    def to_dict(self) -> dict:
+        return {"scene": self.scene, "target": self.target, "total_risk": self.total_risk,
+                "steps": [{"remove": s.name, "p_anything_falls": s.p_anything_falls, "ci95": list(s.ci95)}
+                          for s in self.steps]}
+
+
+def clear_order(scene: Scene, model: ModelConfig, settings: SimSettings, target: str | None = None,
+                **kw) -> ClearOrder:
+    """Greedy disassembly: at each step take away the object whose removal is least likely to make
+    anything else fall (ties: the highest first). With ``target``, only the target and what rests
+    on it (directly or through others) are candidates, and the sequence ends when the target is gone."""
+    if target is not None and target not in {b.name for b in scene.dynamic_objects}:
+        raise ConfigError("target", f"no dynamic object named {target!r} in {scene.name!r}")
+    steps: list[ClearStep] = []
+    current = scene
+    while True:
+        candidates = [b.name for b in current.dynamic_objects]
+        if target is not None:
+            resting = resting_on(current)
+            candidates = [target] + sorted(dependents(resting, target))
+        if len(current.dynamic_objects) == 1:
+            only = current.dynamic_objects[0].name
+            steps.append(ClearStep(only, 0.0, (0.0, 0.0)))
+            break
+        answers = remove(current, candidates, model, settings, **kw)
+        heights = {b.name: b.centre_of_mass_m[2] for b in current.dynamic_objects}
+        best = min(answers.variants[1:], key=lambda v: (1.0 if v.any_fall_probability is None else v.any_fall_probability,
+                                                        -heights[v.action.names[0]]))
+        (name,) = best.action.names
+        steps.append(ClearStep(name, best.any_fall_probability or 0.0, best.any_fall_probability_ci95 or (0.0, 1.0)))
+        current = dataclasses.replace(current, objects=tuple(b for b in current.objects if b.name != name))
+        if name == target or not current.dynamic_objects:
+            break
+    total = 1 - float(np.prod([1 - s.p_anything_falls for s in steps]))
+    return ClearOrder(scene.name, tuple(steps), total, target)
+
+
+def place(scene: Scene, bodies: list[Body], model: ModelConfig, settings: SimSettings, **kw) -> Answers:
+    """P(anything falls, the new object included) for each candidate placement (one object each);
+    the scene as it is comes first."""
+    return ask(scene, [None] + [Place(b) for b in bodies], model, settings, **kw)
+
+
+def resting_height_m(scene: Scene, body: Body, x_m: float, y_m: float, orientation_xyzw) -> float:
+    """z of ``body``'s frame when it is lowered at (x, y) with this orientation until it touches
+    what is below (the support or an object), found by bisection on its distance to everything
+    else: exact for any shape, a ball's top included."""
+    from .simulation import world as world_module
+
+    world = _geometry_world(scene)
+    size = max(body.extents_m)
+    top = max([scene.support.top_m] + [float(b.position_m[2]) + max(b.extents_m) for b in scene.objects]) + size
+    handle = world_module.add_fixed_body(world, dataclasses.replace(body, static=True), (x_m, y_m, top),
+                                         orientation_xyzw)
+    touch = 1e-3 * min(body.extents_m)  # rest this close above the surface
+
+    def clear_at(z: float) -> bool:
+        world_module.move_body(world, handle, (x_m, y_m, z), orientation_xyzw)
+        return world_module.gap_to_others_m(world, handle, 2 * size) >= touch
+
+    low, high = scene.support.top_m - 2 * size, top
+    if clear_at(low):  # nothing below at all (off a table's edge with no floor): not a place
+        raise ConfigError("position_m", f"nothing under ({x_m:g}, {y_m:g}) to rest {body.name!r} on")
+    for _ in range(50):
+        middle = (low + high) / 2
+        if clear_at(middle):
+            high = middle
+        else:
+            low = middle
+    return float(high)
+
+
+@dataclass(frozen=True)
+class Region:
+    """Where to look for a place: x and y ranges in the scene frame (metres), yaws (radians)."""
+
+    x_m: tuple[float, float]
+    y_m: tuple[float, float]
+    yaw_rad: tuple[float, float] = (0.0, 0.0)
+
+
+def best_place(scene: Scene, body: Body, region: Region, model: ModelConfig, settings: SimSettings,
+               candidates: int = 16, yaws: int = 1, **kw) -> tuple[list[tuple[Body, VariantAnswer]], Answers]:
+    """Candidate poses on a grid over ``region`` (about ``candidates`` of them, times ``yaws``
+    orientations), each lowered onto what is below; returned most stable first."""
+    n = max(1, int(round(math.sqrt(candidates))))
+    xs = np.linspace(*region.x_m, n)
+    ys = np.linspace(*region.y_m, n)
+    yaw_values = np.linspace(*region.yaw_rad, yaws) if yaws > 1 else [region.yaw_rad[0]]
+    bodies = []
+    for i, (x, y, yaw) in enumerate(itertools.product(xs, ys, yaw_values)):
+        q = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+        z = resting_height_m(scene, body, float(x), float(y), q)
+        bodies.append(dataclasses.replace(body, position_m=(float(x), float(y), z), orientation_xyzw=q))
+    answers = place(scene, bodies, model, settings, **kw)
+    ranked = sorted(zip(bodies, answers.variants[1:]),
+                    key=lambda bv: 1.0 if bv[1].any_fall_probability is None else bv[1].any_fall_probability)
+    return ranked, answers
+
+
+def push(scene: Scene, pushes: list[Push], model: ModelConfig, settings: SimSettings, **kw) -> Answers:
+    """What falls, and in which direction, when each push is made; the scene as it is comes first."""
+    return ask(scene, [None] + list(pushes), model, settings, **kw)

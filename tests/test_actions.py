@@ -1,0 +1,186 @@
+"""Robot questions (engine): remove, support graph, clear order, place, push, on hand-built scenes
+whose answers are known. Small k and a small sigma: the answers asserted are near 0 or near 1."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from ipe_ros.engine import Box, ConfigError, Floor, ModelConfig, Scene, Sphere, preset
+from ipe_ros.engine import actions as A
+from ipe_ros.engine.scene import Body
+
+I = (0.0, 0.0, 0.0, 1.0)
+MODEL = ModelConfig(sigma_m=0.005, samples=8)
+SETTINGS = preset("default")
+
+
+def box(name, x, y, z, extents=(0.2, 0.2, 0.2), mass=1.0):
+    return Box(name=name, extents_m=extents, position_m=(x, y, z), orientation_xyzw=I, friction=0.6,
+               restitution=0.0, mass_kg=mass)
+
+
+def scene(name, *objects):
+    return Scene(name=name, objects=objects, support=Floor(friction=0.6, restitution=0.0),
+                 gravity_m_s2=(0.0, 0.0, -9.81))
+
+
+STACK = scene("stack", box("bottom", 0, 0, 0.1), box("top", 0, 0, 0.3))
+LINTEL = scene("lintel", box("left", -0.3, 0, 0.3, (0.2, 0.2, 0.6)), box("right", 0.3, 0, 0.3, (0.2, 0.2, 0.6)),
+               box("lintel", 0, 0, 0.65, (0.9, 0.2, 0.1)))
+ARCH = scene("arch", box("pillar_l", -0.3, 0, 0.3, (0.2, 0.2, 0.6)), box("pillar_r", 0.3, 0, 0.3, (0.2, 0.2, 0.6)),
+             box("cap_l", -0.3, 0, 0.65, (0.3, 0.2, 0.1)), box("cap_r", 0.3, 0, 0.65, (0.3, 0.2, 0.1)),
+             box("keystone", 0, 0, 0.75, (0.6, 0.2, 0.1)))
+
+
+def leaning_plank() -> Scene:
+    """A plank leaning 20 degrees against a post's side, its foot on the floor."""
+    angle = math.radians(20)
+    q = (0.0, math.sin(angle / 2), 0.0, math.cos(angle / 2))  # top tilts towards +x
+    half = np.array([0.025, 0.1, 0.4])
+    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * half
+    c, s = math.cos(angle), math.sin(angle)
+    rotated = corners @ np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]).T
+    post = box("post", 0.0, 0.0, 0.4, (0.4, 0.3, 0.8), mass=20.0)
+    x = -0.2 - rotated[:, 0].max()  # the plank's far side touches the post's face at x = -0.2
+    plank = Box(name="plank", extents_m=tuple(2 * half), position_m=(x, 0.0, -rotated[:, 2].min()), orientation_xyzw=q,
+                friction=0.8, restitution=0.0, mass_kg=1.0)
+    return scene("leaning", post, plank)
+
+
+def _by_label(answers):
+    return {v.label: v for v in answers.variants}
+
+
+def test_two_block_stack_removing_the_bottom_drops_the_top_and_the_top_is_safe():
+    graph = A.support_graph(STACK, MODEL, SETTINGS)
+    assert [(a, b) for a, b, _ in graph.edges] == [("bottom", "top")]
+    assert [name for name, _, _ in graph.safe] == ["top"]
+    variants = _by_label(graph.answers)
+    assert variants["remove/bottom"].object_fall_probability == {"top": 1.0}
+    top = variants["remove/top"]
+    assert top.any_fall_probability == 0.0 and top.simulated is False  # nothing rests on the top: no simulation
+
+
+def test_lintel_on_two_posts_and_an_arch():
+    lintel = _by_label(A.remove(LINTEL, None, MODEL, SETTINGS))
+    assert lintel["remove/left"].object_fall_probability["lintel"] == 1.0
+    assert lintel["remove/lintel"].any_fall_probability == 0.0 and not lintel["remove/lintel"].simulated
+    arch = _by_label(A.remove(ARCH, ["keystone", "pillar_l"], MODEL, SETTINGS))
+    assert arch["remove/keystone"].any_fall_probability == 0.0
+    pillar = arch["remove/pillar_l"].object_fall_probability
+    assert pillar["cap_l"] == 1.0 and pillar["keystone"] == 1.0 and pillar["cap_r"] == 0.0
+
+
+def test_a_plank_leaning_on_a_post_falls_when_the_post_goes():
+    leaning = leaning_plank()
+    assert "plank" in A.resting_on(leaning)["post"]  # a lean counts as resting on it
+    answers = _by_label(A.remove(leaning, None, MODEL, SETTINGS))
+    assert answers["as_is"].any_fall_probability == 0.0
+    assert answers["remove/post"].object_fall_probability["plank"] == 1.0
+    assert answers["remove/plank"].any_fall_probability == 0.0
+
+
+def _towers(n: int) -> Scene:
+    objects = []
+    for t in range(n):
+        objects += [box(f"t{t}_bottom", 2.0 * t, 0, 0.1), box(f"t{t}_top", 2.0 * t, 0, 0.3)]
+    return scene("shelf", *objects)
+
+
+def test_a_shelf_of_separate_towers_simulates_only_the_tower_asked_about():
+    shelf = _towers(3)
+    assert sorted(map(sorted, A.groups(shelf))) == [["t0_bottom", "t0_top"], ["t1_bottom", "t1_top"],
+                                                    ["t2_bottom", "t2_top"]]
+    answer = _by_label(A.remove(shelf, ["t0_bottom"], MODEL, SETTINGS))["remove/t0_bottom"]
+    assert answer.object_fall_probability == {"t0_top": 1.0}
+    assert answer.not_simulated == ("t1_bottom", "t1_top", "t2_bottom", "t2_top")
+
+
+def test_towers_close_enough_to_topple_onto_each_other_are_one_group():
+    near = scene("near", box("a_bottom", 0, 0, 0.1), box("a_top", 0, 0, 0.3), box("b", 0.5, 0, 0.1))
+    assert len(A.groups(near)) == 1  # 0.3 m apart, a tower 0.4 m tall
+
+
+def test_common_random_numbers_make_answers_independent_of_the_other_variants():
+    alone = A.ask(ARCH, [A.Remove(("pillar_r",))], MODEL, SETTINGS, seed=3)
+    together = A.ask(ARCH, [A.Remove(("keystone",)), None, A.Remove(("pillar_r",)), A.Remove(("cap_l",))], MODEL,
+                     SETTINGS, seed=3)
+    assert _by_label(alone)["remove/pillar_r"] == _by_label(together)["remove/pillar_r"]
+    other_seed = A.ask(ARCH, [A.Remove(("pillar_r",))], MODEL, SETTINGS, seed=4)
+    assert other_seed.variants[0].samples == 8
+
+
+def _exhaustive_total_risk(start: Scene) -> float:
+    """The least total risk over every removal order (dynamic programming over removed sets)."""
+    names = [b.name for b in start.dynamic_objects]
+    best = {frozenset(names): 0.0}  # all removed: no risk left
+    for size in range(len(names) - 1, -1, -1):
+        for removed in map(frozenset, itertools.combinations(names, size)):
+            current = dataclasses.replace(start, objects=tuple(b for b in start.objects if b.name not in removed))
+            remaining = [n for n in names if n not in removed]
+            if len(remaining) == 1:
+                best[removed] = 0.0
+                continue
+            risks = {v.action.names[0]: v.any_fall_probability for v in A.remove(current, remaining, MODEL, SETTINGS).variants[1:]}
+            best[removed] = min(1 - (1 - risks[n]) * (1 - best[removed | {n}]) for n in remaining)
+    return best[frozenset()]
+
+
+def test_the_greedy_clear_order_matches_exhaustive_search_on_a_small_scene():
+    small = scene("small", *LINTEL.objects, box("block", 0, 0, 0.8))
+    order = A.clear_order(small, MODEL, SETTINGS)
+    assert [s.name for s in order.steps][:2] == ["block", "lintel"]
+    assert order.total_risk <= _exhaustive_total_risk(small) + 0.05  # the stated tolerance
+
+
+def test_clearing_towards_a_target_removes_what_rests_on_it_first():
+    order = A.clear_order(scene("tall", box("a", 0, 0, 0.1), box("b", 0, 0, 0.3), box("c", 0, 0, 0.5)),
+                          MODEL, SETTINGS, target="b")
+    assert [s.name for s in order.steps] == ["c", "b"] and order.total_risk == 0.0
+
+
+def test_placing_on_a_flat_top_is_safe_and_over_a_gap_or_on_a_ball_is_not():
+    post = scene("post", box("post", 0, 0, 0.2, (0.2, 0.2, 0.4)))
+    new = box("new", 0, 0, 1.0)
+    flat = dataclasses.replace(new, position_m=(0.0, 0.0, A.resting_height_m(post, new, 0.0, 0.0, I)))
+    overhang = dataclasses.replace(new, position_m=(0.16, 0.0, A.resting_height_m(post, new, 0.16, 0.0, I)))
+    assert flat.position_m[2] == pytest.approx(0.5, abs=1e-3) and overhang.position_m[2] == pytest.approx(0.5, abs=1e-3)
+    answers = _by_label(A.place(post, [flat, overhang], MODEL, SETTINGS))
+    assert answers[A.Place(flat).label].any_fall_probability == 0.0
+    assert answers[A.Place(overhang).label].object_fall_probability["new"] == 1.0
+    ball = scene("ball", Body(name="ball", shape=Sphere(0.1), position_m=(0, 0, 0.1), orientation_xyzw=I,
+                              friction=0.6, restitution=0.0, mass_kg=1.0))
+    on_ball = dataclasses.replace(new, position_m=(0.0, 0.0, A.resting_height_m(ball, new, 0.0, 0.0, I)))
+    assert on_ball.position_m[2] == pytest.approx(0.3, abs=2e-3)
+    assert A.place(ball, [on_ball], ModelConfig(sigma_m=0.01, samples=8), SETTINGS).variants[1].any_fall_probability >= 0.75
+
+
+def test_best_place_ranks_the_centre_of_a_top_first():
+    ranked, _ = A.best_place(STACK, box("new", 0, 0, 1.0), A.Region((-0.16, 0.16), (-0.16, 0.16)), MODEL, SETTINGS,
+                             candidates=9)
+    best_body, best = ranked[0]
+    assert best_body.position_m[:2] == (0.0, 0.0) and best.any_fall_probability == 0.0
+    assert ranked[-1][1].any_fall_probability == 1.0
+
+
+def test_pushing_the_bottom_block_drops_the_top_in_the_push_direction():
+    answers = A.push(STACK, [A.Push("bottom", (2.0, 0.0, 0.0)), A.Push("top", (0.05, 0.0, 0.0))], MODEL, SETTINGS)
+    hard, gentle = answers.variants[1], answers.variants[2]
+    assert hard.object_fall_probability["top"] == 1.0 and abs(hard.direction_rad) < math.radians(45)
+    assert gentle.any_fall_probability == 0.0
+
+
+def test_bad_questions_name_the_field():
+    with pytest.raises(ConfigError, match=r"^actions\[0\]\.names: no object named 'nope' in 'stack'$"):
+        A.ask(STACK, [A.Remove(("nope",))], MODEL, SETTINGS)
+    with pytest.raises(ConfigError, match=r"^actions\[0\]\.body\.name: 'top' is already in the scene"):
+        A.ask(STACK, [A.Place(box("top", 0, 0, 0.5))], MODEL, SETTINGS)
+    with pytest.raises(ConfigError, match=r"^actions\[0\]\.velocity_m_s: must be a finite horizontal velocity"):
+        A.ask(STACK, [A.Push("top", (0.0, 0.0, 1.0))], MODEL, SETTINGS)
+    with pytest.raises(ConfigError, match=r"^target: no dynamic object named 'x' in 'stack'$"):
+        A.clear_order(STACK, MODEL, SETTINGS, target="x")

@@ -3,6 +3,7 @@
     ipe predict PATH [--tower NAME ...] [--query fall,any_fall,direction,far,bump] [--samples K] [--sigma M]
                 [--phi A[,A...]] [--force-direction DEG] [--mu R] [--preset NAME] [--seed N]
                 [--workers W] [--ci-width W] [--deadline S] [--horizon S] [--until-rest] [--json]
+    ipe ask remove|support|clear|place|push PATH ...   (questions about an action: ipe_ros/cli_ask.py)
     ipe generate tower --count N --seed S -o FILE [--pairs RATIO]
     ipe generate table --configurations N --seed S -o FILE
     ipe generate catalogue --count N --seed S -o FILE
@@ -31,6 +32,7 @@ from .engine import (ALL_QUERIES, PRESETS, AdaptiveStop, ConfigError, ModelConfi
                      WorkerPool, load_scenes, parse_queries, predict, preset)
 from .engine.config import (DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M,
                             anytime_batch_size)
+from .cli_ask import add_ask_parser, cmd_ask
 from .engine.examples import example_scene_path
 from .engine.catalogue import capped_tower, scene_catalogue
 from .engine.generators import generate_tables, generate_towers, state_pair
@@ -112,6 +114,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"compute budget per prediction in seconds (default {DEFAULT_BUDGET_S:g}): samples still "
                         "running then are cut off (stopped_by: budget); scenes whose one rollout cannot fit are refused")
     p.add_argument("--json", action="store_true", help="one JSON object per scene per line")
+
+    add_ask_parser(sub, _finite, _OneLineParser)
 
     g = sub.add_parser("generate", help="write generated scenes (JSON)")
     gsub = g.add_subparsers(dest="kind", required=True, parser_class=_OneLineParser)
@@ -331,6 +335,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_predict(args)
         if args.command == "generate":
             return cmd_generate(args)
+        if args.command == "ask":
+            return cmd_ask(args)
         if args.command == "experiment":
             return cmd_experiment(args)
         return cmd_demo(args)

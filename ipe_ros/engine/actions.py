@@ -300,6 +300,9 @@ class VariantAnswer:
     failed_samples: int
     simulated: bool = True
     not_simulated: tuple[str, ...] = ()  # objects the action cannot reach, left out of its rollouts
+    #: per object, P(it falls with the action and would not have without): sample s of the variant
+    #: against sample s of the scene as is (common random numbers make this pairing meaningful)
+    caused_fall_probability: dict[str, float] | None = None
 
     def to_dict(self) -> dict:
         return {"label": self.label, "any_fall_probability": self.any_fall_probability,
@@ -307,7 +310,7 @@ class VariantAnswer:
                 else list(self.any_fall_probability_ci95),
                 "object_fall_probability": self.object_fall_probability, "direction_rad": self.direction_rad,
                 "samples": self.samples, "failed_samples": self.failed_samples, "simulated": self.simulated,
-                "not_simulated": list(self.not_simulated)}
+                "not_simulated": list(self.not_simulated), "caused_fall_probability": self.caused_fall_probability}
 
 
 def _aggregate(label: str, action: Action, results: list[VariantResult], simulated: bool = True) -> VariantAnswer:
@@ -465,6 +468,11 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
         _aggregate(_label(a), a, [s[j] for s in per_sample]),
         not_simulated=() if regions[j] is None else tuple(sorted(everything - regions[j])))
         for j, a in enumerate(simulated_actions)}
+    if None in simulated_actions:
+        as_is = simulated_actions.index(None)
+        for j, a in enumerate(simulated_actions):
+            caused = _caused(per_sample, j, as_is)
+            by_variant[_label(a)] = dataclasses.replace(by_variant[_label(a)], caused_fall_probability=caused)
     answers = []
     for action, is_trivial in zip(actions, trivial):
         if not is_trivial:
@@ -475,9 +483,25 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
         results = [VariantResult(tuple(r.names[j] for j in others), None if r.fallen is None else r.fallen[others],
                                  r.direction_rad, r.error, r.budget_stopped) for r in (s[simulated_actions.index(None)]
                                                                                      for s in per_sample)]
-        answers.append(dataclasses.replace(_aggregate(_label(action), action, results), simulated=False))
+        answers.append(dataclasses.replace(_aggregate(_label(action), action, results), simulated=False,
+                                           caused_fall_probability={n: 0.0 for n in results[0].names}))
     stopped = "budget" if any(r.budget_stopped for s in per_sample for r in s) else "samples"
     return Answers(scene.name, tuple(answers), k, time.perf_counter() - start, stopped)
+
+
+def _caused(per_sample: list[list[VariantResult]], variant: int, as_is: int) -> dict[str, float] | None:
+    """Per object of the variant: the fraction of paired samples in which it fell with the action
+    and not in the scene as is."""
+    pairs = [(s[variant], s[as_is]) for s in per_sample if s[variant].error is None and s[as_is].error is None]
+    if not pairs:
+        return None
+    names = pairs[0][0].names
+    counts = dict.fromkeys(names, 0)
+    for with_action, without in pairs:
+        before = dict(zip(without.names, without.fallen))
+        for name, fell in zip(with_action.names, with_action.fallen):
+            counts[name] += bool(fell) and not before.get(name, False)
+    return {n: c / len(pairs) for n, c in counts.items()}
 
 
 def _regions(scene: Scene, actions: list[Action], margin_m: float) -> tuple[frozenset[str] | None, ...]:
@@ -508,9 +532,11 @@ def remove(scene: Scene, names: list[str] | None, model: ModelConfig, settings: 
 
 @dataclass(frozen=True)
 class SupportGraph:
-    """``edges``: (supporter, supported, P(supported falls when supporter is removed)) at or above
-    ``threshold``; ``safe``: objects whose removal makes anything else fall with probability below
-    ``safe_below`` (upper end of the 95% interval reported with it)."""
+    """``edges``: (supporter, supported, P) where P, at or above ``threshold``, is the probability
+    that the supported object falls without the supporter and would not have fallen with it (paired
+    samples); ``safe``: objects whose removal leaves P(anything else falls) below ``safe_below``
+    (the upper end of its 95% interval reported with it). In a scene that falls by itself nothing is
+    safe to remove."""
 
     scene: str
     edges: tuple[tuple[str, str, float], ...]
@@ -534,7 +560,8 @@ def support_graph(scene: Scene, model: ModelConfig, settings: SimSettings, thres
     edges, safe = [], []
     for variant in answers.variants[1:]:
         (removed,) = variant.action.names
-        for name, p in variant.object_fall_probability.items():
+        # "removing i makes j fall": j falls without i and would not have with it (paired samples)
+        for name, p in (variant.caused_fall_probability or {}).items():
             if p >= threshold:
                 edges.append((removed, name, p))
         if variant.any_fall_probability is not None and variant.any_fall_probability < safe_below:

@@ -258,6 +258,11 @@ class PredictionService:
             self._cond.notify_all()
             return replaced
 
+    def latest_scene(self) -> StampedScene | None:
+        """The newest accepted scene (what ``~/ask`` questions are about by default)."""
+        with self._cond:
+            return self._latest
+
     def reject(self, reason: str) -> None:
         """Count (and remember) a scene that could not be read or validated."""
         with self._cond:
@@ -448,3 +453,87 @@ class PredictionService:
             return dataclasses.replace(answer, rrd_path=None, rollouts_logged=0, rrd_error=error)
         return dataclasses.replace(answer, rollouts_logged=logged)
 
+
+
+#: Questions waiting beyond this are refused (the asker hears "busy" at once, not minutes later).
+MAX_WAITING_QUESTIONS = 4
+#: Samples per variant of a question when the request does not say (see ipe_ros.cli_ask).
+DEFAULT_QUESTION_SAMPLES = 16
+
+
+class QuestionService:
+    """Questions about actions (``~/ask``): a FIFO of at most MAX_WAITING_QUESTIONS, one thread,
+    the prediction service's worker pool and config. Each answer (or error) goes to ``publish``
+    with the request id echoed (and the scene it was about); a question brings its scene or is
+    about the newest accepted one."""
+
+    def __init__(self, predictions: PredictionService, publish: Callable[[dict[str, Any], StampedScene], None],
+                 log_error: Callable[[str], None] = lambda _msg: None):
+        self._predictions = predictions
+        self._publish = publish
+        self._log_error = log_error
+        self._cond = threading.Condition()
+        self._queue: collections.deque = collections.deque()
+        self._closing = False
+        self.answered = 0
+        self.refused = 0
+        self._thread = threading.Thread(target=self._run, name="ipe-questions", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def close(self, timeout_s: float = 1.5) -> None:
+        with self._cond:
+            self._closing = True
+            self._queue.clear()
+            self._cond.notify_all()
+        if self._thread.is_alive():
+            self._thread.join(timeout_s)
+
+    def submit(self, question, scene: StampedScene | None) -> str | None:
+        """Queue a parsed question (``scene`` None: the newest accepted scene); returns why it was
+        refused, or None."""
+        if scene is None:
+            scene = self._predictions.latest_scene()
+            if scene is None:
+                return "no scene received yet; publish one on ~/scene or ~/scene_json, or put \"scene\" in the question"
+        with self._cond:
+            if self._closing:
+                return "the node is shutting down"
+            if len(self._queue) >= MAX_WAITING_QUESTIONS:
+                return f"busy: {len(self._queue)} questions are waiting; ask again later"
+            self._queue.append((question, scene))
+            self._cond.notify_all()
+        return None
+
+    def _run(self) -> None:
+        from .engine.actions import answer_question
+
+        while True:
+            with self._cond:
+                while not self._closing and not self._queue:
+                    self._cond.wait()
+                if self._closing:
+                    return
+                question, source = self._queue.popleft()
+            config = self._predictions.config
+            head = {"id": question.request_id, "question": question.kind, "scene_id": source.scene_id,
+                    "frame_id": source.frame_id, "stamp": dict(zip(("sec", "nanosec"),
+                                                                   divmod(source.stamp_ns, 1_000_000_000)))}
+            start = time.perf_counter()
+            try:
+                model = dataclasses.replace(config.model, samples=DEFAULT_QUESTION_SAMPLES)
+                pool = self._predictions.pool
+                answer = answer_question(source.scene, question, model, config.settings, seed=config.seed,
+                                         map_fn=pool.map if pool is not None else None, budget_s=config.budget_s)
+                message = {**head, "answer": answer, "compute_s": time.perf_counter() - start}
+                self.answered += 1
+            except Exception as exc:  # noqa: BLE001 - one question's trouble is its answer, never the thread's end
+                error = str(exc) if isinstance(exc, ValueError) else "".join(
+                    traceback.format_exception_only(type(exc), exc)).strip()
+                message = {**head, "error": clip(error, 1000)}
+                self.refused += 1
+            try:
+                self._publish(message, source)
+            except Exception as exc:  # noqa: BLE001
+                self._log_error(f"publishing the answer to question {question.request_id!r} failed: {exc}")

@@ -287,3 +287,36 @@ def test_rerun_recording_is_written_and_holds_the_rollouts(ros, tower, tmp_path)
     step_s = get_preset("default").time_step_s
     every = max(1, round(0.02 / step_s))
     assert 1 + round(0.3 / step_s) // every <= sum(c.num_rows for c in moving) <= 1 + round(2.0 / step_s) // every
+
+
+def test_questions_on_ask_are_answered_on_answer_with_their_id(ros, tower):
+    from tests.test_actions import STACK
+
+    node = ros.start_ipe_node(samples=4, sigma=0.005)
+    got = ros.collect(String, "/ipe/answer", LATCHED_QOS)
+    graph_markers = ros.collect(MarkerArray, "/ipe/support_graph", LATCHED_QOS)
+    ask = ros.publisher(String, "/ipe/ask")
+    ask.publish(String(data=json.dumps({"id": "too-early", "question": "remove"})))
+    wait_until(lambda: len(got), TIMEOUT_S, "the refusal of a question with no scene")
+    first = json.loads(got[0].data)
+    assert first["id"] == "too-early" and first["error"].startswith("no scene received yet")
+    # a question that brings its own scene
+    request = {"id": "r1", "question": "support", "samples": 4, "scene": json.loads(scene_to_json(STACK))}
+    ask.publish(String(data=json.dumps(request)))
+    wait_until(lambda: len(got) >= 2 and len(graph_markers), TIMEOUT_S, "the support graph answer and its markers")
+    answer = json.loads(got[1].data)
+    assert answer["id"] == "r1" and answer["scene_id"] == "stack"
+    assert answer["answer"]["edges"] == [["bottom", "top", 1.0]]
+    assert [s["name"] for s in answer["answer"]["safe_to_remove"]] == ["top"]
+    lines = [m for m in graph_markers[-1].markers if m.type == Marker.LINE_LIST]
+    assert len(lines) == 1 and len(lines[0].points) == 2
+    # about the newest scene the node accepted, and a bad question refused by name
+    ros.publisher(String, "/ipe/scene_json").publish(String(data=scene_to_json(STACK)))
+    wait_until(lambda: node.service.latest_scene() is not None, TIMEOUT_S, "the scene to be accepted")
+    ask.publish(String(data=json.dumps({"id": "r2", "question": "push", "object": "bottom", "velocity_m_s": [2, 0]})))
+    ask.publish(String(data=json.dumps({"id": "r3", "question": "fly"})))
+    wait_until(lambda: len(got) >= 4, TIMEOUT_S, "answers to r2 and r3")
+    by_id = {json.loads(m.data)["id"]: json.loads(m.data) for m in got}
+    assert by_id["r3"]["error"] == "question: must be one of remove, support, clear, place, push, got 'fly'"
+    pushed = by_id["r2"]["answer"]["variants"][1]
+    assert pushed["label"] == "push/bottom" and pushed["object_fall_probability"]["top"] == 1.0

@@ -689,3 +689,155 @@ def best_place(scene: Scene, body: Body, region: Region, model: ModelConfig, set
 def push(scene: Scene, pushes: list[Push], model: ModelConfig, settings: SimSettings, **kw) -> Answers:
     """What falls, and in which direction, when each push is made; the scene as it is comes first."""
     return ask(scene, [None] + list(pushes), model, settings, **kw)
+
+
+# -- questions as data (the node's ~/ask, scripts) ------------------------------------------------------
+QUESTIONS = ("remove", "support", "clear", "place", "push")
+
+
+@dataclass(frozen=True)
+class Question:
+    """One question as a robot sends it (see ``question_from_dict`` for the JSON)."""
+
+    kind: str
+    request_id: str = ""
+    objects: tuple[str, ...] | None = None  # remove: which (None: every object)
+    threshold: float = DEFAULT_SUPPORT_THRESHOLD  # support
+    safe_below: float = DEFAULT_SAFE_BELOW  # support
+    target: str | None = None  # clear
+    body: Body | None = None  # place
+    spots: tuple[tuple[float, float, float], ...] = ()  # place: (x, y, yaw_rad), lowered onto what is below
+    region: Region | None = None  # place: search here instead
+    candidates: int = 16
+    yaws: int = 1
+    push: Push | None = None
+    samples: int | None = None  # None: the asker's default
+
+
+def _field(data: dict, key: str, kind, default=None, *, path: str = ""):
+    value = data.get(key, default)
+    if value is default:
+        return value
+    if kind is float and isinstance(value, int) and not isinstance(value, bool):
+        value = float(value)
+    if not isinstance(value, kind) or isinstance(value, bool) and kind is not bool:
+        raise ConfigError(f"{path}{key}", f"must be {kind.__name__ if kind is not float else 'a number'}")
+    return value
+
+
+def question_from_dict(data) -> Question:
+    """A question from parsed JSON::
+
+        {"id": "r1", "question": "remove", "objects": ["block3"]}           (objects: default every one)
+        {"id": "r2", "question": "support", "threshold": 0.5, "safe_below": 0.05}
+        {"id": "r3", "question": "clear", "target": "block7"}                (target optional)
+        {"id": "r4", "question": "place", "object": {...scene-format object...},
+         "at": [[x, y, yaw_deg], ...]}  or  "region": {"x_m": [x0, x1], "y_m": [y0, y1],
+         "yaw_deg": [a0, a1], "candidates": 16, "yaws": 1}
+        {"id": "r5", "question": "push", "object": "block2", "velocity_m_s": [vx, vy],
+         "point_m": [x, y, z], "direction_sigma_deg": 0, "speed_sigma": 0}
+        any of them: "samples": k
+    """
+    from .scene_io import object_from_dict
+
+    if not isinstance(data, dict):
+        raise ConfigError("question", "must be a JSON object with a \"question\" field")
+    kind = data.get("question")
+    if kind not in QUESTIONS:
+        raise ConfigError("question", f"must be one of {', '.join(QUESTIONS)}, got {kind!r}"[:300])
+    request_id = data.get("id", "")
+    if not isinstance(request_id, str) or len(request_id) > 128:
+        raise ConfigError("id", "must be a string of at most 128 characters")
+    samples = data.get("samples")
+    if samples is not None and (isinstance(samples, bool) or not isinstance(samples, int) or not 1 <= samples <= 1000):
+        raise ConfigError("samples", "must be an integer in [1, 1000]")
+    common = dict(kind=kind, request_id=request_id, samples=samples)
+    if kind == "remove":
+        objects = data.get("objects")
+        if objects is not None and (not isinstance(objects, list) or not all(isinstance(o, str) for o in objects)):
+            raise ConfigError("objects", "must be a list of object names")
+        return Question(objects=None if objects is None else tuple(objects), **common)
+    if kind == "support":
+        return Question(threshold=_field(data, "threshold", float, DEFAULT_SUPPORT_THRESHOLD),
+                        safe_below=_field(data, "safe_below", float, DEFAULT_SAFE_BELOW), **common)
+    if kind == "clear":
+        return Question(target=_field(data, "target", str), **common)
+    if kind == "push":
+        velocity = data.get("velocity_m_s")
+        if not isinstance(velocity, list) or len(velocity) != 2:
+            raise ConfigError("velocity_m_s", "must be [vx, vy] in m/s")
+        point = data.get("point_m")
+        if point is not None and (not isinstance(point, list) or len(point) != 3):
+            raise ConfigError("point_m", "must be [x, y, z] in metres or absent")
+        try:
+            push = Push(_field(data, "object", str, path=""), (float(velocity[0]), float(velocity[1]), 0.0),
+                        None if point is None else tuple(float(v) for v in point),
+                        math.radians(_field(data, "direction_sigma_deg", float, 0.0)),
+                        _field(data, "speed_sigma", float, 0.0))
+        except (TypeError, ValueError):
+            raise ConfigError("velocity_m_s", "must hold numbers") from None
+        if push.name is None:
+            raise ConfigError("object", "name the object to push")
+        return Question(push=push, **common)
+    body_data = data.get("object")
+    if not isinstance(body_data, dict):
+        raise ConfigError("object", "must be the new object in the scene format (/2)")
+    body_data = {"position_m": [0.0, 0.0, 0.0], "orientation_xyzw": [0.0, 0.0, 0.0, 1.0], **body_data}
+    body = object_from_dict(body_data, "object")
+    at, region = data.get("at"), data.get("region")
+    if (at is None) == (region is None):
+        raise ConfigError("at", "give candidate spots in \"at\" or a \"region\" to search (one of them)")
+    if at is not None:
+        if not isinstance(at, list) or not at or not all(
+                isinstance(s, list) and len(s) in (2, 3) and all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                                                 and math.isfinite(v) for v in s) for s in at):
+            raise ConfigError("at", "must be a list of [x, y] or [x, y, yaw_deg] spots")
+        spots = tuple((float(s[0]), float(s[1]), math.radians(s[2]) if len(s) == 3 else 0.0) for s in at)
+        return Question(body=body, spots=spots, **common)
+    if not isinstance(region, dict):
+        raise ConfigError("region", "must be {\"x_m\": [x0, x1], \"y_m\": [y0, y1]} (+ yaw_deg, candidates, yaws)")
+    try:
+        xs, ys = tuple(map(float, region["x_m"])), tuple(map(float, region["y_m"]))
+        yaw = tuple(math.radians(float(v)) for v in region.get("yaw_deg", [0.0, 0.0]))
+    except (KeyError, TypeError, ValueError):
+        xs = ys = yaw = ()
+    if not (len(xs) == len(ys) == len(yaw) == 2 and all(map(math.isfinite, xs + ys + yaw))):
+        raise ConfigError("region", "must be {\"x_m\": [x0, x1], \"y_m\": [y0, y1]} (+ yaw_deg: [a0, a1])")
+    candidates, yaws = region.get("candidates", 16), region.get("yaws", 1)
+    if not all(isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 400 for v in (candidates, yaws)):
+        raise ConfigError("region.candidates", "candidates and yaws must be integers in [1, 400]")
+    return Question(body=body, region=Region(xs, ys, yaw), candidates=candidates, yaws=yaws, **common)
+
+
+def answer_question(scene: Scene, question: Question, model: ModelConfig, settings: SimSettings, **kw) -> dict:
+    """Answer a Question; returns the JSON-ready answer (the question's own result's ``to_dict``)."""
+    if question.samples is not None:
+        model = dataclasses.replace(model, samples=question.samples)
+    kind = question.kind
+    if kind == "remove":
+        return remove(scene, None if question.objects is None else list(question.objects), model, settings,
+                      **kw).to_dict()
+    if kind == "support":
+        return support_graph(scene, model, settings, threshold=question.threshold, safe_below=question.safe_below,
+                             **kw).to_dict()
+    if kind == "clear":
+        return clear_order(scene, model, settings, target=question.target, **kw).to_dict()
+    if kind == "push":
+        return push(scene, [question.push], model, settings, **kw).to_dict()
+    if question.region is not None:
+        ranked, answers = best_place(scene, question.body, question.region, model, settings,
+                                     candidates=question.candidates, yaws=question.yaws, **kw)
+        rows = ranked
+    else:
+        bodies = []
+        for x, y, yaw in question.spots:
+            q = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+            bodies.append(dataclasses.replace(question.body, position_m=(x, y, resting_height_m(scene, question.body,
+                                                                                                 x, y, q)),
+                                              orientation_xyzw=q))
+        answers = place(scene, bodies, model, settings, **kw)
+        rows = list(zip(bodies, answers.variants[1:]))
+    return {"scene": scene.name, "as_is": answers.variants[0].to_dict(), "wall_s": answers.wall_s,
+            "stopped_by": answers.stopped_by,
+            "candidates": [{"position_m": list(b.position_m), "orientation_xyzw": list(b.orientation_xyzw),
+                            **v.to_dict()} for b, v in rows]}

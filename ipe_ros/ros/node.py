@@ -24,13 +24,16 @@ from std_srvs.srv import Trigger
 from geometry_msgs.msg import Vector3Stamped
 from visualization_msgs.msg import MarkerArray
 
+from msg_bridge.ask_json import answer_to_string as ask_answer_to_string
+from msg_bridge.ask_json import request_id_of, string_to_question, support_graph_markers
 from msg_bridge.json_text import answer_to_string, string_to_scene
 from msg_bridge.markers import markers_to_scene, prediction_to_markers
 from msg_bridge.outputs import any_fall_probability_msg, fall_direction_msg, fall_probability_msg
 
 from ..engine import ConfigError
 from ..engine.errors import clip
-from ..service import Answer, NoSceneError, PredictionFailed, PredictionService, StampedScene, error_answer
+from ..service import (Answer, NoSceneError, PredictionFailed, PredictionService, QuestionService, StampedScene,
+                       error_answer)
 from . import params
 from .diagnostics import diagnostics_msg
 
@@ -58,20 +61,26 @@ class IpeNode(Node):
         self._pub_direction = self.create_publisher(Vector3Stamped, "~/fall_direction", LATCHED_QOS)
         self._pub_markers = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
         self._pub_diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._pub_answer = self.create_publisher(String, "~/answer", LATCHED_QOS)
+        self._pub_support_graph = self.create_publisher(MarkerArray, "~/support_graph", LATCHED_QOS)
 
         self.service = PredictionService(config, workers=int(values["workers"]), publish=self._publish_answer,
                                          log_error=self._log_error, log_info=self._log_info,
                                          start_method=start_method, publish_error=self._publish_error)
+        self.questions = QuestionService(self.service, publish=self._publish_question_answer,
+                                         log_error=self._log_error)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         # Inputs, the service and diagnostics in separate groups: a service call waiting for its
         # answer never holds up scene intake or the 1 Hz health report (with a multi-threaded executor).
         inputs = MutuallyExclusiveCallbackGroup()
         self.create_subscription(MarkerArray, "~/scene", self._on_markers, INPUT_QOS, callback_group=inputs)
         self.create_subscription(String, "~/scene_json", self._on_scene_json, INPUT_QOS, callback_group=inputs)
+        self.create_subscription(String, "~/ask", self._on_ask, INPUT_QOS, callback_group=inputs)
         self.create_service(Trigger, "~/predict", self._on_predict, callback_group=MutuallyExclusiveCallbackGroup())
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics,
                           callback_group=MutuallyExclusiveCallbackGroup())
         self.service.start()
+        self.questions.start()
         self.get_logger().info(
             f"ready: k = {config.model.samples}, sigma = {config.model.sigma_m:g} m, "
             f"phi = {config.model.phi_m_s2[0]:g} m/s^2, preset {config.settings.name}, {values['workers']} worker(s); "
@@ -132,6 +141,30 @@ class IpeNode(Node):
             return
         self._accept(scene, self.get_clock().now().nanoseconds, str(self._values["frame_id"]))
 
+    def _on_ask(self, msg: String) -> None:
+        """A question about an action: answered on ~/answer (with its id), never blocking intake."""
+        request_id = request_id_of(msg)
+        try:
+            question, scene = string_to_question(msg, max_objects=self.service.config.max_objects)
+            source = None
+            if scene is not None:
+                source = StampedScene(scene=scene, stamp_ns=self.get_clock().now().nanoseconds,
+                                      frame_id=str(self._values["frame_id"]), scene_id=scene.name)
+            refused = self.questions.submit(question, source)
+        except ValueError as exc:
+            refused = str(exc)
+        except Exception as exc:  # noqa: BLE001 - no input may end the node
+            refused = f"data: unreadable question ({type(exc).__name__})"
+        if refused is not None:
+            self._log_error(f"question {request_id!r} refused: {refused}")
+            self._pub_answer.publish(ask_answer_to_string({"id": request_id, "error": clip(refused, 1000)}))
+
+    def _publish_question_answer(self, message: dict, source: StampedScene) -> None:
+        self._pub_answer.publish(ask_answer_to_string(message))
+        if message.get("question") == "support" and "answer" in message:
+            self._pub_support_graph.publish(support_graph_markers(source.scene, message["answer"], source.frame_id,
+                                                                  source.stamp_ns))
+
     # -- service -----------------------------------------------------------------------------------
     def _on_predict(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         try:
@@ -171,6 +204,7 @@ class IpeNode(Node):
                                                       self.get_clock().now().nanoseconds, name))
 
     def destroy_node(self) -> None:
+        self.questions.close()
         self.service.close()
         super().destroy_node()
 

@@ -79,3 +79,25 @@ def test_bad_json_file_is_one_line(tmp_path):
     out = run_cli("predict", str(bad))
     assert out.returncode == 2
     assert out.stderr.strip() == "ipe: error: support.height_m: required field is missing"
+
+
+def test_ask_support_clear_place_push_on_the_command_line(tmp_path, capsys):
+    from ipe_ros.engine.scene_io import write_scenes
+    from tests.test_actions import STACK
+
+    path = tmp_path / "stack.json"
+    write_scenes([STACK], path)
+    common = ["--samples", "4", "--sigma", "0.005", "--workers", "0"]
+    assert main(["ask", "support", str(path), *common, "--json", "--png", str(tmp_path / "graph.png")]) == 0
+    graph = json.loads(capsys.readouterr().out)
+    assert graph["edges"] == [["bottom", "top", 1.0]] and (tmp_path / "graph.png").stat().st_size > 1000
+    assert main(["ask", "clear", str(path), *common]) == 0
+    assert "1. remove top" in capsys.readouterr().out
+    box = '{"name": "new", "shape": {"type": "box", "extents_m": [0.2, 0.2, 0.2]}, "mass_kg": 1, "friction": 0.6, "restitution": 0}'
+    assert main(["ask", "place", str(path), *common, "--object", box, "--at", "0,0", "--json"]) == 0
+    placed = json.loads(capsys.readouterr().out)["candidates"][0]
+    assert placed["position_m"][2] == pytest.approx(0.5, abs=1e-3) and placed["any_fall_probability"] == 0.0
+    assert main(["ask", "push", str(path), *common, "--object", "bottom", "--velocity", "2,0"]) == 0
+    assert "push/bottom" in capsys.readouterr().out
+    assert main(["ask", "remove", str(path), *common, "--object", "nope"]) == 2
+    assert capsys.readouterr().err.strip() == "ipe: error: actions[1].names: no object named 'nope' in 'stack'"

@@ -59,6 +59,8 @@ def add_ask_parser(sub, finite, one_line_parser) -> None:
         q.add_argument("--budget", type=finite, default=DEFAULT_BUDGET_S, metavar="S",
                        help="compute budget per batch of variants, seconds")
         q.add_argument("--json", action="store_true", help="one JSON object per line")
+        q.add_argument("--rrd", default=None, metavar="FILE",
+                       help="record 4 rollouts of every variant to this rerun file (not for clear)")
 
     r = questions.add_parser("remove", help="P(anything else falls) if an object is taken away")
     common(r)
@@ -122,6 +124,8 @@ def cmd_ask(args) -> int:
         raise ConfigError("--workers", f"must be >= 0, got {args.workers}")
     pool = WorkerPool(min(args.workers, args.samples)) if args.workers > 0 else None
     kw = dict(seed=args.seed, map_fn=pool.map if pool else None, budget_s=args.budget)
+    if args.rrd and args.question != "clear":
+        kw.update(record_every=max(1, round(0.02 / settings.time_step_s)), record_samples=4)
     try:
         return _answer(args, scene, model, settings, kw)
     finally:
@@ -131,11 +135,13 @@ def cmd_ask(args) -> int:
 
 def _answer(args, scene, model, settings, kw) -> int:
     emit = (lambda d: print(json.dumps(d, allow_nan=False, sort_keys=True), flush=True)) if args.json else None
+    answers = None
     if args.question == "remove":
         answers = A.remove(scene, args.object, model, settings, **kw)
         print(json.dumps(answers.to_dict(), allow_nan=False, sort_keys=True) if emit else _table(answers))
     elif args.question == "support":
         graph = A.support_graph(scene, model, settings, threshold=args.threshold, safe_below=args.safe_below, **kw)
+        answers = graph.answers
         if emit:
             emit(graph.to_dict())
         else:
@@ -154,7 +160,7 @@ def _answer(args, scene, model, settings, kw) -> int:
                       f"[{step.ci95[0]:.2f}, {step.ci95[1]:.2f}]")
             print(f"total risk: {order.total_risk:.3f}")
     elif args.question == "place":
-        _place(args, scene, model, settings, kw, emit)
+        answers = _place(args, scene, model, settings, kw, emit)
     else:
         point = None if args.point is None else tuple(args.point)
         action = A.Push(args.object, (args.velocity[0], args.velocity[1], 0.0), point,
@@ -166,6 +172,10 @@ def _answer(args, scene, model, settings, kw) -> int:
             print(_table(answers))
             d = answers.variants[1].direction_rad
             print(f"fall direction: {'-' if d is None else f'{math.degrees(d):.0f} deg'}")
+    if args.rrd and answers is not None:
+        from .viz import rerun_log
+
+        rerun_log.write_question_rrd(args.rrd, scene, answers)
     return 0
 
 
@@ -198,13 +208,14 @@ def _place(args, scene, model, settings, kw, emit) -> None:
         emit({"scene": scene.name, "as_is": answers.variants[0].to_dict(),
               "candidates": [{"position_m": list(b.position_m), "orientation_xyzw": list(b.orientation_xyzw),
                               **v.to_dict()} for b, v in rows]})
-        return
+        return answers
     print(f"{'x m':>8} {'y m':>8} {'z m':>8} {'yaw deg':>8} {'P(any falls)':>12} {'95% interval':>15}")
     for b, v in rows:
         yaw = math.degrees(2 * math.atan2(b.orientation_xyzw[2], b.orientation_xyzw[3]))
         p = "-" if v.any_fall_probability is None else f"{v.any_fall_probability:.3f}"
         ci = "-" if v.any_fall_probability_ci95 is None else "[{:.2f}, {:.2f}]".format(*v.any_fall_probability_ci95)
         print(f"{b.position_m[0]:>8.3f} {b.position_m[1]:>8.3f} {b.position_m[2]:>8.3f} {yaw:>8.1f} {p:>12} {ci:>15}")
+    return answers
 
 
 def draw_support_graph(scene, graph: A.SupportGraph, path: str) -> None:

@@ -477,6 +477,7 @@ class QuestionService:
         self._closing = False
         self.answered = 0
         self.refused = 0
+        self._recordings = 0
         self._thread = threading.Thread(target=self._run, name="ipe-questions", daemon=True)
 
     def start(self) -> None:
@@ -524,9 +525,16 @@ class QuestionService:
             try:
                 model = dataclasses.replace(config.model, samples=DEFAULT_QUESTION_SAMPLES)
                 pool = self._predictions.pool
-                answer = answer_question(source.scene, question, model, config.settings, seed=config.seed,
-                                         map_fn=pool.map if pool is not None else None, budget_s=config.budget_s)
+                record = {}
+                if config.rerun_save_dir and config.rerun_rollouts_logged > 0:
+                    record = dict(record_every=max(1, round(config.rerun_frame_period_s / config.settings.time_step_s)),
+                                  record_samples=config.rerun_rollouts_logged)
+                answer, answers = answer_question(source.scene, question, model, config.settings, seed=config.seed,
+                                                  map_fn=pool.map if pool is not None else None,
+                                                  budget_s=config.budget_s, **record)
                 message = {**head, "answer": answer, "compute_s": time.perf_counter() - start}
+                if record and answers is not None:
+                    message["rrd_path"] = self._write_rrd(config, question, source, answers)
                 self.answered += 1
             except Exception as exc:  # noqa: BLE001 - one question's trouble is its answer, never the thread's end
                 error = str(exc) if isinstance(exc, ValueError) else "".join(
@@ -537,3 +545,16 @@ class QuestionService:
                 self._publish(message, source)
             except Exception as exc:  # noqa: BLE001
                 self._log_error(f"publishing the answer to question {question.request_id!r} failed: {exc}")
+
+    def _write_rrd(self, config: ServiceConfig, question, source: StampedScene, answers) -> str | None:
+        from .viz import rerun_log  # only needed when recording
+
+        safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in question.request_id)[:60] or "question"
+        self._recordings += 1
+        path = Path(config.rerun_save_dir) / f"ask_{self._recordings:06d}_{question.kind}_{safe}.rrd"
+        try:
+            rerun_log.write_question_rrd(path, source.scene, answers, stamp_ns=source.stamp_ns)
+        except Exception as exc:  # noqa: BLE001 - a recording's trouble must not cost the answer
+            self._log_error(f"writing {path} failed: {exc}")
+            return None
+        return str(path.resolve())

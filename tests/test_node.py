@@ -289,10 +289,10 @@ def test_rerun_recording_is_written_and_holds_the_rollouts(ros, tower, tmp_path)
     assert 1 + round(0.3 / step_s) // every <= sum(c.num_rows for c in moving) <= 1 + round(2.0 / step_s) // every
 
 
-def test_questions_on_ask_are_answered_on_answer_with_their_id(ros, tower):
+def test_questions_on_ask_are_answered_on_answer_with_their_id(ros, tower, tmp_path):
     from tests.test_actions import STACK
 
-    node = ros.start_ipe_node(samples=4, sigma=0.005)
+    node = ros.start_ipe_node(samples=4, sigma=0.005, **{"rerun.save_dir": str(tmp_path), "rerun.rollouts_logged": 2})
     got = ros.collect(String, "/ipe/answer", LATCHED_QOS)
     graph_markers = ros.collect(MarkerArray, "/ipe/support_graph", LATCHED_QOS)
     ask = ros.publisher(String, "/ipe/ask")
@@ -308,6 +308,7 @@ def test_questions_on_ask_are_answered_on_answer_with_their_id(ros, tower):
     assert answer["id"] == "r1" and answer["scene_id"] == "stack"
     assert answer["answer"]["edges"] == [["bottom", "top", 1.0]]
     assert [s["name"] for s in answer["answer"]["safe_to_remove"]] == ["top"]
+    assert answer["rrd_path"].endswith("_support_r1.rrd") and os.path.getsize(answer["rrd_path"]) > 0
     lines = [m for m in graph_markers[-1].markers if m.type == Marker.LINE_LIST]
     assert len(lines) == 1 and len(lines[0].points) == 2
     # about the newest scene the node accepted, and a bad question refused by name

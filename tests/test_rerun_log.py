@@ -6,7 +6,7 @@ import numpy as np
 from rerun.chunk import RrdReader
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
-from ipe_ros.viz.rerun_log import write_prediction_rrd
+from ipe_ros.viz.rerun_log import write_prediction_rrd, write_question_rrd
 from tests.helpers import block, floor_scene, without_timing
 
 MODEL = ModelConfig(sigma_m=0.04, samples=4)
@@ -78,3 +78,16 @@ def test_recordings_draw_every_body_in_its_own_shape(tmp_path):
         assert has(f"{base}/box0", "Boxes3D") and has(f"{base}/ball", "Ellipsoids3D")
         assert has(f"{base}/cone", "Mesh3D")  # a convex hull: its faces
         assert has(f"{base}/cone", "Transform3D")  # moved by a transform, drawn in its own frame
+
+
+def test_a_question_recording_names_each_variants_rollouts_by_the_question(tmp_path):
+    from ipe_ros.engine import ModelConfig, preset
+    from ipe_ros.engine import actions as A
+    from tests.test_actions import STACK
+
+    answers = A.remove(STACK, None, ModelConfig(sigma_m=0.005, samples=3), preset("default"), record_every=4,
+                       record_samples=2)
+    path = tmp_path / "question.rrd"
+    assert write_question_rrd(path, STACK, answers) == 4  # as is and remove/bottom, 2 samples each
+    paths = {chunk.entity_path for chunk in RrdReader(path).stream().to_chunks()}
+    assert {"/world/remove/bottom/sample_0/top", "/world/as_is/sample_1/bottom", "/answers/remove/top"} <= paths

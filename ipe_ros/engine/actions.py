@@ -141,6 +141,7 @@ class VariantTask:
     deadline_unix_s: float | None = None
     #: per action, the dynamic objects worth simulating (None: all); the rest cannot be reached
     regions: tuple[frozenset[str] | None, ...] | None = None
+    record_every: int = 0  # record trajectories every N ticks (rerun), 0: none
 
 
 @dataclass(frozen=True)
@@ -152,6 +153,7 @@ class VariantResult:
     direction_rad: float | None
     error: str | None = None
     budget_stopped: bool = False
+    trajectory: list | None = None  # (t, positions, orientations) frames when recorded
 
 
 def _action_rng(task: VariantTask, variant: int) -> np.random.Generator:
@@ -199,7 +201,7 @@ def _simulate_variant(task: VariantTask, scene: Scene, positions, orientations, 
         end = simulation.simulate(world, scene, task.settings, simulation.Push(phi, push_direction,
                                                                               task.model.push_duration_s),
                                   decided=decided, collapse_below_z_m=collapse_below,
-                                  deadline_unix_s=task.deadline_unix_s)
+                                  deadline_unix_s=task.deadline_unix_s, record_every=task.record_every)
     return initial, initial_orn, end
 
 
@@ -274,7 +276,7 @@ def _one_variant(task: VariantTask, v: int, action: Action, shared, shared_orn, 
     smallest = np.array([b.smallest_extent_m for b in variant_bodies])
     fallen = queries.fallen_mask(initial, end.positions_m, smallest, task.query.fall_threshold_fraction)
     direction = queries.fall_direction_rad(initial, end.positions_m, fallen)
-    return VariantResult(tuple(b.name for b in variant_bodies), fallen, direction)
+    return VariantResult(tuple(b.name for b in variant_bodies), fallen, direction, trajectory=end.trajectory)
 
 
 # -- the answers ----------------------------------------------------------------------------------------
@@ -418,6 +420,8 @@ class Answers:
     samples_requested: int
     wall_s: float
     stopped_by: str = "samples"
+    #: label -> [(sample index, the variant's result with its trajectory)] for recorded samples
+    recorded: dict = dataclasses.field(default_factory=dict, repr=False, compare=False)
 
     def to_dict(self) -> dict:
         return {"scene": self.scene, "variants": [v.to_dict() for v in self.variants],
@@ -426,10 +430,11 @@ class Answers:
 
 def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSettings, seed: int = 0,
         map_fn: MapFn | None = None, budget_s: float | None = None,
-        fall_threshold_fraction: float = 0.125) -> Answers:
+        fall_threshold_fraction: float = 0.125, record_every: int = 0, record_samples: int = 0) -> Answers:
     """Answer every variant with common random numbers (see the module docstring). Removals that
     cannot change anything are answered from the scene's own samples (a variant "as is" is added
-    for them when it is not asked)."""
+    for them when it is not asked). ``record_every`` / ``record_samples``: keep the trajectories of
+    the first samples of every simulated variant (for rerun), in ``Answers.recorded``."""
     validate_scene(scene)
     check_budget(budget_s)
     for i, action in enumerate(actions):
@@ -453,7 +458,8 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     k = model.samples if not model.is_deterministic else 1
     deadline = None if budget_s is None else time.time() + budget_s
     tasks = [VariantTask(scene=scene, model=model, settings=settings, query=query, index=i, seed=s,
-                         actions=tuple(simulated_actions), deadline_unix_s=deadline, regions=regions)
+                         actions=tuple(simulated_actions), deadline_unix_s=deadline, regions=regions,
+                         record_every=record_every if i < record_samples else 0)
              for i, s in enumerate(np.random.SeedSequence(seed).spawn(k))]
     start = time.perf_counter()
     if map_fn is None:
@@ -486,7 +492,9 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
         answers.append(dataclasses.replace(_aggregate(_label(action), action, results), simulated=False,
                                            caused_fall_probability={n: 0.0 for n in results[0].names}))
     stopped = "budget" if any(r.budget_stopped for s in per_sample for r in s) else "samples"
-    return Answers(scene.name, tuple(answers), k, time.perf_counter() - start, stopped)
+    recorded = {_label(a): [(i, s[j]) for i, s in enumerate(per_sample) if s[j].trajectory is not None]
+                for j, a in enumerate(simulated_actions)} if record_every else {}
+    return Answers(scene.name, tuple(answers), k, time.perf_counter() - start, stopped, recorded)
 
 
 def _caused(per_sample: list[list[VariantResult]], variant: int, as_is: int) -> dict[str, float] | None:
@@ -809,35 +817,38 @@ def question_from_dict(data) -> Question:
     return Question(body=body, region=Region(xs, ys, yaw), candidates=candidates, yaws=yaws, **common)
 
 
-def answer_question(scene: Scene, question: Question, model: ModelConfig, settings: SimSettings, **kw) -> dict:
-    """Answer a Question; returns the JSON-ready answer (the question's own result's ``to_dict``)."""
+def answer_question(scene: Scene, question: Question, model: ModelConfig, settings: SimSettings,
+                    **kw) -> tuple[dict, Answers | None]:
+    """Answer a Question: the JSON-ready answer, and the variants' Answers (None for ``clear``,
+    which asks once per step) for a recording."""
     if question.samples is not None:
         model = dataclasses.replace(model, samples=question.samples)
     kind = question.kind
     if kind == "remove":
-        return remove(scene, None if question.objects is None else list(question.objects), model, settings,
-                      **kw).to_dict()
+        answers = remove(scene, None if question.objects is None else list(question.objects), model, settings, **kw)
+        return answers.to_dict(), answers
     if kind == "support":
-        return support_graph(scene, model, settings, threshold=question.threshold, safe_below=question.safe_below,
-                             **kw).to_dict()
+        graph = support_graph(scene, model, settings, threshold=question.threshold, safe_below=question.safe_below,
+                              **kw)
+        return graph.to_dict(), graph.answers
     if kind == "clear":
-        return clear_order(scene, model, settings, target=question.target, **kw).to_dict()
+        kw = {k: v for k, v in kw.items() if k not in ("record_every", "record_samples")}
+        return clear_order(scene, model, settings, target=question.target, **kw).to_dict(), None
     if kind == "push":
-        return push(scene, [question.push], model, settings, **kw).to_dict()
+        answers = push(scene, [question.push], model, settings, **kw)
+        return answers.to_dict(), answers
     if question.region is not None:
-        ranked, answers = best_place(scene, question.body, question.region, model, settings,
-                                     candidates=question.candidates, yaws=question.yaws, **kw)
-        rows = ranked
+        rows, answers = best_place(scene, question.body, question.region, model, settings,
+                                   candidates=question.candidates, yaws=question.yaws, **kw)
     else:
         bodies = []
         for x, y, yaw in question.spots:
             q = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
-            bodies.append(dataclasses.replace(question.body, position_m=(x, y, resting_height_m(scene, question.body,
-                                                                                                 x, y, q)),
-                                              orientation_xyzw=q))
+            z = resting_height_m(scene, question.body, x, y, q)
+            bodies.append(dataclasses.replace(question.body, position_m=(x, y, z), orientation_xyzw=q))
         answers = place(scene, bodies, model, settings, **kw)
         rows = list(zip(bodies, answers.variants[1:]))
     return {"scene": scene.name, "as_is": answers.variants[0].to_dict(), "wall_s": answers.wall_s,
             "stopped_by": answers.stopped_by,
             "candidates": [{"position_m": list(b.position_m), "orientation_xyzw": list(b.orientation_xyzw),
-                            **v.to_dict()} for b, v in rows]}
+                            **v.to_dict()} for b, v in rows]}, answers

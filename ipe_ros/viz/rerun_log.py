@@ -208,3 +208,47 @@ def write_prediction_rrd(path: str | Path, scene: Scene, prediction: Prediction,
     finally:
         rec.disconnect()
     return logged
+
+
+def write_question_rrd(path: str | Path, scene: Scene, answers, *, stamp_ns: int = 0) -> int:
+    """One ``.rrd`` for a question about actions (``ipe_ros.engine.actions.Answers`` with recorded
+    samples): each variant's rollouts under ``world/<variant label>/sample_<i>/<object>`` (e.g.
+    ``world/remove/block3/sample_0/block5``), drawn red where the object fell, and every variant's
+    answer as JSON under ``answers/<label>``. Returns how many rollouts were logged."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{scene.name}@{stamp_ns}/{uuid.uuid4().hex[:12]}")
+    rec.save(str(path))
+    placed = [v.action.body for v in answers.variants if hasattr(v.action, "body")]
+    bodies = {b.name: b for b in (*scene.objects, *placed)}
+
+    def entity(label: str) -> str:
+        return "/".join(_part(part) for part in label.split("/"))
+    logged = 0
+    try:
+        log_scene(rec, scene)
+        for variant in answers.variants:
+            rec.log(f"answers/{entity(variant.label)}", rr.TextDocument(json.dumps(variant.to_dict(), indent=1),
+                                                                media_type="text/markdown"), static=True)
+        for label, samples in answers.recorded.items():
+            for index, result in samples:
+                times = np.array([frame[0] for frame in result.trajectory])
+                positions = np.stack([frame[1] for frame in result.trajectory])
+                orientations = np.stack([frame[2] for frame in result.trajectory])
+                indexes = [rr.TimeColumn("sim_time", duration=times)]
+                for b, name in enumerate(result.names):
+                    body = bodies.get(name)
+                    if body is None:
+                        continue
+                    path_b = f"world/{entity(label)}/sample_{index}/{_part(name)}"
+                    fell = result.fallen is not None and bool(result.fallen[b])
+                    rec.log(path_b, shape_archetype(body, FELL_RGB if fell else group_rgb(body.group),
+                                                    about_centre_of_mass=True), static=True)
+                    rec.send_columns(path_b, indexes=indexes,
+                                     columns=rr.Transform3D.columns(translation=positions[:, b],
+                                                                    quaternion=orientations[:, b]))
+                logged += 1
+        rec.flush()
+    finally:
+        rec.disconnect()
+    return logged

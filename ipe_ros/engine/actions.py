@@ -275,7 +275,7 @@ def _one_variant(task: VariantTask, v: int, action: Action, shared, shared_orn, 
     variant_bodies = scene.dynamic_objects
     smallest = np.array([b.smallest_extent_m for b in variant_bodies])
     fallen = queries.fallen_mask(initial, end.positions_m, smallest, task.query.fall_threshold_fraction)
-    direction = queries.fall_direction_rad(initial, end.positions_m, fallen)
+    direction = queries.fall_direction_rad(initial, end.positions_m, fallen) if task.query.wants("direction") else None
     return VariantResult(tuple(b.name for b in variant_bodies), fallen, direction, trajectory=end.trajectory)
 
 
@@ -430,11 +430,14 @@ class Answers:
 
 def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSettings, seed: int = 0,
         map_fn: MapFn | None = None, budget_s: float | None = None,
-        fall_threshold_fraction: float = 0.125, record_every: int = 0, record_samples: int = 0) -> Answers:
+        fall_threshold_fraction: float = 0.125, record_every: int = 0, record_samples: int = 0,
+        directions: bool = False) -> Answers:
     """Answer every variant with common random numbers (see the module docstring). Removals that
     cannot change anything are answered from the scene's own samples (a variant "as is" is added
     for them when it is not asked). ``record_every`` / ``record_samples``: keep the trajectories of
-    the first samples of every simulated variant (for rerun), in ``Answers.recorded``."""
+    the first samples of every simulated variant (for rerun), in ``Answers.recorded``.
+    ``directions``: also where things fall (rollouts then run until everything rests; without it a
+    rollout ends as soon as what falls is decided)."""
     validate_scene(scene)
     check_budget(budget_s)
     for i, action in enumerate(actions):
@@ -454,7 +457,8 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
                                           f"~{cost.seconds * len(simulated_actions):.3g} s, more than the budget of "
                                           f"{budget_s:g} s; ask fewer variants or raise the budget")
     regions = _regions(scene, simulated_actions, margin)
-    query = QuerySpec(queries=frozenset({"fall", "direction"}), fall_threshold_fraction=fall_threshold_fraction)
+    query = QuerySpec(queries=frozenset({"fall", "direction"} if directions else {"fall"}),
+                      fall_threshold_fraction=fall_threshold_fraction)
     k = model.samples if not model.is_deterministic else 1
     deadline = None if budget_s is None else time.time() + budget_s
     tasks = [VariantTask(scene=scene, model=model, settings=settings, query=query, index=i, seed=s,
@@ -696,7 +700,7 @@ def best_place(scene: Scene, body: Body, region: Region, model: ModelConfig, set
 
 def push(scene: Scene, pushes: list[Push], model: ModelConfig, settings: SimSettings, **kw) -> Answers:
     """What falls, and in which direction, when each push is made; the scene as it is comes first."""
-    return ask(scene, [None] + list(pushes), model, settings, **kw)
+    return ask(scene, [None] + list(pushes), model, settings, directions=True, **kw)
 
 
 # -- questions as data (the node's ~/ask, scripts) ------------------------------------------------------

@@ -114,6 +114,12 @@ def test_common_random_numbers_make_answers_independent_of_the_other_variants():
     assert _by_label(alone)["remove/pillar_r"] == dataclasses.replace(paired, caused_fall_probability=None)
     # paired with "as is" sample by sample: what the removal itself made fall
     assert paired.caused_fall_probability == {"pillar_l": 0.0, "cap_l": 0.0, "cap_r": 1.0, "keystone": 1.0}
+    # a placement's own noise is keyed by the placement, not by its place in the list
+    cap = box("cap", 0.0, 0.0, 0.85)
+    wobbly = ModelConfig(sigma_m=0.05, samples=8)
+    first = A.ask(ARCH, [A.Place(cap)], wobbly, SETTINGS, seed=3).variants[0]
+    later = _by_label(A.ask(ARCH, [A.Remove(("cap_l",)), A.Place(cap)], wobbly, SETTINGS, seed=3))[A.Place(cap).label]
+    assert first == later
     other_seed = A.ask(ARCH, [A.Remove(("pillar_r",))], MODEL, SETTINGS, seed=4)
     assert other_seed.variants[0].samples == 8
 
@@ -147,7 +153,7 @@ def test_clearing_towards_a_target_removes_what_rests_on_it_first():
     assert [s.name for s in order.steps] == ["c", "b"] and order.total_risk == 0.0
 
 
-def test_placing_on_a_flat_top_is_safe_and_over_a_gap_or_on_a_ball_is_not():
+def test_placing_on_a_flat_top_or_across_a_gap_is_safe_and_overhanging_or_on_a_ball_is_not():
     post = scene("post", box("post", 0, 0, 0.2, (0.2, 0.2, 0.4)))
     new = box("new", 0, 0, 1.0)
     flat = dataclasses.replace(new, position_m=(0.0, 0.0, A.resting_height_m(post, new, 0.0, 0.0, I)))
@@ -156,6 +162,12 @@ def test_placing_on_a_flat_top_is_safe_and_over_a_gap_or_on_a_ball_is_not():
     answers = _by_label(A.place(post, [flat, overhang], MODEL, SETTINGS))
     assert answers[A.Place(flat).label].any_fall_probability == 0.0
     assert answers[A.Place(overhang).label].object_fall_probability["new"] == 1.0
+    # across a gap: a plank spanning two posts 10 cm apart rests on both and stays
+    posts = scene("posts", box("p1", -0.15, 0, 0.2, (0.2, 0.2, 0.4)), box("p2", 0.15, 0, 0.2, (0.2, 0.2, 0.4)))
+    plank = box("plank", 0, 0, 1.0, (0.3, 0.1, 0.05))
+    across = dataclasses.replace(plank, position_m=(0.0, 0.0, A.resting_height_m(posts, plank, 0.0, 0.0, I)))
+    assert across.position_m[2] == pytest.approx(0.425, abs=1e-3)
+    assert A.place(posts, [across], MODEL, SETTINGS).variants[1].any_fall_probability == 0.0
     ball = scene("ball", Body(name="ball", shape=Sphere(0.1), position_m=(0, 0, 0.1), orientation_xyzw=I,
                               friction=0.6, restitution=0.0, mass_kg=1.0))
     on_ball = dataclasses.replace(new, position_m=(0.0, 0.0, A.resting_height_m(ball, new, 0.0, 0.0, I)))

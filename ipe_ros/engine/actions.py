@@ -21,6 +21,7 @@ import itertools
 import math
 import time
 import traceback
+import zlib
 from dataclasses import dataclass
 from typing import Union
 
@@ -156,12 +157,15 @@ class VariantResult:
     trajectory: list | None = None  # (t, positions, orientations) frames when recorded
 
 
-def _action_rng(task: VariantTask, variant: int) -> np.random.Generator:
-    """The second stream: variant v's own randomness, independent of the shared draw."""
-    return np.random.default_rng(np.random.SeedSequence(task.seed.entropy, spawn_key=task.seed.spawn_key + (1, variant)))
+def _action_rng(task: VariantTask, action: Action) -> np.random.Generator:
+    """The second stream: this action's own randomness, independent of the shared draw and keyed
+    by what the action is (not where it stands in the list), so asking it among other variants
+    gives the same answer."""
+    key = zlib.crc32(_label(action).encode("utf-8", "backslashreplace"))
+    return np.random.default_rng(np.random.SeedSequence(task.seed.entropy, spawn_key=task.seed.spawn_key + (1, key)))
 
 
-def _push_velocities(body: Body, push: Push, rng: np.random.Generator, centre_m: np.ndarray, orientation: np.ndarray,
+def _push_velocities(push: Push, rng: np.random.Generator, centre_m: np.ndarray, orientation: np.ndarray,
                      inertia_kg_m2: np.ndarray, mass_kg: float) -> tuple[tuple, tuple]:
     v = np.asarray(push.velocity_m_s, float)
     speed, angle = float(np.linalg.norm(v)), math.atan2(v[1], v[0])
@@ -225,7 +229,7 @@ def run_variants(task: VariantTask) -> list[VariantResult]:
     for v, action in enumerate(task.actions):
         region = None if task.regions is None else task.regions[v]
         try:
-            results.append(_one_variant(task, v, action, shared, shared_orn, inputs, region))
+            results.append(_one_variant(task, action, shared, shared_orn, inputs, region))
         except BudgetExceeded as exc:
             results.append(VariantResult(names, None, None, f"BudgetExceeded: {exc}", True))
         except PhysicsError as exc:
@@ -235,7 +239,7 @@ def run_variants(task: VariantTask) -> list[VariantResult]:
     return results
 
 
-def _one_variant(task: VariantTask, v: int, action: Action, shared, shared_orn, inputs,
+def _one_variant(task: VariantTask, action: Action, shared, shared_orn, inputs,
                  region: frozenset[str] | None) -> VariantResult:
     scene = task.scene
     bodies = scene.dynamic_objects
@@ -252,7 +256,7 @@ def _one_variant(task: VariantTask, v: int, action: Action, shared, shared_orn, 
         scene = dataclasses.replace(scene, objects=tuple(b for b in scene.objects if b.name not in action.names))
         positions, orientations, masses = shared[keep], shared_orn[keep], masses[keep]
     elif isinstance(action, Place):
-        rng = _action_rng(task, v)
+        rng = _action_rng(task, action)
         new = action.body
         added = dataclasses.replace(scene, objects=(new,))
         drawn = draw_sample_inputs(added, task.model, rng)  # the new object's own noise, second stream
@@ -265,7 +269,7 @@ def _one_variant(task: VariantTask, v: int, action: Action, shared, shared_orn, 
         i = next(k for k, b in enumerate(bodies) if b.name == action.name)
         world = simulation.build_world(scene, shared, masses, task.settings, orientations_xyzw=shared_orn)
         inertia = world.inertia_kg_m2[i]
-        velocity, spin = _push_velocities(bodies[i], action, _action_rng(task, v), shared[i], shared_orn[i], inertia,
+        velocity, spin = _push_velocities(action, _action_rng(task, action), shared[i], shared_orn[i], inertia,
                                           float(masses[i]))
         pushed = dataclasses.replace(bodies[i], linear_velocity_m_s=velocity, angular_velocity_rad_s=spin)
         scene = dataclasses.replace(scene, objects=tuple(pushed if b.name == action.name else b

@@ -2,7 +2,7 @@
 
     ipe predict PATH [--tower NAME ...] [--query fall,any_fall,direction,far,bump] [--samples K] [--sigma M]
                 [--phi A[,A...]] [--force-direction DEG] [--mu R] [--preset NAME] [--seed N]
-                [--workers W] [--ci-width W] [--deadline S] [--horizon S] [--until-rest] [--json]
+                [--workers W] [--ci-width W] [--deadline S] [--horizon S] [--until-rest] [--budget S] [--json]
     ipe ask remove|support|clear|place|push PATH ...   (questions about an action: ipe_ros/cli_ask.py)
     ipe generate tower --count N --seed S -o FILE [--pairs RATIO]
     ipe generate table --configurations N --seed S -o FILE

@@ -184,7 +184,8 @@ def main() -> int:
     while time.monotonic() < end:
         now = time.monotonic()
         if now >= next_memory:
-            memory.append((now - start, _rss_mb(_family(node.pid))))
+            family_now = _family(node.pid)
+            memory.append((now - start, _rss_mb(family_now), _rss_mb([node.pid])))
             next_memory += 10.0
         draw = rng.random()
         if draw < 0.6:
@@ -220,14 +221,16 @@ def main() -> int:
     rclpy.try_shutdown(context=context)
 
     lat = np.array(latencies) if latencies else np.array([np.nan])
-    rss = np.array([m for _, m in memory])
+    rss = np.array([m for _, m, _ in memory])
+    node_rss = np.array([m for _, _, m in memory])
     result = {
         "minutes": args.minutes, "date": time.strftime("%Y-%m-%d"), "sent": counts,
         "good_scenes_sent": counts["good"] + 20 * counts["flood"], "answers": answers,
         "answered_distinct_scenes": len(latencies), "node_alive_until_the_end": alive_at_end,
         "latency_s": {f"p{q}": float(np.percentile(lat, q)) for q in (50, 90, 99)} | {"max": float(lat.max())},
         "rss_mb": {"first": float(rss[0]), "last": float(rss[-1]), "max": float(rss.max()),
-                   "samples": [[round(t, 1), round(m, 1)] for t, m in memory]},
+                   "node_first": float(node_rss[0]), "node_last": float(node_rss[-1]),
+                   "samples": [[round(t, 1), round(m, 1), round(n, 1)] for t, m, n in memory]},
         "diagnostics_at_end": diagnostics[0] if diagnostics else None,
         "sigint_exit_s": exit_s, "exit_code": code, "processes_left": left,
     }
@@ -247,6 +250,7 @@ def main() -> int:
           f"| latency send -> answer, s | p50 {result['latency_s']['p50']:.2f}, p90 {result['latency_s']['p90']:.2f}, "
           f"p99 {result['latency_s']['p99']:.2f}, max {result['latency_s']['max']:.2f} |",
           f"| resident memory (node + workers), MB | first {rss[0]:.0f}, last {rss[-1]:.0f}, max {rss.max():.0f} |",
+          f"| resident memory (node process alone), MB | first {node_rss[0]:.0f}, last {node_rss[-1]:.0f} |",
           f"| SIGINT -> exit | {exit_s:.2f} s, exit code {code}, processes left: {len(left)} |", ""]
     (out / "soak.md").write_text("\n".join(md))
     print("\n".join(md))

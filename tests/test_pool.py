@@ -9,6 +9,10 @@ import pytest
 from ipe_ros.engine import WorkerPool
 
 
+def _square(x: int) -> int:
+    return x * x
+
+
 def square_or_die_once(args):
     """Kills its worker the first time it sees item 3 (a marker file remembers)."""
     value, marker = args
@@ -103,3 +107,14 @@ def test_workers_end_by_themselves_when_their_owner_is_killed(tmp_path):
     while any(Path(f"/proc/{pid}").exists() for pid in pids):
         assert time.monotonic() < deadline, f"workers {pids} outlived their owner"
         time.sleep(0.05)
+
+
+def test_workers_are_renewed_between_maps_after_their_share_of_items():
+    """pybullet leaks native memory (its MLCP solver): fresh workers bound it, never mid-map."""
+    with WorkerPool(2, max_tasks_per_worker=3) as pool:
+        first = pool.warm()
+        assert pool.map(_square, range(4)) == [0, 1, 4, 9]
+        assert pool.map(_square, range(4)) == [0, 1, 4, 9]  # ran whole: 8 items, beyond 3 per worker
+        assert pool.recycles == 0 and pool.worker_pids() == first
+        assert pool.map(_square, range(3)) == [0, 1, 4]  # renewed before this map
+        assert pool.recycles == 1 and not set(pool.worker_pids()) & set(first)

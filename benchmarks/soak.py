@@ -217,6 +217,7 @@ def main() -> int:
     left = [pid for pid in family if Path(f"/proc/{pid}").exists()
             and Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"]
     executor.shutdown()
+    spinner.join(timeout=10.0)  # the spin thread must leave rcl before the context goes (else std::terminate)
     client.destroy_node()
     rclpy.try_shutdown(context=context)
 

@@ -322,13 +322,3 @@ def test_questions_on_ask_are_answered_on_answer_with_their_id(ros, tower, tmp_p
     pushed = by_id["r2"]["answer"]["variants"][1]
     assert pushed["label"] == "push/bottom" and pushed["object_fall_probability"]["top"] == 1.0
 
-
-
-def test_a_best_effort_scene_publisher_is_answered_as_a_reliable_one_is(ros, tower):
-    from rclpy.qos import qos_profile_sensor_data
-
-    ros.start_ipe_node(**FAST)
-    got = answers(ros)
-    ros.publisher(MarkerArray, "/ipe/scene", qos_profile_sensor_data).publish(scene_to_markers(tower, "world"))
-    wait_until(lambda: len(got), TIMEOUT_S, "an answer to a scene from a best-effort (sensor data) publisher")
-    assert got[0]["scene_id"] == tower.name

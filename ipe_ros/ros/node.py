@@ -40,10 +40,6 @@ from .diagnostics import diagnostics_msg
 #: Outputs are "latched": reliable + transient-local, depth 1, so a late joiner gets the latest answer.
 LATCHED_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
-#: Scenes: best effort, so that sensor-style (best-effort) publishers match as well as reliable ones
-#: (a best-effort reader matches both); a lost scene is replaced by the next one anyway (keep-latest).
-SCENE_QOS = QoSProfile(depth=5, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.BEST_EFFORT)
-#: Questions are requests: reliable, each one answered.
 INPUT_QOS = QoSProfile(depth=5, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
 DIAGNOSTICS_PERIOD_S = 1.0
 
@@ -77,8 +73,8 @@ class IpeNode(Node):
         # Inputs, the service and diagnostics in separate groups: a service call waiting for its
         # answer never holds up scene intake or the 1 Hz health report (with a multi-threaded executor).
         inputs = MutuallyExclusiveCallbackGroup()
-        self.create_subscription(MarkerArray, "~/scene", self._on_markers, SCENE_QOS, callback_group=inputs)
-        self.create_subscription(String, "~/scene_json", self._on_scene_json, SCENE_QOS, callback_group=inputs)
+        self.create_subscription(MarkerArray, "~/scene", self._on_markers, INPUT_QOS, callback_group=inputs)
+        self.create_subscription(String, "~/scene_json", self._on_scene_json, INPUT_QOS, callback_group=inputs)
         self.create_subscription(String, "~/ask", self._on_ask, INPUT_QOS, callback_group=inputs)
         self.create_service(Trigger, "~/predict", self._on_predict, callback_group=MutuallyExclusiveCallbackGroup())
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics,

@@ -34,6 +34,11 @@ from .engine.sampler import check_request
 from .engine.scene import DEFAULT_MAX_OBJECTS
 
 
+def _file_safe(text: str, limit: int) -> str:
+    """``text`` as a file-name part: letters, digits, - _ . kept, anything else _."""
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in text)[:limit]
+
+
 @dataclass(frozen=True)
 class ServiceConfig:
     """Everything a prediction depends on besides the scene; replaced as a whole on updates.
@@ -435,7 +440,7 @@ class PredictionService:
         from .viz import rerun_log  # imported on first use: rerun is only needed when logging
 
         item = answer.source
-        safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in item.scene_id)[:80]
+        safe = _file_safe(item.scene_id, 80)
         with self._cond:
             self._recordings += 1  # one file per prediction, also when a scene is predicted again
             number = self._recordings
@@ -549,7 +554,7 @@ class QuestionService:
     def _write_rrd(self, config: ServiceConfig, question, source: StampedScene, answers) -> str | None:
         from .viz import rerun_log  # only needed when recording
 
-        safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in question.request_id)[:60] or "question"
+        safe = _file_safe(question.request_id, 60) or "question"
         self._recordings += 1
         path = Path(config.rerun_save_dir) / f"ask_{self._recordings:06d}_{question.kind}_{safe}.rrd"
         try:

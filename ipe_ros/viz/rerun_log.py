@@ -101,6 +101,27 @@ def log_scene(rec: rr.RecordingStream, scene: Scene) -> None:
     _log_bodies(rec, "world/scene/objects", dynamic, [group_rgb(b.group) for b in dynamic])
 
 
+def _log_trajectory(rec: rr.RecordingStream, base: str, bodies, trajectory: list, fallen, stamp_ns: int | None) -> None:
+    """One rollout's bodies under ``base``/<name>, all frames at once; red where the body fell.
+    ``bodies`` follow the trajectory's order (None: a body not to draw)."""
+    times = np.array([frame[0] for frame in trajectory])
+    positions = np.stack([frame[1] for frame in trajectory])      # (frames, bodies, 3)
+    orientations = np.stack([frame[2] for frame in trajectory])   # (frames, bodies, 4)
+    indexes = [rr.TimeColumn("sim_time", duration=times)]
+    if stamp_ns is not None:
+        indexes.append(rr.TimeColumn("ros_stamp", timestamp=np.full(len(times), stamp_ns, dtype="datetime64[ns]")))
+    for b, body in enumerate(bodies):
+        if body is None:
+            continue
+        path = f"{base}/{_part(body.name)}"
+        fell = fallen is not None and bool(fallen[b])
+        # trajectories hold centres of mass: the shape is drawn about it, moved by a transform
+        rec.log(path, shape_archetype(body, FELL_RGB if fell else group_rgb(body.group),
+                                      about_centre_of_mass=True), static=True)
+        rec.send_columns(path, indexes=indexes,
+                         columns=rr.Transform3D.columns(translation=positions[:, b], quaternion=orientations[:, b]))
+
+
 def log_rollouts(rec: rr.RecordingStream, scene: Scene, prediction: Prediction, stamp_ns: int,
                  limit: int) -> int:
     """Recorded trajectories of up to ``limit`` samples; returns how many rollouts were logged."""
@@ -114,20 +135,7 @@ def log_rollouts(rec: rr.RecordingStream, scene: Scene, prediction: Prediction, 
         several = len(outcome.rollouts) > 1
         for j, rollout in enumerate(outcome.rollouts):
             base = f"world/rollouts/{outcome.index}" + (f"-phi{j}" if several else "")
-            times = np.array([frame[0] for frame in rollout.trajectory])
-            positions = np.stack([frame[1] for frame in rollout.trajectory])      # (frames, boxes, 3)
-            orientations = np.stack([frame[2] for frame in rollout.trajectory])   # (frames, boxes, 4)
-            indexes = [rr.TimeColumn("sim_time", duration=times),
-                       rr.TimeColumn("ros_stamp", timestamp=np.full(len(times), stamp_ns, dtype="datetime64[ns]"))]
-            for b, body in enumerate(boxes):
-                path = f"{base}/{_part(body.name)}"
-                fell = rollout.fallen is not None and bool(rollout.fallen[b])
-                # trajectories hold centres of mass: the shape is drawn about it, moved by a transform
-                rec.log(path, shape_archetype(body, FELL_RGB if fell else group_rgb(body.group),
-                                              about_centre_of_mass=True), static=True)
-                rec.send_columns(path, indexes=indexes,
-                                 columns=rr.Transform3D.columns(translation=positions[:, b],
-                                                                quaternion=orientations[:, b]))
+            _log_trajectory(rec, base, boxes, rollout.trajectory, rollout.fallen, stamp_ns)
         logged += 1
     return logged
 
@@ -232,21 +240,8 @@ def write_question_rrd(path: str | Path, scene: Scene, answers, *, stamp_ns: int
                                                                 media_type="text/markdown"), static=True)
         for label, samples in answers.recorded.items():
             for index, result in samples:
-                times = np.array([frame[0] for frame in result.trajectory])
-                positions = np.stack([frame[1] for frame in result.trajectory])
-                orientations = np.stack([frame[2] for frame in result.trajectory])
-                indexes = [rr.TimeColumn("sim_time", duration=times)]
-                for b, name in enumerate(result.names):
-                    body = bodies.get(name)
-                    if body is None:
-                        continue
-                    path_b = f"world/{entity(label)}/sample_{index}/{_part(name)}"
-                    fell = result.fallen is not None and bool(result.fallen[b])
-                    rec.log(path_b, shape_archetype(body, FELL_RGB if fell else group_rgb(body.group),
-                                                    about_centre_of_mass=True), static=True)
-                    rec.send_columns(path_b, indexes=indexes,
-                                     columns=rr.Transform3D.columns(translation=positions[:, b],
-                                                                    quaternion=orientations[:, b]))
+                _log_trajectory(rec, f"world/{entity(label)}/sample_{index}", [bodies.get(n) for n in result.names],
+                                result.trajectory, result.fallen, None)
                 logged += 1
         rec.flush()
     finally:

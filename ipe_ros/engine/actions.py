@@ -32,7 +32,7 @@ from .config import ModelConfig, QuerySpec, SimSettings, SolverSettings
 from .errors import BudgetExceeded, ConfigError, PhysicsError
 from .estimate import wilson_interval, circular_mean
 from .perturb import draw_sample_inputs, position_sigmas_m
-from .rollout import SampleTask, _decided_heights, _smallest_extents
+from .rollout import SampleTask, _decided_heights, collapse_heights, separated_world
 from .sampler import MapFn, check_budget, rollout_cost
 from .scene import Body, Scene, lowest_z_m, validate_scene
 from .shapes import rotation_matrix
@@ -195,9 +195,7 @@ def _simulate_variant(task: VariantTask, scene: Scene, positions, orientations, 
         simulation.depenetrate(world, task.settings)
     initial, initial_orn = simulation.read_poses(world)
     decided = _decided_heights(sub, initial)
-    collapse_below = None
-    if task.settings.collapse.enabled:
-        collapse_below = initial[:, 2] - task.settings.collapse.drop_fraction * _smallest_extents(sub)
+    collapse_below = collapse_heights(sub, initial)
     end = None
     for i, phi in enumerate(task.model.phi_m_s2):
         if i > 0:
@@ -218,11 +216,7 @@ def run_variants(task: VariantTask) -> list[VariantResult]:
     rng = np.random.default_rng(task.seed)
     inputs = draw_sample_inputs(task.scene, task.model, rng)
     try:
-        separation = task.settings.changed(solver={"maximal_coordinates": True})
-        world = simulation.build_world(task.scene, inputs.positions_m, inputs.masses_kg, separation,
-                                       orientations_xyzw=inputs.orientations_xyzw)
-        simulation.depenetrate(world, separation)
-        shared, shared_orn = simulation.read_poses(world)
+        shared, shared_orn = simulation.read_poses(separated_world(task.scene, task.settings, inputs))
     except PhysicsError as exc:
         return [VariantResult(names, None, None, f"PhysicsError: {exc}") for _ in task.actions]
     results = []

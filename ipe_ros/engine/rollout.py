@@ -135,6 +135,27 @@ def _never_falls(task: SampleTask, decided_below_z: np.ndarray) -> np.ndarray | 
     return decided_below_z < lowest_surface_z + lowest_rest - 0.05 * smallest
 
 
+def separated_world(scene: Scene, settings, inputs, probe: Probe = NO_PROBE) -> simulation.World:
+    """A sample's noisy scene built and de-penetrated. Separated in the same body representation
+    whatever the preset, so that every preset starts from bit-identical initial scenes (the two
+    representations round differently); plain rigid bodies are the default's own, so it simulates
+    on in this world."""
+    separation = settings.changed(solver={"maximal_coordinates": True})
+    with probe.part("build"):
+        world = simulation.build_world(scene, inputs.positions_m, inputs.masses_kg, separation,
+                                       orientations_xyzw=inputs.orientations_xyzw)
+    with probe.part("depenetrate"):
+        simulation.depenetrate(world, separation)
+    return world
+
+
+def collapse_heights(task: SampleTask, initial: np.ndarray) -> np.ndarray | None:
+    """Per body, the height below which the collapse steps start (None: the preset has none)."""
+    if not task.settings.collapse.enabled:
+        return None
+    return initial[:, 2] - task.settings.collapse.drop_fraction * _smallest_extents(task)
+
+
 def _cut_off(task: SampleTask, push_direction_rad: float, why: str) -> SampleOutcome:
     return SampleOutcome(index=task.index, ok=False, error=f"BudgetExceeded: {why}",
                          push_direction_rad=push_direction_rad, initial_positions_m=None,
@@ -151,20 +172,10 @@ def run_sample(task: SampleTask, probe: Probe = NO_PROBE) -> SampleOutcome:
     rng = np.random.default_rng(task.seed)
     inputs = draw_sample_inputs(task.scene, task.model, rng)
     try:
-        # Separate in the same body representation whatever the preset, so that every preset starts
-        # from bit-identical initial scenes (the two representations round differently). Plain rigid
-        # bodies are the default's own, so it simulates on in the separated world.
-        separation = task.settings.changed(solver={"maximal_coordinates": True})
-        with probe.part("build"):
-            world = simulation.build_world(task.scene, inputs.positions_m, inputs.masses_kg, separation,
-                                           orientations_xyzw=inputs.orientations_xyzw)
-        with probe.part("depenetrate"):
-            simulation.depenetrate(world, separation)
+        world = separated_world(task.scene, task.settings, inputs, probe)
         initial, initial_orn = simulation.read_poses(world)
         decided = _decided_heights(task, initial)
-        collapse_below_z = None
-        if task.settings.collapse.enabled:
-            collapse_below_z = initial[:, 2] - task.settings.collapse.drop_fraction * _smallest_extents(task)
+        collapse_below_z = collapse_heights(task, initial)
         results = []
         for i, phi in enumerate(task.model.phi_m_s2):
             if i > 0 or not task.settings.solver.maximal_coordinates:  # a fresh world from the separated state

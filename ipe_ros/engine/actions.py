@@ -338,21 +338,37 @@ def _geometry_world(scene: Scene):
                                   np.array([max(b.resolved_mass_kg, 1e-6) for b in bodies]), _GEOMETRY_SETTINGS)
 
 
-def resting_on(scene: Scene, margin_m: float = 0.0) -> dict[str, set[str]]:
-    """name -> the dynamic objects that may rest or lean on it, in the scene as given (no noise):
-    they touch it (within ``margin_m``) and their centre of mass is above its lowest point.
-    Deliberately generous (a plank leaning on a post's side counts), since it decides what need not
-    be simulated."""
+@dataclass(frozen=True)
+class Contacts:
+    """Which dynamic objects of a scene touch (within a margin), and their bounding boxes: one
+    geometry pass that ``resting_on`` and ``groups`` both read."""
+
+    bodies: tuple[Body, ...]
+    pairs: tuple[tuple[int, int], ...]  # indices into bodies
+    boxes: tuple[np.ndarray, ...]  # (2, 3) axis-aligned bounds per body
+
+
+def contacts(scene: Scene, margin_m: float = 0.0) -> Contacts:
     bodies = scene.dynamic_objects
     world = _geometry_world(scene)
     p = simulation.world.pybullet()
-    by_id = dict(zip(world.dynamic_ids, bodies))
-    out: dict[str, set[str]] = {b.name: set() for b in bodies}
     reach = margin_m + 0.01 * world.scale_m
-    for a, b in itertools.combinations(world.dynamic_ids, 2):
-        if not p.getClosestPoints(a, b, reach, physicsClientId=world.client):
-            continue
-        body_a, body_b = by_id[a], by_id[b]
+    pairs = tuple((i, j) for (i, a), (j, b) in itertools.combinations(enumerate(world.dynamic_ids), 2)
+                  if p.getClosestPoints(a, b, reach, physicsClientId=world.client))
+    boxes = tuple(np.array(p.getAABB(h, physicsClientId=world.client)) for h in world.dynamic_ids)
+    return Contacts(bodies, pairs, boxes)
+
+
+def resting_on(scene: Scene, margin_m: float = 0.0, touching: Contacts | None = None) -> dict[str, set[str]]:
+    """name -> the dynamic objects that may rest or lean on it, in the scene as given (no noise):
+    they touch it (within ``margin_m``) and their centre of mass is above its lowest point.
+    Deliberately generous (a plank leaning on a post's side counts), since it decides what need not
+    be simulated. ``touching``: the scene's contacts, when already found."""
+    touching = touching or contacts(scene, margin_m)
+    bodies = touching.bodies
+    out: dict[str, set[str]] = {b.name: set() for b in bodies}
+    for i, j in touching.pairs:
+        body_a, body_b = bodies[i], bodies[j]
         if body_a.centre_of_mass_m[2] > lowest_z_m(body_b):
             out[body_b.name].add(body_a.name)
         if body_b.centre_of_mass_m[2] > lowest_z_m(body_a):
@@ -360,15 +376,13 @@ def resting_on(scene: Scene, margin_m: float = 0.0) -> dict[str, set[str]]:
     return out
 
 
-def groups(scene: Scene, margin_m: float = 0.0) -> list[frozenset[str]]:
+def groups(scene: Scene, margin_m: float = 0.0, touching: Contacts | None = None) -> list[frozenset[str]]:
     """The dynamic objects in groups that cannot affect each other within a rollout: objects that
     touch (within ``margin_m``) are one group, and groups closer to each other horizontally than
     the taller one's height are merged, since it could topple onto the other."""
-    bodies = scene.dynamic_objects
-    world = _geometry_world(scene)
-    p = simulation.world.pybullet()
-    names = [b.name for b in bodies]
-    parent = list(range(len(bodies)))
+    touching = touching or contacts(scene, margin_m)
+    names = [b.name for b in touching.bodies]
+    parent = list(range(len(names)))
 
     def root(i: int) -> int:
         while parent[i] != i:
@@ -376,15 +390,13 @@ def groups(scene: Scene, margin_m: float = 0.0) -> list[frozenset[str]]:
             i = parent[i]
         return i
 
-    reach = margin_m + 0.01 * world.scale_m
-    for (i, a), (j, b) in itertools.combinations(enumerate(world.dynamic_ids), 2):
-        if p.getClosestPoints(a, b, reach, physicsClientId=world.client):
-            parent[root(i)] = root(j)
-    boxes = [np.array(p.getAABB(h, physicsClientId=world.client)) for h in world.dynamic_ids]
+    for i, j in touching.pairs:
+        parent[root(i)] = root(j)
+    boxes = touching.boxes
     ground = scene.support.top_m
     while True:
         members: dict[int, list[int]] = {}
-        for i in range(len(bodies)):
+        for i in range(len(names)):
             members.setdefault(root(i), []).append(i)
         bounds = {r: (np.min([boxes[i][0] for i in m], axis=0), np.max([boxes[i][1] for i in m], axis=0))
                   for r, m in members.items()}
@@ -441,7 +453,8 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     for i, action in enumerate(actions):
         _check_action(scene, action, f"actions[{i}]")
     margin = 3 * float(position_sigmas_m(scene, model).max(initial=0.0))  # noise can close gaps this wide
-    resting = resting_on(scene, margin_m=margin)
+    touching = contacts(scene, margin)  # one geometry pass for what rests on what and the groups
+    resting = resting_on(scene, margin, touching)
     moving = any(b.moving for b in scene.dynamic_objects)
     trivial = [isinstance(a, Remove) and not moving and not set().union(*(dependents(resting, n) for n in a.names))
                for a in actions]
@@ -454,7 +467,7 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
             raise ConfigError("budget_s", f"one sample of these {len(simulated_actions)} variants takes up to "
                                           f"~{cost.seconds * len(simulated_actions):.3g} s, more than the budget of "
                                           f"{budget_s:g} s; ask fewer variants or raise the budget")
-    regions = _regions(scene, simulated_actions, margin)
+    regions = _regions(scene, simulated_actions, margin, touching)
     query = QuerySpec(queries=frozenset({"fall", "direction"} if directions else {"fall"}),
                       fall_threshold_fraction=fall_threshold_fraction)
     k = model.samples if not model.is_deterministic else 1
@@ -514,7 +527,8 @@ def _caused(per_sample: list[list[VariantResult]], variant: int, as_is: int) -> 
     return {n: c / len(pairs) for n, c in counts.items()}
 
 
-def _regions(scene: Scene, actions: list[Action], margin_m: float) -> tuple[frozenset[str] | None, ...]:
+def _regions(scene: Scene, actions: list[Action], margin_m: float,
+             touching: Contacts) -> tuple[frozenset[str] | None, ...]:
     """Per action, the groups of objects it can affect (None: the whole scene)."""
     everything = frozenset(b.name for b in scene.dynamic_objects)
     scene_groups = None
@@ -522,7 +536,7 @@ def _regions(scene: Scene, actions: list[Action], margin_m: float) -> tuple[froz
     for action in actions:
         region = None
         if isinstance(action, Remove):
-            scene_groups = scene_groups or groups(scene, margin_m)
+            scene_groups = scene_groups or groups(scene, margin_m, touching)
             region = frozenset().union(*(g for g in scene_groups if g & set(action.names)))
         elif isinstance(action, Place):
             with_it = dataclasses.replace(scene, objects=scene.objects + (action.body,))

@@ -15,7 +15,6 @@ Common options: --scene NAME (a file holding several), --samples K (default 16),
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import math
 import os
@@ -23,7 +22,6 @@ import os
 from .engine import ConfigError, ModelConfig, WorkerPool, load_scenes, preset
 from .engine import actions as A
 from .engine.config import DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_SIGMA_M, PRESETS
-from .engine.scene_io import object_from_dict
 
 #: Samples per variant: a question has many variants, and common random numbers make k = 16 enough
 #: to rank them (the paper's k = 48 is for one judgment).
@@ -184,30 +182,19 @@ def _place(args, scene, model, settings, kw, emit) -> None:
         data = json.loads(args.object)
     except json.JSONDecodeError as exc:
         raise ConfigError("--object", f"not JSON ({exc.msg} at column {exc.colno})") from None
-    data.setdefault("position_m", [0.0, 0.0, 0.0])
-    data.setdefault("orientation_xyzw", [0.0, 0.0, 0.0, 1.0])
-    body = object_from_dict(data, "--object")
+    body = A.new_object_from_dict(data, "--object")
     if (args.at is None) == (args.region is None):
         raise ConfigError("--at", "give candidate spots with --at, or a --region to search (not both)")
     if args.region is not None:
         x0, x1, y0, y1 = args.region
         region = A.Region((x0, x1), (y0, y1), (math.radians(args.yaw[0]), math.radians(args.yaw[1])))
-        ranked, answers = A.best_place(scene, body, region, model, settings, candidates=args.candidates,
-                                       yaws=args.yaws, **kw)
-        rows = [(b, v) for b, v in ranked]
+        rows, answers = A.best_place(scene, body, region, model, settings, candidates=args.candidates,
+                                     yaws=args.yaws, **kw)
     else:
-        bodies = []
-        for spot in args.at:
-            yaw = math.radians(spot[2]) if len(spot) == 3 else 0.0
-            q = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
-            z = A.resting_height_m(scene, body, spot[0], spot[1], q)
-            bodies.append(dataclasses.replace(body, position_m=(spot[0], spot[1], z), orientation_xyzw=q))
-        answers = A.place(scene, bodies, model, settings, **kw)
-        rows = list(zip(bodies, answers.variants[1:]))
+        spots = [(s[0], s[1], math.radians(s[2]) if len(s) == 3 else 0.0) for s in args.at]
+        rows, answers = A.place_at(scene, body, spots, model, settings, **kw)
     if emit:
-        emit({"scene": scene.name, "as_is": answers.variants[0].to_dict(),
-              "candidates": [{"position_m": list(b.position_m), "orientation_xyzw": list(b.orientation_xyzw),
-                              **v.to_dict()} for b, v in rows]})
+        emit(A.placements_to_dict(scene, rows, answers))
         return answers
     print(f"{'x m':>8} {'y m':>8} {'z m':>8} {'yaw deg':>8} {'P(any falls)':>12} {'95% interval':>15}")
     for b, v in rows:

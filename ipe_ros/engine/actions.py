@@ -762,8 +762,6 @@ def question_from_dict(data) -> Question:
          "point_m": [x, y, z], "direction_sigma_deg": 0, "speed_sigma": 0}
         any of them: "samples": k
     """
-    from .scene_io import object_from_dict
-
     if not isinstance(data, dict):
         raise ConfigError("question", "must be a JSON object with a \"question\" field")
     kind = data.get("question")
@@ -803,11 +801,7 @@ def question_from_dict(data) -> Question:
         if push.name is None:
             raise ConfigError("object", "name the object to push")
         return Question(push=push, **common)
-    body_data = data.get("object")
-    if not isinstance(body_data, dict):
-        raise ConfigError("object", "must be the new object in the scene format (/2)")
-    body_data = {"position_m": [0.0, 0.0, 0.0], "orientation_xyzw": [0.0, 0.0, 0.0, 1.0], **body_data}
-    body = object_from_dict(body_data, "object")
+    body = new_object_from_dict(data.get("object"), "object")
     at, region = data.get("at"), data.get("region")
     if (at is None) == (region is None):
         raise ConfigError("at", "give candidate spots in \"at\" or a \"region\" to search (one of them)")
@@ -857,14 +851,34 @@ def answer_question(scene: Scene, question: Question, model: ModelConfig, settin
         rows, answers = best_place(scene, question.body, question.region, model, settings,
                                    candidates=question.candidates, yaws=question.yaws, **kw)
     else:
-        bodies = []
-        for x, y, yaw in question.spots:
-            q = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
-            z = resting_height_m(scene, question.body, x, y, q)
-            bodies.append(dataclasses.replace(question.body, position_m=(x, y, z), orientation_xyzw=q))
-        answers = place(scene, bodies, model, settings, **kw)
-        rows = list(zip(bodies, answers.variants[1:]))
+        rows, answers = place_at(scene, question.body, question.spots, model, settings, **kw)
+    return placements_to_dict(scene, rows, answers), answers
+
+
+def place_at(scene: Scene, body: Body, spots, model: ModelConfig, settings: SimSettings,
+             **kw) -> tuple[list[tuple[Body, VariantAnswer]], Answers]:
+    """``place`` at each (x, y, yaw_rad) spot, the body lowered onto what is below it there."""
+    bodies = []
+    for x, y, yaw in spots:
+        q = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+        bodies.append(dataclasses.replace(body, position_m=(x, y, resting_height_m(scene, body, x, y, q)),
+                                          orientation_xyzw=q))
+    answers = place(scene, bodies, model, settings, **kw)
+    return list(zip(bodies, answers.variants[1:])), answers
+
+
+def placements_to_dict(scene: Scene, rows: list[tuple[Body, VariantAnswer]], answers: Answers) -> dict:
+    """A placement question's JSON answer: the scene as is, then each candidate pose with its answer."""
     return {"scene": scene.name, "as_is": answers.variants[0].to_dict(), "wall_s": answers.wall_s,
             "stopped_by": answers.stopped_by,
             "candidates": [{"position_m": list(b.position_m), "orientation_xyzw": list(b.orientation_xyzw),
-                            **v.to_dict()} for b, v in rows]}, answers
+                            **v.to_dict()} for b, v in rows]}
+
+
+def new_object_from_dict(data, path: str) -> Body:
+    """An object to place, in the scene format; its pose may be left out (the spot gives it)."""
+    from .scene_io import object_from_dict
+
+    if not isinstance(data, dict):
+        raise ConfigError(path, "must be the new object in the scene format (/2)")
+    return object_from_dict({"position_m": [0.0, 0.0, 0.0], "orientation_xyzw": [0.0, 0.0, 0.0, 1.0], **data}, path)

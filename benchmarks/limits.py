@@ -17,7 +17,6 @@ Ranges are checked by ``validate_scene``, so this script builds the scenes past 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import os
 import time

@@ -2,7 +2,7 @@
 
     ipe predict PATH [--tower NAME ...] [--query fall,any_fall,direction,far,bump] [--samples K] [--sigma M]
                 [--phi A[,A...]] [--force-direction DEG] [--mu R] [--preset NAME] [--seed N]
-                [--workers W] [--ci-width W] [--deadline S] [--horizon S] [--until-rest] [--budget S] [--json]
+                [--workers W] [--ci-width W] [--deadline S] [--horizon S] [--until-rest] [--budget S] [--json] [--png FILE]
     ipe ask remove|support|clear|place|push PATH ...   (questions about an action: ipe_ros/cli_ask.py)
     ipe generate tower --count N --seed S -o FILE [--pairs RATIO]
     ipe generate table --configurations N --seed S -o FILE
@@ -30,6 +30,7 @@ import numpy as np
 
 from .engine import (ALL_QUERIES, PRESETS, AdaptiveStop, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError,
                      WorkerPool, load_scenes, parse_queries, predict, preset)
+from .progress import steps
 from .engine.config import (DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M,
                             anytime_batch_size)
 from .cli_ask import add_ask_parser, cmd_ask
@@ -114,6 +115,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"compute budget per prediction in seconds (default {DEFAULT_BUDGET_S:g}): samples still "
                         "running then are cut off (stopped_by: budget); scenes whose one rollout cannot fit are refused")
     p.add_argument("--json", action="store_true", help="one JSON object per scene per line")
+    p.add_argument("--png", default=None, metavar="FILE",
+                   help="also draw the answer: the scene coloured by fall probability and three sampled rollouts "
+                        "(one scene only)")
 
     add_ask_parser(sub, _finite, _OneLineParser)
 
@@ -201,7 +205,7 @@ def _run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: in
     if stop is not None:
         stop = dataclasses.replace(stop, batch_size=anytime_batch_size(workers))
     try:
-        for scene in scenes:
+        for scene in steps(scenes, "predict") if len(scenes) > 1 else scenes:
             emit(predict(scene, model, sim, query, seed=seed, map_fn=pool.map if pool else None, stop=stop,
                          budget_s=budget_s))
     finally:
@@ -230,20 +234,27 @@ def cmd_predict(args) -> int:
         check_budget(args.budget)
     except ConfigError as exc:
         raise ConfigError("--budget", exc.problem) from None
+    if args.png is not None and len(scenes) != 1:
+        raise ConfigError("--png", f"draws one scene, but {args.path} holds {len(scenes)}; choose one with --tower")
     for scene in scenes:  # reject what cannot be answered before printing anything
         try:
             check_request(scene, query, model=model, settings=sim, budget_s=args.budget)
         except ConfigError as exc:
             raise ConfigError(f"--budget ({scene.name})" if exc.field == "budget_s" else exc.field, exc.problem) from None
+    collected: list[Prediction] = []
     if args.json:
         _run_predictions(scenes, model, sim, query, args.seed, args.workers,
-                         lambda p: print(prediction_json(p), flush=True), stop, args.budget)
+                         lambda p: (collected.append(p), print(prediction_json(p), flush=True)), stop, args.budget)
     else:
-        collected: list[Prediction] = []
         print(f"sigma = {sigma:g} m, phi = {','.join(f'{v:g}' for v in phi)} m/s^2, mu = {args.mu}, "
               f"k = {1 if model.is_deterministic else args.samples}, preset = {sim.name}, seed = {args.seed}")
         _run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append, stop, args.budget)
         print(format_table(collected))
+    if args.png is not None:
+        from .viz.figure import draw_prediction
+
+        draw_prediction(args.png, scenes[0], collected[0])
+        print(f"wrote {args.png}", file=sys.stderr)
     return 0
 
 

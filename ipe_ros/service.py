@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import importlib
 import threading
 import time
 import traceback
@@ -29,7 +30,7 @@ from typing import Any, Callable
 
 from .engine import AdaptiveStop, ModelConfig, Prediction, QuerySpec, Scene, SimSettings, WorkerPool, predict, preset
 from .engine.config import DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES
-from .engine.errors import clip
+from .engine.errors import SceneError, clip, shown
 from .engine.sampler import check_request
 from .engine.scene import DEFAULT_MAX_OBJECTS
 
@@ -62,6 +63,7 @@ class ServiceConfig:
     rerun_connect_url: str | None = None
     stop: AdaptiveStop | None = None  # anytime sampling (deadline / interval width), None: all k
     budget_s: float = DEFAULT_BUDGET_S  # wall seconds a prediction may take (see engine.predict)
+    gravity_aligned_frames: tuple[str, ...] = ()  # frames whose -z is gravity; () trusts every frame
 
 
 @dataclass(frozen=True)
@@ -109,6 +111,13 @@ def error_answer(source: StampedScene, error: str) -> dict[str, Any]:
     sec, nanosec = divmod(source.stamp_ns, 1_000_000_000)
     return {"error": error, "scene": source.scene.name, "scene_id": source.scene_id, "scene_seq": source.seq,
             "stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": source.frame_id}
+
+
+def _load_rerun_if_recording(config: ServiceConfig) -> None:
+    """Import rerun when recording is (switched) on, not on the first answer (the import takes ~0.4 s);
+    without recording rerun is never imported."""
+    if config.rerun_save_dir is not None or config.rerun_connect_url is not None:
+        importlib.import_module(".viz.rerun_log", __package__)
 
 
 #: How many recent inputs and predictions the health level looks back on.
@@ -201,6 +210,7 @@ class PredictionService:
         self._recordings = 0
         self._last_error: str | None = None
         self._thread = threading.Thread(target=self._run, name="ipe-prediction", daemon=True)
+        _load_rerun_if_recording(config)
 
     # -- lifecycle -----------------------------------------------------------------------------
     def start(self) -> None:
@@ -233,6 +243,7 @@ class PredictionService:
 
     def update_config(self, config: ServiceConfig) -> None:
         """Applies to the next prediction (the one in flight keeps the config it started with)."""
+        _load_rerun_if_recording(config)
         with self._cond:
             self._config = config
             self._version += 1
@@ -242,9 +253,18 @@ class PredictionService:
             self._seq += 1
             return self._seq
 
-    def check(self, scene: Scene) -> None:
-        """Raise SceneError/ConfigError if the current config cannot answer this scene."""
+    def check(self, scene: Scene, frame_id: str | None = None, frame_field: str = "frame_id") -> None:
+        """Raise SceneError/ConfigError if the current config cannot answer this scene (in this frame).
+
+        The physics takes the frame's -z axis as gravity: a scene in a frame not known to be
+        gravity-aligned would be answered wrongly, so it is refused (``frame_field`` names where the
+        frame came from)."""
         config = self._config
+        frames = config.gravity_aligned_frames
+        if frame_id is not None and frames and frame_id not in frames:
+            raise SceneError(frame_field, f"{shown(frame_id)} is not a gravity-aligned frame ({', '.join(frames)}); "
+                                          "transform the scene into one of them, or add the frame to the "
+                                          "gravity_aligned_frames parameter if its -z axis is gravity")
         check_request(scene, config.query, config.max_objects, model=config.model, settings=config.settings,
                       budget_s=config.budget_s)
 

@@ -12,14 +12,14 @@ from ipe_ros.engine import Prediction
 from .stamps import stamp_ns_to_header
 
 
-def fall_probability_msg(prediction: Prediction) -> Float64 | None:
-    """Expected fraction of the dynamic boxes that fall; None when the ``fall`` query was not asked."""
+def fall_fraction_msg(prediction: Prediction) -> Float64 | None:
+    """Expected fraction of the dynamic objects that fall; None when the ``fall`` query was not asked."""
     if prediction.fall_fraction is None:
         return None
     return Float64(data=float(prediction.fall_fraction))
 
 
-def any_fall_probability_msg(prediction: Prediction) -> Float64 | None:
+def fall_probability_msg(prediction: Prediction) -> Float64 | None:
     """Probability that anything falls; None when the ``any_fall`` query was not asked."""
     if prediction.any_fall_probability is None:
         return None

@@ -95,3 +95,9 @@ def test_a_heavy_bouncy_cylinder_on_a_light_one_gains_no_energy():
     model = ModelConfig(sigma_m=0.05 * min(b.smallest_extent_m for b in scene.objects), samples=4)
     prediction = predict(scene, model, preset("default"), QUERY)
     assert prediction.max_energy_gain_j <= MAX_ENERGY_GAIN * energy_scale_j(scene)
+
+
+def test_the_catalogue_only_draws_scenes_the_engine_accepts():
+    """A thrown body used to be drawn outside the others' mass ratio (seed 3, scene 23 was 1001:1)."""
+    for seed in range(6):
+        assert len(scene_catalogue(seed, 40)) == 40  # validate_scene raises on any refused scene

@@ -101,3 +101,33 @@ def test_ask_support_clear_place_push_on_the_command_line(tmp_path, capsys):
     assert "push/bottom" in capsys.readouterr().out
     assert main(["ask", "remove", str(path), *common, "--object", "nope"]) == 2
     assert capsys.readouterr().err.strip() == "ipe: error: actions[1].names: no object named 'nope' in 'stack'"
+
+
+def test_long_work_shows_plain_progress_lines_off_a_terminal_and_a_bar_on_one(capsys, monkeypatch):
+    import io
+    import sys
+
+    from ipe_ros.progress import steps
+
+    assert list(steps(range(45), "towers")) == list(range(45))
+    assert capsys.readouterr().err.splitlines() == ["  towers: 20/45", "  towers: 40/45", "  towers: 45/45"]
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+    terminal = Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    assert list(steps(range(3), "towers")) == [0, 1, 2]
+    assert "towers:" in terminal.getvalue() and "/3 [" in terminal.getvalue() and "\r" in terminal.getvalue()  # a bar
+
+
+def test_predict_draws_the_answer_as_a_png(tmp_path):
+    out = tmp_path / "tower.png"
+    run = run_cli("predict", str(example_scene_path()), "--samples", "4", "--workers", "0", "--png", str(out))
+    assert run.returncode == 0, run.stderr
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 10_000
+    two = tmp_path / "two.json"
+    assert run_cli("generate", "tower", "--count", "2", "--seed", "1", "-o", str(two)).returncode == 0
+    several = run_cli("predict", str(two), "--samples", "2", "--png", str(out))
+    assert several.returncode == 2
+    assert several.stderr.strip() == (f"ipe: error: --png: draws one scene, but {two} holds 2; choose one with --tower")

@@ -33,7 +33,8 @@ def test_colcon_build_installs_the_node_script(tmp_path):
         script = prefix / "lib" / "ipe_ros" / name
         assert script.is_file() and os.access(script, os.X_OK), f"{script} missing"
     assert (prefix / "share" / "ament_index" / "resource_index" / "packages" / "ipe_ros").is_file()
-    assert (prefix / "share" / "ipe_ros" / "package.xml").is_file()
+    for shared in ("package.xml", "config/ipe.yaml", "launch/ipe.launch.py"):
+        assert (prefix / "share" / "ipe_ros" / shared).is_file(), f"share/ipe_ros/{shared} not installed"
 
     # The installed copy (not this checkout) is what the workspace's scripts import.
     site = next(prefix.glob("lib/python3*/site-packages"))

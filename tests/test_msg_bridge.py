@@ -13,9 +13,9 @@ from visualization_msgs.msg import Marker, MarkerArray
 from ipe_ros.engine import Body, Floor, Prediction, Scene, SceneError, Table, load_scenes
 from ipe_ros.engine.generators import generate_tables
 from msg_bridge.json_text import answer_to_string, scene_to_string, string_to_answer, string_to_scene
-from msg_bridge.markers import (DEFAULT_DENSITY_KG_M3, markers_to_scene, parse_properties, prediction_to_markers,
+from msg_bridge.markers import (DEFAULT_DENSITY_KG_M3, markers_to_scene, prediction_to_markers,
                                 scene_to_markers)
-from msg_bridge.outputs import any_fall_probability_msg, fall_direction_msg, fall_probability_msg
+from msg_bridge.outputs import fall_direction_msg, fall_fraction_msg, fall_probability_msg
 from msg_bridge.stamps import header_to_stamp_ns, stamp_ns_to_header
 from tests.helpers import IDENTITY, block, floor_scene
 
@@ -196,10 +196,10 @@ def test_direction_vector_is_scaled_by_decisiveness_and_zero_when_nothing_falls(
     assert (msg.header.frame_id, msg.header.stamp.nanosec) == ("map", 5)
     still = fall_direction_msg(_prediction(direction_rad=None), "map", 5)
     assert (still.vector.x, still.vector.y, still.vector.z) == (0.0, 0.0, 0.0)
+    assert fall_fraction_msg(_prediction()) is None
+    assert fall_fraction_msg(_prediction(fall_fraction=0.5)).data == 0.5
     assert fall_probability_msg(_prediction()) is None
-    assert fall_probability_msg(_prediction(fall_fraction=0.5)).data == 0.5
-    assert any_fall_probability_msg(_prediction()) is None
-    assert any_fall_probability_msg(_prediction(any_fall_probability=0.25)).data == 0.25
+    assert fall_probability_msg(_prediction(any_fall_probability=0.25)).data == 0.25
 
 
 def test_prediction_markers_colour_objects_by_risk_and_draw_the_arrow():

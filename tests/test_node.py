@@ -8,7 +8,6 @@ import math
 import os
 import signal
 
-import numpy as np
 import pytest
 
 from tests.ros_harness import RosHarness, wait_until
@@ -17,15 +16,15 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from geometry_msgs.msg import Vector3Stamped  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.parameter_client import AsyncParameterClient  # noqa: E402
+from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from std_msgs.msg import Float64, String  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, predict, preset  # noqa: E402
 from ipe_ros.engine.scene_io import scene_to_json  # noqa: E402
-from ipe_ros.ros.node import LATCHED_QOS  # noqa: E402
+from ipe_ros.ros.node import INPUT_QOS as RELIABLE_QOS, LATCHED_QOS  # noqa: E402
 from msg_bridge.markers import scene_to_markers  # noqa: E402
-from tests.helpers import block, floor_scene  # noqa: E402
 
 EXAMPLE = "ipe_ros/data/example_tower.json"
 TIMEOUT_S = 90.0
@@ -73,11 +72,11 @@ def set_params(ros: RosHarness, **values):
 def test_will_anything_fall_is_published_on_its_own_topic(ros, tower):
     ros.start_ipe_node(**FAST, seed=7, queries=["any_fall"])
     got = answers(ros)
-    anything = ros.collect(Float64, "/ipe/any_fall_probability", LATCHED_QOS)
-    fractions = ros.collect(Float64, "/ipe/fall_probability", LATCHED_QOS)
+    anything = ros.collect(Float64, "/ipe/fall_probability", LATCHED_QOS)
+    fractions = ros.collect(Float64, "/ipe/fall_fraction", LATCHED_QOS)
     directions = ros.collect(Vector3Stamped, "/ipe/fall_direction", LATCHED_QOS)
     ros.publisher(MarkerArray, "/ipe/scene").publish(scene_to_markers(tower, "odom", 1))
-    wait_until(lambda: len(got) and len(anything), TIMEOUT_S, "an answer and /ipe/any_fall_probability")
+    wait_until(lambda: len(got) and len(anything), TIMEOUT_S, "an answer and /ipe/fall_probability")
     # direction was not asked: no zero vector that would read as "nothing falls"
     assert len(directions) == 0
     with WorkerPool(1) as pool:
@@ -90,13 +89,14 @@ def test_will_anything_fall_is_published_on_its_own_topic(ros, tower):
 def test_marker_tower_in_stamped_prediction_out_matching_the_engine(ros, tower):
     node = ros.start_ipe_node(**FAST, seed=7)
     got = answers(ros)
+    fractions = ros.collect(Float64, "/ipe/fall_fraction", LATCHED_QOS)
     probabilities = ros.collect(Float64, "/ipe/fall_probability", LATCHED_QOS)
     directions = ros.collect(Vector3Stamped, "/ipe/fall_direction", LATCHED_QOS)
     markers = ros.collect(MarkerArray, "/ipe/markers", LATCHED_QOS)
     pub = ros.publisher(MarkerArray, "/ipe/scene")
     stamp_ns = 1_700_000_000_123_456_789
     pub.publish(scene_to_markers(tower, "odom", stamp_ns))
-    wait_until(lambda: len(got) and len(probabilities) and len(directions) and len(markers), TIMEOUT_S,
+    wait_until(lambda: len(got) and len(fractions) and len(probabilities) and len(directions) and len(markers), TIMEOUT_S,
                "a prediction on every output topic")
     answer = got[0]
     assert answer["stamp"] == {"sec": 1_700_000_000, "nanosec": 123_456_789}
@@ -107,13 +107,15 @@ def test_marker_tower_in_stamped_prediction_out_matching_the_engine(ros, tower):
     # Same scene, settings and seed through the engine API: the same numbers.
     with WorkerPool(1) as pool:
         expected = predict(tower, ModelConfig(sigma_m=0.04, samples=6), preset("default"),
-                           QuerySpec(queries=frozenset({"fall", "direction", "far"})), seed=7,
+                           QuerySpec(queries=frozenset({"fall", "any_fall", "direction", "far"})), seed=7,
                            map_fn=pool.map).to_dict()
-    for key in ("fall_fraction", "fall_fraction_ci95", "object_fall_probability", "direction_rad",
-                "direction_decisiveness", "far_m", "samples", "failed_samples"):
+    for key in ("fall_fraction", "fall_fraction_ci95", "object_fall_probability", "any_fall_probability",
+                "direction_rad", "direction_decisiveness", "far_m", "samples", "failed_samples"):
         assert answer[key] == expected[key], key
 
-    assert probabilities[0].data == answer["fall_fraction"]
+    # ~/fall_fraction: the expected fraction of objects that fall; ~/fall_probability: P(anything falls)
+    assert fractions[0].data == answer["fall_fraction"]
+    assert probabilities[0].data == answer["any_fall_probability"] >= answer["fall_fraction"]
     d = directions[0]
     assert (d.header.frame_id, d.header.stamp.sec, d.header.stamp.nanosec) == ("odom", 1_700_000_000, 123_456_789)
     if answer["direction_rad"] is None:
@@ -190,6 +192,47 @@ def test_parameter_updates_accepted_and_rejected(ros, tower):
     assert got[0]["stopped_by"] == "samples"
 
 
+def test_gravity_aligned_frames_decide_which_scene_frames_are_answered(ros, tower):
+    node = ros.start_ipe_node(**FAST, gravity_aligned_frames=["odom", "base_footprint"], frame_id="odom")
+    got = answers(ros)
+    pub = ros.publisher(MarkerArray, "/ipe/scene")
+    pub.publish(scene_to_markers(tower, "world"))  # not in this node's list
+    wait_until(lambda: node.service.stats().rejected == 1, TIMEOUT_S, "the scene in 'world' to be refused")
+    assert node.service.stats().last_error.startswith("header.frame_id: 'world' is not a gravity-aligned frame "
+                                                      "(odom, base_footprint)")
+    pub.publish(scene_to_markers(tower, "base_footprint"))
+    wait_until(lambda: len(got), TIMEOUT_S, "the scene in 'base_footprint' to be answered")
+    assert got[0]["frame_id"] == "base_footprint"
+    [outside] = set_params(ros, frame_id="camera_link")  # ~/scene_json's frame must be gravity-aligned too
+    assert outside.reason == ("frame_id: 'camera_link' is not in gravity_aligned_frames ['odom', 'base_footprint']; "
+                              "add it there if its -z axis is gravity, or publish scenes in one of those frames")
+    trust_all = set_params(ros, gravity_aligned_frames=[""], frame_id="camera_link")  # [""]: every frame
+    assert all(r.successful for r in trust_all) and node.service.config.gravity_aligned_frames == ()
+
+
+@pytest.mark.parametrize("reliability", ["both", "best_effort", "reliable"])
+def test_scene_topics_take_reliable_and_sensor_style_publishers_once_each(ros, tower, reliability):
+    node = ros.start_ipe_node(**FAST, scene_reliability=reliability)
+    got = answers(ros)
+    reliable = ros.publisher(String, "/ipe/scene_json", RELIABLE_QOS)
+    if reliability == "both":
+        wait_until(lambda: reliable.get_subscription_count() == 2, 10.0, "both scene_json subscriptions")
+    reliable.publish(String(data=scene_to_json(tower)))
+    wait_until(lambda: len(got), TIMEOUT_S, "the reliably published scene's answer")
+    if reliability == "reliable":  # a sensor-style publisher matches no subscription: documented
+        sensor = ros.client.create_publisher(MarkerArray, "/ipe/scene", qos_profile_sensor_data)
+        wait_until(lambda: node.count_publishers("/ipe/scene") >= 1, 10.0, "discovery of the sensor publisher")
+        assert sensor.get_subscription_count() == 0
+        return
+    sensor = ros.publisher(MarkerArray, "/ipe/scene", qos_profile_sensor_data)
+    scene = scene_to_markers(dataclasses.replace(tower, name="sensor_style"), "world", 1)
+    wait_until(lambda: (sensor.publish(scene), any(a["scene_id"] == "sensor_style" for a in got))[1], TIMEOUT_S,
+               "the best-effort scene's answer")  # best effort may drop a message: publish until one arrives
+    # the reliable scene reached both subscriptions of "both" and was still used once
+    assert sum(a["scene_id"] == tower.name for a in got) == 1
+    assert node.service.stats().rejected == 0
+
+
 def _good_and_bad_inputs(tower):
     nan_pose = scene_to_markers(tower, "world")
     nan_pose.markers[3].pose.position.x = math.nan
@@ -212,6 +255,9 @@ def _good_and_bad_inputs(tower):
          "json: nested too deeply to read; a scene nests a few levels (objects, shapes, parts), not hundreds"),
         ("scene_json", String(data=scene_to_json(dataclasses.replace(tower, name="\ud800"))),
          "name: must be valid Unicode text (it holds a lone surrogate), got '\\ud800'"),
+        ("scene", scene_to_markers(tower, "camera_link"),
+         "header.frame_id: 'camera_link' is not a gravity-aligned frame (world, map, odom); transform the scene "
+         "into one of them, or add the frame to the gravity_aligned_frames parameter if its -z axis is gravity"),
         ("scene", MarkerArray(), "markers: the array holds no ADD markers; publish one CUBE, SPHERE, CYLINDER or "
                                  "TRIANGLE_LIST marker per body"),
     ]

@@ -91,3 +91,69 @@ def test_a_question_recording_names_each_variants_rollouts_by_the_question(tmp_p
     assert write_question_rrd(path, STACK, answers) == 4  # as is and remove/bottom, 2 samples each
     paths = {chunk.entity_path for chunk in RrdReader(path).stream().to_chunks()}
     assert {"/world/remove/bottom/sample_0/top", "/world/as_is/sample_1/bottom", "/answers/remove/top"} <= paths
+
+
+def _blueprint_views(path) -> dict[str, dict]:
+    """The views a recording's blueprint opens on: display name -> class, origin and contents."""
+    reader = RrdReader(path)
+    [store] = reader.blueprints()
+    columns: dict[str, dict] = {}
+    for chunk in reader.stream(store=store).to_chunks():
+        batch = chunk.to_record_batch()
+        view = chunk.entity_path.removesuffix("/ViewContents")
+        if not view.startswith("/view/"):
+            continue
+        entry = columns.setdefault(view, {})
+        for name in batch.schema.names:
+            if ":" in name:
+                value = batch.column(name).to_pylist()[-1]
+                entry[name.split(":")[1]] = value[0] if isinstance(value, list) and len(value) == 1 else value
+    return {v["display_name"]: v for v in columns.values()}
+
+
+def test_recordings_open_on_a_blueprint_with_the_answer_the_rollouts_and_the_outcomes(tmp_path):
+    prediction = predict(SCENE, MODEL, preset("default"), QUERY, seed=5, record_every=100, record_samples=4)
+    path = tmp_path / "p.rrd"
+    write_prediction_rrd(path, SCENE, prediction, answer=prediction.to_dict(), stamp_ns=1, rollouts_logged=3)
+    views = _blueprint_views(path)
+    assert set(views) == {"answer: fall risk and direction", "answer (JSON)", "sample 0", "sample 1", "sample 2",
+                          "fall_fraction per sample", "far_m per sample"}
+    assert views["answer: fall risk and direction"]["class_identifier"] == "3D"
+    assert views["answer: fall risk and direction"]["query"] == ["+ /world/scene/support/**", "+ /world/answer/**"]
+    assert views["sample 2"]["query"] == ["+ /world/scene/support/**", "+ /world/rollouts/2/**"]
+    assert views["fall_fraction per sample"]["space_origin"] == "outcome_bars/fall_fraction"
+    # each bar view has its data: one bar per sample
+    bars = [c for c in RrdReader(path).stream().to_chunks() if c.entity_path == "/outcome_bars/fall_fraction"]
+    assert bars and bars[0].is_static
+
+
+def test_question_recordings_show_one_view_per_variant(tmp_path):
+    from ipe_ros.engine import actions as A
+    from tests.test_actions import STACK
+
+    answers = A.remove(STACK, None, ModelConfig(sigma_m=0.005, samples=3), preset("default"), record_every=4,
+                       record_samples=1)
+    path = tmp_path / "q.rrd"
+    write_question_rrd(path, STACK, answers)
+    views = _blueprint_views(path)
+    assert set(views) == {"answers", "as_is", "remove/bottom"}  # the top's removal is not simulated: no view
+    assert views["remove/bottom"]["query"] == ["+ /world/scene/support/**", "+ /world/remove/bottom/**"]
+
+
+def test_rerun_is_imported_when_recording_is_switched_on_not_on_the_first_answer(tmp_path):
+    import subprocess
+    import sys
+
+    from tests.conftest import REPO
+
+    script = f"""
+import sys
+from ipe_ros.service import PredictionService, ServiceConfig
+service = PredictionService(ServiceConfig(), workers=0, publish=print)
+assert "rerun" not in sys.modules, "imported without recording"
+service.update_config(ServiceConfig(rerun_save_dir={str(tmp_path)!r}))
+assert "rerun" in sys.modules, "not imported when recording was switched on"
+print("ok")
+"""
+    run = subprocess.run([sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0 and run.stdout.strip() == "ok", run.stderr[-2000:]

@@ -19,19 +19,20 @@ Units and the paper's parameters:
 from __future__ import annotations
 
 import math
-import sys
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
+from scipy.stats import circmean
 
 from ..engine import ModelConfig, Prediction, QuerySpec, Scene, SimSettings, predict
 from ..engine.estimate import sample_fall_fraction, sample_far_m
 from ..engine.generators import generate_towers
 from ..engine.rollout import SampleOutcome
 from ..engine.scene_io import scenes_from_tower_csv
+from ..progress import steps
 
 #: Tower blocks' short side in the stimulus files (metres here): the paper's unit for sigma.
 SHORT_SIDE_M = 0.2
@@ -108,7 +109,7 @@ def _sample_direction(outcome: SampleOutcome) -> float:
     angles = [r.direction_rad for r in outcome.rollouts if r.direction_rad is not None]
     if not angles:
         return math.nan
-    return float(math.atan2(np.mean(np.sin(angles)), np.mean(np.cos(angles))))
+    return float(circmean(angles, high=math.pi, low=-math.pi))
 
 
 def _sample_bump(outcome: SampleOutcome) -> float:
@@ -151,18 +152,12 @@ class ModelRun:
         return sum(p.wall_s for p in self.predictions)
 
 
-def progress(message: str) -> None:
-    print(message, file=sys.stderr, flush=True)
-
-
 def run_model(label: str, scenes, model: ModelConfig, settings: SimSettings, query: QuerySpec, seed: int,
               map_fn=None) -> ModelRun:
     """Predict every scene with its own stimulus seed (see ``stimulus_seed``)."""
     predictions = []
     scenes = list(scenes)
-    for i, scene in enumerate(scenes):
+    for scene in steps(scenes, label):
         predictions.append(predict(scene, model, settings, query, seed=stimulus_seed(seed, scene.name),
                                    map_fn=map_fn))
-        if (i + 1) % 20 == 0 or i + 1 == len(scenes):
-            progress(f"  {label}: {i + 1}/{len(scenes)}")
     return ModelRun(label=label, names=tuple(s.name for s in scenes), predictions=tuple(predictions))

@@ -35,31 +35,33 @@ def _as_pair(x, y) -> tuple[np.ndarray, np.ndarray]:
 
 
 def pearson(x, y, axis: int = -1) -> np.ndarray | float:
-    """Pearson's r along ``axis``; NaN where either side is constant (vectorised for the bootstrap)."""
+    """Pearson's r along ``axis`` (``scipy.stats.pearsonr``, vectorised for the bootstrap); NaN where
+    either side is constant."""
     x, y = np.asarray(x, float), np.asarray(y, float)
-    dx = x - x.mean(axis=axis, keepdims=True)
-    dy = y - y.mean(axis=axis, keepdims=True)
-    num = (dx * dy).sum(axis=axis)
-    den = np.sqrt((dx * dx).sum(axis=axis) * (dy * dy).sum(axis=axis))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        r = np.where(den > 0, num / np.where(den > 0, den, 1.0), np.nan)
-    return float(r) if np.ndim(r) == 0 else r
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", scipy_stats.ConstantInputWarning)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            r = scipy_stats.pearsonr(x, y, axis=axis).statistic
+    return float(r) if np.ndim(r) == 0 else np.asarray(r)
 
 
 def circular_mean(angles_rad, axis: int = -1) -> np.ndarray | float:
-    out = np.arctan2(np.sin(angles_rad).mean(axis=axis), np.cos(angles_rad).mean(axis=axis))
+    """``scipy.stats.circmean`` in (-pi, pi]."""
+    out = scipy_stats.circmean(angles_rad, high=math.pi, low=-math.pi, axis=axis)
     return float(out) if np.ndim(out) == 0 else out
 
 
 def circular_variance(angles_rad, axis: int = -1) -> np.ndarray | float:
-    """1 - the mean resultant length: 0 when all angles agree, 1 when they cancel."""
-    c, s = np.cos(angles_rad).mean(axis=axis), np.sin(angles_rad).mean(axis=axis)
-    out = 1.0 - np.hypot(c, s)
+    """``scipy.stats.circvar``: 1 - the mean resultant length (0 when all angles agree, 1 when they cancel)."""
+    out = scipy_stats.circvar(angles_rad, high=math.pi, low=-math.pi, axis=axis)
     return float(out) if np.ndim(out) == 0 else out
 
 
 def circular_correlation(a, b, axis: int = -1) -> np.ndarray | float:
     """Jammalamadaka-SenGupta circular correlation of two angle arrays (radians), in [-1, 1].
+
+    Written here: scipy has no circular correlation (astropy's ``circcorrcoef`` is this formula, not
+    worth a dependency for five lines).
 
     r = sum sin(a - mean a) sin(b - mean b) / sqrt(sum sin^2(a - mean a) sum sin^2(b - mean b)).
     A rotated copy (b = a + c) gives exactly 1, a reflected one (b = c - a) gives -1.

@@ -12,9 +12,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from .scene import Body, Floor, Scene, validate_scene
-from .shapes import (BoxShape, Capsule, Compound, CompoundPart, ConvexHull, Cylinder, Sphere, quaternion_product,
+from .shapes import (BoxShape, Capsule, Compound, CompoundPart, ConvexHull, Cylinder, Sphere,
                      rotation_matrix, surface_points)
 
 _IDENTITY = (0.0, 0.0, 0.0, 1.0)
@@ -67,11 +68,8 @@ def _random_shape(rng: np.random.Generator, size_m: float):
 def _yaw_tilt(rng: np.random.Generator, tilt_rad: float) -> tuple[float, float, float, float]:
     yaw = rng.uniform(-math.pi, math.pi)
     axis = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-    half = tilt_rad / 2
-    turn_z = np.array([0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)])
-    tilt = np.array([*(axis * math.sin(half)), math.cos(half)])
-    q = quaternion_product(tilt[None], turn_z[None])[0]
-    return tuple(float(v) for v in q / np.linalg.norm(q))
+    q = (Rotation.from_rotvec(axis * tilt_rad) * Rotation.from_rotvec([0.0, 0.0, yaw])).as_quat()
+    return tuple(float(v) for v in q)
 
 
 def _extent_z(shape, orientation) -> tuple[float, float]:
@@ -117,8 +115,10 @@ def random_scene(rng: np.random.Generator, name: str) -> Scene:
         shape = Sphere(float(size * rng.uniform(0.2, 0.5)))
         speed = float(rng.uniform(0.5, MAX_SPEED_M_S))
         start = -3.0 * size - shape.radius_m
-        bodies.append(_body(f"{name}_thrown", shape, (start, 0.0, shape.radius_m), _IDENTITY,
-                            base_mass * float(rng.uniform(0.5, 2.0)), rng,
+        # kept within the mass ratio of the others (a light stack and a heavy throw would be refused)
+        mass = float(np.clip(base_mass * rng.uniform(0.5, 2.0), masses.max() / MAX_MASS_RATIO,
+                             masses.min() * MAX_MASS_RATIO))
+        bodies.append(_body(f"{name}_thrown", shape, (start, 0.0, shape.radius_m), _IDENTITY, mass, rng,
                             linear_velocity_m_s=(speed, 0.0, 0.0), position_sigma_m=0.0))
     scene = Scene(name=name, objects=tuple(bodies), support=Floor(friction=float(rng.uniform(0.2, 1.5)),
                                                                   restitution=float(rng.uniform(0.0, 0.5))))

@@ -33,10 +33,11 @@ from .errors import ConfigError, shown
 ALL_QUERIES = ("fall", "any_fall", "direction", "far", "bump")
 
 #: The paper's IPE, as the CLI, the node and the service answer by default: sigma = 0.2 block short
-#: sides (0.04 m for 0.2 m blocks), k = 48 samples, the fall fraction with its direction and reach.
+#: sides (0.04 m for 0.2 m blocks), k = 48 samples, the fall fraction, the probability that anything
+#: falls (free: the same rollouts), the direction and the reach.
 DEFAULT_SIGMA_M = 0.04
 DEFAULT_SAMPLES = 48
-DEFAULT_QUERIES: frozenset[str] = frozenset({"fall", "direction", "far"})
+DEFAULT_QUERIES: frozenset[str] = frozenset({"fall", "any_fall", "direction", "far"})
 DEFAULT_PRESET = "default"
 #: Wall seconds one prediction may take in the node and ``ipe predict`` (the paper's own settings
 #: answer a 10-block tower at k = 48 in ~11 s on two workers).

@@ -49,13 +49,13 @@ def mean_interval(values: np.ndarray) -> tuple[float, float]:
 
 
 def circular_mean(angles_rad: np.ndarray) -> float | None:
-    """Angle of the mean unit vector; None for no angles or a zero resultant."""
-    if len(angles_rad) == 0:
+    """``scipy.stats.circmean`` in (-pi, pi], or None for no angles or a zero resultant (opposite
+    falls cancel: "no direction", where circmean would return an arbitrary angle)."""
+    from scipy.stats import circmean, circvar
+
+    if len(angles_rad) == 0 or 1.0 - circvar(angles_rad) < 1e-12:
         return None
-    c, s = np.cos(angles_rad).mean(), np.sin(angles_rad).mean()
-    if math.hypot(c, s) < 1e-12:
-        return None
-    return float(math.atan2(s, c))
+    return float(circmean(angles_rad, high=math.pi, low=-math.pi))
 
 
 def half_circle_decisiveness(angles_rad: np.ndarray) -> float | None:

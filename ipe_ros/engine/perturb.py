@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from .config import MODEL_LIGHT_DENSITY_KG_M3, ModelConfig
 from .scene import Scene
@@ -64,8 +65,8 @@ def position_sigmas_m(scene: Scene, model: ModelConfig) -> np.ndarray:
 
 
 def _yaw_quaternions(yaw_rad: np.ndarray) -> np.ndarray:
-    half = yaw_rad / 2
-    return np.stack([np.zeros_like(half), np.zeros_like(half), np.sin(half), np.cos(half)], axis=1)
+    """xyzw quaternions of turns by ``yaw_rad`` about +z."""
+    return Rotation.from_rotvec(np.outer(yaw_rad, (0.0, 0.0, 1.0))).as_quat()
 
 
 def draw_push_direction(model: ModelConfig, rng: np.random.Generator) -> float:

@@ -14,6 +14,7 @@ from functools import lru_cache
 from typing import Union
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from .errors import SceneError, shown
 
@@ -84,25 +85,17 @@ SHAPE_TYPES = ("box", "sphere", "cylinder", "capsule", "convex", "compound")
 
 def rotation_matrices(q_xyzw) -> np.ndarray:
     """(n, 3, 3) rotation matrices of (n, 4) quaternions in (x, y, z, w) order (normalised here)."""
-    q = np.asarray(q_xyzw, dtype=float)
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    x, y, z, w = q.T
-    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=1),
-                     np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=1),
-                     np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=1)], axis=1)
+    return Rotation.from_quat(np.asarray(q_xyzw, dtype=float)).as_matrix()
 
 
 def rotation_matrix(q_xyzw) -> np.ndarray:
     """Rotation matrix of one (normalised here) quaternion in (x, y, z, w) order."""
-    return rotation_matrices(np.asarray(q_xyzw, dtype=float)[None])[0]
+    return Rotation.from_quat(np.asarray(q_xyzw, dtype=float)).as_matrix()
 
 
 def quaternion_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise a * b for (n, 4) xyzw quaternions (b applied first)."""
-    ax, ay, az, aw = np.asarray(a, float).T
-    bx, by, bz, bw = np.asarray(b, float).T
-    return np.stack([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz], axis=1)
+    return (Rotation.from_quat(np.asarray(a, float)) * Rotation.from_quat(np.asarray(b, float))).as_quat()
 
 
 # --------------------------------------------------------------------------------------------

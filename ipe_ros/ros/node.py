@@ -7,14 +7,16 @@ processes and calls back here to publish. Topics, the service and parameters are
 
 from __future__ import annotations
 
+import collections
 import sys
 import time
-from typing import Any
+from typing import Any, Callable
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
@@ -28,7 +30,7 @@ from msg_bridge.ask_json import answer_to_string as ask_answer_to_string
 from msg_bridge.ask_json import request_id_of, string_to_question, support_graph_markers
 from msg_bridge.json_text import answer_to_string, string_to_scene
 from msg_bridge.markers import markers_to_scene, prediction_to_markers
-from msg_bridge.outputs import any_fall_probability_msg, fall_direction_msg, fall_probability_msg
+from msg_bridge.outputs import fall_direction_msg, fall_fraction_msg, fall_probability_msg
 
 from ..engine import ConfigError
 from ..engine.errors import clip
@@ -41,6 +43,11 @@ from .diagnostics import diagnostics_msg
 LATCHED_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 INPUT_QOS = QoSProfile(depth=5, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+#: The scene subscriptions per ``scene_reliability``: "both" accepts reliable and sensor-style publishers.
+SCENE_QOS = {"both": (ReliabilityPolicy.RELIABLE, ReliabilityPolicy.BEST_EFFORT),
+             "reliable": (ReliabilityPolicy.RELIABLE,), "best_effort": (ReliabilityPolicy.BEST_EFFORT,)}
+#: How many recent scene messages are remembered to use each once (a few seconds of a 10 Hz stream).
+DUPLICATE_WINDOW = 64
 DIAGNOSTICS_PERIOD_S = 1.0
 
 
@@ -56,8 +63,8 @@ class IpeNode(Node):
         self._values = values
 
         self._pub_prediction = self.create_publisher(String, "~/prediction", LATCHED_QOS)
+        self._pub_fraction = self.create_publisher(Float64, "~/fall_fraction", LATCHED_QOS)
         self._pub_probability = self.create_publisher(Float64, "~/fall_probability", LATCHED_QOS)
-        self._pub_any_fall = self.create_publisher(Float64, "~/any_fall_probability", LATCHED_QOS)
         self._pub_direction = self.create_publisher(Vector3Stamped, "~/fall_direction", LATCHED_QOS)
         self._pub_markers = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
         self._pub_diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -73,8 +80,15 @@ class IpeNode(Node):
         # Inputs, the service and diagnostics in separate groups: a service call waiting for its
         # answer never holds up scene intake or the 1 Hz health report (with a multi-threaded executor).
         inputs = MutuallyExclusiveCallbackGroup()
-        self.create_subscription(MarkerArray, "~/scene", self._on_markers, INPUT_QOS, callback_group=inputs)
-        self.create_subscription(String, "~/scene_json", self._on_scene_json, INPUT_QOS, callback_group=inputs)
+        self._recently_seen: collections.deque = collections.deque(maxlen=DUPLICATE_WINDOW)
+        for reliability in SCENE_QOS[str(values["scene_reliability"])]:
+            qos = QoSProfile(depth=INPUT_QOS.depth, history=HistoryPolicy.KEEP_LAST, reliability=reliability)
+            # Our reliable subscription does not match best-effort publishers: expected, not worth a warning.
+            quiet = SubscriptionEventCallbacks(incompatible_qos=lambda _event: None)
+            self.create_subscription(MarkerArray, "~/scene", self._once(self._on_markers), qos,
+                                     callback_group=inputs, event_callbacks=quiet)
+            self.create_subscription(String, "~/scene_json", self._once(self._on_scene_json), qos,
+                                     callback_group=inputs, event_callbacks=quiet)
         self.create_subscription(String, "~/ask", self._on_ask, INPUT_QOS, callback_group=inputs)
         self.create_service(Trigger, "~/predict", self._on_predict, callback_group=MutuallyExclusiveCallbackGroup())
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics,
@@ -117,10 +131,22 @@ class IpeNode(Node):
         if self.service.submit(item):
             self.get_logger().debug("a waiting scene was replaced by a newer one (keep-latest)")
 
+    def _once(self, handler: Callable[[Any], None]) -> Callable[[Any, dict], None]:
+        """``handler`` for a scene subscription, skipping a message the other reliability's
+        subscription already delivered (a reliable publisher reaches both). A sample is identified
+        by its writer's timestamp and sequence number; the inputs group runs one callback at a time."""
+        def deliver(msg: Any, info: dict) -> None:
+            key = (info.get("source_timestamp"), info.get("publication_sequence_number"), type(msg).__name__)
+            if key[0] is not None and key in self._recently_seen:
+                return
+            self._recently_seen.append(key)
+            handler(msg)
+        return deliver
+
     def _on_markers(self, msg: MarkerArray) -> None:
         try:
             converted = markers_to_scene(msg, max_objects=self.service.config.max_objects)
-            self.service.check(converted.scene)
+            self.service.check(converted.scene, converted.frame_id, "header.frame_id")
         except ValueError as exc:  # SceneError / ConfigError name the field
             self._reject(self.resolve_topic_name("~/scene"), exc)
             return
@@ -132,7 +158,7 @@ class IpeNode(Node):
     def _on_scene_json(self, msg: String) -> None:
         try:
             scene = string_to_scene(msg, max_objects=self.service.config.max_objects)
-            self.service.check(scene)
+            self.service.check(scene)  # frame_id (the parameter) is checked against the frames at configuration
         except ValueError as exc:
             self._reject(self.resolve_topic_name("~/scene_json"), exc)
             return
@@ -179,18 +205,20 @@ class IpeNode(Node):
     def _publish_answer(self, answer: Answer) -> None:
         source, prediction = answer.source, answer.prediction
         self._pub_prediction.publish(answer_to_string(answer.to_dict()))
+        fraction = fall_fraction_msg(prediction)
+        if fraction is not None:
+            self._pub_fraction.publish(fraction)
         probability = fall_probability_msg(prediction)
         if probability is not None:
             self._pub_probability.publish(probability)
-        anything = any_fall_probability_msg(prediction)
-        if anything is not None:
-            self._pub_any_fall.publish(anything)
         if "direction" in prediction.request.get("queries", ()):  # a zero vector means "nothing falls"
             self._pub_direction.publish(fall_direction_msg(prediction, source.frame_id, source.stamp_ns))
         self._pub_markers.publish(prediction_to_markers(source.scene, prediction, source.frame_id, source.stamp_ns))
-        fall = "-" if prediction.fall_fraction is None else f"{prediction.fall_fraction:.3f}"
+        outcome = ", ".join(f"{label} {value:.3f}" for label, value in (
+            ("fall fraction", prediction.fall_fraction), ("P(anything falls)", prediction.any_fall_probability))
+            if value is not None) or "answered"
         self._log_info(
-            f"{source.scene_id} #{source.seq}: P(fall) = {fall}, k = {prediction.samples}"
+            f"{source.scene_id} #{source.seq}: {outcome}, k = {prediction.samples}"
             f"{f' ({prediction.failed_samples} failed)' if prediction.failed_samples else ''}, "
             f"{answer.compute_s:.2f} s" + (f", {answer.rrd_path}" if answer.rrd_path else ""))
 

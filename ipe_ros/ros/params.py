@@ -20,6 +20,11 @@ from ..engine.config import (DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_QUERIES, 
 from ..engine.scene import DEFAULT_MAX_OBJECTS
 from ..service import ServiceConfig
 
+#: Frames conventionally gravity-aligned in ROS (REP 105: map, odom; world is common in simulation).
+DEFAULT_GRAVITY_ALIGNED_FRAMES = ("world", "map", "odom")
+#: How the scene topics subscribe: "both" takes reliable and best-effort (sensor-style) publishers.
+SCENE_RELIABILITY = ("both", "reliable", "best_effort")
+
 
 @dataclass(frozen=True)
 class ParamSpec:
@@ -55,7 +60,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               "cued push direction in degrees in the scene frame (0 = +x, counter-clockwise), pushes drawn "
               "within +-45 deg of it; NaN (default) draws the direction uniformly",
               constraints="finite degrees, or NaN for any direction"),
-    ParamSpec("mu", 0.0, _DOUBLE, "heavy/light density ratio for boxes in group 'heavy'; 0 keeps the scene's "
+    ParamSpec("mu", 0.0, _DOUBLE, "heavy/light density ratio for bodies in group 'heavy'; 0 keeps the scene's "
                                   "own masses", (0.0, 1000.0)),
     ParamSpec("queries", [q for q in ALL_QUERIES if q in DEFAULT_QUERIES], _STRINGS,
               "queries to answer: any of " + ", ".join(ALL_QUERIES) + " (bump needs a table)",
@@ -80,9 +85,17 @@ PARAMETERS: tuple[ParamSpec, ...] = (
                                                    "take; samples still running then are cut off (stopped_by: "
                                                    "budget) and scenes whose one rollout cannot fit are rejected",
               (0.1, 3600.0)),
-    ParamSpec("max_objects", DEFAULT_MAX_OBJECTS, _INT, "scenes with more boxes are rejected", (1, 10000)),
-    ParamSpec("frame_id", "world", _STRING, "frame of scenes received on ~/scene_json (JSON carries no header)",
+    ParamSpec("max_objects", DEFAULT_MAX_OBJECTS, _INT, "scenes with more objects are rejected", (1, 10000)),
+    ParamSpec("frame_id", "world", _STRING, "frame of scenes received on ~/scene_json and ~/ask (JSON carries no "
+                                            "header); must be one of gravity_aligned_frames",
               constraints="a non-empty frame name"),
+    ParamSpec("gravity_aligned_frames", list(DEFAULT_GRAVITY_ALIGNED_FRAMES), _STRINGS,
+              "frames whose -z axis is gravity: the physics assumes it, so scenes in any other frame are "
+              "refused (transform them first); [''] accepts every frame", constraints="frame names, or ['']"),
+    ParamSpec("scene_reliability", "both", _STRING,
+              "QoS reliability of the ~/scene and ~/scene_json subscriptions: both (a reliable and a best-effort "
+              "subscription, each message used once: accepts every publisher), reliable, or best_effort; "
+              "fixed at start", read_only=True, constraints="one of " + ", ".join(SCENE_RELIABILITY)),
     ParamSpec("service_timeout_s", 60.0, _DOUBLE, "how long ~/predict waits for an answer, seconds", (0.1, 3600.0)),
     ParamSpec("rerun.save_dir", "", _STRING, "folder for one .rrd recording per prediction; empty: no rerun logging"),
     ParamSpec("rerun.rollouts_logged", 8, _INT, "sampled rollouts shown in each .rrd", (0, 1000)),
@@ -98,6 +111,16 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
     frame = values["frame_id"]
     if not isinstance(frame, str) or not frame.strip() or frame != frame.strip():
         raise ConfigError("frame_id", f"must be a non-empty frame name without surrounding spaces, got {frame!r}")
+    frames = tuple(f for f in values["gravity_aligned_frames"] if f != "")
+    if any(not f.strip() or f != f.strip() for f in frames):
+        raise ConfigError("gravity_aligned_frames", f"frame names must be non-empty without surrounding spaces, got "
+                                                    f"{list(values['gravity_aligned_frames'])!r}")
+    if frames and frame not in frames:
+        raise ConfigError("frame_id", f"{frame!r} is not in gravity_aligned_frames {list(frames)!r}; add it there "
+                                      "if its -z axis is gravity, or publish scenes in one of those frames")
+    if values["scene_reliability"] not in SCENE_RELIABILITY:
+        raise ConfigError("scene_reliability", f"must be one of {', '.join(SCENE_RELIABILITY)}, got "
+                                               f"{values['scene_reliability']!r}")
     budget = float(values["budget_s"])
     if not (math.isfinite(budget) and budget > 0):
         raise ConfigError("budget_s", f"must be a finite number of seconds > 0, got {budget!r}")
@@ -136,4 +159,5 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
                          seed=int(values["seed"]), max_objects=int(values["max_objects"]),
                          rerun_save_dir=save_dir or None, rerun_rollouts_logged=int(values["rerun.rollouts_logged"]),
                          rerun_frame_period_s=float(values["rerun.frame_period_s"]),
-                         rerun_connect_url=connect or None, stop=stop, budget_s=budget)
+                         rerun_connect_url=connect or None, stop=stop, budget_s=budget,
+                         gravity_aligned_frames=frames)

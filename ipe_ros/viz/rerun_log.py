@@ -14,10 +14,14 @@ Entity layout (z up, metres):
     world/answer/objects           the scene coloured by each object's fall probability
     world/answer/direction         arrow of the predicted fall direction, length = decisiveness
     outcomes/<name>                per-sample outcomes over the ``sample`` timeline
+    outcome_bars/<name>            the same per-sample outcomes as one bar chart (static)
     answer                         the aggregated prediction as JSON text; answer/fall_probability
                                    on the ``ros_stamp`` timeline
 
-Replay with ``rerun FILE.rrd``.
+Each recording carries a blueprint, so the viewer opens on a layout a person reads at a glance:
+the answer (objects coloured by fall risk, the direction arrow, the JSON) on the left, the
+sampled rollouts side by side in the middle (playing on ``sim_time``), per-sample outcomes as bar
+charts on the right. Replay with ``rerun FILE.rrd``.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 import rerun as rr
+import rerun.blueprint as rrb
 
 from ..engine.estimate import Prediction, sample_any_fall, sample_fall_fraction, sample_far_m
 from .palette import SUPPORT_RGB, group_rgb, risk_rgb, to_rgb8
@@ -161,6 +166,7 @@ def log_outcomes(rec: rr.RecordingStream, prediction: Prediction) -> None:
         columns["fell_off_count"] = [float(np.mean([r.fell_off.sum() for r in o.rollouts])) for o in ok]
     for name, values in columns.items():
         rec.send_columns(f"outcomes/{name}", indexes=index, columns=rr.Scalars.columns(scalars=values))
+        rec.log(f"outcome_bars/{name}", rr.BarChart(np.asarray(values, dtype=float)), static=True)
     failed = [o.index for o in prediction.outcomes if not o.ok]
     if failed:
         rec.log("outcomes/failed", rr.TextDocument("\n".join(
@@ -191,6 +197,65 @@ def log_answer(rec: rr.RecordingStream, scene: Scene, prediction: Prediction, an
                          columns=rr.Scalars.columns(scalars=[prediction.fall_fraction]))
 
 
+#: Rollout views shown side by side; more logged rollouts stay in the recording, one click away.
+ROLLOUT_VIEWS = 8
+SUPPORT_CONTENTS = "+ /world/scene/support/**"
+
+
+def prediction_blueprint(rollout_bases: list[str], outcome_names: list[str]) -> rrb.Blueprint:
+    """The answer left (risk-coloured objects, arrow, JSON), rollouts in a grid, outcome bars right."""
+    answer = rrb.Vertical(
+        rrb.Spatial3DView(name="answer: fall risk and direction", origin="world",
+                          contents=[SUPPORT_CONTENTS, "+ /world/answer/**"]),
+        rrb.TextDocumentView(name="answer (JSON)", origin="answer"), row_shares=[3, 2])
+    rollouts = [rrb.Spatial3DView(name=f"sample {base.rsplit('/', 1)[1]}", origin="world",
+                                  contents=[SUPPORT_CONTENTS, f"+ /{base}/**"])
+                for base in rollout_bases[:ROLLOUT_VIEWS]]
+    columns: list = [answer]
+    if rollouts:
+        columns.append(rrb.Grid(*rollouts, name="sampled rollouts (red: fell)"))
+    else:  # nothing recorded: the scene as received instead
+        columns.append(rrb.Spatial3DView(name="scene", origin="world",
+                                         contents=[SUPPORT_CONTENTS, "+ /world/scene/objects/**"]))
+    if outcome_names:
+        columns.append(rrb.Vertical(*[rrb.BarChartView(name=f"{name} per sample", origin=f"outcome_bars/{name}")
+                                      for name in outcome_names]))
+    shares = [2, 3, 1.5][:len(columns)]
+    return rrb.Blueprint(rrb.Horizontal(*columns, column_shares=shares),
+                         rrb.TimePanel(timeline="sim_time"), collapse_panels=True)
+
+
+def question_blueprint(variant_entities: list[str]) -> rrb.Blueprint:
+    """One 3-D view per variant (its recorded samples), the answers as text below."""
+    views = [rrb.Spatial3DView(name=entity, origin="world", contents=[SUPPORT_CONTENTS, f"+ /world/{entity}/**"])
+             for entity in variant_entities]
+    return rrb.Blueprint(rrb.Vertical(rrb.Grid(*views, name="variants"),
+                                      rrb.TextDocumentView(name="answers", origin="answers"), row_shares=[3, 1]),
+                         rrb.TimePanel(timeline="sim_time"), collapse_panels=True)
+
+
+def _rollout_bases(prediction: Prediction, limit: int) -> list[str]:
+    """Entity paths of the rollouts ``log_rollouts`` writes (same rule: recorded, ok, first ``limit``)."""
+    bases = []
+    for outcome in prediction.outcomes:
+        if len(bases) >= limit:
+            break
+        if outcome.ok and outcome.rollouts and outcome.rollouts[0].trajectory is not None:
+            several = len(outcome.rollouts) > 1
+            bases.append(f"world/rollouts/{outcome.index}" + ("-phi0" if several else ""))
+    return bases
+
+
+def _outcome_names(prediction: Prediction) -> list[str]:
+    ok = [o for o in prediction.outcomes if o.ok and o.rollouts]
+    if not ok:
+        return []
+    first = ok[0].rollouts[0]
+    return [name for name, present in (("fall_fraction", first.fallen is not None),
+                                        ("any_fall", first.any_fell is not None), ("far_m", first.far_m is not None),
+                                        ("fell_off_count", first.fell_off is not None)) if present]
+
+
 def write_prediction_rrd(path: str | Path, scene: Scene, prediction: Prediction, *, answer: dict,
                          stamp_ns: int, rollouts_logged: int, connect_url: str | None = None) -> int:
     """Write one ``.rrd`` for one prediction (and optionally stream it to a running viewer).
@@ -203,10 +268,11 @@ def write_prediction_rrd(path: str | Path, scene: Scene, prediction: Prediction,
     # one id per recording: a scene predicted twice (same name and stamp, new parameters) must not
     # be merged with its earlier recording by the viewer
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{scene.name}@{stamp_ns}/{uuid.uuid4().hex[:12]}")
+    blueprint = prediction_blueprint(_rollout_bases(prediction, rollouts_logged), _outcome_names(prediction))
     if connect_url:
-        rec.set_sinks(rr.FileSink(str(path)), rr.GrpcSink(connect_url))
+        rec.set_sinks(rr.FileSink(str(path)), rr.GrpcSink(connect_url), default_blueprint=blueprint)
     else:
-        rec.save(str(path))
+        rec.save(str(path), default_blueprint=blueprint)
     try:
         log_scene(rec, scene)
         logged = log_rollouts(rec, scene, prediction, stamp_ns, rollouts_logged)
@@ -225,13 +291,13 @@ def write_question_rrd(path: str | Path, scene: Scene, answers, *, stamp_ns: int
     answer as JSON under ``answers/<label>``. Returns how many rollouts were logged."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{scene.name}@{stamp_ns}/{uuid.uuid4().hex[:12]}")
-    rec.save(str(path))
-    placed = [v.action.body for v in answers.variants if hasattr(v.action, "body")]
-    bodies = {b.name: b for b in (*scene.objects, *placed)}
-
     def entity(label: str) -> str:
         return "/".join(_part(part) for part in label.split("/"))
+
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{scene.name}@{stamp_ns}/{uuid.uuid4().hex[:12]}")
+    rec.save(str(path), default_blueprint=question_blueprint([entity(label) for label in answers.recorded]))
+    placed = [v.action.body for v in answers.variants if hasattr(v.action, "body")]
+    bodies = {b.name: b for b in (*scene.objects, *placed)}
     logged = 0
     try:
         log_scene(rec, scene)

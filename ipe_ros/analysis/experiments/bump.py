@@ -12,7 +12,8 @@ from ...engine import ModelConfig, predict, preset
 from ...engine.generators import generate_tables
 from .. import stats
 from ..report import Report, pyplot
-from ..runs import PAPER_BUMP_PHIS, PAPER_SIGMA, PHI_M_S2_PER_PAPER_UNIT, phi_m_s2, progress, sigma_m, stimulus_seed
+from ...progress import steps
+from ..runs import PAPER_BUMP_PHIS, PAPER_SIGMA, PHI_M_S2_PER_PAPER_UNIT, phi_m_s2, sigma_m, stimulus_seed
 from .common import BUMP, HumanComparison, Options, compare_with_people, render_people
 
 #: The comparisons between model variants: (label, variant a, variant b, compare once per scene).
@@ -45,7 +46,7 @@ def bump_grid(scenes, directions, phis, k: int, opts: Options, map_fn, label: st
     shape = (len(scenes), len(directions), len(phis))
     ratio, fell = np.full(shape, np.nan), np.zeros(shape)
     ratio_sum, ratio_count = np.zeros(shape), np.zeros(shape)
-    for s, scene in enumerate(scenes):
+    for s, scene in enumerate(steps(scenes, f"{label} (scenes)", every=1)):
         for d, theta in enumerate(directions):
             # a fixed direction (no cue spread); every magnitude is simulated for each noisy sample
             model = ModelConfig(sigma_m=sigma_m(PAPER_SIGMA), phi_m_s2=tuple(phi_m_s2(p) for p in phis), samples=k,
@@ -60,7 +61,6 @@ def bump_grid(scenes, directions, phis, k: int, opts: Options, map_fn, label: st
                 ratio_sum[s, d, m], ratio_count[s, d, m] = sum(values), len(values)
                 ratio[s, d, m] = np.mean(values) if values else np.nan
                 fell[s, d, m] = np.mean([r.fell_off.mean() for r in rollouts]) if rollouts else np.nan
-        progress(f"  {label}: {s + 1}/{len(scenes)} scenes")
     return BumpGrid(directions_rad=np.asarray(directions), phis_paper=np.asarray(phis), ratio=ratio, fell_off=fell,
                     ratio_sum=ratio_sum, ratio_count=ratio_count)
 

@@ -14,7 +14,7 @@ from tests.conftest import REPO
 
 SKIP = shutil.ignore_patterns(".git", ".venv", "build", "install", "log", "__pycache__", "*.egg-info", "*.rrd",
                               ".pytest_cache")
-SCRIPTS = ("ipe", "ipe_node", "ipe_ros_demo", "ipe_send_scene")
+SCRIPTS = ("ipe", "ipe_node", "ipe_lifecycle_node", "ipe_ros_demo", "ipe_send_scene")
 
 
 def test_colcon_build_installs_the_node_script(tmp_path):

@@ -57,6 +57,10 @@ def describe(answer: dict) -> str:
         kind = "deterministic rollout" if answer["deterministic"] else f"k = {answer['samples']} samples"
         lines.append(f"  expected fraction of blocks that fall: {answer['fall_fraction']:.2f} "
                      f"(95% interval {lo:.2f}..{hi:.2f}, {kind}, {answer['failed_samples']} failed)")
+        if answer.get("any_fall_probability") is not None:
+            lo, hi = answer["any_fall_probability_ci95"]
+            lines.append(f"  probability that anything falls: {answer['any_fall_probability']:.2f} "
+                         f"(95% interval {lo:.2f}..{hi:.2f})")
         risky = sorted(answer["object_fall_probability"].items(), key=lambda kv: -kv[1])[:3]
         if risky and risky[0][1] > 0:
             lines.append("  most likely to fall: " + ", ".join(f"{n} ({p:.2f})" for n, p in risky))

@@ -19,7 +19,9 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.node import Node
+from rclpy.service import Service as RclpyService
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
@@ -34,8 +36,8 @@ from msg_bridge.outputs import fall_direction_msg, fall_fraction_msg, fall_proba
 
 from ..engine import ConfigError
 from ..engine.errors import clip
-from ..service import (Answer, NoSceneError, PredictionFailed, PredictionService, QuestionService, StampedScene,
-                       error_answer)
+from ..service import (Answer, NoSceneError, PredictionFailed, PredictionService, QuestionService, ServiceConfig,
+                       StampedScene, error_answer)
 from . import params
 from .diagnostics import diagnostics_msg
 
@@ -51,54 +53,92 @@ DUPLICATE_WINDOW = 64
 DIAGNOSTICS_PERIOD_S = 1.0
 
 
-class IpeNode(Node):
-    """Subscribes to scenes, predicts in worker processes, publishes answers; see the module docstring."""
+class _IpeInterface:
+    """The node's topics, service and prediction service, shared by :class:`IpeNode` (starts
+    answering at once) and :class:`IpeLifecycleNode` (configure starts the workers, activate starts
+    answering). Mixed into an rclpy ``Node``."""
 
-    def __init__(self, node_name: str = "ipe", *, start_method: str = "forkserver", **node_kwargs: Any):
-        super().__init__(node_name, **node_kwargs)
+    service: PredictionService | None = None
+    questions: QuestionService | None = None
+
+    def _declare(self) -> dict[str, Any]:
         for spec in params.PARAMETERS:
             self.declare_parameter(spec.name, spec.default, spec.descriptor())
-        values = {spec.name: self.get_parameter(spec.name).value for spec in params.PARAMETERS}
-        config = params.config_from_values(values)  # bad overrides end construction with a named error
-        self._values = values
+        self._values = {spec.name: self.get_parameter(spec.name).value for spec in params.PARAMETERS}
+        self._inputs: list = []  # subscriptions, service and timer of the answering state
+        self._recently_seen: collections.deque = collections.deque(maxlen=DUPLICATE_WINDOW)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        return self._values
 
-        self._pub_prediction = self.create_publisher(String, "~/prediction", LATCHED_QOS)
-        self._pub_fraction = self.create_publisher(Float64, "~/fall_fraction", LATCHED_QOS)
-        self._pub_probability = self.create_publisher(Float64, "~/fall_probability", LATCHED_QOS)
-        self._pub_direction = self.create_publisher(Vector3Stamped, "~/fall_direction", LATCHED_QOS)
-        self._pub_markers = self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS)
-        self._pub_diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self._pub_answer = self.create_publisher(String, "~/answer", LATCHED_QOS)
-        self._pub_support_graph = self.create_publisher(MarkerArray, "~/support_graph", LATCHED_QOS)
-
+    def _open(self, start_method: str) -> ServiceConfig:
+        """Publishers and the prediction service (its worker processes start here)."""
+        values = self._values
+        config = params.config_from_values(values)  # bad overrides end here with a named error
+        self._publishers = [
+            self.create_publisher(String, "~/prediction", LATCHED_QOS),
+            self.create_publisher(Float64, "~/fall_fraction", LATCHED_QOS),
+            self.create_publisher(Float64, "~/fall_probability", LATCHED_QOS),
+            self.create_publisher(Vector3Stamped, "~/fall_direction", LATCHED_QOS),
+            self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS),
+            self.create_publisher(DiagnosticArray, "/diagnostics", 10),
+            self.create_publisher(String, "~/answer", LATCHED_QOS),
+            self.create_publisher(MarkerArray, "~/support_graph", LATCHED_QOS),
+        ]
+        (self._pub_prediction, self._pub_fraction, self._pub_probability, self._pub_direction, self._pub_markers,
+         self._pub_diagnostics, self._pub_answer, self._pub_support_graph) = self._publishers
         self.service = PredictionService(config, workers=int(values["workers"]), publish=self._publish_answer,
                                          log_error=self._log_error, log_info=self._log_info,
                                          start_method=start_method, publish_error=self._publish_error)
         self.questions = QuestionService(self.service, publish=self._publish_question_answer,
                                          log_error=self._log_error)
-        self.add_on_set_parameters_callback(self._on_set_parameters)
-        # Inputs, the service and diagnostics in separate groups: a service call waiting for its
-        # answer never holds up scene intake or the 1 Hz health report (with a multi-threaded executor).
+        self._diagnostics_timer = self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics,
+                                                    callback_group=MutuallyExclusiveCallbackGroup())
+        self.service.start()
+        self.questions.start()
+        return config
+
+    def _listen(self) -> None:
+        """Start answering: the scene and question subscriptions and the Trigger service."""
+        # Inputs and the service in separate groups: a service call waiting for its answer never
+        # holds up scene intake or the 1 Hz health report (with a multi-threaded executor).
         inputs = MutuallyExclusiveCallbackGroup()
-        self._recently_seen: collections.deque = collections.deque(maxlen=DUPLICATE_WINDOW)
-        for reliability in SCENE_QOS[str(values["scene_reliability"])]:
+        for reliability in SCENE_QOS[str(self._values["scene_reliability"])]:
             qos = QoSProfile(depth=INPUT_QOS.depth, history=HistoryPolicy.KEEP_LAST, reliability=reliability)
             # Our reliable subscription does not match best-effort publishers: expected, not worth a warning.
             quiet = SubscriptionEventCallbacks(incompatible_qos=lambda _event: None)
-            self.create_subscription(MarkerArray, "~/scene", self._once(self._on_markers), qos,
-                                     callback_group=inputs, event_callbacks=quiet)
-            self.create_subscription(String, "~/scene_json", self._once(self._on_scene_json), qos,
-                                     callback_group=inputs, event_callbacks=quiet)
-        self.create_subscription(String, "~/ask", self._on_ask, INPUT_QOS, callback_group=inputs)
-        self.create_service(Trigger, "~/predict", self._on_predict, callback_group=MutuallyExclusiveCallbackGroup())
-        self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics,
-                          callback_group=MutuallyExclusiveCallbackGroup())
-        self.service.start()
-        self.questions.start()
+            self._inputs.append(self.create_subscription(MarkerArray, "~/scene", self._once(self._on_markers), qos,
+                                                         callback_group=inputs, event_callbacks=quiet))
+            self._inputs.append(self.create_subscription(String, "~/scene_json", self._once(self._on_scene_json),
+                                                         qos, callback_group=inputs, event_callbacks=quiet))
+        self._inputs.append(self.create_subscription(String, "~/ask", self._on_ask, INPUT_QOS, callback_group=inputs))
+        self._inputs.append(self.create_service(Trigger, "~/predict", self._on_predict,
+                                                callback_group=MutuallyExclusiveCallbackGroup()))
+        config = self.service.config
         self.get_logger().info(
             f"ready: k = {config.model.samples}, sigma = {config.model.sigma_m:g} m, "
-            f"phi = {config.model.phi_m_s2[0]:g} m/s^2, preset {config.settings.name}, {values['workers']} worker(s); "
-            f"scenes on {self.resolve_topic_name('~/scene')} and {self.resolve_topic_name('~/scene_json')}")
+            f"phi = {config.model.phi_m_s2[0]:g} m/s^2, preset {config.settings.name}, "
+            f"{self._values['workers']} worker(s); scenes on {self.resolve_topic_name('~/scene')} and "
+            f"{self.resolve_topic_name('~/scene_json')}")
+
+    def _unlisten(self) -> None:
+        for entity in self._inputs:
+            if isinstance(entity, RclpyService):
+                self.destroy_service(entity)
+            else:
+                self.destroy_subscription(entity)
+        self._inputs.clear()
+
+    def _close(self) -> None:
+        """Stop answering, end the prediction service and its workers, drop the publishers."""
+        self._unlisten()
+        if self.questions is not None:
+            self.questions.close()
+        if self.service is not None:
+            self.service.close()
+            self.destroy_timer(self._diagnostics_timer)
+            for publisher in self._publishers:
+                self.destroy_publisher(publisher)
+        self.service = self.questions = None
 
     # -- logging: whatever text an input carried, the logger gets printable text ----------------
     def _log_error(self, text: str) -> None:
@@ -116,7 +156,8 @@ class IpeNode(Node):
         except ConfigError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         self._values = values
-        self.service.update_config(config)
+        if self.service is not None:  # a lifecycle node not yet configured takes the values at configure
+            self.service.update_config(config)
         return SetParametersResult(successful=True)
 
     # -- inputs ----------------------------------------------------------------------------------
@@ -231,19 +272,68 @@ class IpeNode(Node):
         self._pub_diagnostics.publish(diagnostics_msg(stats, f"{name}: IPE prediction service",
                                                       self.get_clock().now().nanoseconds, name))
 
+
+
+class IpeNode(_IpeInterface, Node):
+    """Subscribes to scenes, predicts in worker processes, publishes answers: from construction on."""
+
+    def __init__(self, node_name: str = "ipe", *, start_method: str = "forkserver", **node_kwargs: Any):
+        super().__init__(node_name, **node_kwargs)
+        self._declare()
+        self._open(start_method)
+        self._listen()
+
     def destroy_node(self) -> None:
-        self.questions.close()
-        self.service.close()
+        self._close()
         super().destroy_node()
 
 
-def main(args: list[str] | None = None) -> int:
+class IpeLifecycleNode(_IpeInterface, LifecycleNode):
+    """The managed variant (``ipe_lifecycle_node``): unconfigured it only holds its parameters;
+    configure starts the worker processes and publishers, activate starts answering (subscriptions
+    and ``~/predict``), deactivate stops answering (workers stay warm), cleanup ends the workers."""
+
+    def __init__(self, node_name: str = "ipe", *, start_method: str = "forkserver", **node_kwargs: Any):
+        super().__init__(node_name, **node_kwargs)
+        self._start_method = start_method
+        self._declare()
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        try:
+            self._open(self._start_method)
+        except ConfigError as exc:
+            self.get_logger().error(f"configure failed: {exc}")
+            return TransitionCallbackReturn.FAILURE
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._listen()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._unlisten()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._close()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._close()
+        return TransitionCallbackReturn.SUCCESS
+
+    def destroy_node(self) -> None:
+        self._close()
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None, node_class: type = IpeNode) -> int:
     """Entry point of ``ipe_node`` / ``ros2 run ipe_ros ipe_node``; SIGINT and SIGTERM end it cleanly."""
     rclpy.init(args=args)  # installs SIGINT/SIGTERM handlers that shut the context down
-    node: IpeNode | None = None
+    node = None
     code = 0
     try:
-        node = IpeNode()
+        node = node_class()
         executor = MultiThreadedExecutor(num_threads=4)
         executor.add_node(node)
         executor.spin()
@@ -262,6 +352,11 @@ def main(args: list[str] | None = None) -> int:
             node.destroy_node()
         rclpy.try_shutdown()
     return code
+
+
+def lifecycle_main(args: list[str] | None = None) -> int:
+    """Entry point of ``ipe_lifecycle_node``: the managed node, waiting to be configured."""
+    return main(args, IpeLifecycleNode)
 
 
 if __name__ == "__main__":

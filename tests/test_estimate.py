@@ -43,3 +43,15 @@ def test_half_circle_decisiveness():
     assert half_circle_decisiveness(np.array([3.0, -3.0, 3.1])) == 1.0  # all near pi, across the +-pi seam
     assert half_circle_decisiveness(np.array([0.0, 3.0, -3.0])) == 2 / 3
     assert half_circle_decisiveness(np.array([])) is None
+
+
+def test_the_wilson_interval_is_scipys_for_counts():
+    from scipy.stats import binomtest
+
+    from ipe_ros.engine.estimate import wilson_interval
+
+    for n in (1, 5, 48):
+        for count in range(n + 1):
+            ours = wilson_interval(count / n, n)
+            theirs = binomtest(count, n).proportion_ci(confidence_level=0.95, method="wilson")
+            assert ours == pytest.approx((theirs.low, theirs.high), abs=1e-6), (count, n)

@@ -254,6 +254,8 @@ class KEstimate:
 
 
 def _fit_line(x, y, axis=-1):
+    """Least-squares slope and intercept along ``axis`` (``scipy.stats.linregress`` fits one line at a
+    time; the bootstrap fits 10 000 at once)."""
     x, y = np.asarray(x, float), np.asarray(y, float)
     dx = x - x.mean(axis=axis, keepdims=True)
     with np.errstate(invalid="ignore", divide="ignore"):

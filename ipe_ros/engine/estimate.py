@@ -24,6 +24,8 @@ def wilson_interval(p_hat: float, n: int, z: float = Z95) -> tuple[float, float]
     For a fraction (not only a 0/1 outcome) the Bernoulli variance p(1-p) bounds the true variance,
     so the interval is conservative; unlike mean +- 1.96 sd/sqrt(n) it does not collapse to a point
     when every sample agrees (48 samples that all stay up still leave P(fall) up to ~0.07).
+    Written here because ``scipy.stats.binomtest(...).proportion_ci(method="wilson")`` takes an
+    integer count, and a fall fraction is a mean of fractions; for counts the two agree (tested).
     """
     if n <= 0:
         return (0.0, 1.0)

@@ -94,6 +94,10 @@ class ModelConfig:
     push_duration_s: float = 0.2
     mu: float | None = None
     samples: int = DEFAULT_SAMPLES
+    #: where the k noisy scenes come from: "gaussian" (sigma, the paper's IPE) or "vision" (the SI's
+    #: Bayesian vision system: samples of an image posterior, ``vision`` its settings; sigma unused)
+    perception: str = "gaussian"
+    vision: Any = None  # engine.vision.VisionSettings, or None for its defaults
 
     def __post_init__(self) -> None:
         _non_negative(self.sigma_m, "sigma_m")
@@ -113,6 +117,8 @@ class ModelConfig:
             _positive(self.mu, "mu")
             _at_most(self.mu, "mu", limits.MAX_MASS_RATIO, "(the solver's mass-ratio limit)")
         _integer(self.samples, "samples", 1, 100_000)
+        if self.perception not in PERCEPTIONS:
+            raise ConfigError("perception", f"must be one of {', '.join(PERCEPTIONS)}, got {shown(self.perception)}")
 
     @property
     def pushes(self) -> bool:
@@ -120,9 +126,12 @@ class ModelConfig:
 
     @property
     def is_deterministic(self) -> bool:
-        """sigma = phi = 0: the ground-truth model; one rollout says everything."""
-        return self.sigma_m == 0 and not self.pushes
+        """sigma = phi = 0 (and no vision): the ground-truth model; one rollout says everything."""
+        return self.sigma_m == 0 and not self.pushes and self.perception == "gaussian"
 
+
+#: Input models: Gaussian position noise (the paper's IPE), or samples of the SI's vision posterior.
+PERCEPTIONS = ("gaussian", "vision")
 
 #: The paper's IPE with the default sigma and k (phi = 0, the scene's own masses).
 DEFAULT_MODEL = ModelConfig(sigma_m=DEFAULT_SIGMA_M, samples=DEFAULT_SAMPLES)

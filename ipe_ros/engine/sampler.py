@@ -54,6 +54,17 @@ class AdaptiveStop:
                 raise ConfigError(name, f"must be an integer >= 1, got {shown(value)}")
 
 
+#: The vision chain's random stream, apart from the samples' (SeedSequence(seed).spawn(k)).
+VISION_STREAM = 0x5EE
+
+
+def _perceive(scene: Scene, model: ModelConfig, seed: int, map_fn: MapFn | None):
+    from .vision.perception import PerceptionTask, perceive_task
+
+    task = PerceptionTask(scene=scene, k=model.samples, settings=model.vision, seed=(seed, VISION_STREAM))
+    return map_fn(perceive_task, [task])[0] if map_fn is not None else perceive_task(task)
+
+
 def _lost(task: SampleTask, reason: str) -> SampleOutcome:
     return SampleOutcome(index=task.index, ok=False, error=f"WorkerLost: {reason}",
                          push_direction_rad=float("nan"), initial_positions_m=None,
@@ -129,7 +140,7 @@ def check_budget(budget_s: float | None) -> None:
 def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: QuerySpec, seed: int = 0,
             map_fn: MapFn | None = None, record_every: int = 0, record_samples: int | None = None,
             max_objects: int = DEFAULT_MAX_OBJECTS, stop: AdaptiveStop | None = None,
-            budget_s: float | None = None) -> Prediction:
+            budget_s: float | None = None, perceived=None) -> Prediction:
     """Run the IPE on one scene and aggregate (failed rollouts are counted in ``failed_samples``).
 
     ``record_every``/``record_samples``: record trajectories (for rerun) every N simulation steps
@@ -139,6 +150,10 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
     fit is refused (ConfigError naming budget_s); samples still running when it runs out are cut
     off and the answer uses the rest (``stopped_by: "budget"``). Which samples finish in time is
     the one thing here that depends on timing.
+
+    ``model.perception == "vision"``: the k noisy scenes are states of the vision posterior
+    (``engine.vision``), from a chain run here (in a worker when ``map_fn`` is given, seeded from
+    ``seed`` on a stream of its own) or taken from ``perceived`` (``vision.PerceivedScenes``).
     """
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ConfigError("seed", f"must be an integer >= 0, got {shown(seed)}")
@@ -149,6 +164,10 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
                                       "or drop it")
     per_sample_answer = sample_fall_fraction if query.wants("fall") else sample_any_fall
     tasks = make_tasks(scene, model, settings, query, seed, record_every, record_samples)
+    if model.perception == "vision":
+        perceived = perceived or _perceive(scene, model, seed, map_fn)
+        sampled = dataclasses.replace(model, sigma_m=0.0)  # the posterior is the noise
+        tasks = [dataclasses.replace(t, scene=perceived.scenes[t.index], model=sampled) for t in tasks]
     if budget_s is not None:
         deadline = time.time() + budget_s
         tasks = [dataclasses.replace(t, deadline_unix_s=deadline) for t in tasks]
@@ -191,6 +210,8 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
         request.update(ci_width=stop.ci_width, deadline_s=stop.deadline_s)
     if budget_s is not None:
         request.update(budget_s=budget_s)
+    if model.perception == "vision":
+        request.update(perception=perceived.to_dict())
     prediction = aggregate(scene, outcomes, queries=query.queries, bump_group=query.bump_group,
                            deterministic=model.is_deterministic, samples_requested=len(tasks),
                            wall_s=wall_s, request=request)

@@ -12,7 +12,7 @@ from __future__ import annotations
 from typing import Callable
 
 from ..report import Report
-from . import bump, direction, fall, far, features, mass, samples
+from . import bump, direction, fall, far, features, mass, samples, vision
 from .common import Options
 
 EXPERIMENTS: dict[str, Callable[[Options, object], Report]] = {
@@ -23,6 +23,7 @@ EXPERIMENTS: dict[str, Callable[[Options, object], Report]] = {
     "bump": bump.run,
     "samples": samples.run,
     "features": features.run,
+    "vision": vision.run,
 }
 
 __all__ = ["EXPERIMENTS", "Options"]

@@ -1,0 +1,175 @@
+"""Metropolis-Hastings over the blocks' horizontal positions, given blurred images (SI "Bayesian
+Vision System"): uniform prior, the image likelihood, single-block Gaussian moves.
+
+The chain records one sample per block update; updates come in scans of as many updates as there
+are dynamic bodies, the body of each update drawn uniformly with replacement (the SI's "order of
+block updates was chosen uniformly with replacement, independently per scan"). It starts at the
+state the images were made from and its first ``burn_in`` samples are dropped.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .camera import Camera
+from .likelihood import VisionSettings, _blur_matrices, blur, log_likelihood
+from .render import BACKGROUND_GREY, EMPTY, Patch, SceneMesh, body_patch, render
+
+
+@dataclass(frozen=True)
+class Chain:
+    """A chain after burn-in.
+
+    positions_m: (samples, dynamic bodies, 3) states (heights never change).
+    log_likelihood: (samples,) of each state. acceptance_rate: over all proposals, burn-in included.
+    """
+
+    positions_m: np.ndarray
+    log_likelihood: np.ndarray
+    acceptance_rate: float
+    proposals: int
+
+    def coordinate_ess(self) -> np.ndarray:
+        """ESS of every body's x and y (Geyer's initial positive sequence)."""
+        values = self.positions_m[:, :, :2].reshape(len(self.positions_m), -1)
+        return np.array([effective_sample_size(values[:, j]) for j in range(values.shape[1])])
+
+    @property
+    def effective_sample_size(self) -> float:
+        """The median ESS over the bodies' coordinates. Not the minimum: a body no view constrains
+        wanders without bound under the uniform prior, and its ESS says that, not how well the
+        chain mixes (``coordinate_ess`` gives every coordinate's)."""
+        return float(np.median(self.coordinate_ess()))
+
+    def thinned(self, k: int) -> np.ndarray:
+        """k states spread evenly over the chain (k <= samples)."""
+        index = np.linspace(0, len(self.positions_m) - 1, k).round().astype(int)
+        return self.positions_m[index]
+
+
+def effective_sample_size(x: np.ndarray) -> float:
+    """ESS of one chain: n / (1 + 2 sum of autocorrelations), summed in pairs while the pair sums stay
+    positive (Geyer 1992). A constant chain has ESS 1: it says one thing."""
+    x = np.asarray(x, float)
+    n = len(x)
+    centred = x - x.mean()
+    variance = float(centred @ centred) / n
+    if n < 4 or variance == 0:
+        return 1.0
+    spectrum = np.fft.rfft(centred, 2 * n)
+    acf = np.fft.irfft(spectrum * np.conj(spectrum))[:n] / (n * variance)
+    total, t = 0.0, 1
+    while t + 1 < n:
+        pair = acf[t] + acf[t + 1]
+        if pair <= 0:
+            break
+        total += pair
+        t += 2
+    return float(min(n, n / (1 + 2 * total)))
+
+
+class ImageModel:
+    """The observed (blurred) images, and the rendered images of the chain's current state.
+
+    A proposal moves one body, so only its pixels change: every body keeps its own depth layer per
+    view, a proposal re-rasterises the moved body and re-composites the pixels it covered before or
+    covers now, and, the blur being linear, adds the blurred change to the blurred image. The result
+    equals a full render and blur of the proposed state (``tests/test_vision.py``)."""
+
+    def __init__(self, mesh: SceneMesh, cameras: tuple[Camera, ...], observed: np.ndarray, settings: VisionSettings):
+        self.mesh, self.cameras, self.settings = mesh, cameras, settings
+        self.blur_px = settings.blur_at_resolution_px
+        self.sd = settings.sd_at_resolution_grey
+        self.observed_blurred = blur(np.asarray(observed, float), self.blur_px)
+        self._k, self._k_t = _blur_matrices(settings.resolution_px, float(self.blur_px))
+
+    def log_likelihood(self, positions_m: np.ndarray) -> float:
+        """From scratch: render every view, blur, compare."""
+        rendered = np.stack([render(self.mesh, camera, positions_m) for camera in self.cameras])
+        return log_likelihood(self.observed_blurred, blur(rendered, self.blur_px), self.sd)
+
+    def start(self, positions_m: np.ndarray) -> float:
+        """Lay out every body's layer at ``positions_m``; returns the state's log-likelihood."""
+        size, bodies = self.settings.resolution_px, len(positions_m)
+        self.depth = np.full((len(self.cameras), bodies, size, size), np.inf)
+        self.grey = np.zeros((len(self.cameras), bodies, size, size))
+        self.patches = [[EMPTY] * bodies for _ in self.cameras]
+        for v, camera in enumerate(self.cameras):
+            for b in range(bodies):
+                self._place(v, b, body_patch(self.mesh, camera, b, positions_m[b]))
+        self.images = np.stack([self._composite(v, (0, size, 0, size)) for v in range(len(self.cameras))])
+        self.blurred = blur(self.images, self.blur_px)
+        return log_likelihood(self.observed_blurred, self.blurred, self.sd)
+
+    def _place(self, v: int, b: int, patch: Patch) -> None:
+        old = self.patches[v][b]
+        self.depth[v, b, old.v0:old.v1, old.u0:old.u1] = np.inf
+        self.depth[v, b, patch.v0:patch.v1, patch.u0:patch.u1] = patch.depth
+        self.grey[v, b, patch.v0:patch.v1, patch.u0:patch.u1] = patch.grey
+        self.patches[v][b] = patch
+
+    def _composite(self, v: int, region: tuple[int, int, int, int], depth=None, grey=None) -> np.ndarray:
+        v0, v1, u0, u1 = region
+        depth = self.depth[v, :, v0:v1, u0:u1] if depth is None else depth
+        grey = self.grey[v, :, v0:v1, u0:u1] if grey is None else grey
+        nearest = depth.argmin(axis=0)
+        covered = np.take_along_axis(depth, nearest[None], axis=0)[0] < np.inf
+        return np.where(covered, np.take_along_axis(grey, nearest[None], axis=0)[0], BACKGROUND_GREY)
+
+    def propose(self, body: int, position_m) -> float:
+        """The log-likelihood with ``body`` moved to ``position_m`` (kept pending until ``accept``)."""
+        blurred, self._pending = self.blurred.copy(), []
+        for v, camera in enumerate(self.cameras):
+            new, old = body_patch(self.mesh, camera, body, position_m), self.patches[v][body]
+            boxes = [p for p in (new, old) if p.v1 > p.v0]
+            if not boxes:
+                self._pending.append(None)
+                continue
+            v0, v1 = min(p.v0 for p in boxes), max(p.v1 for p in boxes)
+            u0, u1 = min(p.u0 for p in boxes), max(p.u1 for p in boxes)
+            depth = self.depth[v, :, v0:v1, u0:u1].copy()
+            grey = self.grey[v, :, v0:v1, u0:u1].copy()
+            depth[body] = np.inf
+            depth[body, new.v0 - v0:new.v1 - v0, new.u0 - u0:new.u1 - u0] = new.depth
+            grey[body, new.v0 - v0:new.v1 - v0, new.u0 - u0:new.u1 - u0] = new.grey
+            image = self._composite(v, (v0, v1, u0, u1), depth, grey)
+            change = image - self.images[v, v0:v1, u0:u1]
+            blurred[v] += self._k[:, v0:v1] @ change @ self._k_t[u0:u1, :]
+            self._pending.append((new, (v0, v1, u0, u1), image))
+        self._proposed = (body, blurred)
+        return log_likelihood(self.observed_blurred, blurred, self.sd)
+
+    def accept(self) -> None:
+        body, self.blurred = self._proposed
+        for v, pending in enumerate(self._pending):
+            if pending is not None:
+                new, (v0, v1, u0, u1), image = pending
+                self._place(v, body, new)
+                self.images[v, v0:v1, u0:u1] = image
+
+
+def run_chain(model: ImageModel, start_m: np.ndarray, dynamic: int, settings: VisionSettings,
+              rng: np.random.Generator) -> Chain:
+    """``settings.chain_samples`` single-body updates of the first ``dynamic`` bodies' x, y."""
+    state = np.array(start_m, float)
+    current = model.start(state)
+    kept, kept_ll = [], []
+    accepted = 0
+    for sample in range(settings.chain_samples):
+        if sample % dynamic == 0:
+            order = rng.integers(0, dynamic, size=dynamic)
+        body = order[sample % dynamic]
+        moved = state[body].copy()
+        moved[:2] += settings.proposal_sd_m * rng.standard_normal(2)
+        candidate = model.propose(body, moved)
+        if np.log(rng.random()) < candidate - current:  # uniform prior: the likelihood ratio decides
+            model.accept()
+            state[body], current = moved, candidate
+            accepted += 1
+        if sample >= settings.burn_in:
+            kept.append(state[:dynamic].copy())
+            kept_ll.append(current)
+    return Chain(positions_m=np.array(kept), log_likelihood=np.array(kept_ll),
+                 acceptance_rate=accepted / settings.chain_samples, proposals=settings.chain_samples)

@@ -1,0 +1,93 @@
+"""The IPE's input from vision: k scene samples drawn from the image posterior instead of Gaussian sigma.
+
+The scene as given is rendered from the cameras (the SI's synthetic evidence; a robot could pass its
+own images), a Metropolis-Hastings chain explores the blocks' horizontal positions, and k states
+spread over the chain become k scenes, each then separated and simulated like any IPE sample.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..errors import ConfigError
+from ..scene import Scene
+from .camera import Camera, default_cameras
+from .likelihood import VisionSettings
+from .mcmc import Chain, ImageModel, run_chain
+from .render import render_views, scene_mesh
+
+#: A chain must give at least this many effective samples per IPE sample asked ("roughly independent").
+MIN_ESS_PER_SAMPLE = 0.5
+
+
+@dataclass(frozen=True)
+class PerceivedScenes:
+    """k scenes from the vision posterior, with how well the chain mixed."""
+
+    scenes: tuple[Scene, ...]
+    acceptance_rate: float
+    effective_sample_size: float
+    chain_samples: int
+    burn_in: int
+    chain: Chain
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": "vision", "acceptance_rate": self.acceptance_rate,
+                "effective_sample_size": self.effective_sample_size, "chain_samples": self.chain_samples,
+                "burn_in": self.burn_in, "samples": len(self.scenes)}
+
+
+def scene_at(scene: Scene, positions_m: np.ndarray) -> Scene:
+    """The scene with its dynamic bodies moved to ``positions_m`` (object origins), their own noise
+    removed: the vision posterior stands in for it."""
+    moved = iter(positions_m)
+    objects = tuple(dataclasses.replace(b, position_m=tuple(float(v) for v in next(moved)), position_sigma_m=0.0,
+                                        yaw_sigma_rad=None) if not b.static else b for b in scene.objects)
+    return dataclasses.replace(scene, objects=objects)
+
+
+def perceive(scene: Scene, k: int, settings: VisionSettings, rng: np.random.Generator,
+             cameras: tuple[Camera, ...] | None = None, observed: np.ndarray | None = None,
+             check_ess: bool = True) -> PerceivedScenes:
+    """Run the chain on the scene's images and return k scenes spread over it.
+
+    Raises ConfigError naming ``vision.chain_samples`` when the chain gives fewer than
+    MIN_ESS_PER_SAMPLE x k effective samples (the k scenes would not be roughly independent)."""
+    cameras = cameras or default_cameras(scene, settings.views, math.radians(settings.separation_deg),
+                                         settings.resolution_px)
+    mesh = scene_mesh(scene)
+    if observed is None:
+        observed = render_views(mesh, cameras)
+    model = ImageModel(mesh, cameras, observed, settings)
+    dynamic = len(scene.dynamic_objects)
+    chain = run_chain(model, mesh.positions_m, dynamic, settings, rng)
+    ess = chain.effective_sample_size
+    kept = len(chain.positions_m)
+    if k > kept or (check_ess and ess < MIN_ESS_PER_SAMPLE * k):
+        raise ConfigError("vision.chain_samples",
+                          f"the chain of {settings.chain_samples} samples ({kept} after burn-in) gave an effective "
+                          f"sample size of {ess:.0f}, too few for {k} roughly independent scene samples (needs "
+                          f">= {MIN_ESS_PER_SAMPLE * k:g}); lengthen the chain or ask for fewer samples")
+    scenes = tuple(scene_at(scene, state) for state in chain.thinned(k))
+    return PerceivedScenes(scenes=scenes, acceptance_rate=chain.acceptance_rate, effective_sample_size=ess,
+                           chain_samples=settings.chain_samples, burn_in=settings.burn_in, chain=chain)
+
+
+@dataclass(frozen=True)
+class PerceptionTask:
+    """One chain for ``predict`` (picklable, for a worker process): ``seed`` entropy for its Generator."""
+
+    scene: Scene
+    k: int
+    settings: VisionSettings | None
+    seed: tuple[int, ...]
+
+
+def perceive_task(task: PerceptionTask) -> PerceivedScenes:
+    return perceive(task.scene, task.k, task.settings or VisionSettings(),
+                    np.random.default_rng(np.random.SeedSequence(list(task.seed))))

@@ -1,0 +1,164 @@
+"""A z-buffered numpy rasteriser of the bodies' convex hulls into grey images.
+
+Each face is flat-shaded by its angle to a fixed light (ambient + Lambert), over a uniform
+background (the floor). The SI rendered its stimuli with OpenGL; what the likelihood needs is the
+silhouettes and the shading boundaries of the blocks, which this gives at a fraction of pybullet's
+software-renderer cost (``benchmarks/vision.py`` measures both on the same scenes, and
+``tests/test_vision.py`` checks that their silhouettes agree).
+
+A :class:`SceneMesh` is built once per scene: the bodies' hull triangles in the scene frame's
+orientation, relative to each body's position, so a state that only moves bodies is rendered by
+adding positions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import shapes
+from ..scene import Scene
+from .camera import Camera
+
+BACKGROUND_GREY = 90.0
+AMBIENT_GREY = 40.0
+DIFFUSE_GREY = 200.0
+LIGHT_DIRECTION = np.array([0.4, -0.6, 0.7]) / np.linalg.norm([0.4, -0.6, 0.7])
+
+
+@dataclass(frozen=True)
+class SceneMesh:
+    """Triangles of every body (dynamic ones first, in ``scene.dynamic_objects`` order), relative to
+    the body's position and already rotated; ``owner[t]`` is triangle t's body, ``grey[t]`` its shade."""
+
+    triangles_m: np.ndarray  # (T, 3, 3)
+    owner: np.ndarray        # (T,)
+    grey: np.ndarray         # (T,)
+    normals: np.ndarray      # (T, 3) outward
+    positions_m: np.ndarray  # (bodies, 3): the bodies' positions in the scene
+
+
+def outward_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """The hull's triangles wound counter-clockwise seen from outside (qhull's are not consistent)."""
+    tris = vertices[faces]
+    normal = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    inward = np.einsum("ij,ij->i", normal, tris.mean(axis=1) - vertices.mean(axis=0)) < 0
+    return np.where(inward[:, None], faces[:, ::-1], faces)
+
+
+def scene_mesh(scene: Scene) -> SceneMesh:
+    bodies = [*scene.dynamic_objects, *(b for b in scene.objects if b.static)]
+    triangles, owner, normals = [], [], []
+    for i, body in enumerate(bodies):
+        vertices, faces = shapes.hull_faces(body.shape)
+        rotated = vertices @ shapes.rotation_matrix(body.orientation_xyzw).T
+        tris = rotated[outward_faces(rotated, faces)]
+        n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        triangles.append(tris)
+        normals.append(n)
+        owner.append(np.full(len(tris), i))
+    normals_all = np.vstack(normals)
+    grey = AMBIENT_GREY + DIFFUSE_GREY * np.clip(normals_all @ LIGHT_DIRECTION, 0.0, 1.0)
+    return SceneMesh(triangles_m=np.vstack(triangles), owner=np.concatenate(owner), grey=grey, normals=normals_all,
+                     positions_m=np.array([b.position_m for b in bodies], float))
+
+
+@dataclass(frozen=True)
+class Patch:
+    """One body's rasterised front faces: rows v0..v1-1, columns u0..u1-1 of the image; ``depth`` is
+    inf where the body does not cover a pixel."""
+
+    v0: int
+    v1: int
+    u0: int
+    u1: int
+    depth: np.ndarray
+    grey: np.ndarray
+
+
+EMPTY = Patch(0, 0, 0, 0, np.zeros((0, 0)), np.zeros((0, 0)))
+
+
+def body_patch(mesh: SceneMesh, camera: Camera, body: int, position_m) -> Patch:
+    """Rasterise one body at ``position_m``: its front faces together, vectorised over its
+    triangles (a convex hull's front faces do not overlap, so each pixel takes the one covering it)."""
+    mine = mesh.owner == body
+    tris = mesh.triangles_m[mine] + np.asarray(position_m, float)
+    front = np.einsum("ij,ij->i", mesh.normals[mine], tris.mean(axis=1) - np.asarray(camera.position_m, float)) < 0
+    pixels, depth = camera.project(tris[front].reshape(-1, 3))
+    p, z, shade = pixels.reshape(-1, 3, 2), depth.reshape(-1, 3), mesh.grey[mine][front]
+    if len(p) == 0 or (z <= 1e-6).any():
+        return EMPTY
+    size = camera.resolution_px
+    u0, u1 = max(int(np.floor(p[..., 0].min())), 0), min(int(np.ceil(p[..., 0].max())) + 1, size)
+    v0, v1 = max(int(np.floor(p[..., 1].min())), 0), min(int(np.ceil(p[..., 1].max())) + 1, size)
+    if u0 >= u1 or v0 >= v1:
+        return EMPTY
+    u = (np.arange(u0, u1) + 0.5)[None, None, :]
+    v = (np.arange(v0, v1) + 0.5)[None, :, None]
+    a, b, c = (p[:, i, :, None, None] for i in range(3))  # (T, 2, 1, 1)
+    area = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    area = np.where(np.abs(area) < 1e-12, np.nan, area)
+    # barycentric weights from edge functions: inside where all three are >= 0
+    wa = ((b[:, 0] - u) * (c[:, 1] - v) - (b[:, 1] - v) * (c[:, 0] - u)) / area
+    wb = ((c[:, 0] - u) * (a[:, 1] - v) - (c[:, 1] - v) * (a[:, 0] - u)) / area
+    wc = 1.0 - wa - wb
+    with np.errstate(invalid="ignore", divide="ignore"):
+        inside = (wa >= 0) & (wb >= 0) & (wc >= 0)
+        inverse = wa / z[:, 0, None, None] + wb / z[:, 1, None, None] + wc / z[:, 2, None, None]
+        depth_here = np.where(inside, 1.0 / inverse, np.inf)  # perspective-correct depth
+    which = depth_here.argmin(axis=0)
+    nearest = np.take_along_axis(depth_here, which[None], axis=0)[0]
+    return Patch(v0, v1, u0, u1, nearest, shade[which])
+
+
+def render(mesh: SceneMesh, camera: Camera, positions_m: np.ndarray | None = None) -> np.ndarray:
+    """One grey image (float, 0..255) of the bodies at ``positions_m`` (default: the scene's),
+    nearest body in front."""
+    positions = mesh.positions_m if positions_m is None else np.asarray(positions_m, float)
+    size = camera.resolution_px
+    image = np.full((size, size), BACKGROUND_GREY)
+    nearest = np.full((size, size), np.inf)
+    for body in range(len(positions)):
+        patch = body_patch(mesh, camera, body, positions[body])
+        window = nearest[patch.v0:patch.v1, patch.u0:patch.u1]
+        closer = patch.depth < window
+        window[closer] = patch.depth[closer]
+        image[patch.v0:patch.v1, patch.u0:patch.u1][closer] = patch.grey[closer]
+    return image
+
+
+def render_views(mesh: SceneMesh, cameras, positions_m: np.ndarray | None = None) -> np.ndarray:
+    """(views, size, size) grey images."""
+    return np.stack([render(mesh, camera, positions_m) for camera in cameras])
+
+
+def render_with_pybullet(scene: Scene, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+    """The same view from pybullet's software renderer (TinyRenderer), for comparison and benchmarks:
+    (grey image 0..255, mask of the pixels the scene's bodies cover). Bodies are drawn as their
+    hulls' meshes; nothing else is in the world."""
+    from ..simulation.world import pybullet
+
+    p = pybullet()
+    client = p.connect(p.DIRECT)
+    try:
+        for body in [*scene.dynamic_objects, *(b for b in scene.objects if b.static)]:
+            vertices, faces = shapes.hull_faces(body.shape)
+            faces = outward_faces(vertices, faces)
+            visual = p.createVisualShape(p.GEOM_MESH, vertices=vertices.tolist(), indices=faces.ravel().tolist(),
+                                         physicsClientId=client)
+            p.createMultiBody(baseMass=0, baseVisualShapeIndex=visual, basePosition=list(body.position_m),
+                              baseOrientation=list(body.orientation_xyzw), physicsClientId=client)
+        distance = float(np.linalg.norm(np.subtract(camera.target_m, camera.position_m)))
+        view = p.computeViewMatrix(list(camera.position_m), list(camera.target_m), [0, 0, 1], physicsClientId=client)
+        projection = p.computeProjectionMatrixFOV(np.degrees(camera.fov_rad), 1.0, distance / 100, distance * 10,
+                                                  physicsClientId=client)
+        size = camera.resolution_px
+        _, _, rgba, _, segmentation = p.getCameraImage(size, size, view, projection, renderer=p.ER_TINY_RENDERER,
+                                                       physicsClientId=client)
+    finally:
+        p.disconnect(client)
+    rgba = np.reshape(rgba, (size, size, 4)).astype(float)
+    return rgba[..., :3].mean(axis=2), np.reshape(segmentation, (size, size)) >= 0

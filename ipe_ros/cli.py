@@ -97,6 +97,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force-direction", type=_finite, default=None, metavar="DEG",
                    help="cued push direction in degrees (push drawn within +-45 deg); default: any direction")
     p.add_argument("--mu", type=_finite, default=None, help="heavy/light density ratio (default: scene's own masses)")
+    p.add_argument("--perception", choices=("gaussian", "vision"), default="gaussian",
+                   help="where the k noisy scenes come from: gaussian (sigma, the paper's IPE) or vision (samples of "
+                        "the SI's Bayesian vision posterior given three rendered views; sigma unused)")
+    p.add_argument("--chain-samples", type=int, default=None, metavar="N",
+                   help="vision: Metropolis-Hastings samples (default 5000, the SI's; a fifth is burn-in)")
+    p.add_argument("--vision-resolution", type=int, default=None, metavar="PX",
+                   help="vision: rendered image size (default 256, the SI's; blur and SD scale with it)")
+    p.add_argument("--vision-rrd", default=None, metavar="FILE",
+                   help="vision: write the observed images, the posterior sample cloud and the acceptance trace "
+                        "to a rerun recording (one scene only)")
     p.add_argument("--preset", default=DEFAULT_PRESET, choices=sorted(PRESETS), help="simulation settings")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
@@ -198,7 +208,7 @@ def prediction_json(prediction: Prediction) -> str:
 
 
 def _run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: int, workers: int, emit,
-                     stop: AdaptiveStop | None = None, budget_s: float | None = None) -> None:
+                     stop: AdaptiveStop | None = None, budget_s: float | None = None, perceived=None) -> None:
     if workers < 0:
         raise ConfigError("--workers", f"must be >= 0, got {workers}")
     pool = WorkerPool(min(workers, max(1, model.samples))) if workers > 0 else None
@@ -207,7 +217,7 @@ def _run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: in
     try:
         for scene in steps(scenes, "predict") if len(scenes) > 1 else scenes:
             emit(predict(scene, model, sim, query, seed=seed, map_fn=pool.map if pool else None, stop=stop,
-                         budget_s=budget_s))
+                         budget_s=budget_s, perceived=perceived))
     finally:
         if pool is not None:
             pool.close()
@@ -217,7 +227,25 @@ def cmd_predict(args) -> int:
     scenes = load_scenes(args.path, towers=args.tower)
     phi = (0.0,) if args.ground_truth else args.phi
     sigma = 0.0 if args.ground_truth else args.sigma
-    model = ModelConfig(sigma_m=sigma, phi_m_s2=phi, mu=args.mu, samples=args.samples,
+    vision = None
+    if args.perception == "vision":
+        from .engine.vision import VisionSettings
+
+        changes = {}
+        if args.chain_samples is not None:
+            changes.update(chain_samples=args.chain_samples, burn_in=args.chain_samples // 5)
+        if args.vision_resolution is not None:
+            changes.update(resolution_px=args.vision_resolution)
+        try:
+            vision = VisionSettings(**changes)
+        except ConfigError as exc:
+            option = {"vision.chain_samples": "--chain-samples", "vision.burn_in": "--chain-samples",
+                      "vision.resolution_px": "--vision-resolution"}.get(exc.field, exc.field)
+            raise ConfigError(option, exc.problem) from None
+    elif args.chain_samples is not None or args.vision_resolution is not None or args.vision_rrd is not None:
+        raise ConfigError("--perception", "--chain-samples, --vision-resolution and --vision-rrd need --perception vision")
+    model = ModelConfig(sigma_m=sigma, phi_m_s2=phi, mu=args.mu, samples=args.samples, perception=args.perception,
+                        vision=vision,
                         force_direction_rad=None if args.force_direction is None else math.radians(args.force_direction))
     query = QuerySpec(queries=args.query)
     sim = preset(args.preset)
@@ -234,6 +262,8 @@ def cmd_predict(args) -> int:
         check_budget(args.budget)
     except ConfigError as exc:
         raise ConfigError("--budget", exc.problem) from None
+    if args.vision_rrd is not None and len(scenes) != 1:
+        raise ConfigError("--vision-rrd", f"records one scene, but {args.path} holds {len(scenes)}; choose one with --tower")
     if args.png is not None and len(scenes) != 1:
         raise ConfigError("--png", f"draws one scene, but {args.path} holds {len(scenes)}; choose one with --tower")
     for scene in scenes:  # reject what cannot be answered before printing anything
@@ -241,15 +271,35 @@ def cmd_predict(args) -> int:
             check_request(scene, query, model=model, settings=sim, budget_s=args.budget)
         except ConfigError as exc:
             raise ConfigError(f"--budget ({scene.name})" if exc.field == "budget_s" else exc.field, exc.problem) from None
+    perceived = None
+    if args.vision_rrd is not None:  # the chain the prediction would run, kept for the recording
+        from .engine.sampler import VISION_STREAM
+        from .engine.vision.perception import PerceptionTask, perceive_task
+
+        perceived = perceive_task(PerceptionTask(scenes[0], model.samples, vision, (args.seed, VISION_STREAM)))
     collected: list[Prediction] = []
     if args.json:
         _run_predictions(scenes, model, sim, query, args.seed, args.workers,
-                         lambda p: (collected.append(p), print(prediction_json(p), flush=True)), stop, args.budget)
+                         lambda p: (collected.append(p), print(prediction_json(p), flush=True)), stop, args.budget,
+                         perceived)
     else:
         print(f"sigma = {sigma:g} m, phi = {','.join(f'{v:g}' for v in phi)} m/s^2, mu = {args.mu}, "
-              f"k = {1 if model.is_deterministic else args.samples}, preset = {sim.name}, seed = {args.seed}")
-        _run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append, stop, args.budget)
+              f"k = {1 if model.is_deterministic else args.samples}, preset = {sim.name}, seed = {args.seed}"
+              + (f", perception = vision ({vision.chain_samples} MH samples, {vision.resolution_px} px)"
+                 if vision is not None else ""))
+        _run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append, stop, args.budget,
+                         perceived)
         print(format_table(collected))
+        if vision is not None:
+            for p in collected:
+                v = p.request["perception"]
+                print(f"{p.scene}: vision chain acceptance {v['acceptance_rate']:.2f}, effective sample size "
+                      f"{v['effective_sample_size']:.0f} ({v['chain_samples']} samples, {v['burn_in']} burn-in)")
+    if args.vision_rrd is not None:
+        from .viz.rerun_log import write_vision_rrd
+
+        write_vision_rrd(args.vision_rrd, scenes[0], perceived, vision)
+        print(f"wrote {args.vision_rrd}", file=sys.stderr)
     if args.png is not None:
         from .viz.figure import draw_prediction
 

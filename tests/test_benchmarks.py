@@ -88,3 +88,13 @@ def test_soak_benchmark_runs_the_node_under_mixed_input_and_reports(tmp_path):
     assert report["node_alive_until_the_end"] and report["processes_left"] == [] and report["exit_code"] == 0
     assert report["answers"]["ok"] >= 1 and report["sigint_exit_s"] < 2.0
     assert int(report["diagnostics_at_end"]["scenes_rejected"]) >= 1 or report["sent"]["bad"] == 0
+
+
+def test_vision_benchmark_writes_renders_and_mh_steps_per_second(tmp_path):
+    result = subprocess.run([sys.executable, str(REPO / "benchmarks" / "vision.py"), "--towers", "1", "--steps", "20",
+                             "--resolutions", "48", "--out", str(tmp_path)], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr[-3000:]
+    [row] = json.loads((tmp_path / "vision.json").read_text())["rows"]
+    assert row["resolution_px"] == 48 and row["renders_per_s"] > 0 and row["pybullet_renders_per_s"] > 0
+    assert 0.5 < row["silhouette_iou_mean"] <= 1.0 and row["mh_steps_per_s"] > 0
+    assert "| 48 |" in (tmp_path / "vision.md").read_text()

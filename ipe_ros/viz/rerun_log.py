@@ -313,3 +313,48 @@ def write_question_rrd(path: str | Path, scene: Scene, answers, *, stamp_ns: int
     finally:
         rec.disconnect()
     return logged
+
+
+def write_vision_rrd(path: str | Path, scene: Scene, perceived, settings) -> None:
+    """The vision system's view of a scene (``engine.vision``): the observed images (rendered and
+    blurred) under ``vision/views``, the posterior sample cloud of every body's position under
+    ``world/vision/<object>`` beside the scene, and the chain's acceptance (running mean) and
+    log-likelihood over the ``mh_sample`` timeline under ``vision/``."""
+    from ..engine.vision import blur, default_cameras
+    from ..engine.vision.render import render_views, scene_mesh
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cameras = default_cameras(scene, settings.views, math.radians(settings.separation_deg), settings.resolution_px)
+    observed = render_views(scene_mesh(scene), cameras)
+    blurred = blur(observed, settings.blur_at_resolution_px)
+    blueprint = rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial3DView(name="posterior samples of each body's position", origin="world"),
+            rrb.Vertical(rrb.Grid(*[rrb.Spatial2DView(name=f"view {i}", origin=f"vision/views/{i}")
+                                    for i in range(len(cameras))], name="the evidence (blurred views)"),
+                         rrb.TimeSeriesView(name="acceptance and log-likelihood", origin="vision/chain")),
+            column_shares=[3, 2]),
+        rrb.TimePanel(timeline="mh_sample"), collapse_panels=True)
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{scene.name}@vision/{uuid.uuid4().hex[:12]}")
+    rec.save(str(path), default_blueprint=blueprint)
+    try:
+        log_scene(rec, scene)
+        for i, (image, soft) in enumerate(zip(observed, blurred)):
+            rec.log(f"vision/views/{i}", rr.Image(np.clip(soft, 0, 255).astype(np.uint8)), static=True)
+            rec.log(f"vision/rendered/{i}", rr.Image(np.clip(image, 0, 255).astype(np.uint8)), static=True)
+        chain = perceived.chain
+        cloud = chain.positions_m[:: max(1, len(chain.positions_m) // 1000)]
+        for b, body in enumerate(scene.dynamic_objects):
+            rec.log(f"world/vision/{_part(body.name)}", rr.Points3D(cloud[:, b], radii=0.004,
+                                                                   colors=[to_rgb8(group_rgb(body.group))]), static=True)
+        if chain.accepted is not None:
+            trace = np.cumsum(chain.accepted) / np.arange(1, len(chain.accepted) + 1)
+            index = [rr.TimeColumn("mh_sample", sequence=np.arange(len(trace)))]
+            rec.send_columns("vision/chain/acceptance", indexes=index, columns=rr.Scalars.columns(scalars=trace))
+        kept = np.arange(perceived.burn_in, perceived.burn_in + len(chain.log_likelihood))
+        rec.send_columns("vision/chain/log_likelihood", indexes=[rr.TimeColumn("mh_sample", sequence=kept)],
+                         columns=rr.Scalars.columns(scalars=chain.log_likelihood))
+        rec.flush()
+    finally:
+        rec.disconnect()

@@ -24,12 +24,14 @@ class Chain:
 
     positions_m: (samples, dynamic bodies, 3) states (heights never change).
     log_likelihood: (samples,) of each state. acceptance_rate: over all proposals, burn-in included.
+    accepted: every proposal's outcome, burn-in included (the acceptance trace).
     """
 
     positions_m: np.ndarray
     log_likelihood: np.ndarray
     acceptance_rate: float
     proposals: int
+    accepted: np.ndarray | None = None  # (proposals,) whether each proposal was taken, burn-in included
 
     def coordinate_ess(self) -> np.ndarray:
         """ESS of every body's x and y (Geyer's initial positive sequence)."""
@@ -101,7 +103,9 @@ class ImageModel:
                 self._place(v, b, body_patch(self.mesh, camera, b, positions_m[b]))
         self.images = np.stack([self._composite(v, (0, size, 0, size)) for v in range(len(self.cameras))])
         self.blurred = blur(self.images, self.blur_px)
-        return log_likelihood(self.observed_blurred, self.blurred, self.sd)
+        self.current_ll = log_likelihood(self.observed_blurred, self.blurred, self.sd)
+        self._accepts = 0
+        return self.current_ll
 
     def _place(self, v: int, b: int, patch: Patch) -> None:
         old = self.patches[v][b]
@@ -119,8 +123,13 @@ class ImageModel:
         return np.where(covered, np.take_along_axis(grey, nearest[None], axis=0)[0], BACKGROUND_GREY)
 
     def propose(self, body: int, position_m) -> float:
-        """The log-likelihood with ``body`` moved to ``position_m`` (kept pending until ``accept``)."""
-        blurred, self._pending = self.blurred.copy(), []
+        """The log-likelihood with ``body`` moved to ``position_m`` (kept pending until ``accept``).
+
+        Only the blurred pixels within the kernel's reach (4 sigma) of the changed ones change, so
+        the blurred image and the likelihood are updated in that window alone."""
+        self._pending, change_ll = [], 0.0
+        reach = int(np.ceil(4 * self.blur_px))
+        size = self.settings.resolution_px
         for v, camera in enumerate(self.cameras):
             new, old = body_patch(self.mesh, camera, body, position_m), self.patches[v][body]
             boxes = [p for p in (new, old) if p.v1 > p.v0]
@@ -136,18 +145,28 @@ class ImageModel:
             grey[body, new.v0 - v0:new.v1 - v0, new.u0 - u0:new.u1 - u0] = new.grey
             image = self._composite(v, (v0, v1, u0, u1), depth, grey)
             change = image - self.images[v, v0:v1, u0:u1]
-            blurred[v] += self._k[:, v0:v1] @ change @ self._k_t[u0:u1, :]
-            self._pending.append((new, (v0, v1, u0, u1), image))
-        self._proposed = (body, blurred)
-        return log_likelihood(self.observed_blurred, blurred, self.sd)
+            r0, r1, c0, c1 = max(v0 - reach, 0), min(v1 + reach, size), max(u0 - reach, 0), min(u1 + reach, size)
+            before = self.blurred[v, r0:r1, c0:c1]
+            after = before + self._k[r0:r1, v0:v1] @ change @ self._k_t[u0:u1, c0:c1]
+            target = self.observed_blurred[v, r0:r1, c0:c1]
+            change_ll += float(np.sum((target - before) ** 2) - np.sum((target - after) ** 2))
+            self._pending.append((new, (v0, v1, u0, u1), image, (r0, r1, c0, c1), after))
+        proposed = self.current_ll + change_ll / (2 * self.sd * self.sd)
+        self._proposed = (body, proposed)
+        return proposed
 
     def accept(self) -> None:
-        body, self.blurred = self._proposed
+        body, proposed = self._proposed
         for v, pending in enumerate(self._pending):
             if pending is not None:
-                new, (v0, v1, u0, u1), image = pending
+                new, (v0, v1, u0, u1), image, (r0, r1, c0, c1), after = pending
                 self._place(v, body, new)
                 self.images[v, v0:v1, u0:u1] = image
+                self.blurred[v, r0:r1, c0:c1] = after
+        self._accepts += 1
+        # now and then from scratch, so that sums of window changes cannot drift
+        self.current_ll = log_likelihood(self.observed_blurred, self.blurred, self.sd) \
+            if self._accepts % 500 == 0 else proposed
 
 
 def run_chain(model: ImageModel, start_m: np.ndarray, dynamic: int, settings: VisionSettings,
@@ -156,7 +175,7 @@ def run_chain(model: ImageModel, start_m: np.ndarray, dynamic: int, settings: Vi
     state = np.array(start_m, float)
     current = model.start(state)
     kept, kept_ll = [], []
-    accepted = 0
+    taken = np.zeros(settings.chain_samples, bool)
     for sample in range(settings.chain_samples):
         if sample % dynamic == 0:
             order = rng.integers(0, dynamic, size=dynamic)
@@ -167,9 +186,9 @@ def run_chain(model: ImageModel, start_m: np.ndarray, dynamic: int, settings: Vi
         if np.log(rng.random()) < candidate - current:  # uniform prior: the likelihood ratio decides
             model.accept()
             state[body], current = moved, candidate
-            accepted += 1
+            taken[sample] = True
         if sample >= settings.burn_in:
             kept.append(state[:dynamic].copy())
             kept_ll.append(current)
     return Chain(positions_m=np.array(kept), log_likelihood=np.array(kept_ll),
-                 acceptance_rate=accepted / settings.chain_samples, proposals=settings.chain_samples)
+                 acceptance_rate=float(taken.mean()), proposals=settings.chain_samples, accepted=taken)

@@ -171,6 +171,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--resamples", type=int, default=10_000, help="bootstrap resamples (paper: 10 000)")
     e.add_argument("--human", default=None, help="CSV with columns stimulus,response (people's judgments)")
     e.add_argument("--human-scale", default=None, choices=SCALES, help="what the responses are measured in")
+    e.add_argument("--vision-resolution", type=int, default=None, metavar="PX",
+                   help="vision: rendered image size (default 256, the SI's; blur and likelihood SD scale with it)")
     return parser
 
 
@@ -374,7 +376,7 @@ def cmd_experiment(args) -> int:
     opts = Options(out_dir=Path(args.out), data_dir=Path(args.data) if args.data else shared_data_dir(),
                    quick=args.quick, seed=args.seed, samples=args.samples, stimuli=args.stimuli,
                    preset=args.preset, resamples=args.resamples, grid_samples=args.grid_samples, human=human,
-                   human_path=args.human)
+                   human_path=args.human, vision_resolution=args.vision_resolution)
     names = list(EXPERIMENTS) if args.name == "all" else [args.name]
     pool = WorkerPool(args.workers) if args.workers > 0 else None
     try:

@@ -100,6 +100,18 @@ def test_features_report_fits_ridge_to_the_ipe(reports):
         assert set(features["exp3"]["by_mu"]) == {"1", "10"}
 
 
+def test_vision_report_compares_the_vision_posterior_with_sigma(reports):
+    vision = reports[1]["vision"]["results"]
+    for label in ("Exp. 1 (will it fall?)", "Exp. 2 (direction, circular)"):
+        part = vision[label]
+        spread = np.array(part["vision_spread_m"], dtype=float)
+        assert spread.shape[0] == len(part["towers"]) and np.all(spread > 0) and np.all(spread < 1.0)
+        assert all(0 < a < 1 for a in part["acceptance"])
+    # a wider blur leaves the blocks less constrained: the spread grows with it
+    assert np.all(np.diff(np.array(vision["blur_spread_m"], dtype=float)) > 0)
+    assert vision["blur_px"][0] <= vision["matching_blur_px"] <= vision["blur_px"][-1]
+
+
 def test_a_human_table_gets_correlated_with_the_model(tmp_path, reports):
     """People who answer with the IPE's own prediction plus noise correlate with it."""
     fall = reports[1]["fall"]["results"]

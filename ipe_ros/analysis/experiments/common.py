@@ -42,6 +42,7 @@ class Options:
     grid_samples: int | None = None
     human: HumanResponses | None = None
     human_path: str | None = None
+    vision_resolution: int | None = None  # the vision report's image size (None: 256, quick 64)
 
     @property
     def k(self) -> int:

@@ -45,6 +45,8 @@ def run_chain_job(job: ChainJob) -> PerceivedScenes:
 
 def vision_settings(opts: Options, **changes) -> VisionSettings:
     base = VisionSettings(resolution_px=64, chain_samples=400, burn_in=100) if opts.quick else VisionSettings()
+    if opts.vision_resolution is not None:
+        base = dataclasses.replace(base, resolution_px=opts.vision_resolution)
     return dataclasses.replace(base, **changes)
 
 

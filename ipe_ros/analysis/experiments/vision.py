@@ -68,6 +68,7 @@ class ExperimentPart:
     sigma_answer: np.ndarray
     correlation: object
     clouds: tuple                 # (scene, vision positions, sigma positions) of the first towers
+    direction_agreement: dict | None = None  # Exp. 2: Fisher-Lee r and the share within +-45 degrees
 
 
 @dataclass(frozen=True)
@@ -100,10 +101,17 @@ def _part(label: str, filename: str, query, opts: Options, settings: VisionSetti
     sigma_positions = [np.array([o.initial_positions_m for o in p.outcomes if o.ok]) for p in sigma_run.predictions]
     both = np.isfinite(vision_answer) & np.isfinite(sigma_answer)
     rng = opts.rng(f"vision-{label}")
+    agreement = None
     if both.sum() < 3:
         correlation = None
     elif key == "direction_rad":
-        correlation = stats.bootstrap_circular(vision_answer[both], sigma_answer[both], n_resamples=opts.resamples, rng=rng)
+        a, b = vision_answer[both], sigma_answer[both]
+        correlation = stats.bootstrap_circular(a, b, n_resamples=opts.resamples, rng=rng)
+        # the mean direction of directions spread round the circle is ill-defined, so Jammalamadaka-
+        # SenGupta's r swings between resamples; as in the direction report, two measures without it
+        agreement = {"fisher_lee": stats.bootstrap_fisher_lee(a, b, n_resamples=opts.resamples, rng=rng),
+                     "within_45_deg": stats.bootstrap_within(a, b, math.pi / 4, n_resamples=opts.resamples, rng=rng),
+                     "towers": int(both.sum())}
     else:
         correlation = stats.bootstrap_pearson(vision_answer[both], sigma_answer[both], n_resamples=opts.resamples, rng=rng)
     return ExperimentPart(
@@ -113,7 +121,8 @@ def _part(label: str, filename: str, query, opts: Options, settings: VisionSetti
         acceptance=np.array([p.acceptance_rate for p in perceived]),
         ess_median=np.array([p.effective_sample_size for p in perceived]),
         vision_answer=vision_answer, sigma_answer=sigma_answer, correlation=correlation,
-        clouds=tuple((s, p.chain.positions_m, x) for s, p, x in list(zip(stim.scenes, perceived, sigma_positions))[:3]))
+        clouds=tuple((s, p.chain.positions_m, x) for s, p, x in list(zip(stim.scenes, perceived, sigma_positions))[:3]),
+        direction_agreement=agreement)
 
 
 def compute(opts: Options, map_fn) -> VisionResult:
@@ -206,12 +215,23 @@ def render(res: VisionResult, opts: Options) -> Report:
         report.results[part.label] = {
             "towers": list(part.towers), "source": part.source, "vision_spread_m": part.vision_spread_m,
             "sigma_spread_m": part.sigma_spread_m, "acceptance": part.acceptance, "ess_median": part.ess_median,
-            "vision_answer": part.vision_answer, "sigma_answer": part.sigma_answer, "correlation": part.correlation}
+            "vision_answer": part.vision_answer, "sigma_answer": part.sigma_answer, "correlation": part.correlation,
+            "direction_agreement": part.direction_agreement}
     report.add("## Posterior spread and the IPE's judgments", "")
     report.table(["towers", "n", "sigma-based spread m", "vision spread m", "vision / sigma", "MH acceptance",
                   "median ESS", "IPE(vision) vs IPE(sigma)", "paper"], rows)
     report.add("Spread: per block, the horizontal SD of its position over samples, averaged over blocks and "
-               "towers. ESS: the chain's effective sample size (median over block coordinates).", "",
+               "towers. ESS: the chain's effective sample size (median over block coordinates). Correlations are "
+               "Pearson's r (Exp. 1) and Jammalamadaka-SenGupta's circular r (Exp. 2), as the paper's, over towers "
+               "where both models give an answer.", "")
+    for part in res.parts:
+        if part.direction_agreement is not None:
+            a = part.direction_agreement
+            report.add(f"{part.label}: the circular r needs a mean direction, ill-defined for directions spread round "
+                       f"the circle, so its interval is wide; without it: Fisher-Lee circular r = {a['fisher_lee']}, "
+                       f"and the vision-fed IPE's direction is within +-45 degrees of the sigma-based IPE's on "
+                       f"{a['within_45_deg']} of {a['towers']} towers.", "")
+    report.add("",
                "## Which blur matches sigma = 0.2 short sides", "")
     report.table(["blur px (at 256 px)", "mean block spread m"], [[b, float(v)] for b, v in zip(res.blur_px, res.blur_spread_m)])
     report.add(f"Sigma-based spread on the same towers: {res.sigma_spread_first_m:.4f} m; the matching blur "

@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 from typing import Any, Sequence
 
 import numpy as np
+# imported with the module, not on a first answer (or during a shutdown): scipy.stats takes ~0.5 s
+from scipy.stats import circmean, circvar
 
 from .rollout import SampleOutcome
 from .scene import Scene
@@ -53,8 +55,6 @@ def mean_interval(values: np.ndarray) -> tuple[float, float]:
 def circular_mean(angles_rad: np.ndarray) -> float | None:
     """``scipy.stats.circmean`` in (-pi, pi], or None for no angles or a zero resultant (opposite
     falls cancel: "no direction", where circmean would return an arbitrary angle)."""
-    from scipy.stats import circmean, circvar
-
     if len(angles_rad) == 0 or 1.0 - circvar(angles_rad) < 1e-12:
         return None
     return float(circmean(angles_rad, high=math.pi, low=-math.pi))

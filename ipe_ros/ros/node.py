@@ -128,17 +128,23 @@ class _IpeInterface:
                 self.destroy_subscription(entity)
         self._inputs.clear()
 
-    def _close(self) -> None:
-        """Stop answering, end the prediction service and its workers, drop the publishers."""
-        self._unlisten()
+    def _close_services(self) -> bool:
+        """End the question and prediction services and their workers; False when none was open."""
         if self.questions is not None:
             self.questions.close()
-        if self.service is not None:
+        opened = self.service is not None
+        if opened:
             self.service.close()
+        self.service = self.questions = None
+        return opened
+
+    def _close(self) -> None:
+        """Stop answering, end the services and their workers, drop the publishers (the node lives on)."""
+        self._unlisten()
+        if self._close_services():
             self.destroy_timer(self._diagnostics_timer)
             for publisher in self._publishers:
                 self.destroy_publisher(publisher)
-        self.service = self.questions = None
 
     # -- logging: whatever text an input carried, the logger gets printable text ----------------
     def _log_error(self, text: str) -> None:
@@ -284,7 +290,7 @@ class IpeNode(_IpeInterface, Node):
         self._listen()
 
     def destroy_node(self) -> None:
-        self._close()
+        self._close_services()  # the node's own teardown destroys every entity
         super().destroy_node()
 
 
@@ -323,7 +329,7 @@ class IpeLifecycleNode(_IpeInterface, LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def destroy_node(self) -> None:
-        self._close()
+        self._close_services()
         super().destroy_node()
 
 

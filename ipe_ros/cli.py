@@ -125,6 +125,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"compute budget per prediction in seconds (default {DEFAULT_BUDGET_S:g}): samples still "
                         "running then are cut off (stopped_by: budget); scenes whose one rollout cannot fit are refused")
     p.add_argument("--json", action="store_true", help="one JSON object per scene per line")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run the samples on a Dask cluster (e.g. tcp://10.0.0.2:8786; default: $IPE_DASK_SCHEDULER, "
+                        "else worker processes here); see docs/cluster.md")
     p.add_argument("--png", default=None, metavar="FILE",
                    help="also draw the answer: the scene coloured by fall probability and three sampled rollouts "
                         "(one scene only)")
@@ -167,6 +170,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--grid-samples", type=int, default=None, help="k per cell of fall's sigma x phi grid")
     e.add_argument("--seed", type=int, default=0)
     e.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes (0: in-process)")
+    e.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run the samples on a Dask cluster (default: $IPE_DASK_SCHEDULER, else --workers here)")
     e.add_argument("--preset", default=DEFAULT_PRESET, choices=sorted(PRESETS))
     e.add_argument("--resamples", type=int, default=10_000, help="bootstrap resamples (paper: 10 000)")
     e.add_argument("--human", default=None, help="CSV with columns stimulus,response (people's judgments)")
@@ -209,13 +214,31 @@ def prediction_json(prediction: Prediction) -> str:
     return json.dumps(prediction.to_dict(), allow_nan=False, sort_keys=True)
 
 
-def _run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: int, workers: int, emit,
-                     stop: AdaptiveStop | None = None, budget_s: float | None = None, perceived=None) -> None:
+def _sample_map(scheduler: str | None, workers: int):
+    """Where samples run: a Dask cluster (``--scheduler`` or $IPE_DASK_SCHEDULER), worker processes
+    here, or (0 workers) this process. Returns the pool-like object (with ``map`` and ``close``) or None."""
+    from .engine.cluster import DaskMap, scheduler_address
+
+    address = scheduler_address(scheduler)
+    if address is not None:
+        try:
+            return DaskMap(address)
+        except ConfigError as exc:
+            raise ConfigError("--scheduler", exc.problem) from None
     if workers < 0:
         raise ConfigError("--workers", f"must be >= 0, got {workers}")
-    pool = WorkerPool(min(workers, max(1, model.samples))) if workers > 0 else None
+    return WorkerPool(workers) if workers > 0 else None
+
+
+def _run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: int, workers: int, emit,
+                     stop: AdaptiveStop | None = None, budget_s: float | None = None, perceived=None,
+                     scheduler: str | None = None) -> None:
+    pool = _sample_map(scheduler, min(workers, max(1, model.samples)) if workers > 0 else workers)
     if stop is not None:
-        stop = dataclasses.replace(stop, batch_size=anytime_batch_size(workers))
+        from .engine.cluster import DaskMap
+
+        parallel = pool.workers if isinstance(pool, DaskMap) else workers
+        stop = dataclasses.replace(stop, batch_size=anytime_batch_size(parallel))
     try:
         for scene in steps(scenes, "predict") if len(scenes) > 1 else scenes:
             emit(predict(scene, model, sim, query, seed=seed, map_fn=pool.map if pool else None, stop=stop,
@@ -283,14 +306,14 @@ def cmd_predict(args) -> int:
     if args.json:
         _run_predictions(scenes, model, sim, query, args.seed, args.workers,
                          lambda p: (collected.append(p), print(prediction_json(p), flush=True)), stop, args.budget,
-                         perceived)
+                         perceived, args.scheduler)
     else:
         print(f"sigma = {sigma:g} m, phi = {','.join(f'{v:g}' for v in phi)} m/s^2, mu = {args.mu}, "
               f"k = {1 if model.is_deterministic else args.samples}, preset = {sim.name}, seed = {args.seed}"
               + (f", perception = vision ({vision.chain_samples} MH samples, {vision.resolution_px} px)"
                  if vision is not None else ""))
         _run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append, stop, args.budget,
-                         perceived)
+                         perceived, args.scheduler)
         print(format_table(collected))
         if vision is not None:
             for p in collected:
@@ -378,7 +401,7 @@ def cmd_experiment(args) -> int:
                    preset=args.preset, resamples=args.resamples, grid_samples=args.grid_samples, human=human,
                    human_path=args.human, vision_resolution=args.vision_resolution)
     names = list(EXPERIMENTS) if args.name == "all" else [args.name]
-    pool = WorkerPool(args.workers) if args.workers > 0 else None
+    pool = _sample_map(args.scheduler, args.workers)
     try:
         for name in names:
             print(f"experiment {name}{' (quick)' if args.quick else ''} ...", file=sys.stderr, flush=True)

@@ -23,6 +23,8 @@ PYTHON_ROSDEP_KEYS = {
     "pybullet": "python3-pybullet-pip",
     "tqdm": "python3-tqdm",
     "rerun": None,
+    "distributed": None,
+    "dask": None,
 }
 OUR_PACKAGES = {"ipe_ros", "msg_bridge"}
 
@@ -62,7 +64,8 @@ def test_package_xml_declares_every_imported_ros_package_and_python_library():
     imported = _imported_top_level_modules()
     needed = {PYTHON_ROSDEP_KEYS[m] if m in PYTHON_ROSDEP_KEYS else m for m in imported}
     assert _declared(("exec_depend",)) <= needed, f"declared but not imported: {_declared(('exec_depend',)) - needed}"
-    assert "rerun-sdk" in (REPO / "package.xml").read_text(), "package.xml must say how rerun-sdk is installed"
+    for pip_only in ("rerun-sdk", "dask/distributed"):
+        assert pip_only in (REPO / "package.xml").read_text(), f"package.xml must say how {pip_only} is installed"
 
 
 def _yaml_parameters() -> dict:

@@ -1,0 +1,91 @@
+"""Rollouts per second through Dask against the local worker pool, on this machine, same worker count.
+
+    .venv/bin/python benchmarks/cluster.py [--towers 10] [--samples 48] [--out benchmarks/results/cluster]
+
+A LocalCluster on loopback (processes, one thread each) stands in for a cluster: what it measures is
+the scheduler's overhead per task and how batching hides it, and how rollouts/s scale from 1 to 2
+workers, from which the time of the paper's full-size analyses on N cores is projected.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from datetime import date
+from pathlib import Path
+
+os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+from ipe_ros.analysis.paper_data import shared_data_dir  # noqa: E402
+from ipe_ros.analysis.runs import load_tower_stimuli  # noqa: E402
+from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, predict, preset  # noqa: E402
+from ipe_ros.engine.cluster import DaskMap  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+QUERY = QuerySpec(queries=frozenset({"fall"}))
+#: Rollouts of the paper's full-size analyses that issue 20 asks for: fall's 11 x 11 sigma x phi grid
+#: at k = 48 on 60 towers, and bump's 60 tables x 16 x 16 bumps at k = 12 (each bump one rollout).
+FULL_SIZE_ROLLOUTS = {"fall grid (121 cells x 60 towers x 48)": 121 * 60 * 48, "bump (60 tables x 256 bumps x 12)": 60 * 256 * 12}
+
+
+def rollouts_per_s(scenes, k: int, map_fn) -> float:
+    model = ModelConfig(sigma_m=0.04, samples=k)
+    start = time.perf_counter()
+    for i, scene in enumerate(scenes):
+        predict(scene, model, preset("default"), QUERY, seed=i, map_fn=map_fn)
+    return len(scenes) * k / (time.perf_counter() - start)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--towers", type=int, default=10)
+    parser.add_argument("--samples", type=int, default=48)
+    parser.add_argument("--batches", default="1,4,12")
+    parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "cluster"))
+    args = parser.parse_args()
+    from distributed import Client, LocalCluster
+
+    scenes = load_tower_stimuli("willitfall.csv", shared_data_dir(), args.towers).scenes
+    rows = []
+    for workers in (1, 2):
+        with WorkerPool(workers) as pool:
+            rollouts_per_s(scenes[:1], args.samples, pool.map)  # warm the workers
+            rows.append({"backend": "local pool", "workers": workers, "batch": None,
+                         "rollouts_per_s": rollouts_per_s(scenes, args.samples, pool.map)})
+        with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                          dashboard_address=None) as cluster, Client(cluster, set_as_default=False) as client:
+            for batch in (int(b) for b in args.batches.split(",")):
+                dask_map = DaskMap(client, batch_size=batch)
+                rollouts_per_s(scenes[:1], args.samples, dask_map.map)
+                rows.append({"backend": "dask", "workers": workers, "batch": batch,
+                             "rollouts_per_s": rollouts_per_s(scenes, args.samples, dask_map.map)})
+    best = {w: max(r["rollouts_per_s"] for r in rows if r["backend"] == "dask" and r["workers"] == w) for w in (1, 2)}
+    scaling = best[2] / best[1]
+    per_core = best[1]
+    projection = {name: {"rollouts": n, "hours_here": n / best[2] / 3600,
+                         "hours_on_64_cores": n / (per_core * 64 * min(1.0, scaling / 2)) / 3600}
+                  for name, n in FULL_SIZE_ROLLOUTS.items()}
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    result = {"date": date.today().isoformat(), "towers": len(scenes), "samples": args.samples, "rows": rows,
+              "scaling_1_to_2_workers": scaling, "projection": projection}
+    (out / "cluster.json").write_text(json.dumps(result, indent=1))
+    lines = [f"# Dask against the local pool ({result['date']})", "",
+             f"{len(scenes)} towers, k = {args.samples}, `default`, the fall query, this 2-core machine; a LocalCluster "
+             "on loopback (processes, one thread each).", "",
+             "| backend | workers | batch | rollouts/s |", "|---|---|---|---|"]
+    lines += [f"| {r['backend']} | {r['workers']} | {r['batch'] or '-'} | {r['rollouts_per_s']:.1f} |" for r in rows]
+    lines += ["", f"Scaling from 1 to 2 Dask workers: {scaling:.2f}x. Projected wall time of the paper's full-size "
+              "analyses (rollouts / best Dask rate; on 64 cores, the 1-worker rate x 64 x the measured parallel "
+              "efficiency):", "", "| analysis | rollouts | hours here | hours on 64 cores |", "|---|---|---|---|"]
+    lines += [f"| {name} | {p['rollouts']} | {p['hours_here']:.1f} | {p['hours_on_64_cores']:.2f} |"
+              for name, p in projection.items()]
+    (out / "cluster.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

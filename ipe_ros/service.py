@@ -181,7 +181,11 @@ class PredictionService:
     def __init__(self, config: ServiceConfig, *, workers: int, publish: Callable[[Answer], None],
                  log_error: Callable[[str], None] = lambda _msg: None,
                  log_info: Callable[[str], None] = lambda _msg: None, start_method: str = "forkserver",
-                 publish_error: Callable[[StampedScene, str], None] = lambda _source, _error: None):
+                 publish_error: Callable[[StampedScene, str], None] = lambda _source, _error: None,
+                 pool=None):
+        """``pool``: where samples run instead of ``workers`` local processes (e.g. an
+        ``engine.cluster.DaskMap``); anything with WorkerPool's ``map``, ``warm``, ``worker_pids``,
+        ``replacements`` and ``close``."""
         if isinstance(workers, bool) or not isinstance(workers, int) or workers < 0:
             raise ValueError(f"workers: must be an integer >= 0 (0 runs samples in the prediction thread), got {workers!r}")
         self._config = config
@@ -190,8 +194,8 @@ class PredictionService:
         self._publish_error = publish_error
         self._log_error = log_error
         self._log_info = log_info
-        self._pool = WorkerPool(workers, start_method=start_method) if workers > 0 else None
-        self.workers = workers
+        self._pool = pool if pool is not None else WorkerPool(workers, start_method=start_method) if workers > 0 else None
+        self.workers = len(pool.worker_pids()) if pool is not None else workers
         self._cond = threading.Condition()
         self._pending: StampedScene | None = None
         self._latest: StampedScene | None = None
@@ -349,7 +353,7 @@ class PredictionService:
         if self._pool is not None:
             try:
                 self._pool.warm()  # start workers now, not on the first scene
-                self._log_info(f"{self.workers} worker process(es) ready: pids {self._pool.worker_pids()}")
+                self._log_info(f"{self.workers} worker process(es) ready: {self._pool.worker_pids()}")
             except RuntimeError:
                 return  # closed before it started
             except Exception as exc:  # noqa: BLE001 - the first prediction will retry and report

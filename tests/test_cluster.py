@@ -17,8 +17,10 @@ from ipe_ros.engine.cluster import DaskMap, scheduler_address  # noqa: E402
 def cluster():
     import dask
 
-    # one reschedule, not three, so that the lost-worker test ends quickly
-    with dask.config.set({"distributed.scheduler.allowed-failures": 1}):
+    # one reschedule, not three, so that the lost-worker test ends quickly; one task at a time per
+    # worker, so that a dying worker takes only its own task with it (the scheduler queues the rest)
+    with dask.config.set({"distributed.scheduler.allowed-failures": 1,
+                          "distributed.scheduler.worker-saturation": 1.0}):
         local = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
                                          dashboard_address=None)
         client = distributed.Client(local, set_as_default=False)
@@ -80,3 +82,30 @@ def test_ipe_predict_on_a_scheduler_answers_as_it_does_locally(cluster):
     assert unreachable.returncode == 2
     assert unreachable.stderr.startswith("ipe: error: --scheduler: cannot reach the Dask scheduler at "
                                          "'tcp://127.0.0.1:9'")
+
+
+def test_a_node_offloads_its_samples_to_the_cluster(cluster):
+    import json
+
+    from std_msgs.msg import String
+
+    from ipe_ros.engine.scene_io import scene_to_json
+    from ipe_ros.ros.node import LATCHED_QOS
+    from tests.ros_harness import RosHarness, wait_until
+
+    tower = load_scenes("ipe_ros/data/example_tower.json")[0]
+    ros = RosHarness()
+    try:
+        node = ros.start_ipe_node(samples=6, seed=4, dask_scheduler=cluster.scheduler.address)
+        answers = ros.collect(String, "/ipe/prediction", LATCHED_QOS)
+        ros.publisher(String, "/ipe/scene_json").publish(String(data=scene_to_json(tower)))
+        wait_until(lambda: len(answers), 120.0, "an answer computed on the cluster")
+        stats = node.service.stats()
+        assert stats.workers == 2 and stats.workers_alive == 2  # the Dask workers
+    finally:
+        ros.close()
+    with WorkerPool(2) as pool:
+        local = predict(tower, ModelConfig(sigma_m=0.04, samples=6), preset("default"),
+                        QuerySpec(queries=frozenset({"fall", "any_fall", "direction", "far"})), seed=4, map_fn=pool.map)
+    answer = json.loads(answers[0].data)
+    assert answer["fall_fraction"] == local.fall_fraction and answer["direction_rad"] == local.direction_rad

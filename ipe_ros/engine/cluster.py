@@ -83,7 +83,18 @@ class DaskMap:
                 results += [on_lost(item, reason) for item in batch]
         return results
 
-    def close(self) -> None:
+    # -- what the node's prediction service asks of a pool ------------------------------------------
+    replacements = 0  # Dask's nannies replace dead workers; the scheduler counts them, not we
+
+    def worker_pids(self) -> list[str]:
+        """The Dask workers' addresses (a local pool's are process ids)."""
+        return sorted(self.client.scheduler_info(n_workers=-1).get("workers", {}))
+
+    def warm(self) -> list[str]:
+        return self.worker_pids()
+
+    def close(self, grace_s: float | None = None) -> None:
+        """Disconnect (the cluster's workers keep running; tasks still queued for us are dropped)."""
         if self._own:
             self.client.close()
 

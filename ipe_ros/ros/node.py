@@ -86,9 +86,17 @@ class _IpeInterface:
         ]
         (self._pub_prediction, self._pub_fraction, self._pub_probability, self._pub_direction, self._pub_markers,
          self._pub_diagnostics, self._pub_answer, self._pub_support_graph) = self._publishers
+        pool = None
+        if str(values["dask_scheduler"]).strip():
+            from ..engine.cluster import DaskMap  # only a node that offloads to a cluster needs dask
+
+            try:
+                pool = DaskMap(str(values["dask_scheduler"]).strip())
+            except ConfigError as exc:
+                raise ConfigError("dask_scheduler", exc.problem) from None
         self.service = PredictionService(config, workers=int(values["workers"]), publish=self._publish_answer,
                                          log_error=self._log_error, log_info=self._log_info,
-                                         start_method=start_method, publish_error=self._publish_error)
+                                         start_method=start_method, publish_error=self._publish_error, pool=pool)
         self.questions = QuestionService(self.service, publish=self._publish_question_answer,
                                          log_error=self._log_error)
         self._diagnostics_timer = self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics,

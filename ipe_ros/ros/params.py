@@ -85,6 +85,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
                                                    "take; samples still running then are cut off (stopped_by: "
                                                    "budget) and scenes whose one rollout cannot fit are rejected",
               (0.1, 3600.0)),
+    ParamSpec("dask_scheduler", "", _STRING, "run the samples on a Dask cluster at this address (e.g. "
+                                         "tcp://10.0.0.1:8786, see docs/cluster.md) instead of `workers` local "
+                                         "processes; empty: local; fixed at start", read_only=True),
     ParamSpec("max_objects", DEFAULT_MAX_OBJECTS, _INT, "scenes with more objects are rejected", (1, 10000)),
     ParamSpec("frame_id", "world", _STRING, "frame of scenes received on ~/scene_json and ~/ask (JSON carries no "
                                             "header); must be one of gravity_aligned_frames",

@@ -172,6 +172,9 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes (0: in-process)")
     e.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run the samples on a Dask cluster (default: $IPE_DASK_SCHEDULER, else --workers here)")
+    e.add_argument("--resume", default=None, metavar="DIR",
+                   help="keep every sample's result in DIR (keyed by scene, settings and seed); a run started again "
+                        "with the same DIR computes only what is missing")
     e.add_argument("--preset", default=DEFAULT_PRESET, choices=sorted(PRESETS))
     e.add_argument("--resamples", type=int, default=10_000, help="bootstrap resamples (paper: 10 000)")
     e.add_argument("--human", default=None, help="CSV with columns stimulus,response (people's judgments)")
@@ -402,10 +405,19 @@ def cmd_experiment(args) -> int:
                    human_path=args.human, vision_resolution=args.vision_resolution)
     names = list(EXPERIMENTS) if args.name == "all" else [args.name]
     pool = _sample_map(args.scheduler, args.workers)
+    map_fn = pool.map if pool else None
+    store = None
+    if args.resume is not None:
+        from .engine.store import ResumableMap
+
+        store = ResumableMap(args.resume, map_fn)
+        map_fn = store.map
     try:
         for name in names:
             print(f"experiment {name}{' (quick)' if args.quick else ''} ...", file=sys.stderr, flush=True)
-            report = EXPERIMENTS[name](opts, pool.map if pool else None)
+            report = EXPERIMENTS[name](opts, map_fn)
+            if store is not None:
+                print(f"  {store.hits} results read back from {args.resume}, {store.computed} computed", file=sys.stderr)
             json_path, md_path = report.write(opts.out_dir)
             print(f"wrote {md_path} and {json_path}" + (f" (+{len(report.figures)} PNG)" if report.figures else ""))
     finally:

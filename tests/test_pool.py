@@ -118,3 +118,10 @@ def test_workers_are_renewed_between_maps_after_their_share_of_items():
         assert pool.recycles == 0 and pool.worker_pids() == first
         assert pool.map(_square, range(3)) == [0, 1, 4]  # renewed before this map
         assert pool.recycles == 1 and not set(pool.worker_pids()) & set(first)
+
+
+def test_workers_run_single_threaded_blas_unless_the_user_chose_otherwise():
+    """A worker process is one core's worth of work: BLAS thread pools on top oversubscribe the cores."""
+    with WorkerPool(1) as pool:
+        [in_worker] = pool.map(os.getenv, ["OPENBLAS_NUM_THREADS"])
+    assert in_worker == os.environ["OPENBLAS_NUM_THREADS"]  # "1" unless set before the pool started

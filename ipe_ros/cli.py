@@ -301,10 +301,9 @@ def cmd_predict(args) -> int:
             raise ConfigError(f"--budget ({scene.name})" if exc.field == "budget_s" else exc.field, exc.problem) from None
     perceived = None
     if args.vision_rrd is not None:  # the chain the prediction would run, kept for the recording
-        from .engine.sampler import VISION_STREAM
-        from .engine.vision.perception import PerceptionTask, perceive_task
+        from .engine.sampler import perceive_for
 
-        perceived = perceive_task(PerceptionTask(scenes[0], model.samples, vision, (args.seed, VISION_STREAM)))
+        perceived = perceive_for(scenes[0], model, args.seed)
     collected: list[Prediction] = []
     if args.json:
         _run_predictions(scenes, model, sim, query, args.seed, args.workers,

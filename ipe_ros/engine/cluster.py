@@ -63,7 +63,7 @@ class DaskMap:
 
     @property
     def workers(self) -> int:
-        return len(self.client.scheduler_info(n_workers=-1).get("workers", {}))
+        return len(self.worker_pids())
 
     def map(self, fn: Callable[[T], R], items: Iterable[T],
             on_lost: Callable[[T, str], R] | None = None) -> list[R]:

@@ -58,7 +58,8 @@ class AdaptiveStop:
 VISION_STREAM = 0x5EE
 
 
-def _perceive(scene: Scene, model: ModelConfig, seed: int, map_fn: MapFn | None):
+def perceive_for(scene: Scene, model: ModelConfig, seed: int, map_fn: MapFn | None = None):
+    """The vision chain ``predict`` runs for this scene, model and seed (``vision.PerceivedScenes``)."""
     from .vision.perception import PerceptionTask, perceive_task
 
     task = PerceptionTask(scene=scene, k=model.samples, settings=model.vision, seed=(seed, VISION_STREAM))
@@ -165,7 +166,7 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
     per_sample_answer = sample_fall_fraction if query.wants("fall") else sample_any_fall
     tasks = make_tasks(scene, model, settings, query, seed, record_every, record_samples)
     if model.perception == "vision":
-        perceived = perceived or _perceive(scene, model, seed, map_fn)
+        perceived = perceived or perceive_for(scene, model, seed, map_fn)
         sampled = dataclasses.replace(model, sigma_m=0.0)  # the posterior is the noise
         tasks = [dataclasses.replace(t, scene=perceived.scenes[t.index], model=sampled) for t in tasks]
     if budget_s is not None:

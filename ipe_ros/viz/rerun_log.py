@@ -320,12 +320,13 @@ def write_vision_rrd(path: str | Path, scene: Scene, perceived, settings) -> Non
     blurred) under ``vision/views``, the posterior sample cloud of every body's position under
     ``world/vision/<object>`` beside the scene, and the chain's acceptance (running mean) and
     log-likelihood over the ``mh_sample`` timeline under ``vision/``."""
-    from ..engine.vision import blur, default_cameras
+    from ..engine.vision import blur
+    from ..engine.vision.camera import cameras_for
     from ..engine.vision.render import render_views, scene_mesh
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    cameras = default_cameras(scene, settings.views, math.radians(settings.separation_deg), settings.resolution_px)
+    cameras = cameras_for(scene, settings)
     observed = render_views(scene_mesh(scene), cameras)
     blurred = blur(observed, settings.blur_at_resolution_px)
     blueprint = rrb.Blueprint(

@@ -16,7 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...engine import ModelConfig, predict, preset
-from ...engine.vision import VisionSettings, default_cameras, perceive
+from ...engine.vision import VisionSettings, perceive
+from ...engine.vision.camera import cameras_for
 from ...engine.vision.perception import PerceivedScenes
 from ...engine.vision.render import render_views, scene_mesh
 from .. import stats
@@ -142,9 +143,7 @@ def compute(opts: Options, map_fn) -> VisionResult:
     order = np.argsort(spread)
     matching = float(np.exp(np.interp(sigma_first, spread[order], np.log(np.array(BLUR_SCALES_PX))[order])))
     scene = first[0]
-    observed = render_views(scene_mesh(scene), default_cameras(scene, settings.views,
-                                                               math.radians(settings.separation_deg),
-                                                               settings.resolution_px))
+    observed = render_views(scene_mesh(scene), cameras_for(scene, settings))
     return VisionResult(settings=settings, parts=parts, blur_px=BLUR_SCALES_PX, blur_spread_m=spread,
                         sigma_spread_first_m=sigma_first, matching_blur_px=matching, observed=observed)
 

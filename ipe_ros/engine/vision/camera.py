@@ -44,6 +44,11 @@ class Camera:
         return pixels, depth
 
 
+def cameras_for(scene: Scene, settings) -> tuple[Camera, ...]:
+    """The cameras a ``VisionSettings`` asks for (views, separation, resolution) around ``scene``."""
+    return default_cameras(scene, settings.views, math.radians(settings.separation_deg), settings.resolution_px)
+
+
 def default_cameras(scene: Scene, views: int = 3, separation_rad: float = math.radians(45),
                     resolution_px: int = 256, elevation_rad: float = math.radians(20),
                     fov_rad: float = math.radians(40), first_azimuth_rad: float = math.radians(-90)) -> tuple[Camera, ...]:

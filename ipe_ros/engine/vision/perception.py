@@ -8,7 +8,6 @@ spread over the chain become k scenes, each then separated and simulated like an
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -16,7 +15,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..scene import Scene
-from .camera import Camera, default_cameras
+from .camera import Camera, cameras_for
 from .likelihood import VisionSettings
 from .mcmc import Chain, ImageModel, run_chain
 from .render import render_views, scene_mesh
@@ -58,8 +57,7 @@ def perceive(scene: Scene, k: int, settings: VisionSettings, rng: np.random.Gene
 
     Raises ConfigError naming ``vision.chain_samples`` when the chain gives fewer than
     MIN_ESS_PER_SAMPLE x k effective samples (the k scenes would not be roughly independent)."""
-    cameras = cameras or default_cameras(scene, settings.views, math.radians(settings.separation_deg),
-                                         settings.resolution_px)
+    cameras = cameras or cameras_for(scene, settings)
     mesh = scene_mesh(scene)
     if observed is None:
         observed = render_views(mesh, cameras)

@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
+ENV = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
 
 
 def test_accuracy_vs_time_writes_table_json_and_plot_with_paper_as_reference(tmp_path):
@@ -98,3 +99,19 @@ def test_vision_benchmark_writes_renders_and_mh_steps_per_second(tmp_path):
     assert row["resolution_px"] == 48 and row["renders_per_s"] > 0 and row["pybullet_renders_per_s"] > 0
     assert 0.5 < row["silhouette_iou_mean"] <= 1.0 and row["mh_steps_per_s"] > 0
     assert "| 48 |" in (tmp_path / "vision.md").read_text()
+
+
+def test_full_size_runner_times_a_resumable_run_on_a_local_cluster(tmp_path):
+    # the runner of the paper's full-size analyses, at --quick size: a second run reads every sample back
+    command = [sys.executable, str(REPO / "benchmarks" / "full_size.py"), "bump", "--workers", "1",
+               "--resume", str(tmp_path / "runs"), "--out", str(tmp_path / "out"), "--", "--quick"]
+    for _ in range(2):
+        result = subprocess.run(command, cwd=tmp_path, capture_output=True, text=True, timeout=300, env=ENV)
+        assert result.returncode == 0, result.stderr[-2000:]
+    summary = json.loads((tmp_path / "out" / "bump_full_size.json").read_text())
+    first, second = summary["runs"]
+    assert first["finished"] and second["finished"]
+    assert first["samples_computed"] > 0 and first["samples_read_back"] == 0
+    assert second["samples_computed"] == 0 and second["samples_read_back"] == first["samples_computed"]
+    assert "<LocalCluster on 127.0.0.1>" in first["command"] and "--quick" in first["command"]
+    assert (tmp_path / "out" / "bump.md").exists()

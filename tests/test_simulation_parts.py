@@ -82,3 +82,25 @@ def test_health_names_divergence_and_watches_energy_after_the_inputs():
     watch.look(4.0)
     watch.look(5.5)
     assert watch.max_gain_j == pytest.approx(0.5)
+
+
+def test_the_quick_depth_test_agrees_with_the_deepest_penetration():
+    # a small cube sunk into a large one by several depths, with and without the small one counted:
+    # deeper_than skips the per-body pass only when no body can be that deep
+    from ipe_ros.engine.simulation.world import build_world
+
+    from .helpers import block, floor_scene
+
+    for sunk_m in (0.0, 0.004, 0.01, 0.03, 0.06):
+        scene = floor_scene(block("big", 0.0, 0.0, 0.2, extents=(0.4, 0.4, 0.4)),
+                            block("small", 0.0, 0.0, 0.45 - sunk_m, extents=(0.1, 0.1, 0.1)))
+        positions = np.array([b.position_m for b in scene.dynamic_objects])
+        world = build_world(scene, positions, np.array([1.0, 1.0]), DEFAULT)
+        smallest = np.array([0.4, 0.1])
+        for among in (None, np.array([True, False]), np.array([False, True])):
+            deepest = health.deepest_penetration_fraction(world, smallest, among)
+            for fraction in (0.0, 0.01, 0.05, 0.1, 0.2, 0.5):
+                assert health.deeper_than(world, smallest, fraction, among) == (deepest > fraction), \
+                    (sunk_m, among, fraction, deepest)
+        if sunk_m >= 0.03:
+            assert health.deepest_penetration_fraction(world, smallest) > 0.2  # the small cube, mostly

@@ -27,7 +27,7 @@ from typing import Callable
 import numpy as np
 from scipy.stats import circmean
 
-from ..engine import ModelConfig, Prediction, QuerySpec, Scene, SimSettings, predict
+from ..engine import ModelConfig, Prediction, QuerySpec, Scene, SimSettings, predict_many
 from ..engine.estimate import sample_fall_fraction, sample_far_m
 from ..engine.generators import generate_towers
 from ..engine.rollout import SampleOutcome
@@ -152,12 +152,21 @@ class ModelRun:
         return sum(p.wall_s for p in self.predictions)
 
 
+#: Samples handed to the map at once: predictions of several stimuli share one map (a worker never
+#: idles at the end of one prediction, a cluster's round trip is paid once per map), and progress is
+#: still reported every few stimuli.
+SAMPLES_PER_MAP = 480
+
+
 def run_model(label: str, scenes, model: ModelConfig, settings: SimSettings, query: QuerySpec, seed: int,
               map_fn=None) -> ModelRun:
     """Predict every scene with its own stimulus seed (see ``stimulus_seed``)."""
-    predictions = []
     scenes = list(scenes)
-    for scene in steps(scenes, label):
-        predictions.append(predict(scene, model, settings, query, seed=stimulus_seed(seed, scene.name),
-                                   map_fn=map_fn))
+    per_scene = 1 if model.is_deterministic else model.samples
+    chunk = max(1, SAMPLES_PER_MAP // per_scene)
+    chunks = [scenes[i:i + chunk] for i in range(0, len(scenes), chunk)]
+    predictions = []
+    for part in steps(chunks, f"{label} ({len(scenes)} stimuli, {min(chunk, len(scenes))} per batch)", every=1):
+        predictions += predict_many([(scene, model, stimulus_seed(seed, scene.name)) for scene in part],
+                                    settings, query, map_fn)
     return ModelRun(label=label, names=tuple(s.name for s in scenes), predictions=tuple(predictions))

@@ -7,7 +7,7 @@ from .config import ALL_QUERIES, PRESETS, ModelConfig, QuerySpec, SimSettings, p
 from .errors import ConfigError, PhysicsError, SceneError
 from .estimate import Prediction
 from .pool import WorkerPool
-from .sampler import AdaptiveStop, predict
+from .sampler import AdaptiveStop, predict, predict_many
 from .scene import Body, Box, Floor, Scene, Table, validate_scene
 from .shapes import BoxShape, Capsule, Compound, CompoundPart, ConvexHull, Cylinder, Sphere
 from .scene_io import load_scenes, scene_from_dict, scene_to_dict, scenes_from_json, scenes_from_tower_csv
@@ -16,6 +16,6 @@ __all__ = [
     "ALL_QUERIES", "PRESETS", "AdaptiveStop", "Body", "Box", "BoxShape", "Capsule", "Compound", "CompoundPart",
     "ConvexHull", "Cylinder", "Sphere", "ConfigError", "Floor", "ModelConfig", "PhysicsError", "Prediction",
     "QuerySpec", "Scene", "SceneError", "SimSettings", "Table", "WorkerPool", "load_scenes",
-    "parse_queries", "predict", "preset", "scene_from_dict", "scene_to_dict", "scenes_from_json",
+    "parse_queries", "predict", "predict_many", "preset", "scene_from_dict", "scene_to_dict", "scenes_from_json",
     "scenes_from_tower_csv", "validate_scene",
 ]

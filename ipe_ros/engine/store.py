@@ -74,7 +74,12 @@ class ResumableMap:
     """``map(fn, items, on_lost=None)`` through ``inner`` (None: in this process), remembering results
     in ``folder``. ``hits`` and ``computed`` count what the last calls read back and ran."""
 
-    def __init__(self, folder: str | Path, inner: Callable | None = None, batch: int = 64):
+    #: Missing results computed per call of ``inner``: large enough that the map's own overheads (a
+    #: cluster's round trip, the last sample's wait) stay small, small enough that an interruption
+    #: loses seconds of work (~10 s at 46 rollouts/s).
+    DEFAULT_BATCH = 480
+
+    def __init__(self, folder: str | Path, inner: Callable | None = None, batch: int = DEFAULT_BATCH):
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
         self.inner, self.batch = inner, batch

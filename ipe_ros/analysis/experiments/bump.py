@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...engine import ModelConfig, predict, preset
+from ...engine import ModelConfig, predict_many, preset
 from ...engine.generators import generate_tables
 from .. import stats
 from ..report import Report, pyplot
@@ -47,14 +47,16 @@ def bump_grid(scenes, directions, phis, k: int, opts: Options, map_fn, label: st
     ratio, fell = np.full(shape, np.nan), np.zeros(shape)
     ratio_sum, ratio_count = np.zeros(shape), np.zeros(shape)
     for s, scene in enumerate(steps(scenes, f"{label} (scenes)", every=1)):
-        for d, theta in enumerate(directions):
-            # a fixed direction (no cue spread); every magnitude is simulated for each noisy sample
-            model = ModelConfig(sigma_m=sigma_m(PAPER_SIGMA), phi_m_s2=tuple(phi_m_s2(p) for p in phis), samples=k,
-                                force_direction_rad=float(theta), cue_half_width_rad=0.0)
-            # a block configuration keeps its seed on every table, with or without walls (common
-            # random numbers: differences between tables are the tables' alone)
-            configuration = scene.name.removesuffix("_nowalls").rsplit("_", 1)[0]
-            pred = predict(scene, model, settings, BUMP, seed=stimulus_seed(opts.seed, configuration), map_fn=map_fn)
+        # a block configuration keeps its seed on every table, with or without walls (common
+        # random numbers: differences between tables are the tables' alone)
+        configuration = scene.name.removesuffix("_nowalls").rsplit("_", 1)[0]
+        seed = stimulus_seed(opts.seed, configuration)
+        # a fixed direction each (no cue spread); every magnitude is simulated for each noisy sample;
+        # all directions of a table in one map
+        models = [ModelConfig(sigma_m=sigma_m(PAPER_SIGMA), phi_m_s2=tuple(phi_m_s2(p) for p in phis), samples=k,
+                              force_direction_rad=float(theta), cue_half_width_rad=0.0) for theta in directions]
+        answers = predict_many([(scene, model, seed) for model in models], settings, BUMP, map_fn)
+        for d, pred in enumerate(answers):
             for m in range(len(phis)):
                 rollouts = [o.rollouts[m] for o in pred.outcomes if o.ok]
                 values = [r.bump_ratio for r in rollouts if r.bump_ratio is not None]

@@ -94,14 +94,33 @@ def deepest_penetration_fraction(world, smallest_extents_m: np.ndarray, among: n
     """The deepest any dynamic body (of ``among``, default all) is inside the support or another body,
     as a fraction of its own smallest extent (0 when nothing overlaps). ``detect``: find the contacts
     of the state now; else read the ones the last step found (cheaper, one step old)."""
+    return _deepest_fraction(world, _contacts(world, detect), smallest_extents_m, among)
+
+
+def deeper_than(world, smallest_extents_m: np.ndarray, fraction: float, among: np.ndarray | None = None,
+                detect: bool = True) -> bool:
+    """``deepest_penetration_fraction(...) > fraction``, cheaply in the usual case: when no contact
+    is deeper than ``fraction`` of the smallest body's extent, none can be deeper than ``fraction`` of
+    its own, and the per-body pass is skipped (this runs at every look of a collapse)."""
+    contacts = _contacts(world, detect)
+    if not contacts or -min(c[8] for c in contacts) <= fraction * float(np.min(smallest_extents_m)):
+        return False
+    return _deepest_fraction(world, contacts, smallest_extents_m, among) > fraction
+
+
+def _contacts(world, detect: bool) -> tuple:
     from .world import pybullet
 
     p = pybullet()
     if detect:
         p.performCollisionDetection(physicsClientId=world.client)
+    return p.getContactPoints(physicsClientId=world.client)
+
+
+def _deepest_fraction(world, contacts, smallest_extents_m: np.ndarray, among: np.ndarray | None) -> float:
     index = {handle: i for i, handle in enumerate(world.dynamic_ids) if among is None or among[i]}
     deepest = 0.0
-    for contact in p.getContactPoints(physicsClientId=world.client):
+    for contact in contacts:
         depth = -contact[8]
         if depth <= 0:
             continue

@@ -178,8 +178,8 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
             # body is deep inside another: the solver pushes it out by a fraction per step, so coarse
             # steps leave it there (a heavy body on a light one, a landing at a coarse step)
             ticks = collapse.coarse_factor(ticks_allowed(fastest_m_s, settings, world))
-            deep = ticks > 1 and tick < fine_from_tick and health.deepest_penetration_fraction(
-                world, smallest, detect=False) > settings.early_stop.max_penetration_fraction
+            deep = ticks > 1 and tick < fine_from_tick and health.deeper_than(
+                world, smallest, settings.early_stop.max_penetration_fraction, detect=False)
             if ticks > 1 and (tick >= fine_from_tick or deep):
                 ticks = 1
             steps.set(ticks, travel_substeps if ticks == 1 else 1)
@@ -188,8 +188,7 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
         steps.find_contacts_ahead(fastest_m_s)
         if rest.enabled and rest.should_stop(tick * dt, speeds, spins, heights):
             # only bodies whose outcome is still open must be out of the others
-            deepest = health.deepest_penetration_fraction(world, smallest, rest.undecided)
-            if deepest <= settings.early_stop.max_penetration_fraction:
+            if not health.deeper_than(world, smallest, settings.early_stop.max_penetration_fraction, rest.undecided):
                 break
             collapse.end()  # at rest but still inside another body: push it out at the fine step
             steps.set(1, travel_substeps)

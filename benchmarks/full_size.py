@@ -4,7 +4,7 @@
                                                   [--out benchmarks/results/experiments] [-- ARGS...]
     .venv/bin/python benchmarks/full_size.py fall -- --grid-samples 48
 
-Starts a LocalCluster on 127.0.0.1 (processes, one thread each, no dashboard), runs
+Starts a LocalCluster on 127.0.0.1 (processes, one thread each, its HTTP port a free one), runs
 ``ipe experiment NAME --scheduler ADDRESS --resume DIR --out OUT ARGS`` in this process, and writes
 ``OUT/NAME_full_size.json``: the command, wall time, samples computed in this run and read back from
 ``DIR``, and samples/s. Interrupted (Ctrl-C, SIGTERM), the cluster is closed and the same command
@@ -55,10 +55,11 @@ def main() -> int:
     from ipe_ros import cli
 
     before = stored_samples(resume)
-    # one task per one-thread worker at a time: a worker that dies takes only its own task with it
+    # one task per one-thread worker at a time: a worker that dies takes only its own task with it;
+    # the scheduler always serves HTTP (health, metrics): on a free loopback port, so clusters never collide
     with dask.config.set({"distributed.scheduler.worker-saturation": 1.0}), \
             LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                         dashboard_address=None) as cluster, Client(cluster, set_as_default=False):
+                         dashboard_address="127.0.0.1:0") as cluster, Client(cluster, set_as_default=False):
         command = ["experiment", args.name, "--scheduler", cluster.scheduler_address, "--resume", str(resume),
                    "--out", args.out, *extra]
         start = time.perf_counter()

@@ -22,7 +22,7 @@ def cluster():
     with dask.config.set({"distributed.scheduler.allowed-failures": 1,
                           "distributed.scheduler.worker-saturation": 1.0}):
         local = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                         dashboard_address=None)
+                                         dashboard_address="127.0.0.1:0")
         client = distributed.Client(local, set_as_default=False)
         yield client
         client.close()

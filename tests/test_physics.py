@@ -164,6 +164,24 @@ def _three_block_tower_with_a_borderline_top():
                        block("b2", 0.095, 0, 0.5, extents=(0.2, 0.2, 0.2)))
 
 
+def test_what_falls_off_is_decided_once_below_the_table_top_and_agrees_with_waiting_for_rest():
+    # bump alone: a block below the table top has fallen off and need not come to rest on the floor;
+    # asked with direction (which waits for every block to rest), the same blocks are off the table
+    model = ModelConfig(sigma_m=0.01, phi_m_s2=(10.0, 30.0), force_direction_rad=0.0, samples=6)
+    scene = table_scene("T0")
+    alone = predict(scene, model, preset("default"), QuerySpec(queries=frozenset({"bump"})), seed=4)
+    waiting = predict(scene, model, preset("default"), QuerySpec(queries=frozenset({"bump", "direction"})), seed=4)
+    assert alone.failed_samples == waiting.failed_samples == 0
+    ended_sooner = 0
+    for quick, slow in zip(alone.outcomes, waiting.outcomes):
+        for a, b in zip(quick.rollouts, slow.rollouts):
+            assert np.array_equal(a.fell_off, b.fell_off)
+            ended_sooner += a.simulated_s < b.simulated_s
+    assert any(r.fell_off.any() for o in alone.outcomes for r in o.rollouts)
+    assert ended_sooner >= len(alone.outcomes)  # most rollouts stop before everything is at rest
+    assert alone.fell_off_fraction_by_group == waiting.fell_off_fraction_by_group
+
+
 def test_will_anything_fall_stops_at_the_first_fall_and_agrees_with_the_full_rollout():
     scene = _three_block_tower_with_a_borderline_top()
     model = ModelConfig(sigma_m=0.02, samples=12)

@@ -446,11 +446,6 @@ class QuerySpec:
     def wants(self, name: str) -> bool:
         return name in self.queries
 
-    @property
-    def only_fall(self) -> bool:
-        """Only whether boxes fall is asked (not where they end up): rollouts may end once it is decided."""
-        return self.queries <= frozenset({"fall", "any_fall"})
-
 
 def parse_queries(text: str) -> frozenset[str]:
     """``"fall,direction"`` -> frozenset; raises ConfigError for unknown names."""

@@ -106,17 +106,27 @@ def _smallest_extents(task: SampleTask) -> np.ndarray:
 
 
 def _decided_heights(task: SampleTask, initial: np.ndarray) -> DecidedHeights | None:
-    """When only ``fall`` / ``any_fall`` are asked, the height below which each box's outcome is
-    decided (fallen), and the boxes that can never get there.
+    """When only ``fall`` / ``any_fall`` / ``bump`` are asked, the height below which each body's
+    outcome is decided, and the bodies that can never get there.
 
-    Other queries (direction, far, bump) depend on where boxes end up, so they wait for rest.
+    fall: a body whose centre dropped by the fall threshold has fallen. bump: a body whose centre is
+    below the table top has fallen off it (it is beside or under the table; nothing lifts it back).
+    Asked together, a body is decided once both are: below the lower of the two heights. Other
+    queries (direction, far) depend on where bodies end up, so they wait for rest.
     """
-    if not task.settings.early_stop.enabled or not task.query.only_fall:
+    spec, support = task.query, task.scene.support
+    if not task.settings.early_stop.enabled or not spec.queries <= frozenset({"fall", "any_fall", "bump"}):
         return None
-    fallen_below_z = initial[:, 2] - task.query.fall_threshold_fraction * _smallest_extents(task)
+    fallen_below_z = np.full(len(initial), np.inf)
+    if spec.queries & {"fall", "any_fall"}:
+        fallen_below_z = initial[:, 2] - spec.fall_threshold_fraction * _smallest_extents(task)
+    if spec.wants("bump") and isinstance(support, Table):
+        fallen_below_z = np.minimum(fallen_below_z, support.top_height_m)
+    if not np.all(np.isfinite(fallen_below_z)):
+        return None  # bump asked of a scene without a table: nothing to decide by height
     # "will anything fall?" is decided by the first box that falls
     return DecidedHeights(fallen_below_z_m=fallen_below_z, never_falls=_never_falls(task, fallen_below_z),
-                          stop_at_first_fall=task.query.queries == frozenset({"any_fall"}))
+                          stop_at_first_fall=spec.queries == frozenset({"any_fall"}))
 
 
 def _never_falls(task: SampleTask, decided_below_z: np.ndarray) -> np.ndarray | None:

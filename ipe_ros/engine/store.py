@@ -26,7 +26,7 @@ T = TypeVar("T")
 R = TypeVar("R")
 
 #: Bump when what a stored result means changes (the engine's physics or outcome format).
-STORE_VERSION = 1
+STORE_VERSION = 2  # 2: bump-only rollouts end once what fell off is decided
 
 
 def result_key(fn: Callable, item) -> str:

@@ -66,6 +66,18 @@ def perceive_for(scene: Scene, model: ModelConfig, seed: int, map_fn: MapFn | No
     return map_fn(perceive_task, [task])[0] if map_fn is not None else perceive_task(task)
 
 
+def _check_seed(seed) -> None:
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ConfigError("seed", f"must be an integer >= 0, got {shown(seed)}")
+
+
+def _run_tasks(tasks: list[SampleTask], map_fn: MapFn | None) -> list[SampleOutcome]:
+    """The samples' outcomes, in order: through ``map_fn``, or in this process without one."""
+    if map_fn is None:
+        return [run_sample(t) for t in tasks]
+    return map_fn(run_sample, tasks, on_lost=_lost)
+
+
 def _lost(task: SampleTask, reason: str) -> SampleOutcome:
     return SampleOutcome(index=task.index, ok=False, error=f"WorkerLost: {reason}",
                          push_direction_rad=float("nan"), initial_positions_m=None,
@@ -156,8 +168,7 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
     (``engine.vision``), from a chain run here (in a worker when ``map_fn`` is given, seeded from
     ``seed`` on a stream of its own) or taken from ``perceived`` (``vision.PerceivedScenes``).
     """
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ConfigError("seed", f"must be an integer >= 0, got {shown(seed)}")
+    _check_seed(seed)
     check_budget(budget_s)
     check_request(scene, query, max_objects, model=model, settings=settings, budget_s=budget_s)
     if stop is not None and stop.ci_width is not None and not (query.wants("fall") or query.wants("any_fall")):
@@ -174,9 +185,7 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
         tasks = [dataclasses.replace(t, deadline_unix_s=deadline) for t in tasks]
 
     def run(batch: list[SampleTask]) -> list[SampleOutcome]:
-        if map_fn is None:
-            return [run_sample(t) for t in batch]
-        return map_fn(run_sample, batch, on_lost=_lost)
+        return _run_tasks(batch, map_fn)
 
     start = time.perf_counter()
     stopped_by = "samples"
@@ -244,16 +253,12 @@ def predict_many(requests: Sequence[tuple[Scene, ModelConfig, int]], settings: S
         if model.perception == "vision":
             answers[i] = predict(scene, model, settings, query, seed, map_fn, max_objects=max_objects)
             continue
-        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-            raise ConfigError("seed", f"must be an integer >= 0, got {shown(seed)}")
+        _check_seed(seed)
         check_request(scene, query, max_objects)
         batched.append((i, make_tasks(scene, model, settings, query, seed)))
     everything = [task for _, tasks in batched for task in tasks]
     start = time.perf_counter()
-    if map_fn is None:
-        outcomes = [run_sample(t) for t in everything]
-    else:
-        outcomes = map_fn(run_sample, everything, on_lost=_lost)
+    outcomes = _run_tasks(everything, map_fn)
     wall_s = time.perf_counter() - start
     first = 0
     for i, tasks in batched:

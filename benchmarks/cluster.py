@@ -21,7 +21,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 from ipe_ros.analysis.paper_data import shared_data_dir  # noqa: E402
 from ipe_ros.analysis.runs import load_tower_stimuli  # noqa: E402
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, predict, predict_many, preset  # noqa: E402
-from ipe_ros.engine.cluster import DaskMap  # noqa: E402
+from ipe_ros.engine.cluster import DaskMap, local_cluster  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 QUERY = QuerySpec(queries=frozenset({"fall"}))
@@ -52,8 +52,6 @@ def main() -> int:
     parser.add_argument("--batches", default="1,4,12")
     parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "cluster"))
     args = parser.parse_args()
-    from distributed import Client, LocalCluster
-
     scenes = load_tower_stimuli("willitfall.csv", shared_data_dir(), args.towers).scenes
     rows = []
     for workers in (1, 2):
@@ -62,8 +60,7 @@ def main() -> int:
             for together in (False, True):
                 rows.append({"backend": "local pool", "workers": workers, "batch": None, "together": together,
                              "rollouts_per_s": rollouts_per_s(scenes, args.samples, pool.map, together)})
-        with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                          dashboard_address="127.0.0.1:0") as cluster, Client(cluster, set_as_default=False) as client:
+        with local_cluster(workers) as client:
             for batch in (int(b) for b in args.batches.split(",")):
                 dask_map = DaskMap(client, batch_size=batch)
                 rollouts_per_s(scenes[:1], args.samples, dask_map.map)

@@ -49,18 +49,12 @@ def main() -> int:
     resume = Path(args.resume or REPO / "runs" / args.name)
     signal.signal(signal.SIGTERM, _stop)  # close the cluster on the way out, as Ctrl-C does
 
-    import dask
-    from distributed import Client, LocalCluster
-
     from ipe_ros import cli
+    from ipe_ros.engine.cluster import local_cluster
 
     before = stored_samples(resume)
-    # one task per one-thread worker at a time: a worker that dies takes only its own task with it;
-    # the scheduler always serves HTTP (health, metrics): on a free loopback port, so clusters never collide
-    with dask.config.set({"distributed.scheduler.worker-saturation": 1.0}), \
-            LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                         dashboard_address="127.0.0.1:0") as cluster, Client(cluster, set_as_default=False):
-        command = ["experiment", args.name, "--scheduler", cluster.scheduler_address, "--resume", str(resume),
+    with local_cluster(args.workers) as client:
+        command = ["experiment", args.name, "--scheduler", client.cluster.scheduler_address, "--resume", str(resume),
                    "--out", args.out, *extra]
         start = time.perf_counter()
         interrupted = False

@@ -10,23 +10,14 @@ import pytest
 distributed = pytest.importorskip("distributed", reason="dask/distributed are pinned in requirements.txt")
 
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, predict, preset  # noqa: E402
-from ipe_ros.engine.cluster import DaskMap, scheduler_address  # noqa: E402
+from ipe_ros.engine.cluster import DaskMap, local_cluster, scheduler_address  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def cluster():
-    import dask
-
-    # one reschedule, not three, so that the lost-worker test ends quickly; one task at a time per
-    # worker, so that a dying worker takes only its own task with it (the scheduler queues the rest)
-    with dask.config.set({"distributed.scheduler.allowed-failures": 1,
-                          "distributed.scheduler.worker-saturation": 1.0}):
-        local = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                         dashboard_address="127.0.0.1:0")
-        client = distributed.Client(local, set_as_default=False)
+    # one reschedule, not three, so that the lost-worker test ends quickly
+    with local_cluster(2, **{"distributed.scheduler.allowed-failures": 1}) as client:
         yield client
-        client.close()
-        local.close()
 
 
 def test_a_prediction_on_the_cluster_is_bit_identical_to_the_local_pool(cluster):

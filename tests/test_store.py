@@ -30,6 +30,19 @@ def test_a_run_started_again_reads_back_what_it_has_and_computes_the_rest(tmp_pa
     assert other.hits == 0
 
 
+def test_samples_lost_with_their_worker_are_not_kept_and_come_out_in_the_next_run(tmp_path):
+    def every_worker_dies(fn, items, on_lost):
+        return [on_lost(item, "the worker running it died twice") for item in items]
+
+    lost_run = ResumableMap(tmp_path, inner=every_worker_dies)
+    answer = predict(TOWER, MODEL, preset("default"), QUERY, seed=1, map_fn=lost_run.map)
+    assert answer.failed_samples == MODEL.samples
+    assert answer.failure_reasons == ("WorkerLost: the worker running it died twice",)
+    again = ResumableMap(tmp_path)
+    resumed = predict(TOWER, MODEL, preset("default"), QUERY, seed=1, map_fn=again.map)
+    assert (again.hits, again.computed, resumed.failed_samples) == (0, MODEL.samples, 0)
+
+
 def test_keys_follow_what_a_result_depends_on_and_not_when_it_ran():
     from ipe_ros.engine.rollout import run_sample
     from ipe_ros.engine.sampler import make_tasks

@@ -32,6 +32,7 @@ from ..engine.estimate import sample_fall_fraction, sample_far_m
 from ..engine.generators import generate_towers
 from ..engine.rollout import SampleOutcome
 from ..engine.scene_io import scenes_from_tower_csv
+from ..engine.store import ResumableMap
 from ..progress import steps
 
 #: Tower blocks' short side in the stimulus files (metres here): the paper's unit for sigma.
@@ -154,8 +155,9 @@ class ModelRun:
 
 #: Samples handed to the map at once: predictions of several stimuli share one map (a worker never
 #: idles at the end of one prediction, a cluster's round trip is paid once per map), and progress is
-#: still reported every few stimuli.
-SAMPLES_PER_MAP = 480
+#: still reported every few stimuli. As many as a resumable run computes per call, so that a resumed
+#: map's missing samples also go out together.
+SAMPLES_PER_MAP = ResumableMap.DEFAULT_BATCH
 
 
 def run_model(label: str, scenes, model: ModelConfig, settings: SimSettings, query: QuerySpec, seed: int,

@@ -154,6 +154,7 @@ class VariantResult:
     direction_rad: float | None
     error: str | None = None
     budget_stopped: bool = False
+    worker_lost: bool = False  # its worker process died twice
     trajectory: list | None = None  # (t, positions, orientations) frames when recorded
 
 
@@ -481,8 +482,8 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
         per_sample = [run_variants(t) for t in tasks]
     else:
         names = tuple(b.name for b in scene.dynamic_objects)
-        lost = lambda task, reason: [VariantResult(names, None, None, f"WorkerLost: {reason}")  # noqa: E731
-                                     for _ in task.actions]
+        lost = lambda task, reason: [  # noqa: E731
+            VariantResult(names, None, None, f"WorkerLost: {reason}", worker_lost=True) for _ in task.actions]
         per_sample = map_fn(run_variants, tasks, on_lost=lost)
     everything = {b.name for b in scene.dynamic_objects}
     by_variant = {_label(a): dataclasses.replace(

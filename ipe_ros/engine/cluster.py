@@ -15,8 +15,9 @@ Dask is imported only here and only when a cluster is used: without ``--schedule
 
 from __future__ import annotations
 
+import contextlib
 import os
-from typing import Callable, Iterable, TypeVar
+from typing import Any, Callable, Iterable, Iterator, TypeVar
 
 from .errors import ConfigError
 
@@ -41,6 +42,28 @@ def scheduler_address(given: str | None) -> str | None:
     if address is None or not address.strip():
         return None
     return address.strip()
+
+
+@contextlib.contextmanager
+def local_cluster(workers: int, **config: Any) -> Iterator[Any]:
+    """A Dask cluster on this machine, reachable on loopback only; yields its ``distributed.Client``
+    (``client.cluster.scheduler_address`` is what ``--scheduler`` takes) and ends every process on exit.
+
+    ``workers`` processes of one thread each (pybullet steps one world per thread), each given one
+    task at a time, so that a worker that dies takes only its own task with it (the scheduler queues
+    the rest). The scheduler always serves HTTP (health, metrics routes) even without a dashboard:
+    on a free loopback port, so that two clusters never collide. ``config``: more Dask settings by
+    their dotted names, e.g. ``{"distributed.scheduler.allowed-failures": 1}``.
+    """
+    import dask
+    from distributed import Client, LocalCluster
+
+    settings = {"distributed.scheduler.worker-saturation": 1.0, **config}
+    with dask.config.set(settings), \
+            LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                         dashboard_address="127.0.0.1:0") as cluster, \
+            Client(cluster, set_as_default=False) as client:
+        yield client
 
 
 class DaskMap:

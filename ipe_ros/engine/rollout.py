@@ -72,6 +72,7 @@ class SampleOutcome:
     initial_orientations_xyzw: np.ndarray | None
     rollouts: tuple[RolloutResult, ...] = ()
     budget_stopped: bool = False  # cut off by the compute budget: neither used nor a failure
+    worker_lost: bool = False  # its worker process died twice: a failure of the machine, not of the sample
 
 
 def _query(task: SampleTask, initial: np.ndarray, phi: float, end: simulation.RolloutEnd) -> RolloutResult:

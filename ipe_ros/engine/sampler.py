@@ -81,7 +81,7 @@ def _run_tasks(tasks: list[SampleTask], map_fn: MapFn | None) -> list[SampleOutc
 def _lost(task: SampleTask, reason: str) -> SampleOutcome:
     return SampleOutcome(index=task.index, ok=False, error=f"WorkerLost: {reason}",
                          push_direction_rad=float("nan"), initial_positions_m=None,
-                         initial_orientations_xyzw=None)
+                         initial_orientations_xyzw=None, worker_lost=True)
 
 
 def make_tasks(scene: Scene, model: ModelConfig, settings: SimSettings, query: QuerySpec, seed: int,

@@ -66,8 +66,9 @@ def _canonical(value):
 
 
 def _own_result(result) -> bool:
-    error = getattr(result, "error", None) or ""
-    return not getattr(result, "budget_stopped", False) and not str(error).startswith("WorkerLost")
+    """A result of the task itself, worth keeping: not one cut off by the budget or answered for a
+    lost worker (both would come out otherwise in another run)."""
+    return not getattr(result, "budget_stopped", False) and not getattr(result, "worker_lost", False)
 
 
 class ResumableMap:

@@ -35,7 +35,8 @@ from .probe import NO_PROBE, Probe
 from .settling import Settling
 from .steps import StepControl, substeps_for, ticks_allowed
 from .termination import DecidedHeights, RestWatch
-from .world import World, mass_ratio, pybullet, read_poses, read_velocity_vectors, set_initial_velocities, speeds_of
+from .world import (World, mass_ratio, pybullet, read_poses, read_velocity_vectors, set_initial_velocities, speeds_of,
+                    use_sequential_solver)
 
 #: Seconds between health checks (divergence, non-finite speeds), and between looks for rest and collapse.
 HEALTH_PERIOD_S = 0.1
@@ -127,6 +128,7 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
         p.stepSimulation(physicsClientId=cid)
 
     tick = 0
+    resting_solver = False
     if settling.ticks or travel_substeps > 1:
         steps.set(1, max(travel_substeps, settling.substeps if settling.ticks else 1))
     while tick < total_ticks:
@@ -136,6 +138,11 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
         step_ticks = min(steps.ticks, total_ticks - tick)
         if step_ticks != steps.ticks:  # a shorter last step (coarse steps only)
             p.setTimeStep(dt * step_ticks, physicsClientId=cid)
+        # the end on the sequential-impulse solver: the direct one (for bounces) leaves resting
+        # bodies sunk into each other (config.SolverSettings.direct_solver_for_restitution)
+        if not resting_solver and tick >= fine_from_tick and world.direct_solver:
+            resting_solver = True
+            use_sequential_solver(world)
         settling_now = settling.covers(tick)
         phase = "settle" if settling_now else "collapse" if collapse.collapsing else "fine"
         for _ in range(steps.substeps):

@@ -85,6 +85,7 @@ class World:
     contact_distance_m: float = 0.0  # how far ahead contacts are found (Bullet's breaking threshold), as built
     masses_kg: np.ndarray | None = None  # of the dynamic bodies
     inertia_kg_m2: np.ndarray | None = None  # (n, 3) their principal moments (pybullet's)
+    direct_solver: bool = False  # solved by pybullet's MLCP (Dantzig) solver, for bounces
 
 
 _HULL_FILES: dict[tuple, str] = {}
@@ -275,9 +276,11 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
         deterministicOverlappingPairs=1,
         physicsClientId=cid)
     solver = settings.solver
+    direct = False
     if solver.direct_solver_for_restitution and can_bounce(scene) \
             and mass_ratio(masses_kg) <= solver.direct_solver_max_mass_ratio:
         _use_direct_solver(p, cid)
+        direct = True
 
     support = scene.support
     if isinstance(support, Floor):
@@ -306,7 +309,8 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
     inertia = np.array([p.getDynamicsInfo(h, -1, physicsClientId=cid)[2] for h in dynamic_ids], float)
     return World(client=cid, dynamic_ids=dynamic_ids, scale_m=scale, time_step_s=time_step,
                  contact_distance_m=contact_distance,
-                 masses_kg=np.asarray(masses_kg, float), inertia_kg_m2=inertia.reshape(len(dynamic_ids), 3))
+                 masses_kg=np.asarray(masses_kg, float), inertia_kg_m2=inertia.reshape(len(dynamic_ids), 3),
+                 direct_solver=direct)
 
 
 def add_fixed_body(world: World, body: Body, position_m, orientation_xyzw) -> int:
@@ -342,6 +346,14 @@ def can_bounce(scene: Scene) -> bool:
         return False
     others = [scene.support.restitution] + [b.restitution for b in scene.static_objects]  # a table's floor too
     return len(bouncy) > 1 or any(e > 0 for e in others)
+
+
+def use_sequential_solver(world) -> None:
+    """Back to pybullet's sequential-impulse solver (it pushes resting bodies out of each other
+    where the direct solver leaves them sunk; see SolverSettings.direct_solver_for_restitution)."""
+    p = pybullet()
+    with _quiet_c_output():
+        p.setPhysicsEngineParameter(constraintSolverType=p.CONSTRAINT_SOLVER_LCP_SI, physicsClientId=world.client)
 
 
 def _use_direct_solver(p, cid: int) -> None:

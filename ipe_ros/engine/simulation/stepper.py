@@ -128,7 +128,7 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
         p.stepSimulation(physicsClientId=cid)
 
     tick = 0
-    resting_solver = False
+    solver_switch_due = world.direct_solver
     if settling.ticks or travel_substeps > 1:
         steps.set(1, max(travel_substeps, settling.substeps if settling.ticks else 1))
     while tick < total_ticks:
@@ -140,8 +140,8 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
             p.setTimeStep(dt * step_ticks, physicsClientId=cid)
         # the end on the sequential-impulse solver: the direct one (for bounces) leaves resting
         # bodies sunk into each other (config.SolverSettings.direct_solver_for_restitution)
-        if not resting_solver and tick >= fine_from_tick and world.direct_solver:
-            resting_solver = True
+        if solver_switch_due and tick >= fine_from_tick:
+            solver_switch_due = False
             use_sequential_solver(world)
         settling_now = settling.covers(tick)
         phase = "settle" if settling_now else "collapse" if collapse.collapsing else "fine"

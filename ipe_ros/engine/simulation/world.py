@@ -276,11 +276,10 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
         deterministicOverlappingPairs=1,
         physicsClientId=cid)
     solver = settings.solver
-    direct = False
-    if solver.direct_solver_for_restitution and can_bounce(scene) \
-            and mass_ratio(masses_kg) <= solver.direct_solver_max_mass_ratio:
-        _use_direct_solver(p, cid)
-        direct = True
+    direct = solver.direct_solver_for_restitution and can_bounce(scene) \
+        and mass_ratio(masses_kg) <= solver.direct_solver_max_mass_ratio
+    if direct:
+        _set_solver(p, cid, p.CONSTRAINT_SOLVER_LCP_DANTZIG)
 
     support = scene.support
     if isinstance(support, Floor):
@@ -348,19 +347,18 @@ def can_bounce(scene: Scene) -> bool:
     return len(bouncy) > 1 or any(e > 0 for e in others)
 
 
-def use_sequential_solver(world) -> None:
+def use_sequential_solver(world: World) -> None:
     """Back to pybullet's sequential-impulse solver (it pushes resting bodies out of each other
     where the direct solver leaves them sunk; see SolverSettings.direct_solver_for_restitution)."""
     p = pybullet()
-    with _quiet_c_output():
-        p.setPhysicsEngineParameter(constraintSolverType=p.CONSTRAINT_SOLVER_LCP_SI, physicsClientId=world.client)
+    _set_solver(p, world.client, p.CONSTRAINT_SOLVER_LCP_SI)
 
 
-def _use_direct_solver(p, cid: int) -> None:
-    """pybullet's MLCP (Dantzig) solver for this world; ``resetSimulation`` puts back the
-    sequential-impulse one. Quietly: pybullet prints on every switch."""
+def _set_solver(p, cid: int, kind: int) -> None:
+    """pybullet's constraint solver for this world (``resetSimulation`` puts back the
+    sequential-impulse one). Quietly: pybullet prints on every switch."""
     with _quiet_c_output():
-        p.setPhysicsEngineParameter(constraintSolverType=p.CONSTRAINT_SOLVER_LCP_DANTZIG, physicsClientId=cid)
+        p.setPhysicsEngineParameter(constraintSolverType=kind, physicsClientId=cid)
 
 
 def contact_distance_m(settings: SimSettings, scale_m: float, travel_m: float) -> float:

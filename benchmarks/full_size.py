@@ -9,12 +9,13 @@ Starts a LocalCluster on 127.0.0.1 (processes, one thread each, its HTTP port a 
 ``OUT/NAME_full_size.json``: the command, wall time, samples computed in this run and read back from
 ``DIR``, and samples/s. Interrupted (Ctrl-C, SIGTERM), the cluster is closed and the same command
 continues from what ``DIR`` holds; the wall time then covers this run only, and the JSON keeps the
-earlier runs' too.
+earlier runs' too. ``kill -USR1 PID`` prints every thread's stack to stderr (to see what a run waits on).
 """
 
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import json
 import os
 import signal
@@ -48,6 +49,8 @@ def main() -> int:
     args = parser.parse_args(ours)  # after "--": more `ipe experiment` arguments
     resume = Path(args.resume or REPO / "runs" / args.name)
     signal.signal(signal.SIGTERM, _stop)  # close the cluster on the way out, as Ctrl-C does
+    signal.signal(signal.SIGINT, _stop)  # also when started in the background, where SIGINT comes ignored
+    faulthandler.register(signal.SIGUSR1, all_threads=True)  # `kill -USR1 PID`: where every thread is, on stderr
 
     from ipe_ros import cli
     from ipe_ros.engine.cluster import local_cluster

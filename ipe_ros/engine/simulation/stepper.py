@@ -35,7 +35,7 @@ from .probe import NO_PROBE, Probe
 from .settling import Settling
 from .steps import StepControl, substeps_for, ticks_allowed
 from .termination import DecidedHeights, RestWatch
-from .world import (World, mass_ratio, pybullet, read_poses, read_velocity_vectors, set_initial_velocities, speeds_of,
+from .world import (World, mass_ratio, pybullet, read_poses, read_state, set_initial_velocities, speeds_of,
                     use_sequential_solver)
 
 #: Seconds between health checks (divergence, non-finite speeds), and between looks for rest and collapse.
@@ -97,8 +97,8 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
     g = float(np.linalg.norm(gravity))
     set_initial_velocities(world, scene)
     energy = health.EnergyWatch(world.masses_kg, world.inertia_kg_m2, gravity)
-    initial_velocities = read_velocity_vectors(world)
-    initial_energy = energy.energy(*read_poses(world), initial_velocities[:, 0], initial_velocities[:, 1])
+    positions, orientations, initial_velocities = read_state(world)
+    initial_energy = energy.energy(positions, orientations, initial_velocities[:, 0], initial_velocities[:, 1])
     push_ticks = 0
     if push.acceleration_m_s2 > 0:
         push_ticks = int(round(push.duration_s / dt))
@@ -152,15 +152,15 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
         previous, tick = tick, tick + step_ticks
         if tick == push_ticks:
             p.setGravity(*gravity.tolist(), physicsClientId=cid)
-            velocities = read_velocity_vectors(world)
-            energy.reference(energy.energy(*read_poses(world), velocities[:, 0], velocities[:, 1]))
+            positions, orientations, velocities = read_state(world)
+            energy.reference(energy.energy(positions, orientations, velocities[:, 0], velocities[:, 1]))
         if trajectory is not None and _crossed(tick, previous, record_every):
             trajectory.append((tick * dt, *read_poses(world)))
         look_due = (rest.enabled or collapse.active) and _crossed(tick, previous, look_every)
         health_due = _crossed(tick, previous, health_every) or tick == total_ticks
         if not (look_due or health_due):
             continue
-        velocities = read_velocity_vectors(world)  # one read serves every part
+        positions, orientations, velocities = read_state(world)  # one read serves every part
         speeds, spins = speeds_of(velocities)
         if health_due:
             health.check_speeds(speeds, limit, tick * dt)
@@ -168,7 +168,6 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
         period_ticks = look_every if look_due else health_every
         fastest_m_s = float((speeds + spins * half_diagonals_m).max()) + g * period_ticks * dt
         travel_substeps = substeps_for(fastest_m_s, settings, world)
-        positions, orientations = read_poses(world)
         energy.look(energy.energy(positions, orientations, velocities[:, 0], velocities[:, 1]))
         if not look_due:
             if not settling.covers(tick):
@@ -199,9 +198,9 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
                 break
             collapse.end()  # at rest but still inside another body: push it out at the fine step
             steps.set(1, travel_substeps)
-    positions, orientations = read_poses(world)
+    positions, orientations, velocities = read_state(world)
+    positions, orientations = positions.copy(), orientations.copy()  # RolloutEnd's own, contiguous
     health.check_final_poses(positions, orientations)
-    velocities = read_velocity_vectors(world)
     energy.look(energy.energy(positions, orientations, velocities[:, 0], velocities[:, 1]))
     return RolloutEnd(positions, orientations, trajectory, tick * dt, energy_gain_j=energy.max_gain_j,
                       penetration_fraction=health.deepest_penetration_fraction(world, smallest))

@@ -68,10 +68,10 @@ def candidates() -> list[SimSettings]:
         default.changed('default-collapse6', collapse={"step_factor": 6}),
         default.changed('default-travel0.25', max_travel_fraction=0.25),
         default.changed('default-drop0.25', collapse={"drop_fraction": 0.25}),
-        # fewer solver iterations once the collapse has begun (the mass-ratio rule still adds more)
-        default.changed('default-collapse50it', collapse={"solver_iterations": 50}),
+        # the solver iterations once the collapse has begun (the default's 50; None: the solver's 100;
+        # the mass-ratio rule still adds more)
+        default.changed('default-collapse100it', collapse={"solver_iterations": None}),
         default.changed('default-collapse30it', collapse={"solver_iterations": 30}),
-        default.changed('default-collapse50it+drop0.25', collapse={"solver_iterations": 50, "drop_fraction": 0.25}),
         default.changed('default-res5e-6', solver={"residual_threshold": 5e-06}),
         # fewer iterations until the collapse, the full 100 in it
         default.changed('default-50it+collapse100it', solver={"iterations": 50}, collapse={"solver_iterations": 100}),

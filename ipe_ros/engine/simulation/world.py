@@ -403,17 +403,11 @@ def read_poses(world: World) -> tuple[np.ndarray, np.ndarray]:
     return pos, orn
 
 
-def read_velocity_vectors(world: World) -> np.ndarray:
-    """(n, 2, 3): each dynamic body's linear (m/s) and angular (rad/s) velocity in the scene frame."""
-    p = pybullet()
-    pairs = np.array([p.getBaseVelocity(b, physicsClientId=world.client) for b in world.dynamic_ids])
-    return pairs.reshape(len(world.dynamic_ids), 2, 3)
-
-
 def read_state(world: World) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``read_poses`` and ``read_velocity_vectors`` in one pass, as (n, 3), (n, 4) and (n, 2, 3)
-    views of one array: a rollout's look costs pybullet's per-call price and numpy's per-array
-    one, not arithmetic."""
+    """Every dynamic body's centre of mass (m), xyzw orientation, and linear (m/s) and angular
+    (rad/s) velocity in the scene frame, in one pass, as (n, 3), (n, 4) and (n, 2, 3) views of one
+    array: a rollout's look costs pybullet's per-call price and numpy's per-array one, not
+    arithmetic."""
     p = pybullet()
     cid, n = world.client, len(world.dynamic_ids)
     values = itertools.chain.from_iterable(itertools.chain.from_iterable(
@@ -424,11 +418,11 @@ def read_state(world: World) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def speeds_of(velocities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(n,) linear speeds and (n,) angular speeds from ``read_velocity_vectors``' vectors."""
+    """(n,) linear speeds and (n,) angular speeds from ``read_state``'s (n, 2, 3) velocities."""
     speeds = np.sqrt(np.einsum("nkj,nkj->nk", velocities, velocities))
     return speeds[:, 0], speeds[:, 1]
 
 
 def read_velocities(world: World) -> tuple[np.ndarray, np.ndarray]:
     """(n,) linear speeds in m/s and (n,) angular speeds in rad/s of the dynamic bodies."""
-    return speeds_of(read_velocity_vectors(world))
+    return speeds_of(read_state(world)[2])

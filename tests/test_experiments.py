@@ -84,6 +84,28 @@ def test_bump_report_knocks_more_blocks_off_with_a_harder_bump(reports):
     assert finite.size and np.all((finite >= 0) & (finite <= 1))
 
 
+def test_bump_grid_does_not_depend_on_how_tables_are_grouped_into_maps(monkeypatch, tmp_path):
+    # Tables share maps (several scenes' samples in one predict_many); each cell must still get its own
+    # table's and direction's samples, whichever grouping the map size allows.
+    from ipe_ros.analysis.experiments import bump
+    from ipe_ros.analysis.experiments.common import Options
+    from ipe_ros.engine.generators import generate_tables
+
+    scenes = generate_tables(seed=3, configurations=2, tables=("T0", "T1"))[:3]
+    directions, phis = np.array([0.0, np.pi]), (22.0, 76.0)
+    opts = Options(out_dir=tmp_path, data_dir=tmp_path)
+    grids = []
+    for per_map in (2 * 2, 3 * 2 * 2):  # one table per map, then all three in one
+        monkeypatch.setattr(bump, "SAMPLES_PER_MAP", per_map)
+        grids.append(bump.bump_grid(scenes, directions, phis, 2, opts, None, "test"))
+    one_by_one, together = grids
+    for field in ("ratio", "fell_off", "ratio_sum", "ratio_count"):
+        np.testing.assert_array_equal(getattr(one_by_one, field), getattr(together, field), err_msg=field)
+    alone = bump.bump_grid(scenes[2:], directions[1:], phis, 2, opts, None, "test")  # the last cell on its own
+    np.testing.assert_array_equal(alone.fell_off[0, 0], together.fell_off[2, 1])
+    assert not np.array_equal(together.fell_off[0], together.fell_off[2])  # different scenes, different cells
+
+
 def test_samples_report_has_a_curve_per_experiment_and_recovers_k(reports):
     samples = reports[1]["samples"]["results"]
     assert "Exp. 1" in samples["correlation_by_k"] and len(samples["correlation_by_k"]["Exp. 1"]) == 10

@@ -13,7 +13,8 @@ from ...engine.generators import generate_tables
 from .. import stats
 from ..report import Report, pyplot
 from ...progress import steps
-from ..runs import PAPER_BUMP_PHIS, PAPER_SIGMA, PHI_M_S2_PER_PAPER_UNIT, phi_m_s2, sigma_m, stimulus_seed
+from ..runs import (PAPER_BUMP_PHIS, PAPER_SIGMA, PHI_M_S2_PER_PAPER_UNIT, SAMPLES_PER_MAP, phi_m_s2, sigma_m,
+                    stimulus_seed)
 from .common import BUMP, HumanComparison, Options, compare_with_people, render_people
 
 #: The comparisons between model variants: (label, variant a, variant b, compare once per scene).
@@ -46,23 +47,31 @@ def bump_grid(scenes, directions, phis, k: int, opts: Options, map_fn, label: st
     shape = (len(scenes), len(directions), len(phis))
     ratio, fell = np.full(shape, np.nan), np.zeros(shape)
     ratio_sum, ratio_count = np.zeros(shape), np.zeros(shape)
-    for s, scene in enumerate(steps(scenes, f"{label} (scenes)", every=1)):
-        # a block configuration keeps its seed on every table, with or without walls (common
-        # random numbers: differences between tables are the tables' alone)
-        configuration = scene.name.removesuffix("_nowalls").rsplit("_", 1)[0]
-        seed = stimulus_seed(opts.seed, configuration)
-        # a fixed direction each (no cue spread); every magnitude is simulated for each noisy sample;
-        # all directions of a table in one map
-        models = [ModelConfig(sigma_m=sigma_m(PAPER_SIGMA), phi_m_s2=tuple(phi_m_s2(p) for p in phis), samples=k,
-                              force_direction_rad=float(theta), cue_half_width_rad=0.0) for theta in directions]
-        answers = predict_many([(scene, model, seed) for model in models], settings, BUMP, map_fn)
-        for d, pred in enumerate(answers):
-            for m in range(len(phis)):
-                rollouts = [o.rollouts[m] for o in pred.outcomes if o.ok]
-                values = [r.bump_ratio for r in rollouts if r.bump_ratio is not None]
-                ratio_sum[s, d, m], ratio_count[s, d, m] = sum(values), len(values)
-                ratio[s, d, m] = np.mean(values) if values else np.nan
-                fell[s, d, m] = np.mean([r.fell_off.mean() for r in rollouts]) if rollouts else np.nan
+    models = [ModelConfig(sigma_m=sigma_m(PAPER_SIGMA), phi_m_s2=tuple(phi_m_s2(p) for p in phis), samples=k,
+                          force_direction_rad=float(theta), cue_half_width_rad=0.0) for theta in directions]
+    # a fixed direction each (no cue spread); every magnitude is simulated for each noisy sample. Several
+    # tables' directions go in one map, as the tower reports send several towers: one table alone
+    # (directions x k samples) is fewer tasks than a large cluster has workers
+    per_map = max(1, SAMPLES_PER_MAP // (len(directions) * k))
+    batches = [list(range(i, min(i + per_map, len(scenes)))) for i in range(0, len(scenes), per_map)]
+    for batch in steps(batches, f"{label} ({len(scenes)} scenes, {min(per_map, len(scenes))} per batch)", every=1):
+        requests = []
+        for s in batch:
+            # a block configuration keeps its seed on every table, with or without walls (common
+            # random numbers: differences between tables are the tables' alone)
+            configuration = scenes[s].name.removesuffix("_nowalls").rsplit("_", 1)[0]
+            seed = stimulus_seed(opts.seed, configuration)
+            requests += [(scenes[s], model, seed) for model in models]
+        answers = iter(predict_many(requests, settings, BUMP, map_fn))
+        for s in batch:
+            for d in range(len(directions)):
+                pred = next(answers)
+                for m in range(len(phis)):
+                    rollouts = [o.rollouts[m] for o in pred.outcomes if o.ok]
+                    values = [r.bump_ratio for r in rollouts if r.bump_ratio is not None]
+                    ratio_sum[s, d, m], ratio_count[s, d, m] = sum(values), len(values)
+                    ratio[s, d, m] = np.mean(values) if values else np.nan
+                    fell[s, d, m] = np.mean([r.fell_off.mean() for r in rollouts]) if rollouts else np.nan
     return BumpGrid(directions_rad=np.asarray(directions), phis_paper=np.asarray(phis), ratio=ratio, fell_off=fell,
                     ratio_sum=ratio_sum, ratio_count=ratio_count)
 

@@ -87,6 +87,7 @@ def test_bump_report_knocks_more_blocks_off_with_a_harder_bump(reports):
 def test_bump_grid_does_not_depend_on_how_tables_are_grouped_into_maps(monkeypatch, tmp_path):
     # Tables share maps (several scenes' samples in one predict_many); each cell must still get its own
     # table's and direction's samples, whichever grouping the map size allows.
+    from ipe_ros.analysis import runs
     from ipe_ros.analysis.experiments import bump
     from ipe_ros.analysis.experiments.common import Options
     from ipe_ros.engine.generators import generate_tables
@@ -96,7 +97,7 @@ def test_bump_grid_does_not_depend_on_how_tables_are_grouped_into_maps(monkeypat
     opts = Options(out_dir=tmp_path, data_dir=tmp_path)
     grids = []
     for per_map in (2 * 2, 3 * 2 * 2):  # one table per map, then all three in one
-        monkeypatch.setattr(bump, "SAMPLES_PER_MAP", per_map)
+        monkeypatch.setattr(runs, "SAMPLES_PER_MAP", per_map)
         grids.append(bump.bump_grid(scenes, directions, phis, 2, opts, None, "test"))
     one_by_one, together = grids
     for field in ("ratio", "fell_off", "ratio_sum", "ratio_count"):

@@ -160,15 +160,22 @@ class ModelRun:
 SAMPLES_PER_MAP = ResumableMap.DEFAULT_BATCH
 
 
+def map_batches(stimuli: int, samples_each: int) -> list[range]:
+    """Consecutive stimuli grouped so that one map gets about ``SAMPLES_PER_MAP`` samples (at least one
+    stimulus per map)."""
+    per_map = max(1, SAMPLES_PER_MAP // samples_each)
+    return [range(i, min(i + per_map, stimuli)) for i in range(0, stimuli, per_map)]
+
+
 def run_model(label: str, scenes, model: ModelConfig, settings: SimSettings, query: QuerySpec, seed: int,
               map_fn=None) -> ModelRun:
     """Predict every scene with its own stimulus seed (see ``stimulus_seed``)."""
     scenes = list(scenes)
     per_scene = 1 if model.is_deterministic else model.samples
-    chunk = max(1, SAMPLES_PER_MAP // per_scene)
-    chunks = [scenes[i:i + chunk] for i in range(0, len(scenes), chunk)]
+    batches = map_batches(len(scenes), per_scene)
     predictions = []
-    for part in steps(chunks, f"{label} ({len(scenes)} stimuli, {min(chunk, len(scenes))} per batch)", every=1):
-        predictions += predict_many([(scene, model, stimulus_seed(seed, scene.name)) for scene in part],
+    for part in steps(batches, f"{label} ({len(scenes)} stimuli, {len(batches[0]) if batches else 0} per batch)",
+                      every=1):
+        predictions += predict_many([(scenes[i], model, stimulus_seed(seed, scenes[i].name)) for i in part],
                                     settings, query, map_fn)
     return ModelRun(label=label, names=tuple(s.name for s in scenes), predictions=tuple(predictions))

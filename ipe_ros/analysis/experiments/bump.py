@@ -13,7 +13,7 @@ from ...engine.generators import generate_tables
 from .. import stats
 from ..report import Report, pyplot
 from ...progress import steps
-from ..runs import (PAPER_BUMP_PHIS, PAPER_SIGMA, PHI_M_S2_PER_PAPER_UNIT, SAMPLES_PER_MAP, phi_m_s2, sigma_m,
+from ..runs import (PAPER_BUMP_PHIS, PAPER_SIGMA, PHI_M_S2_PER_PAPER_UNIT, map_batches, phi_m_s2, sigma_m,
                     stimulus_seed)
 from .common import BUMP, HumanComparison, Options, compare_with_people, render_people
 
@@ -52,9 +52,9 @@ def bump_grid(scenes, directions, phis, k: int, opts: Options, map_fn, label: st
     # a fixed direction each (no cue spread); every magnitude is simulated for each noisy sample. Several
     # tables' directions go in one map, as the tower reports send several towers: one table alone
     # (directions x k samples) is fewer tasks than a large cluster has workers
-    per_map = max(1, SAMPLES_PER_MAP // (len(directions) * k))
-    batches = [list(range(i, min(i + per_map, len(scenes)))) for i in range(0, len(scenes), per_map)]
-    for batch in steps(batches, f"{label} ({len(scenes)} scenes, {min(per_map, len(scenes))} per batch)", every=1):
+    batches = map_batches(len(scenes), len(directions) * k)
+    for batch in steps(batches, f"{label} ({len(scenes)} scenes, {len(batches[0]) if batches else 0} per batch)",
+                       every=1):
         requests = []
         for s in batch:
             # a block configuration keeps its seed on every table, with or without walls (common

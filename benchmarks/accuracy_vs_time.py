@@ -31,6 +31,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 import numpy as np  # noqa: E402
 
 from ipe_ros.engine import PRESETS, ModelConfig, QuerySpec, SimSettings, WorkerPool, predict  # noqa: E402
+from ipe_ros.engine.fidelity import DEFAULT_CHECK  # noqa: E402
 from ipe_ros.engine.generators import generate_towers  # noqa: E402
 from ipe_ros.engine.scene_io import scenes_from_tower_csv  # noqa: E402
 from ipe_ros.analysis.paper_data import EXP1_DATASET, authors_outcomes, shared_data_dir  # noqa: E402
@@ -38,6 +39,7 @@ from ipe_ros.analysis.paper_data import EXP1_DATASET, authors_outcomes, shared_d
 REPO = Path(__file__).resolve().parents[1]
 SHARED = shared_data_dir()
 SIGMA_M = 0.04
+UNCHECKED = "-unchecked"
 
 
 def candidates() -> list[SimSettings]:
@@ -47,7 +49,8 @@ def candidates() -> list[SimSettings]:
     # coarser than that back into 1/233 s: the swept settings lift it so each runs the step it names.
     base = paper.changed('', max_step_fraction_of_time_scale=0.1,
                          solver={"iterations": 100, "residual_threshold": 1e-05, "warm_start_factor": 1.0})
-    out = [paper, PRESETS["default"]]
+    # "-unchecked": the same settings without the self-check (engine.fidelity), to show what it costs
+    out = [paper, PRESETS["default"], PRESETS["default"].changed("default" + UNCHECKED)]
     for name in sorted(PRESETS):
         if name not in ("paper", "default"):
             out.append(PRESETS[name])
@@ -140,7 +143,8 @@ def run_configs(scenes, configs: list[SimSettings], model: ModelConfig, query: Q
     for i, scene in enumerate(scenes):
         for c, settings in enumerate(configs):
             start = time.perf_counter()
-            predictions[c].append(predict(scene, model, settings, query, seed=i, map_fn=pool.map))
+            predictions[c].append(predict(scene, model, settings, query, seed=i, map_fn=pool.map,
+                                          check=None if settings.name.endswith(UNCHECKED) else DEFAULT_CHECK))
             walls[c] += time.perf_counter() - start
     return [{"wall_s": wall, "predictions": preds, "rollouts": sum(p.samples for p in preds)}
             for wall, preds in zip(walls, predictions)]

@@ -3,11 +3,13 @@
     ipe predict PATH [--tower NAME ...] [--query fall,any_fall,direction,far,bump] [--samples K] [--sigma M]
                 [--phi A[,A...]] [--force-direction DEG] [--mu R] [--preset NAME] [--seed N]
                 [--workers W] [--ci-width W] [--deadline S] [--horizon S] [--until-rest] [--budget S] [--json] [--png FILE]
+                [--no-self-check] [--verify-samples N]
     ipe ask remove|support|clear|place|push PATH ...   (questions about an action: ipe_ros/cli_ask.py)
     ipe generate tower --count N --seed S -o FILE [--pairs RATIO]
     ipe generate table --configurations N --seed S -o FILE
     ipe generate catalogue --count N --seed S -o FILE
     ipe generate capped-tower [--ball-speed M_S] -o FILE
+    ipe generate zoo --per-family N --seed S [--families launch,dominoes,...] -o FILE
     ipe demo
     ipe experiment NAME|all [--quick] [--out DIR] [--data DIR] [--samples K] [--stimuli N] [--seed N]
                 [--workers W] [--preset NAME] [--resamples N] [--grid-samples K]
@@ -36,9 +38,11 @@ from .engine.config import (DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEF
 from .cli_ask import add_ask_parser, cmd_ask
 from .engine.examples import example_scene_path
 from .engine.catalogue import capped_tower, scene_catalogue
+from .engine.fidelity import DEFAULT_CHECK, SelfCheck
 from .engine.generators import generate_tables, generate_towers, state_pair
 from .engine.sampler import check_budget, check_request
 from .engine.scene_io import write_scenes
+from .engine.zoo import FAMILIES, scene_zoo
 
 EXIT_BAD_INPUT = 2
 #: End penetrations above this (of a body's smallest extent) are shown in the table.
@@ -124,6 +128,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--budget", type=_finite, default=DEFAULT_BUDGET_S, metavar="S",
                    help=f"compute budget per prediction in seconds (default {DEFAULT_BUDGET_S:g}): samples still "
                         "running then are cut off (stopped_by: budget); scenes whose one rollout cannot fit are refused")
+    p.add_argument("--no-self-check", action="store_true",
+                   help="answer with the fast physics alone (fidelity: unverified) instead of checking it against "
+                        "the converged reference on the same noisy scenes (docs/model.md, 'Self-checking answers')")
+    p.add_argument("--verify-samples", type=int, default=DEFAULT_CHECK.verify_samples, metavar="N",
+                   help=f"samples rerun at the reference settings to verify the answer (default "
+                        f"{DEFAULT_CHECK.verify_samples})")
     p.add_argument("--json", action="store_true", help="one JSON object per scene per line")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run the samples on a Dask cluster (e.g. tcp://10.0.0.2:8786; default: $IPE_DASK_SCHEDULER, "
@@ -154,6 +164,12 @@ def build_parser() -> argparse.ArgumentParser:
     cap = gsub.add_parser("capped-tower", help="three boxes, a cone on top, a ball rolled at the base (the guide's example)")
     cap.add_argument("--ball-speed", type=_finite, default=5.0, metavar="M_S", help="the ball's speed (default 5 m/s)")
     cap.add_argument("-o", "--output", required=True)
+    zoo = gsub.add_parser("zoo", help="the scene zoo: impacts, dominoes, ramps, drops, rings, bouncy blocks, plates, "
+                                      "capped towers (docs/zoo.md)")
+    zoo.add_argument("--per-family", type=int, default=4)
+    zoo.add_argument("--seed", type=int, required=True)
+    zoo.add_argument("--families", default=",".join(FAMILIES), help="comma-separated (default: all)")
+    zoo.add_argument("-o", "--output", required=True)
 
     sub.add_parser("demo", help="predict on the built-in example tower (IPE and ground truth)")
 
@@ -207,10 +223,26 @@ def format_table(predictions: list[Prediction]) -> str:
             lines.append(f"{'':<34} fell off by group: {groups}; {p.bump_group} share: {_number_or_dash(p.bump_ratio, '.2f')}")
         if p.failure_reasons:
             lines.append(f"{'':<34} failures: {'; '.join(p.failure_reasons)}")
+        if p.fidelity is not None and p.fidelity != "verified" or p.refined_samples:
+            lines.append(f"{'':<34} fidelity: {describe_fidelity(p)}")
         if (p.max_penetration_fraction or 0) > NOTABLE_PENETRATION or (p.max_energy_gain_j or 0) > 0:
             lines.append(f"{'':<34} numerical health: a body ended {p.max_penetration_fraction:.1%} of its size inside "
                          f"another; a rollout gained {p.max_energy_gain_j:.3g} J")
     return "\n".join(lines)
+
+
+def describe_fidelity(p: Prediction) -> str:
+    """One line on what the self-check did (engine.fidelity)."""
+    report = p.self_check or {}
+    text = {"verified": "verified against the reference physics",
+            "escalated": "the reference physics disagreed with the fast one: every sample rerun at the reference",
+            "contradicted": "the reference physics disagreed and the budget ran out before it could answer: "
+                            "do not act on this answer",
+            "unverified": "not checked against the reference physics",
+            "reference": "computed at the reference settings"}.get(p.fidelity or "", str(p.fidelity))
+    if p.refined_samples:
+        text += f"; {p.refined_samples} unhealthy rollout(s) rerun at the reference"
+    return text
 
 
 def prediction_json(prediction: Prediction) -> str:
@@ -235,7 +267,7 @@ def _sample_map(scheduler: str | None, workers: int):
 
 def _run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: int, workers: int, emit,
                      stop: AdaptiveStop | None = None, budget_s: float | None = None, perceived=None,
-                     scheduler: str | None = None) -> None:
+                     scheduler: str | None = None, check: SelfCheck = DEFAULT_CHECK) -> None:
     pool = _sample_map(scheduler, min(workers, max(1, model.samples)) if workers > 0 else workers)
     if stop is not None:
         from .engine.cluster import DaskMap
@@ -245,7 +277,7 @@ def _run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: in
     try:
         for scene in steps(scenes, "predict") if len(scenes) > 1 else scenes:
             emit(predict(scene, model, sim, query, seed=seed, map_fn=pool.map if pool else None, stop=stop,
-                         budget_s=budget_s, perceived=perceived))
+                         budget_s=budget_s, perceived=perceived, check=check))
     finally:
         if pool is not None:
             pool.close()
@@ -287,6 +319,10 @@ def cmd_predict(args) -> int:
     if args.seed < 0:
         raise ConfigError("--seed", f"must be >= 0, got {args.seed}")
     try:
+        check = SelfCheck(enabled=not args.no_self_check, verify_samples=args.verify_samples)
+    except ConfigError as exc:
+        raise ConfigError("--verify-samples", exc.problem) from None
+    try:
         check_budget(args.budget)
     except ConfigError as exc:
         raise ConfigError("--budget", exc.problem) from None
@@ -308,14 +344,14 @@ def cmd_predict(args) -> int:
     if args.json:
         _run_predictions(scenes, model, sim, query, args.seed, args.workers,
                          lambda p: (collected.append(p), print(prediction_json(p), flush=True)), stop, args.budget,
-                         perceived, args.scheduler)
+                         perceived, args.scheduler, check)
     else:
         print(f"sigma = {sigma:g} m, phi = {','.join(f'{v:g}' for v in phi)} m/s^2, mu = {args.mu}, "
               f"k = {1 if model.is_deterministic else args.samples}, preset = {sim.name}, seed = {args.seed}"
               + (f", perception = vision ({vision.chain_samples} MH samples, {vision.resolution_px} px)"
                  if vision is not None else ""))
         _run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append, stop, args.budget,
-                         perceived, args.scheduler)
+                         perceived, args.scheduler, check)
         print(format_table(collected))
         if vision is not None:
             for p in collected:
@@ -351,6 +387,15 @@ def cmd_generate(args) -> int:
         if args.count < 1:
             raise ConfigError("--count", f"must be >= 1, got {args.count}")
         scenes = scene_catalogue(args.seed, args.count)
+    elif args.kind == "zoo":
+        if args.per_family < 1:
+            raise ConfigError("--per-family", f"must be >= 1, got {args.per_family}")
+        families = tuple(f.strip() for f in args.families.split(",") if f.strip())
+        unknown = [f for f in families if f not in FAMILIES]
+        if unknown or not families:
+            raise ConfigError("--families", (f"unknown family {unknown[0]!r}; " if unknown else "none given; ")
+                              + f"choose from {', '.join(FAMILIES)}")
+        scenes = scene_zoo(args.seed, args.per_family, families)
     else:
         scenes = [capped_tower(args.ball_speed)]
     write_scenes(scenes, args.output)

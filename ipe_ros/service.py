@@ -31,6 +31,7 @@ from typing import Any, Callable
 from .engine import AdaptiveStop, ModelConfig, Prediction, QuerySpec, Scene, SimSettings, WorkerPool, predict, preset
 from .engine.config import DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES
 from .engine.errors import SceneError, clip, shown
+from .engine.fidelity import DEFAULT_CHECK, SelfCheck
 from .engine.sampler import check_request
 from .engine.scene import DEFAULT_MAX_OBJECTS
 
@@ -64,6 +65,7 @@ class ServiceConfig:
     stop: AdaptiveStop | None = None  # anytime sampling (deadline / interval width), None: all k
     budget_s: float = DEFAULT_BUDGET_S  # wall seconds a prediction may take (see engine.predict)
     gravity_aligned_frames: tuple[str, ...] = ()  # frames whose -z is gravity; () trusts every frame
+    check: SelfCheck = DEFAULT_CHECK  # how each prediction checks its fast physics (engine.fidelity)
 
 
 @dataclass(frozen=True)
@@ -131,8 +133,11 @@ class ServiceStats:
     received: scenes accepted; predicted: distinct scenes answered (never more than received);
     predictions: answers made (a scene is predicted again after a parameter change); dropped:
     scenes replaced while waiting (keep-latest); budget_stops: answers cut short by the budget.
+    refined_samples: rollouts the self-check reran at the reference because they ended unhealthy;
+    escalated / contradicted: answers whose fast physics the reference contradicted, recomputed at
+    the reference / left as they were because the budget ran out (engine.fidelity).
     recent: the last RECENT_EVENTS inputs and predictions, oldest first: "ok", "rejected",
-    "failed", "partial" (some samples failed or were cut by the budget) or "rrd_failed".
+    "failed", "partial" (some samples failed or were cut by the budget), "contradicted" or "rrd_failed".
     in_flight_s: how long the prediction in flight has run (None: none in flight).
     """
 
@@ -156,6 +161,9 @@ class ServiceStats:
     closed: bool
     recent: tuple[str, ...] = ()
     budget_s: float | None = None
+    refined_samples: int = 0
+    escalated: int = 0
+    contradicted: int = 0
 
 
 class NoSceneError(RuntimeError):
@@ -206,7 +214,8 @@ class PredictionService:
         self._closing = False
         self._seq = 0
         self._counts = dict(received=0, predicted=0, predictions=0, dropped=0, rejected=0, failed_predictions=0,
-                            failed_samples=0, budget_stops=0, rrd_failures=0)
+                            failed_samples=0, budget_stops=0, rrd_failures=0, refined_samples=0, escalated=0,
+                            contradicted=0)
         self._recent: collections.deque[str] = collections.deque(maxlen=RECENT_EVENTS)
         self._last_predicted_seq = 0
         self._in_flight_since: float | None = None
@@ -422,11 +431,16 @@ class PredictionService:
                 self._counts["failed_samples"] += prediction.failed_samples
                 self._counts["budget_stops"] += prediction.stopped_by == "budget"
                 self._counts["rrd_failures"] += answer.rrd_error is not None
+                self._counts["refined_samples"] += prediction.refined_samples
+                self._counts["escalated"] += prediction.fidelity == "escalated"
+                self._counts["contradicted"] += prediction.fidelity == "contradicted"
                 self._last_compute_s = answer.compute_s
                 if answer.rrd_error is not None:
                     self._last_error = answer.rrd_error
                 partial = prediction.failed_samples or prediction.stopped_by == "budget" or not prediction.samples
-                self._recent.append("rrd_failed" if answer.rrd_error else "partial" if partial else "ok")
+                self._recent.append("rrd_failed" if answer.rrd_error else
+                                    "contradicted" if prediction.fidelity == "contradicted" else
+                                    "partial" if partial else "ok")
             else:
                 self._counts["failed_predictions"] += 1
                 self._last_error = error
@@ -448,7 +462,8 @@ class PredictionService:
             prediction = predict(item.scene, config.model, config.settings, config.query, seed=config.seed,
                                  map_fn=self._pool.map if self._pool is not None else None,
                                  record_every=record_every, record_samples=config.rerun_rollouts_logged,
-                                 max_objects=config.max_objects, stop=config.stop, budget_s=config.budget_s)
+                                 max_objects=config.max_objects, stop=config.stop, budget_s=config.budget_s,
+                                 check=config.check)
         except ValueError as exc:  # SceneError / ConfigError: the scene no longer fits a new config
             return None, str(exc)
         except Exception as exc:  # noqa: BLE001 - report, keep serving

@@ -135,6 +135,12 @@ class Prediction:
     budget_skipped_samples: int = 0
     max_penetration_fraction: float | None = None
     max_energy_gain_j: float | None = None
+    #: the self-check's verdict (engine.fidelity.VERDICTS): "verified", "escalated", "contradicted",
+    #: "unverified" or "reference"; ``refined_samples``: rollouts rerun at the reference because they
+    #: ended unhealthy; ``self_check``: what ran at which settings (FidelityReport.to_dict()).
+    fidelity: str | None = None
+    refined_samples: int = 0
+    self_check: dict[str, Any] | None = None
     request: dict[str, Any] = field(default_factory=dict)
     outcomes: tuple[SampleOutcome, ...] = field(default=(), repr=False, compare=False)
 

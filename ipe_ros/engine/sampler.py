@@ -19,6 +19,9 @@ import numpy as np
 from .config import ModelConfig, QuerySpec, SimSettings
 from .errors import ConfigError, shown
 from .estimate import Prediction, aggregate, sample_any_fall, sample_fall_fraction, wilson_interval
+from .fidelity import check_request as check_fidelity_request
+from .fidelity import (DEFAULT_CHECK, NO_CHECK, FidelityReport, SelfCheck, disagree, is_reference, merge,
+                       reference_settings, scale_of, unhealthy, verification_count)
 from .rollout import SampleOutcome, SampleTask, run_sample
 from .scene import DEFAULT_MAX_OBJECTS, Scene, Table, validate_scene
 
@@ -153,7 +156,7 @@ def check_budget(budget_s: float | None) -> None:
 def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: QuerySpec, seed: int = 0,
             map_fn: MapFn | None = None, record_every: int = 0, record_samples: int | None = None,
             max_objects: int = DEFAULT_MAX_OBJECTS, stop: AdaptiveStop | None = None,
-            budget_s: float | None = None, perceived=None) -> Prediction:
+            budget_s: float | None = None, perceived=None, check: SelfCheck | None = DEFAULT_CHECK) -> Prediction:
     """Run the IPE on one scene and aggregate (failed rollouts are counted in ``failed_samples``).
 
     ``record_every``/``record_samples``: record trajectories (for rerun) every N simulation steps
@@ -167,9 +170,15 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
     ``model.perception == "vision"``: the k noisy scenes are states of the vision posterior
     (``engine.vision``), from a chain run here (in a worker when ``map_fn`` is given, seeded from
     ``seed`` on a stream of its own) or taken from ``perceived`` (``vision.PerceivedScenes``).
+
+    ``check``: how the answer checks its fast physics against the reference (``engine.fidelity``):
+    unhealthy rollouts refined, ``check.verify_samples`` samples verified in the same map as the
+    fast ones, everything rerun at the reference on disagreement; ``Prediction.fidelity`` says what
+    happened. None or ``SelfCheck(enabled=False)``: the fast physics alone.
     """
     _check_seed(seed)
     check_budget(budget_s)
+    check_fidelity_request(check)
     check_request(scene, query, max_objects, model=model, settings=settings, budget_s=budget_s)
     if stop is not None and stop.ci_width is not None and not (query.wants("fall") or query.wants("any_fall")):
         raise ConfigError("ci_width", "a target interval width needs the fall or any_fall query; ask for one "
@@ -187,15 +196,27 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
     def run(batch: list[SampleTask]) -> list[SampleOutcome]:
         return _run_tasks(batch, map_fn)
 
+    check = NO_CHECK if check is None or is_reference(settings) else check
+    reference = reference_settings(settings.horizon_s)
+    # the verification runs in the first map, first (the longest tasks start first)
+    verify_tasks = [dataclasses.replace(t, settings=reference, record_every=0)
+                    for t in tasks[:verification_count(check, len(tasks))]]
+
+    def run_first(batch: list[SampleTask]) -> list[SampleOutcome]:
+        both = run(verify_tasks + batch)
+        verified[:] = both[:len(verify_tasks)]
+        return both[len(verify_tasks):]
+
+    verified: list[SampleOutcome] = []
     start = time.perf_counter()
     stopped_by = "samples"
     if stop is None or model.is_deterministic:
-        outcomes: list[SampleOutcome] = run(tasks)
+        outcomes: list[SampleOutcome] = run_first(tasks)
     else:
         outcomes = []
         for first in range(0, len(tasks), stop.batch_size):
             batch_start = time.perf_counter()
-            outcomes += run(tasks[first:first + stop.batch_size])
+            outcomes += (run_first if first == 0 else run)(tasks[first:first + stop.batch_size])
             if len(outcomes) == len(tasks):
                 break
             now = time.perf_counter()
@@ -209,14 +230,70 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
                 if hi - lo <= stop.ci_width:
                     stopped_by = "ci_width"
                     break
+    if is_reference(settings):
+        report = FidelityReport("reference", settings=(("samples", settings.name),))
+    else:
+        outcomes, report = self_check(tasks[:len(outcomes)], outcomes, verified, check, reference, run, settings.name)
     wall_s = time.perf_counter() - start
     return _aggregate(scene, model, settings, query, seed, tasks, outcomes, wall_s, stopped_by, stop=stop,
-                      budget_s=budget_s, perceived=perceived)
+                      budget_s=budget_s, perceived=perceived, fidelity=report)
+
+
+def self_check(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: list[SampleOutcome],
+               check: SelfCheck, reference: SimSettings, run: Callable[[list[SampleTask]], list[SampleOutcome]],
+               fast_name: str) -> tuple[list[SampleOutcome], FidelityReport]:
+    """Refine, verify and escalate (``engine.fidelity``): the outcomes the answer uses, and what happened.
+
+    ``verified[i]`` is sample i rerun at ``reference``; ``run`` reruns tasks (through the map).
+    """
+    parts = [("samples", fast_name)]
+    if not check.enabled:
+        return outcomes, FidelityReport("unverified", settings=tuple(parts))
+
+    def at_reference(batch: list[SampleTask]) -> list[SampleOutcome]:
+        return run([dataclasses.replace(t, settings=reference, record_every=0) for t in batch])
+
+    # 1. refinement of the rollouts that ended unhealthy (a verified sample's rerun is at hand)
+    reasons = {}
+    for i, (task, outcome) in enumerate(zip(tasks, outcomes)):
+        why = unhealthy(outcome, scale_of(task.scene), check)
+        if why is not None:
+            reasons[i] = why
+    rerun = [i for i in reasons if i >= len(verified) or not verified[i].ok]
+    replacements = {i: verified[i] for i in reasons if i < len(verified) and verified[i].ok}
+    if rerun:
+        replacements.update(zip(rerun, at_reference([tasks[i] for i in rerun])))
+    refined = {i: o for i, o in replacements.items() if o.ok}
+    if refined:
+        parts.append(("refined", reference.name))
+    # 2. verification: the fast physics' yes/no outcomes against the reference's, sample by sample
+    compared = [i for i, ref in enumerate(verified) if ref.ok and outcomes[i].ok]
+    disagreeing = [i for i in compared if disagree(outcomes[i], verified[i])]
+    if verified:
+        parts.append(("verification", reference.name))
+    common = dict(verified_samples=len(compared), disagreeing_samples=len(disagreeing),
+                  refined_samples=len(refined), refined_reasons=tuple((i, reasons[i]) for i in sorted(refined)))
+    if not disagreeing:
+        verdict = "verified" if compared and len(compared) == len(verified) else "unverified"
+        return merge(outcomes, refined), FidelityReport(verdict, settings=tuple(parts), **common)
+    # 3. escalation: contradicted on this scene, so every sample at the reference
+    done = {i: verified[i] for i in range(len(verified))}
+    done.update(replacements)
+    rest = [i for i in range(len(outcomes)) if i not in done]
+    if rest:
+        done.update(zip(rest, at_reference([tasks[i] for i in rest])))
+    parts.append(("escalation", reference.name))
+    if any(o.budget_stopped for o in done.values()):
+        return merge(outcomes, refined), FidelityReport("contradicted", escalated_samples=0,
+                                                       settings=tuple(parts), **common)
+    return merge(outcomes, done), FidelityReport("escalated", escalated_samples=len(done), settings=tuple(parts),
+                                                 **common)
 
 
 def _aggregate(scene: Scene, model: ModelConfig, settings: SimSettings, query: QuerySpec, seed: int,
                tasks: list[SampleTask], outcomes: list[SampleOutcome], wall_s: float, stopped_by: str, *,
-               stop: AdaptiveStop | None = None, budget_s: float | None = None, perceived=None) -> Prediction:
+               stop: AdaptiveStop | None = None, budget_s: float | None = None, perceived=None,
+               fidelity: FidelityReport | None = None) -> Prediction:
     request = {
         "sigma_m": model.sigma_m, "phi_m_s2": list(model.phi_m_s2),
         "force_direction_rad": model.force_direction_rad, "mu": model.mu, "preset": settings.name,
@@ -232,6 +309,9 @@ def _aggregate(scene: Scene, model: ModelConfig, settings: SimSettings, query: Q
     prediction = aggregate(scene, outcomes, queries=query.queries, bump_group=query.bump_group,
                            deterministic=model.is_deterministic, samples_requested=len(tasks),
                            wall_s=wall_s, request=request)
+    if fidelity is not None:
+        prediction = dataclasses.replace(prediction, fidelity=fidelity.verdict, refined_samples=fidelity.refined_samples,
+                                         self_check=fidelity.to_dict())
     if prediction.stopped_by == "budget":
         return prediction
     return dataclasses.replace(prediction, stopped_by=stopped_by)

@@ -24,13 +24,13 @@ def diagnostics_msg(stats: ServiceStats, name: str, stamp_ns: int, hardware_id: 
     - ERROR: shutting down, no worker process alive, or the latest prediction failed (until the
       next one succeeds);
     - WARN: one of the last RECENT_EVENTS inputs or predictions was rejected, partial (failed
-      samples, cut by the budget) or lost its recording; or the prediction in flight has run past
-      the budget;
+      samples, cut by the budget), contradicted by the reference physics without time to escalate,
+      or lost its recording; or the prediction in flight has run past the budget;
     - OK otherwise ("predicting" / "idle"). The counters since start come as key/values.
     """
     recent = stats.recent
     overdue = stats.in_flight_s is not None and stats.budget_s is not None and stats.in_flight_s > stats.budget_s + 5
-    troubles = {kind: recent.count(kind) for kind in ("rejected", "failed", "partial", "rrd_failed") if kind in recent}
+    troubles = {kind: recent.count(kind) for kind in ("rejected", "failed", "partial", "contradicted", "rrd_failed") if kind in recent}
     if stats.closed:
         level, message = DiagnosticStatus.ERROR, "shutting down"
     elif stats.workers > 0 and stats.workers_alive == 0:
@@ -55,6 +55,8 @@ def diagnostics_msg(stats: ServiceStats, name: str, stamp_ns: int, hardware_id: 
         "predictions": stats.predictions, "scenes_dropped": stats.dropped, "scenes_rejected": stats.rejected,
         "predictions_failed": stats.failed_predictions, "samples_failed": stats.failed_samples,
         "budget_stops": stats.budget_stops, "rrd_failures": stats.rrd_failures,
+        "samples_refined": stats.refined_samples, "predictions_escalated": stats.escalated,
+        "predictions_contradicted": stats.contradicted,
         "last_compute_s": stats.last_compute_s, "last_error": stats.last_error,
     }
     status = DiagnosticStatus(level=level, name=name, message=clip(message, 1000), hardware_id=hardware_id,

@@ -17,6 +17,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from ..engine import ALL_QUERIES, PRESETS, AdaptiveStop, ConfigError, ModelConfig, QuerySpec, preset
 from ..engine.config import (DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M, anytime_batch_size,
                              default_workers)
+from ..engine.fidelity import DEFAULT_CHECK, SelfCheck
 from ..engine.scene import DEFAULT_MAX_OBJECTS
 from ..service import ServiceConfig
 
@@ -85,6 +86,12 @@ PARAMETERS: tuple[ParamSpec, ...] = (
                                                    "take; samples still running then are cut off (stopped_by: "
                                                    "budget) and scenes whose one rollout cannot fit are rejected",
               (0.1, 3600.0)),
+    ParamSpec("self_check", True, ParameterType.PARAMETER_BOOL,
+              "check each prediction's fast physics against the converged reference on the same noisy scenes "
+              "(refine unhealthy rollouts, verify samples, rerun everything on disagreement; the answer's "
+              "fidelity says what happened); false: the fast physics alone, answers 'unverified'"),
+    ParamSpec("verify_samples", DEFAULT_CHECK.verify_samples, _INT,
+              "samples rerun at the reference settings to verify each prediction", (0, 100)),
     ParamSpec("dask_scheduler", "", _STRING, "run the samples on a Dask cluster at this address (e.g. "
                                          "tcp://10.0.0.1:8786, see docs/cluster.md) instead of `workers` local "
                                          "processes; empty: local; fixed at start", read_only=True),
@@ -163,4 +170,6 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
                          rerun_save_dir=save_dir or None, rerun_rollouts_logged=int(values["rerun.rollouts_logged"]),
                          rerun_frame_period_s=float(values["rerun.frame_period_s"]),
                          rerun_connect_url=connect or None, stop=stop, budget_s=budget,
-                         gravity_aligned_frames=frames)
+                         gravity_aligned_frames=frames,
+                         check=SelfCheck(enabled=bool(values["self_check"]),
+                                         verify_samples=int(values["verify_samples"])))

@@ -1,0 +1,194 @@
+"""What accuracy costs in time, per family of the scene zoo, with the chaos yardstick beside it.
+
+    .venv/bin/python benchmarks/zoo.py [--per-family 6] [--samples 16] [--seed 2026] [--workers 2]
+                                       [--families launch,dominoes] [--only default,default-unchecked]
+                                       [--out benchmarks/results/zoo]
+
+Every zoo family (ipe_ros.engine.zoo) under `paper` (the converged reference), `paper-half-step`
+(the yardstick: `paper` at 0.5 ms on the same noisy scenes; how much a family's outcomes depend on
+the integrator at all) and the candidates (by default `default`, which checks itself, and
+`default-unchecked`, the same physics without the checks). Each scene's sigma is 5% of its smallest
+dynamic body; every configuration gets the same seeds, hence the same noisy scenes. Queries: the
+node's default (fall, any_fall, direction, far), so rollouts run as a user's do.
+
+Per family and configuration: seconds per prediction and speed-up over `paper` (configurations take
+turns scene by scene, so the machine's drift hits each alike), mean and max |dP(object falls)| and
+|dP(anything falls)| against `paper`, per-sample agreement on "did anything fall?", the worst end
+penetration and the rollouts ending > 5% inside another, the worst energy gain (% of the scene's
+scale), the share of samples the self-check refined or escalated, and each answer's fidelity.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+import numpy as np  # noqa: E402
+
+from ipe_ros.engine import PRESETS, ModelConfig, QuerySpec, WorkerPool, predict  # noqa: E402
+from ipe_ros.engine.config import DEFAULT_QUERIES  # noqa: E402
+from ipe_ros.engine.simulation.health import energy_scale_j  # noqa: E402
+from ipe_ros.engine.zoo import FAMILIES, family_of, scene_zoo, zoo_sigma_m  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+QUERY = QuerySpec(queries=DEFAULT_QUERIES)
+PAPER = PRESETS["paper"]
+
+
+def configurations() -> dict[str, tuple]:
+    """name -> (settings, self_check). `paper` first: it is the reference."""
+    from ipe_ros.engine.fidelity import SelfCheck
+
+    default = PRESETS["default"]
+    return {
+        "paper": (PAPER, None),
+        "paper-half-step": (PAPER.changed("paper-half-step", time_step_s=PAPER.time_step_s / 2), None),
+        "default": (default, SelfCheck()),
+        "default-unchecked": (default, None),
+    }
+
+
+def _anything_fell(outcome) -> bool:
+    return bool(outcome.rollouts[0].fallen.any())
+
+
+def compare_family(rows: list[dict], reference: list[dict]) -> dict:
+    """One configuration's predictions of one family against the reference's."""
+    d_obj, d_any, agree, pen, over5, gain = [], [], [], [], 0, []
+    worst_scene = 0.0
+    for row, ref in zip(rows, reference):
+        p, r = row["prediction"], ref["prediction"]
+        if not (p.samples and r.samples):
+            continue
+        diffs = [abs(p.object_fall_probability[n] - r.object_fall_probability[n]) for n in r.object_fall_probability]
+        d_obj.append(float(np.mean(diffs)))
+        worst_scene = max(worst_scene, max(diffs), abs(p.any_fall_probability - r.any_fall_probability))
+        d_any.append(abs(p.any_fall_probability - r.any_fall_probability))
+        for o, ro in zip(p.outcomes, r.outcomes):
+            if o.ok and ro.ok:
+                agree.append(_anything_fell(o) == _anything_fell(ro))
+        ends = [rr.penetration_fraction for o in p.outcomes if o.ok for rr in o.rollouts]
+        pen.append(max(ends))
+        over5 += sum(e > 0.05 for e in ends)
+        gain.append(100 * p.max_energy_gain_j / row["energy_scale_j"])
+    wall = sum(r["wall_s"] for r in rows)
+    samples = sum(r["prediction"].samples for r in rows)
+    refined = sum(getattr(r["prediction"], "refined_samples", 0) or 0 for r in rows)
+    return {
+        "scenes": len(rows), "wall_s_per_prediction": wall / len(rows),
+        "speedup_vs_paper": sum(r["wall_s"] for r in reference) / wall,
+        "mean_abs_dp_object": float(np.mean(d_obj)), "max_abs_dp_scene": worst_scene,
+        "mean_abs_dp_any": float(np.mean(d_any)),
+        "per_sample_agreement": float(np.mean(agree)) if agree else None,
+        "max_end_penetration_fraction": float(max(pen)), "rollouts_over_5_percent": int(over5),
+        "max_energy_gain_percent": float(max(gain)),
+        "refined_share": refined / max(1, samples),
+        "fidelity": dict(Counter(str(getattr(r["prediction"], "fidelity", None)) for r in rows)),
+        "failed_samples": int(sum(r["prediction"].failed_samples for r in rows)),
+    }
+
+
+def verdict(family_rows: dict[str, dict]) -> dict:
+    """The issue's bar for one family: default's mean |dP| <= max(0.03, 1.5x the yardstick's), no
+    scene off by more than the yardstick's worst + 0.1, no rollout ending > 5% inside another, no
+    energy gain above 1% of the scale."""
+    yard, ours = family_rows["paper-half-step"], family_rows["default"]
+    return {
+        "mean_ok": ours["mean_abs_dp_object"] <= max(0.03, 1.5 * yard["mean_abs_dp_object"]),
+        "worst_ok": ours["max_abs_dp_scene"] <= yard["max_abs_dp_scene"] + 0.1,
+        "penetration_ok": ours["rollouts_over_5_percent"] == 0,
+        "energy_ok": ours["max_energy_gain_percent"] <= 1.0,
+    }
+
+
+def markdown(report: dict) -> str:
+    lines = [f"# The scene zoo: {report['per_family']} scenes per family (seed {report['seed']}), k = "
+             f"{report['samples']}, queries {', '.join(sorted(QUERY.queries))}", "",
+             f"{report['machine']}; {report['date']}; sigma = 5% of each scene's smallest dynamic body; every "
+             "configuration on the same noisy scenes (same seeds), taking turns scene by scene; "
+             f"wall time {report['wall_s'] / 60:.0f} min.", "",
+             "| family | configuration | s / prediction | speed-up | mean \\|ΔP(object)\\| | worst scene \\|ΔP\\| | "
+             "mean \\|ΔP(any)\\| | per-sample agreement | worst end penetration | rollouts > 5% | worst energy gain | "
+             "refined | fidelity |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for family, rows in report["families"].items():
+        for name, row in rows.items():
+            fid = ", ".join(f"{k} {v}" for k, v in sorted(row["fidelity"].items()) if k != "None") or "-"
+            agree = "-" if row["per_sample_agreement"] is None else f"{row['per_sample_agreement']:.1%}"
+            lines.append(f"| {family} | {name} | {row['wall_s_per_prediction']:.2f} | {row['speedup_vs_paper']:.1f}x | "
+                         f"{row['mean_abs_dp_object']:.3f} | {row['max_abs_dp_scene']:.3f} | "
+                         f"{row['mean_abs_dp_any']:.3f} | {agree} | {row['max_end_penetration_fraction']:.1%} | "
+                         f"{row['rollouts_over_5_percent']} | {row['max_energy_gain_percent']:.2f}% | "
+                         f"{row['refined_share']:.1%} | {fid} |")
+    lines += ["", "Against the bar (mean \\|ΔP\\| <= max(0.03, 1.5x yardstick); worst scene <= yardstick's worst + "
+              "0.1; no rollout ending > 5% inside another; energy gain <= 1% of the scale):", "",
+              "| family | mean | worst scene | penetration | energy |", "|---|---|---|---|---|"]
+    for family, v in report.get("verdicts", {}).items():
+        lines.append(f"| {family} | {'ok' if v['mean_ok'] else 'MISSED'} | {'ok' if v['worst_ok'] else 'MISSED'} | "
+                     f"{'ok' if v['penetration_ok'] else 'MISSED'} | {'ok' if v['energy_ok'] else 'MISSED'} |")
+    if "overall" in report:
+        lines += ["", "Overall speed-up over `paper` (all scenes' time together): " +
+                  ", ".join(f"`{k}` {v:.1f}x" for k, v in report["overall"].items())]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--per-family", type=int, default=6)
+    parser.add_argument("--samples", type=int, default=16)
+    parser.add_argument("--seed", type=int, default=2026)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--families", default=",".join(FAMILIES))
+    parser.add_argument("--only", default=None, help="configurations besides paper (comma-separated)")
+    parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "zoo"))
+    args = parser.parse_args(argv)
+    configs = configurations()
+    if args.only:
+        wanted = ["paper"] + [n for n in args.only.split(",") if n != "paper"]
+        unknown = [n for n in wanted if n not in configs]
+        if unknown:
+            sys.exit(f"--only: unknown configuration {unknown[0]!r}; choose from {', '.join(configs)}")
+        configs = {n: configs[n] for n in wanted}
+    scenes = scene_zoo(args.seed, args.per_family, tuple(args.families.split(",")))
+    results: dict[str, list[dict]] = {name: [] for name in configs}
+    start = time.perf_counter()
+    with WorkerPool(args.workers) as pool:
+        pool.warm()
+        for i, scene in enumerate(scenes):
+            model = ModelConfig(sigma_m=zoo_sigma_m(scene), samples=args.samples)
+            line = []
+            for name, (settings, check) in configs.items():
+                t0 = time.perf_counter()
+                prediction = predict(scene, model, settings, QUERY, seed=i, map_fn=pool.map, check=check)
+                wall = time.perf_counter() - t0
+                results[name].append({"family": family_of(scene), "prediction": prediction, "wall_s": wall,
+                                      "energy_scale_j": energy_scale_j(scene)})
+                line.append(f"{name} {wall:.2f}s any={prediction.any_fall_probability}")
+            print(f"{scene.name}: " + " | ".join(line), flush=True)
+    report = {"per_family": args.per_family, "seed": args.seed, "samples": args.samples,
+              "machine": f"{os.cpu_count()} CPUs, {args.workers} workers", "date": time.strftime("%Y-%m-%d"),
+              "wall_s": time.perf_counter() - start, "families": {}, "verdicts": {}}
+    for family in dict.fromkeys(family_of(s) for s in scenes):
+        ref = [r for r in results["paper"] if r["family"] == family]
+        report["families"][family] = {name: compare_family([r for r in rows if r["family"] == family], ref)
+                                      for name, rows in results.items()}
+        if {"default", "paper-half-step"} <= set(configs):
+            report["verdicts"][family] = verdict(report["families"][family])
+    paper_wall = sum(r["wall_s"] for r in results["paper"])
+    report["overall"] = {name: paper_wall / sum(r["wall_s"] for r in rows) for name, rows in results.items()}
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "zoo.json").write_text(json.dumps(report, indent=1))
+    (out / "zoo.md").write_text(markdown(report))
+    print(markdown(report))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,168 @@
+"""Self-checking answers: does the fast physics hold on this scene, and repair where it does not.
+
+The fast presets were tuned on the paper's towers and our own catalogue; on scenes nobody tuned for
+(fast impacts, chains of events) they can drift from converged physics without any sign in the
+answer. Every prediction at fast settings therefore checks itself, on the same noisy scenes (sample i
+keeps seed i, and every preset separates the noisy scene identically, so a sample rerun at other
+settings starts from the bit-identical state):
+
+1. **Refinement**: a rollout that ends unhealthy (a body more than ``max_end_penetration_fraction``
+   of its smallest extent inside another, energy gained beyond ``max_energy_gain_fraction`` of the
+   scene's scale, or a physics failure) is rerun at the reference settings and replaced.
+2. **Verification**: ``verify_samples`` samples (the first ones) are rerun at the reference settings
+   in the same map as the fast samples. Their outcomes (which objects fall, fall off, whether
+   anything falls) are compared with the fast rollouts'.
+3. **Escalation**: when a verified sample disagrees, the fast physics is contradicted on this scene
+   and every sample is rerun at the reference settings: the answer is then exactly the reference's.
+   Chaos alone makes two integrators disagree now and then (the zoo's yardstick measures how often),
+   so escalation may be spent on a scene the fast physics had right; never the other way round.
+
+The verdict (``Prediction.fidelity``) a robot can act on:
+
+- ``verified``: the verified samples agree; unhealthy rollouts (if any) were refined.
+- ``escalated``: the fast physics disagreed with the reference; the answer is the reference's.
+- ``contradicted``: it disagreed, and the budget ran out before the reference could answer: the
+  answer is the fast physics' and converged physics contradicts it. Do not act on it.
+- ``unverified``: the check was off, or the budget ran out before the verification finished.
+- ``reference``: the prediction ran at the reference settings themselves.
+
+The reference is the paper's integration (1 ms steps, 50 solver iterations, multibodies) with the
+rollout ending once everything is at rest (``early_stop``): the physics of ``paper``, without
+simulating a tower at rest to the end of the horizon.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+
+from .config import PRESETS, SimSettings, _positive, _integer
+from .errors import ConfigError, shown
+from .rollout import SampleOutcome
+from .scene import Scene
+
+#: The verdicts, from best to worst for a robot about to act.
+VERDICTS = ("reference", "verified", "escalated", "unverified", "contradicted")
+
+
+def reference_settings(horizon_s: float | None = None) -> SimSettings:
+    """`paper`'s integration, ending once everything is at rest (see the module doc)."""
+    paper = PRESETS["paper"]
+    return paper.changed("paper+rest", early_stop={"enabled": True},
+                         **({} if horizon_s is None else {"horizon_s": horizon_s}))
+
+
+@dataclass(frozen=True)
+class SelfCheck:
+    """How a prediction checks its fast physics (see the module doc).
+
+    enabled: False answers at the fast settings alone (``fidelity: "unverified"``).
+    verify_samples: samples rerun at the reference settings to verify the fast ones (the first
+        ones; at most k). Each costs about as much as 5-12 fast samples (benchmarks/README.md).
+    max_end_penetration_fraction: a rollout ending with a body deeper than this fraction of its
+        smallest extent inside another is refined.
+    max_energy_gain_fraction: a rollout that gained more energy than this fraction of the scene's
+        energy scale (weight x size + initial kinetic energy) is refined.
+    """
+
+    enabled: bool = True
+    verify_samples: int = 1
+    max_end_penetration_fraction: float = 0.05
+    max_energy_gain_fraction: float = 0.01
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.enabled, bool):
+            raise ConfigError("self_check.enabled", f"must be true or false, got {shown(self.enabled)}")
+        _integer(self.verify_samples, "self_check.verify_samples", 0, 1000)
+        _positive(self.max_end_penetration_fraction, "self_check.max_end_penetration_fraction")
+        _positive(self.max_energy_gain_fraction, "self_check.max_energy_gain_fraction")
+
+
+DEFAULT_CHECK = SelfCheck()
+NO_CHECK = SelfCheck(enabled=False)
+
+
+def is_reference(settings: SimSettings) -> bool:
+    """Settings at least as converged as the reference: nothing to check them against."""
+    ref = PRESETS["paper"]
+    return (settings.time_step_s <= ref.time_step_s and settings.solver.iterations >= ref.solver.iterations
+            and not settings.solver.maximal_coordinates and not settings.collapse.enabled)
+
+
+def unhealthy(outcome: SampleOutcome, energy_scale_j: float, check: SelfCheck) -> str | None:
+    """Why a fast rollout cannot be trusted as it ended, or None when it can."""
+    if outcome.budget_stopped or outcome.worker_lost:
+        return None  # not the physics' doing: counted as before
+    if not outcome.ok:
+        return "failed"
+    for r in outcome.rollouts:
+        if r.penetration_fraction > check.max_end_penetration_fraction:
+            return "penetration"
+        if r.energy_gain_j > check.max_energy_gain_fraction * energy_scale_j:
+            return "energy"
+    return None
+
+
+def _flags(outcome: SampleOutcome) -> list[np.ndarray]:
+    """What a sample's answer is made of: per rollout, the yes/no outcomes of its queries."""
+    flags = []
+    for r in outcome.rollouts:
+        for value in (r.fallen, r.fell_off):
+            if value is not None:
+                flags.append(np.asarray(value, bool))
+        if r.any_fell is not None:
+            flags.append(np.array([r.any_fell]))
+    return flags
+
+
+def disagree(fast: SampleOutcome, reference: SampleOutcome) -> bool:
+    """Two runs of one sample give a different yes/no outcome for some object (both must have run)."""
+    a, b = _flags(fast), _flags(reference)
+    return len(a) != len(b) or any(x.shape != y.shape or bool(np.any(x != y)) for x, y in zip(a, b))
+
+
+@dataclass(frozen=True)
+class FidelityReport:
+    """What the check did: the verdict, and what each part of the answer ran at.
+
+    settings: part -> settings name ("samples": the fast preset; "refined"/"verification"/
+        "escalation": the reference), for the parts that ran.
+    refined_reasons: per refined sample index, why ("penetration", "energy", "failed").
+    """
+
+    verdict: str
+    verified_samples: int = 0
+    disagreeing_samples: int = 0
+    refined_samples: int = 0
+    refined_reasons: tuple[tuple[int, str], ...] = ()
+    escalated_samples: int = 0
+    settings: tuple[tuple[str, str], ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"verdict": self.verdict, "verified_samples": self.verified_samples,
+                "disagreeing_samples": self.disagreeing_samples, "refined_samples": self.refined_samples,
+                "refined_reasons": {str(i): why for i, why in self.refined_reasons},
+                "escalated_samples": self.escalated_samples, "settings": dict(self.settings)}
+
+
+def check_request(check: SelfCheck | None) -> None:
+    if check is not None and not isinstance(check, SelfCheck):
+        raise ConfigError("self_check", f"must be a SelfCheck or None, got {shown(check)}")
+
+
+def verification_count(check: SelfCheck, samples: int) -> int:
+    return min(check.verify_samples, samples) if check.enabled else 0
+
+
+def merge(outcomes: Sequence[SampleOutcome], replacements: dict[int, SampleOutcome]) -> list[SampleOutcome]:
+    """``outcomes`` with some samples (by position) replaced by their rerun."""
+    return [replacements.get(i, o) for i, o in enumerate(outcomes)]
+
+
+def scale_of(scene: Scene) -> float:
+    from .simulation.health import energy_scale_j
+
+    return max(energy_scale_j(scene), math.ulp(1.0))

@@ -1,0 +1,334 @@
+"""The scene zoo: seeded families of scenes that stand for what robots and benchmarks bring.
+
+The paper's towers and the catalogue are slow scenes: blocks at rest that may topple. The zoo adds
+fast impacts and chains of events, the scenes on which a fast integrator drifts from converged
+physics without noticing (docs/zoo.md). Each family is one function ``(rng, name) -> Scene``:
+
+- ``launch``: a ball or block launched into a stack at 0.5-15 m/s, up to 10x a block's mass;
+- ``dominoes``: 5-20 thin slabs, spaced around the critical spacing, the first one tipped;
+- ``ramp``: a ball or block rolled or slid down a static ramp into a stack;
+- ``drop``: an object dropped from 0.2-2 m onto a stack or into a container (bowl, open box);
+- ``strike``: a heavy object (10-100x) sliding into a light one;
+- ``rings``: rings (tori as compounds) dropped onto a static post;
+- ``bouncy``: large (0.3-1 m) bouncy (restitution 0.5-0.9) blocks stacked or dropped;
+- ``plates``: thin plates stacked with overhangs;
+- ``caps``: towers capped by a cone, a ring or a bowl, sometimes with a ball launched at the base.
+
+Scene i of a family depends on (seed, family, i) only. Bodies the robot moves (thrown, launched,
+dropped) are known exactly (``position_sigma_m = 0``); the rest takes the model's sigma.
+"""
+
+from __future__ import annotations
+
+import math
+import zlib
+from typing import Callable
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from .catalogue import cone, wedge
+from .scene import Body, Floor, Scene, validate_scene
+from .shapes import BoxShape, Capsule, Compound, CompoundPart, Cylinder, Sphere
+
+_IDENTITY = (0.0, 0.0, 0.0, 1.0)
+
+
+def _quat(rotation: Rotation) -> tuple[float, float, float, float]:
+    return tuple(float(v) for v in rotation.as_quat())  # type: ignore[return-value]
+
+
+def _yaw(rad: float) -> tuple[float, float, float, float]:
+    return _quat(Rotation.from_euler("z", rad))
+
+
+def ring(radius_m: float, tube_radius_m: float, segments: int = 10) -> Compound:
+    """A torus lying flat (axis z) as ``segments`` capsules along its centre circle, origin at its centre."""
+    chord = 2 * radius_m * math.sin(math.pi / segments)
+    parts = []
+    for i in range(segments):
+        angle = 2 * math.pi * (i + 0.5) / segments
+        # a capsule's axis is its z: turn it onto x, then onto the circle's tangent at ``angle``
+        turn = Rotation.from_euler("z", angle + math.pi / 2) * Rotation.from_euler("y", math.pi / 2)
+        centre = radius_m * math.cos(math.pi / segments)
+        parts.append(CompoundPart(Capsule(tube_radius_m, chord), (centre * math.cos(angle), centre * math.sin(angle),
+                                                                  0.0), _quat(turn)))
+    return Compound(tuple(parts))
+
+
+def bowl(radius_m: float, height_m: float, wall_m: float, segments: int = 10, flare_rad: float = 0.35) -> Compound:
+    """An open bowl: a disc and ``segments`` wall plates flaring out by ``flare_rad``, origin at the
+    centre of its base's underside."""
+    parts = [CompoundPart(Cylinder(radius_m, wall_m), (0.0, 0.0, wall_m / 2))]
+    width = 2 * (radius_m + height_m * math.sin(flare_rad)) * math.tan(math.pi / segments) + wall_m
+    for i in range(segments):
+        angle = 2 * math.pi * i / segments
+        middle = radius_m + 0.5 * height_m * math.sin(flare_rad)
+        tilt = Rotation.from_euler("z", angle) * Rotation.from_euler("y", flare_rad)
+        parts.append(CompoundPart(BoxShape((wall_m, width, height_m)),
+                                  (middle * math.cos(angle), middle * math.sin(angle),
+                                   wall_m + 0.5 * height_m * math.cos(flare_rad)), _quat(tilt)))
+    return Compound(tuple(parts))
+
+
+def open_box(size_m: float, height_m: float, wall_m: float) -> Compound:
+    """A square box without a lid, origin at the centre of its base's underside."""
+    half = size_m / 2
+    z = wall_m + height_m / 2
+    return Compound((
+        CompoundPart(BoxShape((size_m, size_m, wall_m)), (0.0, 0.0, wall_m / 2)),
+        CompoundPart(BoxShape((wall_m, size_m, height_m)), (half - wall_m / 2, 0.0, z)),
+        CompoundPart(BoxShape((wall_m, size_m, height_m)), (-half + wall_m / 2, 0.0, z)),
+        CompoundPart(BoxShape((size_m - 2 * wall_m, wall_m, height_m)), (0.0, half - wall_m / 2, z)),
+        CompoundPart(BoxShape((size_m - 2 * wall_m, wall_m, height_m)), (0.0, -half + wall_m / 2, z)),
+    ))
+
+
+def _body(name: str, shape, position, *, mass_kg: float, friction: float = 0.6, restitution: float = 0.1,
+          orientation=_IDENTITY, **fields) -> Body:
+    return Body(name=name, shape=shape, position_m=tuple(float(v) for v in position),  # type: ignore[arg-type]
+                orientation_xyzw=orientation, friction=float(friction), restitution=float(restitution),
+                mass_kg=float(mass_kg), **fields)
+
+
+def _stack(rng: np.random.Generator, prefix: str, n: int, size_m: float, *, x_m: float = 0.0, base_z_m: float = 0.0,
+           offset_sd: float = 0.15, friction: float = 0.6, restitution: float = 0.1,
+           density_kg_m3: float = 500.0) -> list[Body]:
+    """``n`` boxes of about ``size_m`` stacked on each other, each shifted by ``offset_sd`` of its
+    size: some such stacks stand, some topple by themselves."""
+    bodies, top = [], base_z_m
+    for i in range(n):
+        ext = size_m * rng.uniform(0.8, 1.2, 3)
+        offset = rng.normal(0.0, offset_sd * size_m, 2)
+        bodies.append(_body(f"{prefix}{i}", BoxShape(tuple(float(v) for v in ext)),
+                            (x_m + offset[0], offset[1], top + ext[2] / 2), mass_kg=density_kg_m3 * float(np.prod(ext)),
+                            friction=friction, restitution=restitution, orientation=_yaw(rng.normal(0.0, 0.1))))
+        top += float(ext[2])
+    return bodies
+
+
+def _floor(rng: np.random.Generator, restitution: float = 0.1) -> Floor:
+    return Floor(friction=float(rng.uniform(0.5, 1.0)), restitution=restitution)
+
+
+def launch(rng: np.random.Generator, name: str) -> Scene:
+    """A ball or a block launched along +x into a stack of 2-5 blocks, at 0.5-15 m/s, up to 10x a block's mass."""
+    size = float(rng.uniform(0.1, 0.4))
+    stack = _stack(rng, "block", int(rng.integers(2, 6)), size, offset_sd=0.05)
+    block_mass = float(np.mean([b.mass_kg for b in stack]))
+    mass = block_mass * float(np.exp(rng.uniform(math.log(0.3), math.log(10.0))))
+    speed = float(np.exp(rng.uniform(math.log(0.5), math.log(15.0))))
+    level = int(rng.integers(0, len(stack)))
+    z = stack[level].position_m[2]
+    if rng.random() < 0.6:
+        radius = size * float(rng.uniform(0.25, 0.5))
+        shape, z = Sphere(radius), max(z, radius)
+    else:
+        side = size * float(rng.uniform(0.4, 0.8))
+        shape, z = BoxShape((side, side, side)), max(z, side / 2)
+    start = -size - 0.3 - float(rng.uniform(0.0, 0.3))
+    projectile = _body("projectile", shape, (start, 0.0, z), mass_kg=mass, friction=0.5,
+                       restitution=float(rng.uniform(0.0, 0.6)), linear_velocity_m_s=(speed, 0.0, 0.0),
+                       position_sigma_m=0.0)
+    return Scene(name=name, objects=tuple(stack) + (projectile,), support=_floor(rng))
+
+
+def dominoes(rng: np.random.Generator, name: str) -> Scene:
+    """5-20 thin slabs in a row, spaced at 0.4-1.1 of their height (a falling slab reaches the next
+    one below ~1x), the first one tipped forward at 1-4 rad/s."""
+    n = int(rng.integers(5, 21))
+    height = float(rng.uniform(0.08, 0.2))
+    thickness, width = height * float(rng.uniform(0.12, 0.2)), height * float(rng.uniform(0.4, 0.6))
+    spacing = height * float(rng.uniform(0.4, 1.1))
+    mass = 600.0 * height * thickness * width
+    bodies = []
+    for i in range(n):
+        x = i * spacing + float(rng.normal(0.0, 0.02 * spacing))
+        fields = {}
+        if i == 0:
+            # tipped about its front bottom edge: v = w x (centre - edge)
+            spin = float(rng.uniform(1.0, 4.0))
+            fields = {"angular_velocity_rad_s": (0.0, spin, 0.0),
+                      "linear_velocity_m_s": (spin * height / 2, 0.0, spin * thickness / 2)}
+        bodies.append(_body(f"domino{i}", BoxShape((thickness, width, height)), (x, 0.0, height / 2), mass_kg=mass,
+                            friction=0.5, restitution=0.05, orientation=_yaw(rng.normal(0.0, 0.03)), **fields))
+    return Scene(name=name, objects=tuple(bodies), support=_floor(rng))
+
+
+def ramp(rng: np.random.Generator, name: str) -> Scene:
+    """A static ramp (15-35 degrees); a ball rolls or a block slides down it into 1-3 stacked blocks."""
+    slope = math.radians(float(rng.uniform(15.0, 35.0)))
+    height = float(rng.uniform(0.2, 0.6))
+    length = height / math.tan(slope)
+    # the wedge's high end is at -x: it descends along +x
+    ramp_body = Body("ramp", wedge(length, 0.5, height), (0.0, 0.0, 0.0), _IDENTITY, friction=0.5, restitution=0.1,
+                     static=True)
+    size = float(rng.uniform(0.08, 0.2))
+    # the object starts near the top, resting on the slope (rotated to lie on it)
+    along = float(rng.uniform(0.1, 0.3)) * length
+    x_top, z_surface = -length / 2 + along, height * (1 - along / length)
+    tilt = Rotation.from_euler("y", slope)
+    normal = np.array([math.sin(slope), 0.0, math.cos(slope)])
+    if rng.random() < 0.5:
+        radius = size * float(rng.uniform(0.3, 0.5))
+        shape, lift, friction = Sphere(radius), radius, 0.6
+    else:
+        side = size * float(rng.uniform(0.4, 0.7))
+        shape, lift, friction = BoxShape((side, side, side)), side / 2, float(rng.uniform(0.05, 0.3))
+    start = np.array([x_top, 0.0, z_surface]) + (lift + 1e-3) * normal  # clear of Bullet's 0.9 mm hull margin
+    mass = 500.0 * size ** 3 * float(np.exp(rng.uniform(0.0, math.log(5.0))))
+    mover = _body("mover", shape, start, mass_kg=mass, friction=friction, restitution=0.1,
+                  orientation=_quat(tilt), position_sigma_m=0.0)
+    stack = _stack(rng, "block", int(rng.integers(1, 4)), size, x_m=length / 2 + size + float(rng.uniform(0.05, 0.3)),
+                   offset_sd=0.05)
+    return Scene(name=name, objects=(ramp_body, mover, *stack), support=_floor(rng))
+
+
+def drop(rng: np.random.Generator, name: str) -> Scene:
+    """An object dropped from 0.2-2 m onto a stack of 1-3 blocks or into a container (a bowl or an open box)."""
+    size = float(rng.uniform(0.08, 0.25))
+    fall = float(rng.uniform(0.2, 2.0))
+    radius = size * float(rng.uniform(0.25, 0.45))
+    kind = rng.choice(["ball", "box", "cylinder"])
+    shape = {"ball": Sphere(radius), "box": BoxShape((2 * radius,) * 3), "cylinder": Cylinder(radius, 2 * radius)}[kind]
+    if rng.random() < 0.5:
+        below = _stack(rng, "block", int(rng.integers(1, 4)), size, offset_sd=0.1)
+        top = max(b.position_m[2] + b.shape.extents_m[2] / 2 for b in below)
+        aim = rng.normal(0.0, 0.3 * size, 2)
+    else:
+        wall = 0.08 * size
+        if rng.random() < 0.5:
+            container = bowl(1.2 * size, 0.8 * size, wall)
+        else:
+            container = open_box(2.4 * size, 0.8 * size, wall)
+        below = [_body("container", container, (0.0, 0.0, 0.0), mass_kg=600.0 * size ** 3, friction=0.6,
+                       restitution=0.2)]
+        top, aim = 0.9 * size, rng.normal(0.0, 0.4 * size, 2)
+    dropped = _body("dropped", shape, (aim[0], aim[1], top + fall + radius), mass_kg=500.0 * size ** 3 *
+                    float(rng.uniform(0.5, 4.0)), friction=0.5, restitution=float(rng.uniform(0.0, 0.6)),
+                    orientation=_quat(Rotation.random(random_state=int(rng.integers(2 ** 31)))), position_sigma_m=0.0)
+    return Scene(name=name, objects=(*below, dropped), support=_floor(rng))
+
+
+def strike(rng: np.random.Generator, name: str) -> Scene:
+    """A heavy object (10-100x) sliding at 1-5 m/s into a light block standing on end, with a second behind it."""
+    size = float(rng.uniform(0.08, 0.3))
+    light = 200.0 * size ** 3 * 2
+    ratio = float(np.exp(rng.uniform(math.log(10.0), math.log(100.0))))
+    targets = [_body(f"light{i}", BoxShape((0.5 * size, size, 2 * size)), (i * 1.2 * size, 0.0, size), mass_kg=light,
+                     friction=0.5, restitution=float(rng.uniform(0.0, 0.5))) for i in range(2)]
+    side = 1.2 * size
+    heavy = _body("heavy", BoxShape((side, side, side)), (-1.5 * size - side / 2, 0.0, side / 2), mass_kg=light * ratio,
+                  friction=float(rng.uniform(0.05, 0.3)), restitution=float(rng.uniform(0.0, 0.5)),
+                  linear_velocity_m_s=(float(rng.uniform(1.0, 5.0)), 0.0, 0.0), position_sigma_m=0.0)
+    return Scene(name=name, objects=(*targets, heavy), support=_floor(rng))
+
+
+def rings(rng: np.random.Generator, name: str) -> Scene:
+    """1-3 rings (tori of capsules) dropped from 1-20 cm onto a static post, off its axis by up to
+    the gap between them: each ring threads the post or catches on its top."""
+    post_r, post_h = float(rng.uniform(0.01, 0.03)), float(rng.uniform(0.15, 0.4))
+    post = Body("post", Cylinder(post_r, post_h), (0.0, 0.0, post_h / 2), _IDENTITY, friction=0.4, restitution=0.2,
+                static=True)
+    bodies = [post]
+    z = post_h
+    for i in range(int(rng.integers(1, 4))):
+        tube = float(rng.uniform(0.006, 0.015))
+        radius = post_r + tube + float(rng.uniform(0.5, 3.0)) * post_r
+        z += float(rng.uniform(0.01, 0.2)) + tube
+        offset = float(rng.uniform(0.0, 1.5)) * (radius - tube - post_r)
+        angle = float(rng.uniform(-math.pi, math.pi))
+        tilt = Rotation.from_euler("x", float(rng.normal(0.0, 0.15)))
+        bodies.append(_body(f"ring{i}", ring(radius, tube), (offset * math.cos(angle), offset * math.sin(angle), z),
+                            mass_kg=1500.0 * 2 * math.pi * radius * math.pi * tube ** 2, friction=0.4,
+                            restitution=0.2, orientation=_quat(tilt), position_sigma_m=0.0))
+        z += tube
+    return Scene(name=name, objects=tuple(bodies), support=_floor(rng, restitution=0.2))
+
+
+def bouncy(rng: np.random.Generator, name: str) -> Scene:
+    """2-4 large (0.3-1 m) blocks of restitution 0.5-0.9 stacked, the top one dropped from up to a
+    third of its size, on a bouncy floor."""
+    size = float(rng.uniform(0.3, 1.0))
+    restitution = float(rng.uniform(0.5, 0.9))
+    stack = _stack(rng, "block", int(rng.integers(2, 5)), size, offset_sd=0.12, restitution=restitution,
+                   density_kg_m3=300.0)
+    top = stack[-1]
+    lift = float(rng.uniform(0.0, 0.33)) * size
+    stack[-1] = _body(top.name, top.shape, (top.position_m[0], top.position_m[1], top.position_m[2] + lift),
+                      mass_kg=top.mass_kg, friction=top.friction, restitution=restitution,
+                      orientation=top.orientation_xyzw)
+    return Scene(name=name, objects=tuple(stack), support=_floor(rng, restitution=float(rng.uniform(0.5, 0.9))))
+
+
+def plates(rng: np.random.Generator, name: str) -> Scene:
+    """3-8 thin plates (thickness 1/30-1/10 of their width) stacked with overhangs."""
+    width = float(rng.uniform(0.1, 0.4))
+    bodies, top = [], 0.0
+    for i in range(int(rng.integers(3, 9))):
+        thick = width * float(rng.uniform(1 / 30, 1 / 10))
+        w, d = width * float(rng.uniform(0.7, 1.3)), width * float(rng.uniform(0.5, 1.0))
+        offset = rng.normal(0.0, 0.2 * width, 2)
+        bodies.append(_body(f"plate{i}", BoxShape((w, d, thick)), (offset[0], offset[1], top + thick / 2),
+                            mass_kg=2500.0 * w * d * thick, friction=float(rng.uniform(0.3, 0.8)), restitution=0.05,
+                            orientation=_yaw(rng.normal(0.0, 0.3))))
+        top += thick
+    return Scene(name=name, objects=tuple(bodies), support=_floor(rng))
+
+
+def caps(rng: np.random.Generator, name: str) -> Scene:
+    """A tower of 2-5 blocks capped by a cone, a ring or a bowl; in half of them a ball is launched
+    at its base (0.6-13 m/s, as heavy as 0.5-3 blocks)."""
+    size = float(rng.uniform(0.1, 0.5))
+    stack = _stack(rng, "block", int(rng.integers(2, 6)), size, offset_sd=0.08,
+                   restitution=float(rng.uniform(0.0, 0.5)))
+    top = max(b.position_m[2] + b.shape.extents_m[2] / 2 for b in stack)
+    centre = stack[-1].position_m
+    kind = rng.choice(["cone", "ring", "bowl"])
+    if kind == "cone":
+        shape, z = cone(0.45 * size, 0.9 * size), top
+    elif kind == "ring":
+        tube = 0.08 * size
+        shape, z = ring(0.4 * size, tube), top + tube
+    else:
+        shape, z = bowl(0.3 * size, 0.3 * size, 0.05 * size), top
+    offset = rng.normal(0.0, 0.1 * size, 2)
+    bodies = [*stack, _body("cap", shape, (centre[0] + offset[0], centre[1] + offset[1], z),
+                            mass_kg=300.0 * size ** 3, friction=0.6, restitution=0.2)]
+    if rng.random() < 0.5:
+        radius = 0.3 * size
+        block = float(np.mean([b.mass_kg for b in stack]))
+        bodies.append(_body("ball", Sphere(radius), (-size - 0.4, 0.0, radius), mass_kg=block * float(rng.uniform(0.5, 3.0)),
+                            friction=0.4, restitution=float(rng.uniform(0.0, 0.6)),
+                            linear_velocity_m_s=(float(rng.uniform(0.6, 13.0)), 0.0, 0.0), position_sigma_m=0.0))
+    return Scene(name=name, objects=tuple(bodies), support=_floor(rng))
+
+
+#: Every family, in the order the benchmark and the docs list them.
+FAMILIES: dict[str, Callable[[np.random.Generator, str], Scene]] = {
+    "launch": launch, "dominoes": dominoes, "ramp": ramp, "drop": drop, "strike": strike, "rings": rings,
+    "bouncy": bouncy, "plates": plates, "caps": caps,
+}
+
+
+def zoo_scene(family: str, seed: int, index: int) -> Scene:
+    """Scene ``index`` of ``family``: a function of (family, seed, index) alone."""
+    if family not in FAMILIES:
+        raise ValueError(f"family: must be one of {', '.join(FAMILIES)}, got {family!r}")
+    rng = np.random.default_rng([seed, zlib.crc32(family.encode()), index])
+    return validate_scene(FAMILIES[family](rng, f"zoo_{family}_{seed}_{index:03d}"))
+
+
+def scene_zoo(seed: int, per_family: int, families: tuple[str, ...] | None = None) -> list[Scene]:
+    """``per_family`` scenes of every family (or of ``families``), family by family."""
+    return [zoo_scene(family, seed, i) for family in (families or tuple(FAMILIES)) for i in range(per_family)]
+
+
+def family_of(scene: Scene) -> str:
+    """The family a zoo scene's name says it belongs to."""
+    return scene.name.split("_")[1]
+
+
+def zoo_sigma_m(scene: Scene) -> float:
+    """The position noise the zoo's benchmark and tests use: 5% of the smallest dynamic body (as the catalogue's)."""
+    return 0.05 * min(b.smallest_extent_m for b in scene.dynamic_objects)

@@ -80,6 +80,24 @@ def test_catalogue_benchmark_writes_every_preset_against_paper(tmp_path):
     assert "| default |" in (tmp_path / "catalogue.md").read_text()
 
 
+def test_zoo_benchmark_compares_every_family_with_paper_and_the_yardstick(tmp_path):
+    result = subprocess.run(
+        [sys.executable, str(REPO / "benchmarks" / "zoo.py"), "--per-family", "1", "--samples", "2",
+         "--families", "launch,bouncy", "--workers", "1", "--out", str(tmp_path)], capture_output=True, text=True,
+        timeout=600)
+    assert result.returncode == 0, result.stderr[-3000:]
+    data = json.loads((tmp_path / "zoo.json").read_text())
+    assert list(data["families"]) == ["launch", "bouncy"]
+    for family, rows in data["families"].items():
+        assert list(rows) == ["paper", "paper-half-step", "default", "default-unchecked"]
+        paper = rows["paper"]
+        assert paper["speedup_vs_paper"] == 1.0 and paper["mean_abs_dp_object"] == 0.0
+        assert paper["fidelity"] == {"reference": 1} and rows["default-unchecked"]["fidelity"] == {"unverified": 1}
+        assert set(data["verdicts"][family]) == {"mean_ok", "worst_ok", "penetration_ok", "energy_ok"}
+    text = (tmp_path / "zoo.md").read_text()
+    assert "| launch | default |" in text and "Overall speed-up" in text
+
+
 def test_soak_benchmark_runs_the_node_under_mixed_input_and_reports(tmp_path):
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     result = subprocess.run([sys.executable, "benchmarks/soak.py", "--minutes", "0.4", "--settle-s", "5",

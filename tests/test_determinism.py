@@ -59,7 +59,9 @@ def test_predict_many_answers_as_predict_does(pool):
     towers = generate_towers(7, 2)
     requests = [(towers[0], MODEL, 3), (towers[1], MODEL, 4), (towers[0], ModelConfig(), 0),
                 (towers[1], ModelConfig(sigma_m=0.04, samples=2, phi_m_s2=(1.0,)), 9)]
-    one_by_one = [predict(scene, model, preset("default"), QUERY, seed=seed) for scene, model, seed in requests]
+    # batch answers are not self-checked (the paper's analyses reproduce fixed settings)
+    one_by_one = [predict(scene, model, preset("default"), QUERY, seed=seed, check=None)
+                  for scene, model, seed in requests]
     for answers in (predict_many(requests, preset("default"), QUERY),
                     predict_many(requests, preset("default"), QUERY, map_fn=pool.map)):
         assert [json.dumps(without_timing(p.to_dict()), sort_keys=True) for p in answers] == \

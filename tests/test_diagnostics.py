@@ -49,3 +49,12 @@ def test_budget_stops_recording_failures_and_an_overdue_prediction_warn():
     overdue = _status(in_flight=True, in_flight_s=300.0)
     assert overdue.level == WARN and "past its budget" in overdue.message
     assert _status(in_flight=True, in_flight_s=3.0).message == "predicting"
+
+
+def test_self_check_counters_and_a_contradicted_answer_warns():
+    status = _status(refined_samples=5, escalated=2, contradicted=1, recent=("ok", "contradicted"))
+    values = {kv.key: kv.value for kv in status.values}
+    assert (values["samples_refined"], values["predictions_escalated"], values["predictions_contradicted"]) == \
+        ("5", "2", "1")
+    assert status.level == WARN and status.message == "in the last 2 inputs/predictions: 1 contradicted"
+    assert _status(escalated=3, recent=("ok",)).level == OK  # escalated answers are the reference's: no trouble

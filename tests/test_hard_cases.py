@@ -10,7 +10,8 @@ trajectory must hold:
 * potential energy never above the initial one plus the most work the push can have done
   (kinetic energy is never negative, so this bounds the total).
 Clear-cut cases also state the outcome physics dictates (stays / falls), and every preset must
-reach it.
+reach it. The presets' own physics, unchecked (``check=None``): the self-check would repair what
+these tests must see (tests/test_fidelity.py tests the check).
 """
 
 from __future__ import annotations
@@ -163,7 +164,7 @@ def assert_still_standing_at_the_horizon(case: Case, settings, query: QuerySpec,
     fall threshold. (Without settling, `default` had the delicately balanced tower 2 cm down, 80%
     of the way to "fallen", at 2 s, and toppled it at 3 s, while `paper` keeps it within 0.1 mm.)"""
     if settings.early_stop.enabled:
-        prediction = predict(case.scene, case.model, settings.changed(early_stop={"enabled": False}), query, seed=11)
+        prediction = predict(case.scene, case.model, settings.changed(early_stop={"enabled": False}), query, seed=11, check=None)
     smallest = np.array([min(b.extents_m) for b in case.scene.dynamic_objects])
     allowed = 0.25 * query.fall_threshold_fraction * smallest
     for outcome in prediction.outcomes:
@@ -183,7 +184,7 @@ def test_hard_case_stays_numerically_stable(name, preset_name, pool):
     if case.horizon_s is not None:
         settings = settings.changed(horizon_s=case.horizon_s)
     query = QuerySpec(queries=frozenset({"fall", "bump"} if isinstance(case.scene.support, Table) else {"fall"}))
-    prediction = predict(case.scene, case.model, settings, query, seed=11, map_fn=pool.map, record_every=1)
+    prediction = predict(case.scene, case.model, settings, query, seed=11, map_fn=pool.map, record_every=1, check=None)
     assert prediction.failed_samples == 0, prediction.failure_reasons
     for outcome in prediction.outcomes:
         for rollout in outcome.rollouts:

@@ -116,10 +116,14 @@ def test_bump_query_needs_a_table():
 def test_failed_rollouts_are_counted_not_raised():
     scene = floor_scene(block("a", 0, 0, 0.1), block("b", 0.001, 0.0, 0.1))
     settings = preset("default").changed(depenetration={"max_iterations": 1})
-    p = predict(scene, ModelConfig(sigma_m=0.001, samples=3), settings, ALL)
+    p = predict(scene, ModelConfig(sigma_m=0.001, samples=3), settings, ALL, check=None)
     assert p.samples == 0 and p.failed_samples == 3 and p.fall_fraction is None
     assert p.failure_reasons == ("PhysicsError: boxes still overlap after 1 depenetration rounds; lower sigma or "
                                  "raise depenetration.max_iterations",)
+    # the self-check reruns failed samples at the reference, whose separation has its 200 rounds
+    checked = predict(scene, ModelConfig(sigma_m=0.001, samples=3), settings, ALL)
+    assert (checked.samples, checked.failed_samples, checked.refined_samples) == (3, 0, 3)
+    assert checked.self_check["refined_reasons"] == {"0": "failed", "1": "failed", "2": "failed"}
 
 
 def test_mu_sets_the_models_own_densities():

@@ -109,3 +109,25 @@ def _failure(svc: PredictionService) -> str | None:
 def test_bad_worker_count_is_named():
     with pytest.raises(ValueError, match=r"^workers: must be an integer >= 0"):
         PredictionService(SETTINGS, workers=-1, publish=print)
+
+
+def test_the_self_check_is_counted_and_can_be_turned_off():
+    """The zoo ramp of tests/test_fidelity.py: its answer is escalated to the reference, and the
+    service counts it; with the check off the same scene is answered unverified."""
+    from ipe_ros.engine.fidelity import SelfCheck
+    from ipe_ros.engine.zoo import zoo_scene, zoo_sigma_m
+
+    ramp = zoo_scene("ramp", 2026, 0)
+    config = ServiceConfig(model=ModelConfig(sigma_m=zoo_sigma_m(ramp), samples=4), seed=8)
+    svc = PredictionService(config, workers=0, publish=lambda answer: None)
+    svc.start()
+    try:
+        svc.submit(item(1, ramp))
+        assert svc.predict_latest(120.0).prediction.fidelity == "escalated"
+        stats = svc.stats()
+        assert (stats.escalated, stats.contradicted, stats.recent) == (1, 0, ("ok",))
+        svc.update_config(dataclasses.replace(config, check=SelfCheck(enabled=False)))
+        assert svc.predict_latest(120.0).prediction.fidelity == "unverified"
+        assert svc.stats().escalated == 1
+    finally:
+        svc.close()

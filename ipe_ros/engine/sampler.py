@@ -20,8 +20,8 @@ from .config import ModelConfig, QuerySpec, SimSettings
 from .errors import ConfigError, shown
 from .estimate import Prediction, aggregate, sample_any_fall, sample_fall_fraction, wilson_interval
 from .fidelity import check_request as check_fidelity_request
-from .fidelity import (DEFAULT_CHECK, NO_CHECK, FidelityReport, SelfCheck, disagree, is_reference, merge,
-                       reference_settings, scale_of, unhealthy, verification_count)
+from .fidelity import (DEFAULT_CHECK, NO_CHECK, FidelityReport, SelfCheck, contradicts, difference, is_reference,
+                       merge, reference_settings, scale_of, unhealthy, verification_count)
 from .rollout import SampleOutcome, SampleTask, run_sample
 from .scene import DEFAULT_MAX_OBJECTS, Scene, Table, validate_scene
 
@@ -199,8 +199,7 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
     check = NO_CHECK if check is None or is_reference(settings) else check
     reference = reference_settings(settings.horizon_s)
     # the verification runs in the first map, first (the longest tasks start first)
-    verify_tasks = [dataclasses.replace(t, settings=reference, record_every=0)
-                    for t in tasks[:verification_count(check, len(tasks))]]
+    verify_tasks = [at_settings(t, reference) for t in tasks[:verification_count(check, len(tasks))]]
 
     def run_first(batch: list[SampleTask]) -> list[SampleOutcome]:
         both = run(verify_tasks + batch)
@@ -239,10 +238,19 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
                       budget_s=budget_s, perceived=perceived, fidelity=report)
 
 
+def at_settings(task: SampleTask, settings: SimSettings) -> SampleTask:
+    """The same sample (same seed, hence the same noisy scene) at other settings; a recorded sample
+    keeps its frames the same simulated time apart."""
+    every = task.record_every
+    if every:
+        every = max(1, round(every * task.settings.time_step_s / settings.time_step_s))
+    return dataclasses.replace(task, settings=settings, record_every=every)
+
+
 def self_check(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: list[SampleOutcome],
                check: SelfCheck, reference: SimSettings, run: Callable[[list[SampleTask]], list[SampleOutcome]],
                fast_name: str) -> tuple[list[SampleOutcome], FidelityReport]:
-    """Refine, verify and escalate (``engine.fidelity``): the outcomes the answer uses, and what happened.
+    """Verify, refine and escalate (``engine.fidelity``): the outcomes the answer uses, and what happened.
 
     ``verified[i]`` is sample i rerun at ``reference``; ``run`` reruns tasks (through the map).
     """
@@ -251,41 +259,44 @@ def self_check(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified:
         return outcomes, FidelityReport("unverified", settings=tuple(parts))
 
     def at_reference(batch: list[SampleTask]) -> list[SampleOutcome]:
-        return run([dataclasses.replace(t, settings=reference, record_every=0) for t in batch])
+        return run([at_settings(t, reference) for t in batch])
 
-    # 1. refinement of the rollouts that ended unhealthy (a verified sample's rerun is at hand)
-    reasons = {}
-    for i, (task, outcome) in enumerate(zip(tasks, outcomes)):
-        why = unhealthy(outcome, scale_of(task.scene), check)
-        if why is not None:
-            reasons[i] = why
-    rerun = [i for i in reasons if i >= len(verified) or not verified[i].ok]
+    def differences(checked: list[SampleOutcome]) -> dict[int, np.ndarray]:
+        return {i: difference(outcomes[i], ref) for i, ref in enumerate(checked) if ref.ok and outcomes[i].ok}
+
+    # 1. verification; a disagreement is confirmed on more samples before it is believed
+    verified = list(verified)[:len(outcomes)]  # anytime sampling may have stopped before them
+    if verified:
+        parts.append(("verification", reference.name))
+    if any(d.any() for d in differences(verified).values()) and check.confirm_samples:
+        verified += at_reference(tasks[len(verified):len(verified) + check.confirm_samples])
+    compared = differences(verified)
+    disagreeing = [i for i, d in compared.items() if d.any()]
+    # 2. refinement of the rollouts that ended unhealthy (a verified sample's rerun is at hand)
+    reasons = {i: why for i, (task, outcome) in enumerate(zip(tasks, outcomes))
+               if (why := unhealthy(outcome, scale_of(task.scene), check)) is not None}
     replacements = {i: verified[i] for i in reasons if i < len(verified) and verified[i].ok}
+    rerun = [i for i in reasons if i not in replacements]
     if rerun:
         replacements.update(zip(rerun, at_reference([tasks[i] for i in rerun])))
     refined = {i: o for i, o in replacements.items() if o.ok}
     if refined:
         parts.append(("refined", reference.name))
-    # 2. verification: the fast physics' yes/no outcomes against the reference's, sample by sample
-    compared = [i for i, ref in enumerate(verified) if ref.ok and outcomes[i].ok]
-    disagreeing = [i for i in compared if disagree(outcomes[i], verified[i])]
-    if verified:
-        parts.append(("verification", reference.name))
     common = dict(verified_samples=len(compared), disagreeing_samples=len(disagreeing),
                   refined_samples=len(refined), refined_reasons=tuple((i, reasons[i]) for i in sorted(refined)))
-    if not disagreeing:
-        verdict = "verified" if compared and len(compared) == len(verified) else "unverified"
+    if not contradicts(list(compared.values()), check.escalate_share):
+        first = min(check.verify_samples, len(tasks))
+        verdict = "verified" if first and all(i in compared for i in range(first)) else "unverified"
         return merge(outcomes, refined), FidelityReport(verdict, settings=tuple(parts), **common)
     # 3. escalation: contradicted on this scene, so every sample at the reference
-    done = {i: verified[i] for i in range(len(verified))}
+    done = {i: ref for i, ref in enumerate(verified)}
     done.update(replacements)
     rest = [i for i in range(len(outcomes)) if i not in done]
     if rest:
         done.update(zip(rest, at_reference([tasks[i] for i in rest])))
     parts.append(("escalation", reference.name))
     if any(o.budget_stopped for o in done.values()):
-        return merge(outcomes, refined), FidelityReport("contradicted", escalated_samples=0,
-                                                       settings=tuple(parts), **common)
+        return merge(outcomes, refined), FidelityReport("contradicted", settings=tuple(parts), **common)
     return merge(outcomes, done), FidelityReport("escalated", escalated_samples=len(done), settings=tuple(parts),
                                                  **common)
 
@@ -324,14 +335,18 @@ def predict_many(requests: Sequence[tuple[Scene, ModelConfig, int]], settings: S
     own seeds), but no worker waits for a prediction's last sample before the next one starts, and a
     cluster's round trip is paid once instead of per prediction. For batch work (the paper's
     analyses); ``wall_s`` of each answer is the whole map's time shared out by its samples.
-    Requests with vision perception run one by one (each needs its chain first).
+    Requests with vision perception run one by one (each needs its chain first). Batch answers are
+    not self-checked (``fidelity: "unverified"``): the paper's analyses reproduce fixed settings,
+    and the check's extra samples would change what a resumable run stores.
     """
+    unchecked = FidelityReport("reference" if is_reference(settings) else "unverified",
+                               settings=(("samples", settings.name),))
     requests = list(requests)
     answers: list[Prediction | None] = [None] * len(requests)
     batched: list[tuple[int, list[SampleTask]]] = []
     for i, (scene, model, seed) in enumerate(requests):
         if model.perception == "vision":
-            answers[i] = predict(scene, model, settings, query, seed, map_fn, max_objects=max_objects)
+            answers[i] = predict(scene, model, settings, query, seed, map_fn, max_objects=max_objects, check=None)
             continue
         _check_seed(seed)
         check_request(scene, query, max_objects)
@@ -346,5 +361,5 @@ def predict_many(requests: Sequence[tuple[Scene, ModelConfig, int]], settings: S
         mine = outcomes[first:first + len(tasks)]
         first += len(tasks)
         answers[i] = _aggregate(scene, model, settings, query, seed, tasks, mine,
-                                wall_s * len(tasks) / max(1, len(everything)), "samples")
+                                wall_s * len(tasks) / max(1, len(everything)), "samples", fidelity=unchecked)
     return answers  # type: ignore[return-value]

@@ -298,7 +298,8 @@ def caps(rng: np.random.Generator, name: str) -> Scene:
     if rng.random() < 0.5:
         radius = 0.3 * size
         block = float(np.mean([b.mass_kg for b in stack]))
-        bodies.append(_body("ball", Sphere(radius), (-size - 0.4, 0.0, radius), mass_kg=block * float(rng.uniform(0.5, 3.0)),
+        bodies.append(_body("ball", Sphere(radius), (-size - 0.4, 0.0, radius),
+                            mass_kg=block * float(rng.uniform(0.5, 3.0)),
                             friction=0.4, restitution=float(rng.uniform(0.0, 0.6)),
                             linear_velocity_m_s=(float(rng.uniform(0.6, 13.0)), 0.0, 0.0), position_sigma_m=0.0))
     return Scene(name=name, objects=tuple(bodies), support=_floor(rng))

@@ -60,8 +60,9 @@ class RolloutEnd:
     trajectory: (time_s, positions, orientations) every ``record_every`` ticks, or None.
     simulated_s: below the horizon when early termination ended the rollout.
     energy_gain_j: the most energy gained beyond what the push and the initial velocities put in.
-    penetration_fraction: the deepest any body ends inside another or the support, as a fraction of
-        its smallest extent.
+    penetration_fraction: the deepest any body whose final pose the answer reads ends inside another
+        or the support, as a fraction of its smallest extent (bodies already decided by height, when
+        only fall / any_fall / bump are asked, are answered whatever pose they end in).
     """
 
     positions_m: np.ndarray
@@ -202,5 +203,8 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
     positions, orientations = positions.copy(), orientations.copy()  # RolloutEnd's own, contiguous
     health.check_final_poses(positions, orientations)
     energy.look(energy.energy(positions, orientations, velocities[:, 0], velocities[:, 1]))
+    # the bodies whose final pose the answer reads: not those already decided by height (a body that
+    # has fallen, or can never fall, is answered whatever pose it ends in mid-collapse)
+    read = rest.undecided if rest.needs_heights else None
     return RolloutEnd(positions, orientations, trajectory, tick * dt, energy_gain_j=energy.max_gain_j,
-                      penetration_fraction=health.deepest_penetration_fraction(world, smallest))
+                      penetration_fraction=health.deepest_penetration_fraction(world, smallest, read))

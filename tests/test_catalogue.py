@@ -81,13 +81,13 @@ def test_no_rollout_gains_energy(answers, catalogue, name):
 @pytest.mark.parametrize("name", ["paper", "default"])
 def test_a_ball_wedged_under_a_heavier_cylinder_gains_no_energy(name):
     # A 9 m/s ball into the foot of a tilted 3.7 kg cylinder, against the floor, everything bouncy.
-    # The sequential-impulse solver, giving each contact its restitution in turn, added more energy
-    # than the ball brought (paper +8 J, default +20 J, of 12 J); the direct solver adds none.
+    # The sequential-impulse solver, giving each contact its restitution in turn, added energy by the
+    # joule (paper +5.5 J of a 12 J scale, default more); the direct solver adds none.
     scene = scene_catalogue(1, 2)[1]
     prediction = predict(scene, ModelConfig(), preset(name), QUERY, check=None)
     assert prediction.max_energy_gain_j <= MAX_ENERGY_GAIN * energy_scale_j(scene)
     sequential = preset(name).changed(solver={"direct_solver_for_restitution": False})
-    assert predict(scene, ModelConfig(), sequential, QUERY, check=None).max_energy_gain_j > energy_scale_j(scene) / 2
+    assert predict(scene, ModelConfig(), sequential, QUERY, check=None).max_energy_gain_j > energy_scale_j(scene) / 3
 
 
 def test_a_heavy_bouncy_cylinder_on_a_light_one_gains_no_energy():

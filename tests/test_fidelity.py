@@ -1,7 +1,8 @@
 """Self-checking answers (ipe_ros.engine.fidelity): refinement, verification, escalation, verdicts.
 
 Each path is forced deterministically: a real scene on which `default` and the reference disagree
-(zoo ramp 2026/0, measured: block1 falls in 8/8 `default` samples, 1/8 `paper` ones), a real
+(zoo ramp 2026/4, seed 0: the stack at the ramp's foot topples in 7 of 8 `default` samples and in
+none of `paper`'s), a real
 rollout that ends deep inside another body at the default's settings, and injected maps that fail a
 sample or cut the escalation off as a spent budget would.
 """
@@ -52,7 +53,7 @@ def tower():
 @pytest.fixture(scope="module")
 def contradicted_scene():
     """On this ramp `default` topples the stack the reference keeps standing (see the module doc)."""
-    return zoo_scene("ramp", 2026, 0)
+    return zoo_scene("ramp", 2026, 4)
 
 
 def _ramp_model(scene, samples=4):
@@ -90,9 +91,9 @@ def test_reference_settings_are_not_checked_and_no_check_runs_nothing_more(tower
 
 def test_a_contradicted_scene_is_escalated_to_the_reference_answer(contradicted_scene):
     model = _ramp_model(contradicted_scene)
-    unchecked = predict(contradicted_scene, model, preset("default"), QUERY, seed=8, check=None)
-    checked = predict(contradicted_scene, model, preset("default"), QUERY, seed=8)
-    reference = predict(contradicted_scene, model, reference_settings(), QUERY, seed=8, check=None)
+    unchecked = predict(contradicted_scene, model, preset("default"), QUERY, seed=0, check=None)
+    checked = predict(contradicted_scene, model, preset("default"), QUERY, seed=0)
+    reference = predict(contradicted_scene, model, reference_settings(), QUERY, seed=0, check=None)
     assert unchecked.object_fall_probability["block1"] - reference.object_fall_probability["block1"] >= 0.5
     assert checked.fidelity == "escalated"
     # the first verified sample disagreed; two more confirmed it
@@ -112,8 +113,8 @@ def test_contradicted_when_the_budget_ends_before_the_escalation(contradicted_sc
         return outcome
 
     model = _ramp_model(contradicted_scene)
-    p = predict(contradicted_scene, model, preset("default"), QUERY, seed=8, map_fn=CountingMap(spent))
-    unchecked = predict(contradicted_scene, model, preset("default"), QUERY, seed=8, check=None)
+    p = predict(contradicted_scene, model, preset("default"), QUERY, seed=0, map_fn=CountingMap(spent))
+    unchecked = predict(contradicted_scene, model, preset("default"), QUERY, seed=0, check=None)
     assert p.fidelity == "contradicted"
     assert _answer(p) == _answer(unchecked)  # the fast answer, flagged: the robot must not act on it
 

@@ -117,8 +117,8 @@ def test_the_self_check_is_counted_and_can_be_turned_off():
     from ipe_ros.engine.fidelity import SelfCheck
     from ipe_ros.engine.zoo import zoo_scene, zoo_sigma_m
 
-    ramp = zoo_scene("ramp", 2026, 0)
-    config = ServiceConfig(model=ModelConfig(sigma_m=zoo_sigma_m(ramp), samples=4), seed=8)
+    ramp = zoo_scene("ramp", 2026, 4)
+    config = ServiceConfig(model=ModelConfig(sigma_m=zoo_sigma_m(ramp), samples=4), seed=0)
     svc = PredictionService(config, workers=0, publish=lambda answer: None)
     svc.start()
     try:

@@ -72,8 +72,8 @@ class SelfCheck:
         the same way in at least this share of the verified samples. Two integrators part by chaos
         alone now and then, either way (on a collapsing paper tower `paper` at half its step differs
         from `paper` on 15% of samples, one object here and another there); a fast physics that is
-        wrong on a scene flips the same outcome the same way (a block toppled in 8 of 8 samples on
-        the ramp of tests/test_fidelity.py, 1 of 8 at the reference).
+        wrong on a scene flips the same outcome the same way (a stack toppled in 7 of 8 samples on
+        the ramp of tests/test_fidelity.py, in none at the reference).
     max_end_penetration_fraction: a rollout ending with a body deeper than this fraction of its
         smallest extent inside another is refined.
     max_energy_gain_fraction: a rollout that gained more energy than this fraction of the scene's

@@ -76,8 +76,9 @@ def main() -> int:
     args = parser.parse_args()
     result = {}
     for key, scene, model, preset_name, queries, record_every in cases():
+        # the physics itself: the self-check would rerun unhealthy rollouts at `paper` (engine.fidelity)
         p = predict(scene, model, preset(preset_name), QuerySpec(queries=frozenset(queries)), seed=7,
-                    record_every=record_every)
+                    record_every=record_every, check=None)
         result[key] = digest(p)
         print(key, result[key], flush=True)
     with open(args.out, "w") as handle:

@@ -32,6 +32,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 import numpy as np  # noqa: E402
 
+from accuracy_vs_time import _anything_fell  # noqa: E402 - the towers' "did anything fall?"
 from ipe_ros.engine import PRESETS, ModelConfig, QuerySpec, WorkerPool, predict  # noqa: E402
 from ipe_ros.engine.config import DEFAULT_QUERIES  # noqa: E402
 from ipe_ros.engine.simulation.health import energy_scale_j  # noqa: E402
@@ -55,10 +56,6 @@ def configurations() -> dict[str, tuple]:
     }
 
 
-def _anything_fell(outcome) -> bool:
-    return bool(outcome.rollouts[0].fallen.any())
-
-
 def compare_family(rows: list[dict], reference: list[dict]) -> dict:
     """One configuration's predictions of one family against the reference's."""
     d_obj, d_any, agree, pen, over5, gain = [], [], [], [], 0, []
@@ -73,14 +70,14 @@ def compare_family(rows: list[dict], reference: list[dict]) -> dict:
         d_any.append(abs(p.any_fall_probability - r.any_fall_probability))
         for o, ro in zip(p.outcomes, r.outcomes):
             if o.ok and ro.ok:
-                agree.append(_anything_fell(o) == _anything_fell(ro))
+                agree.append(_anything_fell(o.rollouts[0]) == _anything_fell(ro.rollouts[0]))
         ends = [rr.penetration_fraction for o in p.outcomes if o.ok for rr in o.rollouts]
         pen.append(max(ends))
         over5 += sum(e > 0.05 for e in ends)
         gain.append(100 * p.max_energy_gain_j / row["energy_scale_j"])
     wall = sum(r["wall_s"] for r in rows)
     samples = sum(r["prediction"].samples for r in rows)
-    refined = sum(getattr(r["prediction"], "refined_samples", 0) or 0 for r in rows)
+    refined = sum(r["prediction"].refined_samples for r in rows)
     return {
         "scenes": len(rows), "wall_s_per_prediction": wall / len(rows),
         "speedup_vs_paper": sum(r["wall_s"] for r in reference) / wall,
@@ -90,7 +87,7 @@ def compare_family(rows: list[dict], reference: list[dict]) -> dict:
         "max_end_penetration_fraction": float(max(pen)), "rollouts_over_5_percent": int(over5),
         "max_energy_gain_percent": float(max(gain)),
         "refined_share": refined / max(1, samples),
-        "fidelity": dict(Counter(str(getattr(r["prediction"], "fidelity", None)) for r in rows)),
+        "fidelity": dict(Counter(str(r["prediction"].fidelity) for r in rows)),
         "failed_samples": int(sum(r["prediction"].failed_samples for r in rows)),
     }
 

@@ -61,6 +61,11 @@ def default_workers() -> int:
     return max(1, min(os.cpu_count() or 1, 8))
 
 
+def _boolean(value: Any, field: str) -> None:
+    if not isinstance(value, bool):
+        raise ConfigError(field, f"must be true or false, got {shown(value)}")
+
+
 def _positive(value: float, field: str) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
             or value <= 0:
@@ -284,8 +289,7 @@ class EarlyStopSettings:
 
     def __post_init__(self) -> None:
         _positive(self.max_penetration_fraction, "early_stop.max_penetration_fraction")
-        if not isinstance(self.enabled, bool):
-            raise ConfigError("early_stop.enabled", f"must be true or false, got {shown(self.enabled)}")
+        _boolean(self.enabled, "early_stop.enabled")
         for name in ("speed_sizes_per_s", "angular_rad_s", "duration_s"):
             _positive(getattr(self, name), f"early_stop.{name}")
         _non_negative(self.min_time_s, "early_stop.min_time_s")

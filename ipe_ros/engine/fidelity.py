@@ -41,7 +41,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .config import PRESETS, SimSettings, _positive, _integer
+from .config import PRESETS, SimSettings, _boolean, _integer, _positive
 from .errors import ConfigError, shown
 from .rollout import SampleOutcome
 from .scene import Scene
@@ -89,8 +89,7 @@ class SelfCheck:
     max_energy_gain_fraction: float = 0.01
 
     def __post_init__(self) -> None:
-        if not isinstance(self.enabled, bool):
-            raise ConfigError("self_check.enabled", f"must be true or false, got {shown(self.enabled)}")
+        _boolean(self.enabled, "self_check.enabled")
         _integer(self.verify_samples, "self_check.verify_samples", 0, 1000)
         _integer(self.confirm_samples, "self_check.confirm_samples", 0, 1000)
         if isinstance(self.escalate_share, bool) or not isinstance(self.escalate_share, (int, float)) \

@@ -196,7 +196,8 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
     def run(batch: list[SampleTask]) -> list[SampleOutcome]:
         return _run_tasks(batch, map_fn)
 
-    check = NO_CHECK if check is None or is_reference(settings) else check
+    at_reference = is_reference(settings)
+    check = NO_CHECK if check is None or at_reference else check
     reference = reference_settings(settings.horizon_s)
     # the verification runs in the first map, first (the longest tasks start first)
     verify_tasks = [at_settings(t, reference) for t in tasks[:verification_count(check, len(tasks))]]
@@ -229,7 +230,7 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
                 if hi - lo <= stop.ci_width:
                     stopped_by = "ci_width"
                     break
-    if is_reference(settings):
+    if at_reference:
         report = FidelityReport("reference", settings=(("samples", settings.name),))
     else:
         outcomes, report = self_check(tasks[:len(outcomes)], outcomes, verified, check, reference, run, settings.name)

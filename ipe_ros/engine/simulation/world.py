@@ -201,9 +201,14 @@ def _add_body(p, cid: int, body: Body, position, mass_kg: float, maximal: bool =
                                basePosition=list(map(float, position)),
                                baseOrientation=list(map(float, quat)), useMaximalCoordinates=maximal,
                                physicsClientId=cid)
+    _set_dynamics(p, cid, handle, body)
+    return handle
+
+
+def _set_dynamics(p, cid: int, handle: int, body: Body) -> None:
+    """A body's surface (friction, restitution), and no damping (``NO_DAMPING``)."""
     p.changeDynamics(handle, -1, lateralFriction=body.friction, restitution=body.restitution,
                      physicsClientId=cid, **NO_DAMPING)
-    return handle
 
 
 def _add_dynamic_bodies(p, cid: int, bodies, positions_m, masses_kg, orientations_xyzw, maximal: bool) -> list[int]:
@@ -235,8 +240,7 @@ def _add_dynamic_bodies(p, cid: int, bodies, positions_m, masses_kg, orientation
                                 batchPositions=[list(map(float, pos)) for pos in positions_m[start:end]],
                                 useMaximalCoordinates=maximal, physicsClientId=cid)
         for handle, body in zip(run, bodies[start:end]):
-            p.changeDynamics(handle, -1, lateralFriction=body.friction, restitution=body.restitution,
-                             physicsClientId=cid, **NO_DAMPING)
+            _set_dynamics(p, cid, handle, body)
         ids.extend(run)
         start = end
     return ids

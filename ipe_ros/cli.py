@@ -40,6 +40,7 @@ from .engine.examples import example_scene_path
 from .engine.catalogue import capped_tower, scene_catalogue
 from .engine.fidelity import DEFAULT_CHECK, SelfCheck
 from .engine.generators import generate_tables, generate_towers, state_pair
+from .engine.perturb import is_deterministic
 from .engine.sampler import check_budget, check_request
 from .engine.scene_io import write_scenes
 from .engine.zoo import FAMILIES, scene_zoo
@@ -115,7 +116,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
                    help="worker processes (default: CPU count; 0 runs in this process)")
-    p.add_argument("--ground-truth", action="store_true", help="sigma = phi = 0: one deterministic rollout")
+    p.add_argument("--ground-truth", action="store_true",
+                   help="sigma = phi = 0 and no body's own noise: the scene as given, one deterministic rollout")
     p.add_argument("--ci-width", type=_finite, default=None, metavar="W",
                    help="anytime sampling: stop once the 95%% interval of P(fall) is at most W wide")
     p.add_argument("--deadline", type=_finite, default=None, metavar="S",
@@ -305,7 +307,7 @@ def cmd_predict(args) -> int:
     elif args.chain_samples is not None or args.vision_resolution is not None or args.vision_rrd is not None:
         raise ConfigError("--perception", "--chain-samples, --vision-resolution and --vision-rrd need --perception vision")
     model = ModelConfig(sigma_m=sigma, phi_m_s2=phi, mu=args.mu, samples=args.samples, perception=args.perception,
-                        vision=vision,
+                        vision=vision, object_noise=not args.ground_truth,
                         force_direction_rad=None if args.force_direction is None else math.radians(args.force_direction))
     query = QuerySpec(queries=args.query)
     sim = preset(args.preset)
@@ -347,7 +349,7 @@ def cmd_predict(args) -> int:
                          perceived, args.scheduler, check)
     else:
         print(f"sigma = {sigma:g} m, phi = {','.join(f'{v:g}' for v in phi)} m/s^2, mu = {args.mu}, "
-              f"k = {1 if model.is_deterministic else args.samples}, preset = {sim.name}, seed = {args.seed}"
+              f"k = {1 if all(is_deterministic(s, model) for s in scenes) else args.samples}, preset = {sim.name}, seed = {args.seed}"
               + (f", perception = vision ({vision.chain_samples} MH samples, {vision.resolution_px} px)"
                  if vision is not None else ""))
         _run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append, stop, args.budget,
@@ -410,7 +412,7 @@ def cmd_demo(_args) -> int:
     print(f"Built-in example: {example_scene_path().name} ({len(scenes[0].objects)} blocks of 0.2 x 0.6 x 0.2 m)\n")
     ipe_title = (f"IPE (sigma = {DEFAULT_MODEL.sigma_m:g} m = 0.2 block short sides, phi = 0, "
                  f"k = {DEFAULT_MODEL.samples}):")
-    for title, model in (("Ground truth (sigma = phi = 0, one deterministic rollout):", ModelConfig()),
+    for title, model in (("Ground truth (sigma = phi = 0, one deterministic rollout):", ModelConfig(object_noise=False)),
                          (ipe_title, DEFAULT_MODEL)):
         rows: list[Prediction] = []
         _run_predictions(scenes, model, preset(DEFAULT_PRESET), query, 0, workers, rows.append)

@@ -51,6 +51,8 @@ def add_ask_parser(sub, finite, one_line_parser) -> None:
         q.add_argument("--samples", type=int, default=DEFAULT_ASK_SAMPLES,
                        help=f"samples per variant (default {DEFAULT_ASK_SAMPLES})")
         q.add_argument("--sigma", type=finite, default=DEFAULT_SIGMA_M, help="position noise SD, metres")
+        q.add_argument("--ground-truth", action="store_true",
+                       help="no noise at all (sigma = 0, no body's own noise): one rollout per variant")
         q.add_argument("--preset", default=DEFAULT_PRESET, choices=sorted(PRESETS))
         q.add_argument("--seed", type=int, default=0)
         q.add_argument("--workers", type=int, default=os.cpu_count() or 1)
@@ -116,7 +118,8 @@ def cmd_ask(args) -> int:
     scene = _scene(args)
     if args.samples < 1:
         raise ConfigError("--samples", f"must be >= 1, got {args.samples}")
-    model = ModelConfig(sigma_m=args.sigma, samples=args.samples)
+    model = ModelConfig(sigma_m=0.0 if args.ground_truth else args.sigma, samples=args.samples,
+                        object_noise=not args.ground_truth)
     settings = preset(args.preset)
     if args.workers < 0:
         raise ConfigError("--workers", f"must be >= 0, got {args.workers}")

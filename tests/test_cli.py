@@ -46,6 +46,42 @@ def test_predict_table_and_ground_truth(capsys):
     assert "sigma = 0 m" in text and "example_tower" in text and "P(fall)" in text
 
 
+def _uncertain_tower(tmp_path, sigma_m: float):
+    """The example tower with every block's own position noise set, written to a file."""
+    from dataclasses import replace
+
+    from ipe_ros.engine.scene_io import write_scenes
+
+    tower = load_scenes(example_scene_path())[0]
+    noisy = replace(tower, objects=tuple(replace(b, position_sigma_m=sigma_m) for b in tower.objects))
+    path = tmp_path / "uncertain.json"
+    write_scenes([noisy], path)
+    return path
+
+
+def test_ground_truth_takes_the_scene_as_given_even_where_bodies_give_their_own_noise(tmp_path, capsys):
+    """--ground-truth is sigma = phi = 0 and no noise at all: a tower whose blocks each carry their
+    own position noise gets the answer of the same tower without it, from one rollout."""
+    def ground_truth(path) -> dict:
+        assert main(["predict", str(path), "--ground-truth", "--workers", "0", "--json", "--no-self-check"]) == 0
+        return json.loads(capsys.readouterr().out)
+
+    exact = ground_truth(example_scene_path())
+    noisy = ground_truth(_uncertain_tower(tmp_path, 0.05))
+    assert noisy["deterministic"] and noisy["samples"] == 1
+    assert noisy["object_fall_probability"] == exact["object_fall_probability"]
+
+
+def test_sigma_zero_with_bodies_own_noise_is_not_deterministic(tmp_path, capsys):
+    """sigma = 0 without --ground-truth keeps each block's own noise: k samples, not one rollout
+    that claims to be deterministic."""
+    path = _uncertain_tower(tmp_path, 0.05)
+    assert main(["predict", str(path), "--sigma", "0", "--samples", "3", "--workers", "0", "--json",
+                 "--no-self-check"]) == 0
+    record = json.loads(capsys.readouterr().out)
+    assert not record["deterministic"] and record["samples"] == 3
+
+
 def test_generate_tower_and_table_write_loadable_scenes(tmp_path):
     towers, tables = tmp_path / "towers.json", tmp_path / "tables.json"
     assert main(["generate", "tower", "--count", "2", "--pairs", "10", "--seed", "5", "-o", str(towers)]) == 0
@@ -101,6 +137,23 @@ def test_ask_support_clear_place_push_on_the_command_line(tmp_path, capsys):
     assert "push/bottom" in capsys.readouterr().out
     assert main(["ask", "remove", str(path), *common, "--object", "nope"]) == 2
     assert capsys.readouterr().err.strip() == "ipe: error: actions[1].names: no object named 'nope' in 'stack'"
+
+
+def test_ask_takes_the_ground_truth_too(tmp_path, capsys):
+    """`ipe ask --ground-truth`: no noise at all, so one rollout per variant and exact answers (a
+    point, not an interval), as `ipe predict --ground-truth` gives."""
+    from ipe_ros.engine.scene_io import write_scenes
+    from tests.test_actions import STACK
+
+    path = tmp_path / "stack.json"
+    write_scenes([STACK], path)
+    assert main(["ask", "remove", str(path), "--object", "bottom", "--ground-truth", "--samples", "8",
+                 "--workers", "0", "--json"]) == 0
+    answer = json.loads(capsys.readouterr().out)
+    assert answer["samples_requested"] == 1
+    removal = next(v for v in answer["variants"] if v["label"] == "remove/bottom")
+    assert removal["simulated"] and removal["samples"] == 1 and removal["object_fall_probability"] == {"top": 1.0}
+    assert removal["any_fall_probability_ci95"] == [1.0, 1.0]
 
 
 def test_long_work_shows_plain_progress_lines_off_a_terminal_and_a_bar_on_one(capsys, monkeypatch):

@@ -11,12 +11,13 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
 import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
 from ipe_ros.engine.config import DEFAULT_QUERIES
 from ipe_ros.engine.errors import ConfigError
-from ipe_ros.engine.fidelity import VERDICTS, SelfCheck, reference_settings
+from ipe_ros.engine.fidelity import VERDICTS, SelfCheck, confirmation_samples, reference_settings
 from ipe_ros.engine.rollout import SampleOutcome, run_sample
 from ipe_ros.engine.scene_io import load_scenes
 from ipe_ros.engine.examples import example_scene_path
@@ -105,18 +106,35 @@ def test_a_contradicted_scene_is_escalated_to_the_reference_answer(contradicted_
     assert _answer(checked) == expected
 
 
-def test_contradicted_when_the_budget_ends_before_the_escalation(contradicted_scene):
-    def spent(task, outcome):  # the budget runs out once the verification is done
-        if task.settings.name == REFERENCE and task.index > 0:
+def _spent_from_call(calls: int):
+    """A map whose budget runs out at its ``calls``-th call: every reference sample from then on is
+    cut off, as a spent budget cuts it."""
+    def spent(task, outcome):
+        if task.settings.name == REFERENCE and len(spy.calls) >= calls:
             return dataclasses.replace(outcome, ok=False, budget_stopped=True, error="BudgetExceeded: spent",
                                        rollouts=(), initial_positions_m=None, initial_orientations_xyzw=None)
         return outcome
 
+    spy = CountingMap(spent)
+    return spy
+
+
+def test_contradicted_when_the_budget_ends_before_the_escalation(contradicted_scene):
     model = _ramp_model(contradicted_scene)
-    p = predict(contradicted_scene, model, preset("default"), QUERY, seed=0, map_fn=CountingMap(spent))
+    spy = _spent_from_call(3)  # verification and confirmation run; the escalation is cut off
+    p = predict(contradicted_scene, model, preset("default"), QUERY, seed=0, map_fn=spy)
     unchecked = predict(contradicted_scene, model, preset("default"), QUERY, seed=0, check=None)
-    assert p.fidelity == "contradicted"
+    assert p.fidelity == "contradicted" and len(spy.calls) == 3
     assert _answer(p) == _answer(unchecked)  # the fast answer, flagged: the robot must not act on it
+
+
+def test_unverified_when_the_budget_ends_before_a_disagreement_is_confirmed(contradicted_scene):
+    """One verified sample disagrees and the budget cuts its confirmation off: neither verified
+    nor contradicted."""
+    model = _ramp_model(contradicted_scene)
+    p = predict(contradicted_scene, model, preset("default"), QUERY, seed=0, map_fn=_spent_from_call(2))
+    assert p.fidelity == "unverified"
+    assert (p.self_check["verified_samples"], p.self_check["disagreeing_samples"]) == (1, 1)
 
 
 def test_one_disagreement_that_more_samples_do_not_confirm_is_chaos_not_a_verdict(tower):
@@ -130,10 +148,89 @@ def test_one_disagreement_that_more_samples_do_not_confirm_is_chaos_not_a_verdic
     spy = CountingMap(flip_first_verification)
     model = ModelConfig(sigma_m=0.01, samples=6)
     p = predict(tower, model, preset("default"), QUERY, seed=4, map_fn=spy)
-    assert [(t.settings.name, t.index) for t in spy.calls[1]] == [(REFERENCE, 1), (REFERENCE, 2)]
+    assert len(spy.calls) == 2  # one round of confirmation, then a verdict
+    confirmed = [(t.settings.name, t.index) for t in spy.calls[1]]
+    assert len(confirmed) == 2 and all(name == REFERENCE and i > 0 for name, i in confirmed)
     assert p.fidelity == "verified"
     assert (p.self_check["verified_samples"], p.self_check["disagreeing_samples"]) == (3, 1)
     assert _answer(p) == _answer(predict(tower, model, preset("default"), QUERY, seed=4, check=None))
+
+
+def _flags_of(*values):
+    return np.array(values, float)
+
+
+def test_confirmation_is_sought_where_the_suspect_difference_can_show():
+    """Sample 0's fast physics said object 1 fell where the reference said not: a fast physics
+    biased towards falling can only show that again on samples where the fast physics says
+    object 1 fell (4 and 6), so those are verified next, then others in index order."""
+    fast = {1: _flags_of(0, 0), 2: _flags_of(1, 0), 3: _flags_of(0, 0), 4: _flags_of(0, 1), 5: _flags_of(1, 0),
+            6: _flags_of(1, 1)}
+    differences = {0: _flags_of(0, 1)}
+    assert confirmation_samples(fast, differences, 2) == [4, 6]
+    assert confirmation_samples(fast, differences, 3) == [4, 6, 1]
+    # the reference said it fell where the fast physics said not: samples where fast says "not"
+    assert confirmation_samples(fast, {0: _flags_of(0, -1)}, 2) == [1, 2]
+    # the outcome that differs most often one way leads; differences the other way cancel
+    assert confirmation_samples(fast, {0: _flags_of(1, 1), 7: _flags_of(1, -1)}, 2) == [2, 5]
+    assert confirmation_samples(fast, {0: _flags_of(1, 0), 7: _flags_of(-1, 0)}, 2) == [1, 2]  # nothing suspect
+    assert confirmation_samples({}, differences, 2) == [] and confirmation_samples(fast, differences, 0) == []
+
+
+def _toppled_only_in(scene, kept: tuple[int, ...], unhealthy: bool = False):
+    """A map under which the fast physics topples the stack at the ramp's foot in the samples
+    ``kept`` only (its other samples stand, as every one of the reference's does); ``unhealthy``:
+    those end with a body half its size inside another."""
+    unchecked = predict(scene, _ramp_model(scene, 8), preset("default"), QUERY, seed=0, check=None)
+    block1 = [b.name for b in scene.dynamic_objects].index("block1")
+    standing = [o for o in unchecked.outcomes if not o.rollouts[0].fallen[block1]]
+    assert standing and all(unchecked.outcomes[i].rollouts[0].fallen[block1] for i in kept)
+
+    def stand_unless_kept(task, outcome):
+        if task.settings.name == "default" and task.index not in kept:
+            return dataclasses.replace(standing[0], index=task.index)
+        if task.settings.name == "default" and unhealthy:
+            deep = tuple(dataclasses.replace(r, penetration_fraction=0.5) for r in outcome.rollouts)
+            return dataclasses.replace(outcome, rollouts=deep)
+        return outcome
+
+    return CountingMap(stand_unless_kept)
+
+
+def test_a_bias_on_a_minority_of_samples_is_confirmed_where_it_shows(contradicted_scene):
+    """The fast physics topples the stack in samples 0, 3 and 5 of 8: confirmation looks at 3 and
+    5, not at 1 and 2 where no bias could show, and three verified samples differing the same way
+    escalate."""
+    spy = _toppled_only_in(contradicted_scene, (0, 3, 5))
+    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), preset("default"), QUERY, seed=0,
+                map_fn=spy)
+    assert [t.index for t in spy.calls[1]] == [3, 5]
+    assert p.fidelity == "escalated" and p.object_fall_probability["block1"] == 0.0
+
+
+def test_refined_rollouts_that_differ_the_same_way_are_evidence_too(contradicted_scene):
+    """The fast physics topples the stack in samples 2, 3 and 5 only, and each of those ends
+    unhealthy: their reference reruns (standing) are three same-way differences, so the scene is
+    escalated instead of three samples being quietly replaced (which, where the reference's
+    outcomes are chaotic, would bias the answer towards whatever the healthy rollouts said)."""
+    spy = _toppled_only_in(contradicted_scene, (2, 3, 5), unhealthy=True)
+    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), preset("default"), QUERY, seed=0,
+                map_fn=spy)
+    assert [t.index for t in spy.calls[1]] == [2, 3, 5]  # the refinement; sample 0 agreed
+    assert p.self_check["refined_reasons"] == {"2": "penetration", "3": "penetration", "5": "penetration"}
+    assert p.fidelity == "escalated" and p.self_check["disagreeing_samples"] == 3
+
+
+def test_two_same_way_differences_in_three_samples_look_again_before_escalating(contradicted_scene):
+    """Toppled in samples 0 and 5 only: after 5 (the one sample where it can show) confirms, two of
+    three are suspicious, not proof; a second round verifies two more, and two of five do not
+    escalate."""
+    spy = _toppled_only_in(contradicted_scene, (0, 5))
+    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), preset("default"), QUERY, seed=0,
+                map_fn=spy)
+    assert [[t.index for t in call] for call in spy.calls[1:]] == [[5, 1], [2, 3]]
+    assert p.fidelity == "verified"
+    assert (p.self_check["verified_samples"], p.self_check["disagreeing_samples"]) == (5, 2)
 
 
 def test_a_failed_fast_sample_is_rerun_at_the_reference(tower):
@@ -185,6 +282,10 @@ def test_ground_truth_is_verified_too(tower):
 def test_self_check_settings_are_validated_with_the_field_named():
     with pytest.raises(ConfigError, match=r"^self_check.verify_samples: must be an integer in \[0, 1000\], got -1$"):
         SelfCheck(verify_samples=-1)
+    with pytest.raises(ConfigError, match=r"^self_check.confirm_rounds: must be an integer in \[0, 100\], got 101$"):
+        SelfCheck(confirm_rounds=101)
+    with pytest.raises(ConfigError, match=r"^self_check.escalate_min_samples: must be an integer in \[1, 1000\], got 0$"):
+        SelfCheck(escalate_min_samples=0)
     with pytest.raises(ConfigError, match=r"^self_check.enabled: must be true or false, got 'yes'$"):
         SelfCheck(enabled="yes")
     with pytest.raises(ConfigError, match=r"^self_check: must be a SelfCheck or None"):

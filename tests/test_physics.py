@@ -27,6 +27,16 @@ def test_resting_box_stays_put_for_two_seconds(name):
     assert p.fall_fraction == 0.0 and p.direction_rad is None and p.far_m == 0.0
 
 
+def test_the_answer_reports_the_horizon_that_was_simulated():
+    """A scene's own horizon_s replaces the preset's; the request says which one ran."""
+    scene = replace(floor_scene(block("a", 0.3, -0.2, 0.1)), horizon_s=0.5)
+    p = predict(scene, ModelConfig(), preset("paper"), ALL)
+    assert p.outcomes[0].rollouts[0].simulated_s == pytest.approx(0.5)
+    assert p.request["horizon_s"] == 0.5
+    assert predict(floor_scene(block("a", 0.3, -0.2, 0.1)), ModelConfig(), preset("paper"), ALL).request[
+        "horizon_s"] == preset("paper").horizon_s
+
+
 def test_block_overhanging_more_than_half_its_length_falls_towards_the_overhang():
     # bottom block lies along y (0.6 long); the top block sticks out 0.35 m (> half of 0.6) towards +y
     scene = floor_scene(block("base", 0, 0, 0.1), block("top", 0, 0.35, 0.3))

@@ -30,6 +30,7 @@ from scipy.stats import circmean
 from ..engine import ModelConfig, Prediction, QuerySpec, Scene, SimSettings, predict_many
 from ..engine.estimate import sample_fall_fraction, sample_far_m
 from ..engine.generators import generate_towers
+from ..engine.perturb import is_deterministic
 from ..engine.rollout import SampleOutcome
 from ..engine.scene_io import scenes_from_tower_csv
 from ..engine.store import ResumableMap
@@ -171,7 +172,7 @@ def run_model(label: str, scenes, model: ModelConfig, settings: SimSettings, que
               map_fn=None) -> ModelRun:
     """Predict every scene with its own stimulus seed (see ``stimulus_seed``)."""
     scenes = list(scenes)
-    per_scene = 1 if model.is_deterministic else model.samples
+    per_scene = max((1 if is_deterministic(s, model) else model.samples for s in scenes), default=1)
     batches = map_batches(len(scenes), per_scene)
     predictions = []
     for part in steps(batches, f"{label} ({len(scenes)} stimuli, {len(batches[0]) if batches else 0} per batch)",

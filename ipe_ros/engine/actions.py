@@ -31,7 +31,7 @@ from . import queries, simulation
 from .config import ModelConfig, QuerySpec, SimSettings, SolverSettings
 from .errors import BudgetExceeded, ConfigError, PhysicsError
 from .estimate import wilson_interval, circular_mean
-from .perturb import draw_sample_inputs, position_sigmas_m
+from .perturb import draw_sample_inputs, is_deterministic, position_sigmas_m
 from .rollout import SampleTask, _decided_heights, collapse_heights, separated_world
 from .sampler import MapFn, check_budget, rollout_cost
 from .scene import Body, Scene, lowest_z_m, validate_scene
@@ -314,7 +314,18 @@ class VariantAnswer:
                 "not_simulated": list(self.not_simulated), "caused_fall_probability": self.caused_fall_probability}
 
 
-def _aggregate(label: str, action: Action, results: list[VariantResult], simulated: bool = True) -> VariantAnswer:
+def _draws_noise(scene: Scene, action: Action, model: ModelConfig) -> bool:
+    """The action has randomness of its own: a push's uncertainty, a placed object's noise."""
+    if isinstance(action, Push):
+        return bool(action.direction_sigma_rad or action.speed_sigma_fraction)
+    if isinstance(action, Place):
+        return not is_deterministic(dataclasses.replace(scene, objects=(action.body,)), model)
+    return False
+
+
+def _aggregate(label: str, action: Action, results: list[VariantResult], simulated: bool = True, *,
+               deterministic: bool = False) -> VariantAnswer:
+    """``deterministic``: nothing was drawn, so the one sample's answer is exact (a point, not an interval)."""
     ok = [r for r in results if r.error is None]
     failed = [r for r in results if r.error is not None and not r.budget_stopped]
     if not ok:
@@ -323,7 +334,8 @@ def _aggregate(label: str, action: Action, results: list[VariantResult], simulat
     fallen = np.array([r.fallen for r in ok], bool)
     anything = float(fallen.any(axis=1).mean())
     directions = np.array([r.direction_rad for r in ok if r.direction_rad is not None])
-    return VariantAnswer(label, action, anything, wilson_interval(anything, len(ok)),
+    interval = (anything, anything) if deterministic else wilson_interval(anything, len(ok))
+    return VariantAnswer(label, action, anything, interval,
                          {n: float(p) for n, p in zip(names, fallen.mean(axis=0))},
                          circular_mean(directions), len(ok), len(failed), simulated)
 
@@ -471,7 +483,10 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     regions = _regions(scene, simulated_actions, margin, touching)
     query = QuerySpec(queries=frozenset({"fall", "direction"} if directions else {"fall"}),
                       fall_threshold_fraction=fall_threshold_fraction)
-    k = model.samples if not model.is_deterministic else 1
+    # no noise anywhere (scene, model, nor an action's own): one rollout per variant says everything
+    deterministic = is_deterministic(scene, model) and not any(_draws_noise(scene, a, model)
+                                                               for a in simulated_actions)
+    k = 1 if deterministic else model.samples
     deadline = None if budget_s is None else time.time() + budget_s
     tasks = [VariantTask(scene=scene, model=model, settings=settings, query=query, index=i, seed=s,
                          actions=tuple(simulated_actions), deadline_unix_s=deadline, regions=regions,
@@ -487,7 +502,7 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
         per_sample = map_fn(run_variants, tasks, on_lost=lost)
     everything = {b.name for b in scene.dynamic_objects}
     by_variant = {_label(a): dataclasses.replace(
-        _aggregate(_label(a), a, [s[j] for s in per_sample]),
+        _aggregate(_label(a), a, [s[j] for s in per_sample], deterministic=deterministic),
         not_simulated=() if regions[j] is None else tuple(sorted(everything - regions[j])))
         for j, a in enumerate(simulated_actions)}
     if None in simulated_actions:
@@ -505,7 +520,8 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
         results = [VariantResult(tuple(r.names[j] for j in others), None if r.fallen is None else r.fallen[others],
                                  r.direction_rad, r.error, r.budget_stopped) for r in (s[simulated_actions.index(None)]
                                                                                      for s in per_sample)]
-        answers.append(dataclasses.replace(_aggregate(_label(action), action, results), simulated=False,
+        answers.append(dataclasses.replace(_aggregate(_label(action), action, results, deterministic=deterministic),
+                                           simulated=False,
                                            caused_fall_probability={n: 0.0 for n in results[0].names}))
     stopped = "budget" if any(r.budget_stopped for s in per_sample for r in s) else "samples"
     recorded = {_label(a): [(i, s[j]) for i, s in enumerate(per_sample) if s[j].trajectory is not None]

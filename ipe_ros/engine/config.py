@@ -103,6 +103,9 @@ class ModelConfig:
     #: Bayesian vision system: samples of an image posterior, ``vision`` its settings; sigma unused)
     perception: str = "gaussian"
     vision: Any = None  # engine.vision.VisionSettings, or None for its defaults
+    #: draw each body's own noise (``position_sigma_m``, ``yaw_sigma_rad``) where the scene gives it;
+    #: False takes the scene exactly as given, as the ground truth (``--ground-truth``) must
+    object_noise: bool = True
 
     def __post_init__(self) -> None:
         _non_negative(self.sigma_m, "sigma_m")
@@ -122,6 +125,7 @@ class ModelConfig:
             _positive(self.mu, "mu")
             _at_most(self.mu, "mu", limits.MAX_MASS_RATIO, "(the solver's mass-ratio limit)")
         _integer(self.samples, "samples", 1, 100_000)
+        _boolean(self.object_noise, "object_noise")
         if self.perception not in PERCEPTIONS:
             raise ConfigError("perception", f"must be one of {', '.join(PERCEPTIONS)}, got {shown(self.perception)}")
 
@@ -131,7 +135,8 @@ class ModelConfig:
 
     @property
     def is_deterministic(self) -> bool:
-        """sigma = phi = 0 (and no vision): the ground-truth model; one rollout says everything."""
+        """sigma = phi = 0 (and no vision): no noise of the model's own. Whether a prediction is
+        deterministic also depends on the scene's per-body noise: ``perturb.is_deterministic``."""
         return self.sigma_m == 0 and not self.pushes and self.perception == "gaussian"
 
 

@@ -51,10 +51,11 @@ def dynamic_masses(scene: Scene, mu: float | None) -> np.ndarray:
 
 
 def position_sigmas_m(scene: Scene, model: ModelConfig) -> np.ndarray:
-    """(n_dynamic, 3) position noise SDs: each body's own, else the model's sigma horizontally."""
+    """(n_dynamic, 3) position noise SDs: each body's own (unless ``model.object_noise`` is off),
+    else the model's sigma horizontally."""
     out = np.zeros((len(scene.dynamic_objects), 3))
     for i, body in enumerate(scene.dynamic_objects):
-        own = body.position_sigma_m
+        own = body.position_sigma_m if model.object_noise else None
         if own is None:
             out[i, :2] = model.sigma_m
         elif isinstance(own, (tuple, list)):
@@ -62,6 +63,18 @@ def position_sigmas_m(scene: Scene, model: ModelConfig) -> np.ndarray:
         else:
             out[i, :2] = own
     return out
+
+
+def yaw_sigmas_rad(scene: Scene, model: ModelConfig) -> np.ndarray:
+    """(n_dynamic,) yaw noise SDs: each body's own (none when ``model.object_noise`` is off)."""
+    return np.array([(b.yaw_sigma_rad or 0.0) if model.object_noise else 0.0 for b in scene.dynamic_objects])
+
+
+def is_deterministic(scene: Scene, model: ModelConfig) -> bool:
+    """No noise at all for this scene: neither the model's (sigma = phi = 0, no vision) nor any body's
+    own. One rollout then says everything; with a body's own noise and sigma = 0 it does not."""
+    return model.is_deterministic and not position_sigmas_m(scene, model).any() and \
+        not yaw_sigmas_rad(scene, model).any()
 
 
 def _yaw_quaternions(yaw_rad: np.ndarray) -> np.ndarray:
@@ -89,7 +102,7 @@ def draw_sample_inputs(scene: Scene, model: ModelConfig, rng: np.random.Generato
     direction = draw_push_direction(model, rng)
     if sigmas[:, 2].any():
         positions[:, 2] += sigmas[:, 2] * rng.standard_normal(len(bodies))
-    yaw_sigmas = np.array([b.yaw_sigma_rad or 0.0 for b in bodies])
+    yaw_sigmas = yaw_sigmas_rad(scene, model)
     if yaw_sigmas.any():  # about each body's centre of mass
         turn = _yaw_quaternions(yaw_sigmas * rng.standard_normal(len(bodies)))
         orientations = quaternion_product(turn, orientations)

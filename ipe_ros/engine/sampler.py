@@ -20,8 +20,10 @@ from .config import ModelConfig, QuerySpec, SimSettings
 from .errors import ConfigError, shown
 from .estimate import Prediction, aggregate, sample_any_fall, sample_fall_fraction, wilson_interval
 from .fidelity import check_request as check_fidelity_request
-from .fidelity import (DEFAULT_CHECK, NO_CHECK, FidelityReport, SelfCheck, contradicts, difference, is_reference,
-                       merge, reference_settings, scale_of, unhealthy, verification_count)
+from .fidelity import (DEFAULT_CHECK, NO_CHECK, FidelityReport, SelfCheck, confirmation_samples, contradicts,
+                       difference, is_reference, merge, outcome_flags, reference_settings, scale_of, suspect,
+                       unhealthy, verification_count)
+from .perturb import is_deterministic
 from .rollout import SampleOutcome, SampleTask, run_sample
 from .scene import DEFAULT_MAX_OBJECTS, Scene, Table, validate_scene
 
@@ -94,7 +96,7 @@ def make_tasks(scene: Scene, model: ModelConfig, settings: SimSettings, query: Q
     Trajectories (every ``record_every`` steps) are recorded for the first ``record_samples``
     samples only (None: all), since only the rollouts that rerun will show need them.
     """
-    k = 1 if model.is_deterministic else model.samples
+    k = 1 if is_deterministic(scene, model) else model.samples
     seeds = np.random.SeedSequence(seed).spawn(k)
     recorded = k if record_samples is None else record_samples
     return [SampleTask(scene=scene, model=model, settings=settings, query=query, index=i, seed=s,
@@ -210,7 +212,7 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
     verified: list[SampleOutcome] = []
     start = time.perf_counter()
     stopped_by = "samples"
-    if stop is None or model.is_deterministic:
+    if stop is None or is_deterministic(scene, model):
         outcomes: list[SampleOutcome] = run_first(tasks)
     else:
         outcomes = []
@@ -262,36 +264,58 @@ def self_check(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified:
     def at_reference(batch: list[SampleTask]) -> list[SampleOutcome]:
         return run([at_settings(t, reference) for t in batch])
 
-    def differences(checked: list[SampleOutcome]) -> dict[int, np.ndarray]:
-        return {i: difference(outcomes[i], ref) for i, ref in enumerate(checked) if ref.ok and outcomes[i].ok}
+    def differences() -> dict[int, np.ndarray]:
+        return {i: difference(outcomes[i], ref) for i, ref in checked.items() if ref.ok and outcomes[i].ok}
 
-    # 1. verification; a disagreement is confirmed on more samples before it is believed
-    verified = list(verified)[:len(outcomes)]  # anytime sampling may have stopped before them
-    if verified:
+    at_least = min(check.escalate_min_samples, len(tasks))
+
+    def contradicted(compared: dict[int, np.ndarray]) -> bool:
+        return contradicts(list(compared.values()), check.escalate_share, at_least)
+
+    # 1. verification (its sample ran in the first map)
+    checked = dict(enumerate(list(verified)[:len(outcomes)]))  # anytime sampling may have stopped before them
+    if checked:
         parts.append(("verification", reference.name))
-    if any(d.any() for d in differences(verified).values()) and check.confirm_samples:
-        verified += at_reference(tasks[len(verified):len(verified) + check.confirm_samples])
-    compared = differences(verified)
-    disagreeing = [i for i, d in compared.items() if d.any()]
-    # 2. refinement of the rollouts that ended unhealthy (a verified sample's rerun is at hand)
+    # 2. refinement: the rollouts that ended unhealthy are rerun (a verified sample's rerun is at hand)
     reasons = {i: why for i, (task, outcome) in enumerate(zip(tasks, outcomes))
                if (why := unhealthy(outcome, scale_of(task.scene), check)) is not None}
-    replacements = {i: verified[i] for i in reasons if i < len(verified) and verified[i].ok}
-    rerun = [i for i in reasons if i not in replacements]
+    rerun = [i for i in reasons if i not in checked]
     if rerun:
-        replacements.update(zip(rerun, at_reference([tasks[i] for i in rerun])))
-    refined = {i: o for i, o in replacements.items() if o.ok}
+        checked.update(zip(rerun, at_reference([tasks[i] for i in rerun])))
+    refined = {i: checked[i] for i in reasons if checked[i].ok}
     if refined:
         parts.append(("refined", reference.name))
+    # the refined reruns alone moving some outcome by escalate_min_samples samples: that repair is
+    # not small, and (chosen by how the fast rollouts ended) not unbiased; the reference answers
+    repair = suspect([d for i, d in differences().items() if i in refined])
+    # 3. confirmation: every sample rerun so far is a paired comparison, refined ones included (a
+    # fast physics whose unhealthy rollouts topple what the reference's keep standing is wrong on
+    # this scene, and replacing only those would bias the answer), and a suspect difference is
+    # looked for again where it can show before it is believed
+    for round_ in range(check.confirm_rounds):
+        compared = differences()
+        found = suspect(list(compared.values()))
+        # nothing differs, or it is decided; a second round only while something is suspicious
+        if not found or repair >= at_least or contradicted(compared) or (round_ and found < 2):
+            break
+        fast = {i: outcome_flags(o) for i, o in enumerate(outcomes) if i not in checked and o.ok}
+        picked = confirmation_samples(fast, compared, check.confirm_samples)
+        if not picked:
+            break
+        checked.update(zip(picked, at_reference([tasks[i] for i in picked])))
+    compared = differences()
+    disagreeing = [i for i, d in compared.items() if d.any()]
     common = dict(verified_samples=len(compared), disagreeing_samples=len(disagreeing),
                   refined_samples=len(refined), refined_reasons=tuple((i, reasons[i]) for i in sorted(refined)))
-    if not contradicts(list(compared.values()), check.escalate_share):
+    if not contradicted(compared) and repair < at_least:
         first = min(check.verify_samples, len(tasks))
-        verdict = "verified" if first and all(i in compared for i in range(first)) else "unverified"
+        # a disagreement whose confirmation the budget cut off was neither confirmed nor dismissed
+        unconfirmed = disagreeing and any(o.budget_stopped for o in checked.values())
+        verdict = "verified" if first and all(i in compared for i in range(first)) and not unconfirmed \
+            else "unverified"
         return merge(outcomes, refined), FidelityReport(verdict, settings=tuple(parts), **common)
-    # 3. escalation: contradicted on this scene, so every sample at the reference
-    done = {i: ref for i, ref in enumerate(verified)}
-    done.update(replacements)
+    # 4. escalation: contradicted on this scene, so every sample at the reference
+    done = dict(checked)
     rest = [i for i in range(len(outcomes)) if i not in done]
     if rest:
         done.update(zip(rest, at_reference([tasks[i] for i in rest])))
@@ -309,7 +333,7 @@ def _aggregate(scene: Scene, model: ModelConfig, settings: SimSettings, query: Q
     request = {
         "sigma_m": model.sigma_m, "phi_m_s2": list(model.phi_m_s2),
         "force_direction_rad": model.force_direction_rad, "mu": model.mu, "preset": settings.name,
-        "time_step_s": settings.time_step_s, "horizon_s": settings.horizon_s,
+        "time_step_s": settings.time_step_s, "horizon_s": settings.horizon_for(scene.horizon_s),  # what ran
         "solver_iterations": settings.solver.iterations, "seed": seed, "queries": sorted(query.queries),
     }
     if stop is not None:
@@ -319,7 +343,7 @@ def _aggregate(scene: Scene, model: ModelConfig, settings: SimSettings, query: Q
     if model.perception == "vision":
         request.update(perception=perceived.to_dict())
     prediction = aggregate(scene, outcomes, queries=query.queries, bump_group=query.bump_group,
-                           deterministic=model.is_deterministic, samples_requested=len(tasks),
+                           deterministic=is_deterministic(scene, model), samples_requested=len(tasks),
                            wall_s=wall_s, request=request)
     if fidelity is not None:
         prediction = dataclasses.replace(prediction, fidelity=fidelity.verdict, refined_samples=fidelity.refined_samples,

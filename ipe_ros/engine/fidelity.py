@@ -171,10 +171,8 @@ def contradicts(differences: Sequence[np.ndarray], share: float, at_least: int =
     same way (net of differences the other way) in at least ``share`` of them and in at least
     ``at_least`` samples. Chaos flips outcomes either way, one sample here and one there, and does
     not add up; a wrong physics flips the same one the same way."""
-    if not differences:
-        return False
-    net = np.abs(np.sum(differences, axis=0))
-    return bool(net.size) and float(net.max()) >= max(at_least, share * len(differences)) - 1e-9
+    found = suspect(differences)
+    return found > 0 and found >= max(at_least, share * len(differences)) - 1e-9
 
 
 def suspect(differences: Sequence[np.ndarray]) -> int:

@@ -215,6 +215,8 @@ def confirmation_samples(fast_flags: dict[int, np.ndarray], differences: dict[in
 class FidelityReport:
     """What the check did: the verdict, and what each part of the answer ran at.
 
+    verified_samples: samples compared with their reference rerun (verified, confirmed or refined).
+
     settings: part -> settings name ("samples": the fast preset; "refined"/"verification"/
         "escalation": the reference), for the parts that ran.
     refined_reasons: per refined sample index, why ("penetration", "energy", "failed").

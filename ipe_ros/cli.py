@@ -348,8 +348,9 @@ def cmd_predict(args) -> int:
                          lambda p: (collected.append(p), print(prediction_json(p), flush=True)), stop, args.budget,
                          perceived, args.scheduler, check)
     else:
+        k = 1 if all(is_deterministic(s, model) for s in scenes) else args.samples
         print(f"sigma = {sigma:g} m, phi = {','.join(f'{v:g}' for v in phi)} m/s^2, mu = {args.mu}, "
-              f"k = {1 if all(is_deterministic(s, model) for s in scenes) else args.samples}, preset = {sim.name}, seed = {args.seed}"
+              f"k = {k}, preset = {sim.name}, seed = {args.seed}"
               + (f", perception = vision ({vision.chain_samples} MH samples, {vision.resolution_px} px)"
                  if vision is not None else ""))
         _run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append, stop, args.budget,

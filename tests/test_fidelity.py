@@ -149,8 +149,9 @@ def test_one_disagreement_that_more_samples_do_not_confirm_is_chaos_not_a_verdic
     model = ModelConfig(sigma_m=0.01, samples=6)
     p = predict(tower, model, preset("default"), QUERY, seed=4, map_fn=spy)
     assert len(spy.calls) == 2  # one round of confirmation, then a verdict
-    confirmed = [(t.settings.name, t.index) for t in spy.calls[1]]
-    assert len(confirmed) == 2 and all(name == REFERENCE and i > 0 for name, i in confirmed)
+    # the flip says the lower blocks fell where the fast physics kept them: every other sample
+    # keeps them too, so the targeted samples are the next ones in line
+    assert [(t.settings.name, t.index) for t in spy.calls[1]] == [(REFERENCE, 1), (REFERENCE, 2)]
     assert p.fidelity == "verified"
     assert (p.self_check["verified_samples"], p.self_check["disagreeing_samples"]) == (3, 1)
     assert _answer(p) == _answer(predict(tower, model, preset("default"), QUERY, seed=4, check=None))

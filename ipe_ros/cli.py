@@ -464,7 +464,8 @@ def cmd_experiment(args) -> int:
             print(f"experiment {name}{' (quick)' if args.quick else ''} ...", file=sys.stderr, flush=True)
             report = EXPERIMENTS[name](opts, map_fn)
             if store is not None:
-                print(f"  {store.hits} results read back from {args.resume}, {store.computed} computed", file=sys.stderr)
+                print(f"  {store.hits} results read back from {args.resume}, {store.computed} computed"
+                      + (f", {store.rejected} stored entries refused" if store.rejected else ""), file=sys.stderr)
             json_path, md_path = report.write(opts.out_dir)
             print(f"wrote {md_path} and {json_path}" + (f" (+{len(report.figures)} PNG)" if report.figures else ""))
     finally:

@@ -4,8 +4,12 @@ what is missing and answers as an uninterrupted run does."""
 from __future__ import annotations
 
 import json
+import os
+import pickle
 import subprocess
 import sys
+
+import numpy as np
 
 from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes, predict, preset
 from ipe_ros.engine.store import ResumableMap, result_key
@@ -67,3 +71,114 @@ def test_ipe_experiment_resume_reads_everything_back_the_second_time(tmp_path):
     assert " 0 computed" in second.stderr and "0 results read back" in first.stderr
     a, b = (json.loads((tmp_path / d / "far.json").read_text())["results"] for d in ("a", "b"))
     assert a == b
+
+
+# --- entries are data: a crafted, damaged or foreign entry is reported in one line and recomputed ---
+
+def _one_sample_run(folder, **kwargs):
+    store = ResumableMap(folder, **kwargs)
+    answer = predict(TOWER, ModelConfig(sigma_m=0.04, samples=1), preset("default"), QUERY, seed=1, map_fn=store.map,
+                     **UNCHECKED)
+    return store, answer
+
+
+def _only_entry(folder):
+    [entry] = [p for p in folder.rglob("*.json")]
+    return entry
+
+
+class _RunsAShellCommand:
+    """What a crafted pickle does when loaded: here it would create ``marker``."""
+
+    def __init__(self, marker):
+        self.marker = marker
+
+    def __reduce__(self):
+        return (os.system, (f"touch {self.marker}",))
+
+
+def _damage_cases(tmp_path):
+    valid = json.loads(_only_entry(tmp_path / "store").read_text())
+    other_type = dict(valid, result={"dataclass": "Popen", "fields": {"args": "touch x"}})
+    wrong_field = json.loads(json.dumps(valid))
+    wrong_field["result"]["fields"]["index"] = "zero"
+    bad_array = json.loads(json.dumps(valid))
+    bad_array["result"]["fields"]["initial_positions_m"]["shape"] = [99, 3]
+    object_array = json.loads(json.dumps(valid))
+    object_array["result"]["fields"]["initial_positions_m"]["array"] = "object"
+    return {
+        "pickle": (pickle.dumps(_RunsAShellCommand(tmp_path / "marker")), "not a JSON document"),
+        "empty": (b"", "not a JSON document"),
+        "truncated": (json.dumps(valid).encode()[:200], "not a JSON document"),
+        "list": (b"[1, 2, 3]", "not an ipe_ros.result entry"),
+        "old version": (json.dumps(dict(valid, version=2)).encode(), "version 2, this engine writes 3"),
+        "another key": (json.dumps(dict(valid, key="0" * 64)).encode(), "stored under another result's name"),
+        "another type": (json.dumps(other_type).encode(), "result: 'Popen' is not a result type"),
+        "a field of the wrong type": (json.dumps(wrong_field).encode(),
+                                      "result.index: a str where a <class 'int'> belongs"),
+        "an array that does not fill its shape": (json.dumps(bad_array).encode(), "do not fill a float64 array"),
+        "an object array": (json.dumps(object_array).encode(), "arrays of 'object' are not allowed"),
+        "deep nesting": (b"[" * 100_000 + b"]" * 100_000, "nested deeper than any result"),
+    }
+
+
+def test_a_crafted_or_damaged_entry_is_reported_in_one_line_and_recomputed_never_run(tmp_path):
+    _, fresh = _one_sample_run(tmp_path / "store")
+    for case, (content, reason) in _damage_cases(tmp_path).items():
+        entry = _only_entry(tmp_path / "store")
+        entry.write_bytes(content)
+        lines = []
+        store, answer = _one_sample_run(tmp_path / "store", report=lines.append)
+        assert (store.hits, store.computed, store.rejected) == (0, 1, 1), case
+        assert len(lines) == 1 and lines[0].startswith(f"ipe: ignoring store entry {entry} and computing it again: ")
+        assert reason in lines[0], (case, lines[0])
+        assert answer.to_dict()["object_fall_probability"] == fresh.to_dict()["object_fall_probability"], case
+        again, _ = _one_sample_run(tmp_path / "store", report=lines.append)  # the recomputed entry was written back
+        assert (again.hits, again.rejected) == (1, 0), case
+    assert not (tmp_path / "marker").exists()
+
+
+def test_links_and_oversized_entries_are_refused_unread(tmp_path, monkeypatch):
+    _one_sample_run(tmp_path / "store")
+    entry = _only_entry(tmp_path / "store")
+    target = tmp_path / "elsewhere.json"
+    target.write_bytes(entry.read_bytes())  # even a valid entry is not read through a link
+    entry.unlink()
+    entry.symlink_to(target)
+    lines = []
+    store, _ = _one_sample_run(tmp_path / "store", report=lines.append)
+    assert store.rejected == 1 and lines[0].endswith("not a regular file (a link or a folder)")
+    assert not entry.is_symlink()  # replaced by the recomputed entry; the link's target untouched
+    import ipe_ros.engine.store as store_module
+    monkeypatch.setattr(store_module, "MAX_ENTRY_BYTES", 100)
+    store, _ = _one_sample_run(tmp_path / "store", report=lines.append)
+    assert store.rejected == 1 and lines[-1].endswith("bytes, more than the 100 an entry may have")
+
+
+def test_every_stored_result_type_reads_back_equal():
+    from ipe_ros.engine.rollout import run_sample
+    from ipe_ros.engine.sampler import make_tasks
+    from ipe_ros.engine.scene_io import scene_to_dict
+    from ipe_ros.engine.store import decode_entry, encode_entry
+    from ipe_ros.engine.vision.likelihood import VisionSettings
+    from ipe_ros.engine.vision.perception import perceive
+
+    [task] = make_tasks(TOWER, ModelConfig(sigma_m=0.04, samples=1), preset("default"),
+                        QuerySpec(queries=frozenset({"fall", "direction", "far"})), 0)
+    outcome = run_sample(task)
+    back = decode_entry(encode_entry(outcome, "k"), "k")
+    assert type(back) is type(outcome) and back.index == outcome.index and back.ok is outcome.ok
+    np.testing.assert_array_equal(back.initial_positions_m, outcome.initial_positions_m)
+    for a, b in zip(back.rollouts, outcome.rollouts, strict=True):
+        assert (a.direction_rad, a.far_m, a.simulated_s, a.any_fell) == (b.direction_rad, b.far_m, b.simulated_s,
+                                                                         b.any_fell)
+        np.testing.assert_array_equal(a.final_orientations_xyzw, b.final_orientations_xyzw)
+        np.testing.assert_array_equal(a.fallen, b.fallen)
+        assert a.fallen.dtype == b.fallen.dtype
+    seen = perceive(TOWER, 2, VisionSettings(resolution_px=32, chain_samples=40, burn_in=10),
+                    np.random.default_rng(0), check_ess=False)
+    back = decode_entry(encode_entry(seen, "k"), "k")
+    assert [scene_to_dict(s) for s in back.scenes] == [scene_to_dict(s) for s in seen.scenes]
+    assert (back.acceptance_rate, back.effective_sample_size) == (seen.acceptance_rate, seen.effective_sample_size)
+    np.testing.assert_array_equal(back.chain.positions_m, seen.chain.positions_m)
+    np.testing.assert_array_equal(back.chain.accepted, seen.chain.accepted)

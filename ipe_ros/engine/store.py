@@ -9,16 +9,27 @@ answers an uninterrupted run gives (tested).
 
 Results that are not the task's own (a sample lost with its worker, one cut off by a compute
 budget) are never stored, so a rerun computes them again.
+
+Entries are data, never code: one JSON document per result (format ``ipe_ros.result``, a version, the
+key it answers, a type from a fixed list, arrays as dtype + shape + base64 bytes, scenes through the
+validated scene reader). An entry that is not exactly that (truncated, empty, another type, another
+key, a link, too large) is reported in one line, ignored and recomputed: a run folder from somebody
+else can waste time but cannot run anything (a pickle could).
 """
 
 from __future__ import annotations
 
+import base64
 import dataclasses
 import hashlib
+import json
 import os
-import pickle
+import stat
+import sys
+import types as pytypes
+import typing
 from pathlib import Path
-from typing import Callable, Iterable, TypeVar
+from typing import Any, Callable, Iterable, TypeVar
 
 import numpy as np
 
@@ -26,7 +37,18 @@ T = TypeVar("T")
 R = TypeVar("R")
 
 #: Bump when what a stored result means changes (the engine's physics or outcome format).
-STORE_VERSION = 2  # 2: bump-only rollouts end once what fell off is decided
+STORE_VERSION = 3  # 3: JSON entries (2: bump-only rollouts end once what fell off is decided)
+#: An entry's ``format`` field: what tells a result of ours from any other JSON file.
+ENTRY_FORMAT = "ipe_ros.result"
+#: Larger entries are refused unread (a k-sample vision chain is ~100 kB; a recorded trajectory more).
+MAX_ENTRY_BYTES = 64 * 1024 * 1024
+#: Array dtypes an entry may hold: numbers and booleans only (an object array would unpickle).
+_DTYPES = frozenset({"bool", "int8", "int16", "int32", "int64", "uint8", "uint16", "uint32", "uint64",
+                     "float32", "float64"})
+
+
+class StoreEntryError(ValueError):
+    """A stored entry that is not a result of ours; the message says what is wrong with it."""
 
 
 def result_key(fn: Callable, item) -> str:
@@ -73,21 +95,42 @@ def _own_result(result) -> bool:
 
 class ResumableMap:
     """``map(fn, items, on_lost=None)`` through ``inner`` (None: in this process), remembering results
-    in ``folder``. ``hits`` and ``computed`` count what the last calls read back and ran."""
+    in ``folder``. ``hits``, ``computed`` and ``rejected`` count what the calls read back, ran, and
+    refused to read (each refusal is passed to ``report`` as one line; default: stderr)."""
 
     #: Missing results computed per call of ``inner``: large enough that the map's own overheads (a
     #: cluster's round trip, the last sample's wait) stay small, small enough that an interruption
     #: loses seconds of work (~10 s at 46 rollouts/s).
     DEFAULT_BATCH = 480
 
-    def __init__(self, folder: str | Path, inner: Callable | None = None, batch: int = DEFAULT_BATCH):
+    def __init__(self, folder: str | Path, inner: Callable | None = None, batch: int = DEFAULT_BATCH,
+                 report: Callable[[str], None] | None = None):
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
         self.inner, self.batch = inner, batch
-        self.hits = self.computed = 0
+        self.report = report if report is not None else (lambda line: print(line, file=sys.stderr))
+        self.hits = self.computed = self.rejected = 0
 
     def _path(self, key: str) -> Path:
-        return self.folder / key[:2] / f"{key}.pkl"
+        return self.folder / key[:2] / f"{key}.json"
+
+    def _read(self, key: str):
+        """The stored result for ``key``; None when there is none or it is refused (reported)."""
+        path = self._path(key)
+        try:
+            info = path.lstat()
+        except FileNotFoundError:
+            return None
+        try:
+            if not stat.S_ISREG(info.st_mode):  # a link could point anywhere: never followed
+                raise StoreEntryError("not a regular file (a link or a folder)")
+            if info.st_size > MAX_ENTRY_BYTES:
+                raise StoreEntryError(f"{info.st_size} bytes, more than the {MAX_ENTRY_BYTES} an entry may have")
+            return decode_entry(path.read_bytes(), key)
+        except (StoreEntryError, OSError) as exc:
+            self.rejected += 1
+            self.report(f"ipe: ignoring store entry {path} and computing it again: {exc}")
+            return None
 
     def map(self, fn: Callable[[T], R], items: Iterable[T], on_lost: Callable[[T, str], R] | None = None) -> list[R]:
         items = list(items)
@@ -95,11 +138,8 @@ class ResumableMap:
         results: list = [None] * len(items)
         missing = []
         for i, key in enumerate(keys):
-            path = self._path(key)
-            if path.exists():
-                with path.open("rb") as handle:
-                    results[i] = pickle.load(handle)
-            else:
+            results[i] = self._read(key)
+            if results[i] is None:
                 missing.append(i)
         self.hits += len(items) - len(missing)
         for first in range(0, len(missing), self.batch):  # written batch by batch: an interruption keeps them
@@ -117,6 +157,186 @@ class ResumableMap:
         path = self._path(key)
         path.parent.mkdir(exist_ok=True)
         partial = path.with_suffix(f".{os.getpid()}.part")
-        with partial.open("wb") as handle:
-            pickle.dump(result, handle, protocol=5)
+        partial.write_bytes(encode_entry(result, key))
         os.replace(partial, path)  # atomic: a crash leaves a .part, never a half-written result
+
+
+# --- the entry format ------------------------------------------------------------------------------
+
+def _result_types() -> dict[str, type]:
+    """The dataclasses an entry may hold, by name (imported here: the vision package imports the engine)."""
+    from .rollout import RolloutResult, SampleOutcome
+    from .vision.mcmc import Chain
+    from .vision.perception import PerceivedScenes
+
+    return {t.__name__: t for t in (SampleOutcome, RolloutResult, PerceivedScenes, Chain)}
+
+
+def encode_entry(result, key: str) -> bytes:
+    """``result`` as an entry answering ``key``. Raises TypeError for a value the format has no
+    place for (a new result type must be added to ``_result_types``)."""
+    types = _result_types()
+    document = {"format": ENTRY_FORMAT, "version": STORE_VERSION, "key": key,
+                "result": _encode(result, types)}
+    return json.dumps(document, separators=(",", ":"), allow_nan=True).encode()
+
+
+def decode_entry(data: bytes, key: str):
+    """The result in an entry, checked to be an entry of this format and version answering ``key``;
+    StoreEntryError naming what is wrong otherwise."""
+    try:
+        document = json.loads(data.decode("utf-8"))
+    except RecursionError:
+        raise StoreEntryError("nested deeper than any result") from None
+    except (UnicodeDecodeError, ValueError) as exc:  # empty, truncated, binary, not JSON
+        raise StoreEntryError(f"not a JSON document ({type(exc).__name__}: {str(exc)[:80]})") from None
+    if not isinstance(document, dict) or document.get("format") != ENTRY_FORMAT:
+        raise StoreEntryError(f"not an {ENTRY_FORMAT} entry")
+    if document.get("version") != STORE_VERSION:
+        raise StoreEntryError(f"version {document.get('version')!r}, this engine writes {STORE_VERSION}")
+    if document.get("key") != key:
+        raise StoreEntryError("stored under another result's name (its key differs)")
+    if "result" not in document:
+        raise StoreEntryError("has no result")
+    try:
+        result = _decode(document["result"], _result_types(), "result")
+    except StoreEntryError:
+        raise
+    except (TypeError, ValueError, KeyError) as exc:  # a constructor refusing what it was given
+        raise StoreEntryError(f"result does not fit its type ({type(exc).__name__}: {str(exc)[:80]})") from None
+    except RecursionError:
+        raise StoreEntryError("nested deeper than any result") from None
+    _check_shapes(result)
+    return result
+
+
+def _encode(value, types: dict[str, type]):
+    if isinstance(value, (np.ndarray, np.generic)):  # first: np.float64 is also a float
+        array = np.asarray(value)
+        if array.dtype.name not in _DTYPES:
+            raise TypeError(f"arrays of {array.dtype} have no place in a store entry")
+        return {"array": array.dtype.name, "shape": list(array.shape), "scalar": isinstance(value, np.generic),
+                "data": base64.b64encode(np.ascontiguousarray(array).tobytes()).decode("ascii")}
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    if isinstance(value, tuple):
+        return {"tuple": [_encode(v, types) for v in value]}
+    if isinstance(value, list):
+        return [_encode(v, types) for v in value]
+    from .scene import Scene
+
+    if isinstance(value, Scene):
+        from .scene_io import scene_to_dict
+
+        return {"scene": scene_to_dict(value)}
+    if dataclasses.is_dataclass(value) and types.get(type(value).__name__) is type(value):
+        return {"dataclass": type(value).__name__,
+                "fields": {f.name: _encode(getattr(value, f.name), types) for f in dataclasses.fields(value)}}
+    raise TypeError(f"a {type(value).__qualname__} has no place in a store entry")
+
+
+def _decode(value, types: dict[str, type], where: str):
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    if isinstance(value, list):
+        return [_decode(v, types, f"{where}[{i}]") for i, v in enumerate(value)]
+    if not isinstance(value, dict) or len(value) == 0:
+        raise StoreEntryError(f"{where}: unexpected {type(value).__name__}")
+    if "tuple" in value and len(value) == 1 and isinstance(value["tuple"], list):
+        return tuple(_decode(v, types, f"{where}[{i}]") for i, v in enumerate(value["tuple"]))
+    if set(value) == {"array", "shape", "scalar", "data"}:
+        return _decode_array(value, where)
+    if set(value) == {"scene"}:
+        from .errors import ConfigError
+        from .scene_io import scene_from_dict
+
+        try:
+            return scene_from_dict(value["scene"])
+        except (ConfigError, ValueError, TypeError) as exc:
+            raise StoreEntryError(f"{where}: not a valid scene ({str(exc)[:80]})") from None
+    if set(value) == {"dataclass", "fields"}:
+        cls = types.get(value["dataclass"]) if isinstance(value["dataclass"], str) else None
+        if cls is None:
+            raise StoreEntryError(f"{where}: {str(value['dataclass'])[:40]!r} is not a result type")
+        fields = value["fields"]
+        names = {f.name for f in dataclasses.fields(cls)}
+        if not isinstance(fields, dict) or set(fields) != names:
+            raise StoreEntryError(f"{where}: a {cls.__name__} with other fields than this engine's")
+        hints = typing.get_type_hints(cls)
+        decoded = {}
+        for name, v in fields.items():
+            decoded[name] = _decode(v, types, f"{where}.{name}")
+            if not _fits(decoded[name], hints[name]):
+                raise StoreEntryError(f"{where}.{name}: a {type(decoded[name]).__name__} where a "
+                                      f"{hints[name]} belongs")
+        return cls(**decoded)
+    raise StoreEntryError(f"{where}: an object of unknown kind (keys {sorted(value)[:4]})")
+
+
+def _decode_array(value: dict[str, Any], where: str):
+    dtype, shape, data = value["array"], value["shape"], value["data"]
+    if dtype not in _DTYPES:
+        raise StoreEntryError(f"{where}: arrays of {str(dtype)[:20]!r} are not allowed")
+    if not (isinstance(shape, list) and all(isinstance(n, int) and not isinstance(n, bool) and n >= 0
+                                            for n in shape)):
+        raise StoreEntryError(f"{where}: shape must be a list of counts")
+    try:
+        raw = base64.b64decode(data, validate=True) if isinstance(data, str) else None
+    except ValueError:
+        raw = None
+    if raw is None:
+        raise StoreEntryError(f"{where}: data is not base64")
+    if len(raw) != int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize:
+        raise StoreEntryError(f"{where}: {len(raw)} bytes do not fill a {dtype} array of shape {tuple(shape)}")
+    array = np.frombuffer(raw, dtype=dtype).reshape(shape).copy()
+    if value["scalar"] is True and array.shape == ():
+        return array[()]
+    return array
+
+
+def _fits(value, hint) -> bool:
+    """Whether ``value`` is of the annotated type (the annotations our result dataclasses use)."""
+    origin = typing.get_origin(hint)
+    if origin is typing.Union or origin is pytypes.UnionType:
+        return any(_fits(value, h) for h in typing.get_args(hint))
+    if hint is type(None):
+        return value is None
+    if hint is float:
+        return isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, (bool, np.bool_))
+    if hint is int:
+        return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+    if hint is bool:
+        return isinstance(value, (bool, np.bool_))
+    if hint is np.ndarray:
+        return isinstance(value, np.ndarray)
+    if origin is tuple:
+        args = typing.get_args(hint)
+        return isinstance(value, tuple) and (len(args) == 2 and args[1] is Ellipsis
+                                             and all(_fits(v, args[0]) for v in value))
+    if origin is list or hint is list:
+        return isinstance(value, list)
+    if isinstance(hint, type):
+        return isinstance(value, hint)
+    return False
+
+
+def _check_shapes(result) -> None:
+    """The arrays of a sample's outcome agree with each other (code reading it indexes them together)."""
+    from .rollout import SampleOutcome
+
+    if not isinstance(result, SampleOutcome) or result.initial_positions_m is None:
+        return
+    n = len(result.initial_positions_m)
+    expected = {"initial_positions_m": (n, 3), "initial_orientations_xyzw": (n, 4)}
+    arrays = {name: getattr(result, name) for name in expected}
+    for i, rollout in enumerate(result.rollouts):
+        expected |= {f"rollouts[{i}].final_positions_m": (n, 3), f"rollouts[{i}].final_orientations_xyzw": (n, 4)}
+        arrays |= {f"rollouts[{i}].final_positions_m": rollout.final_positions_m,
+                   f"rollouts[{i}].final_orientations_xyzw": rollout.final_orientations_xyzw}
+        for name in ("fallen", "fell_off"):
+            if getattr(rollout, name) is not None:
+                expected[f"rollouts[{i}].{name}"] = (n,)
+                arrays[f"rollouts[{i}].{name}"] = getattr(rollout, name)
+    for name, shape in expected.items():
+        if arrays[name] is not None and arrays[name].shape != shape:
+            raise StoreEntryError(f"result.{name}: shape {arrays[name].shape}, the sample has {n} bodies so {shape}")

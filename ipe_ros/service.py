@@ -210,6 +210,7 @@ class PredictionService:
         self._latest_rejected: str | None = None  # why the newest input was refused, if it was
         self._last_answer: Answer | None = None
         self._in_flight: tuple[int, int] | None = None  # (seq, config version) being computed
+        self._in_flight_item: StampedScene | None = None
         self._waiters: list[_Waiter] = []
         self._closing = False
         self._seq = 0
@@ -229,17 +230,21 @@ class PredictionService:
     def start(self) -> None:
         self._thread.start()
 
-    def close(self, timeout_s: float = 1.5) -> None:
-        """Stop taking work, cancel what is queued, stop the workers (those still busy after half
-        a second are terminated), join the thread: done within ~``timeout_s``."""
+    def close(self, timeout_s: float = 1.5, reason: str = "the node is shutting down") -> None:
+        """Stop taking work, answer the scene waiting and the one in flight with an error naming
+        ``reason`` (every accepted scene hears back once), stop the workers (those still busy after
+        half a second are terminated), join the thread: done within ~``timeout_s``."""
         with self._cond:
             self._closing = True
+            abandoned = [item for item in (self._pending, self._in_flight_item) if item is not None]
             self._pending = None
             for w in self._waiters:
-                w.error = "the node is shutting down"
+                w.error = reason
                 w.event.set()
             self._waiters.clear()
             self._cond.notify_all()
+        for item in abandoned:  # the prediction thread publishes nothing once closing (see _serve)
+            self._report_failure(item, f"{reason}: the prediction was cancelled")
         if self._pool is not None:
             # cancels samples not yet started; running ones get half a second (their answers are
             # dropped anyway: the waiters were told the node is shutting down), so that with the
@@ -378,14 +383,16 @@ class PredictionService:
                     return
                 item, self._pending = self._pending, None
                 config, version = self._config, self._version
-                self._in_flight = (item.seq, version)
+                self._in_flight, self._in_flight_item = (item.seq, version), item
                 self._in_flight_since = time.monotonic()
             try:
                 self._serve(item, config, version)
             except Exception as exc:  # noqa: BLE001 - the thread must outlive any one prediction
                 error = clip(f"internal error: {''.join(traceback.format_exception_only(type(exc), exc)).strip()}", 600)
                 with self._cond:
-                    self._in_flight = self._in_flight_since = None
+                    self._in_flight = self._in_flight_since = self._in_flight_item = None
+                    if self._closing:
+                        return  # close() answered it
                     self._counts["failed_predictions"] += 1
                     self._last_error = error
                     self._recent.append("failed")
@@ -410,12 +417,9 @@ class PredictionService:
         """One prediction: compute, hand to waiters, count, publish."""
         answer, error = self._predict(item, config, version)
         with self._cond:
-            self._in_flight = self._in_flight_since = None
+            self._in_flight = self._in_flight_since = self._in_flight_item = None
             if self._closing:
-                for w in self._waiters:
-                    w.error = "the node is shutting down"
-                    w.event.set()
-                return
+                return  # close() answered it and its waiters
             done = [w for w in self._waiters if item.seq >= w.seq and version >= w.version]
             for w in done:
                 self._waiters.remove(w)
@@ -508,6 +512,12 @@ MAX_WAITING_QUESTIONS = 4
 DEFAULT_QUESTION_SAMPLES = 16
 
 
+def _question_head(question, source: StampedScene) -> dict[str, Any]:
+    """The fields every reply to a question carries: its id, kind, and the scene it was about."""
+    return {"id": question.request_id, "question": question.kind, "scene_id": source.scene_id,
+            "frame_id": source.frame_id, "stamp": dict(zip(("sec", "nanosec"), divmod(source.stamp_ns, 1_000_000_000)))}
+
+
 class QuestionService:
     """Questions about actions (``~/ask``): a FIFO of at most MAX_WAITING_QUESTIONS, one thread,
     the prediction service's worker pool and config. Each answer (or error) goes to ``publish``
@@ -521,6 +531,7 @@ class QuestionService:
         self._log_error = log_error
         self._cond = threading.Condition()
         self._queue: collections.deque = collections.deque()
+        self._current: tuple | None = None  # (question, scene) being answered
         self._closing = False
         self.answered = 0
         self.refused = 0
@@ -530,11 +541,17 @@ class QuestionService:
     def start(self) -> None:
         self._thread.start()
 
-    def close(self, timeout_s: float = 1.5) -> None:
+    def close(self, timeout_s: float = 1.5, reason: str = "the node is shutting down") -> None:
+        """Stop taking questions; every one waiting or in flight is answered with an error naming
+        ``reason`` (the question thread publishes nothing once closing)."""
         with self._cond:
             self._closing = True
+            abandoned = list(self._queue) + ([self._current] if self._current is not None else [])
             self._queue.clear()
             self._cond.notify_all()
+        for question, source in abandoned:
+            self._deliver({**_question_head(question, source), "error": f"{reason}: the question was cancelled"},
+                          source, question)
         if self._thread.is_alive():
             self._thread.join(timeout_s)
 
@@ -563,11 +580,9 @@ class QuestionService:
                     self._cond.wait()
                 if self._closing:
                     return
-                question, source = self._queue.popleft()
+                question, source = self._current = self._queue.popleft()
             config = self._predictions.config
-            head = {"id": question.request_id, "question": question.kind, "scene_id": source.scene_id,
-                    "frame_id": source.frame_id, "stamp": dict(zip(("sec", "nanosec"),
-                                                                   divmod(source.stamp_ns, 1_000_000_000)))}
+            head = _question_head(question, source)
             start = time.perf_counter()
             try:
                 model = dataclasses.replace(config.model, samples=DEFAULT_QUESTION_SAMPLES)
@@ -582,16 +597,25 @@ class QuestionService:
                 message = {**head, "answer": answer, "compute_s": time.perf_counter() - start}
                 if record and answers is not None:
                     message["rrd_path"] = self._write_rrd(config, question, source, answers)
-                self.answered += 1
+                answered = True
             except Exception as exc:  # noqa: BLE001 - one question's trouble is its answer, never the thread's end
                 error = str(exc) if isinstance(exc, ValueError) else "".join(
                     traceback.format_exception_only(type(exc), exc)).strip()
                 message = {**head, "error": clip(error, 1000)}
-                self.refused += 1
-            try:
-                self._publish(message, source)
-            except Exception as exc:  # noqa: BLE001
-                self._log_error(f"publishing the answer to question {question.request_id!r} failed: {exc}")
+                answered = False
+            with self._cond:
+                self._current = None
+                if self._closing:
+                    return  # close() answered it
+                self.answered += answered
+                self.refused += not answered
+            self._deliver(message, source, question)
+
+    def _deliver(self, message: dict[str, Any], source: StampedScene, question) -> None:
+        try:
+            self._publish(message, source)
+        except Exception as exc:  # noqa: BLE001
+            self._log_error(f"publishing the answer to question {question.request_id!r} failed: {exc}")
 
     def _write_rrd(self, config: ServiceConfig, question, source: StampedScene, answers) -> str | None:
         from .viz import rerun_log  # only needed when recording

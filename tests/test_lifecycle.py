@@ -83,3 +83,53 @@ def test_a_bad_parameter_fails_configure_by_name_and_the_node_stays_unconfigured
     ros.executor.add_node(node)
     assert not _transition(ros, Transition.TRANSITION_CONFIGURE)
     assert _state(ros) == State.PRIMARY_STATE_UNCONFIGURED and node.service is None
+
+
+def _managed_node(ros: RosHarness, **values) -> IpeLifecycleNode:
+    node = IpeLifecycleNode(context=ros.context, parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
+    ros._nodes.append(node)
+    ros.executor.add_node(node)
+    return node
+
+
+@pytest.mark.parametrize("in_state, transition_id", [
+    ("unconfigured", Transition.TRANSITION_ACTIVATE),
+    ("unconfigured", Transition.TRANSITION_DEACTIVATE),
+    ("unconfigured", Transition.TRANSITION_CLEANUP),
+    ("inactive", Transition.TRANSITION_CONFIGURE),
+    ("unconfigured", 99),  # no such transition
+])
+def test_a_transition_not_allowed_from_the_state_is_refused_and_the_state_kept(ros, in_state, transition_id):
+    node = _managed_node(ros, samples=2, workers=1)
+    if in_state == "inactive":
+        assert _transition(ros, Transition.TRANSITION_CONFIGURE)
+    state = _state(ros)
+    assert not _transition(ros, transition_id)
+    assert _state(ros) == state  # answered, and the node is still there with its state
+    assert (node.service is None) == (in_state == "unconfigured")
+    if in_state == "unconfigured":  # the node goes on with the transitions that are allowed
+        assert _transition(ros, Transition.TRANSITION_CONFIGURE)
+    assert _transition(ros, Transition.TRANSITION_ACTIVATE)
+    assert _state(ros) == State.PRIMARY_STATE_ACTIVE
+
+
+def test_cleanup_answers_the_prediction_and_the_question_in_flight_with_an_error(ros):
+    # a prediction that takes long: the paper's settings, many samples, one worker
+    node = _managed_node(ros, samples=400, workers=1, preset="paper", budget_s=120.0)
+    predictions = ros.collect(String, "/ipe/prediction", LATCHED_QOS)
+    replies = ros.collect(String, "/ipe/answer", LATCHED_QOS)
+    assert _transition(ros, Transition.TRANSITION_CONFIGURE) and _transition(ros, Transition.TRANSITION_ACTIVATE)
+    tower = load_scenes("ipe_ros/data/example_tower.json")[0]
+    ros.publisher(String, "/ipe/scene_json").publish(String(data=scene_to_json(tower)))
+    wait_until(lambda: node.service.stats().in_flight, TIMEOUT_S, "the prediction to start")
+    ros.publisher(String, "/ipe/ask").publish(String(data=json.dumps({"id": "q1", "question": "support"})))
+    wait_until(lambda: node.questions._current is not None, TIMEOUT_S, "the question to start")
+    assert _transition(ros, Transition.TRANSITION_DEACTIVATE)  # stops intake; what is in flight goes on
+    assert node.service.stats().in_flight and not predictions and not replies
+    assert _transition(ros, Transition.TRANSITION_CLEANUP)
+    wait_until(lambda: predictions and replies, 10.0, "a reply on ~/prediction and on ~/answer")
+    [prediction] = [json.loads(m.data) for m in predictions]
+    assert prediction["error"] == "the node was cleaned up (lifecycle cleanup): the prediction was cancelled"
+    assert prediction["scene_id"] == tower.name
+    [reply] = [json.loads(m.data) for m in replies]
+    assert (reply["id"], reply["error"]) == ("q1", "the node was cleaned up (lifecycle cleanup): the question was cancelled")

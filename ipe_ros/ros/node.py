@@ -20,6 +20,7 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle.node import LifecycleNodeMixin
 from rclpy.node import Node
 from rclpy.service import Service as RclpyService
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -136,20 +137,21 @@ class _IpeInterface:
                 self.destroy_subscription(entity)
         self._inputs.clear()
 
-    def _close_services(self) -> bool:
-        """End the question and prediction services and their workers; False when none was open."""
+    def _close_services(self, reason: str = "the node is shutting down") -> bool:
+        """End the question and prediction services and their workers, answering what is waiting or
+        in flight with an error naming ``reason``; False when none was open."""
         if self.questions is not None:
-            self.questions.close()
+            self.questions.close(reason=reason)
         opened = self.service is not None
         if opened:
-            self.service.close()
+            self.service.close(reason=reason)
         self.service = self.questions = None
         return opened
 
-    def _close(self) -> None:
+    def _close(self, reason: str) -> None:
         """Stop answering, end the services and their workers, drop the publishers (the node lives on)."""
         self._unlisten()
-        if self._close_services():
+        if self._close_services(reason):
             self.destroy_timer(self._diagnostics_timer)
             for publisher in self._publishers:
                 self.destroy_publisher(publisher)
@@ -329,12 +331,25 @@ class IpeLifecycleNode(_IpeInterface, LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self._close()
+        self._close("the node was cleaned up (lifecycle cleanup)")
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self._close()
+        self._close("the node is shutting down (lifecycle shutdown)")
         return TransitionCallbackReturn.SUCCESS
+
+    def _LifecycleNodeMixin__change_state(self, transition_id: int) -> TransitionCallbackReturn:  # noqa: N802
+        """Every transition request (the ~/change_state service and trigger_*) passes here. rclpy
+        (7.1) lets the state machine raise on a transition not allowed from the current state, which
+        ends the node without a reply; refuse it instead (success false) and keep the state."""
+        allowed = {transition[0]: transition[1] for transition in self._state_machine.available_transitions}
+        if transition_id not in allowed:
+            current = self._state_machine.current_state[1]
+            self.get_logger().warning(
+                f"transition {transition_id} refused: not allowed from state '{current}' (allowed: "
+                + (", ".join(f"{label} ({tid})" for tid, label in sorted(allowed.items())) or "none") + ")")
+            return TransitionCallbackReturn.FAILURE
+        return LifecycleNodeMixin._LifecycleNodeMixin__change_state(self, transition_id)
 
     def destroy_node(self) -> None:
         self._close_services()

@@ -42,7 +42,7 @@ from .engine.fidelity import DEFAULT_CHECK, SelfCheck
 from .engine.generators import generate_tables, generate_towers, state_pair
 from .engine.perturb import is_deterministic
 from .engine.sampler import check_budget, check_request
-from .engine.scene_io import write_scenes
+from .engine.scene_io import RefusedScene, write_scenes
 from .engine.zoo import FAMILIES, scene_zoo
 
 EXIT_BAD_INPUT = 2
@@ -286,7 +286,8 @@ def _run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: in
 
 
 def cmd_predict(args) -> int:
-    scenes = load_scenes(args.path, towers=args.tower)
+    refused: list[RefusedScene] = []  # scenes of the file that cannot be answered: reported, the rest answered
+    scenes = load_scenes(args.path, towers=args.tower, on_refused=refused.append)
     phi = (0.0,) if args.ground_truth else args.phi
     sigma = 0.0 if args.ground_truth else args.sigma
     vision = None
@@ -332,11 +333,26 @@ def cmd_predict(args) -> int:
         raise ConfigError("--vision-rrd", f"records one scene, but {args.path} holds {len(scenes)}; choose one with --tower")
     if args.png is not None and len(scenes) != 1:
         raise ConfigError("--png", f"draws one scene, but {args.path} holds {len(scenes)}; choose one with --tower")
-    for scene in scenes:  # reject what cannot be answered before printing anything
+    unread = {r.index for r in refused}  # a scene's position in the file counts the unreadable ones too
+    positions = {id(scene): i for scene, i in zip(scenes, (i for i in range(len(scenes) + len(unread))
+                                                           if i not in unread))}
+    answerable = []
+    for scene in scenes:  # refuse what cannot be answered before predicting anything
         try:
             check_request(scene, query, model=model, settings=sim, budget_s=args.budget)
+            answerable.append(scene)
         except ConfigError as exc:
-            raise ConfigError(f"--budget ({scene.name})" if exc.field == "budget_s" else exc.field, exc.problem) from None
+            field = f"--budget ({scene.name})" if exc.field == "budget_s" else exc.field
+            refused.append(RefusedScene(positions[id(scene)], scene.name, ConfigError(field, exc.problem)))
+    if len(scenes) == 1 and not answerable and len(refused) == 1:  # one scene: its refusal is the command's error
+        raise refused[-1].error
+    scenes = answerable
+    for refusal in refused:  # at once, before the predictions' minutes
+        report = {"scene": refusal.name, "index": refusal.index, "error": str(refusal.error)}
+        print(json.dumps(report) if args.json else f"ipe: refused scene {refusal.index} "
+              f"({refusal.name or 'unnamed'}): {refusal.error}", file=sys.stdout if args.json else sys.stderr, flush=True)
+    if not scenes:
+        raise SceneError(args.path, f"none of its {len(refused)} scenes can be answered (each refusal is reported)")
     perceived = None
     if args.vision_rrd is not None:  # the chain the prediction would run, kept for the recording
         from .engine.sampler import perceive_for
@@ -371,7 +387,7 @@ def cmd_predict(args) -> int:
 
         draw_prediction(args.png, scenes[0], collected[0])
         print(f"wrote {args.png}", file=sys.stderr)
-    return 0
+    return EXIT_BAD_INPUT if refused else 0  # the others answered; the status says not all could be
 
 
 def cmd_generate(args) -> int:

@@ -115,6 +115,14 @@ def error_answer(source: StampedScene, error: str) -> dict[str, Any]:
             "stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": source.frame_id}
 
 
+def refusal_answer(reason: str, scene_id: str, stamp_ns: int, frame_id: str, input_topic: str) -> dict[str, Any]:
+    """What ~/prediction carries for a scene refused on arrival: the same fields as a failed
+    prediction's error answer (no sequence number: the scene was never accepted) and the topic it came on."""
+    sec, nanosec = divmod(max(0, stamp_ns), 1_000_000_000)
+    return {"error": reason, "scene": scene_id or None, "scene_id": scene_id, "scene_seq": None,
+            "stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": frame_id, "refused_on": input_topic}
+
+
 def _load_rerun_if_recording(config: ServiceConfig) -> None:
     """Import rerun when recording is (switched) on, not on the first answer (the import takes ~0.4 s);
     without recording rerun is never imported."""

@@ -23,6 +23,19 @@ def string_to_scene(msg: String, *, max_objects: int = DEFAULT_MAX_OBJECTS) -> S
     return scenes[0]
 
 
+def scene_name_of(msg: String) -> str:
+    """The scene's "name" if the text can be read that far ("" otherwise): a refusal names the scene
+    it refuses even when the rest of it is unreadable."""
+    try:
+        data = json.loads(msg.data)
+    except (ValueError, RecursionError):
+        return ""
+    if isinstance(data, list) and len(data) == 1:
+        data = data[0]
+    value = data.get("name", "") if isinstance(data, dict) else ""
+    return value[:128] if isinstance(value, str) else ""
+
+
 def scene_to_string(scene: Scene) -> String:
     return String(data=scene_to_json(scene))
 

@@ -184,3 +184,29 @@ def test_predict_draws_the_answer_as_a_png(tmp_path):
     several = run_cli("predict", str(two), "--samples", "2", "--png", str(out))
     assert several.returncode == 2
     assert several.stderr.strip() == (f"ipe: error: --png: draws one scene, but {two} holds 2; choose one with --tower")
+
+
+def test_a_file_with_bad_scenes_answers_every_good_one_and_reports_each_refused_one(tmp_path):
+    from ipe_ros.engine.scene_io import scene_to_dict
+
+    good = scene_to_dict(load_scenes(example_scene_path())[0])
+    unreadable = dict(good, name="broken", objects=[dict(good["objects"][0], mass_kg=-1.0)])
+    too_costly = dict(good, name="too_costly", horizon_s=60.0)  # readable, but beyond the budget
+    mixed = tmp_path / "mixed.json"
+    mixed.write_text(json.dumps([good, unreadable, dict(good, name="second"), too_costly]))
+    out = run_cli("predict", str(mixed), "--samples", "2", "--workers", "0", "--json", "--budget", "1")
+    assert out.returncode == 2, out.stderr
+    lines = [json.loads(line) for line in out.stdout.strip().splitlines()]
+    refusals, answers = lines[:2], lines[2:]  # refusals first: at once, before the predictions run
+    assert [(r["index"], r["scene"]) for r in refusals] == [(1, "broken"), (3, "too_costly")]
+    assert refusals[0]["error"] == "scenes[1].objects[0] ('block0').mass_kg: mass in kg must be > 0, got -1.0"
+    assert refusals[1]["error"].startswith("--budget (too_costly): ")
+    assert [a["scene"] for a in answers] == ["example_tower", "second"] and all(a["samples"] == 2 for a in answers)
+    table = run_cli("predict", str(mixed), "--samples", "2", "--workers", "0", "--budget", "1")
+    assert table.returncode == 2 and "example_tower" in table.stdout and "second" in table.stdout
+    assert table.stderr.splitlines()[0] == ("ipe: refused scene 1 (broken): scenes[1].objects[0] ('block0').mass_kg: "
+                                            "mass in kg must be > 0, got -1.0")
+    mixed.write_text(json.dumps([unreadable, too_costly]))  # nothing left to answer: one line more says so
+    none = run_cli("predict", str(mixed), "--samples", "2", "--budget", "1")
+    assert none.returncode == 2
+    assert none.stderr.splitlines()[-1] == f"ipe: error: {mixed}: none of its 2 scenes can be answered (each refusal is reported)"

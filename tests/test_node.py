@@ -271,13 +271,20 @@ def test_bad_inputs_are_rejected_and_the_next_good_scene_is_answered(ros, tower)
     bad = _good_and_bad_inputs(tower)
     for i, (topic, msg, reason) in enumerate(bad, start=1):
         pubs[topic].publish(msg)
-        wait_until(lambda: node.service.stats().rejected == i, TIMEOUT_S, f"bad input {i} to be rejected")
+        wait_until(lambda: node.service.stats().rejected == i and len(got) == i, TIMEOUT_S,
+                   f"bad input {i} to be rejected and answered")
         assert node.service.stats().last_error == reason
+        refusal = got[i - 1]  # the client hears why on the topic it reads answers from
+        assert (refusal["error"], refusal["refused_on"], refusal["scene_seq"]) == (reason, f"/ipe/{topic}", None)
+        if topic == "scene" and msg.markers:
+            assert refusal["frame_id"] == msg.markers[0].header.frame_id
+    assert got[0]["scene_id"] == "" and got[8]["frame_id"] == ""  # unreadable: what is known is echoed
     response = ros.call(Trigger, "/ipe/predict", Trigger.Request())
     assert response.message == ("the latest scene was rejected: markers: the array holds no ADD markers; "
                                 "publish one CUBE, SPHERE, CYLINDER or TRIANGLE_LIST marker per body")
     pubs["scene"].publish(scene_to_markers(tower, "world"))
-    wait_until(lambda: len(got), TIMEOUT_S, "the good scene's prediction")
+    wait_until(lambda: len(got) == len(bad) + 1, TIMEOUT_S, "the good scene's prediction")
+    assert "error" not in got[len(bad)]
     stats = node.service.stats()
     assert (stats.rejected, stats.received, stats.predicted) == (len(bad), 1, 1)
 

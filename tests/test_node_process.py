@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -107,10 +108,21 @@ def test_a_signal_mid_prediction_ends_the_node_within_2_s_leaving_no_process(sig
 def test_send_scene_helper_gets_the_answer_from_a_running_node(tmp_path):
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(domain_id_for_tests()))
     node = subprocess.Popen([sys.executable, "-m", "ipe_ros.ros.node", "--ros-args", "-p", "workers:=1",
-                             "-p", "samples:=3"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                             "-p", "samples:=3", "-p", "max_objects:=12"], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    from ipe_ros.engine import load_scenes
+    from ipe_ros.engine.scene_io import write_scenes
+    tower = load_scenes("ipe_ros/data/example_tower.json")[0]
+    too_big = dataclasses.replace(tower, name="too_big", objects=tower.objects + tuple(
+        dataclasses.replace(b, name=f"{b.name}_again", position_m=(b.position_m[0] + 2.0, *b.position_m[1:]))
+        for b in tower.objects[:3]))
+    write_scenes([too_big], tmp_path / "too_big.json")
     try:
         sent = subprocess.run([sys.executable, "-m", "ipe_ros.ros.send_scene", "ipe_ros/data/example_tower.json",
                                "--timeout", "120"], env=env, capture_output=True, text=True, timeout=180)
+        # valid as a file, refused by this node's max_objects: the client hears why at once
+        refused = subprocess.run([sys.executable, "-m", "ipe_ros.ros.send_scene", str(tmp_path / "too_big.json"),
+                                  "--timeout", "120"], env=env, capture_output=True, text=True, timeout=180)
     finally:
         node.send_signal(signal.SIGINT)
         try:
@@ -122,6 +134,11 @@ def test_send_scene_helper_gets_the_answer_from_a_running_node(tmp_path):
     assert sent.returncode == 0, sent.stderr
     answer = json.loads(sent.stdout)
     assert answer["scene_id"] == "example_tower" and answer["samples"] == 3 and answer["frame_id"] == "world"
+    assert refused.returncode == 3, refused.stderr
+    error = json.loads(refused.stdout)
+    assert (error["scene_id"], error["refused_on"]) == ("too_big", "/ipe/scene_json")
+    assert error["error"] == "objects: 13 objects exceed the maximum of 12; split the scene or raise max_objects"
+    assert refused.stderr.endswith(f"ipe_send_scene: the node answered with an error: {error['error']}\n")
 
 
 def test_send_scene_refuses_a_bad_file_before_publishing(tmp_path):

@@ -69,6 +69,18 @@ def test_tower_csv_rejects_bad_rows(tmp_path):
         scenes_from_tower_csv(path)
 
 
+def test_a_bad_tower_of_a_csv_is_handed_to_on_refused_and_the_others_are_read(tmp_path):
+    path = tmp_path / "some_bad.csv"
+    write_csv(path, [("a", "block0", 0, 0, 0.3, 0, 1), ("b", "block0", 0, 0, 0.05, 0, 1), ("c", "block0", 0, 0, 0.3, 0, 1)])
+    refused = []
+    assert [s.name for s in scenes_from_tower_csv(path, on_refused=refused.append)] == ["a", "c"]
+    [refusal] = refused
+    assert (refusal.index, refusal.name) == (1, "b")
+    assert str(refusal.error).startswith("some_bad.csv:b:objects[0] ('block0').position_m: the body's lowest point")
+    with pytest.raises(SceneError, match="^some_bad.csv: none of the 1 towers asked for can be read"):
+        scenes_from_tower_csv(path, towers=["b"], on_refused=refused.append)
+
+
 def test_paper_csv_loads_all_60_towers():
     scenes = load_scenes(shared_file("willitfall.csv"))
     assert len(scenes) == 60

@@ -43,8 +43,9 @@ from __future__ import annotations
 import csv
 import json
 from collections import OrderedDict
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Callable, Iterable
 
 from .errors import SceneError, json_type as _json_type, shown
 from .limits import MAX_JSON_CHARS
@@ -323,12 +324,28 @@ def scene_from_dict(data: Any, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scene:
         raise
 
 
+@dataclass(frozen=True)
+class RefusedScene:
+    """A scene of a file that could not be read, while the others could: its position in the file
+    (0-based), its name where readable ("" otherwise) and why."""
+
+    index: int
+    name: str
+    error: SceneError
+
+
+#: Called with each scene a file holds that cannot be read; without one the first such scene ends the read.
+OnRefused = Callable[[RefusedScene], None]
+
+
 def _reject_constant(token: str) -> None:
     raise SceneError("json", f"{token} is not a valid number; use finite numbers only")
 
 
-def scenes_from_json(text: str, max_objects: int = DEFAULT_MAX_OBJECTS) -> list[Scene]:
-    """Parse JSON text holding one scene object or a list of them."""
+def scenes_from_json(text: str, max_objects: int = DEFAULT_MAX_OBJECTS, on_refused: OnRefused | None = None) -> list[Scene]:
+    """Parse JSON text holding one scene object or a list of them. With ``on_refused``, a scene of
+    the list that cannot be read is handed to it and the others are returned (the text itself must
+    still be JSON holding scenes)."""
     if len(text) > MAX_JSON_CHARS:
         raise SceneError("json", f"{len(text)} characters exceed the maximum of {MAX_JSON_CHARS}; split the scene")
     try:
@@ -346,7 +363,13 @@ def scenes_from_json(text: str, max_objects: int = DEFAULT_MAX_OBJECTS) -> list[
             try:
                 scenes.append(scene_from_dict(item, max_objects))
             except SceneError as exc:
-                raise SceneError(f"scenes[{i}].{exc.field}", exc.problem) from None
+                error = SceneError(f"scenes[{i}].{exc.field}", exc.problem)
+                if on_refused is None:
+                    raise error from None
+                name = item.get("name") if isinstance(item, dict) else None
+                on_refused(RefusedScene(i, name[:128] if isinstance(name, str) else "", error))
+        if not scenes and on_refused is not None:
+            raise SceneError("json", f"none of the {len(data)} scenes can be read (each refusal is reported)")
         return scenes
     return [scene_from_dict(data, max_objects)]
 
@@ -365,12 +388,14 @@ PAPER_FLOOR_FRICTION = 1.0
 
 
 def scenes_from_tower_csv(path: str | Path, towers: Iterable[str] | None = None,
-                          max_objects: int = DEFAULT_MAX_OBJECTS) -> list[Scene]:
+                          max_objects: int = DEFAULT_MAX_OBJECTS, on_refused: OnRefused | None = None) -> list[Scene]:
     """Load the paper's tower stimuli (one row per block; see shared/data/battaglia2013/README.md).
 
     Units are taken as metres and kilograms; blocks with ``blocktype`` 1 get group "heavy", the rest
     "light". Rows are grouped by (name, ratio): where a file holds a tower at several mass ratios the
-    scene name gets a ``@ratio=R`` suffix. ``towers`` selects by base name or full scene name.
+    scene name gets a ``@ratio=R`` suffix. ``towers`` selects by base name or full scene name. With
+    ``on_refused``, a tower that cannot be read is handed to it and the others are returned (the
+    file's own structure, its columns and rows, must still be right).
     """
     path = Path(path)
     grouped: "OrderedDict[tuple[str, str], list[dict[str, str]]]" = OrderedDict()
@@ -406,37 +431,24 @@ def scenes_from_tower_csv(path: str | Path, towers: Iterable[str] | None = None,
 
     wanted = None if towers is None else set(towers)
     scenes: list[Scene] = []
-    for (name, ratio), rows in grouped.items():
+    refused_names: set[str] = set()
+    refused = 0
+    for position, ((name, ratio), rows) in enumerate(grouped.items()):
         scene_name = name if ratios_per_name[name] == 1 else f"{name}@ratio={float(ratio):g}"
         if wanted is not None and name not in wanted and scene_name not in wanted:
             continue
-        boxes = []
-        for row in rows:
-            where = f"{path.name}:{scene_name}:{row['object']}"
-            try:
-                values = {c: float(row[c]) for c in _CSV_COLUMNS[2:]}
-            except ValueError as exc:
-                raise SceneError(where, f"non-numeric value ({exc})") from None
-            blocktype = row.get("blocktype", "0") or "0"
-            boxes.append(Box(
-                name=row["object"],
-                extents_m=(values["scale_x"], values["scale_y"], values["scale_z"]),
-                position_m=(values["pos_x"], values["pos_y"], values["pos_z"]),
-                orientation_xyzw=(values["quat_x"], values["quat_y"], values["quat_z"], values["quat_w"]),
-                friction=values["friction"],
-                restitution=values["restitution"],
-                mass_kg=values["mass"],
-                group="heavy" if blocktype.strip() in ("1", "1.0") else "light",
-            ))
-        scene = Scene(name=scene_name, objects=tuple(boxes),
-                      support=Floor(friction=PAPER_FLOOR_FRICTION, restitution=0.0),
-                      gravity_m_s2=PAPER_GRAVITY_M_S2)
         try:
-            scenes.append(validate_scene(scene, max_objects=max_objects))
+            scenes.append(_tower_scene(path, scene_name, rows, max_objects))
         except SceneError as exc:
-            raise SceneError(f"{path.name}:{scene_name}:{exc.field}", exc.problem) from None
+            if on_refused is None:
+                raise
+            refused_names |= {scene_name, name}
+            refused += 1
+            on_refused(RefusedScene(position, scene_name, exc))
+    if not scenes and refused:
+        raise SceneError(path.name, f"none of the {refused} towers asked for can be read (each refusal is reported)")
     if wanted is not None:
-        found = {s.name for s in scenes} | {s.name.split("@", 1)[0] for s in scenes}
+        found = {s.name for s in scenes} | {s.name.split("@", 1)[0] for s in scenes} | refused_names
         unknown = sorted(wanted - found)
         if unknown:
             raise SceneError("--tower", f"no tower named {shown(unknown[0])} in {path.name}")
@@ -445,19 +457,53 @@ def scenes_from_tower_csv(path: str | Path, towers: Iterable[str] | None = None,
     return scenes
 
 
+def _tower_scene(path: Path, scene_name: str, rows: list[dict[str, str]], max_objects: int) -> Scene:
+    boxes = []
+    for row in rows:
+        where = f"{path.name}:{scene_name}:{row['object']}"
+        try:
+            values = {c: float(row[c]) for c in _CSV_COLUMNS[2:]}
+        except ValueError as exc:
+            raise SceneError(where, f"non-numeric value ({exc})") from None
+        blocktype = row.get("blocktype", "0") or "0"
+        boxes.append(Box(
+            name=row["object"],
+            extents_m=(values["scale_x"], values["scale_y"], values["scale_z"]),
+            position_m=(values["pos_x"], values["pos_y"], values["pos_z"]),
+            orientation_xyzw=(values["quat_x"], values["quat_y"], values["quat_z"], values["quat_w"]),
+            friction=values["friction"],
+            restitution=values["restitution"],
+            mass_kg=values["mass"],
+            group="heavy" if blocktype.strip() in ("1", "1.0") else "light",
+        ))
+    scene = Scene(name=scene_name, objects=tuple(boxes),
+                  support=Floor(friction=PAPER_FLOOR_FRICTION, restitution=0.0),
+                  gravity_m_s2=PAPER_GRAVITY_M_S2)
+    try:
+        return validate_scene(scene, max_objects=max_objects)
+    except SceneError as exc:
+        raise SceneError(f"{path.name}:{scene_name}:{exc.field}", exc.problem) from None
+
+
 def load_scenes(path: str | Path, towers: Iterable[str] | None = None,
-                max_objects: int = DEFAULT_MAX_OBJECTS) -> list[Scene]:
-    """Load a JSON scene file or a paper-format tower CSV, by extension."""
+                max_objects: int = DEFAULT_MAX_OBJECTS, on_refused: OnRefused | None = None) -> list[Scene]:
+    """Load a JSON scene file or a paper-format tower CSV, by extension. ``on_refused``: see
+    ``scenes_from_json``; without it any unreadable scene ends the read."""
     path = Path(path)
     if not path.exists():
         raise SceneError(str(path), "no such file")
     if path.suffix.lower() == ".csv":
-        return scenes_from_tower_csv(path, towers, max_objects)
-    scenes = scenes_from_json(path.read_text(), max_objects)
+        return scenes_from_tower_csv(path, towers, max_objects, on_refused)
+    refusals: list[RefusedScene] = []
+    scenes = scenes_from_json(path.read_text(), max_objects, refusals.append if on_refused is not None else None)
+    if towers is not None:
+        refusals = [r for r in refusals if r.name in set(towers)]
+    for refusal in refusals:
+        on_refused(refusal)
     if towers is not None:
         wanted = set(towers)
         picked = [s for s in scenes if s.name in wanted]
-        missing = sorted(wanted - {s.name for s in picked})
+        missing = sorted(wanted - {s.name for s in picked} - {r.name for r in refusals})
         if missing:
             raise SceneError("--tower", f"no scene named {shown(missing[0])} in {path.name}")
         scenes = picked

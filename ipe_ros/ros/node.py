@@ -31,14 +31,15 @@ from visualization_msgs.msg import MarkerArray
 
 from msg_bridge.ask_json import answer_to_string as ask_answer_to_string
 from msg_bridge.ask_json import request_id_of, string_to_question, support_graph_markers
-from msg_bridge.json_text import answer_to_string, string_to_scene
+from msg_bridge.json_text import answer_to_string, scene_name_of, string_to_scene
 from msg_bridge.markers import markers_to_scene, prediction_to_markers
 from msg_bridge.outputs import fall_direction_msg, fall_fraction_msg, fall_probability_msg
+from msg_bridge.stamps import header_to_stamp_ns
 
 from ..engine import ConfigError
 from ..engine.errors import clip
 from ..service import (Answer, NoSceneError, PredictionFailed, PredictionService, QuestionService, ServiceConfig,
-                       StampedScene, error_answer)
+                       StampedScene, error_answer, refusal_answer)
 from . import params
 from .diagnostics import diagnostics_msg
 
@@ -177,10 +178,13 @@ class _IpeInterface:
         return SetParametersResult(successful=True)
 
     # -- inputs ----------------------------------------------------------------------------------
-    def _reject(self, topic: str, exc: Exception) -> None:
+    def _reject(self, topic: str, exc: Exception, scene_id: str, stamp_ns: int, frame_id: str) -> None:
+        """Count, log and answer a refused scene: its client hears why on ~/prediction, as for a failed prediction."""
         reason = clip(str(exc), 1000)
         self.service.reject(reason)
         self._log_error(f"rejected scene on {topic}: {reason}")
+        self._pub_prediction.publish(answer_to_string(refusal_answer(reason, clip(scene_id, 128), stamp_ns,
+                                                                     clip(frame_id, 256), topic)))
 
     def _accept(self, scene, stamp_ns: int, frame_id: str) -> None:
         item = StampedScene(scene=scene, stamp_ns=stamp_ns, frame_id=frame_id, scene_id=scene.name,
@@ -204,11 +208,13 @@ class _IpeInterface:
         try:
             converted = markers_to_scene(msg, max_objects=self.service.config.max_objects)
             self.service.check(converted.scene, converted.frame_id, "header.frame_id")
-        except ValueError as exc:  # SceneError / ConfigError name the field
-            self._reject(self.resolve_topic_name("~/scene"), exc)
-            return
         except Exception as exc:  # noqa: BLE001 - no input may end the node; name what happened
-            self._reject(self.resolve_topic_name("~/scene"), RuntimeError(f"unreadable input ({type(exc).__name__})"))
+            if not isinstance(exc, ValueError):  # SceneError / ConfigError name the field
+                exc = RuntimeError(f"unreadable input ({type(exc).__name__})")
+            header = msg.markers[0].header if msg.markers else None
+            self._reject(self.resolve_topic_name("~/scene"), exc, "",
+                         header_to_stamp_ns(header) if header is not None else self.get_clock().now().nanoseconds,
+                         header.frame_id if header is not None else "")
             return
         self._accept(converted.scene, converted.stamp_ns, converted.frame_id)
 
@@ -216,11 +222,11 @@ class _IpeInterface:
         try:
             scene = string_to_scene(msg, max_objects=self.service.config.max_objects)
             self.service.check(scene)  # frame_id (the parameter) is checked against the frames at configuration
-        except ValueError as exc:
-            self._reject(self.resolve_topic_name("~/scene_json"), exc)
-            return
         except Exception as exc:  # noqa: BLE001 - no input may end the node; name what happened
-            self._reject(self.resolve_topic_name("~/scene_json"), RuntimeError(f"data: unreadable input ({type(exc).__name__})"))
+            if not isinstance(exc, ValueError):
+                exc = RuntimeError(f"data: unreadable input ({type(exc).__name__})")
+            self._reject(self.resolve_topic_name("~/scene_json"), exc, scene_name_of(msg),
+                         self.get_clock().now().nanoseconds, str(self._values["frame_id"]))
             return
         self._accept(scene, self.get_clock().now().nanoseconds, str(self._values["frame_id"]))
 

@@ -8,7 +8,8 @@ The ``ros2`` command line is not available as pip wheels; this is the small rclp
 
 The scene is validated here first (exit status 2 with the field at fault), then published; the
 answer is the first one on ``<node>/prediction`` for this scene name stamped after the send.
-Exit status 1 when no answer comes in time.
+Exit status 1 when no answer comes in time, 3 when the node answers with an error (the scene refused
+by its configuration, or the prediction failed): the error answer is printed all the same.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from msg_bridge.json_text import scene_to_string  # noqa: E402
 from ..engine import load_scenes  # noqa: E402
 from .node import LATCHED_QOS  # noqa: E402
 
-EXIT_NO_ANSWER, EXIT_BAD_INPUT = 1, 2
+EXIT_NO_ANSWER, EXIT_BAD_INPUT, EXIT_ERROR_ANSWER = 1, 2, 3
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -83,11 +84,14 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         while answer is None:
             if time.monotonic() > deadline:
-                print(f"ipe_send_scene: no answer on {node_name}/prediction within {args.timeout:g} s "
-                      "(a rejected scene is logged by the node and counted in /diagnostics)", file=sys.stderr)
+                print(f"ipe_send_scene: no answer on {node_name}/prediction within {args.timeout:g} s",
+                      file=sys.stderr)
                 return EXIT_NO_ANSWER
             executor.spin_once(timeout_sec=0.1)
         print(json.dumps(answer, indent=2, sort_keys=True))
+        if "error" in answer:
+            print(f"ipe_send_scene: the node answered with an error: {answer['error']}", file=sys.stderr)
+            return EXIT_ERROR_ANSWER
         return 0
     except KeyboardInterrupt:
         return 130

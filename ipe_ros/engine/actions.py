@@ -29,6 +29,7 @@ import numpy as np
 
 from . import queries, simulation
 from .config import ModelConfig, QuerySpec, SimSettings, SolverSettings
+from . import limits
 from .errors import BudgetExceeded, ConfigError, PhysicsError
 from .estimate import wilson_interval, circular_mean
 from .perturb import draw_sample_inputs, is_deterministic, position_sigmas_m
@@ -119,12 +120,35 @@ def _check_action(scene: Scene, action: Action, path: str) -> None:
                                                       f"got {list(action.velocity_m_s)}")
         if np.linalg.norm(v) > 100:
             raise ConfigError(f"{path}.velocity_m_s", "a push faster than 100 m/s is a projectile, not a push")
-        if action.point_m is not None and not (len(action.point_m) == 3 and np.all(np.isfinite(action.point_m))):
-            raise ConfigError(f"{path}.point_m", "must be 3 finite numbers (metres, scene frame) or null")
+        if action.point_m is not None:
+            _check_push_point(scene, action, f"{path}.point_m")
         if not (0 <= action.direction_sigma_rad <= math.pi) or not (0 <= action.speed_sigma_fraction <= 1):
             raise ConfigError(f"{path}", "direction_sigma_rad must be in [0, pi] and speed_sigma_fraction in [0, 1]")
     elif action is not None:
         raise ConfigError(path, f"not an action: {type(action).__name__}")
+
+
+def _check_push_point(scene: Scene, push: Push, path: str) -> None:
+    """The point pushed lies on the object (within its bounding sphere, 1 mm of slack), and the spin
+    the push implies there stays within what a scene may start with (limits.MAX_SPIN_RAD_S)."""
+    point = np.asarray(push.point_m, float)
+    if point.shape != (3,) or not np.all(np.isfinite(point)):
+        raise ConfigError(path, "must be 3 finite numbers (metres, scene frame) or null")
+    i, body = next((i, b) for i, b in enumerate(scene.dynamic_objects) if b.name == push.name)
+    centre = np.asarray(body.centre_of_mass_m, float)
+    reach = 0.5 * float(np.linalg.norm(body.extents_m)) + 1e-3
+    distance = float(np.linalg.norm(point - centre))
+    if distance > reach:
+        raise ConfigError(path, f"{list(push.point_m)} is {distance:.3g} m from the centre of mass of {push.name!r}, "
+                                f"outside its reach of {reach:.3g} m; push a point on the object")
+    inertia = _geometry_world(scene).inertia_kg_m2[i]  # pybullet's own, as the rollout will use
+    _, spin = _push_velocities(push, np.random.default_rng(0), centre, np.asarray(body.orientation_xyzw, float),
+                               inertia, body.resolved_mass_kg)
+    worst = float(np.linalg.norm(spin)) * (1 + push.speed_sigma_fraction * 4)  # the push's own noise, to 4 SD
+    if worst > limits.MAX_SPIN_RAD_S:
+        raise ConfigError(path, f"pushed there at this speed {push.name!r} would spin at up to {worst:.4g} rad/s, more "
+                                f"than the {limits.MAX_SPIN_RAD_S:g} rad/s a scene may start with; push nearer its "
+                                "centre of mass or slower")
 
 
 # -- one sample of every variant ----------------------------------------------------------------------
@@ -567,8 +591,45 @@ def _regions(scene: Scene, actions: list[Action], margin_m: float,
 def remove(scene: Scene, names: list[str] | None, model: ModelConfig, settings: SimSettings, **kw) -> Answers:
     """P(anything else falls) and per-object probabilities if each named object (None: every
     dynamic object, one at a time) is taken away; the scene as it is comes first."""
+    if names is not None and not names:
+        raise ConfigError("objects", "names no object; name at least one, or leave it out to ask about every one")
     names = [b.name for b in scene.dynamic_objects] if names is None else list(names)
     return ask(scene, [None] + [Remove((n,)) for n in names], model, settings, **kw)
+
+
+#: Estimated seconds to lower one candidate placement onto what is below it (measured 2-8 ms).
+PLACEMENT_GEOMETRY_S = 0.01
+
+
+class _Deadline:
+    """A question's wall-clock budget, started when it is asked: everything before the simulation
+    (geometry for placements, earlier steps of a clearing order) spends from it too."""
+
+    def __init__(self, budget_s: float | None):
+        check_budget(budget_s)
+        self.budget_s = budget_s
+        self.at_unix_s = None if budget_s is None else time.time() + budget_s
+
+    def remaining_s(self) -> float | None:
+        return None if self.at_unix_s is None else self.at_unix_s - time.time()
+
+    def passed(self) -> bool:
+        return self.at_unix_s is not None and time.time() >= self.at_unix_s
+
+
+def _check_variants(scene: Scene, variants: int, model: ModelConfig, settings: SimSettings, budget_s: float | None,
+                    what: str, field: str, placements: int = 0) -> None:
+    """Refuse up front, before any geometry or simulation: more variants than a question may ask,
+    or one sample of each (plus lowering the placements) estimated beyond the budget."""
+    if variants > limits.MAX_QUESTION_VARIANTS:
+        raise ConfigError(field, f"{what} make {variants} variants, more than the {limits.MAX_QUESTION_VARIANTS} one "
+                                 "question may ask about; split the search into several questions")
+    if budget_s is not None:
+        seconds = rollout_cost(scene, model, settings).seconds * (variants + 1) + placements * PLACEMENT_GEOMETRY_S
+        if seconds > budget_s:
+            raise ConfigError("budget_s", f"one sample of these {variants + 1} variants takes up to ~{seconds:.3g} s, "
+                                          f"more than the budget of {budget_s:g} s; ask fewer variants or raise the "
+                                          "budget")
 
 
 @dataclass(frozen=True)
@@ -626,9 +687,10 @@ class ClearOrder:
     steps: tuple[ClearStep, ...]
     total_risk: float
     target: str | None
+    stopped_by: str = "done"  # "budget": the steps so far are all the budget held (the order is incomplete)
 
     def to_dict(self) -> dict:
-        return {"scene": self.scene, "target": self.target, "total_risk": self.total_risk,
+        return {"scene": self.scene, "target": self.target, "total_risk": self.total_risk, "stopped_by": self.stopped_by,
                 "steps": [{"remove": s.name, "p_anything_falls": s.p_anything_falls, "ci95": list(s.ci95)}
                           for s in self.steps]}
 
@@ -640,8 +702,10 @@ def clear_order(scene: Scene, model: ModelConfig, settings: SimSettings, target:
     on it (directly or through others) are candidates, and the sequence ends when the target is gone."""
     if target is not None and target not in {b.name for b in scene.dynamic_objects}:
         raise ConfigError("target", f"no dynamic object named {target!r} in {scene.name!r}")
+    deadline = _Deadline(kw.pop("budget_s", None))  # one budget for every step, not one each
     steps: list[ClearStep] = []
     current = scene
+    stopped_by = "done"
     while True:
         candidates = [b.name for b in current.dynamic_objects]
         if target is not None:
@@ -651,7 +715,19 @@ def clear_order(scene: Scene, model: ModelConfig, settings: SimSettings, target:
             only = current.dynamic_objects[0].name
             steps.append(ClearStep(only, 0.0, (0.0, 0.0)))
             break
-        answers = remove(current, candidates, model, settings, **kw)
+        if deadline.passed():
+            stopped_by = "budget"
+            break
+        try:
+            answers = remove(current, candidates, model, settings, budget_s=deadline.remaining_s(), **kw)
+        except ConfigError as exc:
+            if exc.field != "budget_s" or not steps:  # the first step must fit: refused as any question
+                raise
+            stopped_by = "budget"  # what is left of the budget does not hold the next step
+            break
+        if answers.stopped_by == "budget":  # a step decided on fewer samples than asked is not decided
+            stopped_by = "budget"
+            break
         heights = {b.name: b.centre_of_mass_m[2] for b in current.dynamic_objects}
         best = min(answers.variants[1:], key=lambda v: (1.0 if v.any_fall_probability is None else v.any_fall_probability,
                                                         -heights[v.action.names[0]]))
@@ -661,7 +737,7 @@ def clear_order(scene: Scene, model: ModelConfig, settings: SimSettings, target:
         if name == target or not current.dynamic_objects:
             break
     total = 1 - float(np.prod([1 - s.p_anything_falls for s in steps]))
-    return ClearOrder(scene.name, tuple(steps), total, target)
+    return ClearOrder(scene.name, tuple(steps), total, target, stopped_by)
 
 
 def place(scene: Scene, bodies: list[Body], model: ModelConfig, settings: SimSettings, **kw) -> Answers:
@@ -674,29 +750,55 @@ def resting_height_m(scene: Scene, body: Body, x_m: float, y_m: float, orientati
     """z of ``body``'s frame when it is lowered at (x, y) with this orientation until it touches
     what is below (the support or an object), found by bisection on its distance to everything
     else: exact for any shape, a ball's top included."""
-    from .simulation import world as world_module
+    return _Lowering(scene, body).height_m(x_m, y_m, orientation_xyzw)
 
-    world = _geometry_world(scene)
-    size = max(body.extents_m)
-    top = max([scene.support.top_m] + [float(b.position_m[2]) + max(b.extents_m) for b in scene.objects]) + size
-    handle = world_module.add_fixed_body(world, dataclasses.replace(body, static=True), (x_m, y_m, top),
-                                         orientation_xyzw)
-    touch = 1e-3 * min(body.extents_m)  # rest this close above the surface
 
-    def clear_at(z: float) -> bool:
-        world_module.move_body(world, handle, (x_m, y_m, z), orientation_xyzw)
-        return world_module.gap_to_others_m(world, handle, 2 * size) >= touch
+class _Lowering:
+    """One geometry world of the scene with ``body`` in it, moved from spot to spot (building the
+    world is most of the cost of one spot)."""
 
-    low, high = scene.support.top_m - 2 * size, top
-    if clear_at(low):  # nothing below at all (off a table's edge with no floor): not a place
-        raise ConfigError("position_m", f"nothing under ({x_m:g}, {y_m:g}) to rest {body.name!r} on")
-    for _ in range(50):
-        middle = (low + high) / 2
-        if clear_at(middle):
-            high = middle
-        else:
-            low = middle
-    return float(high)
+    def __init__(self, scene: Scene, body: Body):
+        from .simulation import world as world_module
+
+        self._world_module, self.scene, self.body = world_module, scene, body
+        self.world = _geometry_world(scene)
+        self.size = max(body.extents_m)
+        self.top = max([scene.support.top_m] + [float(b.position_m[2]) + max(b.extents_m)
+                                                for b in scene.objects]) + self.size
+        self.handle = world_module.add_fixed_body(self.world, dataclasses.replace(body, static=True),
+                                                  (0.0, 0.0, self.top), (0.0, 0.0, 0.0, 1.0))
+        self.touch = 1e-3 * min(body.extents_m)  # rest this close above the surface
+
+    def height_m(self, x_m: float, y_m: float, orientation_xyzw) -> float:
+        def clear_at(z: float) -> bool:
+            self._world_module.move_body(self.world, self.handle, (x_m, y_m, z), orientation_xyzw)
+            return self._world_module.gap_to_others_m(self.world, self.handle, 2 * self.size) >= self.touch
+
+        low, high = self.scene.support.top_m - 2 * self.size, self.top
+        if clear_at(low):  # nothing below at all (off a table's edge with no floor): not a place
+            raise ConfigError("position_m", f"nothing under ({x_m:g}, {y_m:g}) to rest {self.body.name!r} on")
+        for _ in range(50):
+            middle = (low + high) / 2
+            if clear_at(middle):
+                high = middle
+            else:
+                low = middle
+        return float(high)
+
+
+def _lowered(scene: Scene, body: Body, spots, deadline: _Deadline) -> list[Body]:
+    """``body`` at each (x, y, yaw_rad) spot, lowered onto what is below; the question's budget
+    checked between spots."""
+    lowering = _Lowering(scene, body)
+    bodies = []
+    for x, y, yaw in spots:
+        if deadline.passed():
+            raise ConfigError("budget_s", f"lowering {len(spots)} candidate placements onto the scene took the whole "
+                                          f"budget of {deadline.budget_s:g} s ({len(bodies)} done); ask fewer "
+                                          "candidates or raise the budget")
+        q = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+        bodies.append(dataclasses.replace(body, position_m=(x, y, lowering.height_m(x, y, q)), orientation_xyzw=q))
+    return bodies
 
 
 @dataclass(frozen=True)
@@ -712,16 +814,19 @@ def best_place(scene: Scene, body: Body, region: Region, model: ModelConfig, set
                candidates: int = 16, yaws: int = 1, **kw) -> tuple[list[tuple[Body, VariantAnswer]], Answers]:
     """Candidate poses on a grid over ``region`` (about ``candidates`` of them, times ``yaws``
     orientations), each lowered onto what is below; returned most stable first."""
+    for name, value in (("candidates", candidates), ("yaws", yaws)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ConfigError(name, f"must be an integer >= 1, got {value!r}")
     n = max(1, int(round(math.sqrt(candidates))))
+    _check_variants(scene, n * n * yaws, model, settings, kw.get("budget_s"),
+                    f"{n} x {n} candidates x {yaws} yaws", "candidates", placements=n * n * yaws)
+    deadline = _Deadline(kw.pop("budget_s", None))
     xs = np.linspace(*region.x_m, n)
     ys = np.linspace(*region.y_m, n)
     yaw_values = np.linspace(*region.yaw_rad, yaws) if yaws > 1 else [region.yaw_rad[0]]
-    bodies = []
-    for i, (x, y, yaw) in enumerate(itertools.product(xs, ys, yaw_values)):
-        q = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
-        z = resting_height_m(scene, body, float(x), float(y), q)
-        bodies.append(dataclasses.replace(body, position_m=(float(x), float(y), z), orientation_xyzw=q))
-    answers = place(scene, bodies, model, settings, **kw)
+    bodies = _lowered(scene, body, [(float(x), float(y), float(yaw))
+                                    for x, y, yaw in itertools.product(xs, ys, yaw_values)], deadline)
+    answers = place(scene, bodies, model, settings, budget_s=deadline.remaining_s(), **kw)
     ranked = sorted(zip(bodies, answers.variants[1:]),
                     key=lambda bv: 1.0 if bv[1].any_fall_probability is None else bv[1].any_fall_probability)
     return ranked, answers
@@ -795,6 +900,8 @@ def question_from_dict(data) -> Question:
         objects = data.get("objects")
         if objects is not None and (not isinstance(objects, list) or not all(isinstance(o, str) for o in objects)):
             raise ConfigError("objects", "must be a list of object names")
+        if objects == []:
+            raise ConfigError("objects", "names no object; name at least one, or leave it out to ask about every one")
         return Question(objects=None if objects is None else tuple(objects), **common)
     if kind == "support":
         return Question(threshold=_field(data, "threshold", float, DEFAULT_SUPPORT_THRESHOLD),
@@ -823,6 +930,9 @@ def question_from_dict(data) -> Question:
     if (at is None) == (region is None):
         raise ConfigError("at", "give candidate spots in \"at\" or a \"region\" to search (one of them)")
     if at is not None:
+        if isinstance(at, list) and len(at) > limits.MAX_QUESTION_VARIANTS:
+            raise ConfigError("at", f"{len(at)} spots are more than the {limits.MAX_QUESTION_VARIANTS} one question may "
+                                    "ask about; split them into several questions")
         if not isinstance(at, list) or not at or not all(
                 isinstance(s, list) and len(s) in (2, 3) and all(isinstance(v, (int, float)) and not isinstance(v, bool)
                                                                  and math.isfinite(v) for v in s) for s in at):
@@ -841,6 +951,10 @@ def question_from_dict(data) -> Question:
     candidates, yaws = region.get("candidates", 16), region.get("yaws", 1)
     if not all(isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 400 for v in (candidates, yaws)):
         raise ConfigError("region.candidates", "candidates and yaws must be integers in [1, 400]")
+    if candidates * yaws > limits.MAX_QUESTION_VARIANTS:
+        raise ConfigError("region.candidates", f"{candidates} candidates x {yaws} yaws are {candidates * yaws} "
+                                               f"placements, more than the {limits.MAX_QUESTION_VARIANTS} one question "
+                                               "may ask about; search a smaller region or fewer yaws")
     return Question(body=body, region=Region(xs, ys, yaw), candidates=candidates, yaws=yaws, **common)
 
 
@@ -875,12 +989,12 @@ def answer_question(scene: Scene, question: Question, model: ModelConfig, settin
 def place_at(scene: Scene, body: Body, spots, model: ModelConfig, settings: SimSettings,
              **kw) -> tuple[list[tuple[Body, VariantAnswer]], Answers]:
     """``place`` at each (x, y, yaw_rad) spot, the body lowered onto what is below it there."""
-    bodies = []
-    for x, y, yaw in spots:
-        q = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
-        bodies.append(dataclasses.replace(body, position_m=(x, y, resting_height_m(scene, body, x, y, q)),
-                                          orientation_xyzw=q))
-    answers = place(scene, bodies, model, settings, **kw)
+    spots = list(spots)
+    _check_variants(scene, len(spots), model, settings, kw.get("budget_s"), f"{len(spots)} spots", "at",
+                    placements=len(spots))
+    deadline = _Deadline(kw.pop("budget_s", None))
+    bodies = _lowered(scene, body, spots, deadline)
+    answers = place(scene, bodies, model, settings, budget_s=deadline.remaining_s(), **kw)
     return list(zip(bodies, answers.variants[1:])), answers
 
 

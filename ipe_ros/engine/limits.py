@@ -39,6 +39,10 @@ MAX_GRAVITY_M_S2 = 100.0
 MAX_SIGMA_M = 10.0
 #: Latent push phi (the support's horizontal acceleration): 10 g.
 MAX_PHI_M_S2 = 100.0
+#: Variants one question may ask about (place spots, or a region's candidates x yaws): each is one
+#: more simulated scene per sample, and each placement is first lowered onto what is below it
+#: (~2-8 ms of geometry). More is a search for a planner to run, not one question.
+MAX_QUESTION_VARIANTS = 400
 #: Characters of a name (scene, object, group).
 MAX_NAME_CHARS = 256
 #: Characters of a JSON scene text (a 200-object scene is ~60 kB).

@@ -16,6 +16,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from ipe_ros.engine import ConfigError, Scene, SceneError
 from ipe_ros.engine.actions import Question, question_from_dict
 from ipe_ros.engine.errors import json_type
+from ipe_ros.engine.limits import MAX_JSON_CHARS
 from ipe_ros.engine.scene import DEFAULT_MAX_OBJECTS
 from ipe_ros.engine.scene_io import scene_from_dict
 from ipe_ros.viz.palette import risk_rgb
@@ -35,6 +36,9 @@ def request_id_of(msg: String) -> str:
 
 def string_to_question(msg: String, *, max_objects: int = DEFAULT_MAX_OBJECTS) -> tuple[Question, Scene | None]:
     """A question and the scene it brings (None: ask about the node's newest scene)."""
+    if len(msg.data) > MAX_JSON_CHARS:  # before reading it: the reply must not wait on 100 MB of JSON
+        raise ConfigError("data", f"{len(msg.data)} characters exceed the maximum of {MAX_JSON_CHARS} for a question; "
+                                  "send the scene on ~/scene_json and ask about it without \"scene\"")
     try:
         data = json.loads(msg.data)
     except RecursionError:

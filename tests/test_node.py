@@ -201,8 +201,9 @@ def test_gravity_aligned_frames_decide_which_scene_frames_are_answered(ros, towe
     assert node.service.stats().last_error.startswith("header.frame_id: 'world' is not a gravity-aligned frame "
                                                       "(odom, base_footprint)")
     pub.publish(scene_to_markers(tower, "base_footprint"))
-    wait_until(lambda: len(got), TIMEOUT_S, "the scene in 'base_footprint' to be answered")
-    assert got[0]["frame_id"] == "base_footprint"
+    wait_until(lambda: len(got) == 2, TIMEOUT_S, "the scene in 'base_footprint' to be answered")
+    assert (got[0]["frame_id"], got[0]["error"]) == ("world", node.service.stats().last_error)  # the refusal
+    assert got[1]["frame_id"] == "base_footprint" and "error" not in got[1]
     [outside] = set_params(ros, frame_id="camera_link")  # ~/scene_json's frame must be gravity-aligned too
     assert outside.reason == ("frame_id: 'camera_link' is not in gravity_aligned_frames ['odom', 'base_footprint']; "
                               "add it there if its -z axis is gravity, or publish scenes in one of those frames")
@@ -375,3 +376,40 @@ def test_questions_on_ask_are_answered_on_answer_with_their_id(ros, tower, tmp_p
     pushed = by_id["r2"]["answer"]["variants"][1]
     assert pushed["label"] == "push/bottom" and pushed["object_fall_probability"]["top"] == 1.0
 
+
+
+def test_every_question_gets_exactly_one_reply_under_a_flood_and_when_too_large(ros):
+    import collections
+
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    from ipe_ros.ros.node import ASK_QOS
+    from tests.test_actions import STACK
+
+    node = ros.start_ipe_node(samples=2, sigma=0.005)
+    reader = QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    got = ros.collect(String, "/ipe/answer", reader)
+    ros.publisher(String, "/ipe/scene_json").publish(String(data=scene_to_json(STACK)))
+    wait_until(lambda: node.service.latest_scene() is not None, TIMEOUT_S, "the scene to be accepted")
+    ask = ros.publisher(String, "/ipe/ask", ASK_QOS)
+    flood = 5000
+    for i in range(flood):  # as fast as one publisher goes (~0.4 s here)
+        ask.publish(String(data=json.dumps({"id": f"q{i}", "question": "remove", "objects": ["top"]})))
+    ask.publish(String(data=json.dumps({"id": "huge", "question": "support", "note": "x" * 16_500_000})))
+    region = {"x_m": [-1, 1], "y_m": [-1, 1], "candidates": 400, "yaws": 400}
+    ask.publish(String(data=json.dumps({"id": "search", "question": "place", "region": region, "object": {
+        "name": "new", "shape": {"type": "box", "extents_m": [0.1, 0.1, 0.1]}, "friction": 0.5, "restitution": 0.0}})))
+    replies = lambda: [json.loads(m.data) for m in list(got)]  # noqa: E731
+    wait_until(lambda: len(got) >= flood + 2, 120.0, f"{flood + 2} replies")
+    counts = collections.Counter(r["id"] for r in replies())
+    assert len(counts) == flood + 2 and set(counts.values()) == {1}  # every question once, none twice
+    by_id = {r["id"]: r for r in replies()}
+    busy = [r for r in by_id.values() if r.get("error", "").startswith("busy: ")]
+    answered = [r for r in by_id.values() if "answer" in r]
+    assert len(busy) + len(answered) == flood and len(answered) >= 1
+    assert by_id["huge"]["error"] == ("data: 16500049 characters exceed the maximum of 16000000 for a question; send "
+                                      "the scene on ~/scene_json and ask about it without \"scene\"")
+    assert by_id["search"]["error"].startswith("region.candidates: 400 candidates x 400 yaws are 160000 placements")
+    ask.publish(String(data=json.dumps({"id": "after", "question": "remove", "objects": ["top"]})))  # still answering
+    wait_until(lambda: any(r["id"] == "after" and "answer" in r for r in replies()), TIMEOUT_S, "the next answer")

@@ -115,3 +115,21 @@ def test_a_clearing_order_spends_one_budget_over_all_its_steps(monkeypatch):
     assert cut.stopped_by == "budget" and 1 <= len(cut.steps) < 4
     assert [s.name for s in cut.steps] == [s.name for s in full.steps[:len(cut.steps)]]
     assert cut.to_dict()["stopped_by"] == "budget"
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"gravity_aligned_frames": []}, "gravity_aligned_frames: is empty; list the frames whose -z axis is gravity, or "
+                                     "[''] to accept scenes in every frame"),
+    ({"rerun.save_dir": "../../etc"}, "rerun.save_dir: must not climb out of a folder ('..'), got '../../etc'; give "
+                                      "the folder itself"),
+    ({"rerun.save_dir": "/tmp/rec/../../root"}, "rerun.save_dir: must not climb out of a folder ('..'), got "
+                                                "'/tmp/rec/../../root'; give the folder itself"),
+])
+def test_node_parameters_that_would_trust_every_frame_or_write_anywhere_are_refused(changes, message):
+    from ipe_ros.ros.params import PARAMETERS, config_from_values
+
+    values = {spec.name: spec.default for spec in PARAMETERS} | changes
+    with pytest.raises(ConfigError) as caught:
+        config_from_values(values)
+    assert str(caught.value) == message
+    config_from_values(values | {"gravity_aligned_frames": [""], "rerun.save_dir": "/tmp/recordings"})  # allowed

@@ -30,7 +30,7 @@ import numpy as np
 from . import queries, simulation
 from .config import ModelConfig, QuerySpec, SimSettings, SolverSettings
 from . import limits
-from .errors import BudgetExceeded, ConfigError, PhysicsError
+from .errors import BudgetExceeded, ConfigError, PhysicsError, shown
 from .estimate import wilson_interval, circular_mean
 from .perturb import draw_sample_inputs, is_deterministic, position_sigmas_m
 from .rollout import SampleTask, _decided_heights, collapse_heights, separated_world
@@ -871,6 +871,12 @@ def _field(data: dict, key: str, kind, default=None, *, path: str = ""):
     return value
 
 
+#: The fields each kind of question reads, besides id, question, samples and scene.
+_QUESTION_FIELDS = {"remove": {"objects"}, "support": {"threshold", "safe_below"}, "clear": {"target"},
+                    "place": {"object", "at", "region"},
+                    "push": {"object", "velocity_m_s", "point_m", "direction_sigma_deg", "speed_sigma"}}
+
+
 def question_from_dict(data) -> Question:
     """A question from parsed JSON::
 
@@ -889,6 +895,12 @@ def question_from_dict(data) -> Question:
     kind = data.get("question")
     if kind not in QUESTIONS:
         raise ConfigError("question", f"must be one of {', '.join(QUESTIONS)}, got {kind!r}"[:300])
+    unknown = sorted(set(data) - _QUESTION_FIELDS[kind] - {"id", "question", "samples", "scene"}, key=str)
+    if unknown:
+        key = unknown[0]
+        raise ConfigError(key if key.isidentifier() and len(key) <= 64 else f"[{shown(key)}]",
+                          f"unknown field of a {kind} question; allowed: "
+                                                  f"{', '.join(sorted(_QUESTION_FIELDS[kind] | {'id', 'samples', 'scene'}))}")
     request_id = data.get("id", "")
     if not isinstance(request_id, str) or len(request_id) > 128:
         raise ConfigError("id", "must be a string of at most 128 characters")

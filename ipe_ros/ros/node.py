@@ -47,12 +47,21 @@ from .diagnostics import diagnostics_msg
 LATCHED_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 INPUT_QOS = QoSProfile(depth=5, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+#: Questions are never dropped in our reader (every question gets exactly one reply): a flood is
+#: held back by reliable flow control instead of overwritten, and each one is answered "busy" at once.
+ASK_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
+#: Replies to questions: latched like the other outputs, deep enough that a burst of "busy" replies
+#: is not overwritten before it is delivered (a late joiner gets the latest ones; match them by id).
+ANSWER_QOS = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: The scene subscriptions per ``scene_reliability``: "both" accepts reliable and sensor-style publishers.
 SCENE_QOS = {"both": (ReliabilityPolicy.RELIABLE, ReliabilityPolicy.BEST_EFFORT),
              "reliable": (ReliabilityPolicy.RELIABLE,), "best_effort": (ReliabilityPolicy.BEST_EFFORT,)}
 #: How many recent scene messages are remembered to use each once (a few seconds of a 10 Hz stream).
 DUPLICATE_WINDOW = 64
 DIAGNOSTICS_PERIOD_S = 1.0
+#: Refused inputs logged per second at most (each is still answered and counted).
+REFUSAL_LOG_LINES_PER_S = 5
 
 
 class _IpeInterface:
@@ -69,6 +78,7 @@ class _IpeInterface:
         self._values = {spec.name: self.get_parameter(spec.name).value for spec in params.PARAMETERS}
         self._inputs: list = []  # subscriptions, service and timer of the answering state
         self._recently_seen: collections.deque = collections.deque(maxlen=DUPLICATE_WINDOW)
+        self._refusal_log_window_s, self._refusal_log_lines, self._refusals_not_logged = -1.0, 0, 0
         self.add_on_set_parameters_callback(self._on_set_parameters)
         return self._values
 
@@ -83,7 +93,7 @@ class _IpeInterface:
             self.create_publisher(Vector3Stamped, "~/fall_direction", LATCHED_QOS),
             self.create_publisher(MarkerArray, "~/markers", LATCHED_QOS),
             self.create_publisher(DiagnosticArray, "/diagnostics", 10),
-            self.create_publisher(String, "~/answer", LATCHED_QOS),
+            self.create_publisher(String, "~/answer", ANSWER_QOS),
             self.create_publisher(MarkerArray, "~/support_graph", LATCHED_QOS),
         ]
         (self._pub_prediction, self._pub_fraction, self._pub_probability, self._pub_direction, self._pub_markers,
@@ -120,7 +130,7 @@ class _IpeInterface:
                                                          callback_group=inputs, event_callbacks=quiet))
             self._inputs.append(self.create_subscription(String, "~/scene_json", self._once(self._on_scene_json),
                                                          qos, callback_group=inputs, event_callbacks=quiet))
-        self._inputs.append(self.create_subscription(String, "~/ask", self._on_ask, INPUT_QOS, callback_group=inputs))
+        self._inputs.append(self.create_subscription(String, "~/ask", self._on_ask, ASK_QOS, callback_group=inputs))
         self._inputs.append(self.create_service(Trigger, "~/predict", self._on_predict,
                                                 callback_group=MutuallyExclusiveCallbackGroup()))
         config = self.service.config
@@ -161,6 +171,20 @@ class _IpeInterface:
     def _log_error(self, text: str) -> None:
         self.get_logger().error(clip(text, 2000))
 
+    def _log_refusal(self, text: str) -> None:
+        """A refused input, logged at most REFUSAL_LOG_LINES_PER_S times a second: rclpy's logger
+        costs ~5 ms a line (it inspects the caller's frames), so a flood of bad inputs logged line
+        by line would hold up every reply. Lines left out are counted in the next one."""
+        now = time.monotonic()
+        if now - self._refusal_log_window_s >= 1.0:
+            self._refusal_log_window_s, self._refusal_log_lines = now, 0
+        if self._refusal_log_lines >= REFUSAL_LOG_LINES_PER_S:
+            self._refusals_not_logged += 1
+            return
+        self._refusal_log_lines += 1
+        skipped, self._refusals_not_logged = self._refusals_not_logged, 0
+        self._log_error(text + (f" ({skipped} refusals before this one not logged: too many)" if skipped else ""))
+
     def _log_info(self, text: str) -> None:
         self.get_logger().info(clip(text, 2000))
 
@@ -182,7 +206,7 @@ class _IpeInterface:
         """Count, log and answer a refused scene: its client hears why on ~/prediction, as for a failed prediction."""
         reason = clip(str(exc), 1000)
         self.service.reject(reason)
-        self._log_error(f"rejected scene on {topic}: {reason}")
+        self._log_refusal(f"rejected scene on {topic}: {reason}")
         self._pub_prediction.publish(answer_to_string(refusal_answer(reason, clip(scene_id, 128), stamp_ns,
                                                                      clip(frame_id, 256), topic)))
 
@@ -245,7 +269,7 @@ class _IpeInterface:
         except Exception as exc:  # noqa: BLE001 - no input may end the node
             refused = f"data: unreadable question ({type(exc).__name__})"
         if refused is not None:
-            self._log_error(f"question {request_id!r} refused: {refused}")
+            self._log_refusal(f"question {request_id!r} refused: {refused}")
             self._pub_answer.publish(ask_answer_to_string({"id": request_id, "error": clip(refused, 1000)}))
 
     def _publish_question_answer(self, message: dict, source: StampedScene) -> None:

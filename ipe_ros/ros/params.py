@@ -9,6 +9,7 @@ parameter. The engine's own types do the checking; only ROS-specific fields are 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from dataclasses import dataclass
 from typing import Any, Mapping
 
@@ -121,6 +122,9 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
     frame = values["frame_id"]
     if not isinstance(frame, str) or not frame.strip() or frame != frame.strip():
         raise ConfigError("frame_id", f"must be a non-empty frame name without surrounding spaces, got {frame!r}")
+    if not list(values["gravity_aligned_frames"]):  # [] would trust every frame by accident
+        raise ConfigError("gravity_aligned_frames", "is empty; list the frames whose -z axis is gravity, or [''] "
+                                                    "to accept scenes in every frame")
     frames = tuple(f for f in values["gravity_aligned_frames"] if f != "")
     if any(not f.strip() or f != f.strip() for f in frames):
         raise ConfigError("gravity_aligned_frames", f"frame names must be non-empty without surrounding spaces, got "
@@ -164,6 +168,10 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
         stop = AdaptiveStop(ci_width=width or None, deadline_s=deadline or None,
                             batch_size=anytime_batch_size(int(values["workers"])))
     save_dir = str(values["rerun.save_dir"]).strip()
+    if save_dir and (".." in Path(save_dir).parts or "\0" in save_dir):
+        # any participant on the DDS domain may set parameters: recordings stay where the operator points
+        raise ConfigError("rerun.save_dir", f"must not climb out of a folder ('..'), got {save_dir!r}; give the "
+                                            "folder itself")
     connect = str(values["rerun.connect_url"]).strip()
     return ServiceConfig(model=model, settings=settings, query=query,
                          seed=int(values["seed"]), max_objects=int(values["max_objects"]),

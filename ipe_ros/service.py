@@ -506,6 +506,10 @@ class PredictionService:
                                                     stamp_ns=item.stamp_ns,
                                                     rollouts_logged=config.rerun_rollouts_logged,
                                                     connect_url=config.rerun_connect_url)
+        except rerun_log.ViewerUnavailable as exc:  # the file is there; only the live view is missing
+            error = clip(f"streaming to the viewer failed: {exc}; the recording is in {path}", 600)
+            self._log_error(error)
+            return dataclasses.replace(answer, rrd_error=error)
         except Exception as exc:  # noqa: BLE001 - logging trouble must not cost the answer
             error = clip(f"writing {path} failed: {exc}", 600)
             self._log_error(error)

@@ -13,6 +13,7 @@ import json
 import math
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -277,3 +278,54 @@ def test_a_marker_of_denormal_size_is_refused_by_name():
 def test_the_cli_refuses_an_absurd_sigma_in_one_line(capsys):
     assert main(["predict", str(example_scene_path()), "--sigma", "1e308", "--json", "--workers", "0"]) == 2
     assert capsys.readouterr().err.strip() == "ipe: error: sigma_m: must be at most 10 m (check the units), got 1e+308"
+
+
+def _closed_port() -> int:
+    import socket
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]  # nothing listens there once closed
+
+
+def test_a_dead_viewer_never_holds_up_an_answer_and_is_reported(tmp_path):
+    port = _closed_port()
+    out = _Recorder()
+    config = ServiceConfig(model=ModelConfig(sigma_m=0.01, samples=2), rerun_save_dir=str(tmp_path),
+                           rerun_connect_url=f"rerun+http://127.0.0.1:{port}/proxy")
+    service = PredictionService(config, workers=0, publish=out.publish)
+    service.start()
+    try:
+        started = time.monotonic()
+        service.submit(_stamped(service, floor_scene(block("a", 0, 0, 0.1))))
+        _wait(out.done)
+        assert time.monotonic() - started < 10.0  # before: no answer within 80 s
+        answer = out.answers[0]
+        assert answer.rrd_error == (f"streaming to the viewer failed: no viewer at 127.0.0.1:{port} (Connection "
+                                    f"refused); the recording is in {tmp_path}/{Path(answer.rrd_path).name}")
+        assert Path(answer.rrd_path).stat().st_size > 0  # the file does not depend on the viewer
+        assert service.stats().rrd_failures == 1
+    finally:
+        started = time.monotonic()
+        service.close()
+        assert time.monotonic() - started < 2.0
+
+
+def test_a_viewer_that_accepts_and_stays_silent_is_left_to_a_helper_that_ends_itself(tmp_path):
+    import socket
+
+    from ipe_ros.viz import rerun_log
+
+    with socket.socket() as silent:  # accepts connections (kernel backlog), never answers
+        silent.bind(("127.0.0.1", 0))
+        silent.listen(8)
+        path = tmp_path / "x.rrd"
+        scene = floor_scene(block("a", 0, 0, 0.1))
+        prediction = predict(scene, ModelConfig(sigma_m=0.01, samples=1), preset("default"),
+                             QuerySpec(queries=frozenset({"fall"})), record_every=10, record_samples=1, check=None)
+        started = time.monotonic()
+        rerun_log.write_prediction_rrd(path, scene, prediction, answer=prediction.to_dict(), stamp_ns=0,
+                                       rollouts_logged=1, connect_url=f"rerun+http://127.0.0.1:{silent.getsockname()[1]}")
+        assert time.monotonic() - started < 3.0 and path.stat().st_size > 0  # before: no return within 80 s
+        helper = rerun_log._STREAMERS[-1]
+        assert helper.wait(timeout=15.0) == 1  # gave up by itself: flush timed out, os._exit

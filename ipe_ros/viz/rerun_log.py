@@ -28,6 +28,10 @@ from __future__ import annotations
 
 import json
 import math
+import socket
+import subprocess
+import sys
+import urllib.parse
 import uuid
 from pathlib import Path
 
@@ -256,31 +260,79 @@ def _outcome_names(prediction: Prediction) -> list[str]:
                                         ("fell_off_count", first.fell_off is not None)) if present]
 
 
+#: How long a live viewer may take to answer (TCP connect, then taking the recording) before it is
+#: given up on. The .rrd file never waits on the viewer: it is written first, on its own.
+VIEWER_TIMEOUT_S = 1.0
+#: Helper processes streaming recordings to a viewer (each ends itself; reaped as new ones start).
+_STREAMERS: list[subprocess.Popen] = []
+
+
+class ViewerUnavailable(RuntimeError):
+    """The recording was written to its file, but the live viewer cannot be reached (the message says why)."""
+
+
+def _viewer_problem(url: str, timeout_s: float) -> str | None:
+    """Why the viewer at ``url`` cannot be reached (None: something accepts connections there)."""
+    parsed = urllib.parse.urlsplit(url.removeprefix("rerun+"))
+    try:
+        port = parsed.port or (443 if parsed.scheme == "https" else 80)
+    except ValueError:
+        return f"{url!r} has no valid port"
+    if not parsed.hostname:
+        return f"{url!r} names no host"
+    try:
+        with socket.create_connection((parsed.hostname, port), timeout=timeout_s):
+            return None
+    except OSError as exc:
+        return f"no viewer at {parsed.hostname}:{port} ({exc.strerror or type(exc).__name__})"
+
+
+def stream_to_viewer(url: str, path: Path, recording_id: str) -> None:
+    """Send the written recording at ``path`` to the viewer at ``url`` without waiting for it:
+    ViewerUnavailable at once when nothing listens there (within VIEWER_TIMEOUT_S), otherwise a
+    helper process (ipe_ros.viz.stream_to_viewer) sends it and ends itself after VIEWER_TIMEOUT_S."""
+    _STREAMERS[:] = [p for p in _STREAMERS if p.poll() is None]
+    problem = _viewer_problem(url, VIEWER_TIMEOUT_S)
+    if problem is not None:
+        raise ViewerUnavailable(problem)
+    _STREAMERS.append(subprocess.Popen(
+        [sys.executable, "-m", "ipe_ros.viz.stream_to_viewer", url, str(path), recording_id, str(VIEWER_TIMEOUT_S)],
+        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, start_new_session=True))
+
+
 def write_prediction_rrd(path: str | Path, scene: Scene, prediction: Prediction, *, answer: dict,
                          stamp_ns: int, rollouts_logged: int, connect_url: str | None = None) -> int:
     """Write one ``.rrd`` for one prediction (and optionally stream it to a running viewer).
 
     ``answer`` is the JSON published for this prediction; returns how many rollouts were logged.
-    A viewer is only contacted when ``connect_url`` is given; nothing is ever spawned.
+    A viewer is only contacted when ``connect_url`` is given; no viewer is ever spawned. The file is
+    written first and on its own, then streamed by ``stream_to_viewer`` (ViewerUnavailable after
+    the file is written when nothing listens at the URL).
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     # one id per recording: a scene predicted twice (same name and stamp, new parameters) must not
     # be merged with its earlier recording by the viewer
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{scene.name}@{stamp_ns}/{uuid.uuid4().hex[:12]}")
+    recording_id = f"{scene.name}@{stamp_ns}/{uuid.uuid4().hex[:12]}"
     blueprint = prediction_blueprint(_rollout_bases(prediction, rollouts_logged), _outcome_names(prediction))
-    if connect_url:
-        rec.set_sinks(rr.FileSink(str(path)), rr.GrpcSink(connect_url), default_blueprint=blueprint)
-    else:
-        rec.save(str(path), default_blueprint=blueprint)
-    try:
+    logged = 0
+
+    def log_all(rec: rr.RecordingStream) -> None:
+        nonlocal logged
         log_scene(rec, scene)
         logged = log_rollouts(rec, scene, prediction, stamp_ns, rollouts_logged)
         log_outcomes(rec, prediction)
         log_answer(rec, scene, prediction, answer, stamp_ns)
+
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
+    rec.save(str(path), default_blueprint=blueprint)
+    try:
+        log_all(rec)
         rec.flush()
     finally:
         rec.disconnect()
+    if connect_url:
+        stream_to_viewer(connect_url, path, recording_id)
     return logged
 
 

@@ -5,7 +5,10 @@
 Every second or so the driver sends one of: a good scene (the example tower, the capped tower, a
 catalogue scene) on ``~/scene_json`` or ``~/scene``; a bad one (malformed or deeply nested JSON, a
 lone-surrogate name, a 1 MB list, NaN poses, 1e15 m positions, gravity 1e8, a 1e-9 m box, a marker
-of 1e-320 m); or a flood (20 scenes back to back, of which only the newest should be answered).
+of 1e-320 m); a question on ``~/ask`` (support, remove, push, place about the newest scene) or a
+hostile one (400 x 400 placements, 100,000 spots, a push 1e6 m away, 2 MB of padding, an unknown
+field, malformed JSON); or a flood (20 scenes back to back, of which only the newest should be
+answered, or 200 questions, each of which must get exactly one reply).
 Each good scene has a unique name, so its answer on ``~/prediction`` gives its latency (send to
 answer). The node's resident memory (itself and its worker processes, from /proc) is sampled every
 10 s. At the end the node gets SIGINT; the time it takes to exit and whether any process is left
@@ -39,7 +42,7 @@ from ipe_ros.engine import load_scenes  # noqa: E402
 from ipe_ros.engine.catalogue import capped_tower, scene_catalogue  # noqa: E402
 from ipe_ros.engine.examples import example_scene_path  # noqa: E402
 from ipe_ros.engine.scene_io import scene_to_dict, scene_to_json  # noqa: E402
-from ipe_ros.ros.node import LATCHED_QOS  # noqa: E402
+from ipe_ros.ros.node import ASK_QOS, LATCHED_QOS  # noqa: E402
 from msg_bridge.markers import scene_to_markers  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -105,6 +108,21 @@ def _bad_inputs(tower) -> list[tuple[str, object]]:
     ]
 
 
+def _questions() -> tuple[list[dict], list[dict]]:
+    """Good questions (about the node's newest scene) and hostile ones, without ids."""
+    cube = {"name": "new", "shape": {"type": "box", "extents_m": [0.1, 0.1, 0.1]}, "friction": 0.5, "restitution": 0.0}
+    good = [{"question": "support", "samples": 4}, {"question": "remove", "objects": ["block0"], "samples": 4},
+            {"question": "push", "object": "block9", "velocity_m_s": [1.0, 0.0], "samples": 4},
+            {"question": "place", "object": cube, "at": [[1.0, 0.0], [1.2, 0.3]], "samples": 4}]
+    hostile = [{"question": "place", "object": cube, "region": {"x_m": [-1, 1], "y_m": [-1, 1], "candidates": 400,
+                                                                 "yaws": 400}},
+               {"question": "place", "object": cube, "at": [[1.0 + 1e-4 * i, 0.0] for i in range(100_000)]},
+               {"question": "push", "object": "block9", "velocity_m_s": [1.0, 0.0], "point_m": [1e6, 0, 1e6]},
+               {"question": "support", "padding": "x" * 2_000_000}, {"question": "support", "sampels": 4},
+               {"question": "fly"}]
+    return good, hostile
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--minutes", type=float, default=30.0)
@@ -150,7 +168,19 @@ def main() -> int:
                 diagnostics[:] = [{kv.key: kv.value for kv in msg.status[0].values}
                                   | {"level": int.from_bytes(msg.status[0].level, "little")}]
 
+    asked: dict[str, int] = {}  # question id -> replies received
+    replies = {"answer": 0, "error": 0, "busy": 0}
+
+    def on_reply(msg: String) -> None:
+        data = json.loads(msg.data)
+        with lock:
+            asked[data["id"]] = asked.get(data["id"], 0) + 1
+            kind = "answer" if "answer" in data else "busy" if data.get("error", "").startswith("busy") else "error"
+            replies[kind] += 1
+
     client.create_subscription(String, "/ipe/prediction", on_answer, LATCHED_QOS)
+    client.create_subscription(String, "/ipe/answer", on_reply, ASK_QOS)
+    ask_pub = client.create_publisher(String, "/ipe/ask", ASK_QOS)
     client.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
     json_pub = client.create_publisher(String, "/ipe/scene_json", 10)
     marker_pub = client.create_publisher(MarkerArray, "/ipe/scene", 10)
@@ -163,7 +193,18 @@ def main() -> int:
     tower = load_scenes(example_scene_path())[0]
     goods = [tower, capped_tower(3.0)] + [s for s in scene_catalogue(7, 12) if len(s.objects) <= 12]
     bads = _bad_inputs(capped_tower(3.0))
-    counts = {"good": 0, "bad": 0, "flood": 0}
+    good_questions, hostile_questions = _questions()
+    counts = {"good": 0, "bad": 0, "flood": 0, "questions": 0, "hostile_questions": 0, "question_floods": 0}
+    question_serial = 0
+
+    def ask(question: dict) -> None:
+        nonlocal question_serial
+        question_serial += 1
+        key = f"q{question_serial}"
+        with lock:
+            asked.setdefault(key, 0)
+        text = json.dumps({"id": key, **question}) if question.get("question") != "fly" else '{"id": "%s", "question": ' % key
+        ask_pub.publish(String(data=text))
     memory: list[tuple[float, float]] = []
     start = time.monotonic()
     end = start + 60 * args.minutes
@@ -188,22 +229,38 @@ def main() -> int:
             memory.append((now - start, _rss_mb(family_now), _rss_mb([node.pid])))
             next_memory += 10.0
         draw = rng.random()
-        if draw < 0.6:
+        if draw < 0.45:
             send_good(rng.random() < 0.3)
             counts["good"] += 1
-        elif draw < 0.9:
+        elif draw < 0.65:
             kind, msg = rng.choice(bads)
             (json_pub if kind == "json" else marker_pub).publish(msg)
             counts["bad"] += 1
-        else:
+        elif draw < 0.78:
+            ask(rng.choice(good_questions))
+            counts["questions"] += 1
+        elif draw < 0.9:
+            ask(rng.choice(hostile_questions))
+            counts["hostile_questions"] += 1
+        elif draw < 0.95:
             for _ in range(20):
                 send_good(False)
             counts["flood"] += 1
+        else:
+            for _ in range(200):
+                ask(rng.choice(good_questions))
+            counts["question_floods"] += 1
         time.sleep(rng.uniform(0.5, 1.5))
         if node.poll() is not None:
             break
     alive_at_end = node.poll() is None
-    time.sleep(args.settle_s)  # let the last answers and diagnostics arrive
+    settled = time.monotonic() + args.settle_s  # let the last answers and diagnostics arrive,
+    while time.monotonic() < settled + 120:  # and every question still waiting get its reply
+        with lock:
+            waiting = sum(1 for n in asked.values() if n == 0)
+        if time.monotonic() >= settled and not waiting:
+            break
+        time.sleep(0.5)
     family = _family(node.pid)
     stop_started = time.monotonic()
     node.send_signal(signal.SIGINT)
@@ -223,11 +280,19 @@ def main() -> int:
 
     lat = np.array(latencies) if latencies else np.array([np.nan])
     rss = np.array([m for _, m, _ in memory])
+    times_min = np.array([t for t, _, _ in memory]) / 60
+    half = len(rss) // 2  # the trend after warm-up (imports, worker start, caches): flat or growing?
+    slope = float(np.polyfit(times_min[half:], rss[half:], 1)[0]) if len(rss) - half >= 3 else float("nan")
+    with lock:
+        unanswered = sum(1 for n in asked.values() if n == 0)
+        twice = sum(1 for n in asked.values() if n > 1)
     node_rss = np.array([m for _, _, m in memory])
     result = {
         "minutes": args.minutes, "date": time.strftime("%Y-%m-%d"), "sent": counts,
         "good_scenes_sent": counts["good"] + 20 * counts["flood"], "answers": answers,
         "answered_distinct_scenes": len(latencies), "node_alive_until_the_end": alive_at_end,
+        "questions": {"asked": len(asked), "replies": replies, "without_reply": unanswered, "replied_twice": twice},
+        "rss_slope_second_half_mb_per_10_min": 10 * slope,
         "latency_s": {f"p{q}": float(np.percentile(lat, q)) for q in (50, 90, 99)} | {"max": float(lat.max())},
         "rss_mb": {"first": float(rss[0]), "last": float(rss[-1]), "max": float(rss.max()),
                    "node_first": float(node_rss[0]), "node_last": float(node_rss[-1]),
@@ -243,7 +308,11 @@ def main() -> int:
           "`.venv/bin/python benchmarks/soak.py --minutes "
           f"{args.minutes:g}`; 2 workers, k = 8, budget 10 s, on this project's 2-core machine.", "",
           "| what | value |", "|---|---|",
-          f"| sent | {counts['good']} good scenes, {counts['bad']} bad inputs, {counts['flood']} floods of 20 |",
+          f"| sent | {counts['good']} good scenes, {counts['bad']} bad inputs, {counts['flood']} floods of 20; "
+          f"{counts['questions']} questions, {counts['hostile_questions']} hostile ones, "
+          f"{counts['question_floods']} floods of 200 questions |",
+          f"| question replies | {len(asked)} asked: {replies['answer']} answers, {replies['error']} errors, "
+          f"{replies['busy']} busy; {unanswered} without reply, {twice} replied twice |",
           f"| answers | {answers['ok']} ({answers['budget']} cut by the budget), {answers['error']} error answers |",
           f"| scenes rejected (diagnostics) | {d.get('scenes_rejected', '-')} |",
           f"| scenes dropped by keep-latest (diagnostics) | {d.get('scenes_dropped', '-')} |",
@@ -252,10 +321,11 @@ def main() -> int:
           f"p99 {result['latency_s']['p99']:.2f}, max {result['latency_s']['max']:.2f} |",
           f"| resident memory (node + workers), MB | first {rss[0]:.0f}, last {rss[-1]:.0f}, max {rss.max():.0f} |",
           f"| resident memory (node process alone), MB | first {node_rss[0]:.0f}, last {node_rss[-1]:.0f} |",
+          f"| memory trend over the second half, MB per 10 min | {10 * slope:+.1f} |",
           f"| SIGINT -> exit | {exit_s:.2f} s, exit code {code}, processes left: {len(left)} |", ""]
     (out / "soak.md").write_text("\n".join(md))
     print("\n".join(md))
-    return 0 if alive_at_end and not left and code == 0 else 1
+    return 0 if alive_at_end and not left and code == 0 and not unanswered and not twice else 1
 
 
 if __name__ == "__main__":

@@ -329,3 +329,24 @@ def test_a_viewer_that_accepts_and_stays_silent_is_left_to_a_helper_that_ends_it
         assert time.monotonic() - started < 3.0 and path.stat().st_size > 0  # before: no return within 80 s
         helper = rerun_log._STREAMERS[-1]
         assert helper.wait(timeout=15.0) == 1  # gave up by itself: flush timed out, os._exit
+
+
+@pytest.mark.parametrize("shape, message", [
+    ({"type": "convex", "vertices_m": [[0.1 * np.cos(a), 0.1 * np.sin(a), z] for a in np.linspace(0, 6.28, 50_000)
+                                       for z in (0.0, 0.1)]},
+     "objects[0] ('block0').shape.vertices_m: 100000 points exceed the maximum of 1024 for one hull; decimate the mesh"),
+    ({"type": "compound", "parts": [{"shape": {"type": "box", "extents_m": [0.01, 0.01, 0.01]},
+                                     "position_m": [0.01 * (i % 100), 0.01 * (i // 100), 0.0],
+                                     "orientation_xyzw": [0, 0, 0, 1]} for i in range(10_000)]},
+     "objects[0] ('block0').shape.parts: 10000 parts exceed the maximum of 256 for one compound; merge parts into hulls"),
+])
+def test_shapes_whose_geometry_alone_would_outrun_the_budget_are_refused_by_counting(shape, message):
+    from ipe_ros.engine import load_scenes
+
+    scene = scene_to_dict(load_scenes(example_scene_path())[0])
+    scene["objects"][0]["shape"] = shape
+    started = time.perf_counter()
+    with pytest.raises(SceneError) as caught:
+        scenes_from_json(json.dumps(scene))
+    assert str(caught.value) == message
+    assert time.perf_counter() - started < 5.0  # counted, never hulled (before: 12-14 s on a 10 s budget)

@@ -39,6 +39,13 @@ MAX_GRAVITY_M_S2 = 100.0
 MAX_SIGMA_M = 10.0
 #: Latent push phi (the support's horizontal acceleration): 10 g.
 MAX_PHI_M_S2 = 100.0
+#: Points of one convex hull. pybullet builds the hull in every rollout's world and tests contacts
+#: against its vertices: a 100,000-point hull ran a 10 s budget over by 2-4 s before the deadline
+#: could act. A robot's mesh decimated to ~100-1000 points loses nothing at the 1 mm scale.
+MAX_HULL_VERTICES = 1024
+#: Parts of one compound (the zoo's bowls and rings have 10-11), and hull points over all of them.
+MAX_COMPOUND_PARTS = 256
+MAX_COMPOUND_VERTICES = 4096
 #: Variants one question may ask about (place spots, or a region's candidates x yaws): each is one
 #: more simulated scene per sample, and each placement is first lowered onto what is below it
 #: (~2-8 ms of geometry). More is a search for a planner to run, not one question.

@@ -16,6 +16,7 @@ from typing import Union
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from . import limits
 from .errors import SceneError, shown
 
 Vec3 = tuple[float, float, float]
@@ -158,10 +159,20 @@ def validate_shape(shape, path: str) -> None:
         else:
             _positive(shape.length_m, f"{path}.length_m", "the length")
     elif isinstance(shape, ConvexHull):
+        if len(shape.vertices_m) > limits.MAX_HULL_VERTICES:  # counted before any hull is computed
+            raise SceneError(f"{path}.vertices_m", f"{len(shape.vertices_m)} points exceed the maximum of "
+                                                   f"{limits.MAX_HULL_VERTICES} for one hull; decimate the mesh")
         _hull_or_error(np.asarray(shape.vertices_m, float).reshape(-1, 3), f"{path}.vertices_m")
     elif isinstance(shape, Compound):
         if not shape.parts:
             raise SceneError(f"{path}.parts", "a compound needs at least one part")
+        if len(shape.parts) > limits.MAX_COMPOUND_PARTS:
+            raise SceneError(f"{path}.parts", f"{len(shape.parts)} parts exceed the maximum of "
+                                              f"{limits.MAX_COMPOUND_PARTS} for one compound; merge parts into hulls")
+        points = sum(len(getattr(part.shape, "vertices_m", ())) for part in shape.parts)
+        if points > limits.MAX_COMPOUND_VERTICES:
+            raise SceneError(f"{path}.parts", f"its hulls hold {points} points, more than the maximum of "
+                                              f"{limits.MAX_COMPOUND_VERTICES} for one compound; decimate them")
         for i, part in enumerate(shape.parts):
             if isinstance(part.shape, Compound):
                 raise SceneError(f"{path}.parts[{i}].shape", "parts must be simple shapes, not compounds; "

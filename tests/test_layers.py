@@ -113,3 +113,14 @@ def test_engine_cli_service_and_analyses_run_without_loading_ros():
     out = subprocess.run([sys.executable, "-c", RUNTIME_CHECK], capture_output=True, text=True, timeout=120, check=True)
     result = json.loads(out.stdout.strip().splitlines()[-1])
     assert result == {"ros": [], "samples": 2}
+
+
+@pytest.mark.parametrize("module", ["ipe_ros.cli", "ipe_ros.ros.node"])
+def test_starting_the_cli_or_the_node_imports_nothing_heavy_it_may_not_need(module):
+    """scipy.stats (0.5-1 s), matplotlib, rerun, pybullet and dask load on first use, not at start:
+    every CLI call and node start would pay for them."""
+    heavy = ("scipy.stats", "matplotlib", "rerun", "pybullet", "dask")
+    code = f"import sys, {module}; print(' '.join(m for m in {heavy!r} if m in sys.modules))"
+    loaded = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert loaded.returncode == 0, loaded.stderr
+    assert loaded.stdout.strip() == ""

@@ -189,3 +189,124 @@ def test_the_unmutated_inputs_reach_the_engine():
                  lambda: markers_to_scene(scene_to_markers(capped_tower(3.0), "world"), max_objects=20).scene):
         prediction = _through_the_node(read)
         assert prediction is not None and prediction.samples == CONFIG.model.samples
+
+
+# -- questions (~/ask) --------------------------------------------------------------------------------------
+QUESTIONS = [
+    {"id": "r1", "question": "support", "samples": 2},
+    {"id": "r2", "question": "remove", "objects": ["block0"], "samples": 2},
+    {"id": "r3", "question": "clear", "target": "block1", "samples": 2},
+    {"id": "r4", "question": "push", "object": "block1", "velocity_m_s": [1.0, 0.0], "point_m": [0.3, 0.0, 0.3],
+     "direction_sigma_deg": 5.0, "speed_sigma": 0.1, "samples": 2},
+    {"id": "r5", "question": "place", "object": {"name": "new", "shape": {"type": "box", "extents_m": [0.1, 0.1, 0.1]},
+                                                 "friction": 0.5, "restitution": 0.0},
+     "at": [[1.0, 0.0, 30.0]], "samples": 2},
+    {"id": "r6", "question": "place", "object": {"name": "new", "shape": {"type": "sphere", "radius_m": 0.05},
+                                                 "friction": 0.5, "restitution": 0.0},
+     "region": {"x_m": [0.8, 1.2], "y_m": [-0.2, 0.2], "yaw_deg": [0, 90], "candidates": 4, "yaws": 2}, "samples": 2},
+]
+QUESTION_SCENE = capped_tower(3.0)
+
+
+@st.composite
+def mutated_questions(draw):
+    question = copy.deepcopy(draw(st.sampled_from(QUESTIONS)))
+    paths = [p for p in _paths(question) if p]
+    for _ in range(draw(st.integers(1, 3))):
+        path = draw(st.sampled_from(paths))
+        parent = question
+        try:
+            for key in path[:-1]:
+                parent = parent[key]
+            old = parent[path[-1]]
+        except (KeyError, IndexError, TypeError):
+            continue
+        if not isinstance(parent, (dict, list)):  # an earlier mutation made it a string
+            continue
+        kind = draw(st.sampled_from(["number", "scale", "value", "delete", "extra"]))
+        if kind == "number":
+            parent[path[-1]] = draw(numbers)
+        elif kind == "scale" and isinstance(old, (int, float)) and not isinstance(old, bool):
+            parent[path[-1]] = old * 10.0 ** draw(st.integers(-6, 6)) * draw(st.sampled_from([1, -1]))
+        elif kind == "value":
+            parent[path[-1]] = draw(json_values)
+        elif kind == "delete" and isinstance(parent, dict):
+            del parent[path[-1]]
+        elif kind == "extra" and isinstance(parent, dict):
+            parent[draw(st.text(min_size=1, max_size=8))] = draw(json_values)
+    return question
+
+
+@settings(suppress_health_check=[HealthCheck.too_slow], deadline=None)
+@given(mutated_questions())
+def test_mutated_questions_are_answered_within_budget_or_refused_by_name(question):
+    """The node's question path: read (msg_bridge), then answer with the node's budget. Either a
+    one-line error naming a field, or a JSON answer within the budget (+ slack)."""
+    from ipe_ros.engine.actions import answer_question
+    from msg_bridge.ask_json import string_to_question
+
+    start = time.monotonic()
+    try:
+        parsed, _ = string_to_question(String(data=json.dumps(question)))
+        answer, _ = answer_question(QUESTION_SCENE, parsed, CONFIG.model, CONFIG.settings, seed=1,
+                                    budget_s=BUDGET_S)
+    except ValueError as exc:
+        _check_error(exc)
+        return
+    assert time.monotonic() - start <= BUDGET_S + BUDGET_SLACK_S
+    json.dumps(answer, allow_nan=False)
+
+
+# -- the result store --------------------------------------------------------------------------------------
+def _store_entry() -> tuple[str, dict]:
+    from ipe_ros.engine.rollout import run_sample
+    from ipe_ros.engine.sampler import make_tasks
+    from ipe_ros.engine.store import encode_entry
+
+    [task] = make_tasks(capped_tower(3.0), ModelConfig(sigma_m=0.02, samples=1), preset("default"),
+                        QuerySpec(queries=frozenset({"fall", "direction"})), 0)
+    return "k" * 64, json.loads(encode_entry(run_sample(task), "k" * 64))
+
+
+STORE_KEY, STORE_ENTRY = _store_entry()
+
+
+@st.composite
+def mutated_entries(draw):
+    entry = copy.deepcopy(STORE_ENTRY)
+    paths = [p for p in _paths(entry) if p]
+    for _ in range(draw(st.integers(1, 3))):
+        path = draw(st.sampled_from(paths))
+        parent = entry
+        try:
+            for key in path[:-1]:
+                parent = parent[key]
+            parent[path[-1]]  # still there (an earlier mutation may have removed it)
+        except (KeyError, IndexError, TypeError):
+            continue
+        if not isinstance(parent, (dict, list)):  # an earlier mutation made it a string
+            continue
+        kind = draw(st.sampled_from(["value", "delete", "extra", "text"]))
+        if kind == "value":
+            parent[path[-1]] = draw(json_values)
+        elif kind == "delete" and isinstance(parent, dict):
+            del parent[path[-1]]
+        elif kind == "extra" and isinstance(parent, dict):
+            parent[draw(st.text(min_size=1, max_size=8))] = draw(json_values)
+        elif kind == "text" and isinstance(parent[path[-1]], str):
+            parent[path[-1]] = draw(st.text(max_size=40))
+    return json.dumps(entry).encode()
+
+
+@settings(suppress_health_check=[HealthCheck.too_slow])
+@given(mutated_entries() | st.binary(max_size=200))
+def test_any_store_entry_reads_back_as_a_result_or_is_refused_in_one_line(data):
+    from ipe_ros.engine.rollout import SampleOutcome
+    from ipe_ros.engine.store import StoreEntryError, decode_entry
+
+    try:
+        result = decode_entry(data, STORE_KEY)
+    except StoreEntryError as exc:
+        assert "\n" not in str(exc) and len(str(exc)) < 400
+        return
+    assert isinstance(result, SampleOutcome)  # the only type this key's entry may hold

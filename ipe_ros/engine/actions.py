@@ -35,7 +35,7 @@ from .estimate import wilson_interval, circular_mean
 from .perturb import draw_sample_inputs, is_deterministic, position_sigmas_m
 from .rollout import SampleTask, _decided_heights, collapse_heights, separated_world
 from .sampler import MapFn, check_budget, rollout_cost
-from .scene import Body, Scene, lowest_z_m, validate_scene
+from .scene import Body, Scene, lowest_z_m, validate_body, validate_scene
 from .shapes import rotation_matrix
 
 #: P(anything else falls) below this makes an object safe to remove now.
@@ -789,6 +789,7 @@ class _Lowering:
 def _lowered(scene: Scene, body: Body, spots, deadline: _Deadline) -> list[Body]:
     """``body`` at each (x, y, yaw_rad) spot, lowered onto what is below; the question's budget
     checked between spots."""
+    validate_body(body, "object")  # before pybullet sees its shape (the scene check comes after lowering)
     lowering = _Lowering(scene, body)
     bodies = []
     for x, y, yaw in spots:
@@ -1024,4 +1025,6 @@ def new_object_from_dict(data, path: str) -> Body:
 
     if not isinstance(data, dict):
         raise ConfigError(path, "must be the new object in the scene format (/2)")
-    return object_from_dict({"position_m": [0.0, 0.0, 0.0], "orientation_xyzw": [0.0, 0.0, 0.0, 1.0], **data}, path)
+    body = object_from_dict({"position_m": [0.0, 0.0, 0.0], "orientation_xyzw": [0.0, 0.0, 0.0, 1.0], **data}, path)
+    validate_body(body, path)  # its own fields now: the geometry that lowers it comes before the scene check
+    return body

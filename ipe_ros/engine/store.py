@@ -23,6 +23,7 @@ import base64
 import dataclasses
 import hashlib
 import json
+import math
 import os
 import stat
 import sys
@@ -32,6 +33,8 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, TypeVar
 
 import numpy as np
+
+from .errors import clip, shown
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -48,7 +51,11 @@ _DTYPES = frozenset({"bool", "int8", "int16", "int32", "int64", "uint8", "uint16
 
 
 class StoreEntryError(ValueError):
-    """A stored entry that is not a result of ours; the message says what is wrong with it."""
+    """A stored entry that is not a result of ours; the message (one line, at most 300 characters)
+    says what is wrong with it."""
+
+    def __init__(self, problem: str):
+        super().__init__(clip(problem.replace("\n", " "), 300))
 
 
 def result_key(fn: Callable, item) -> str:
@@ -193,7 +200,7 @@ def decode_entry(data: bytes, key: str):
     if not isinstance(document, dict) or document.get("format") != ENTRY_FORMAT:
         raise StoreEntryError(f"not an {ENTRY_FORMAT} entry")
     if document.get("version") != STORE_VERSION:
-        raise StoreEntryError(f"version {document.get('version')!r}, this engine writes {STORE_VERSION}")
+        raise StoreEntryError(f"version {shown(document.get('version'))}, this engine writes {STORE_VERSION}")
     if document.get("key") != key:
         raise StoreEntryError("stored under another result's name (its key differs)")
     if "result" not in document:
@@ -202,10 +209,12 @@ def decode_entry(data: bytes, key: str):
         result = _decode(document["result"], _result_types(), "result")
     except StoreEntryError:
         raise
-    except (TypeError, ValueError, KeyError) as exc:  # a constructor refusing what it was given
+    except (TypeError, ValueError, KeyError, OverflowError) as exc:  # a constructor refusing what it was given
         raise StoreEntryError(f"result does not fit its type ({type(exc).__name__}: {str(exc)[:80]})") from None
     except RecursionError:
         raise StoreEntryError("nested deeper than any result") from None
+    if type(result) not in _result_types().values():  # a bare number, list or null is no result
+        raise StoreEntryError(f"result: a {type(result).__name__}, not one of the stored result types")
     _check_shapes(result)
     return result
 
@@ -257,7 +266,7 @@ def _decode(value, types: dict[str, type], where: str):
     if set(value) == {"dataclass", "fields"}:
         cls = types.get(value["dataclass"]) if isinstance(value["dataclass"], str) else None
         if cls is None:
-            raise StoreEntryError(f"{where}: {str(value['dataclass'])[:40]!r} is not a result type")
+            raise StoreEntryError(f"{where}: {shown(value['dataclass'])} is not a result type")
         fields = value["fields"]
         names = {f.name for f in dataclasses.fields(cls)}
         if not isinstance(fields, dict) or set(fields) != names:
@@ -270,23 +279,23 @@ def _decode(value, types: dict[str, type], where: str):
                 raise StoreEntryError(f"{where}.{name}: a {type(decoded[name]).__name__} where a "
                                       f"{hints[name]} belongs")
         return cls(**decoded)
-    raise StoreEntryError(f"{where}: an object of unknown kind (keys {sorted(value)[:4]})")
+    raise StoreEntryError(f"{where}: an object of unknown kind (keys {shown(sorted(value)[:4])})")
 
 
 def _decode_array(value: dict[str, Any], where: str):
     dtype, shape, data = value["array"], value["shape"], value["data"]
     if dtype not in _DTYPES:
-        raise StoreEntryError(f"{where}: arrays of {str(dtype)[:20]!r} are not allowed")
-    if not (isinstance(shape, list) and all(isinstance(n, int) and not isinstance(n, bool) and n >= 0
-                                            for n in shape)):
-        raise StoreEntryError(f"{where}: shape must be a list of counts")
+        raise StoreEntryError(f"{where}: arrays of {shown(dtype)} are not allowed")
+    if not (isinstance(shape, list) and len(shape) <= 32 and all(isinstance(n, int) and not isinstance(n, bool)
+                                                                 and 0 <= n < 2**40 for n in shape)):
+        raise StoreEntryError(f"{where}: shape must be a list of at most 32 counts")
     try:
         raw = base64.b64decode(data, validate=True) if isinstance(data, str) else None
     except ValueError:
         raw = None
     if raw is None:
         raise StoreEntryError(f"{where}: data is not base64")
-    if len(raw) != int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize:
+    if len(raw) != math.prod(shape) * np.dtype(dtype).itemsize:  # Python ints: no overflow
         raise StoreEntryError(f"{where}: {len(raw)} bytes do not fill a {dtype} array of shape {tuple(shape)}")
     array = np.frombuffer(raw, dtype=dtype).reshape(shape).copy()
     if value["scalar"] is True and array.shape == ():

@@ -553,9 +553,10 @@ class QuestionService:
     def start(self) -> None:
         self._thread.start()
 
-    def close(self, timeout_s: float = 1.5, reason: str = "the node is shutting down") -> None:
+    def close(self, timeout_s: float = 1.5, reason: str = "the node is shutting down", join: bool = True) -> None:
         """Stop taking questions; every one waiting or in flight is answered with an error naming
-        ``reason`` (the question thread publishes nothing once closing)."""
+        ``reason`` (the question thread publishes nothing once closing). ``join=False``: return at
+        once; the thread ends when the pool it waits on closes (see ``join``)."""
         with self._cond:
             self._closing = True
             abandoned = list(self._queue) + ([self._current] if self._current is not None else [])
@@ -564,6 +565,10 @@ class QuestionService:
         for question, source in abandoned:
             self._deliver({**_question_head(question, source), "error": f"{reason}: the question was cancelled"},
                           source, question)
+        if join:
+            self.join(timeout_s)
+
+    def join(self, timeout_s: float) -> None:
         if self._thread.is_alive():
             self._thread.join(timeout_s)
 

@@ -76,9 +76,9 @@ def test_signal_ends_the_node_and_its_workers(signum):
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
-def test_a_signal_mid_prediction_ends_the_node_within_2_s_leaving_no_process(signum):
-    """A long prediction (paper settings, k = 400) is running when the signal comes: the node must
-    not wait for it; workers still busy are terminated."""
+def test_a_signal_mid_prediction_and_mid_question_ends_the_node_within_2_s_leaving_no_process(signum):
+    """A long prediction (paper settings, k = 400) and a long question (a support graph, k = 400) are
+    running when the signal comes: the node must wait for neither; workers still busy are terminated."""
     if sys.platform != "linux":
         pytest.skip("reads the process tree from /proc")
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(domain_id_for_tests()))
@@ -90,6 +90,18 @@ def test_a_signal_mid_prediction_ends_the_node_within_2_s_leaving_no_process(sig
         sent = subprocess.run([sys.executable, "-m", "ipe_ros.ros.send_scene", "ipe_ros/data/example_tower.json",
                                "--timeout", "5"], env=env, capture_output=True, text=True, timeout=120)
         assert "sent example_tower" in sent.stderr and sent.returncode != 0, sent.stderr  # ~90 s of work runs
+        from std_msgs.msg import String
+
+        from ipe_ros.ros.node import ASK_QOS
+        from tests.ros_harness import RosHarness
+
+        asker = RosHarness()
+        try:
+            asker.publisher(String, "/ipe/ask", ASK_QOS).publish(String(data=json.dumps(
+                {"id": "long", "question": "support", "samples": 400})))  # about the scene sent: minutes of work
+            time.sleep(1.0)  # a fixed wait is all a test outside the process has: the question starts in ms
+        finally:
+            asker.close()
         family = _descendants(proc.pid)
         sent_at = time.monotonic()
         proc.send_signal(signum)

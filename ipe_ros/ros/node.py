@@ -151,11 +151,15 @@ class _IpeInterface:
     def _close_services(self, reason: str = "the node is shutting down") -> bool:
         """End the question and prediction services and their workers, answering what is waiting or
         in flight with an error naming ``reason``; False when none was open."""
+        # both stop taking work first; the pool's close then ends whatever a question thread waits on,
+        # so the two never wait one after the other (that took shutdown past 2 s mid-question)
         if self.questions is not None:
-            self.questions.close(reason=reason)
+            self.questions.close(reason=reason, join=False)
         opened = self.service is not None
         if opened:
             self.service.close(reason=reason)
+        if self.questions is not None:
+            self.questions.join(0.5)
         self.service = self.questions = None
         return opened
 

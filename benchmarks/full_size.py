@@ -31,7 +31,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 def stored_samples(folder: Path) -> int:
     """Results ResumableMap holds: one file per sample (every phi value of it)."""
-    return sum(1 for _ in folder.glob("*/*.pkl")) if folder.is_dir() else 0
+    return sum(1 for _ in folder.glob("*/*.json")) if folder.is_dir() else 0
 
 
 def _stop(signum, frame):

@@ -170,11 +170,15 @@ def main() -> int:
 
     asked: dict[str, int] = {}  # question id -> replies received
     replies = {"answer": 0, "error": 0, "busy": 0}
+    unreadable = {"sent": 0, "replies": 0}  # malformed JSON: its id cannot be read, so the reply carries ""
 
     def on_reply(msg: String) -> None:
         data = json.loads(msg.data)
         with lock:
-            asked[data["id"]] = asked.get(data["id"], 0) + 1
+            if data["id"] == "":
+                unreadable["replies"] += 1
+            else:
+                asked[data["id"]] = asked.get(data["id"], 0) + 1
             kind = "answer" if "answer" in data else "busy" if data.get("error", "").startswith("busy") else "error"
             replies[kind] += 1
 
@@ -201,9 +205,13 @@ def main() -> int:
         nonlocal question_serial
         question_serial += 1
         key = f"q{question_serial}"
+        malformed = question.get("question") == "fly"
         with lock:
-            asked.setdefault(key, 0)
-        text = json.dumps({"id": key, **question}) if question.get("question") != "fly" else '{"id": "%s", "question": ' % key
+            if malformed:
+                unreadable["sent"] += 1
+            else:
+                asked.setdefault(key, 0)
+        text = '{"id": "%s", "question": ' % key if malformed else json.dumps({"id": key, **question})
         ask_pub.publish(String(data=text))
     memory: list[tuple[float, float]] = []
     start = time.monotonic()
@@ -257,7 +265,7 @@ def main() -> int:
     settled = time.monotonic() + args.settle_s  # let the last answers and diagnostics arrive,
     while time.monotonic() < settled + 120:  # and every question still waiting get its reply
         with lock:
-            waiting = sum(1 for n in asked.values() if n == 0)
+            waiting = sum(1 for n in asked.values() if n == 0) + unreadable["sent"] - unreadable["replies"]
         if time.monotonic() >= settled and not waiting:
             break
         time.sleep(0.5)
@@ -291,7 +299,8 @@ def main() -> int:
         "minutes": args.minutes, "date": time.strftime("%Y-%m-%d"), "sent": counts,
         "good_scenes_sent": counts["good"] + 20 * counts["flood"], "answers": answers,
         "answered_distinct_scenes": len(latencies), "node_alive_until_the_end": alive_at_end,
-        "questions": {"asked": len(asked), "replies": replies, "without_reply": unanswered, "replied_twice": twice},
+        "questions": {"asked": len(asked), "replies": replies, "without_reply": unanswered, "replied_twice": twice,
+                      "unreadable": unreadable},
         "rss_slope_second_half_mb_per_10_min": 10 * slope,
         "latency_s": {f"p{q}": float(np.percentile(lat, q)) for q in (50, 90, 99)} | {"max": float(lat.max())},
         "rss_mb": {"first": float(rss[0]), "last": float(rss[-1]), "max": float(rss.max()),
@@ -312,7 +321,8 @@ def main() -> int:
           f"{counts['questions']} questions, {counts['hostile_questions']} hostile ones, "
           f"{counts['question_floods']} floods of 200 questions |",
           f"| question replies | {len(asked)} asked: {replies['answer']} answers, {replies['error']} errors, "
-          f"{replies['busy']} busy; {unanswered} without reply, {twice} replied twice |",
+          f"{replies['busy']} busy; {unanswered} without reply, {twice} replied twice; {unreadable['sent']} "
+          f"unreadable (malformed JSON, no id to echo): {unreadable['replies']} replies with id \"\" |",
           f"| answers | {answers['ok']} ({answers['budget']} cut by the budget), {answers['error']} error answers |",
           f"| scenes rejected (diagnostics) | {d.get('scenes_rejected', '-')} |",
           f"| scenes dropped by keep-latest (diagnostics) | {d.get('scenes_dropped', '-')} |",
@@ -325,7 +335,8 @@ def main() -> int:
           f"| SIGINT -> exit | {exit_s:.2f} s, exit code {code}, processes left: {len(left)} |", ""]
     (out / "soak.md").write_text("\n".join(md))
     print("\n".join(md))
-    return 0 if alive_at_end and not left and code == 0 and not unanswered and not twice else 1
+    every_question_once = not unanswered and not twice and unreadable["sent"] == unreadable["replies"]
+    return 0 if alive_at_end and not left and code == 0 and every_question_once else 1
 
 
 if __name__ == "__main__":

@@ -107,6 +107,9 @@ def test_soak_benchmark_runs_the_node_under_mixed_input_and_reports(tmp_path):
     assert report["node_alive_until_the_end"] and report["processes_left"] == [] and report["exit_code"] == 0
     assert report["answers"]["ok"] >= 1 and report["sigint_exit_s"] < 2.0
     assert int(report["diagnostics_at_end"]["scenes_rejected"]) >= 1 or report["sent"]["bad"] == 0
+    questions = report["questions"]  # every question exactly one reply, floods and hostile ones included
+    assert (questions["without_reply"], questions["replied_twice"]) == (0, 0)
+    assert questions["unreadable"]["sent"] == questions["unreadable"]["replies"]
 
 
 def test_vision_benchmark_writes_renders_and_mh_steps_per_second(tmp_path):

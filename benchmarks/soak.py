@@ -110,7 +110,8 @@ def _bad_inputs(tower) -> list[tuple[str, object]]:
 
 def _questions() -> tuple[list[dict], list[dict]]:
     """Good questions (about the node's newest scene) and hostile ones, without ids."""
-    cube = {"name": "new", "shape": {"type": "box", "extents_m": [0.1, 0.1, 0.1]}, "friction": 0.5, "restitution": 0.0}
+    cube = {"name": "new", "shape": {"type": "box", "extents_m": [0.1, 0.1, 0.1]}, "mass_kg": 1.0, "friction": 0.5,
+            "restitution": 0.0}
     good = [{"question": "support", "samples": 4}, {"question": "remove", "objects": ["block0"], "samples": 4},
             {"question": "push", "object": "block9", "velocity_m_s": [1.0, 0.0], "samples": 4},
             {"question": "place", "object": cube, "at": [[1.0, 0.0], [1.2, 0.3]], "samples": 4}]

@@ -194,18 +194,18 @@ def test_the_unmutated_inputs_reach_the_engine():
 # -- questions (~/ask) --------------------------------------------------------------------------------------
 QUESTIONS = [
     {"id": "r1", "question": "support", "samples": 2},
-    {"id": "r2", "question": "remove", "objects": ["block0"], "samples": 2},
-    {"id": "r3", "question": "clear", "target": "block1", "samples": 2},
-    {"id": "r4", "question": "push", "object": "block1", "velocity_m_s": [1.0, 0.0], "point_m": [0.3, 0.0, 0.3],
+    {"id": "r2", "question": "remove", "objects": ["box0"], "samples": 2},
+    {"id": "r3", "question": "clear", "target": "box1", "samples": 2},
+    {"id": "r4", "question": "push", "object": "box1", "velocity_m_s": [1.0, 0.0], "point_m": [0.1, 0.0, 0.5],
      "direction_sigma_deg": 5.0, "speed_sigma": 0.1, "samples": 2},
-    {"id": "r5", "question": "place", "object": {"name": "new", "shape": {"type": "box", "extents_m": [0.1, 0.1, 0.1]},
+    {"id": "r5", "question": "place", "object": {"name": "new", "shape": {"type": "box", "extents_m": [0.1, 0.1, 0.1]}, "mass_kg": 1.0,
                                                  "friction": 0.5, "restitution": 0.0},
-     "at": [[1.0, 0.0, 30.0]], "samples": 2},
-    {"id": "r6", "question": "place", "object": {"name": "new", "shape": {"type": "sphere", "radius_m": 0.05},
+     "at": [[0.6, 0.0, 30.0]], "samples": 2},
+    {"id": "r6", "question": "place", "object": {"name": "new", "shape": {"type": "sphere", "radius_m": 0.05}, "mass_kg": 1.0,
                                                  "friction": 0.5, "restitution": 0.0},
-     "region": {"x_m": [0.8, 1.2], "y_m": [-0.2, 0.2], "yaw_deg": [0, 90], "candidates": 4, "yaws": 2}, "samples": 2},
+     "region": {"x_m": [0.5, 0.9], "y_m": [-0.2, 0.2], "yaw_deg": [0, 90], "candidates": 4, "yaws": 2}, "samples": 2},
 ]
-QUESTION_SCENE = capped_tower(3.0)
+QUESTION_SCENE = capped_tower(3.0)  # box0..box2, a cone on top, a ball at x = -1
 
 
 @st.composite
@@ -310,3 +310,14 @@ def test_any_store_entry_reads_back_as_a_result_or_is_refused_in_one_line(data):
         assert "\n" not in str(exc) and len(str(exc)) < 400
         return
     assert isinstance(result, SampleOutcome)  # the only type this key's entry may hold
+
+
+def test_the_unmutated_questions_are_answered():
+    """The fuzz starts from questions the engine answers (else it would only exercise refusals)."""
+    from ipe_ros.engine.actions import answer_question
+    from msg_bridge.ask_json import string_to_question
+
+    for question in QUESTIONS:
+        parsed, _ = string_to_question(String(data=json.dumps(question)))
+        answer, _ = answer_question(QUESTION_SCENE, parsed, CONFIG.model, CONFIG.settings, seed=1, budget_s=BUDGET_S)
+        json.dumps(answer, allow_nan=False)

@@ -399,7 +399,8 @@ def test_every_question_gets_exactly_one_reply_under_a_flood_and_when_too_large(
     ask.publish(String(data=json.dumps({"id": "huge", "question": "support", "note": "x" * 16_500_000})))
     region = {"x_m": [-1, 1], "y_m": [-1, 1], "candidates": 400, "yaws": 400}
     ask.publish(String(data=json.dumps({"id": "search", "question": "place", "region": region, "object": {
-        "name": "new", "shape": {"type": "box", "extents_m": [0.1, 0.1, 0.1]}, "friction": 0.5, "restitution": 0.0}})))
+        "name": "new", "shape": {"type": "box", "extents_m": [0.1, 0.1, 0.1]}, "mass_kg": 1.0, "friction": 0.5,
+        "restitution": 0.0}})))
     replies = lambda: [json.loads(m.data) for m in list(got)]  # noqa: E731
     wait_until(lambda: len(got) >= flood + 2, 120.0, f"{flood + 2} replies")
     counts = collections.Counter(r["id"] for r in replies())

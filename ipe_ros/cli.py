@@ -46,6 +46,10 @@ from .engine.scene_io import RefusedScene, write_scenes
 from .engine.zoo import FAMILIES, scene_zoo
 
 EXIT_BAD_INPUT = 2
+#: ``analysis.experiments.EXPERIMENTS`` and ``analysis.human.SCALES`` by name (tests keep them equal):
+#: importing the analyses loads scipy.stats, ~1 s that every other command would pay at start.
+EXPERIMENT_NAMES = ("fall", "direction", "mass", "far", "bump", "samples", "features", "vision")
+HUMAN_SCALES = ("1-7", "unit", "degrees", "radians", "metres")
 #: End penetrations above this (of a body's smallest extent) are shown in the table.
 NOTABLE_PENETRATION = 0.01
 
@@ -175,10 +179,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     sub.add_parser("demo", help="predict on the built-in example tower (IPE and ground truth)")
 
-    from .analysis.experiments import EXPERIMENTS
-    from .analysis.human import SCALES
     e = sub.add_parser("experiment", help="rerun one of the paper's model analyses; writes JSON, Markdown, PNG")
-    e.add_argument("name", choices=[*EXPERIMENTS, "all"])
+    e.add_argument("name", choices=[*EXPERIMENT_NAMES, "all"])
     e.add_argument("--quick", action="store_true", help="few stimuli and samples (minutes; what CI runs)")
     e.add_argument("--out", default="experiments", help="output folder (default: ./experiments)")
     e.add_argument("--data", default=None, help="the authors' stimuli (default: $IPE_SHARED_DATA or "
@@ -196,7 +198,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--preset", default=DEFAULT_PRESET, choices=sorted(PRESETS))
     e.add_argument("--resamples", type=int, default=10_000, help="bootstrap resamples (paper: 10 000)")
     e.add_argument("--human", default=None, help="CSV with columns stimulus,response (people's judgments)")
-    e.add_argument("--human-scale", default=None, choices=SCALES, help="what the responses are measured in")
+    e.add_argument("--human-scale", default=None, choices=HUMAN_SCALES, help="what the responses are measured in")
     e.add_argument("--vision-resolution", type=int, default=None, metavar="PX",
                    help="vision: rendered image size (default 256, the SI's; blur and likelihood SD scale with it)")
     return parser

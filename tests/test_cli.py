@@ -210,3 +210,11 @@ def test_a_file_with_bad_scenes_answers_every_good_one_and_reports_each_refused_
     none = run_cli("predict", str(mixed), "--samples", "2", "--budget", "1")
     assert none.returncode == 2
     assert none.stderr.splitlines()[-1] == f"ipe: error: {mixed}: none of its 2 scenes can be answered (each refusal is reported)"
+
+
+def test_the_parsers_experiment_names_and_scales_are_the_analyses_own():
+    from ipe_ros import cli
+    from ipe_ros.analysis.experiments import EXPERIMENTS
+    from ipe_ros.analysis.human import SCALES
+
+    assert cli.EXPERIMENT_NAMES == tuple(EXPERIMENTS) and cli.HUMAN_SCALES == SCALES

@@ -120,7 +120,8 @@ def test_starting_the_cli_or_the_node_imports_nothing_heavy_it_may_not_need(modu
     """scipy.stats (0.5-1 s), matplotlib, rerun, pybullet and dask load on first use, not at start:
     every CLI call and node start would pay for them."""
     heavy = ("scipy.stats", "matplotlib", "rerun", "pybullet", "dask")
-    code = f"import sys, {module}; print(' '.join(m for m in {heavy!r} if m in sys.modules))"
+    start = "import ipe_ros.cli as c; c.build_parser()" if module == "ipe_ros.cli" else f"import {module}"
+    code = f"import sys; {start}; print(' '.join(m for m in {heavy!r} if m in sys.modules))"
     loaded = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
     assert loaded.returncode == 0, loaded.stderr
     assert loaded.stdout.strip() == ""

@@ -100,35 +100,49 @@ def _paths(node, prefix=()):
             yield from _paths(value, prefix + (i,))
 
 
-PATHS = [p for p in _paths(BASE) if p]
 numbers = st.one_of(st.floats(), st.integers(min_value=-10**30, max_value=10**30),
                     st.sampled_from([0.0, -0.0, 1e-320, 1e-9, 1e15, 1e300, -1e300, 5e-324]))
 
 
-@st.composite
-def mutated_scenes(draw):
-    scene = copy.deepcopy(BASE)
+MUTATIONS = ("number", "scale", "value", "delete", "extra")
+
+
+def _mutated(draw, base, scale_exponent: int = 0, kinds: tuple[str, ...] = MUTATIONS):
+    """A copy of ``base`` with 1-3 of its values replaced (a number, the value scaled by 10^+-n, any
+    JSON value, any text where it was text), deleted, or given a sibling key."""
+    document = copy.deepcopy(base)
+    paths = [p for p in _paths(document) if p]
     for _ in range(draw(st.integers(1, 3))):
-        path = draw(st.sampled_from(PATHS))
-        parent = scene
+        path = draw(st.sampled_from(paths))
+        parent = document
         try:
             for key in path[:-1]:
                 parent = parent[key]
             old = parent[path[-1]]
         except (KeyError, IndexError, TypeError):
             continue
-        kind = draw(st.sampled_from(["number", "scale", "value", "delete", "extra"]))
+        if not isinstance(parent, (dict, list)):  # an earlier mutation made it a string
+            continue
+        kind = draw(st.sampled_from(kinds))
         if kind == "number":
             parent[path[-1]] = draw(numbers)
         elif kind == "scale" and isinstance(old, (int, float)) and not isinstance(old, bool):
-            parent[path[-1]] = old * 10.0 ** draw(st.integers(-12, 12)) * draw(st.sampled_from([1, -1]))
+            exponent = draw(st.integers(-scale_exponent, scale_exponent))
+            parent[path[-1]] = old * 10.0 ** exponent * draw(st.sampled_from([1, -1]))
         elif kind == "value":
             parent[path[-1]] = draw(json_values)
         elif kind == "delete" and isinstance(parent, dict):
             del parent[path[-1]]
         elif kind == "extra" and isinstance(parent, dict):
             parent[draw(st.text(min_size=1, max_size=8))] = draw(json_values)
-    return scene
+        elif kind == "text" and isinstance(old, str):
+            parent[path[-1]] = draw(st.text(max_size=40))
+    return document
+
+
+@st.composite
+def mutated_scenes(draw):
+    return _mutated(draw, BASE, 12)
 
 
 @settings(suppress_health_check=[HealthCheck.too_slow])
@@ -210,31 +224,7 @@ QUESTION_SCENE = capped_tower(3.0)  # box0..box2, a cone on top, a ball at x = -
 
 @st.composite
 def mutated_questions(draw):
-    question = copy.deepcopy(draw(st.sampled_from(QUESTIONS)))
-    paths = [p for p in _paths(question) if p]
-    for _ in range(draw(st.integers(1, 3))):
-        path = draw(st.sampled_from(paths))
-        parent = question
-        try:
-            for key in path[:-1]:
-                parent = parent[key]
-            old = parent[path[-1]]
-        except (KeyError, IndexError, TypeError):
-            continue
-        if not isinstance(parent, (dict, list)):  # an earlier mutation made it a string
-            continue
-        kind = draw(st.sampled_from(["number", "scale", "value", "delete", "extra"]))
-        if kind == "number":
-            parent[path[-1]] = draw(numbers)
-        elif kind == "scale" and isinstance(old, (int, float)) and not isinstance(old, bool):
-            parent[path[-1]] = old * 10.0 ** draw(st.integers(-6, 6)) * draw(st.sampled_from([1, -1]))
-        elif kind == "value":
-            parent[path[-1]] = draw(json_values)
-        elif kind == "delete" and isinstance(parent, dict):
-            del parent[path[-1]]
-        elif kind == "extra" and isinstance(parent, dict):
-            parent[draw(st.text(min_size=1, max_size=8))] = draw(json_values)
-    return question
+    return _mutated(draw, draw(st.sampled_from(QUESTIONS)), 6)
 
 
 @settings(suppress_health_check=[HealthCheck.too_slow], deadline=None)
@@ -273,29 +263,7 @@ STORE_KEY, STORE_ENTRY = _store_entry()
 
 @st.composite
 def mutated_entries(draw):
-    entry = copy.deepcopy(STORE_ENTRY)
-    paths = [p for p in _paths(entry) if p]
-    for _ in range(draw(st.integers(1, 3))):
-        path = draw(st.sampled_from(paths))
-        parent = entry
-        try:
-            for key in path[:-1]:
-                parent = parent[key]
-            parent[path[-1]]  # still there (an earlier mutation may have removed it)
-        except (KeyError, IndexError, TypeError):
-            continue
-        if not isinstance(parent, (dict, list)):  # an earlier mutation made it a string
-            continue
-        kind = draw(st.sampled_from(["value", "delete", "extra", "text"]))
-        if kind == "value":
-            parent[path[-1]] = draw(json_values)
-        elif kind == "delete" and isinstance(parent, dict):
-            del parent[path[-1]]
-        elif kind == "extra" and isinstance(parent, dict):
-            parent[draw(st.text(min_size=1, max_size=8))] = draw(json_values)
-        elif kind == "text" and isinstance(parent[path[-1]], str):
-            parent[path[-1]] = draw(st.text(max_size=40))
-    return json.dumps(entry).encode()
+    return json.dumps(_mutated(draw, STORE_ENTRY, kinds=("value", "delete", "extra", "text"))).encode()
 
 
 @settings(suppress_health_check=[HealthCheck.too_slow])

@@ -100,27 +100,30 @@ class Answer:
     def to_dict(self) -> dict[str, Any]:
         """The published JSON: ``ipe predict --json``'s fields plus stamp, frame, ids and timing."""
         out = self.prediction.to_dict()
-        sec, nanosec = divmod(self.source.stamp_ns, 1_000_000_000)
-        out.update(stamp={"sec": sec, "nanosec": nanosec}, frame_id=self.source.frame_id,
+        out.update(stamp=stamp_dict(self.source.stamp_ns), frame_id=self.source.frame_id,
                    scene_id=self.source.scene_id, scene_seq=self.source.seq, compute_s=self.compute_s,
                    latency_s=self.latency_s, rrd_path=self.rrd_path, rollouts_logged=self.rollouts_logged,
                    rrd_error=self.rrd_error)
         return out
 
 
+def stamp_dict(stamp_ns: int) -> dict[str, int]:
+    """A stamp in ns since the epoch as the published JSON writes it: {"sec", "nanosec"}."""
+    sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+    return {"sec": sec, "nanosec": nanosec}
+
+
 def error_answer(source: StampedScene, error: str) -> dict[str, Any]:
     """What ~/prediction carries when a prediction failed: the scene it was for and why."""
-    sec, nanosec = divmod(source.stamp_ns, 1_000_000_000)
     return {"error": error, "scene": source.scene.name, "scene_id": source.scene_id, "scene_seq": source.seq,
-            "stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": source.frame_id}
+            "stamp": stamp_dict(source.stamp_ns), "frame_id": source.frame_id}
 
 
 def refusal_answer(reason: str, scene_id: str, stamp_ns: int, frame_id: str, input_topic: str) -> dict[str, Any]:
     """What ~/prediction carries for a scene refused on arrival: the same fields as a failed
     prediction's error answer (no sequence number: the scene was never accepted) and the topic it came on."""
-    sec, nanosec = divmod(max(0, stamp_ns), 1_000_000_000)
     return {"error": reason, "scene": scene_id or None, "scene_id": scene_id, "scene_seq": None,
-            "stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": frame_id, "refused_on": input_topic}
+            "stamp": stamp_dict(max(0, stamp_ns)), "frame_id": frame_id, "refused_on": input_topic}
 
 
 def _load_rerun_if_recording(config: ServiceConfig) -> None:
@@ -527,7 +530,7 @@ DEFAULT_QUESTION_SAMPLES = 16
 def _question_head(question, source: StampedScene) -> dict[str, Any]:
     """The fields every reply to a question carries: its id, kind, and the scene it was about."""
     return {"id": question.request_id, "question": question.kind, "scene_id": source.scene_id,
-            "frame_id": source.frame_id, "stamp": dict(zip(("sec", "nanosec"), divmod(source.stamp_ns, 1_000_000_000)))}
+            "frame_id": source.frame_id, "stamp": stamp_dict(source.stamp_ns)}
 
 
 class QuestionService:

@@ -588,11 +588,14 @@ def _regions(scene: Scene, actions: list[Action], margin_m: float,
 
 
 # -- the questions ----------------------------------------------------------------------------------------
+_NO_OBJECTS = "names no object; name at least one, or leave it out to ask about every one"
+
+
 def remove(scene: Scene, names: list[str] | None, model: ModelConfig, settings: SimSettings, **kw) -> Answers:
     """P(anything else falls) and per-object probabilities if each named object (None: every
     dynamic object, one at a time) is taken away; the scene as it is comes first."""
     if names is not None and not names:
-        raise ConfigError("objects", "names no object; name at least one, or leave it out to ask about every one")
+        raise ConfigError("objects", _NO_OBJECTS)
     names = [b.name for b in scene.dynamic_objects] if names is None else list(names)
     return ask(scene, [None] + [Remove((n,)) for n in names], model, settings, **kw)
 
@@ -819,9 +822,9 @@ def best_place(scene: Scene, body: Body, region: Region, model: ModelConfig, set
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise ConfigError(name, f"must be an integer >= 1, got {value!r}")
     n = max(1, int(round(math.sqrt(candidates))))
-    _check_variants(scene, n * n * yaws, model, settings, kw.get("budget_s"),
-                    f"{n} x {n} candidates x {yaws} yaws", "candidates", placements=n * n * yaws)
     deadline = _Deadline(kw.pop("budget_s", None))
+    _check_variants(scene, n * n * yaws, model, settings, deadline.budget_s,
+                    f"{n} x {n} candidates x {yaws} yaws", "candidates", placements=n * n * yaws)
     xs = np.linspace(*region.x_m, n)
     ys = np.linspace(*region.y_m, n)
     yaw_values = np.linspace(*region.yaw_rad, yaws) if yaws > 1 else [region.yaw_rad[0]]
@@ -899,9 +902,9 @@ def question_from_dict(data) -> Question:
     unknown = sorted(set(data) - _QUESTION_FIELDS[kind] - {"id", "question", "samples", "scene"}, key=str)
     if unknown:
         key = unknown[0]
+        allowed = ", ".join(sorted(_QUESTION_FIELDS[kind] | {"id", "samples", "scene"}))
         raise ConfigError(key if key.isidentifier() and len(key) <= 64 else f"[{shown(key)}]",
-                          f"unknown field of a {kind} question; allowed: "
-                                                  f"{', '.join(sorted(_QUESTION_FIELDS[kind] | {'id', 'samples', 'scene'}))}")
+                          f"unknown field of a {kind} question; allowed: {allowed}")
     request_id = data.get("id", "")
     if not isinstance(request_id, str) or len(request_id) > 128:
         raise ConfigError("id", "must be a string of at most 128 characters")
@@ -913,8 +916,8 @@ def question_from_dict(data) -> Question:
         objects = data.get("objects")
         if objects is not None and (not isinstance(objects, list) or not all(isinstance(o, str) for o in objects)):
             raise ConfigError("objects", "must be a list of object names")
-        if objects == []:
-            raise ConfigError("objects", "names no object; name at least one, or leave it out to ask about every one")
+        if objects == []:  # refused when read, before the question waits its turn (remove() refuses it too)
+            raise ConfigError("objects", _NO_OBJECTS)
         return Question(objects=None if objects is None else tuple(objects), **common)
     if kind == "support":
         return Question(threshold=_field(data, "threshold", float, DEFAULT_SUPPORT_THRESHOLD),
@@ -1003,9 +1006,9 @@ def place_at(scene: Scene, body: Body, spots, model: ModelConfig, settings: SimS
              **kw) -> tuple[list[tuple[Body, VariantAnswer]], Answers]:
     """``place`` at each (x, y, yaw_rad) spot, the body lowered onto what is below it there."""
     spots = list(spots)
-    _check_variants(scene, len(spots), model, settings, kw.get("budget_s"), f"{len(spots)} spots", "at",
-                    placements=len(spots))
     deadline = _Deadline(kw.pop("budget_s", None))
+    _check_variants(scene, len(spots), model, settings, deadline.budget_s, f"{len(spots)} spots", "at",
+                    placements=len(spots))
     bodies = _lowered(scene, body, spots, deadline)
     answers = place(scene, bodies, model, settings, budget_s=deadline.remaining_s(), **kw)
     return list(zip(bodies, answers.variants[1:])), answers

@@ -496,12 +496,12 @@ def load_scenes(path: str | Path, towers: Iterable[str] | None = None,
         return scenes_from_tower_csv(path, towers, max_objects, on_refused)
     refusals: list[RefusedScene] = []
     scenes = scenes_from_json(path.read_text(), max_objects, refusals.append if on_refused is not None else None)
-    if towers is not None:
-        refusals = [r for r in refusals if r.name in set(towers)]
+    wanted = None if towers is None else set(towers)
+    if wanted is not None:
+        refusals = [r for r in refusals if r.name in wanted]
     for refusal in refusals:
         on_refused(refusal)
-    if towers is not None:
-        wanted = set(towers)
+    if wanted is not None:
         picked = [s for s in scenes if s.name in wanted]
         missing = sorted(wanted - {s.name for s in picked} - {r.name for r in refusals})
         if missing:

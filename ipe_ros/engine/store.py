@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import base64
 import dataclasses
+import functools
 import hashlib
 import json
 import math
@@ -170,6 +171,7 @@ class ResumableMap:
 
 # --- the entry format ------------------------------------------------------------------------------
 
+@functools.cache
 def _result_types() -> dict[str, type]:
     """The dataclasses an entry may hold, by name (imported here: the vision package imports the engine)."""
     from .rollout import RolloutResult, SampleOutcome
@@ -271,7 +273,7 @@ def _decode(value, types: dict[str, type], where: str):
         names = {f.name for f in dataclasses.fields(cls)}
         if not isinstance(fields, dict) or set(fields) != names:
             raise StoreEntryError(f"{where}: a {cls.__name__} with other fields than this engine's")
-        hints = typing.get_type_hints(cls)
+        hints = _type_hints(cls)
         decoded = {}
         for name, v in fields.items():
             decoded[name] = _decode(v, types, f"{where}.{name}")
@@ -301,6 +303,12 @@ def _decode_array(value: dict[str, Any], where: str):
     if value["scalar"] is True and array.shape == ():
         return array[()]
     return array
+
+
+@functools.cache
+def _type_hints(cls: type) -> dict[str, Any]:
+    """``cls``'s annotations resolved once (each entry read holds several dataclasses)."""
+    return typing.get_type_hints(cls)
 
 
 def _fits(value, hint) -> bool:

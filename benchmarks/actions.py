@@ -99,7 +99,7 @@ def main() -> int:
                      "note": f"{len(graph.edges)} edges, safe now: {', '.join(n for n, _, _ in graph.safe) or 'none'}"})
         rows.append({"question": f"safe to remove the top block ({top}), k = 48", "target_s": 0.8,
                      "seconds": timed(lambda: A.remove(tower, [top], model(48), settings, **kw), args.repeats),
-                     "note": "as is + one removal (answered without simulating when nothing rests on it)"})
+                     "note": "as is + one removal (simulated: the top presses on what holds it up)"})
         block = Box(name="new", extents_m=(0.2, 0.2, 0.2), position_m=(0.0, 0.0, 0.0), orientation_xyzw=I,
                     friction=0.6, restitution=0.0, mass_kg=1.0)
         centre = max(tower.dynamic_objects, key=lambda b: b.position_m[2]).position_m

@@ -58,6 +58,8 @@ def add_ask_parser(sub, finite, one_line_parser) -> None:
         q.add_argument("--workers", type=int, default=os.cpu_count() or 1)
         q.add_argument("--budget", type=finite, default=DEFAULT_BUDGET_S, metavar="S",
                        help="compute budget per batch of variants, seconds")
+        q.add_argument("--fell-off", action="store_true",
+                       help="also which objects end off the table (a scene on a table)")
         q.add_argument("--json", action="store_true", help="one JSON object per line")
         q.add_argument("--rrd", default=None, metavar="FILE",
                        help="record 4 rollouts of every variant to this rerun file (not for clear)")
@@ -103,14 +105,24 @@ def _scene(args):
 
 
 def _table(answers: A.Answers) -> str:
-    lines = [f"{'variant':<40} {'P(any falls)':>12} {'95% interval':>15} {'k':>4}  most likely to fall"]
+    """One line per variant: over all samples, then over those in which the scene stands as it is."""
+    lines = [f"{'variant':<32} {'P(any falls)':>12} {'95% interval':>15} {'k':>4} {'| stands as is':>14} "
+             f"{'k':>4}  most likely to fall"]
     for v in answers.variants:
         p = "-" if v.any_fall_probability is None else f"{v.any_fall_probability:.3f}"
         ci = "-" if v.any_fall_probability_ci95 is None else "[{:.2f}, {:.2f}]".format(*v.any_fall_probability_ci95)
+        given = v.given_stands
+        g = "-" if given is None or given.any_fall_probability is None else f"{given.any_fall_probability:.3f}"
         worst = sorted(v.object_fall_probability.items(), key=lambda kv: -kv[1])[:3]
         shown = ", ".join(f"{n} {q:.2f}" for n, q in worst if q > 0) or "-"
-        note = "" if v.simulated else "  (nothing rests on it: not simulated)"
-        lines.append(f"{v.label:<40} {p:>12} {ci:>15} {v.samples:>4}  {shown}{note}")
+        if v.any_fell_off_probability is not None:
+            shown += f"; P(any falls off) {v.any_fell_off_probability:.2f}"
+        note = "" if v.simulated else "  (nothing within its reach: not simulated)"
+        lines.append(f"{v.label:<32} {p:>12} {ci:>15} {v.samples:>4} {g:>14} "
+                     f"{'-' if given is None else given.samples:>4}  {shown}{note}")
+    if answers.alone is not None and answers.alone.unstable:
+        lines.append(f"the scene is unstable as it is: it falls by itself with P {answers.alone.any_fall_probability:.2f}"
+                     f"; '| stands as is' counts only the {answers.alone.samples_standing} samples in which it stood")
     return "\n".join(lines)
 
 
@@ -124,7 +136,7 @@ def cmd_ask(args) -> int:
     if args.workers < 0:
         raise ConfigError("--workers", f"must be >= 0, got {args.workers}")
     pool = WorkerPool(min(args.workers, args.samples)) if args.workers > 0 else None
-    kw = dict(seed=args.seed, map_fn=pool.map if pool else None, budget_s=args.budget)
+    kw = dict(seed=args.seed, map_fn=pool.map if pool else None, budget_s=args.budget, fell_off=args.fell_off)
     if args.rrd and args.question != "clear":
         kw.update(record_every=max(1, round(0.02 / settings.time_step_s)), record_samples=4)
     try:

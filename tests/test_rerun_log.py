@@ -83,14 +83,14 @@ def test_recordings_draw_every_body_in_its_own_shape(tmp_path):
 def test_a_question_recording_names_each_variants_rollouts_by_the_question(tmp_path):
     from ipe_ros.engine import ModelConfig, preset
     from ipe_ros.engine import actions as A
-    from tests.test_actions import STACK
+    from tests.test_actions import FAR
 
-    answers = A.remove(STACK, None, ModelConfig(sigma_m=0.005, samples=3), preset("default"), record_every=4,
-                       record_samples=2)
+    answers = A.remove(FAR, ["bottom", "lone"], ModelConfig(sigma_m=0.005, samples=3), preset("default"),
+                       record_every=4, record_samples=2)
     path = tmp_path / "question.rrd"
-    assert write_question_rrd(path, STACK, answers) == 4  # as is and remove/bottom, 2 samples each
+    assert write_question_rrd(path, FAR, answers) == 4  # as is and remove/bottom, 2 samples each
     paths = {chunk.entity_path for chunk in RrdReader(path).stream().to_chunks()}
-    assert {"/world/remove/bottom/sample_0/top", "/world/as_is/sample_1/bottom", "/answers/remove/top"} <= paths
+    assert {"/world/remove/bottom/sample_0/top", "/world/as_is/sample_1/bottom", "/answers/remove/lone"} <= paths
 
 
 def _blueprint_views(path) -> dict[str, dict]:
@@ -129,14 +129,14 @@ def test_recordings_open_on_a_blueprint_with_the_answer_the_rollouts_and_the_out
 
 def test_question_recordings_show_one_view_per_variant(tmp_path):
     from ipe_ros.engine import actions as A
-    from tests.test_actions import STACK
+    from tests.test_actions import FAR
 
-    answers = A.remove(STACK, None, ModelConfig(sigma_m=0.005, samples=3), preset("default"), record_every=4,
-                       record_samples=1)
+    answers = A.remove(FAR, ["bottom", "lone"], ModelConfig(sigma_m=0.005, samples=3), preset("default"),
+                       record_every=4, record_samples=1)
     path = tmp_path / "q.rrd"
-    write_question_rrd(path, STACK, answers)
+    write_question_rrd(path, FAR, answers)
     views = _blueprint_views(path)
-    assert set(views) == {"answers", "as_is", "remove/bottom"}  # the top's removal is not simulated: no view
+    assert set(views) == {"answers", "as_is", "remove/bottom"}  # the lone block's removal is not simulated: no view
     assert views["remove/bottom"]["query"] == ["+ /world/scene/support/**", "+ /world/remove/bottom/**"]
 
 

@@ -1,8 +1,10 @@
 """Every kind of bad scene gets an error naming the object and field and saying what is allowed."""
 
 import copy
+import math
 import json
 
+import numpy as np
 import pytest
 
 from ipe_ros.engine import SceneError, scene_from_dict, scene_to_dict, scenes_from_json
@@ -131,3 +133,42 @@ def test_errors_in_a_list_of_scenes_name_the_scene():
     scenes[1]["objects"][2]["shape"]["extents_m"] = [1, 1, -1]
     with pytest.raises(SceneError, match=r"^scenes\[1\]\.objects\[2\] \('block2'\)\.shape\.extents_m: every extent"):
         scenes_from_json(json.dumps(scenes))
+
+
+def _table_scene(*boxes):
+    from ipe_ros.engine import Scene, Table
+
+    table = Table(top_height_m=0.5, size_m=(1.0, 1.0), center_xy_m=(0.0, 0.0), thickness_m=0.05, friction=0.8,
+                  restitution=0.0, floor_z_m=0.0)
+    return scene_from_dict(scene_to_dict(Scene(name="edge", objects=tuple(boxes), support=table,
+                                               gravity_m_s2=(0.0, 0.0, -9.81))))
+
+
+def _brick_over_edge(touch_from_inner_end_m: float, tilt_rad: float = math.radians(15)):
+    """A 0.2 x 0.1 x 0.05 m brick whose bottom face touches the table's +x edge (x = 0.5, z = 0.5)
+    this far from its inner end, tilted down towards +x: its outer end hangs below the top, off the table."""
+    from ipe_ros.engine import Box
+
+    u = np.array([math.cos(tilt_rad), -math.sin(tilt_rad)])  # along the bottom face, in x-z
+    n = np.array([math.sin(tilt_rad), math.cos(tilt_rad)])  # its outward normal
+    inner_corner = np.array([0.5, 0.5]) - touch_from_inner_end_m * u
+    x, z = inner_corner + 0.1 * u + 0.025 * n
+    q = (0.0, math.sin(tilt_rad / 2), 0.0, math.cos(tilt_rad / 2))
+    return Box(name="brick", extents_m=(0.2, 0.1, 0.05), position_m=(float(x), 0.0, float(z)), orientation_xyzw=q,
+               friction=0.8, restitution=0.0, mass_kg=1.0)
+
+
+def test_a_brick_tilted_over_the_table_edge_is_not_below_the_table():
+    brick = _brick_over_edge(0.12)
+    assert brick.position_m[0] < 0.5  # its centre is over the table, its outer end 21 mm below the top, off it
+    assert _table_scene(brick).objects[0].name == "brick"
+
+
+def test_a_corner_inside_the_table_top_is_refused_where_the_centre_is_off_the_table():
+    brick = _brick_over_edge(0.02)  # pushed 10 cm further out, the bottom face now cuts into the slab's edge
+    data = scene_to_dict(_table_scene(_brick_over_edge(0.12)))
+    data["objects"][0]["position_m"] = [brick.position_m[0] - 0.03, 0.0, brick.position_m[2] - 0.01]
+    assert data["objects"][0]["position_m"][0] > 0.5
+    message = error_for(data)
+    assert message.startswith("objects[0] ('brick').position_m: the body's lowest point z = ")
+    assert "below the support surface at z = 0.5 m; raise it by at least" in message

@@ -9,9 +9,11 @@ added randomness (where the new object lands, how hard the push is) from a secon
 seed, leaving the shared draw untouched.
 
 ``ask`` runs variants; ``remove``, ``support_graph``, ``clear_order``, ``place``, ``best_place`` and
-``push`` are the questions built on it. A removal that cannot change anything (nothing rests on the
-object, directly or through others, in the scene as given) is answered from the scene's own samples
-without simulating, and says so (``simulated: False``).
+``push`` are the questions built on it. A removal that cannot change anything (nothing else is
+within the removed objects' reach, ``groups``) is answered from the scene's own samples without
+simulating, and says so (``simulated: False``). Each variant's answer is given twice: over all
+samples, and over the samples in which the scene as it is stands (``given_stands``), so that what
+an action makes fall is not confused with what falls anyway.
 """
 
 from __future__ import annotations
@@ -35,8 +37,9 @@ from .estimate import wilson_interval, circular_mean
 from .perturb import draw_sample_inputs, is_deterministic, position_sigmas_m
 from .rollout import SampleTask, _decided_heights, collapse_heights, separated_world
 from .sampler import MapFn, check_budget, rollout_cost
-from .scene import Body, Scene, lowest_z_m, validate_body, validate_scene
-from .shapes import rotation_matrix
+from .scene import Body, Scene, Table, lowest_z_m, validate_body, validate_scene
+
+from .shapes import BoxShape, rotation_matrix
 
 #: P(anything else falls) below this makes an object safe to remove now.
 DEFAULT_SAFE_BELOW = 0.05
@@ -180,6 +183,7 @@ class VariantResult:
     budget_stopped: bool = False
     worker_lost: bool = False  # its worker process died twice
     trajectory: list | None = None  # (t, positions, orientations) frames when recorded
+    fell_off: np.ndarray | None = None  # ended off the table (asked with fell_off)
 
 
 def _action_rng(task: VariantTask, action: Action) -> np.random.Generator:
@@ -299,7 +303,12 @@ def _one_variant(task: VariantTask, action: Action, shared, shared_orn, inputs,
     smallest = np.array([b.smallest_extent_m for b in variant_bodies])
     fallen = queries.fallen_mask(initial, end.positions_m, smallest, task.query.fall_threshold_fraction)
     direction = queries.fall_direction_rad(initial, end.positions_m, fallen) if task.query.wants("direction") else None
-    return VariantResult(tuple(b.name for b in variant_bodies), fallen, direction, trajectory=end.trajectory)
+    fell_off = None
+    if task.query.wants("bump"):  # started above the table top, ended below it: beside or under the table
+        top = scene.support.top_height_m
+        fell_off = (initial[:, 2] >= top) & queries.fell_off_mask(end.positions_m, top)
+    return VariantResult(tuple(b.name for b in variant_bodies), fallen, direction, trajectory=end.trajectory,
+                         fell_off=fell_off)
 
 
 # -- the answers ----------------------------------------------------------------------------------------
@@ -328,14 +337,41 @@ class VariantAnswer:
     #: per object, P(it falls with the action and would not have without): sample s of the variant
     #: against sample s of the scene as is (common random numbers make this pairing meaningful)
     caused_fall_probability: dict[str, float] | None = None
+    #: the same answer over only the samples in which the scene as it is stands (nothing falls without
+    #: the action): what the action does, apart from what falls anyway; None without an "as is" variant
+    given_stands: "GivenStands | None" = None
+    #: per object, P(it ends off the table: its centre below the top); asked with fell_off
+    fell_off_probability: dict[str, float] | None = None
+    any_fell_off_probability: float | None = None
 
     def to_dict(self) -> dict:
+        off = {} if self.fell_off_probability is None else {
+            "fell_off_probability": self.fell_off_probability, "any_fell_off_probability": self.any_fell_off_probability}
         return {"label": self.label, "any_fall_probability": self.any_fall_probability,
                 "any_fall_probability_ci95": None if self.any_fall_probability_ci95 is None
                 else list(self.any_fall_probability_ci95),
                 "object_fall_probability": self.object_fall_probability, "direction_rad": self.direction_rad,
                 "samples": self.samples, "failed_samples": self.failed_samples, "simulated": self.simulated,
-                "not_simulated": list(self.not_simulated), "caused_fall_probability": self.caused_fall_probability}
+                "not_simulated": list(self.not_simulated), "caused_fall_probability": self.caused_fall_probability,
+                "given_stands": None if self.given_stands is None else self.given_stands.to_dict(), **off}
+
+
+@dataclass(frozen=True)
+class GivenStands:
+    """A variant's answer conditioned on the scene standing as it is: over the ``samples`` samples in
+    which nothing fell without the action (common random numbers pair sample s of every variant),
+    P(anything falls with the action) with its 95% Wilson interval, and per object. None values when
+    no sample stood (the scene falls by itself whatever is done)."""
+
+    samples: int
+    any_fall_probability: float | None
+    any_fall_probability_ci95: tuple[float, float] | None
+    object_fall_probability: dict[str, float]
+
+    def to_dict(self) -> dict:
+        return {"samples": self.samples, "any_fall_probability": self.any_fall_probability,
+                "any_fall_probability_ci95": None if self.any_fall_probability_ci95 is None
+                else list(self.any_fall_probability_ci95), "object_fall_probability": self.object_fall_probability}
 
 
 def _draws_noise(scene: Scene, action: Action, model: ModelConfig) -> bool:
@@ -359,9 +395,26 @@ def _aggregate(label: str, action: Action, results: list[VariantResult], simulat
     anything = float(fallen.any(axis=1).mean())
     directions = np.array([r.direction_rad for r in ok if r.direction_rad is not None])
     interval = (anything, anything) if deterministic else wilson_interval(anything, len(ok))
+    off = {}
+    if ok[0].fell_off is not None:
+        fell_off = np.array([r.fell_off for r in ok], bool)
+        off = dict(fell_off_probability={n: float(p) for n, p in zip(names, fell_off.mean(axis=0))},
+                   any_fell_off_probability=float(fell_off.any(axis=1).mean()))
     return VariantAnswer(label, action, anything, interval,
                          {n: float(p) for n, p in zip(names, fallen.mean(axis=0))},
-                         circular_mean(directions), len(ok), len(failed), simulated)
+                         circular_mean(directions), len(ok), len(failed), simulated, **off)
+
+
+def _stands_as_is(per_sample: list[list[VariantResult]], as_is: int) -> list[bool]:
+    """Per sample: the scene as it is ran without failing and nothing in it fell."""
+    return [s[as_is].error is None and not bool(np.any(s[as_is].fallen)) for s in per_sample]
+
+
+def _aggregate_given(results: list[VariantResult], *, deterministic: bool) -> GivenStands:
+    """A variant's results over the samples in which the scene stands as it is."""
+    answer = _aggregate("", None, results, deterministic=deterministic)
+    return GivenStands(answer.samples, answer.any_fall_probability, answer.any_fall_probability_ci95,
+                       answer.object_fall_probability)
 
 
 #: A world built only to look at the scene's geometry (contacts, rays, bounds): never stepped.
@@ -398,9 +451,9 @@ def contacts(scene: Scene, margin_m: float = 0.0) -> Contacts:
 
 def resting_on(scene: Scene, margin_m: float = 0.0, touching: Contacts | None = None) -> dict[str, set[str]]:
     """name -> the dynamic objects that may rest or lean on it, in the scene as given (no noise):
-    they touch it (within ``margin_m``) and their centre of mass is above its lowest point.
-    Deliberately generous (a plank leaning on a post's side counts), since it decides what need not
-    be simulated. ``touching``: the scene's contacts, when already found."""
+    they touch it (within ``margin_m``) and their centre of mass is above its lowest point (a plank
+    leaning on a post's side counts). What a clearing order takes away before its target.
+    ``touching``: the scene's contacts, when already found."""
     touching = touching or contacts(scene, margin_m)
     bodies = touching.bodies
     out: dict[str, set[str]] = {b.name: set() for b in bodies}
@@ -415,10 +468,13 @@ def resting_on(scene: Scene, margin_m: float = 0.0, touching: Contacts | None = 
 
 def groups(scene: Scene, margin_m: float = 0.0, touching: Contacts | None = None) -> list[frozenset[str]]:
     """The dynamic objects in groups that cannot affect each other within a rollout: objects that
-    touch (within ``margin_m``) are one group, and groups closer to each other horizontally than
-    the taller one's height are merged, since it could topple onto the other."""
+    touch (within ``margin_m``) are one group, and groups that anything of one could reach the other
+    (``reach_m``) are merged. A scene with something moving at t = 0 is one group."""
     touching = touching or contacts(scene, margin_m)
-    names = [b.name for b in touching.bodies]
+    bodies = touching.bodies
+    names = [b.name for b in bodies]
+    if any(b.moving for b in bodies):
+        return [frozenset(names)]
     parent = list(range(len(names)))
 
     def root(i: int) -> int:
@@ -430,21 +486,42 @@ def groups(scene: Scene, margin_m: float = 0.0, touching: Contacts | None = None
     for i, j in touching.pairs:
         parent[root(i)] = root(j)
     boxes = touching.boxes
-    ground = scene.support.top_m
     while True:
         members: dict[int, list[int]] = {}
         for i in range(len(names)):
             members.setdefault(root(i), []).append(i)
         bounds = {r: (np.min([boxes[i][0] for i in m], axis=0), np.max([boxes[i][1] for i in m], axis=0))
                   for r, m in members.items()}
+        reach = {r: reach_m(scene, [bodies[i] for i in m], bounds[r]) for r, m in members.items()}
         for r, q in itertools.combinations(bounds, 2):
             (lo_r, hi_r), (lo_q, hi_q) = bounds[r], bounds[q]
             gap = np.maximum(0.0, np.maximum(lo_r[:2] - hi_q[:2], lo_q[:2] - hi_r[:2]))
-            if float(np.linalg.norm(gap)) < max(hi_r[2], hi_q[2]) - ground + margin_m:
+            if float(np.linalg.norm(gap)) < max(reach[r], reach[q]) + margin_m:
                 parent[root(r)] = root(q)
                 break
         else:
             return [frozenset(names[i] for i in m) for m in members.values()]
+
+
+def reach_m(scene: Scene, bodies: list[Body], bounds: tuple[np.ndarray, np.ndarray]) -> float:
+    """How far beyond its bounding box anything of a group of touching objects, starting at rest,
+    can get: the group toppling about its base edge (its top corner sweeps the box's diagonal), then
+    what falls sliding on with at most the speed of a free fall from the group's top (v^2 / 2 mu g
+    = H / mu) and bouncing (restitution r: 4 r H / (1 - r^2) over all bounces). A body that can roll
+    (any shape but a box) or bounce without loss has no bound (inf): such groups join every other.
+    """
+    if any(not isinstance(b.shape, BoxShape) for b in bodies):
+        return math.inf
+    support = scene.support
+    lowest = support.top_m if not isinstance(support, Table) or support.floor_z_m is None else support.floor_z_m
+    drop = max(0.0, float(bounds[1][2]) - lowest)
+    width = float(np.linalg.norm(bounds[1][:2] - bounds[0][:2]))
+    # pybullet multiplies the two surfaces' friction and restitution coefficients
+    friction = min(b.friction for b in bodies) * min([support.friction] + [b.friction for b in bodies])
+    bounce = max(b.restitution for b in bodies) * max([support.restitution] + [b.restitution for b in bodies])
+    if friction <= 0 or bounce >= 1:
+        return math.inf
+    return math.hypot(drop, width) + drop / friction + 4 * bounce * drop / (1 - bounce * bounce)
 
 
 def dependents(resting: dict[str, set[str]], name: str) -> set[str]:
@@ -469,32 +546,57 @@ class Answers:
     stopped_by: str = "samples"
     #: label -> [(sample index, the variant's result with its trajectory)] for recorded samples
     recorded: dict = dataclasses.field(default_factory=dict, repr=False, compare=False)
+    #: the scene left alone (None when no variant is "as is")
+    alone: "Alone | None" = None
 
     def to_dict(self) -> dict:
         return {"scene": self.scene, "variants": [v.to_dict() for v in self.variants],
-                "samples_requested": self.samples_requested, "wall_s": self.wall_s, "stopped_by": self.stopped_by}
+                "samples_requested": self.samples_requested, "wall_s": self.wall_s, "stopped_by": self.stopped_by,
+                "alone": None if self.alone is None else self.alone.to_dict()}
+
+
+@dataclass(frozen=True)
+class Alone:
+    """The scene left alone: P(anything falls by itself) with its 95% interval, the samples in which
+    it stands (those every ``given_stands`` answer is over), and ``unstable``: it falls by itself
+    more often than ``safe_below`` even at the low end of the interval. Whatever the robot does
+    then, things may fall that its action did not make fall."""
+
+    any_fall_probability: float | None
+    any_fall_probability_ci95: tuple[float, float] | None
+    samples_standing: int
+    unstable: bool
+
+    def to_dict(self) -> dict:
+        return {"any_fall_probability": self.any_fall_probability,
+                "any_fall_probability_ci95": None if self.any_fall_probability_ci95 is None
+                else list(self.any_fall_probability_ci95),
+                "samples_standing": self.samples_standing, "unstable": self.unstable}
 
 
 def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSettings, seed: int = 0,
         map_fn: MapFn | None = None, budget_s: float | None = None,
         fall_threshold_fraction: float = 0.125, record_every: int = 0, record_samples: int = 0,
-        directions: bool = False) -> Answers:
+        directions: bool = False, fell_off: bool = False) -> Answers:
     """Answer every variant with common random numbers (see the module docstring). Removals that
     cannot change anything are answered from the scene's own samples (a variant "as is" is added
     for them when it is not asked). ``record_every`` / ``record_samples``: keep the trajectories of
     the first samples of every simulated variant (for rerun), in ``Answers.recorded``.
     ``directions``: also where things fall (rollouts then run until everything rests; without it a
-    rollout ends as soon as what falls is decided)."""
+    rollout ends as soon as what falls is decided). ``fell_off``: also which objects end off the
+    table (their centre below its top; the scene must stand on a table)."""
     validate_scene(scene)
     check_budget(budget_s)
     for i, action in enumerate(actions):
         _check_action(scene, action, f"actions[{i}]")
     margin = 3 * float(position_sigmas_m(scene, model).max(initial=0.0))  # noise can close gaps this wide
-    touching = contacts(scene, margin)  # one geometry pass for what rests on what and the groups
-    resting = resting_on(scene, margin, touching)
-    moving = any(b.moving for b in scene.dynamic_objects)
-    trivial = [isinstance(a, Remove) and not moving and not set().union(*(dependents(resting, n) for n in a.names))
-               for a in actions]
+    everything = frozenset(b.name for b in scene.dynamic_objects)
+    # a pushed support can slide every group into every other
+    scene_groups = [everything] if model.pushes else groups(scene, margin)
+    # a removal that nothing else is within reach of cannot change anything: the rest of the scene does
+    # what it does anyway (read from "as is"). Touching is not enough to be left out: a counterweight
+    # with nothing on it still holds down what it rests on, and a gap closes when the object above drops.
+    trivial = [isinstance(a, Remove) and _reached(scene_groups, a.names) <= set(a.names) for a in actions]
     simulated_actions = [a for a, t in zip(actions, trivial) if not t]
     if any(trivial) and None not in simulated_actions:
         simulated_actions.append(None)
@@ -504,9 +606,12 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
             raise ConfigError("budget_s", f"one sample of these {len(simulated_actions)} variants takes up to "
                                           f"~{cost.seconds * len(simulated_actions):.3g} s, more than the budget of "
                                           f"{budget_s:g} s; ask fewer variants or raise the budget")
-    regions = _regions(scene, simulated_actions, margin, touching)
-    query = QuerySpec(queries=frozenset({"fall", "direction"} if directions else {"fall"}),
-                      fall_threshold_fraction=fall_threshold_fraction)
+    regions = _regions(scene, simulated_actions, margin, scene_groups, model.pushes)
+    if fell_off and not isinstance(scene.support, Table):
+        raise ConfigError("fell_off", f"{scene.name!r} stands on a floor: nothing can fall off it (ask it of a "
+                                      "scene on a table)")
+    asked = {"fall"} | ({"direction"} if directions else set()) | ({"bump"} if fell_off else set())
+    query = QuerySpec(queries=frozenset(asked), fall_threshold_fraction=fall_threshold_fraction)
     # no noise anywhere (scene, model, nor an action's own): one rollout per variant says everything
     deterministic = is_deterministic(scene, model) and not any(_draws_noise(scene, a, model)
                                                                for a in simulated_actions)
@@ -524,16 +629,18 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
         lost = lambda task, reason: [  # noqa: E731
             VariantResult(names, None, None, f"WorkerLost: {reason}", worker_lost=True) for _ in task.actions]
         per_sample = map_fn(run_variants, tasks, on_lost=lost)
-    everything = {b.name for b in scene.dynamic_objects}
     by_variant = {_label(a): dataclasses.replace(
         _aggregate(_label(a), a, [s[j] for s in per_sample], deterministic=deterministic),
         not_simulated=() if regions[j] is None else tuple(sorted(everything - regions[j])))
         for j, a in enumerate(simulated_actions)}
-    if None in simulated_actions:
-        as_is = simulated_actions.index(None)
+    as_is = simulated_actions.index(None) if None in simulated_actions else None
+    if as_is is not None:
+        stands = _stands_as_is(per_sample, as_is)
         for j, a in enumerate(simulated_actions):
-            caused = _caused(per_sample, j, as_is)
-            by_variant[_label(a)] = dataclasses.replace(by_variant[_label(a)], caused_fall_probability=caused)
+            by_variant[_label(a)] = dataclasses.replace(
+                by_variant[_label(a)], caused_fall_probability=_caused(per_sample, j, as_is),
+                given_stands=_aggregate_given(
+                    [s[j] for s, ok in zip(per_sample, stands) if ok], deterministic=deterministic))
     answers = []
     for action, is_trivial in zip(actions, trivial):
         if not is_trivial:
@@ -542,15 +649,23 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
         # nothing rests on it: the rest of the scene does what it does anyway, read from "as is"
         others = [j for j, n in enumerate(b.name for b in scene.dynamic_objects) if n not in action.names]
         results = [VariantResult(tuple(r.names[j] for j in others), None if r.fallen is None else r.fallen[others],
-                                 r.direction_rad, r.error, r.budget_stopped) for r in (s[simulated_actions.index(None)]
-                                                                                     for s in per_sample)]
-        answers.append(dataclasses.replace(_aggregate(_label(action), action, results, deterministic=deterministic),
-                                           simulated=False,
-                                           caused_fall_probability={n: 0.0 for n in results[0].names}))
+                                 r.direction_rad, r.error, r.budget_stopped,
+                                 fell_off=None if r.fell_off is None else r.fell_off[others])
+                   for r in (s[as_is] for s in per_sample)]
+        answers.append(dataclasses.replace(
+            _aggregate(_label(action), action, results, deterministic=deterministic), simulated=False,
+            caused_fall_probability={n: 0.0 for n in results[0].names},
+            given_stands=_aggregate_given([r for r, ok in zip(results, stands) if ok], deterministic=deterministic)))
     stopped = "budget" if any(r.budget_stopped for s in per_sample for r in s) else "samples"
     recorded = {_label(a): [(i, s[j]) for i, s in enumerate(per_sample) if s[j].trajectory is not None]
                 for j, a in enumerate(simulated_actions)} if record_every else {}
-    return Answers(scene.name, tuple(answers), k, time.perf_counter() - start, stopped, recorded)
+    scene_alone = None
+    if as_is is not None:
+        alone = by_variant["as_is"]
+        scene_alone = Alone(alone.any_fall_probability, alone.any_fall_probability_ci95, sum(stands),
+                           alone.any_fall_probability_ci95 is not None
+                           and alone.any_fall_probability_ci95[0] > DEFAULT_SAFE_BELOW)
+    return Answers(scene.name, tuple(answers), k, time.perf_counter() - start, stopped, recorded, scene_alone)
 
 
 def _caused(per_sample: list[list[VariantResult]], variant: int, as_is: int) -> dict[str, float] | None:
@@ -568,21 +683,23 @@ def _caused(per_sample: list[list[VariantResult]], variant: int, as_is: int) -> 
     return {n: c / len(pairs) for n, c in counts.items()}
 
 
-def _regions(scene: Scene, actions: list[Action], margin_m: float,
-             touching: Contacts) -> tuple[frozenset[str] | None, ...]:
+def _reached(scene_groups: list[frozenset[str]], names) -> frozenset[str]:
+    """Every object in a group with one of ``names``: all that removing them could affect."""
+    return frozenset().union(*(g for g in scene_groups if g & set(names)))
+
+
+def _regions(scene: Scene, actions: list[Action], margin_m: float, scene_groups: list[frozenset[str]],
+             pushes: bool) -> tuple[frozenset[str] | None, ...]:
     """Per action, the groups of objects it can affect (None: the whole scene)."""
     everything = frozenset(b.name for b in scene.dynamic_objects)
-    scene_groups = None
     out = []
     for action in actions:
         region = None
         if isinstance(action, Remove):
-            scene_groups = scene_groups or groups(scene, margin_m, touching)
-            region = frozenset().union(*(g for g in scene_groups if g & set(action.names)))
-        elif isinstance(action, Place):
+            region = _reached(scene_groups, action.names)
+        elif isinstance(action, Place) and not pushes:
             with_it = dataclasses.replace(scene, objects=scene.objects + (action.body,))
-            region = next(g for g in groups(with_it, margin_m) if action.body.name in g) - {action.body.name}
-            region = region | {action.body.name}
+            region = next(g for g in groups(with_it, margin_m) if action.body.name in g)
         out.append(None if region is None or region >= everything else region)
     return tuple(out)
 
@@ -637,11 +754,13 @@ def _check_variants(scene: Scene, variants: int, model: ModelConfig, settings: S
 
 @dataclass(frozen=True)
 class SupportGraph:
-    """``edges``: (supporter, supported, P) where P, at or above ``threshold``, is the probability
-    that the supported object falls without the supporter and would not have fallen with it (paired
-    samples); ``safe``: objects whose removal leaves P(anything else falls) below ``safe_below``
-    (the upper end of its 95% interval reported with it). In a scene that falls by itself nothing is
-    safe to remove."""
+    """What holds what, apart from what falls anyway: every P below is over the samples in which the
+    scene as it is stands (``answers.alone.samples_standing`` of them; common random numbers pair
+    the samples). ``edges``: (supporter, supported, P) where P, at or above ``threshold``, is the
+    probability that the supported object falls without the supporter; ``safe``: objects whose
+    removal leaves P(anything else falls) below ``safe_below`` (the upper end of its 95% interval
+    reported with it). ``answers.alone.unstable``: the scene falls by itself too often to leave
+    alone; with no sample standing, there are no edges and nothing is safe."""
 
     scene: str
     edges: tuple[tuple[str, str, float], ...]
@@ -665,12 +784,15 @@ def support_graph(scene: Scene, model: ModelConfig, settings: SimSettings, thres
     edges, safe = [], []
     for variant in answers.variants[1:]:
         (removed,) = variant.action.names
-        # "removing i makes j fall": j falls without i and would not have with it (paired samples)
-        for name, p in (variant.caused_fall_probability or {}).items():
+        given = variant.given_stands
+        if given is None or given.any_fall_probability is None:
+            continue
+        # "removing i makes j fall": j falls without i in the samples where nothing falls with it
+        for name, p in given.object_fall_probability.items():
             if p >= threshold:
                 edges.append((removed, name, p))
-        if variant.any_fall_probability is not None and variant.any_fall_probability < safe_below:
-            safe.append((removed, variant.any_fall_probability, variant.any_fall_probability_ci95[1]))
+        if given.any_fall_probability < safe_below:
+            safe.append((removed, given.any_fall_probability, given.any_fall_probability_ci95[1]))
     return SupportGraph(scene.name, tuple(edges), tuple(safe), threshold, safe_below, answers)
 
 
@@ -862,6 +984,7 @@ class Question:
     yaws: int = 1
     push: Push | None = None
     samples: int | None = None  # None: the asker's default
+    fell_off: bool = False  # also: which objects end off the table (a scene on a table)
 
 
 def _field(data: dict, key: str, kind, default=None, *, path: str = ""):
@@ -892,17 +1015,18 @@ def question_from_dict(data) -> Question:
          "yaw_deg": [a0, a1], "candidates": 16, "yaws": 1}
         {"id": "r5", "question": "push", "object": "block2", "velocity_m_s": [vx, vy],
          "point_m": [x, y, z], "direction_sigma_deg": 0, "speed_sigma": 0}
-        any of them: "samples": k
+        any of them: "samples": k, "fell_off": true (also which objects end off the table)
     """
     if not isinstance(data, dict):
         raise ConfigError("question", "must be a JSON object with a \"question\" field")
     kind = data.get("question")
     if kind not in QUESTIONS:
         raise ConfigError("question", f"must be one of {', '.join(QUESTIONS)}, got {kind!r}"[:300])
-    unknown = sorted(set(data) - _QUESTION_FIELDS[kind] - {"id", "question", "samples", "scene"}, key=str)
+    common_fields = {"id", "question", "samples", "scene", "fell_off"}
+    unknown = sorted(set(data) - _QUESTION_FIELDS[kind] - common_fields, key=str)
     if unknown:
         key = unknown[0]
-        allowed = ", ".join(sorted(_QUESTION_FIELDS[kind] | {"id", "samples", "scene"}))
+        allowed = ", ".join(sorted(_QUESTION_FIELDS[kind] | common_fields - {"question"}))
         raise ConfigError(key if key.isidentifier() and len(key) <= 64 else f"[{shown(key)}]",
                           f"unknown field of a {kind} question; allowed: {allowed}")
     request_id = data.get("id", "")
@@ -911,7 +1035,10 @@ def question_from_dict(data) -> Question:
     samples = data.get("samples")
     if samples is not None and (isinstance(samples, bool) or not isinstance(samples, int) or not 1 <= samples <= 1000):
         raise ConfigError("samples", "must be an integer in [1, 1000]")
-    common = dict(kind=kind, request_id=request_id, samples=samples)
+    fell_off = data.get("fell_off", False)
+    if not isinstance(fell_off, bool):
+        raise ConfigError("fell_off", "must be true or false")
+    common = dict(kind=kind, request_id=request_id, samples=samples, fell_off=fell_off)
     if kind == "remove":
         objects = data.get("objects")
         if objects is not None and (not isinstance(objects, list) or not all(isinstance(o, str) for o in objects)):
@@ -980,6 +1107,8 @@ def answer_question(scene: Scene, question: Question, model: ModelConfig, settin
     which asks once per step) for a recording."""
     if question.samples is not None:
         model = dataclasses.replace(model, samples=question.samples)
+    if question.fell_off:
+        kw["fell_off"] = True
     kind = question.kind
     if kind == "remove":
         answers = remove(scene, None if question.objects is None else list(question.objects), model, settings, **kw)
@@ -1017,6 +1146,7 @@ def place_at(scene: Scene, body: Body, spots, model: ModelConfig, settings: SimS
 def placements_to_dict(scene: Scene, rows: list[tuple[Body, VariantAnswer]], answers: Answers) -> dict:
     """A placement question's JSON answer: the scene as is, then each candidate pose with its answer."""
     return {"scene": scene.name, "as_is": answers.variants[0].to_dict(), "wall_s": answers.wall_s,
+            "alone": None if answers.alone is None else answers.alone.to_dict(),
             "stopped_by": answers.stopped_by,
             "candidates": [{"position_m": list(b.position_m), "orientation_xyzw": list(b.orientation_xyzw),
                             **v.to_dict()} for b, v in rows]}

@@ -401,9 +401,8 @@ def validate_scene(scene: Scene, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scen
         if body.name in seen:
             raise SceneError(f"{path}.name", f"duplicate name {shown(body.name)}; names must be unique")
         seen.add(body.name)
-        lowest = lowest_z_m(body)
+        lowest, ground = deepest_into_support(support, body)
         tolerance = 0.01 * body.smallest_extent_m
-        ground = support_top_below(support, body.position_m[0], body.position_m[1])
         if ground is not None and lowest < ground - tolerance:
             raise SceneError(f"{path} ({shown(body.name)}).position_m",
                              f"the body's lowest point z = {lowest:.6g} m is below the support surface "
@@ -415,6 +414,28 @@ def validate_scene(scene: Scene, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scen
                                     f"{shown(light_name)}; mass ratios above {limits.MAX_MASS_RATIO:g}:1 are beyond what "
                                     "the solver converges on (check the units)")
     return scene
+
+
+def deepest_into_support(support: Support, body: Body) -> tuple[float, float | None]:
+    """(z, surface z) of the body's point deepest inside the support's solid (the floor's half-space,
+    the table top's slab, the floor under a table): each point is judged against the support under
+    *it*, so a body resting on a table and tilted over its edge hangs below the top where no table
+    is. (lowest z, None) when no point lies over any support."""
+    points = shapes.surface_points(body.shape) @ quaternion_to_matrix(body.orientation_xyzw).T
+    points = points + np.asarray(body.position_m, float)
+    x, y, z = points.T
+    if isinstance(support, Floor):
+        surface = np.full(len(z), support.height_m)
+    else:
+        over = ((np.abs(x - support.center_xy_m[0]) <= support.size_m[0] / 2)
+                & (np.abs(y - support.center_xy_m[1]) <= support.size_m[1] / 2)
+                & (z >= support.top_height_m - support.thickness_m))  # under the top is not inside it
+        below = np.nan if support.floor_z_m is None else support.floor_z_m
+        surface = np.where(over, support.top_height_m, below)
+    if np.all(np.isnan(surface)):
+        return float(z.min()), None
+    i = int(np.nanargmin(z - surface))
+    return float(z[i]), float(surface[i])
 
 
 def support_top_below(support: Support, x: float, y: float) -> float | None:

@@ -1,13 +1,16 @@
-"""What the robot questions cost (issue 17's targets), measured on this machine in one run.
+"""What the robot questions cost (issue 32's targets), measured on this machine in one run.
 
     .venv/bin/python benchmarks/actions.py [--workers 2] [--out benchmarks/results/actions]
 
-- the support graph of a 10-block paper tower at k = 16 per variant (target <= 2 s);
-- "safe to remove?" for one object at k = 48 (target <= 0.8 s);
-- best place on a 20 x 20 cm region, 16 candidates, k = 16 (target <= 3 s);
+Each decision question is answered twice on the same seeds, interleaved: sequentially (the default:
+variants sampled in batches until decided, ``engine/decide.py``) and at fixed k (``sequential=False``),
+and the decisions are compared:
+- the support graph of a 10-block paper tower at k = 16 per variant (target <= 1 s);
+- "safe to remove?" for the top block at k = 48 (target <= 0.4 s);
+- best place on a 20 x 20 cm region, 16 candidates, k = 16 (target <= 2 s);
+- the support graph of a column of 5-40 cubes at k = 8 (target for 40: <= 8 s);
 - cost of one removal question vs the number of unrelated towers in the scene (1-8): objects an
-  action cannot reach are left out of its rollouts, so it should cost about one tower;
-- cost of a support graph vs tower height (5-40 cubes) at k = 8.
+  action cannot reach are left out of its rollouts, so it should cost about one tower.
 
 Towers: the authors' stable 10-block towers from ../shared/data/battaglia2013/willitfall.csv (the
 first one their ground truth keeps standing; generated paper-style towers without the data).
@@ -29,6 +32,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 from ipe_ros.engine import Box, Floor, ModelConfig, Scene, WorkerPool, preset  # noqa: E402
 from ipe_ros.engine import actions as A  # noqa: E402
 from ipe_ros.engine.config import DEFAULT_SIGMA_M  # noqa: E402
+from ipe_ros.engine.decide import Ranking, SafeBelow, Supports, Tally  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 I = (0.0, 0.0, 0.0, 1.0)
@@ -65,13 +69,68 @@ def shelf(tower: Scene, copies: int, spacing_m: float = 6.0) -> Scene:
     return dataclasses.replace(tower, name=f"shelf_{copies}", objects=tuple(objects))
 
 
-def timed(fn, repeats: int) -> float:
-    walls = []
+def timed(fn, repeats: int):
+    """(median seconds, the last result)."""
+    walls, result = [], None
     for _ in range(repeats):
         start = time.perf_counter()
-        fn()
+        result = fn()
         walls.append(time.perf_counter() - start)
-    return statistics.median(walls)
+    return statistics.median(walls), result
+
+
+def _tallies(answers: A.Answers) -> dict[str, Tally]:
+    """Each variant's standing-sample counts, as the rules read them."""
+    out = {}
+    for v in answers.variants:
+        given = v.given_stands
+        if v.label == "as_is" or given is None or not v.simulated:
+            continue
+        n = given.samples
+        out[v.label] = Tally(n, round((given.any_fall_probability or 0.0) * n),
+                             {name: round(p * n) for name, p in given.object_fall_probability.items()})
+    return out
+
+
+def _point(rule, tally: Tally):
+    """The answer a fixed-k run acts on where its interval did not decide: the point estimates."""
+    if tally.samples == 0:
+        return None
+    p = tally.any_falls / tally.samples
+    if isinstance(rule, Supports):
+        return (p < rule.safe_below, frozenset(n for n, c in tally.object_falls.items() if c / tally.samples >= rule.threshold))
+    if isinstance(rule, SafeBelow):
+        return p < rule.level
+    return None  # ranking: compared by the candidate each run puts first
+
+
+def compare(rule, sequential: A.Answers, fixed: A.Answers) -> dict:
+    """Per variant: the sequential decision against the fixed-k run's (its full k through the same
+    rule) where that decided, and the point-estimate answers where it did not."""
+    fixed_tallies, seq_tallies = _tallies(fixed), _tallies(sequential)
+    fixed_decided = rule.decide(fixed_tallies, set(fixed_tallies))
+    seq_decisions = {v.label: v.decision for v in sequential.variants if v.label in seq_tallies}
+    decided = [label for label in fixed_decided if label in seq_decisions]
+    same = sum(seq_decisions[label] == fixed_decided[label] for label in decided)
+    undecided = [label for label in fixed_tallies if label not in fixed_decided]
+    differ = sum(_point(rule, seq_tallies[label]) != _point(rule, fixed_tallies[label]) for label in undecided
+                 if _point(rule, fixed_tallies[label]) is not None)
+    drawn = [v.samples_drawn for v in sequential.variants if v.samples_drawn is not None]
+    return {"fixed_decided": len(decided), "same_decision": same, "fixed_undecided": len(undecided),
+            "point_answer_differs": differ, "mean_samples_drawn": statistics.mean(drawn) if drawn else None}
+
+
+def both(name: str, target_s: float | None, run, rule, repeats: int, first=None) -> dict:
+    """One question answered sequentially and at fixed k on the same seeds, interleaved."""
+    seq_s, seq = timed(lambda: run(True), repeats)
+    fixed_s, fixed = timed(lambda: run(False), repeats)
+    seq_answers, fixed_answers = (seq, fixed) if first is None else (seq[1], fixed[1])
+    row = {"question": name, "target_s": target_s, "sequential_s": seq_s, "fixed_s": fixed_s,
+           **compare(rule, seq_answers, fixed_answers)}
+    if first is not None:  # a ranking: the candidate each run puts first, and its fixed-k P
+        chosen, best = first(seq), first(fixed)
+        row["same_first_choice"] = chosen == best
+    return row
 
 
 def main() -> int:
@@ -93,44 +152,54 @@ def main() -> int:
         def model(k):
             return ModelConfig(sigma_m=DEFAULT_SIGMA_M, samples=k)
 
-        graph = A.support_graph(tower, model(16), settings, **kw)
-        rows.append({"question": f"support graph, {tower.name} (10 blocks), k = 16 per variant", "target_s": 2.0,
-                     "seconds": timed(lambda: A.support_graph(tower, model(16), settings, **kw), args.repeats),
-                     "note": f"{len(graph.edges)} edges, safe now: {', '.join(n for n, _, _ in graph.safe) or 'none'}"})
-        rows.append({"question": f"safe to remove the top block ({top}), k = 48", "target_s": 0.8,
-                     "seconds": timed(lambda: A.remove(tower, [top], model(48), settings, **kw), args.repeats),
-                     "note": "as is + one removal (simulated: the top presses on what holds it up)"})
+        supports = Supports(A.DEFAULT_SUPPORT_THRESHOLD, A.DEFAULT_SAFE_BELOW)
+        rows.append(both(f"support graph, {tower.name} (10 blocks), k = 16 per variant", 1.0,
+                         lambda seq: A.support_graph(tower, model(16), settings, sequential=seq, **kw).answers,
+                         supports, args.repeats))
+        rows.append(both(f"safe to remove the top block ({top}), k = 48", 0.4,
+                         lambda seq: A.remove(tower, [top], model(48), settings, safe_below=A.DEFAULT_SAFE_BELOW,
+                                              sequential=seq, **kw), SafeBelow(A.DEFAULT_SAFE_BELOW), args.repeats))
         block = Box(name="new", extents_m=(0.2, 0.2, 0.2), position_m=(0.0, 0.0, 0.0), orientation_xyzw=I,
                     friction=0.6, restitution=0.0, mass_kg=1.0)
         centre = max(tower.dynamic_objects, key=lambda b: b.position_m[2]).position_m
         region = A.Region((centre[0] - 0.1, centre[0] + 0.1), (centre[1] - 0.1, centre[1] + 0.1))
-        rows.append({"question": "best place on the tower's top, 20 x 20 cm, 16 candidates, k = 16", "target_s": 3.0,
-                     "seconds": timed(lambda: A.best_place(tower, block, region, model(16), settings, candidates=16,
-                                                           **kw), args.repeats), "note": ""})
+        rows.append(both("best place on the tower's top, 20 x 20 cm, 16 candidates, k = 16", 2.0,
+                         lambda seq: A.best_place(tower, block, region, model(16), settings, candidates=16,
+                                                  sequential=seq, **kw), Ranking(), args.repeats,
+                         first=lambda result: result[0][0][0].position_m))
+        for n in map(int, args.heights.split(",")):
+            scene = column(n)
+            rows.append(both(f"support graph, column of {n} 10 cm cubes, k = 8 per variant (one run)",
+                             8.0 if n == 40 else None,
+                             lambda seq: A.support_graph(scene, ModelConfig(sigma_m=0.005, samples=8), settings,
+                                                         sequential=seq, **kw).answers, supports, 1))
         shelves = []
         for copies in map(int, args.shelves.split(",")):
             scene = shelf(tower, copies)
-            shelves.append({"towers": copies, "seconds": timed(
-                lambda: A.ask(scene, [A.Remove((f"t0_{tower.dynamic_objects[0].name}",))], model(16), settings, **kw),
-                args.repeats)})
-        heights = []
-        for n in map(int, args.heights.split(",")):
-            scene = column(n)
-            heights.append({"blocks": n, "seconds": timed(
-                lambda: A.support_graph(scene, ModelConfig(sigma_m=0.005, samples=8), settings, **kw), 1)})
-    report = {"date": time.strftime("%Y-%m-%d"), "workers": args.workers, "tower": tower.name, "targets": rows,
-              "unrelated_towers": shelves, "support_graph_vs_height": heights}
+            seconds, _ = timed(lambda: A.ask(scene, [A.Remove((f"t0_{tower.dynamic_objects[0].name}",))], model(16),
+                                             settings, **kw), args.repeats)
+            shelves.append({"towers": copies, "seconds": seconds})
+    report = {"date": time.strftime("%Y-%m-%d"), "workers": args.workers, "tower": tower.name, "questions": rows,
+              "unrelated_towers": shelves}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "actions.json").write_text(json.dumps(report, indent=1) + "\n")
     lines = [f"# Robot questions: cost ({report['date']}, {args.workers} workers, `default`)", "",
-             "`.venv/bin/python benchmarks/actions.py`; medians of 3 runs with a warm pool.", "",
-             "| question | s | target s | |", "|---|---|---|---|"]
-    lines += [f"| {r['question']} | {r['seconds']:.2f} | {r['target_s']:g} | {r['note']} |" for r in rows]
+             f"`.venv/bin/python benchmarks/actions.py`; medians of {args.repeats} runs with a warm pool (columns: one "
+             "run), sequential and fixed-k interleaved on the same seeds. Decisions: where the fixed-k run's own "
+             "interval decided a variant, is the sequential decision the same; where it did not, how often the "
+             "point-estimate answers (edges, safe) differ.", "",
+             "| question | sequential s | fixed-k s | target s | decided at fixed k: same | undecided: answers differ "
+             "| mean samples drawn |", "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        extra = "" if "same_first_choice" not in r else f"; first choice {'same' if r['same_first_choice'] else 'differs'}"
+        lines.append(f"| {r['question']} | {r['sequential_s']:.2f} | {r['fixed_s']:.2f} | "
+                     f"{'-' if r['target_s'] is None else format(r['target_s'], 'g')} | "
+                     f"{r['same_decision']} of {r['fixed_decided']} | {r['point_answer_differs']} of "
+                     f"{r['fixed_undecided']}{extra} | "
+                     f"{'-' if r['mean_samples_drawn'] is None else format(r['mean_samples_drawn'], '.1f')} |")
     lines += ["", "One removal (k = 16) in a scene of N separate 10-block towers 6 m apart:", "",
               "| towers | s |", "|---|---|"] + [f"| {r['towers']} | {r['seconds']:.2f} |" for r in shelves]
-    lines += ["", "Support graph of a column of N 10 cm cubes (k = 8 per variant, one run):", "",
-              "| blocks | s |", "|---|---|"] + [f"| {r['blocks']} | {r['seconds']:.2f} |" for r in heights]
     (out / "actions.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     return 0

@@ -170,12 +170,15 @@ def main() -> int:
                                   | {"level": int.from_bytes(msg.status[0].level, "little")}]
 
     asked: dict[str, int] = {}  # question id -> replies received
-    replies = {"answer": 0, "error": 0, "busy": 0}
+    replies = {"answer": 0, "error": 0, "busy": 0, "partial": 0}
     unreadable = {"sent": 0, "replies": 0}  # malformed JSON: its id cannot be read, so the reply carries ""
 
     def on_reply(msg: String) -> None:
         data = json.loads(msg.data)
         with lock:
+            if not data["final"]:  # what a decision question has decided so far; its final reply follows
+                replies["partial"] += 1
+                return
             if data["id"] == "":
                 unreadable["replies"] += 1
             else:
@@ -322,7 +325,7 @@ def main() -> int:
           f"{counts['questions']} questions, {counts['hostile_questions']} hostile ones, "
           f"{counts['question_floods']} floods of 200 questions |",
           f"| question replies | {len(asked)} asked: {replies['answer']} answers, {replies['error']} errors, "
-          f"{replies['busy']} busy; {unanswered} without reply, {twice} replied twice; {unreadable['sent']} "
+          f"{replies['busy']} busy ({replies['partial']} partial replies before finals); {unanswered} without reply, {twice} replied twice; {unreadable['sent']} "
           f"unreadable (malformed JSON, no id to echo): {unreadable['replies']} replies with id \"\" |",
           f"| answers | {answers['ok']} ({answers['budget']} cut by the budget), {answers['error']} error answers |",
           f"| scenes rejected (diagnostics) | {d.get('scenes_rejected', '-')} |",

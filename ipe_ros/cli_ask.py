@@ -60,6 +60,8 @@ def add_ask_parser(sub, finite, one_line_parser) -> None:
                        help="compute budget per batch of variants, seconds")
         q.add_argument("--fell-off", action="store_true",
                        help="also which objects end off the table (a scene on a table)")
+        q.add_argument("--fixed-k", action="store_true",
+                       help="every variant runs all --samples (default: decision questions sample until decided)")
         q.add_argument("--json", action="store_true", help="one JSON object per line")
         q.add_argument("--rrd", default=None, metavar="FILE",
                        help="record 4 rollouts of every variant to this rerun file (not for clear)")
@@ -67,6 +69,8 @@ def add_ask_parser(sub, finite, one_line_parser) -> None:
     r = questions.add_parser("remove", help="P(anything else falls) if an object is taken away")
     common(r)
     r.add_argument("--object", action="append", default=None, metavar="NAME", help="repeatable; default: every object")
+    r.add_argument("--safe-below", type=finite, default=None, metavar="P",
+                   help="decide each removal safe or unsafe at this P(anything falls), sampling until decided")
     s = questions.add_parser("support", help="which objects hold which up, and what is safe to remove now")
     common(s)
     s.add_argument("--threshold", type=finite, default=A.DEFAULT_SUPPORT_THRESHOLD)
@@ -118,6 +122,8 @@ def _table(answers: A.Answers) -> str:
         if v.any_fell_off_probability is not None:
             shown += f"; P(any falls off) {v.any_fell_off_probability:.2f}"
         note = "" if v.simulated else "  (nothing within its reach: not simulated)"
+        if v.stopped_by is not None:
+            note += f"  [{v.decision or 'undecided'}: {v.stopped_by} after {v.samples_drawn} samples drawn]"
         lines.append(f"{v.label:<32} {p:>12} {ci:>15} {v.samples:>4} {g:>14} "
                      f"{'-' if given is None else given.samples:>4}  {shown}{note}")
     if answers.alone is not None and answers.alone.unstable:
@@ -150,10 +156,12 @@ def _answer(args, scene, model, settings, kw) -> int:
     emit = (lambda d: print(json.dumps(d, allow_nan=False, sort_keys=True), flush=True)) if args.json else None
     answers = None
     if args.question == "remove":
-        answers = A.remove(scene, args.object, model, settings, **kw)
+        answers = A.remove(scene, args.object, model, settings, safe_below=args.safe_below,
+                           sequential=not args.fixed_k, **kw)
         print(json.dumps(answers.to_dict(), allow_nan=False, sort_keys=True) if emit else _table(answers))
     elif args.question == "support":
-        graph = A.support_graph(scene, model, settings, threshold=args.threshold, safe_below=args.safe_below, **kw)
+        graph = A.support_graph(scene, model, settings, threshold=args.threshold, safe_below=args.safe_below,
+                                sequential=not args.fixed_k, **kw)
         answers = graph.answers
         if emit:
             emit(graph.to_dict())
@@ -164,7 +172,7 @@ def _answer(args, scene, model, settings, kw) -> int:
         if args.png:
             draw_support_graph(scene, graph, args.png)
     elif args.question == "clear":
-        order = A.clear_order(scene, model, settings, target=args.target, **kw)
+        order = A.clear_order(scene, model, settings, target=args.target, sequential=not args.fixed_k, **kw)
         if emit:
             emit(order.to_dict())
         else:
@@ -204,19 +212,21 @@ def _place(args, scene, model, settings, kw, emit) -> None:
         x0, x1, y0, y1 = args.region
         region = A.Region((x0, x1), (y0, y1), (math.radians(args.yaw[0]), math.radians(args.yaw[1])))
         rows, answers = A.best_place(scene, body, region, model, settings, candidates=args.candidates,
-                                     yaws=args.yaws, **kw)
+                                     yaws=args.yaws, sequential=not args.fixed_k, **kw)
     else:
         spots = [(s[0], s[1], math.radians(s[2]) if len(s) == 3 else 0.0) for s in args.at]
-        rows, answers = A.place_at(scene, body, spots, model, settings, **kw)
+        rows, answers = A.place_at(scene, body, spots, model, settings, sequential=not args.fixed_k, **kw)
     if emit:
         emit(A.placements_to_dict(scene, rows, answers))
         return answers
-    print(f"{'x m':>8} {'y m':>8} {'z m':>8} {'yaw deg':>8} {'P(any falls)':>12} {'95% interval':>15}")
+    print(f"{'x m':>8} {'y m':>8} {'z m':>8} {'yaw deg':>8} {'P(any falls)':>12} {'95% interval':>15} {'k':>4}")
     for b, v in rows:
         yaw = math.degrees(2 * math.atan2(b.orientation_xyzw[2], b.orientation_xyzw[3]))
         p = "-" if v.any_fall_probability is None else f"{v.any_fall_probability:.3f}"
         ci = "-" if v.any_fall_probability_ci95 is None else "[{:.2f}, {:.2f}]".format(*v.any_fall_probability_ci95)
-        print(f"{b.position_m[0]:>8.3f} {b.position_m[1]:>8.3f} {b.position_m[2]:>8.3f} {yaw:>8.1f} {p:>12} {ci:>15}")
+        decided = "" if v.decision is None else f"  {v.decision}"
+        print(f"{b.position_m[0]:>8.3f} {b.position_m[1]:>8.3f} {b.position_m[2]:>8.3f} {yaw:>8.1f} {p:>12} {ci:>15} "
+              f"{v.samples:>4}{decided}")
     return answers
 
 

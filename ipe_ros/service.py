@@ -527,17 +527,32 @@ MAX_WAITING_QUESTIONS = 4
 DEFAULT_QUESTION_SAMPLES = 16
 
 
+def _replaced_by(question) -> str:
+    return f"cancelled: question {question.request_id!r} about the same scene replaced it (cancel_older)"
+
+
 def _question_head(question, source: StampedScene) -> dict[str, Any]:
     """The fields every reply to a question carries: its id, kind, and the scene it was about."""
     return {"id": question.request_id, "question": question.kind, "scene_id": source.scene_id,
             "frame_id": source.frame_id, "stamp": stamp_dict(source.stamp_ns)}
 
 
+class QuestionCancelled(Exception):
+    """A newer question about the same scene asked to replace this one (``cancel_older``)."""
+
+
+def _same_scene(a: StampedScene, b: StampedScene) -> bool:
+    return a.scene_id == b.scene_id and a.stamp_ns == b.stamp_ns and a.seq == b.seq
+
+
 class QuestionService:
     """Questions about actions (``~/ask``): a FIFO of at most MAX_WAITING_QUESTIONS, one thread,
-    the prediction service's worker pool and config. Each answer (or error) goes to ``publish``
-    with the request id echoed (and the scene it was about); a question brings its scene or is
-    about the newest accepted one."""
+    the prediction service's worker pool and config. Each question gets exactly one final reply
+    (answer or error, ``"final": true``) on ``publish`` with the request id echoed (and the scene it
+    was about); a decision question answered sequentially also publishes partial replies
+    (``"final": false``, what is decided so far) after each batch. A question brings its scene or
+    is about the newest accepted one; with ``cancel_older`` it replaces the older questions about
+    the same scene (waiting: answered cancelled at once; running: after its current batch)."""
 
     def __init__(self, predictions: PredictionService, publish: Callable[[dict[str, Any], StampedScene], None],
                  log_error: Callable[[str], None] = lambda _msg: None):
@@ -547,6 +562,7 @@ class QuestionService:
         self._cond = threading.Condition()
         self._queue: collections.deque = collections.deque()
         self._current: tuple | None = None  # (question, scene) being answered
+        self._cancel_current: str | None = None  # why the running question is to end at its next batch
         self._closing = False
         self.answered = 0
         self.refused = 0
@@ -566,8 +582,8 @@ class QuestionService:
             self._queue.clear()
             self._cond.notify_all()
         for question, source in abandoned:
-            self._deliver({**_question_head(question, source), "error": f"{reason}: the question was cancelled"},
-                          source, question)
+            self._deliver({**_question_head(question, source), "final": True,
+                           "error": f"{reason}: the question was cancelled"}, source, question)
         if join:
             self.join(timeout_s)
 
@@ -582,13 +598,22 @@ class QuestionService:
             scene = self._predictions.latest_scene()
             if scene is None:
                 return "no scene received yet; publish one on ~/scene or ~/scene_json, or put \"scene\" in the question"
+        cancelled = []
         with self._cond:
             if self._closing:
                 return "the node is shutting down"
+            if getattr(question, "cancel_older", False):
+                cancelled = [(q, s) for q, s in self._queue if _same_scene(s, scene)]
+                self._queue = collections.deque((q, s) for q, s in self._queue if not _same_scene(s, scene))
+                if self._current is not None and _same_scene(self._current[1], scene):
+                    self._cancel_current = _replaced_by(question)
             if len(self._queue) >= MAX_WAITING_QUESTIONS:
                 return f"busy: {len(self._queue)} questions are waiting; ask again later"
             self._queue.append((question, scene))
+            self.refused += len(cancelled)
             self._cond.notify_all()
+        for old, source in cancelled:
+            self._deliver({**_question_head(old, source), "error": _replaced_by(question), "final": True}, source, old)
         return None
 
     def _run(self) -> None:
@@ -601,9 +626,20 @@ class QuestionService:
                 if self._closing:
                     return
                 question, source = self._current = self._queue.popleft()
+                self._cancel_current = None
             config = self._predictions.config
             head = _question_head(question, source)
             start = time.perf_counter()
+
+            def progress(partial: dict, head=head, source=source, question=question) -> None:
+                with self._cond:
+                    if self._closing:
+                        raise QuestionCancelled("the node is shutting down")
+                    if self._cancel_current is not None:
+                        raise QuestionCancelled(self._cancel_current)
+                self._deliver({**head, "final": False, "progress": partial,
+                               "compute_s": time.perf_counter() - start}, source, question)
+
             try:
                 model = dataclasses.replace(config.model, samples=DEFAULT_QUESTION_SAMPLES)
                 pool = self._predictions.pool
@@ -613,15 +649,15 @@ class QuestionService:
                                   record_samples=config.rerun_rollouts_logged)
                 answer, answers = answer_question(source.scene, question, model, config.settings, seed=config.seed,
                                                   map_fn=pool.map if pool is not None else None,
-                                                  budget_s=config.budget_s, **record)
-                message = {**head, "answer": answer, "compute_s": time.perf_counter() - start}
+                                                  budget_s=config.budget_s, on_progress=progress, **record)
+                message = {**head, "final": True, "answer": answer, "compute_s": time.perf_counter() - start}
                 if record and answers is not None:
                     message["rrd_path"] = self._write_rrd(config, question, source, answers)
                 answered = True
             except Exception as exc:  # noqa: BLE001 - one question's trouble is its answer, never the thread's end
-                error = str(exc) if isinstance(exc, ValueError) else "".join(
+                error = str(exc) if isinstance(exc, (ValueError, QuestionCancelled)) else "".join(
                     traceback.format_exception_only(type(exc), exc)).strip()
-                message = {**head, "error": clip(error, 1000)}
+                message = {**head, "final": True, "error": clip(error, 1000)}
                 answered = False
             with self._cond:
                 self._current = None

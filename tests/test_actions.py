@@ -262,7 +262,7 @@ def test_what_a_removal_makes_fall_is_told_apart_from_what_falls_anyway():
     not have fallen anyway, that shows as ~0.5 - below the support threshold, so the edge vanished."""
     model = ModelConfig(sigma_m=0.01, samples=40)
     edge = scene("edge", box("bottom", 0, 0, 0.1), box("top", 0.1, 0, 0.3))
-    graph = A.support_graph(edge, model, SETTINGS, seed=1)
+    graph = A.support_graph(edge, model, SETTINGS, seed=1, sequential=False)
     as_is = graph.answers.alone
     assert 0.2 <= as_is.any_fall_probability <= 0.8 and as_is.unstable
     removal = _by_label(graph.answers)["remove/bottom"]
@@ -299,3 +299,43 @@ def test_questions_ask_what_falls_off_the_table():
                                "table)")
     with pytest.raises(ConfigError, match="^fell_off: must be true or false$"):
         A.question_from_dict({"question": "remove", "fell_off": "yes"})
+
+
+# -- sequential decisions ---------------------------------------------------------------------------------
+def test_a_decided_variant_stops_and_an_undecided_one_runs_to_the_cap():
+    model = ModelConfig(sigma_m=0.005, samples=24)
+    variants = _by_label(A.support_graph(STACK, model, SETTINGS).answers)
+    bottom, top = variants["remove/bottom"], variants["remove/top"]
+    # the top falls in each of the first batch of 4: 4 of 4 puts the interval above 0.5 (an edge) and
+    # above 0.05 ("unsafe"); 0 of 4 would put it below 0.5 (no edge)
+    assert (bottom.decision, bottom.stopped_by, bottom.samples_drawn, bottom.samples) == ("unsafe", "decided", 4, 4)
+    # nothing falls: "safe below 0.05" needs 73 samples of 0 for a 95% Wilson interval, more than the cap
+    assert (top.decision, top.stopped_by, top.samples_drawn, top.samples) == (None, "cap", 24, 24)
+    assert variants["as_is"].samples == 24 and variants["as_is"].stopped_by is None
+
+
+def test_a_sequential_answer_equals_the_fixed_k_answer_cut_where_it_stopped():
+    """Sample i keeps seed i: in the edge stack (falls by itself in about half the samples) the
+    removal decided after n drawn samples answers what a fixed-k run of n samples answers over its
+    standing samples."""
+    model = ModelConfig(sigma_m=0.01, samples=40)
+    edge = scene("edge", box("bottom", 0, 0, 0.1), box("top", 0.1, 0, 0.3))
+    sequential = _by_label(A.support_graph(edge, model, SETTINGS, seed=1).answers)["remove/bottom"]
+    assert sequential.stopped_by == "decided" and sequential.samples_drawn < 40
+    fixed = _by_label(A.support_graph(edge, dataclasses.replace(model, samples=sequential.samples_drawn), SETTINGS,
+                                      seed=1, sequential=False).answers)["remove/bottom"]
+    assert sequential.given_stands == fixed.given_stands
+    assert (sequential.any_fall_probability, sequential.samples) == (fixed.given_stands.any_fall_probability,
+                                                                     fixed.given_stands.samples)
+
+
+def test_best_place_ranks_hopeless_spots_out_early_and_says_so():
+    model = ModelConfig(sigma_m=0.005, samples=32)
+    new = box("new", 0, 0, 0, (0.2, 0.2, 0.2))
+    rows, answers = A.place_at(STACK, new, [(0.0, 0.0, 0.0), (0.17, 0.0, 0.0)], model, SETTINGS)
+    (centre, on_top), (edge_spot, overhanging) = rows
+    assert centre.position_m[0] == 0.0 and edge_spot.position_m[0] == 0.17
+    assert overhanging.decision == "ranked out" and overhanging.samples_drawn == 4
+    assert on_top.decision == "best" and on_top.stopped_by == "decided"
+    fixed_rows, _ = A.place_at(STACK, new, [(0.0, 0.0, 0.0), (0.17, 0.0, 0.0)], model, SETTINGS, sequential=False)
+    assert [b.position_m for b, _ in fixed_rows] == [b.position_m for b, _ in rows]  # the same order

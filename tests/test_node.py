@@ -353,16 +353,23 @@ def test_questions_on_ask_are_answered_on_answer_with_their_id(ros, tower, tmp_p
     ask.publish(String(data=json.dumps({"id": "too-early", "question": "remove"})))
     wait_until(lambda: len(got), TIMEOUT_S, "the refusal of a question with no scene")
     first = json.loads(got[0].data)
-    assert first["id"] == "too-early" and first["error"].startswith("no scene received yet")
+    assert first["id"] == "too-early" and first["error"].startswith("no scene received yet") and first["final"]
+    finals = lambda: [json.loads(m.data) for m in list(got) if json.loads(m.data)["final"]]  # noqa: E731
     # a question that brings its own scene
     request = {"id": "r1", "question": "support", "samples": 4, "scene": json.loads(scene_to_json(STACK))}
     ask.publish(String(data=json.dumps(request)))
-    wait_until(lambda: len(got) >= 2 and len(graph_markers), TIMEOUT_S, "the support graph answer and its markers")
-    answer = json.loads(got[1].data)
+    wait_until(lambda: len(finals()) >= 2 and len(graph_markers), TIMEOUT_S, "the support graph answer and its markers")
+    answer = finals()[1]
     assert answer["id"] == "r1" and answer["scene_id"] == "stack"
     assert answer["answer"]["edges"] == [["bottom", "top", 1.0]]
     assert [s["name"] for s in answer["answer"]["safe_to_remove"]] == ["top"]
     assert answer["rrd_path"].endswith("_support_r1.rrd") and os.path.getsize(answer["rrd_path"]) > 0
+    # before it, what was decided after the one batch of 4 samples (anytime)
+    (partial,) = [json.loads(m.data) for m in got if not json.loads(m.data)["final"]]
+    assert partial["id"] == "r1" and partial["progress"]["samples_drawn"] == 4
+    assert partial["progress"]["decided"] == [{"label": "remove/bottom", "decision": "unsafe", "samples_drawn": 4,
+                                               "samples": 4}]
+    assert [u["label"] for u in partial["progress"]["undecided"]] == ["remove/top"]
     lines = [m for m in graph_markers[-1].markers if m.type == Marker.LINE_LIST]
     assert len(lines) == 1 and len(lines[0].points) == 2
     # about the newest scene the node accepted, and a bad question refused by name
@@ -370,8 +377,8 @@ def test_questions_on_ask_are_answered_on_answer_with_their_id(ros, tower, tmp_p
     wait_until(lambda: node.service.latest_scene() is not None, TIMEOUT_S, "the scene to be accepted")
     ask.publish(String(data=json.dumps({"id": "r2", "question": "push", "object": "bottom", "velocity_m_s": [2, 0]})))
     ask.publish(String(data=json.dumps({"id": "r3", "question": "fly"})))
-    wait_until(lambda: len(got) >= 4, TIMEOUT_S, "answers to r2 and r3")
-    by_id = {json.loads(m.data)["id"]: json.loads(m.data) for m in got}
+    wait_until(lambda: len(finals()) >= 4, TIMEOUT_S, "answers to r2 and r3")
+    by_id = {m["id"]: m for m in finals()}
     assert by_id["r3"]["error"] == "question: must be one of remove, support, clear, place, push, got 'fly'"
     pushed = by_id["r2"]["answer"]["variants"][1]
     assert pushed["label"] == "push/bottom" and pushed["object_fall_probability"]["top"] == 1.0

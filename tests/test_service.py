@@ -131,3 +131,32 @@ def test_the_self_check_is_counted_and_can_be_turned_off():
         assert svc.stats().escalated == 1
     finally:
         svc.close()
+
+
+def test_a_newer_question_may_replace_older_ones_about_the_same_scene_each_answered_once(service):
+    from ipe_ros.engine.actions import question_from_dict
+    from ipe_ros.service import QuestionService
+
+    replies = []
+    questions = QuestionService(service, publish=lambda message, _source: replies.append(message))
+    questions.start()
+    try:
+        scene = item(1)
+        other = item(2)  # another scene: untouched by the replacement
+        assert questions.submit(question_from_dict({"id": "slow", "question": "support", "samples": 200}), scene) is None
+        wait_until(lambda: any(not r["final"] for r in replies), 60.0, "the slow question's first partial answer")
+        for request_id, source in (("waiting", scene), ("elsewhere", other)):
+            assert questions.submit(question_from_dict({"id": request_id, "question": "remove", "samples": 2}),
+                                    source) is None
+        newer = question_from_dict({"id": "newer", "question": "remove", "samples": 2, "cancel_older": True})
+        assert questions.submit(newer, scene) is None
+        finals = lambda: {r["id"]: r for r in replies if r["final"]}  # noqa: E731
+        wait_until(lambda: {"slow", "waiting", "elsewhere", "newer"} <= set(finals()), 60.0, "every final reply")
+        replaced = "cancelled: question 'newer' about the same scene replaced it (cancel_older)"
+        assert finals()["waiting"]["error"] == replaced and finals()["slow"]["error"] == replaced
+        assert "answer" in finals()["newer"] and "answer" in finals()["elsewhere"]
+        assert sorted(r["id"] for r in replies if r["final"]) == ["elsewhere", "newer", "slow", "waiting"]
+        progress = [r["progress"] for r in replies if r["id"] == "slow" and not r["final"]]
+        assert progress and progress[0]["samples_requested"] == 200 and progress[0]["samples_drawn"] == 4
+    finally:
+        questions.close()

@@ -25,7 +25,7 @@ import time
 import traceback
 import zlib
 from dataclasses import dataclass
-from typing import Union
+from typing import Callable, Union
 
 import numpy as np
 
@@ -33,6 +33,7 @@ from . import queries, simulation
 from .config import ModelConfig, QuerySpec, SimSettings, SolverSettings
 from . import limits
 from .errors import BudgetExceeded, ConfigError, PhysicsError, shown
+from .decide import Ranking, SafeBelow, Sequential, Supports, Tally
 from .estimate import wilson_interval, circular_mean
 from .perturb import draw_sample_inputs, is_deterministic, position_sigmas_m
 from .rollout import SampleTask, _decided_heights, collapse_heights, separated_world
@@ -170,6 +171,9 @@ class VariantTask:
     #: per action, the dynamic objects worth simulating (None: all); the rest cannot be reached
     regions: tuple[frozenset[str] | None, ...] | None = None
     record_every: int = 0  # record trajectories every N ticks (rerun), 0: none
+    #: run the scene as it is (``None`` among the actions) first, and the other variants only if
+    #: nothing in it fell: a question decided over the standing samples needs no more
+    skip_unless_stands: bool = False
 
 
 @dataclass(frozen=True)
@@ -184,6 +188,7 @@ class VariantResult:
     worker_lost: bool = False  # its worker process died twice
     trajectory: list | None = None  # (t, positions, orientations) frames when recorded
     fell_off: np.ndarray | None = None  # ended off the table (asked with fell_off)
+    skipped: bool = False  # not run: the scene fell as it is, or the variant was already decided
 
 
 def _action_rng(task: VariantTask, action: Action) -> np.random.Generator:
@@ -248,18 +253,33 @@ def run_variants(task: VariantTask) -> list[VariantResult]:
         shared, shared_orn = simulation.read_poses(separated_world(task.scene, task.settings, inputs))
     except PhysicsError as exc:
         return [VariantResult(names, None, None, f"PhysicsError: {exc}") for _ in task.actions]
-    results = []
-    for v, action in enumerate(task.actions):
-        region = None if task.regions is None else task.regions[v]
-        try:
-            results.append(_one_variant(task, action, shared, shared_orn, inputs, region))
-        except BudgetExceeded as exc:
-            results.append(VariantResult(names, None, None, f"BudgetExceeded: {exc}", True))
-        except PhysicsError as exc:
-            results.append(VariantResult(names, None, None, f"PhysicsError: {exc}"))
-        except Exception as exc:  # noqa: BLE001 - one variant's trouble must not end the others
-            results.append(VariantResult(names, None, None, traceback.format_exception_only(type(exc), exc)[-1].strip()))
+    results: list[VariantResult | None] = [None] * len(task.actions)
+    order = list(range(len(task.actions)))
+    if task.skip_unless_stands:
+        as_is = task.actions.index(None)
+        order = [as_is] + [v for v in order if v != as_is]
+    for v in order:
+        action = task.actions[v]
+        if task.skip_unless_stands and v != order[0]:
+            first = results[order[0]]
+            if first.error is not None or bool(np.any(first.fallen)):
+                results[v] = VariantResult(names, None, None, "skipped: the scene fell as it is", skipped=True)
+                continue
+        results[v] = _run_one(task, action, v, shared, shared_orn, inputs, names)
     return results
+
+
+def _run_one(task: VariantTask, action: Action, v: int, shared, shared_orn, inputs, names) -> VariantResult:
+    """One variant of the sample; its physics trouble is its own result, never the others'."""
+    region = None if task.regions is None else task.regions[v]
+    try:
+        return _one_variant(task, action, shared, shared_orn, inputs, region)
+    except BudgetExceeded as exc:
+        return VariantResult(names, None, None, f"BudgetExceeded: {exc}", True)
+    except PhysicsError as exc:
+        return VariantResult(names, None, None, f"PhysicsError: {exc}")
+    except Exception as exc:  # noqa: BLE001 - one variant's trouble must not end the others
+        return VariantResult(names, None, None, traceback.format_exception_only(type(exc), exc)[-1].strip())
 
 
 def _one_variant(task: VariantTask, action: Action, shared, shared_orn, inputs,
@@ -343,6 +363,13 @@ class VariantAnswer:
     #: per object, P(it ends off the table: its centre below the top); asked with fell_off
     fell_off_probability: dict[str, float] | None = None
     any_fell_off_probability: float | None = None
+    #: answered sequentially (``decide.Sequential``): what the rule decided ("safe", "unsafe",
+    #: "ranked out", "best"; None: undecided) and why sampling stopped ("decided", "cap", "budget");
+    #: the variant was then simulated only in samples where the scene as it is stands, so its
+    #: probabilities are over those (equal to ``given_stands``)
+    decision: str | None = None
+    stopped_by: str | None = None
+    samples_drawn: int | None = None  # samples 0..n-1 were drawn for it (it ran in those that stood)
 
     def to_dict(self) -> dict:
         off = {} if self.fell_off_probability is None else {
@@ -353,7 +380,9 @@ class VariantAnswer:
                 "object_fall_probability": self.object_fall_probability, "direction_rad": self.direction_rad,
                 "samples": self.samples, "failed_samples": self.failed_samples, "simulated": self.simulated,
                 "not_simulated": list(self.not_simulated), "caused_fall_probability": self.caused_fall_probability,
-                "given_stands": None if self.given_stands is None else self.given_stands.to_dict(), **off}
+                "given_stands": None if self.given_stands is None else self.given_stands.to_dict(), **off,
+                **({} if self.stopped_by is None else {"decision": self.decision, "stopped_by": self.stopped_by,
+                                                       "samples_drawn": self.samples_drawn})}
 
 
 @dataclass(frozen=True)
@@ -387,7 +416,7 @@ def _aggregate(label: str, action: Action, results: list[VariantResult], simulat
                deterministic: bool = False) -> VariantAnswer:
     """``deterministic``: nothing was drawn, so the one sample's answer is exact (a point, not an interval)."""
     ok = [r for r in results if r.error is None]
-    failed = [r for r in results if r.error is not None and not r.budget_stopped]
+    failed = [r for r in results if r.error is not None and not r.budget_stopped and not r.skipped]
     if not ok:
         return VariantAnswer(label, action, None, None, {}, None, 0, len(failed), simulated)
     names = ok[0].names
@@ -577,14 +606,19 @@ class Alone:
 def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSettings, seed: int = 0,
         map_fn: MapFn | None = None, budget_s: float | None = None,
         fall_threshold_fraction: float = 0.125, record_every: int = 0, record_samples: int = 0,
-        directions: bool = False, fell_off: bool = False) -> Answers:
+        directions: bool = False, fell_off: bool = False, sequential: Sequential | None = None,
+        on_progress: Callable[[dict], None] | None = None) -> Answers:
     """Answer every variant with common random numbers (see the module docstring). Removals that
     cannot change anything are answered from the scene's own samples (a variant "as is" is added
     for them when it is not asked). ``record_every`` / ``record_samples``: keep the trajectories of
     the first samples of every simulated variant (for rerun), in ``Answers.recorded``.
     ``directions``: also where things fall (rollouts then run until everything rests; without it a
     rollout ends as soon as what falls is decided). ``fell_off``: also which objects end off the
-    table (their centre below its top; the scene must stand on a table)."""
+    table (their centre below its top; the scene must stand on a table). ``sequential``: answer
+    in batches until its rule decides each variant, simulating variants only in samples where the
+    scene as it is stands (``decide``); needs an "as is" variant, ignored without noise.
+    ``on_progress``: called after each batch of a sequential answer with what is decided so far
+    (``progress_dict``); whatever it raises ends the question there (a cancellation)."""
     validate_scene(scene)
     check_budget(budget_s)
     for i, action in enumerate(actions):
@@ -617,23 +651,27 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
                                                                for a in simulated_actions)
     k = 1 if deterministic else model.samples
     deadline = None if budget_s is None else time.time() + budget_s
-    tasks = [VariantTask(scene=scene, model=model, settings=settings, query=query, index=i, seed=s,
-                         actions=tuple(simulated_actions), deadline_unix_s=deadline, regions=regions,
-                         record_every=record_every if i < record_samples else 0)
-             for i, s in enumerate(np.random.SeedSequence(seed).spawn(k))]
+    seeds = np.random.SeedSequence(seed).spawn(k)
+
+    def tasks(indices, variants: list[int], skip: bool) -> list[VariantTask]:
+        return [VariantTask(scene=scene, model=model, settings=settings, query=query, index=i, seed=seeds[i],
+                            actions=tuple(simulated_actions[j] for j in variants), deadline_unix_s=deadline,
+                            regions=tuple(regions[j] for j in variants),
+                            record_every=record_every if i < record_samples else 0, skip_unless_stands=skip)
+                for i in indices]
+
     start = time.perf_counter()
-    if map_fn is None:
-        per_sample = [run_variants(t) for t in tasks]
+    as_is = simulated_actions.index(None) if None in simulated_actions else None
+    decisions: dict[str, tuple[str | None, str, int]] = {}
+    if sequential is None or deterministic or as_is is None:
+        per_sample = _run(tasks(range(k), list(range(len(simulated_actions))), False), map_fn, scene)
     else:
-        names = tuple(b.name for b in scene.dynamic_objects)
-        lost = lambda task, reason: [  # noqa: E731
-            VariantResult(names, None, None, f"WorkerLost: {reason}", worker_lost=True) for _ in task.actions]
-        per_sample = map_fn(run_variants, tasks, on_lost=lost)
+        per_sample, decisions = _run_sequentially(tasks, simulated_actions, as_is, k, sequential, map_fn, scene,
+                                                  on_progress)
     by_variant = {_label(a): dataclasses.replace(
         _aggregate(_label(a), a, [s[j] for s in per_sample], deterministic=deterministic),
         not_simulated=() if regions[j] is None else tuple(sorted(everything - regions[j])))
         for j, a in enumerate(simulated_actions)}
-    as_is = simulated_actions.index(None) if None in simulated_actions else None
     if as_is is not None:
         stands = _stands_as_is(per_sample, as_is)
         for j, a in enumerate(simulated_actions):
@@ -641,6 +679,9 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
                 by_variant[_label(a)], caused_fall_probability=_caused(per_sample, j, as_is),
                 given_stands=_aggregate_given(
                     [s[j] for s, ok in zip(per_sample, stands) if ok], deterministic=deterministic))
+    for label, (decision, why, drawn) in decisions.items():
+        by_variant[label] = dataclasses.replace(by_variant[label], decision=decision, stopped_by=why,
+                                                samples_drawn=drawn)
     answers = []
     for action, is_trivial in zip(actions, trivial):
         if not is_trivial:
@@ -666,6 +707,83 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
                            alone.any_fall_probability_ci95 is not None
                            and alone.any_fall_probability_ci95[0] > DEFAULT_SAFE_BELOW)
     return Answers(scene.name, tuple(answers), k, time.perf_counter() - start, stopped, recorded, scene_alone)
+
+
+def _run(tasks: list[VariantTask], map_fn: MapFn | None, scene: Scene) -> list[list[VariantResult]]:
+    if map_fn is None:
+        return [run_variants(t) for t in tasks]
+    names = tuple(b.name for b in scene.dynamic_objects)
+    lost = lambda task, reason: [  # noqa: E731
+        VariantResult(names, None, None, f"WorkerLost: {reason}", worker_lost=True) for _ in task.actions]
+    return map_fn(run_variants, tasks, on_lost=lost)
+
+
+def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequential: Sequential, map_fn: MapFn | None,
+                      scene: Scene, on_progress: Callable[[dict], None] | None = None) -> tuple[list[list[VariantResult]], dict[str, tuple[str | None, str, int]]]:
+    """Batches of samples until the rule has decided every variant or k samples are drawn. Each
+    batch runs the scene as it is and the undecided variants; a decided variant's later samples are
+    skipped results. Returns every sample's results (in ``actions`` order) and, per variant label,
+    (decision, why it stopped, samples drawn for it)."""
+    names = tuple(b.name for b in scene.dynamic_objects)
+    others = [j for j in range(len(actions)) if j != as_is]
+    active = set(others)
+    decisions: dict[str, tuple[str | None, str, int]] = {}
+    per_sample: list[list[VariantResult]] = []
+    tallies = {_label(actions[j]): _Counts() for j in others}
+    while len(per_sample) < k and active:
+        running = [as_is] + sorted(active)
+        batch = range(len(per_sample), min(k, len(per_sample) + sequential.batch_samples))
+        for row in _run(tasks(batch, running, True), map_fn, scene):
+            full = [VariantResult(names, None, None, "skipped: decided", skipped=True) for _ in actions]
+            for j, result in zip(running, row):
+                full[j] = result
+            per_sample.append(full)
+            for j in running[1:]:
+                tallies[_label(actions[j])].add(full[j])
+        if any(r.budget_stopped for row in per_sample[batch.start:] for r in row):
+            break
+        labels = {_label(actions[j]): j for j in active}
+        for label, decision in sequential.rule.decide({n: c.tally() for n, c in tallies.items()}, set(labels)).items():
+            decisions[label] = (decision, "decided", len(per_sample))
+            active.discard(labels[label])
+        if on_progress is not None:
+            on_progress(progress_dict(scene.name, k, len(per_sample), decisions,
+                                      [_label(actions[j]) for j in sorted(active)], tallies))
+    budget = any(r.budget_stopped for row in per_sample for r in row)
+    for j in active:
+        decisions[_label(actions[j])] = (None, "budget" if budget else "cap", len(per_sample))
+    return per_sample, decisions
+
+
+def progress_dict(scene: str, k: int, drawn: int, decisions: dict, undecided: list[str], tallies: dict) -> dict:
+    """A partial answer: the samples drawn so far (of at most k), each decided variant's decision and
+    the samples it used, and the variants still sampling with their running P(anything falls)."""
+    def running(label):
+        t = tallies[label]
+        return {"label": label, "samples": t.samples,
+                "any_fall_probability": None if t.samples == 0 else t.any_falls / t.samples}
+    return {"scene": scene, "samples_requested": k, "samples_drawn": drawn,
+            "decided": [{"label": label, "decision": d, "samples_drawn": n, "samples": tallies[label].samples}
+                        for label, (d, _, n) in decisions.items()],
+            "undecided": [running(label) for label in undecided]}
+
+
+class _Counts:
+    """A variant's outcomes so far (non-skipped, non-failed samples), as a decide.Tally."""
+
+    def __init__(self):
+        self.samples, self.any_falls, self.object_falls = 0, 0, {}
+
+    def add(self, result: VariantResult) -> None:
+        if result.error is not None:
+            return
+        self.samples += 1
+        self.any_falls += bool(np.any(result.fallen))
+        for name, fell in zip(result.names, result.fallen):
+            self.object_falls[name] = self.object_falls.get(name, 0) + bool(fell)
+
+    def tally(self) -> Tally:
+        return Tally(self.samples, self.any_falls, dict(self.object_falls))
 
 
 def _caused(per_sample: list[list[VariantResult]], variant: int, as_is: int) -> dict[str, float] | None:
@@ -708,13 +826,30 @@ def _regions(scene: Scene, actions: list[Action], margin_m: float, scene_groups:
 _NO_OBJECTS = "names no object; name at least one, or leave it out to ask about every one"
 
 
-def remove(scene: Scene, names: list[str] | None, model: ModelConfig, settings: SimSettings, **kw) -> Answers:
+def remove(scene: Scene, names: list[str] | None, model: ModelConfig, settings: SimSettings,
+           safe_below: float | None = None, sequential: bool = True, **kw) -> Answers:
     """P(anything else falls) and per-object probabilities if each named object (None: every
-    dynamic object, one at a time) is taken away; the scene as it is comes first."""
+    dynamic object, one at a time) is taken away; the scene as it is comes first. ``safe_below``:
+    "is it safe to take?" - each removal decided safe or unsafe at this level, sampled until decided
+    (``sequential``; False: the full k for every removal)."""
+    rule = None
+    if safe_below is not None:
+        _check_level("safe_below", safe_below)
+        rule = Sequential(SafeBelow(safe_below)) if sequential else None
+    return ask(scene, _removals(scene, names), model, settings, sequential=rule, **kw)
+
+
+def _removals(scene: Scene, names: list[str] | None) -> list[Action]:
+    """The scene as it is, then each named object (None: every dynamic one) taken away on its own."""
     if names is not None and not names:
         raise ConfigError("objects", _NO_OBJECTS)
     names = [b.name for b in scene.dynamic_objects] if names is None else list(names)
-    return ask(scene, [None] + [Remove((n,)) for n in names], model, settings, **kw)
+    return [None] + [Remove((n,)) for n in names]
+
+
+def _check_level(name: str, value) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value <= 1:
+        raise ConfigError(name, f"must be in (0, 1], got {value!r}")
 
 
 #: Estimated seconds to lower one candidate placement onto what is below it (measured 2-8 ms).
@@ -776,11 +911,13 @@ class SupportGraph:
 
 
 def support_graph(scene: Scene, model: ModelConfig, settings: SimSettings, threshold: float = DEFAULT_SUPPORT_THRESHOLD,
-                  safe_below: float = DEFAULT_SAFE_BELOW, **kw) -> SupportGraph:
+                  safe_below: float = DEFAULT_SAFE_BELOW, sequential: bool = True, **kw) -> SupportGraph:
+    """``sequential``: sample each removal until its edges and its safety are decided (False: the
+    full k for every removal)."""
     for name, value in (("threshold", threshold), ("safe_below", safe_below)):
-        if not 0 < value <= 1:
-            raise ConfigError(name, f"must be in (0, 1], got {value!r}")
-    answers = remove(scene, None, model, settings, **kw)
+        _check_level(name, value)
+    answers = ask(scene, _removals(scene, None), model, settings,
+                  sequential=Sequential(Supports(threshold, safe_below)) if sequential else None, **kw)
     edges, safe = [], []
     for variant in answers.variants[1:]:
         (removed,) = variant.action.names
@@ -821,10 +958,11 @@ class ClearOrder:
 
 
 def clear_order(scene: Scene, model: ModelConfig, settings: SimSettings, target: str | None = None,
-                **kw) -> ClearOrder:
+                sequential: bool = True, **kw) -> ClearOrder:
     """Greedy disassembly: at each step take away the object whose removal is least likely to make
     anything else fall (ties: the highest first). With ``target``, only the target and what rests
-    on it (directly or through others) are candidates, and the sequence ends when the target is gone."""
+    on it (directly or through others) are candidates, and the sequence ends when the target is gone.
+    ``sequential``: each step samples its candidates until all but the least risky are ranked out."""
     if target is not None and target not in {b.name for b in scene.dynamic_objects}:
         raise ConfigError("target", f"no dynamic object named {target!r} in {scene.name!r}")
     deadline = _Deadline(kw.pop("budget_s", None))  # one budget for every step, not one each
@@ -844,7 +982,8 @@ def clear_order(scene: Scene, model: ModelConfig, settings: SimSettings, target:
             stopped_by = "budget"
             break
         try:
-            answers = remove(current, candidates, model, settings, budget_s=deadline.remaining_s(), **kw)
+            answers = ask(current, _removals(current, candidates), model, settings, budget_s=deadline.remaining_s(),
+                          sequential=Sequential(Ranking()) if sequential else None, **kw)
         except ConfigError as exc:
             if exc.field != "budget_s" or not steps:  # the first step must fit: refused as any question
                 raise
@@ -854,8 +993,7 @@ def clear_order(scene: Scene, model: ModelConfig, settings: SimSettings, target:
             stopped_by = "budget"
             break
         heights = {b.name: b.centre_of_mass_m[2] for b in current.dynamic_objects}
-        best = min(answers.variants[1:], key=lambda v: (1.0 if v.any_fall_probability is None else v.any_fall_probability,
-                                                        -heights[v.action.names[0]]))
+        best = min(answers.variants[1:], key=lambda v: (_rank_key(v), -heights[v.action.names[0]]))
         (name,) = best.action.names
         steps.append(ClearStep(name, best.any_fall_probability or 0.0, best.any_fall_probability_ci95 or (0.0, 1.0)))
         current = dataclasses.replace(current, objects=tuple(b for b in current.objects if b.name != name))
@@ -865,10 +1003,13 @@ def clear_order(scene: Scene, model: ModelConfig, settings: SimSettings, target:
     return ClearOrder(scene.name, tuple(steps), total, target, stopped_by)
 
 
-def place(scene: Scene, bodies: list[Body], model: ModelConfig, settings: SimSettings, **kw) -> Answers:
+def place(scene: Scene, bodies: list[Body], model: ModelConfig, settings: SimSettings, sequential: bool = True,
+          **kw) -> Answers:
     """P(anything falls, the new object included) for each candidate placement (one object each);
-    the scene as it is comes first."""
-    return ask(scene, [None] + [Place(b) for b in bodies], model, settings, **kw)
+    the scene as it is comes first. ``sequential``: sample the candidates until all but the least
+    risky are ranked out (ties run to k)."""
+    return ask(scene, [None] + [Place(b) for b in bodies], model, settings,
+               sequential=Sequential(Ranking()) if sequential else None, **kw)
 
 
 def resting_height_m(scene: Scene, body: Body, x_m: float, y_m: float, orientation_xyzw) -> float:
@@ -953,9 +1094,14 @@ def best_place(scene: Scene, body: Body, region: Region, model: ModelConfig, set
     bodies = _lowered(scene, body, [(float(x), float(y), float(yaw))
                                     for x, y, yaw in itertools.product(xs, ys, yaw_values)], deadline)
     answers = place(scene, bodies, model, settings, budget_s=deadline.remaining_s(), **kw)
-    ranked = sorted(zip(bodies, answers.variants[1:]),
-                    key=lambda bv: 1.0 if bv[1].any_fall_probability is None else bv[1].any_fall_probability)
+    ranked = sorted(zip(bodies, answers.variants[1:]), key=lambda bv: _rank_key(bv[1]))
     return ranked, answers
+
+
+def _rank_key(variant: VariantAnswer) -> tuple:
+    """Least likely to make anything fall first; a sequential answer's ranked-out ones last."""
+    return (variant.decision == "ranked out",
+            1.0 if variant.any_fall_probability is None else variant.any_fall_probability)
 
 
 def push(scene: Scene, pushes: list[Push], model: ModelConfig, settings: SimSettings, **kw) -> Answers:
@@ -975,7 +1121,7 @@ class Question:
     request_id: str = ""
     objects: tuple[str, ...] | None = None  # remove: which (None: every object)
     threshold: float = DEFAULT_SUPPORT_THRESHOLD  # support
-    safe_below: float = DEFAULT_SAFE_BELOW  # support
+    safe_below: float | None = DEFAULT_SAFE_BELOW  # support; remove: None (no decision) unless asked
     target: str | None = None  # clear
     body: Body | None = None  # place
     spots: tuple[tuple[float, float, float], ...] = ()  # place: (x, y, yaw_rad), lowered onto what is below
@@ -985,6 +1131,8 @@ class Question:
     push: Push | None = None
     samples: int | None = None  # None: the asker's default
     fell_off: bool = False  # also: which objects end off the table (a scene on a table)
+    sequential: bool = True  # decision questions sample until decided; False: the full k
+    cancel_older: bool = False  # the node drops older questions about the same scene for this one
 
 
 def _field(data: dict, key: str, kind, default=None, *, path: str = ""):
@@ -999,7 +1147,7 @@ def _field(data: dict, key: str, kind, default=None, *, path: str = ""):
 
 
 #: The fields each kind of question reads, besides id, question, samples and scene.
-_QUESTION_FIELDS = {"remove": {"objects"}, "support": {"threshold", "safe_below"}, "clear": {"target"},
+_QUESTION_FIELDS = {"remove": {"objects", "safe_below"}, "support": {"threshold", "safe_below"}, "clear": {"target"},
                     "place": {"object", "at", "region"},
                     "push": {"object", "velocity_m_s", "point_m", "direction_sigma_deg", "speed_sigma"}}
 
@@ -1007,7 +1155,8 @@ _QUESTION_FIELDS = {"remove": {"objects"}, "support": {"threshold", "safe_below"
 def question_from_dict(data) -> Question:
     """A question from parsed JSON::
 
-        {"id": "r1", "question": "remove", "objects": ["block3"]}           (objects: default every one)
+        {"id": "r1", "question": "remove", "objects": ["block3"], "safe_below": 0.05}
+                                     (objects: default every one; safe_below: decide safe/unsafe)
         {"id": "r2", "question": "support", "threshold": 0.5, "safe_below": 0.05}
         {"id": "r3", "question": "clear", "target": "block7"}                (target optional)
         {"id": "r4", "question": "place", "object": {...scene-format object...},
@@ -1015,14 +1164,16 @@ def question_from_dict(data) -> Question:
          "yaw_deg": [a0, a1], "candidates": 16, "yaws": 1}
         {"id": "r5", "question": "push", "object": "block2", "velocity_m_s": [vx, vy],
          "point_m": [x, y, z], "direction_sigma_deg": 0, "speed_sigma": 0}
-        any of them: "samples": k, "fell_off": true (also which objects end off the table)
+        any of them: "samples": k, "fell_off": true (also which objects end off the table),
+        "sequential": false (the full k for every variant), "cancel_older": true (the node drops the
+        older questions about the same scene, waiting or running)
     """
     if not isinstance(data, dict):
         raise ConfigError("question", "must be a JSON object with a \"question\" field")
     kind = data.get("question")
     if kind not in QUESTIONS:
         raise ConfigError("question", f"must be one of {', '.join(QUESTIONS)}, got {kind!r}"[:300])
-    common_fields = {"id", "question", "samples", "scene", "fell_off"}
+    common_fields = {"id", "question", "samples", "scene", "fell_off", "sequential", "cancel_older"}
     unknown = sorted(set(data) - _QUESTION_FIELDS[kind] - common_fields, key=str)
     if unknown:
         key = unknown[0]
@@ -1035,20 +1186,28 @@ def question_from_dict(data) -> Question:
     samples = data.get("samples")
     if samples is not None and (isinstance(samples, bool) or not isinstance(samples, int) or not 1 <= samples <= 1000):
         raise ConfigError("samples", "must be an integer in [1, 1000]")
-    fell_off = data.get("fell_off", False)
-    if not isinstance(fell_off, bool):
-        raise ConfigError("fell_off", "must be true or false")
-    common = dict(kind=kind, request_id=request_id, samples=samples, fell_off=fell_off)
+    flags = {}
+    for name, default in (("fell_off", False), ("sequential", True), ("cancel_older", False)):
+        flags[name] = data.get(name, default)
+        if not isinstance(flags[name], bool):
+            raise ConfigError(name, "must be true or false")
+    common = dict(kind=kind, request_id=request_id, samples=samples, **flags)
     if kind == "remove":
         objects = data.get("objects")
         if objects is not None and (not isinstance(objects, list) or not all(isinstance(o, str) for o in objects)):
             raise ConfigError("objects", "must be a list of object names")
         if objects == []:  # refused when read, before the question waits its turn (remove() refuses it too)
             raise ConfigError("objects", _NO_OBJECTS)
-        return Question(objects=None if objects is None else tuple(objects), **common)
+        safe_below = _field(data, "safe_below", float, None)
+        if safe_below is not None:
+            _check_level("safe_below", safe_below)
+        return Question(objects=None if objects is None else tuple(objects), safe_below=safe_below, **common)
     if kind == "support":
-        return Question(threshold=_field(data, "threshold", float, DEFAULT_SUPPORT_THRESHOLD),
-                        safe_below=_field(data, "safe_below", float, DEFAULT_SAFE_BELOW), **common)
+        question = Question(threshold=_field(data, "threshold", float, DEFAULT_SUPPORT_THRESHOLD),
+                            safe_below=_field(data, "safe_below", float, DEFAULT_SAFE_BELOW), **common)
+        _check_level("threshold", question.threshold)
+        _check_level("safe_below", question.safe_below)
+        return question
     if kind == "clear":
         return Question(target=_field(data, "target", str), **common)
     if kind == "push":
@@ -1110,8 +1269,13 @@ def answer_question(scene: Scene, question: Question, model: ModelConfig, settin
     if question.fell_off:
         kw["fell_off"] = True
     kind = question.kind
+    if kind == "push":  # no decision to reach: the full k
+        answers = push(scene, [question.push], model, settings, **kw)
+        return answers.to_dict(), answers
+    kw["sequential"] = question.sequential
     if kind == "remove":
-        answers = remove(scene, None if question.objects is None else list(question.objects), model, settings, **kw)
+        answers = remove(scene, None if question.objects is None else list(question.objects), model, settings,
+                         safe_below=question.safe_below, **kw)
         return answers.to_dict(), answers
     if kind == "support":
         graph = support_graph(scene, model, settings, threshold=question.threshold, safe_below=question.safe_below,
@@ -1120,9 +1284,6 @@ def answer_question(scene: Scene, question: Question, model: ModelConfig, settin
     if kind == "clear":
         kw = {k: v for k, v in kw.items() if k not in ("record_every", "record_samples")}
         return clear_order(scene, model, settings, target=question.target, **kw).to_dict(), None
-    if kind == "push":
-        answers = push(scene, [question.push], model, settings, **kw)
-        return answers.to_dict(), answers
     if question.region is not None:
         rows, answers = best_place(scene, question.body, question.region, model, settings,
                                    candidates=question.candidates, yaws=question.yaws, **kw)

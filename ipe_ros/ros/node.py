@@ -274,7 +274,7 @@ class _IpeInterface:
             refused = f"data: unreadable question ({type(exc).__name__})"
         if refused is not None:
             self._log_refusal(f"question {request_id!r} refused: {refused}")
-            self._pub_answer.publish(ask_answer_to_string({"id": request_id, "error": clip(refused, 1000)}))
+            self._pub_answer.publish(ask_answer_to_string({"id": request_id, "final": True, "error": clip(refused, 1000)}))
 
     def _publish_question_answer(self, message: dict, source: StampedScene) -> None:
         self._pub_answer.publish(ask_answer_to_string(message))

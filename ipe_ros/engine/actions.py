@@ -171,9 +171,6 @@ class VariantTask:
     #: per action, the dynamic objects worth simulating (None: all); the rest cannot be reached
     regions: tuple[frozenset[str] | None, ...] | None = None
     record_every: int = 0  # record trajectories every N ticks (rerun), 0: none
-    #: run the scene as it is (``None`` among the actions) first, and the other variants only if
-    #: nothing in it fell: a question decided over the standing samples needs no more
-    skip_unless_stands: bool = False
 
 
 @dataclass(frozen=True)
@@ -253,20 +250,7 @@ def run_variants(task: VariantTask) -> list[VariantResult]:
         shared, shared_orn = simulation.read_poses(separated_world(task.scene, task.settings, inputs))
     except PhysicsError as exc:
         return [VariantResult(names, None, None, f"PhysicsError: {exc}") for _ in task.actions]
-    results: list[VariantResult | None] = [None] * len(task.actions)
-    order = list(range(len(task.actions)))
-    if task.skip_unless_stands:
-        as_is = task.actions.index(None)
-        order = [as_is] + [v for v in order if v != as_is]
-    for v in order:
-        action = task.actions[v]
-        if task.skip_unless_stands and v != order[0]:
-            first = results[order[0]]
-            if first.error is not None or bool(np.any(first.fallen)):
-                results[v] = VariantResult(names, None, None, "skipped: the scene fell as it is", skipped=True)
-                continue
-        results[v] = _run_one(task, action, v, shared, shared_orn, inputs, names)
-    return results
+    return [_run_one(task, action, v, shared, shared_orn, inputs, names) for v, action in enumerate(task.actions)]
 
 
 def _run_one(task: VariantTask, action: Action, v: int, shared, shared_orn, inputs, names) -> VariantResult:
@@ -653,18 +637,18 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     deadline = None if budget_s is None else time.time() + budget_s
     seeds = np.random.SeedSequence(seed).spawn(k)
 
-    def tasks(indices, variants: list[int], skip: bool) -> list[VariantTask]:
+    def tasks(indices, variants: list[int]) -> list[VariantTask]:
         return [VariantTask(scene=scene, model=model, settings=settings, query=query, index=i, seed=seeds[i],
                             actions=tuple(simulated_actions[j] for j in variants), deadline_unix_s=deadline,
                             regions=tuple(regions[j] for j in variants),
-                            record_every=record_every if i < record_samples else 0, skip_unless_stands=skip)
+                            record_every=record_every if i < record_samples else 0)
                 for i in indices]
 
     start = time.perf_counter()
     as_is = simulated_actions.index(None) if None in simulated_actions else None
     decisions: dict[str, tuple[str | None, str, int]] = {}
     if sequential is None or deterministic or as_is is None:
-        per_sample = _run(tasks(range(k), list(range(len(simulated_actions))), False), map_fn, scene)
+        per_sample = _run(tasks(range(k), list(range(len(simulated_actions)))), map_fn, scene)
     else:
         per_sample, decisions = _run_sequentially(tasks, simulated_actions, as_is, k, sequential, map_fn, scene,
                                                   on_progress)
@@ -718,12 +702,20 @@ def _run(tasks: list[VariantTask], map_fn: MapFn | None, scene: Scene) -> list[l
     return map_fn(run_variants, tasks, on_lost=lost)
 
 
+#: variants per task in a sequential batch: enough to amortise the shared draw and separation each
+#: task redoes, few enough that standing samples' variants spread over the workers
+VARIANTS_PER_TASK = 4
+
+
 def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequential: Sequential, map_fn: MapFn | None,
-                      scene: Scene, on_progress: Callable[[dict], None] | None = None) -> tuple[list[list[VariantResult]], dict[str, tuple[str | None, str, int]]]:
+                      scene: Scene, on_progress: Callable[[dict], None] | None = None
+                      ) -> tuple[list[list[VariantResult]], dict[str, tuple[str | None, str, int]]]:
     """Batches of samples until the rule has decided every variant or k samples are drawn. Each
-    batch runs the scene as it is and the undecided variants; a decided variant's later samples are
-    skipped results. Returns every sample's results (in ``actions`` order) and, per variant label,
-    (decision, why it stopped, samples drawn for it)."""
+    batch runs the scene as it is first, then the undecided variants of the samples in which it
+    stood, a few variants per task (the work of one sample varies too much - one rollout or all of
+    them - to spread by samples); a variant not run in a sample is a skipped result. Returns every
+    sample's results (in ``actions`` order) and, per variant label, (decision, why it stopped,
+    samples drawn for it)."""
     names = tuple(b.name for b in scene.dynamic_objects)
     others = [j for j in range(len(actions)) if j != as_is]
     active = set(others)
@@ -731,16 +723,25 @@ def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequenti
     per_sample: list[list[VariantResult]] = []
     tallies = {_label(actions[j]): _Counts() for j in others}
     while len(per_sample) < k and active:
-        running = [as_is] + sorted(active)
         batch = range(len(per_sample), min(k, len(per_sample) + sequential.batch_samples))
-        for row in _run(tasks(batch, running, True), map_fn, scene):
-            full = [VariantResult(names, None, None, "skipped: decided", skipped=True) for _ in actions]
-            for j, result in zip(running, row):
-                full[j] = result
-            per_sample.append(full)
-            for j in running[1:]:
-                tallies[_label(actions[j])].add(full[j])
-        if any(r.budget_stopped for row in per_sample[batch.start:] for r in row):
+        rows = {}
+        for i, (alone,) in zip(batch, _run(tasks(batch, [as_is]), map_fn, scene)):
+            rows[i] = [VariantResult(names, None, None, "skipped: the scene fell as it is" if j in active
+                                     else "skipped: decided", skipped=True) for j in range(len(actions))]
+            rows[i][as_is] = alone
+        standing = [i for i in batch if rows[i][as_is].error is None and not np.any(rows[i][as_is].fallen)]
+        running = sorted(active)
+        chunks = [running[c:c + VARIANTS_PER_TASK] for c in range(0, len(running), VARIANTS_PER_TASK)]
+        jobs = [(i, chunk) for i in standing for chunk in chunks]
+        work = [task for i, chunk in jobs for task in tasks([i], chunk)]
+        for (i, chunk), results in zip(jobs, _run(work, map_fn, scene) if work else []):
+            for j, result in zip(chunk, results):
+                rows[i][j] = result
+        for i in batch:
+            per_sample.append(rows[i])
+            for j in running:
+                tallies[_label(actions[j])].add(rows[i][j])
+        if any(r.budget_stopped for i in batch for r in rows[i]):
             break
         labels = {_label(actions[j]): j for j in active}
         for label, decision in sequential.rule.decide({n: c.tally() for n, c in tallies.items()}, set(labels)).items():

@@ -9,6 +9,7 @@
     ipe generate table --configurations N --seed S -o FILE
     ipe generate catalogue --count N --seed S -o FILE
     ipe generate capped-tower [--ball-speed M_S] -o FILE
+    ipe generate depth-example -o DIR
     ipe generate zoo --per-family N --seed S [--families launch,dominoes,...] -o FILE
     ipe demo
     ipe experiment NAME|all [--quick] [--out DIR] [--data DIR] [--samples K] [--stimuli N] [--seed N]
@@ -106,9 +107,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force-direction", type=_finite, default=None, metavar="DEG",
                    help="cued push direction in degrees (push drawn within +-45 deg); default: any direction")
     p.add_argument("--mu", type=_finite, default=None, help="heavy/light density ratio (default: scene's own masses)")
-    p.add_argument("--perception", choices=("gaussian", "vision"), default="gaussian",
-                   help="where the k noisy scenes come from: gaussian (sigma, the paper's IPE) or vision (samples of "
-                        "the SI's Bayesian vision posterior given three rendered views; sigma unused)")
+    p.add_argument("--perception", choices=("gaussian", "vision", "depth"), default="gaussian",
+                   help="where the k noisy scenes come from: gaussian (sigma, the paper's IPE), vision (samples of "
+                        "the SI's Bayesian vision posterior given three rendered views) or depth (samples of the "
+                        "posterior given the robot's depth image: --depth, --camera-info, --camera-pose); sigma unused")
+    p.add_argument("--depth", default=None, metavar="IMAGE",
+                   help="depth: the depth image, .npy (metres) or 16-bit .png (millimetres; 0: no reading)")
+    p.add_argument("--camera-info", default=None, metavar="YAML",
+                   help="depth: the camera's calibration, a ROS camera_info YAML (distortion ignored)")
+    p.add_argument("--camera-pose", default=None, metavar="X,Y,Z,QX,QY,QZ,QW",
+                   help="depth: the camera's optical frame (z forward, y down) in the scene frame")
     p.add_argument("--chain-samples", type=int, default=None, metavar="N",
                    help="vision: Metropolis-Hastings samples (default 5000, the SI's; a fifth is burn-in)")
     p.add_argument("--vision-resolution", type=int, default=None, metavar="PX",
@@ -170,6 +178,10 @@ def build_parser() -> argparse.ArgumentParser:
     cap = gsub.add_parser("capped-tower", help="three boxes, a cone on top, a ball rolled at the base (the guide's example)")
     cap.add_argument("--ball-speed", type=_finite, default=5.0, metavar="M_S", help="the ball's speed (default 5 m/s)")
     cap.add_argument("-o", "--output", required=True)
+    dx = gsub.add_parser("depth-example", help="the example tower seen by a depth camera: a depth PNG, camera_info "
+                                               "YAML, the camera's pose and the detector's guess (for --perception depth)")
+    dx.add_argument("--seed", type=int, default=0)
+    dx.add_argument("-o", "--output", required=True, metavar="DIR")
     zoo = gsub.add_parser("zoo", help="the scene zoo: impacts, dominoes, ramps, drops, rings, bouncy blocks, plates, "
                                       "capped towers (docs/zoo.md)")
     zoo.add_argument("--per-family", type=int, default=4)
@@ -287,6 +299,19 @@ def _run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: in
             pool.close()
 
 
+def _perceive_depth(args, scenes, model):
+    """The depth posterior's k scenes for the one scene asked about (the detector's guess)."""
+    from .engine.vision import depth
+
+    if len(scenes) != 1:
+        raise ConfigError("--depth", f"one depth image describes one scene, but {args.path} holds {len(scenes)}")
+    position, orientation = depth.parse_pose(args.camera_pose)
+    camera = depth.camera_from_info(depth.load_camera_info(args.camera_info), position, orientation)
+    observation = depth.DepthObservation(camera, depth.load_depth_image(args.depth))
+    return depth.perceive_depth(scenes[0], model.samples, (observation,), depth.DepthSettings(),
+                                np.random.default_rng(np.random.SeedSequence([args.seed, depth.DEPTH_STREAM])))
+
+
 def cmd_predict(args) -> int:
     refused: list[RefusedScene] = []  # scenes of the file that cannot be answered: reported, the rest answered
     scenes = load_scenes(args.path, towers=args.tower, on_refused=refused.append)
@@ -309,6 +334,11 @@ def cmd_predict(args) -> int:
             raise ConfigError(option, exc.problem) from None
     elif args.chain_samples is not None or args.vision_resolution is not None or args.vision_rrd is not None:
         raise ConfigError("--perception", "--chain-samples, --vision-resolution and --vision-rrd need --perception vision")
+    depth_inputs = (args.depth, args.camera_info, args.camera_pose)
+    if args.perception == "depth" and None in depth_inputs:
+        raise ConfigError("--perception", "depth perception needs --depth IMAGE, --camera-info YAML and --camera-pose")
+    if args.perception != "depth" and any(v is not None for v in depth_inputs):
+        raise ConfigError("--perception", "--depth, --camera-info and --camera-pose need --perception depth")
     model = ModelConfig(sigma_m=sigma, phi_m_s2=phi, mu=args.mu, samples=args.samples, perception=args.perception,
                         vision=vision, object_noise=not args.ground_truth,
                         force_direction_rad=None if args.force_direction is None else math.radians(args.force_direction))
@@ -360,6 +390,8 @@ def cmd_predict(args) -> int:
         from .engine.sampler import perceive_for
 
         perceived = perceive_for(scenes[0], model, args.seed)
+    if args.perception == "depth":
+        perceived = _perceive_depth(args, scenes, model)
     collected: list[Prediction] = []
     if args.json:
         _run_predictions(scenes, model, sim, query, args.seed, args.workers,
@@ -370,7 +402,8 @@ def cmd_predict(args) -> int:
         print(f"sigma = {sigma:g} m, phi = {','.join(f'{v:g}' for v in phi)} m/s^2, mu = {args.mu}, "
               f"k = {k}, preset = {sim.name}, seed = {args.seed}"
               + (f", perception = vision ({vision.chain_samples} MH samples, {vision.resolution_px} px)"
-                 if vision is not None else ""))
+                 if vision is not None else "")
+              + (", perception = depth (sigma unused)" if args.perception == "depth" else ""))
         _run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append, stop, args.budget,
                          perceived, args.scheduler, check)
         print(format_table(collected))
@@ -379,6 +412,13 @@ def cmd_predict(args) -> int:
                 v = p.request["perception"]
                 print(f"{p.scene}: vision chain acceptance {v['acceptance_rate']:.2f}, effective sample size "
                       f"{v['effective_sample_size']:.0f} ({v['chain_samples']} samples, {v['burn_in']} burn-in)")
+        if args.perception == "depth":
+            for p in collected:
+                v = p.request["perception"]
+                print(f"{p.scene}: depth chain acceptance {v['acceptance_rate']:.2f}, effective sample size "
+                      f"{v['effective_sample_size']:.0f}; posterior SD per object (x, y mm; yaw deg): "
+                      + ", ".join(f"{n} {s['x_sd_m'] * 1000:.1f}/{s['y_sd_m'] * 1000:.1f}/"
+                                  f"{math.degrees(s['yaw_sd_rad']):.1f}" for n, s in v["object_spread"].items()))
     if args.vision_rrd is not None:
         from .viz.rerun_log import write_vision_rrd
 
@@ -393,6 +433,12 @@ def cmd_predict(args) -> int:
 
 
 def cmd_generate(args) -> int:
+    if args.kind == "depth-example":
+        from .engine.vision.depth import write_depth_example
+
+        paths = write_depth_example(args.output, load_scenes(example_scene_path())[0], args.seed)
+        print("wrote " + ", ".join(str(p) for p in paths.values()), file=sys.stderr)
+        return 0
     if args.kind == "tower":
         if args.count < 1:
             raise ConfigError("--count", f"must be >= 1, got {args.count}")

@@ -22,6 +22,8 @@ PYTHON_ROSDEP_KEYS = {
     "matplotlib": "python3-matplotlib",
     "pybullet": "python3-pybullet-pip",
     "tqdm": "python3-tqdm",
+    "PIL": "python3-pil",
+    "yaml": "python3-yaml",
     "rerun": None,
     "distributed": None,
     "dask": None,

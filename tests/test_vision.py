@@ -149,7 +149,7 @@ def test_a_chain_too_short_for_k_is_refused_by_name():
 def test_vision_settings_refuse_bad_values_by_name():
     with pytest.raises(ConfigError, match=r"^vision.burn_in: must be an integer in \[0, chain_samples\), got 500$"):
         VisionSettings(chain_samples=500, burn_in=500)
-    with pytest.raises(ConfigError, match=r"^perception: must be one of gaussian, vision, got 'lidar'$"):
+    with pytest.raises(ConfigError, match=r"^perception: must be one of gaussian, vision, depth, got 'lidar'$"):
         ModelConfig(perception="lidar")
 
 

@@ -99,8 +99,9 @@ class ModelConfig:
     push_duration_s: float = 0.2
     mu: float | None = None
     samples: int = DEFAULT_SAMPLES
-    #: where the k noisy scenes come from: "gaussian" (sigma, the paper's IPE) or "vision" (the SI's
+    #: where the k noisy scenes come from: "gaussian" (sigma, the paper's IPE), "vision" (the SI's
     #: Bayesian vision system: samples of an image posterior, ``vision`` its settings; sigma unused)
+    #: or "depth" (samples of the posterior given depth images, passed to ``predict`` as ``perceived``)
     perception: str = "gaussian"
     vision: Any = None  # engine.vision.VisionSettings, or None for its defaults
     #: draw each body's own noise (``position_sigma_m``, ``yaw_sigma_rad``) where the scene gives it;
@@ -140,8 +141,10 @@ class ModelConfig:
         return self.sigma_m == 0 and not self.pushes and self.perception == "gaussian"
 
 
-#: Input models: Gaussian position noise (the paper's IPE), or samples of the SI's vision posterior.
-PERCEPTIONS = ("gaussian", "vision")
+#: Input models: Gaussian position noise (the paper's IPE), samples of the SI's vision posterior, or
+#: samples of the posterior given the robot's depth images (``vision.depth``; the images come with
+#: the request, not the model).
+PERCEPTIONS = ("gaussian", "vision", "depth")
 
 #: The paper's IPE with the default sigma and k (phi = 0, the scene's own masses).
 DEFAULT_MODEL = ModelConfig(sigma_m=DEFAULT_SIGMA_M, samples=DEFAULT_SAMPLES)

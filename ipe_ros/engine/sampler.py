@@ -187,8 +187,13 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
                                       "or drop it")
     per_sample_answer = sample_fall_fraction if query.wants("fall") else sample_any_fall
     tasks = make_tasks(scene, model, settings, query, seed, record_every, record_samples)
-    if model.perception == "vision":
+    if model.perception == "depth" and perceived is None:
+        raise ConfigError("perception", "depth perception needs the depth images: run vision.depth.perceive_depth "
+                                        "and pass its scenes as perceived (the CLI's --depth, the node's depth topics)")
+    if model.perception in ("vision", "depth"):
         perceived = perceived or perceive_for(scene, model, seed, map_fn)
+        if len(perceived.scenes) < len(tasks):
+            raise ConfigError("samples", f"{len(perceived.scenes)} perceived scenes for {len(tasks)} samples")
         sampled = dataclasses.replace(model, sigma_m=0.0)  # the posterior is the noise
         tasks = [dataclasses.replace(t, scene=perceived.scenes[t.index], model=sampled) for t in tasks]
     if budget_s is not None:
@@ -340,7 +345,7 @@ def _aggregate(scene: Scene, model: ModelConfig, settings: SimSettings, query: Q
         request.update(ci_width=stop.ci_width, deadline_s=stop.deadline_s)
     if budget_s is not None:
         request.update(budget_s=budget_s)
-    if model.perception == "vision":
+    if model.perception in ("vision", "depth"):
         request.update(perception=perceived.to_dict())
     prediction = aggregate(scene, outcomes, queries=query.queries, bump_group=query.bump_group,
                            deterministic=is_deterministic(scene, model), samples_requested=len(tasks),
@@ -370,6 +375,8 @@ def predict_many(requests: Sequence[tuple[Scene, ModelConfig, int]], settings: S
     answers: list[Prediction | None] = [None] * len(requests)
     batched: list[tuple[int, list[SampleTask]]] = []
     for i, (scene, model, seed) in enumerate(requests):
+        if model.perception == "depth":
+            raise ConfigError("perception", "depth perception needs its images: call predict with perceived")
         if model.perception == "vision":
             answers[i] = predict(scene, model, settings, query, seed, map_fn, max_objects=max_objects, check=None)
             continue

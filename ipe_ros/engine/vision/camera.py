@@ -33,6 +33,14 @@ class Camera:
         return np.stack([right, down, forward])
 
     @property
+    def width_px(self) -> int:
+        return self.resolution_px
+
+    @property
+    def height_px(self) -> int:
+        return self.resolution_px
+
+    @property
     def focal_px(self) -> float:
         return self.resolution_px / 2 / math.tan(self.fov_rad / 2)
 

@@ -81,19 +81,25 @@ class Patch:
 EMPTY = Patch(0, 0, 0, 0, np.zeros((0, 0)), np.zeros((0, 0)))
 
 
-def body_patch(mesh: SceneMesh, camera: Camera, body: int, position_m) -> Patch:
-    """Rasterise one body at ``position_m``: its front faces together, vectorised over its
-    triangles (a convex hull's front faces do not overlap, so each pixel takes the one covering it)."""
+def body_patch(mesh: SceneMesh, camera: Camera, body: int, position_m, yaw_rad: float = 0.0) -> Patch:
+    """Rasterise one body at ``position_m``, turned by ``yaw_rad`` about the vertical through it from
+    its orientation in the scene: its front faces together, vectorised over its triangles (a convex
+    hull's front faces do not overlap, so each pixel takes the one covering it). ``camera``: anything
+    with ``project``, ``position_m``, ``width_px`` and ``height_px``."""
     mine = mesh.owner == body
-    tris = mesh.triangles_m[mine] + np.asarray(position_m, float)
-    front = np.einsum("ij,ij->i", mesh.normals[mine], tris.mean(axis=1) - np.asarray(camera.position_m, float)) < 0
+    tris, normals = mesh.triangles_m[mine], mesh.normals[mine]
+    if yaw_rad:
+        c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+        turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        tris, normals = tris @ turn.T, normals @ turn.T
+    tris = tris + np.asarray(position_m, float)
+    front = np.einsum("ij,ij->i", normals, tris.mean(axis=1) - np.asarray(camera.position_m, float)) < 0
     pixels, depth = camera.project(tris[front].reshape(-1, 3))
     p, z, shade = pixels.reshape(-1, 3, 2), depth.reshape(-1, 3), mesh.grey[mine][front]
     if len(p) == 0 or (z <= 1e-6).any():
         return EMPTY
-    size = camera.resolution_px
-    u0, u1 = max(int(np.floor(p[..., 0].min())), 0), min(int(np.ceil(p[..., 0].max())) + 1, size)
-    v0, v1 = max(int(np.floor(p[..., 1].min())), 0), min(int(np.ceil(p[..., 1].max())) + 1, size)
+    u0, u1 = max(int(np.floor(p[..., 0].min())), 0), min(int(np.ceil(p[..., 0].max())) + 1, camera.width_px)
+    v0, v1 = max(int(np.floor(p[..., 1].min())), 0), min(int(np.ceil(p[..., 1].max())) + 1, camera.height_px)
     if u0 >= u1 or v0 >= v1:
         return EMPTY
     u = (np.arange(u0, u1) + 0.5)[None, None, :]

@@ -134,6 +134,36 @@ def _hidden_fraction(scene: Scene, camera: D.DepthCamera, i: int) -> float:
     return float((seen & (front < mine.depth)).sum() / max(1, seen.sum()))
 
 
+def tower_cost(workers: int = 2, k: int = 48) -> dict:
+    """A 10-block paper tower (the built-in example) from one 320 x 240 depth image, end to end:
+    the depth chain, then the IPE at k on ``workers`` processes (self-checked, as the CLI runs it)."""
+    import tempfile
+
+    from ipe_ros.engine import QuerySpec, WorkerPool, load_scenes, predict
+    from ipe_ros.engine.config import DEFAULT_QUERIES
+    from ipe_ros.engine.examples import example_scene_path
+
+    with tempfile.TemporaryDirectory() as folder:
+        paths = D.write_depth_example(folder, load_scenes(example_scene_path())[0])
+        info = D.load_camera_info(paths["camera_info"])
+        position, orientation = D.parse_pose(paths["camera_pose"].read_text().strip())
+        observation = D.DepthObservation(D.camera_from_info(info, position, orientation),
+                                         D.load_depth_image(paths["depth"]))
+        guess = load_scenes(paths["scene"])[0]
+    with WorkerPool(workers) as pool:
+        pool.warm()
+        start = time.perf_counter()
+        perceived = D.perceive_depth(guess, k, (observation,), D.DepthSettings(), np.random.default_rng(0))
+        chain_s = time.perf_counter() - start
+        prediction = predict(guess, ModelConfig(perception="depth", samples=k), preset("default"),
+                             QuerySpec(queries=DEFAULT_QUERIES), map_fn=pool.map, perceived=perceived)
+        total_s = time.perf_counter() - start
+    return {"objects": len(guess.dynamic_objects), "k": k, "workers": workers, "chain_s": chain_s,
+            "total_s": total_s, "chain_share": chain_s / total_s, "effective_sample_size":
+            perceived.effective_sample_size, "acceptance_rate": perceived.acceptance_rate,
+            "p_anything_falls": prediction.any_fall_probability}
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--scenes", type=int, default=50)
@@ -144,6 +174,8 @@ def main() -> int:
     report = {"date": time.strftime("%Y-%m-%d"), "settings": dataclasses.asdict(settings), "noise": NOISE,
               "calibration": coverage(args.scenes, settings)}
     print(json.dumps(report["calibration"], indent=1), flush=True)
+    report["tower"] = tower_cost()
+    print(json.dumps(report["tower"], indent=1), flush=True)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "depth.json").write_text(json.dumps(report, indent=1) + "\n")

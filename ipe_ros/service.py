@@ -28,7 +28,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from .engine import AdaptiveStop, ModelConfig, Prediction, QuerySpec, Scene, SimSettings, WorkerPool, predict, preset
+import numpy as np
+
+from .engine import (AdaptiveStop, ConfigError, ModelConfig, Prediction, QuerySpec, Scene, SimSettings, WorkerPool,
+                     predict, preset)
 from .engine.config import DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES
 from .engine.errors import SceneError, clip, shown
 from .engine.fidelity import DEFAULT_CHECK, SelfCheck
@@ -66,6 +69,9 @@ class ServiceConfig:
     budget_s: float = DEFAULT_BUDGET_S  # wall seconds a prediction may take (see engine.predict)
     gravity_aligned_frames: tuple[str, ...] = ()  # frames whose -z is gravity; () trusts every frame
     check: SelfCheck = DEFAULT_CHECK  # how each prediction checks its fast physics (engine.fidelity)
+    #: ``model.perception == "depth"``: a scene is predicted from the newest depth image taken at most
+    #: this many seconds before or after its stamp
+    depth_max_age_s: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -216,6 +222,7 @@ class PredictionService:
         self._pool = pool if pool is not None else WorkerPool(workers, start_method=start_method) if workers > 0 else None
         self.workers = len(pool.worker_pids()) if pool is not None else workers
         self._cond = threading.Condition()
+        self._depth = None  # (vision.depth.DepthObservation, stamp ns, frame): the newest depth image
         self._pending: StampedScene | None = None
         self._latest: StampedScene | None = None
         self._latest_rejected: str | None = None  # why the newest input was refused, if it was
@@ -468,17 +475,49 @@ class PredictionService:
         else:
             self._report_failure(item, error or "unknown error")
 
+    def set_depth(self, observation, stamp_ns: int, frame_id: str) -> None:
+        """The newest depth image (``vision.depth.DepthObservation``), when it was taken, and the frame
+        its camera pose is in (scenes in another frame cannot use it)."""
+        with self._cond:
+            self._depth = (observation, int(stamp_ns), frame_id)
+
+    def latest_depth_stamp_ns(self) -> int | None:
+        with self._cond:
+            return None if self._depth is None else self._depth[1]
+
+    def _perceived(self, item: StampedScene, config: ServiceConfig):
+        """The depth posterior's scenes for this scene, from the depth image nearest its stamp."""
+        from .engine.vision import depth
+
+        with self._cond:
+            latest = self._depth
+        if latest is None:
+            raise ConfigError("perception", "depth: no depth image received yet; publish ~/depth/image with "
+                                            "~/depth/camera_info and the camera pose (~/depth/camera_pose or the "
+                                            "depth.camera_pose parameter)")
+        observation, stamp_ns, frame_id = latest
+        if frame_id != item.frame_id:
+            raise ConfigError("perception", f"depth: the camera pose is in {frame_id!r} but the scene in "
+                                            f"{item.frame_id!r}; give both in one frame")
+        age = abs(stamp_ns - item.stamp_ns) / 1e9
+        if age > config.depth_max_age_s:
+            raise ConfigError("perception", f"depth: the newest depth image is {age:.3g} s from the scene's stamp, more "
+                                            f"than depth.max_age_s = {config.depth_max_age_s:g} s")
+        rng = np.random.default_rng(np.random.SeedSequence([config.seed, depth.DEPTH_STREAM]))
+        return depth.perceive_depth(item.scene, config.model.samples, (observation,), depth.DepthSettings(), rng)
+
     def _predict(self, item: StampedScene, config: ServiceConfig, version: int) -> tuple[Answer | None, str | None]:
         start = time.perf_counter()
         record_every = 0
         if config.rerun_save_dir and config.rerun_rollouts_logged > 0:
             record_every = max(1, round(config.rerun_frame_period_s / config.settings.time_step_s))
         try:
+            perceived = self._perceived(item, config) if config.model.perception == "depth" else None
             prediction = predict(item.scene, config.model, config.settings, config.query, seed=config.seed,
                                  map_fn=self._pool.map if self._pool is not None else None,
                                  record_every=record_every, record_samples=config.rerun_rollouts_logged,
                                  max_objects=config.max_objects, stop=config.stop, budget_s=config.budget_s,
-                                 check=config.check)
+                                 check=config.check, perceived=perceived)
         except ValueError as exc:  # SceneError / ConfigError: the scene no longer fits a new config
             return None, str(exc)
         except Exception as exc:  # noqa: BLE001 - report, keep serving

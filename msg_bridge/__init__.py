@@ -4,6 +4,7 @@
 * :mod:`msg_bridge.json_text`: ``std_msgs/String`` JSON <-> Scene and answers.
 * :mod:`msg_bridge.outputs`: Float64, Vector3Stamped and DiagnosticArray from answers and stats.
 * :mod:`msg_bridge.stamps`: nanosecond stamps <-> ``std_msgs/Header``.
+* :mod:`msg_bridge.depth`: depth ``sensor_msgs/Image`` <-> metres, ``CameraInfo`` and the camera's ``PoseStamped``.
 
 Every conversion is a pure function; bad input raises ``ValueError`` (``SceneError``) naming the field.
 """

@@ -421,3 +421,43 @@ def test_every_question_gets_exactly_one_reply_under_a_flood_and_when_too_large(
     assert by_id["search"]["error"].startswith("region.candidates: 400 candidates x 400 yaws are 160000 placements")
     ask.publish(String(data=json.dumps({"id": "after", "question": "remove", "objects": ["top"]})))  # still answering
     wait_until(lambda: any(r["id"] == "after" and "answer" in r for r in replies()), TIMEOUT_S, "the next answer")
+
+
+def test_depth_perception_predicts_from_the_newest_depth_image(ros):
+    import time
+
+    from geometry_msgs.msg import PoseStamped
+    from sensor_msgs.msg import CameraInfo, Image
+
+    from ipe_ros.engine.vision import depth as D
+    from msg_bridge.depth import depth_m_to_image
+    from msg_bridge.stamps import stamp_ns_to_header
+    from tests.test_depth import cube, floor
+
+    scene = floor(cube("bottom", 0, 0, 0.05), cube("top", 0.01, 0, 0.15), name="seen")
+    camera = D.look_at((1.0, -0.7, 0.6), (0, 0, 0.1))
+    node = ros.start_ipe_node(samples=4, perception="depth", self_check=False, workers=0)
+    got = answers(ros)
+    scenes = ros.publisher(String, "/ipe/scene_json")
+    scenes.publish(String(data=scene_to_json(scene)))  # no depth image yet: answered with the reason
+    wait_until(lambda: len(got) >= 1, TIMEOUT_S, "the refusal of a scene without a depth image")
+    assert got[0]["error"].startswith("perception: depth: no depth image received yet; publish ~/depth/image")
+    info = CameraInfo(width=camera.width_px, height=camera.height_px,
+                      k=[camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0])
+    pose = PoseStamped(header=stamp_ns_to_header(time.time_ns(), "world"))
+    pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = camera.position_m
+    (pose.pose.orientation.x, pose.pose.orientation.y, pose.pose.orientation.z,
+     pose.pose.orientation.w) = camera.orientation_xyzw
+    ros.publisher(CameraInfo, "/ipe/depth/camera_info", qos_profile_sensor_data).publish(info)
+    ros.publisher(PoseStamped, "/ipe/depth/camera_pose", qos_profile_sensor_data).publish(pose)
+    wait_until(lambda: node._camera_info is not None and node._camera_pose is not None, TIMEOUT_S, "camera info and pose")
+    images = ros.publisher(Image, "/ipe/depth/image", qos_profile_sensor_data)
+    images.publish(Image(encoding="rgb8", width=2, height=1, step=6, data=bytes(6)))  # not a depth image: refused
+    wait_until(lambda: node.depth_images_refused == 1, TIMEOUT_S, "the refusal of an rgb8 image")
+    images.publish(depth_m_to_image(D.depth_with_pybullet(scene, camera), time.time_ns(), "camera", "16UC1"))
+    wait_until(lambda: node.service.latest_depth_stamp_ns() is not None, TIMEOUT_S, "the depth image")
+    scenes.publish(String(data=scene_to_json(scene)))
+    wait_until(lambda: len(got) >= 2, TIMEOUT_S * 2, "the prediction with depth perception")
+    perception = got[1]["request"]["perception"]
+    assert perception["kind"] == "depth" and set(perception["object_spread"]) == {"bottom", "top"}
+    assert perception["object_spread"]["top"]["x_sd_m"] < 0.01 and got[1]["samples"] == 4

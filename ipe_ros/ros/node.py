@@ -23,14 +23,16 @@ from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackRet
 from rclpy.lifecycle.node import LifecycleNodeMixin
 from rclpy.node import Node
 from rclpy.service import Service as RclpyService
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
-from geometry_msgs.msg import Vector3Stamped
+from geometry_msgs.msg import PoseStamped, Vector3Stamped
+from sensor_msgs.msg import CameraInfo, Image
 from visualization_msgs.msg import MarkerArray
 
 from msg_bridge.ask_json import answer_to_string as ask_answer_to_string
 from msg_bridge.ask_json import request_id_of, string_to_question, support_graph_markers
+from msg_bridge.depth import camera_info_to_dict, image_to_depth_m, pose_to_tuples
 from msg_bridge.json_text import answer_to_string, scene_name_of, string_to_scene
 from msg_bridge.markers import markers_to_scene, prediction_to_markers
 from msg_bridge.outputs import fall_direction_msg, fall_fraction_msg, fall_probability_msg
@@ -77,6 +79,9 @@ class _IpeInterface:
             self.declare_parameter(spec.name, spec.default, spec.descriptor())
         self._values = {spec.name: self.get_parameter(spec.name).value for spec in params.PARAMETERS}
         self._inputs: list = []  # subscriptions, service and timer of the answering state
+        self._camera_info: dict | None = None  # the newest CameraInfo (depth perception)
+        self._camera_pose: tuple | None = None  # (position, xyzw, frame) from ~/depth/camera_pose
+        self.depth_images_refused = 0
         self._recently_seen: collections.deque = collections.deque(maxlen=DUPLICATE_WINDOW)
         self._refusal_log_window_s, self._refusal_log_lines, self._refusals_not_logged = -1.0, 0, 0
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -131,6 +136,12 @@ class _IpeInterface:
             self._inputs.append(self.create_subscription(String, "~/scene_json", self._once(self._on_scene_json),
                                                          qos, callback_group=inputs, event_callbacks=quiet))
         self._inputs.append(self.create_subscription(String, "~/ask", self._on_ask, ASK_QOS, callback_group=inputs))
+        # camera streams: best effort takes reliable and best-effort publishers alike
+        for msg_type, topic, handler in ((Image, "~/depth/image", self._on_depth_image),
+                                         (CameraInfo, "~/depth/camera_info", self._on_camera_info),
+                                         (PoseStamped, "~/depth/camera_pose", self._on_camera_pose)):
+            self._inputs.append(self.create_subscription(msg_type, topic, handler, qos_profile_sensor_data,
+                                                         callback_group=inputs))
         self._inputs.append(self.create_service(Trigger, "~/predict", self._on_predict,
                                                 callback_group=MutuallyExclusiveCallbackGroup()))
         config = self.service.config
@@ -231,6 +242,38 @@ class _IpeInterface:
             self._recently_seen.append(key)
             handler(msg)
         return deliver
+
+    def _on_camera_info(self, msg: CameraInfo) -> None:
+        self._camera_info = camera_info_to_dict(msg)
+
+    def _on_camera_pose(self, msg: PoseStamped) -> None:
+        try:
+            position, orientation, frame, _ = pose_to_tuples(msg)
+        except ValueError as exc:
+            self._log_refusal(f"refused camera pose on {self.resolve_topic_name('~/depth/camera_pose')}: {exc}")
+            return
+        self._camera_pose = (position, orientation, frame)
+
+    def _on_depth_image(self, msg: Image) -> None:
+        """A depth image for depth perception: kept (the newest) with its camera, for the next scene."""
+        from ..engine.vision.depth import DepthObservation, camera_from_info
+
+        topic = self.resolve_topic_name("~/depth/image")
+        fixed = params.camera_pose(self._values)
+        pose = (*fixed, str(self._values["frame_id"])) if fixed is not None else self._camera_pose
+        try:
+            if self._camera_info is None:
+                raise ConfigError("camera_info", "no CameraInfo received yet on ~/depth/camera_info")
+            if pose is None:
+                raise ConfigError("camera_pose", "no camera pose yet: publish ~/depth/camera_pose or set "
+                                                 "depth.camera_pose")
+            camera = camera_from_info(self._camera_info, pose[0], pose[1])
+            observation = DepthObservation(camera, image_to_depth_m(msg))
+        except ValueError as exc:
+            self.depth_images_refused += 1
+            self._log_refusal(f"refused depth image on {topic}: {exc}")
+            return
+        self.service.set_depth(observation, header_to_stamp_ns(msg.header), pose[2])
 
     def _on_markers(self, msg: MarkerArray) -> None:
         try:

@@ -96,6 +96,16 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("dask_scheduler", "", _STRING, "run the samples on a Dask cluster at this address (e.g. "
                                          "tcp://10.0.0.1:8786, see docs/cluster.md) instead of `workers` local "
                                          "processes; empty: local; fixed at start", read_only=True),
+    ParamSpec("perception", "gaussian", _STRING,
+              "where the k noisy scenes come from: gaussian (sigma) or depth (the posterior given the newest depth "
+              "image on ~/depth/image, its ~/depth/camera_info and the camera pose; sigma unused)",
+              constraints="gaussian or depth"),
+    ParamSpec("depth.max_age_s", 0.5, _DOUBLE, "depth perception: the depth image may be at most this many seconds "
+                                               "from the scene's stamp", (0.001, 3600.0)),
+    ParamSpec("depth.camera_pose", "", _STRING,
+              "depth perception: the camera's optical frame (z forward, y down) in frame_id as "
+              "'x,y,z,qx,qy,qz,qw' for a fixed camera; empty (default): from ~/depth/camera_pose",
+              constraints="empty, or 7 comma-separated numbers with a unit quaternion"),
     ParamSpec("max_objects", DEFAULT_MAX_OBJECTS, _INT, "scenes with more objects are rejected", (1, 10000)),
     ParamSpec("frame_id", "world", _STRING, "frame of scenes received on ~/scene_json and ~/ask (JSON carries no "
                                             "header); must be one of gravity_aligned_frames",
@@ -153,10 +163,14 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
     if values["until_rest"]:
         settings = settings.changed(early_stop={"enabled": True})
     mu = float(values["mu"])
+    if values["perception"] not in ("gaussian", "depth"):
+        raise ConfigError("perception", f"must be gaussian or depth, got {values['perception']!r}")
+    camera_pose(values)  # checked now, used by the node
     try:
         model = ModelConfig(sigma_m=float(values["sigma"]), phi_m_s2=(float(values["phi"]),),
                             force_direction_rad=None if math.isnan(direction) else math.radians(direction),
-                            mu=None if mu == 0 else mu, samples=int(values["samples"]))
+                            mu=None if mu == 0 else mu, samples=int(values["samples"]),
+                            perception=str(values["perception"]))
     except ConfigError as exc:
         name = {"sigma_m": "sigma", "phi_m_s2": "phi", "force_direction_rad": "force_direction_deg"}.get(exc.field, exc.field)
         raise ConfigError(name, exc.problem) from None
@@ -180,4 +194,18 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
                          rerun_connect_url=connect or None, stop=stop, budget_s=budget,
                          gravity_aligned_frames=frames,
                          check=SelfCheck(enabled=bool(values["self_check"]),
-                                         verify_samples=int(values["verify_samples"])))
+                                         verify_samples=int(values["verify_samples"])),
+                         depth_max_age_s=float(values["depth.max_age_s"]))
+
+
+def camera_pose(values: Mapping[str, Any]) -> tuple[tuple, tuple] | None:
+    """The fixed camera pose of ``depth.camera_pose`` as (position, xyzw), or None (from the topic)."""
+    from ..engine.vision.depth import parse_pose
+
+    text = str(values["depth.camera_pose"]).strip()
+    if not text:
+        return None
+    try:
+        return parse_pose(text)
+    except ConfigError as exc:
+        raise ConfigError("depth.camera_pose", exc.problem) from None

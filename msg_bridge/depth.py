@@ -1,0 +1,63 @@
+"""Depth camera messages <-> numpy: ``sensor_msgs/Image`` depth, ``sensor_msgs/CameraInfo`` and the
+camera's ``geometry_msgs/PoseStamped``. Pure functions; bad input raises ``ValueError`` naming the field."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from geometry_msgs.msg import PoseStamped
+from sensor_msgs.msg import CameraInfo, Image
+
+from ipe_ros.engine.errors import ConfigError
+
+from .stamps import header_to_stamp_ns, stamp_ns_to_header
+
+#: Depth encodings a depth camera driver publishes (REP 118): float metres or integer millimetres.
+DEPTH_ENCODINGS = {"32FC1": (np.float32, 1.0), "16UC1": (np.uint16, 0.001), "mono16": (np.uint16, 0.001)}
+
+
+def image_to_depth_m(msg: Image) -> np.ndarray:
+    """(height, width) float metres; 0 and NaN stay (no reading)."""
+    if msg.encoding not in DEPTH_ENCODINGS:
+        raise ConfigError("image.encoding", f"must be a depth encoding ({', '.join(DEPTH_ENCODINGS)}), got "
+                                            f"{msg.encoding!r}")
+    dtype, scale = DEPTH_ENCODINGS[msg.encoding]
+    itemsize = np.dtype(dtype).itemsize
+    if msg.height < 1 or msg.width < 1 or msg.step < msg.width * itemsize:
+        raise ConfigError("image.step", f"{msg.step} bytes per row cannot hold {msg.width} pixels of {msg.encoding}")
+    data = bytes(msg.data)
+    if len(data) < msg.step * msg.height:
+        raise ConfigError("image.data", f"holds {len(data)} bytes, {msg.step} x {msg.height} expected")
+    rows = np.frombuffer(data, np.uint8, count=msg.step * msg.height).reshape(msg.height, msg.step)
+    pixels = rows[:, :msg.width * itemsize].copy().view(np.dtype(dtype).newbyteorder(">" if msg.is_bigendian else "<"))
+    return pixels.astype(float) * scale
+
+
+def depth_m_to_image(depth_m: np.ndarray, stamp_ns: int, frame_id: str, encoding: str = "32FC1") -> Image:
+    """The inverse of ``image_to_depth_m`` (little-endian; 16UC1 rounds to millimetres)."""
+    if encoding not in DEPTH_ENCODINGS:
+        raise ConfigError("encoding", f"must be one of {', '.join(DEPTH_ENCODINGS)}, got {encoding!r}")
+    dtype, scale = DEPTH_ENCODINGS[encoding]
+    depth = np.asarray(depth_m, float)
+    values = depth.astype(np.float32) if dtype == np.float32 else \
+        np.clip(np.round(np.nan_to_num(depth, nan=0.0) / scale), 0, 65535).astype("<u2")
+    return Image(header=stamp_ns_to_header(stamp_ns, frame_id), height=depth.shape[0], width=depth.shape[1],
+                 encoding=encoding, is_bigendian=0, step=depth.shape[1] * values.itemsize, data=values.tobytes())
+
+
+def camera_info_to_dict(msg: CameraInfo) -> dict:
+    """The fields ``vision.depth.camera_from_info`` reads."""
+    return {"width": int(msg.width), "height": int(msg.height), "k": [float(v) for v in msg.k]}
+
+
+def pose_to_tuples(msg: PoseStamped) -> tuple[tuple[float, float, float], tuple[float, float, float, float], str, int]:
+    """(position, orientation xyzw, frame id, stamp ns) of a camera pose; refuses non-finite or non-unit values."""
+    p, q = msg.pose.position, msg.pose.orientation
+    position = (float(p.x), float(p.y), float(p.z))
+    orientation = (float(q.x), float(q.y), float(q.z), float(q.w))
+    if not all(map(math.isfinite, position + orientation)):
+        raise ConfigError("camera_pose.pose", "must be finite numbers")
+    if abs(math.sqrt(sum(v * v for v in orientation)) - 1) > 1e-3:
+        raise ConfigError("camera_pose.pose.orientation", f"must be a unit quaternion, got {list(orientation)}")
+    return position, orientation, msg.header.frame_id, header_to_stamp_ns(msg.header)

@@ -117,6 +117,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="depth: the camera's calibration, a ROS camera_info YAML (distortion ignored)")
     p.add_argument("--camera-pose", default=None, metavar="X,Y,Z,QX,QY,QZ,QW",
                    help="depth: the camera's optical frame (z forward, y down) in the scene frame")
+    p.add_argument("--depth-rrd", default=None, metavar="FILE",
+                   help="depth: write the measured depth, the depth rendered at the posterior mean, their residual and "
+                        "the posterior sample cloud to a rerun recording")
     p.add_argument("--chain-samples", type=int, default=None, metavar="N",
                    help="vision: Metropolis-Hastings samples (default 5000, the SI's; a fifth is burn-in)")
     p.add_argument("--vision-resolution", type=int, default=None, metavar="PX",
@@ -308,8 +311,14 @@ def _perceive_depth(args, scenes, model):
     position, orientation = depth.parse_pose(args.camera_pose)
     camera = depth.camera_from_info(depth.load_camera_info(args.camera_info), position, orientation)
     observation = depth.DepthObservation(camera, depth.load_depth_image(args.depth))
-    return depth.perceive_depth(scenes[0], model.samples, (observation,), depth.DepthSettings(),
-                                np.random.default_rng(np.random.SeedSequence([args.seed, depth.DEPTH_STREAM])))
+    perceived = depth.perceive_depth(scenes[0], model.samples, (observation,), depth.DepthSettings(),
+                                     np.random.default_rng(np.random.SeedSequence([args.seed, depth.DEPTH_STREAM])))
+    if args.depth_rrd is not None:
+        from .viz.rerun_log import write_depth_rrd
+
+        write_depth_rrd(args.depth_rrd, scenes[0], perceived, (observation,))
+        print(f"wrote {args.depth_rrd}", file=sys.stderr)
+    return perceived
 
 
 def cmd_predict(args) -> int:
@@ -334,11 +343,11 @@ def cmd_predict(args) -> int:
             raise ConfigError(option, exc.problem) from None
     elif args.chain_samples is not None or args.vision_resolution is not None or args.vision_rrd is not None:
         raise ConfigError("--perception", "--chain-samples, --vision-resolution and --vision-rrd need --perception vision")
-    depth_inputs = (args.depth, args.camera_info, args.camera_pose)
-    if args.perception == "depth" and None in depth_inputs:
+    depth_inputs = (args.depth, args.camera_info, args.camera_pose, args.depth_rrd)
+    if args.perception == "depth" and None in depth_inputs[:3]:
         raise ConfigError("--perception", "depth perception needs --depth IMAGE, --camera-info YAML and --camera-pose")
     if args.perception != "depth" and any(v is not None for v in depth_inputs):
-        raise ConfigError("--perception", "--depth, --camera-info and --camera-pose need --perception depth")
+        raise ConfigError("--perception", "--depth, --camera-info, --camera-pose and --depth-rrd need --perception depth")
     model = ModelConfig(sigma_m=sigma, phi_m_s2=phi, mu=args.mu, samples=args.samples, perception=args.perception,
                         vision=vision, object_noise=not args.ground_truth,
                         force_direction_rad=None if args.force_direction is None else math.radians(args.force_direction))

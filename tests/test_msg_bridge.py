@@ -273,3 +273,24 @@ def test_prediction_markers_draw_capsules_and_compounds_as_triangles():
     drawn = [m for m in prediction_to_markers(scene, prediction, "odom", 0).markers if m.ns == "ipe/objects"]
     assert [m.type for m in drawn] == [Marker.TRIANGLE_LIST] * 2
     assert all(len(m.points) % 3 == 0 and len(m.points) >= 12 for m in drawn)
+
+
+def test_depth_images_convert_both_ways_and_name_what_is_wrong():
+    import numpy as np
+    from sensor_msgs.msg import Image
+
+    from msg_bridge.depth import depth_m_to_image, image_to_depth_m
+
+    depth = np.array([[0.0, 0.5, 1.25], [2.0, 3.5, np.nan]])
+    metres = image_to_depth_m(depth_m_to_image(depth, 7, "camera", "32FC1"))
+    assert np.array_equal(np.isnan(metres), np.isnan(depth)) and np.allclose(metres[:, :2], depth[:, :2])
+    millimetres = depth_m_to_image(depth, 7, "camera", "16UC1")
+    assert millimetres.header.frame_id == "camera" and millimetres.step == 6
+    assert image_to_depth_m(millimetres).tolist() == [[0.0, 0.5, 1.25], [2.0, 3.5, 0.0]]  # NaN: no reading
+    big_endian = Image(encoding="16UC1", width=1, height=1, step=2, is_bigendian=1, data=bytes([0x04, 0xD2]))
+    assert image_to_depth_m(big_endian).tolist() == [[1.234]]
+    with pytest.raises(ValueError, match=r"^image.encoding: must be a depth encoding \(32FC1, 16UC1, mono16\), "
+                                         r"got 'rgb8'$"):
+        image_to_depth_m(Image(encoding="rgb8", width=1, height=1, step=3, data=bytes(3)))
+    with pytest.raises(ValueError, match=r"^image.data: holds 2 bytes, 4 x 1 expected$"):
+        image_to_depth_m(Image(encoding="32FC1", width=1, height=1, step=4, data=bytes(2)))

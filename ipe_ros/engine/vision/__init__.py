@@ -4,7 +4,9 @@
 - render.py: a z-buffered numpy rasteriser of the bodies' hulls into grey images;
 - likelihood.py: the Gaussian blur and the per-pixel normal likelihood;
 - mcmc.py: Metropolis-Hastings over the blocks' horizontal positions (an injected Generator);
-- perception.py: the IPE's k scene samples drawn from that posterior (``perception="vision"``).
+- perception.py: the IPE's k scene samples drawn from that posterior (``perception="vision"``);
+- depth.py: the same idea for a robot's depth camera: the posterior over objects' x, y, yaw given
+  depth images (``perception="depth"``).
 
 ROS-free, like the rest of the engine.
 """

@@ -616,3 +616,23 @@ def write_depth_example(directory: str | Path, truth: Scene, seed: int = 0) -> d
         sort_keys=False))
     paths["camera_pose"].write_text(",".join(f"{v:.6f}" for v in (*camera.position_m, *camera.orientation_xyzw)) + "\n")
     return paths
+
+
+def render_depth_m(scene: Scene, camera: DepthCamera, positions_m: np.ndarray | None = None,
+                   yaws_rad: np.ndarray | None = None) -> np.ndarray:
+    """(height, width) depth the camera would measure of the scene with its dynamic objects at
+    ``positions_m`` turned by ``yaws_rad`` (default: as published): objects over the support; NaN
+    where neither is."""
+    mesh = scene_mesh(scene)
+    positions = mesh.positions_m.copy()
+    yaws = np.zeros(len(positions))
+    if positions_m is not None:
+        positions[:len(positions_m)] = positions_m
+    if yaws_rad is not None:
+        yaws[:len(yaws_rad)] = yaws_rad
+    nearest = np.full((camera.height_px, camera.width_px), np.inf)
+    for b in range(len(positions)):
+        patch = body_patch(mesh, camera, b, positions[b], yaws[b])
+        window = nearest[patch.v0:patch.v1, patch.u0:patch.u1]
+        np.minimum(window, patch.depth, out=window)
+    return np.where(np.isfinite(nearest), nearest, support_depth_m(scene, camera))

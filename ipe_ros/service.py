@@ -680,7 +680,9 @@ class QuestionService:
                                "compute_s": time.perf_counter() - start}, source, question)
 
             try:
-                model = dataclasses.replace(config.model, samples=DEFAULT_QUESTION_SAMPLES)
+                # questions draw their noise from sigma: depth perception serves predictions only, and
+                # the reply says so rather than answering as if it had been used
+                model = dataclasses.replace(config.model, samples=DEFAULT_QUESTION_SAMPLES, perception="gaussian")
                 pool = self._predictions.pool
                 record = {}
                 if config.rerun_save_dir and config.rerun_rollouts_logged > 0:
@@ -690,6 +692,9 @@ class QuestionService:
                                                   map_fn=pool.map if pool is not None else None,
                                                   budget_s=config.budget_s, on_progress=progress, **record)
                 message = {**head, "final": True, "answer": answer, "compute_s": time.perf_counter() - start}
+                if config.model.perception != "gaussian":
+                    message["perception"] = (f"gaussian (sigma = {config.model.sigma_m:g} m): questions do not use "
+                                             f"{config.model.perception} perception")
                 if record and answers is not None:
                     message["rrd_path"] = self._write_rrd(config, question, source, answers)
                 answered = True

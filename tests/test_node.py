@@ -461,3 +461,11 @@ def test_depth_perception_predicts_from_the_newest_depth_image(ros):
     perception = got[1]["request"]["perception"]
     assert perception["kind"] == "depth" and set(perception["object_spread"]) == {"bottom", "top"}
     assert perception["object_spread"]["top"]["x_sd_m"] < 0.01 and got[1]["samples"] == 4
+    # questions draw from sigma, and say so
+    replies = ros.collect(String, "/ipe/answer", LATCHED_QOS)
+    ros.publisher(String, "/ipe/ask").publish(String(data=json.dumps({"id": "q", "question": "push", "samples": 2,
+                                                                      "object": "top", "velocity_m_s": [1, 0]})))
+    wait_until(lambda: any(json.loads(m.data)["final"] for m in replies), TIMEOUT_S, "the answer to the question")
+    final = next(json.loads(m.data) for m in replies if json.loads(m.data)["final"])
+    assert final["perception"] == "gaussian (sigma = 0.04 m): questions do not use depth perception"
+    assert "answer" in final

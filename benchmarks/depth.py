@@ -68,14 +68,12 @@ def camera_for(scene: Scene, rng: np.random.Generator) -> D.DepthCamera:
 
 def detected(scene: Scene, rng: np.random.Generator, sd_m: float = 0.01, yaw_sd_rad: float = 0.05) -> Scene:
     """The detector's guess: every block moved and turned a little (heights kept)."""
-    moved = []
+    positions, yaws = [], []
     for b in scene.objects:
-        yaw = yaw_sd_rad * rng.standard_normal()
+        yaws.append(yaw_sd_rad * rng.standard_normal())
         dx, dy = sd_m * rng.standard_normal(2)
-        moved.append(dataclasses.replace(b, position_m=(b.position_m[0] + dx, b.position_m[1] + dy, b.position_m[2]),
-                                         orientation_xyzw=D._multiply((0, 0, math.sin(yaw / 2), math.cos(yaw / 2)),
-                                                                      b.orientation_xyzw)))
-    return dataclasses.replace(scene, objects=tuple(moved))
+        positions.append((b.position_m[0] + dx, b.position_m[1] + dy, b.position_m[2]))
+    return D.scene_at_pose(scene, np.array(positions), np.array(yaws))
 
 
 def yaw_of(q) -> float:
@@ -145,10 +143,7 @@ def tower_cost(workers: int = 2, k: int = 48) -> dict:
 
     with tempfile.TemporaryDirectory() as folder:
         paths = D.write_depth_example(folder, load_scenes(example_scene_path())[0])
-        info = D.load_camera_info(paths["camera_info"])
-        position, orientation = D.parse_pose(paths["camera_pose"].read_text().strip())
-        observation = D.DepthObservation(D.camera_from_info(info, position, orientation),
-                                         D.load_depth_image(paths["depth"]))
+        observation = D.load_observation(paths["depth"], paths["camera_info"], paths["camera_pose"].read_text().strip())
         guess = load_scenes(paths["scene"])[0]
     with WorkerPool(workers) as pool:
         pool.warm()

@@ -308,11 +308,8 @@ def _perceive_depth(args, scenes, model):
 
     if len(scenes) != 1:
         raise ConfigError("--depth", f"one depth image describes one scene, but {args.path} holds {len(scenes)}")
-    position, orientation = depth.parse_pose(args.camera_pose)
-    camera = depth.camera_from_info(depth.load_camera_info(args.camera_info), position, orientation)
-    observation = depth.DepthObservation(camera, depth.load_depth_image(args.depth))
-    perceived = depth.perceive_depth(scenes[0], model.samples, (observation,), depth.DepthSettings(),
-                                     np.random.default_rng(np.random.SeedSequence([args.seed, depth.DEPTH_STREAM])))
+    observation = depth.load_observation(args.depth, args.camera_info, args.camera_pose)
+    perceived = depth.perceive_depth_for(scenes[0], model.samples, (observation,), args.seed)
     if args.depth_rrd is not None:
         from .viz.rerun_log import write_depth_rrd
 

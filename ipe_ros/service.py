@@ -28,8 +28,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-import numpy as np
-
 from .engine import (AdaptiveStop, ConfigError, ModelConfig, Prediction, QuerySpec, Scene, SimSettings, WorkerPool,
                      predict, preset)
 from .engine.config import DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES
@@ -503,8 +501,7 @@ class PredictionService:
         if age > config.depth_max_age_s:
             raise ConfigError("perception", f"depth: the newest depth image is {age:.3g} s from the scene's stamp, more "
                                             f"than depth.max_age_s = {config.depth_max_age_s:g} s")
-        rng = np.random.default_rng(np.random.SeedSequence([config.seed, depth.DEPTH_STREAM]))
-        return depth.perceive_depth(item.scene, config.model.samples, (observation,), depth.DepthSettings(), rng)
+        return depth.perceive_depth_for(item.scene, config.model.samples, (observation,), config.seed)
 
     def _predict(self, item: StampedScene, config: ServiceConfig, version: int) -> tuple[Answer | None, str | None]:
         start = time.perf_counter()

@@ -39,7 +39,6 @@ from .perturb import draw_sample_inputs, is_deterministic, position_sigmas_m
 from .rollout import SampleTask, _decided_heights, collapse_heights, separated_world
 from .sampler import MapFn, check_budget, rollout_cost
 from .scene import Body, Scene, Table, lowest_z_m, validate_body, validate_scene
-
 from .shapes import BoxShape, rotation_matrix
 
 #: P(anything else falls) below this makes an object safe to remove now.
@@ -359,8 +358,7 @@ class VariantAnswer:
         off = {} if self.fell_off_probability is None else {
             "fell_off_probability": self.fell_off_probability, "any_fell_off_probability": self.any_fell_off_probability}
         return {"label": self.label, "any_fall_probability": self.any_fall_probability,
-                "any_fall_probability_ci95": None if self.any_fall_probability_ci95 is None
-                else list(self.any_fall_probability_ci95),
+                "any_fall_probability_ci95": _listed(self.any_fall_probability_ci95),
                 "object_fall_probability": self.object_fall_probability, "direction_rad": self.direction_rad,
                 "samples": self.samples, "failed_samples": self.failed_samples, "simulated": self.simulated,
                 "not_simulated": list(self.not_simulated), "caused_fall_probability": self.caused_fall_probability,
@@ -383,8 +381,13 @@ class GivenStands:
 
     def to_dict(self) -> dict:
         return {"samples": self.samples, "any_fall_probability": self.any_fall_probability,
-                "any_fall_probability_ci95": None if self.any_fall_probability_ci95 is None
-                else list(self.any_fall_probability_ci95), "object_fall_probability": self.object_fall_probability}
+                "any_fall_probability_ci95": _listed(self.any_fall_probability_ci95),
+                "object_fall_probability": self.object_fall_probability}
+
+
+def _listed(interval: tuple[float, float] | None) -> list[float] | None:
+    """An interval as JSON writes it."""
+    return None if interval is None else list(interval)
 
 
 def _draws_noise(scene: Scene, action: Action, model: ModelConfig) -> bool:
@@ -418,9 +421,9 @@ def _aggregate(label: str, action: Action, results: list[VariantResult], simulat
                          circular_mean(directions), len(ok), len(failed), simulated, **off)
 
 
-def _stands_as_is(per_sample: list[list[VariantResult]], as_is: int) -> list[bool]:
-    """Per sample: the scene as it is ran without failing and nothing in it fell."""
-    return [s[as_is].error is None and not bool(np.any(s[as_is].fallen)) for s in per_sample]
+def _stood(alone: VariantResult) -> bool:
+    """The scene as it is ran without failing and nothing in it fell."""
+    return alone.error is None and not bool(np.any(alone.fallen))
 
 
 def _aggregate_given(results: list[VariantResult], *, deterministic: bool) -> GivenStands:
@@ -582,8 +585,7 @@ class Alone:
 
     def to_dict(self) -> dict:
         return {"any_fall_probability": self.any_fall_probability,
-                "any_fall_probability_ci95": None if self.any_fall_probability_ci95 is None
-                else list(self.any_fall_probability_ci95),
+                "any_fall_probability_ci95": _listed(self.any_fall_probability_ci95),
                 "samples_standing": self.samples_standing, "unstable": self.unstable}
 
 
@@ -607,6 +609,9 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     check_budget(budget_s)
     for i, action in enumerate(actions):
         _check_action(scene, action, f"actions[{i}]")
+    if fell_off and not isinstance(scene.support, Table):
+        raise ConfigError("fell_off", f"{scene.name!r} stands on a floor: nothing can fall off it (ask it of a "
+                                      "scene on a table)")
     margin = 3 * float(position_sigmas_m(scene, model).max(initial=0.0))  # noise can close gaps this wide
     everything = frozenset(b.name for b in scene.dynamic_objects)
     # a pushed support can slide every group into every other
@@ -625,9 +630,6 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
                                           f"~{cost.seconds * len(simulated_actions):.3g} s, more than the budget of "
                                           f"{budget_s:g} s; ask fewer variants or raise the budget")
     regions = _regions(scene, simulated_actions, margin, scene_groups, model.pushes)
-    if fell_off and not isinstance(scene.support, Table):
-        raise ConfigError("fell_off", f"{scene.name!r} stands on a floor: nothing can fall off it (ask it of a "
-                                      "scene on a table)")
     asked = {"fall"} | ({"direction"} if directions else set()) | ({"bump"} if fell_off else set())
     query = QuerySpec(queries=frozenset(asked), fall_threshold_fraction=fall_threshold_fraction)
     # no noise anywhere (scene, model, nor an action's own): one rollout per variant says everything
@@ -657,7 +659,7 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
         not_simulated=() if regions[j] is None else tuple(sorted(everything - regions[j])))
         for j, a in enumerate(simulated_actions)}
     if as_is is not None:
-        stands = _stands_as_is(per_sample, as_is)
+        stands = [_stood(s[as_is]) for s in per_sample]
         for j, a in enumerate(simulated_actions):
             by_variant[_label(a)] = dataclasses.replace(
                 by_variant[_label(a)], caused_fall_probability=_caused(per_sample, j, as_is),
@@ -721,7 +723,8 @@ def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequenti
     active = set(others)
     decisions: dict[str, tuple[str | None, str, int]] = {}
     per_sample: list[list[VariantResult]] = []
-    tallies = {_label(actions[j]): _Counts() for j in others}
+    # counted as the batches come (recounting every sample at every look would grow with k x looks)
+    counts = {_label(actions[j]): _Counts() for j in others}
     while len(per_sample) < k and active:
         batch = range(len(per_sample), min(k, len(per_sample) + sequential.batch_samples))
         rows = {}
@@ -729,7 +732,7 @@ def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequenti
             rows[i] = [VariantResult(names, None, None, "skipped: the scene fell as it is" if j in active
                                      else "skipped: decided", skipped=True) for j in range(len(actions))]
             rows[i][as_is] = alone
-        standing = [i for i in batch if rows[i][as_is].error is None and not np.any(rows[i][as_is].fallen)]
+        standing = [i for i in batch if _stood(rows[i][as_is])]
         running = sorted(active)
         chunks = [running[c:c + VARIANTS_PER_TASK] for c in range(0, len(running), VARIANTS_PER_TASK)]
         jobs = [(i, chunk) for i in standing for chunk in chunks]
@@ -740,11 +743,12 @@ def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequenti
         for i in batch:
             per_sample.append(rows[i])
             for j in running:
-                tallies[_label(actions[j])].add(rows[i][j])
+                counts[_label(actions[j])].add(rows[i][j])
         if any(r.budget_stopped for i in batch for r in rows[i]):
             break
+        tallies = {label: c.tally() for label, c in counts.items()}
         labels = {_label(actions[j]): j for j in active}
-        for label, decision in sequential.rule.decide({n: c.tally() for n, c in tallies.items()}, set(labels)).items():
+        for label, decision in sequential.rule.decide(tallies, set(labels)).items():
             decisions[label] = (decision, "decided", len(per_sample))
             active.discard(labels[label])
         if on_progress is not None:
@@ -756,7 +760,8 @@ def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequenti
     return per_sample, decisions
 
 
-def progress_dict(scene: str, k: int, drawn: int, decisions: dict, undecided: list[str], tallies: dict) -> dict:
+def progress_dict(scene: str, k: int, drawn: int, decisions: dict, undecided: list[str],
+                  tallies: dict[str, Tally]) -> dict:
     """A partial answer: the samples drawn so far (of at most k), each decided variant's decision and
     the samples it used, and the variants still sampling with their running P(anything falls)."""
     def running(label):
@@ -770,7 +775,7 @@ def progress_dict(scene: str, k: int, drawn: int, decisions: dict, undecided: li
 
 
 class _Counts:
-    """A variant's outcomes so far (non-skipped, non-failed samples), as a decide.Tally."""
+    """A variant's outcomes so far (skipped and failed samples left out), as a decide.Tally."""
 
     def __init__(self):
         self.samples, self.any_falls, self.object_falls = 0, 0, {}

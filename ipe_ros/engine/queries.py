@@ -61,6 +61,6 @@ def tower_base_xy_m(scene: Scene) -> np.ndarray:
     scale = min(b.smallest_extent_m for b in bodies)
     on_support = np.abs(lows - top) <= 0.05 * scale
     if isinstance(scene.support, Table):
-        on_support &= np.array([scene.support.covers_xy(x, y) for x, y in positions[:, :2]])
+        on_support &= scene.support.covers_xy(positions[:, 0], positions[:, 1])
     chosen = positions[on_support] if on_support.any() else positions[[int(np.argmin(lows))]]
     return chosen[:, :2].mean(axis=0)

@@ -159,10 +159,10 @@ class Table:
     def top_m(self) -> float:
         return self.top_height_m
 
-    def covers_xy(self, x: float, y: float) -> bool:
-        """True when (x, y) lies over the table top (edges included)."""
-        return (abs(x - self.center_xy_m[0]) <= self.size_m[0] / 2
-                and abs(y - self.center_xy_m[1]) <= self.size_m[1] / 2)
+    def covers_xy(self, x, y):
+        """True where (x, y) lies over the table top (edges included); numbers or arrays alike."""
+        return (np.abs(np.subtract(x, self.center_xy_m[0])) <= self.size_m[0] / 2) \
+            & (np.abs(np.subtract(y, self.center_xy_m[1])) <= self.size_m[1] / 2)
 
 
 Support = Union[Floor, Table]
@@ -427,9 +427,7 @@ def deepest_into_support(support: Support, body: Body) -> tuple[float, float | N
     if isinstance(support, Floor):
         surface = np.full(len(z), support.height_m)
     else:
-        over = ((np.abs(x - support.center_xy_m[0]) <= support.size_m[0] / 2)
-                & (np.abs(y - support.center_xy_m[1]) <= support.size_m[1] / 2)
-                & (z >= support.top_height_m - support.thickness_m))  # under the top is not inside it
+        over = support.covers_xy(x, y) & (z >= support.top_height_m - support.thickness_m)  # under it: not inside
         below = np.nan if support.floor_z_m is None else support.floor_z_m
         surface = np.where(over, support.top_height_m, below)
     if np.all(np.isnan(surface)):

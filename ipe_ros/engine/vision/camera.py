@@ -25,12 +25,7 @@ class Camera:
     @property
     def axes(self) -> np.ndarray:
         """Rows: right, down, forward (unit vectors in the scene frame)."""
-        forward = np.asarray(self.target_m, float) - np.asarray(self.position_m, float)
-        forward /= np.linalg.norm(forward)
-        right = np.cross(forward, (0.0, 0.0, 1.0))
-        right /= np.linalg.norm(right)
-        down = np.cross(forward, right)
-        return np.stack([right, down, forward])
+        return look_at_axes(self.position_m, self.target_m)
 
     @property
     def width_px(self) -> int:
@@ -50,6 +45,17 @@ class Camera:
         depth = local[:, 2]
         pixels = self.focal_px * local[:, :2] / depth[:, None] + self.resolution_px / 2
         return pixels, depth
+
+
+def look_at_axes(position_m, target_m) -> np.ndarray:
+    """Rows: right, down, forward (unit vectors in the scene frame) of a camera at ``position_m``
+    looking at ``target_m`` with +z up in its image."""
+    forward = np.asarray(target_m, float) - np.asarray(position_m, float)
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, (0.0, 0.0, 1.0))
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    return np.stack([right, down, forward])
 
 
 def cameras_for(scene: Scene, settings) -> tuple[Camera, ...]:

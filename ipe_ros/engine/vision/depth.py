@@ -33,10 +33,12 @@ from typing import Any
 
 import numpy as np
 
+from ..config import _integer, _positive
 from ..errors import ConfigError
-from ..scene import Floor, Scene, Table
-from ..shapes import rotation_matrix
-from .mcmc import Chain, effective_sample_size
+from ..scene import Floor, Scene
+from ..shapes import quaternion_product, rotation_matrix
+from .camera import look_at_axes
+from .mcmc import effective_sample_size
 from .render import EMPTY, Patch, SceneMesh, body_patch, scene_mesh
 
 
@@ -56,15 +58,14 @@ class DepthCamera:
     orientation_xyzw: tuple[float, float, float, float]
 
     def __post_init__(self) -> None:
-        for name in ("fx", "fy", "cx", "cy"):
+        for name in ("fx", "fy"):
+            _positive(getattr(self, name), f"camera_info.{name}")
+        for name in ("cx", "cy"):
             value = getattr(self, name)
-            if not isinstance(value, (int, float)) or not math.isfinite(value) or (name[0] == "f" and value <= 0):
-                raise ConfigError(f"camera_info.{name}", f"must be a finite number{' > 0' if name[0] == 'f' else ''}, "
-                                                        f"got {value!r}")
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ConfigError(f"camera_info.{name}", f"must be a finite number, got {value!r}")
         for name in ("width_px", "height_px"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or not 8 <= value <= 4096:
-                raise ConfigError(f"camera_info.{name}", f"must be an integer in [8, 4096], got {value!r}")
+            _integer(getattr(self, name), f"camera_info.{name}", 8, 4096)
         position = np.asarray(self.position_m, float)
         q = np.asarray(self.orientation_xyzw, float)
         if position.shape != (3,) or not np.all(np.isfinite(position)):
@@ -131,19 +132,13 @@ class DepthSettings:
     def __post_init__(self) -> None:
         for name in ("sd_m", "max_range_m", "reach_m", "temperature", "prior_sd_m", "prior_yaw_sd_rad",
                      "proposal_sd_m", "proposal_yaw_sd_rad"):
-            value = getattr(self, name)
-            if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-                raise ConfigError(f"depth.{name}", f"must be a finite number > 0, got {value!r}")
+            _positive(getattr(self, name), f"depth.{name}")
         if not isinstance(self.sd_per_m2, (int, float)) or not 0 <= self.sd_per_m2 < 1:
             raise ConfigError("depth.sd_per_m2", f"must be in [0, 1), got {self.sd_per_m2!r}")
         if not isinstance(self.outlier, (int, float)) or not 0 < self.outlier < 1:
             raise ConfigError("depth.outlier", f"must be in (0, 1), got {self.outlier!r}")
-        if isinstance(self.pixel_stride, bool) or not isinstance(self.pixel_stride, int) or not 1 <= self.pixel_stride <= 16:
-            raise ConfigError("depth.pixel_stride", f"must be an integer in [1, 16], got {self.pixel_stride!r}")
-        if isinstance(self.updates_per_object, bool) or not isinstance(self.updates_per_object, int) \
-                or not 1 <= self.updates_per_object <= 100_000:
-            raise ConfigError("depth.updates_per_object", f"must be an integer in [1, 100000], got "
-                                                          f"{self.updates_per_object!r}")
+        _integer(self.pixel_stride, "depth.pixel_stride", 1, 16)
+        _integer(self.updates_per_object, "depth.updates_per_object", 1, 100_000)
         if not isinstance(self.burn_in_fraction, (int, float)) or not 0 <= self.burn_in_fraction < 1:
             raise ConfigError("depth.burn_in_fraction", f"must be in [0, 1), got {self.burn_in_fraction!r}")
 
@@ -171,10 +166,8 @@ def support_depth_m(scene: Scene, camera: DepthCamera) -> np.ndarray:
     if isinstance(support, Floor):
         return plane(support.height_m)[0]
     t_top, hit = plane(support.top_height_m)
-    over = ((np.abs(hit[..., 0] - support.center_xy_m[0]) <= support.size_m[0] / 2)
-            & (np.abs(hit[..., 1] - support.center_xy_m[1]) <= support.size_m[1] / 2))
-    below = plane(support.floor_z_m)[0] if isinstance(support, Table) and support.floor_z_m is not None else np.nan
-    return np.where(over, t_top, below)
+    below = plane(support.floor_z_m)[0] if support.floor_z_m is not None else np.nan
+    return np.where(support.covers_xy(hit[..., 0], hit[..., 1]), t_top, below)
 
 
 def _reach_mask(scene: Scene, camera: DepthCamera, reach_m: float) -> np.ndarray:
@@ -376,18 +369,10 @@ def scene_at_pose(scene: Scene, positions_m: np.ndarray, yaws_rad: np.ndarray) -
         position, yaw = next(state)
         turn = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
         objects.append(dataclasses.replace(body, position_m=tuple(float(v) for v in position),
-                                           orientation_xyzw=_multiply(turn, body.orientation_xyzw),
+                                           orientation_xyzw=tuple(float(v) for v in quaternion_product(
+                                               turn, body.orientation_xyzw)),
                                            position_sigma_m=0.0, yaw_sigma_rad=None))
     return dataclasses.replace(scene, objects=tuple(objects))
-
-
-def _multiply(a, b) -> tuple[float, float, float, float]:
-    """Quaternion product a * b (xyzw): b first, then a."""
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    q = np.array([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-                  aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz])
-    return tuple(float(v) for v in q / np.linalg.norm(q))
 
 
 @dataclass(frozen=True)
@@ -429,6 +414,14 @@ def perceive_depth(scene: Scene, k: int, observations: tuple[DepthObservation, .
     objects = len(scene.dynamic_objects)
     return DepthPerceivedScenes(scenes=scenes, posterior=posterior, chain_samples=settings.chain_samples(objects),
                                 burn_in=settings.burn_in(objects))
+
+
+def perceive_depth_for(scene: Scene, k: int, observations: tuple[DepthObservation, ...], seed: int,
+                       settings: DepthSettings | None = None) -> DepthPerceivedScenes:
+    """``perceive_depth`` as a prediction with this ``seed`` runs it (the CLI, the node): its chain on a
+    random stream of its own, apart from the samples'."""
+    rng = np.random.default_rng(np.random.SeedSequence([seed, DEPTH_STREAM]))
+    return perceive_depth(scene, k, observations, settings or DepthSettings(), rng)
 
 
 def depth_with_pybullet(scene: Scene, camera: DepthCamera, near_m: float = 0.3, far_m: float = 8.0) -> np.ndarray:
@@ -490,15 +483,10 @@ def look_at(position_m, target_m, width_px: int = 320, height_px: int = 240,
             horizontal_fov_rad: float = math.radians(58)) -> DepthCamera:
     """A depth camera at ``position_m`` looking at ``target_m`` (image up towards +z), with a
     Kinect-like field of view: for examples and tests."""
-    forward = np.asarray(target_m, float) - np.asarray(position_m, float)
-    forward /= np.linalg.norm(forward)
-    right = np.cross(forward, (0.0, 0.0, 1.0))
-    right /= np.linalg.norm(right)
-    down = np.cross(forward, right)
-    rotation = np.stack([right, down, forward], axis=1)  # columns: the optical axes in the scene frame
     from scipy.spatial.transform import Rotation
 
-    q = Rotation.from_matrix(rotation).as_quat()
+    # the optical axes (x right, y down, z forward) are the look-at camera's, as columns
+    q = Rotation.from_matrix(look_at_axes(position_m, target_m).T).as_quat()
     f = width_px / 2 / math.tan(horizontal_fov_rad / 2)
     return DepthCamera(fx=f, fy=f, cx=width_px / 2, cy=height_px / 2, width_px=width_px, height_px=height_px,
                        position_m=tuple(float(v) for v in position_m), orientation_xyzw=tuple(float(v) for v in q))
@@ -561,6 +549,14 @@ def load_depth_image(path: str | Path) -> np.ndarray:
     if not np.issubdtype(data.dtype, np.floating):
         raise ConfigError("--depth", f"{path.name}: depth must be numbers, got {data.dtype}")
     return data.astype(float)
+
+
+def load_observation(depth_path: str | Path, camera_info_path: str | Path, camera_pose: str) -> DepthObservation:
+    """A depth image with its camera from the files a robot saves: the image, its camera_info YAML and
+    the pose text "x,y,z,qx,qy,qz,qw"."""
+    position, orientation = parse_pose(camera_pose)
+    camera = camera_from_info(load_camera_info(camera_info_path), position, orientation)
+    return DepthObservation(camera, load_depth_image(depth_path))
 
 
 def parse_pose(text: str) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:

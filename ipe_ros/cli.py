@@ -42,6 +42,8 @@ from .engine.catalogue import capped_tower, scene_catalogue
 from .engine.fidelity import DEFAULT_CHECK, SelfCheck
 from .engine.generators import generate_tables, generate_towers, state_pair
 from .engine.perturb import is_deterministic
+from .engine.query import QUERIES
+from .engine.query.contact import parse_pair
 from .engine.sampler import check_budget, check_request
 from .engine.scene_io import RefusedScene, write_scenes
 from .engine.zoo import FAMILIES, scene_zoo
@@ -63,6 +65,13 @@ class _OneLineParser(argparse.ArgumentParser):
 def _queries(text: str) -> frozenset[str]:
     try:
         return parse_queries(text)
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(exc.problem) from None
+
+
+def _pair(text: str) -> tuple[str, str]:
+    try:
+        return parse_pair(text, "--contact")
     except ConfigError as exc:
         raise argparse.ArgumentTypeError(exc.problem) from None
 
@@ -98,6 +107,9 @@ def build_parser() -> argparse.ArgumentParser:
     default_queries = ",".join(q for q in ALL_QUERIES if q in DEFAULT_QUERIES)
     p.add_argument("--query", type=_queries, default=DEFAULT_QUERIES,
                    help=f"comma-separated queries from {','.join(ALL_QUERIES)} (default {default_queries})")
+    p.add_argument("--contact", type=_pair, action="append", default=None, metavar="A:B",
+                   help="the contact query: will A touch B within the horizon? (repeatable; B may be 'support'; "
+                        "adds contact to --query)")
     p.add_argument("--samples", type=int, default=DEFAULT_SAMPLES,
                    help=f"Monte Carlo samples k (default {DEFAULT_SAMPLES}, as the paper)")
     p.add_argument("--sigma", type=_finite, default=DEFAULT_SIGMA_M,
@@ -240,6 +252,9 @@ def format_table(predictions: list[Prediction]) -> str:
         if p.fell_off_fraction_by_group is not None:
             groups = ", ".join(f"{g}: {v:.2f}" for g, v in p.fell_off_fraction_by_group.items())
             lines.append(f"{'':<34} fell off by group: {groups}; {p.bump_group} share: {_number_or_dash(p.bump_ratio, '.2f')}")
+        for name in p.request.get("queries", ()):
+            if name in QUERIES and p.samples:
+                lines.extend(f"{'':<34} {line}" for line in QUERIES[name].describe(p))
         if p.failure_reasons:
             lines.append(f"{'':<34} failures: {'; '.join(p.failure_reasons)}")
         if p.fidelity is not None and p.fidelity != "verified" or p.refined_samples:
@@ -348,7 +363,8 @@ def cmd_predict(args) -> int:
     model = ModelConfig(sigma_m=sigma, phi_m_s2=phi, mu=args.mu, samples=args.samples, perception=args.perception,
                         vision=vision, object_noise=not args.ground_truth,
                         force_direction_rad=None if args.force_direction is None else math.radians(args.force_direction))
-    query = QuerySpec(queries=args.query)
+    queries = args.query | ({"contact"} if args.contact else set())
+    query = QuerySpec(queries=frozenset(queries), contact_pairs=tuple(args.contact or ()))
     sim = preset(args.preset)
     if args.horizon is not None:
         sim = sim.changed(horizon_s=args.horizon)
@@ -380,7 +396,8 @@ def cmd_predict(args) -> int:
             check_request(scene, query, model=model, settings=sim, budget_s=args.budget)
             answerable.append(scene)
         except ConfigError as exc:
-            field = f"--budget ({scene.name})" if exc.field == "budget_s" else exc.field
+            field = {"budget_s": f"--budget ({scene.name})", "contact": "--contact",
+                     "queries": "--query"}.get(exc.field, exc.field)
             refused.append(RefusedScene(positions[id(scene)], scene.name, ConfigError(field, exc.problem)))
     if len(scenes) == 1 and not answerable and len(refused) == 1:  # one scene: its refusal is the command's error
         raise refused[-1].error

@@ -12,6 +12,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from ipe_ros.engine import Body, Floor, Prediction, Scene, SceneError, Table, load_scenes
 from ipe_ros.engine.generators import generate_tables
+from ipe_ros.engine.query import ANSWER_FIELDS
 from msg_bridge.json_text import answer_to_string, scene_to_string, string_to_answer, string_to_scene
 from msg_bridge.markers import (DEFAULT_DENSITY_KG_M3, markers_to_scene, prediction_to_markers,
                                 scene_to_markers)
@@ -187,7 +188,8 @@ def test_scene_names_that_cannot_ride_in_text_are_refused():
 
 def _prediction(**kw) -> Prediction:
     base = dict(scene="t", samples=4, samples_requested=4, failed_samples=0, failure_reasons=(), deterministic=False)
-    return Prediction(**{**base, **kw})
+    answers = {k: v for k, v in kw.items() if k in ANSWER_FIELDS and v is not None}
+    return Prediction(**base, answers=answers, **{k: v for k, v in kw.items() if k not in ANSWER_FIELDS})
 
 
 def test_direction_vector_is_scaled_by_decisiveness_and_zero_when_nothing_falls():

@@ -27,10 +27,9 @@ from typing import Any
 from . import limits
 from .errors import ConfigError, shown
 
-#: Every query the engine can answer. ``fall`` includes per-object fall probabilities.
-#: fall: expected fraction of boxes that fall; any_fall: probability that anything falls (yes/no,
-#: its rollouts stop at the first fall); direction, far: where they fall; bump: what falls off a table.
-ALL_QUERIES = ("fall", "any_fall", "direction", "far", "bump")
+#: Every query the engine can answer, one module each in engine/query (fall, any_fall, direction,
+#: far, bump, contact, rest, final_pose).
+from .query import ALL_QUERIES, QUERIES  # noqa: E402
 
 #: The paper's IPE, as the CLI, the node and the service answer by default: sigma = 0.2 block short
 #: sides (0.04 m for 0.2 m blocks), k = 48 samples, the fall fraction, the probability that anything
@@ -448,16 +447,33 @@ class QuerySpec:
     queries: frozenset[str] = frozenset({"fall"})
     fall_threshold_fraction: float = 0.125
     bump_group: str = "red"
+    #: the contact query's pairs (A, B): B may be "support"
+    contact_pairs: tuple[tuple[str, str], ...] = ()
+    #: the rest query: at rest when slower than this many of the scene's smallest extents per
+    #: second and ``rest_spin_rad_s`` (the strict reading the self-check's reference uses)
+    rest_speed_sizes_per_s: float = 0.05
+    rest_spin_rad_s: float = 0.05
 
     def __post_init__(self) -> None:
         if not isinstance(self.queries, frozenset) or not all(isinstance(q, str) for q in self.queries):
             raise ConfigError("queries", f"must be a set of query names from {', '.join(ALL_QUERIES)}")
-        unknown = sorted(set(self.queries) - set(ALL_QUERIES))
+        unknown = sorted(set(self.queries) - set(QUERIES))
         if unknown:
             raise ConfigError("queries", f"unknown query {shown(unknown[0])}; choose from {', '.join(ALL_QUERIES)}")
         if not self.queries:
             raise ConfigError("queries", f"ask for at least one of {', '.join(ALL_QUERIES)}")
         _positive(self.fall_threshold_fraction, "fall_threshold_fraction")
+        _positive(self.rest_speed_sizes_per_s, "rest_speed_sizes_per_s")
+        _positive(self.rest_spin_rad_s, "rest_spin_rad_s")
+        if not isinstance(self.contact_pairs, tuple) or not all(
+                isinstance(pair, tuple) and len(pair) == 2 and all(isinstance(n, str) and n for n in pair)
+                for pair in self.contact_pairs):
+            raise ConfigError("contact", "pairs must be a tuple of (A, B) object names")
+        if self.contact_pairs and "contact" not in self.queries:
+            raise ConfigError("contact", "pairs were given but the contact query was not asked; add contact "
+                                         "to the queries")
+        if len(set(self.contact_pairs)) != len(self.contact_pairs):
+            raise ConfigError("contact", "a pair is asked twice; ask each once")
 
     def wants(self, name: str) -> bool:
         return name in self.queries

@@ -7,13 +7,15 @@ with ``ok=False`` and the reason, and the sampler counts it.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import traceback
 from dataclasses import dataclass
 
 import numpy as np
 
-from . import queries, shapes, simulation
+from . import shapes, simulation
+from .query import QUERIES, Reading
 from .config import ModelConfig, QuerySpec, SimSettings
 from .errors import BudgetExceeded, PhysicsError
 from .perturb import draw_sample_inputs
@@ -42,7 +44,9 @@ class SampleTask:
 class RolloutResult:
     """One simulated push magnitude of one sample. Arrays follow ``scene.dynamic_objects``.
 
-    Query fields are None when that query was not asked.
+    The built-in queries' values have fields of their own (None when not asked): ``fallen`` (fall,
+    direction, far), ``any_fell``, ``direction_rad``, ``far_m``, ``fell_off`` and ``bump_ratio``
+    (bump); every other query's are in ``extra`` (name, value) pairs, read with ``value(name)``.
     """
 
     phi_m_s2: float
@@ -58,6 +62,19 @@ class RolloutResult:
     any_fell: bool | None = None  # the any_fall query: did at least one body fall?
     energy_gain_j: float = 0.0  # the most energy gained beyond what the push and initial velocities put in
     penetration_fraction: float = 0.0  # the deepest any body ends inside another, / its smallest extent
+    extra: tuple[tuple[str, object], ...] = ()
+
+    def value(self, name: str):
+        """A query's value in this rollout (KeyError naming it when it was not asked)."""
+        for key, value in self.extra:
+            if key == name:
+                return value
+        if name in _OWN_FIELDS:
+            return getattr(self, name)
+        raise KeyError(f"{name}: not a value of this rollout (was its query asked?)")
+
+
+_OWN_FIELDS = frozenset({"fallen", "any_fell", "direction_rad", "far_m", "fell_off", "bump_ratio"})
 
 
 @dataclass(frozen=True)
@@ -75,31 +92,26 @@ class SampleOutcome:
     worker_lost: bool = False  # its worker process died twice: a failure of the machine, not of the sample
 
 
+def read_rollout(scene: Scene, spec: QuerySpec, initial: np.ndarray, end: simulation.RolloutEnd) -> dict:
+    """Every asked query's values for one rollout (built-in ones under their field names)."""
+    reading = Reading(scene=scene, spec=spec, initial_m=initial, final_m=end.positions_m,
+                      final_orientations_xyzw=end.orientations_xyzw, final_speeds_m_s=end.speeds_m_s,
+                      final_spins_rad_s=end.spins_rad_s, events=end.events or {}, ended_s=end.simulated_s)
+    values: dict = {}
+    for name in spec.queries:
+        values.update(QUERIES[name].read(reading))
+    return values
+
+
 def _query(task: SampleTask, initial: np.ndarray, phi: float, end: simulation.RolloutEnd) -> RolloutResult:
-    scene, spec = task.scene, task.query
-    final, final_orn = end.positions_m, end.orientations_xyzw
-    boxes = scene.dynamic_objects
-    fallen = direction = far = fell_off = ratio = any_fell = None
-    needs_fallen = any(spec.wants(q) for q in ("fall", "any_fall", "direction", "far"))
-    if needs_fallen:
-        min_extents = np.array([b.smallest_extent_m for b in boxes])
-        fallen = queries.fallen_mask(initial, final, min_extents, spec.fall_threshold_fraction)
-    if spec.wants("any_fall"):
-        any_fell = bool(fallen.any())
-        if not (spec.wants("fall") or spec.wants("direction") or spec.wants("far")):
-            fallen = None  # the rollout may have stopped at the first fall: the rest is undecided
-    if spec.wants("direction"):
-        direction = queries.fall_direction_rad(initial, final, fallen)
-    if spec.wants("far"):
-        far = queries.far_m(final, fallen, queries.tower_base_xy_m(scene))
-    if spec.wants("bump") and isinstance(scene.support, Table):
-        fell_off = queries.fell_off_mask(final, scene.support.top_height_m)
-        ratio = queries.bump_ratio(fell_off, tuple(b.group for b in boxes), spec.bump_group)
-    return RolloutResult(phi_m_s2=phi, final_positions_m=final, final_orientations_xyzw=final_orn,
-                         fallen=fallen,
-                         direction_rad=direction, far_m=far, fell_off=fell_off, bump_ratio=ratio,
-                         trajectory=end.trajectory, simulated_s=end.simulated_s, any_fell=any_fell,
-                         energy_gain_j=end.energy_gain_j, penetration_fraction=end.penetration_fraction)
+    values = read_rollout(task.scene, task.query, initial, end)
+    own = {k: v for k, v in values.items() if k in _OWN_FIELDS}
+    extra = tuple(sorted((k, v) for k, v in values.items() if k not in _OWN_FIELDS))
+    return RolloutResult(phi_m_s2=phi, final_positions_m=end.positions_m, final_orientations_xyzw=end.orientations_xyzw,
+                         fallen=own.get("fallen"), direction_rad=own.get("direction_rad"), far_m=own.get("far_m"),
+                         fell_off=own.get("fell_off"), bump_ratio=own.get("bump_ratio"),
+                         trajectory=end.trajectory, simulated_s=end.simulated_s, any_fell=own.get("any_fell"),
+                         energy_gain_j=end.energy_gain_j, penetration_fraction=end.penetration_fraction, extra=extra)
 
 
 def _smallest_extents(task: SampleTask) -> np.ndarray:
@@ -107,27 +119,43 @@ def _smallest_extents(task: SampleTask) -> np.ndarray:
 
 
 def _decided_heights(task: SampleTask, initial: np.ndarray) -> DecidedHeights | None:
-    """When only ``fall`` / ``any_fall`` / ``bump`` are asked, the height below which each body's
-    outcome is decided, and the bodies that can never get there.
-
-    fall: a body whose centre dropped by the fall threshold has fallen. bump: a body whose centre is
-    below the table top has fallen off it (it is beside or under the table; nothing lifts it back).
-    Asked together, a body is decided once both are: below the lower of the two heights. Other
-    queries (direction, far) depend on where bodies end up, so they wait for rest.
+    """Early termination by heights, built from the queries asked: when every one of them says
+    below which height each body's outcome is decided (fall, any_fall: its centre dropped by the fall
+    threshold; bump: below the table top, beside or under it), a body is decided below the lowest
+    of those heights. A query that reads where bodies end up (direction, far, rest, final_pose,
+    contact) waits for rest instead: None.
     """
-    spec, support = task.query, task.scene.support
-    if not task.settings.early_stop.enabled or not spec.queries <= frozenset({"fall", "any_fall", "bump"}):
+    spec = task.query
+    if not task.settings.early_stop.enabled:
         return None
-    fallen_below_z = np.full(len(initial), np.inf)
-    if spec.queries & {"fall", "any_fall"}:
-        fallen_below_z = initial[:, 2] - spec.fall_threshold_fraction * _smallest_extents(task)
-    if spec.wants("bump") and isinstance(support, Table):
-        fallen_below_z = np.minimum(fallen_below_z, support.top_height_m)
-    if not np.all(np.isfinite(fallen_below_z)):
-        return None  # bump asked of a scene without a table: nothing to decide by height
+    asked = [QUERIES[name] for name in sorted(spec.queries)]
+    heights = [q.decided_below_z(task.scene, spec, initial) for q in asked]
+    if any(h is None for h in heights):
+        return None
+    fallen_below_z = np.minimum.reduce(heights)
     # "will anything fall?" is decided by the first box that falls
+    first_fall = all(getattr(q, "decided_by_first_fall", False) for q in asked)
     return DecidedHeights(fallen_below_z_m=fallen_below_z, never_falls=_never_falls(task, fallen_below_z),
-                          stop_at_first_fall=spec.queries == frozenset({"any_fall"}))
+                          stop_at_first_fall=first_fall)
+
+
+def query_settings(settings: SimSettings, spec: QuerySpec) -> SimSettings:
+    """The settings a rollout runs at for these queries: the reading of rest each asks for."""
+    early_stop = settings.early_stop
+    for name in sorted(spec.queries):
+        early_stop = QUERIES[name].early_stop(early_stop, spec)
+    return settings if early_stop == settings.early_stop else dataclasses.replace(settings, early_stop=early_stop)
+
+
+def watches_for(scene: Scene, spec: QuerySpec, world) -> tuple[dict, bool]:
+    """The asked queries' step watches (name -> watch), and whether the rollout may end once they
+    have all decided (only when every asked query is decided by its watch)."""
+    watches = {}
+    for name in sorted(spec.queries):
+        watch = QUERIES[name].watch(scene, spec, world)
+        if watch is not None:
+            watches[name] = watch
+    return watches, bool(watches) and len(watches) == len(spec.queries)
 
 
 def _never_falls(task: SampleTask, decided_below_z: np.ndarray) -> np.ndarray | None:
@@ -187,6 +215,7 @@ def run_sample(task: SampleTask, probe: Probe = NO_PROBE) -> SampleOutcome:
         initial, initial_orn = simulation.read_poses(world)
         decided = _decided_heights(task, initial)
         collapse_below_z = collapse_heights(task, initial)
+        settings = query_settings(task.settings, task.query)
         results = []
         for i, phi in enumerate(task.model.phi_m_s2):
             if i > 0 or not task.settings.solver.maximal_coordinates:  # a fresh world from the separated state
@@ -194,9 +223,11 @@ def run_sample(task: SampleTask, probe: Probe = NO_PROBE) -> SampleOutcome:
                     world = simulation.build_world(task.scene, initial, inputs.masses_kg, task.settings,
                                                    orientations_xyzw=initial_orn)
             push = simulation.Push(phi, inputs.push_direction_rad, task.model.push_duration_s)
-            end = simulation.simulate(world, task.scene, task.settings, push, record_every=task.record_every,
+            watches, end_when_watched = watches_for(task.scene, task.query, world)
+            end = simulation.simulate(world, task.scene, settings, push, record_every=task.record_every,
                                       decided=decided, collapse_below_z_m=collapse_below_z, probe=probe,
-                                      deadline_unix_s=task.deadline_unix_s)
+                                      deadline_unix_s=task.deadline_unix_s, watches=watches,
+                                      end_when_watched=end_when_watched)
             results.append(_query(task, initial, phi, end))
     except BudgetExceeded as exc:
         return _cut_off(task, inputs.push_direction_rad, str(exc))

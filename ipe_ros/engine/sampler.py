@@ -25,7 +25,8 @@ from .fidelity import (DEFAULT_CHECK, NO_CHECK, FidelityReport, SelfCheck, confi
                        unhealthy, verification_count)
 from .perturb import is_deterministic
 from .rollout import SampleOutcome, SampleTask, run_sample
-from .scene import DEFAULT_MAX_OBJECTS, Scene, Table, validate_scene
+from .query import QUERIES
+from .scene import DEFAULT_MAX_OBJECTS, Scene, validate_scene
 
 MapFn = Callable[..., list]
 
@@ -138,9 +139,8 @@ def check_request(scene: Scene, query: QuerySpec, max_objects: int = DEFAULT_MAX
     """Reject what cannot be answered before any simulation starts: a bad scene, a query it cannot
     answer, or (given a budget) a scene whose single rollout is estimated to take longer than it."""
     validate_scene(scene, max_objects=max_objects)
-    if query.wants("bump") and not isinstance(scene.support, Table):
-        raise ConfigError("queries", "the bump query needs a table support (it counts boxes that fall "
-                                     "off the table's edge); drop 'bump' or give the scene a table")
+    for name in sorted(query.queries):
+        QUERIES[name].check(scene, query)
     if budget_s is not None and model is not None and settings is not None:
         cost = rollout_cost(scene, model, settings)
         if cost.seconds > budget_s:
@@ -341,13 +341,15 @@ def _aggregate(scene: Scene, model: ModelConfig, settings: SimSettings, query: Q
         "time_step_s": settings.time_step_s, "horizon_s": settings.horizon_for(scene.horizon_s),  # what ran
         "solver_iterations": settings.solver.iterations, "seed": seed, "queries": sorted(query.queries),
     }
+    if query.contact_pairs:
+        request.update(contact=[f"{a}:{b}" for a, b in query.contact_pairs])
     if stop is not None:
         request.update(ci_width=stop.ci_width, deadline_s=stop.deadline_s)
     if budget_s is not None:
         request.update(budget_s=budget_s)
     if model.perception in ("vision", "depth"):
         request.update(perception=perceived.to_dict())
-    prediction = aggregate(scene, outcomes, queries=query.queries, bump_group=query.bump_group,
+    prediction = aggregate(scene, outcomes, query=query,
                            deterministic=is_deterministic(scene, model), samples_requested=len(tasks),
                            wall_s=wall_s, request=request)
     if fidelity is not None:

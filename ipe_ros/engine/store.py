@@ -232,6 +232,10 @@ def _encode(value, types: dict[str, type]):
         return value
     if isinstance(value, tuple):
         return {"tuple": [_encode(v, types) for v in value]}
+    if isinstance(value, dict):
+        if not all(isinstance(k, str) for k in value):
+            raise TypeError("a store entry's mappings have text keys")
+        return {"dict": [[k, _encode(v, types)] for k, v in value.items()]}
     if isinstance(value, list):
         return [_encode(v, types) for v in value]
     from .scene import Scene
@@ -255,6 +259,11 @@ def _decode(value, types: dict[str, type], where: str):
         raise StoreEntryError(f"{where}: unexpected {type(value).__name__}")
     if "tuple" in value and len(value) == 1 and isinstance(value["tuple"], list):
         return tuple(_decode(v, types, f"{where}[{i}]") for i, v in enumerate(value["tuple"]))
+    if "dict" in value and len(value) == 1 and isinstance(value["dict"], list):
+        items = value["dict"]
+        if not all(isinstance(kv, list) and len(kv) == 2 and isinstance(kv[0], str) for kv in items):
+            raise StoreEntryError(f"{where}: a mapping's items are [text, value] pairs")
+        return {k: _decode(v, types, f"{where}.{k}") for k, v in items}
     if set(value) == {"array", "shape", "scalar", "data"}:
         return _decode_array(value, where)
     if set(value) == {"scene"}:
@@ -271,7 +280,10 @@ def _decode(value, types: dict[str, type], where: str):
             raise StoreEntryError(f"{where}: {shown(value['dataclass'])} is not a result type")
         fields = value["fields"]
         names = {f.name for f in dataclasses.fields(cls)}
-        if not isinstance(fields, dict) or set(fields) != names:
+        # a field added later with a default may be missing from an older entry
+        required = {f.name for f in dataclasses.fields(cls)
+                    if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING}
+        if not isinstance(fields, dict) or not required <= set(fields) <= names:
             raise StoreEntryError(f"{where}: a {cls.__name__} with other fields than this engine's")
         hints = _type_hints(cls)
         decoded = {}
@@ -328,8 +340,9 @@ def _fits(value, hint) -> bool:
         return isinstance(value, np.ndarray)
     if origin is tuple:
         args = typing.get_args(hint)
-        return isinstance(value, tuple) and (len(args) == 2 and args[1] is Ellipsis
-                                             and all(_fits(v, args[0]) for v in value))
+        if len(args) == 2 and args[1] is Ellipsis:
+            return isinstance(value, tuple) and all(_fits(v, args[0]) for v in value)
+        return isinstance(value, tuple) and len(value) == len(args) and all(_fits(v, a) for v, a in zip(value, args))
     if origin is list or hint is list:
         return isinstance(value, list)
     if isinstance(hint, type):

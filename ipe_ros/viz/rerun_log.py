@@ -40,6 +40,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from ..engine.estimate import Prediction, sample_any_fall, sample_fall_fraction, sample_far_m
+from ..engine.query import QUERIES
 from .palette import SUPPORT_RGB, group_rgb, risk_rgb, to_rgb8
 from ..engine import shapes
 from ..engine.scene import Body, Floor, Scene
@@ -145,8 +146,26 @@ def log_rollouts(rec: rr.RecordingStream, scene: Scene, prediction: Prediction, 
         for j, rollout in enumerate(outcome.rollouts):
             base = f"world/rollouts/{outcome.index}" + (f"-phi{j}" if several else "")
             _log_trajectory(rec, base, boxes, rollout.trajectory, rollout.fallen, stamp_ns)
+            _log_contacts(rec, base, rollout)
         logged += 1
     return logged
+
+
+CONTACT_RGB = (1.0, 0.85, 0.1)
+
+
+def _log_contacts(rec: rr.RecordingStream, base: str, rollout) -> None:
+    """Where and when each asked pair first touched in this rollout: a point that appears then."""
+    if "contact" not in dict(rollout.extra):
+        return
+    events = rollout.value("contact")
+    for key, t in events["first_s"].items():
+        where = events["where_m"].get(key)
+        if t is None or where is None:
+            continue
+        rec.send_columns(f"{base}/contacts/{_part(key)}", indexes=[rr.TimeColumn("sim_time", duration=[t])],
+                         columns=rr.Points3D.columns(positions=[where], radii=[0.01], colors=[to_rgb8(CONTACT_RGB)],
+                                                     labels=[f"{key} touch"]))
 
 
 def log_outcomes(rec: rr.RecordingStream, prediction: Prediction) -> None:
@@ -168,6 +187,7 @@ def log_outcomes(rec: rr.RecordingStream, prediction: Prediction) -> None:
                                     if o.rollouts[0].direction_rad is not None else math.nan for o in ok]
     if first.fell_off is not None:
         columns["fell_off_count"] = [float(np.mean([r.fell_off.sum() for r in o.rollouts])) for o in ok]
+    columns.update(_query_columns(prediction, ok))
     for name, values in columns.items():
         rec.send_columns(f"outcomes/{name}", indexes=index, columns=rr.Scalars.columns(scalars=values))
         rec.log(f"outcome_bars/{name}", rr.BarChart(np.asarray(values, dtype=float)), static=True)
@@ -257,7 +277,20 @@ def _outcome_names(prediction: Prediction) -> list[str]:
     first = ok[0].rollouts[0]
     return [name for name, present in (("fall_fraction", first.fallen is not None),
                                         ("any_fall", first.any_fell is not None), ("far_m", first.far_m is not None),
-                                        ("fell_off_count", first.fell_off is not None)) if present]
+                                        ("fell_off_count", first.fell_off is not None)) if present] \
+        + list(_query_columns(prediction, ok[:1]))
+
+
+def _query_columns(prediction: Prediction, ok: list) -> dict[str, list[float]]:
+    """The per-sample values of the asked queries that chart their own (``Query.sample_columns``)."""
+    columns: dict[str, list[float]] = {}
+    for name in prediction.request.get("queries", ()):
+        if name not in QUERIES:
+            continue
+        for outcome in ok:
+            for key, value in QUERIES[name].sample_columns(outcome).items():
+                columns.setdefault(_part(key), []).append(value)
+    return columns
 
 
 #: How long a live viewer may take to answer (TCP connect, then taking the recording) before it is

@@ -71,6 +71,9 @@ class RolloutEnd:
     simulated_s: float
     energy_gain_j: float = 0.0
     penetration_fraction: float = 0.0
+    speeds_m_s: np.ndarray | None = None  # (n,) linear speeds at the end
+    spins_rad_s: np.ndarray | None = None  # (n,) angular speeds at the end
+    events: dict | None = None  # what each watch recorded, by the name it was given under
 
 
 def _crossed(tick: int, previous: int, period: int) -> bool:
@@ -80,12 +83,15 @@ def _crossed(tick: int, previous: int, period: int) -> bool:
 
 def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, record_every: int = 0,
              decided: DecidedHeights | None = None, collapse_below_z_m: np.ndarray | None = None,
-             probe: Probe = NO_PROBE, deadline_unix_s: float | None = None) -> RolloutEnd:
+             probe: Probe = NO_PROBE, deadline_unix_s: float | None = None,
+             watches: dict | None = None, end_when_watched: bool = False) -> RolloutEnd:
     """Run a built world (bodies at rest; the scene's initial velocities are given here) to the
     horizon, or until early termination ends it.
 
     ``decided``: outcomes already settled by height (only fall / any_fall asked); ``collapse_below_z_m``:
-    heights that start the collapse steps (when ``settings.collapse`` is enabled). Raises
+    heights that start the collapse steps (when ``settings.collapse`` is enabled). ``watches``:
+    name -> query.StepWatch, each shown the world at t = 0 and after every step; with
+    ``end_when_watched`` the rollout ends once every watch has decided. Raises
     PhysicsError on non-finite states or speeds above ``health.speed_limit_m_s``, and
     BudgetExceeded once ``time.time()`` passes ``deadline_unix_s``.
     """
@@ -128,6 +134,9 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
     def step() -> None:
         p.stepSimulation(physicsClientId=cid)
 
+    watches = watches or {}
+    for watch in watches.values():
+        watch.start(world)
     tick = 0
     solver_switch_due = world.direct_solver
     if settling.ticks or travel_substeps > 1:
@@ -151,6 +160,11 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
         if settling_now and tick + 1 == settling.ticks:
             steps.set(1, travel_substeps)
         previous, tick = tick, tick + step_ticks
+        if watches:
+            for watch in watches.values():
+                watch.after_step(world, tick * dt)
+            if end_when_watched and all(w.decided for w in watches.values()):
+                break
         if tick == push_ticks:
             p.setGravity(*gravity.tolist(), physicsClientId=cid)
             positions, orientations, velocities = read_state(world)
@@ -206,5 +220,8 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
     # the bodies whose final pose the answer reads: not those already decided by height (a body that
     # has fallen, or can never fall, is answered whatever pose it ends in mid-collapse)
     read = rest.undecided if rest.needs_heights else None
+    speeds, spins = speeds_of(velocities)
     return RolloutEnd(positions, orientations, trajectory, tick * dt, energy_gain_j=energy.max_gain_j,
-                      penetration_fraction=health.deepest_penetration_fraction(world, smallest, read))
+                      penetration_fraction=health.deepest_penetration_fraction(world, smallest, read),
+                      speeds_m_s=np.array(speeds, float), spins_rad_s=np.array(spins, float),
+                      events={name: w.events() for name, w in watches.items()})

@@ -87,6 +87,8 @@ class World:
     masses_kg: np.ndarray | None = None  # of the dynamic bodies
     inertia_kg_m2: np.ndarray | None = None  # (n, 3) their principal moments (pybullet's)
     direct_solver: bool = False  # solved by pybullet's MLCP (Dantzig) solver, for bounces
+    support_ids: tuple[int, ...] = ()  # the floor, or the table top and the floor under it
+    static_ids: tuple[int, ...] = ()  # follow ``scene.static_objects``
 
 
 _HULL_FILES: dict[tuple, str] = {}
@@ -296,25 +298,27 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
         _set_solver(p, cid, p.CONSTRAINT_SOLVER_LCP_DANTZIG)
 
     support = scene.support
+    support_ids = []
     if isinstance(support, Floor):
         plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=cid)
         body = p.createMultiBody(0, plane, basePosition=[0, 0, support.height_m], physicsClientId=cid)
         p.changeDynamics(body, -1, lateralFriction=support.friction, restitution=support.restitution,
                          physicsClientId=cid)
+        support_ids.append(body)
     else:
         top = Box(name="__table__", extents_m=(support.size_m[0], support.size_m[1], support.thickness_m),
                   position_m=(support.center_xy_m[0], support.center_xy_m[1],
                               support.top_height_m - support.thickness_m / 2),
                   orientation_xyzw=(0.0, 0.0, 0.0, 1.0), friction=support.friction,
                   restitution=support.restitution, static=True)
-        _add_body(p, cid, top, top.position_m, 0.0)
+        support_ids.append(_add_body(p, cid, top, top.position_m, 0.0))
         if support.floor_z_m is not None:
             plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=cid)
             body = p.createMultiBody(0, plane, basePosition=[0, 0, support.floor_z_m], physicsClientId=cid)
             p.changeDynamics(body, -1, lateralFriction=support.friction, restitution=support.restitution,
                              physicsClientId=cid)
-    for b in scene.static_objects:
-        _add_body(p, cid, b, b.position_m, 0.0)
+            support_ids.append(body)
+    static_ids = tuple(_add_body(p, cid, b, b.position_m, 0.0) for b in scene.static_objects)
     orientations = [b.orientation_xyzw for b in scene.dynamic_objects] if orientations_xyzw is None \
         else orientations_xyzw
     dynamic_ids = _add_dynamic_bodies(p, cid, scene.dynamic_objects, positions_m, masses_kg, orientations,
@@ -323,7 +327,7 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
     return World(client=cid, dynamic_ids=dynamic_ids, scale_m=scale, time_step_s=time_step,
                  contact_distance_m=contact_distance,
                  masses_kg=np.asarray(masses_kg, float), inertia_kg_m2=inertia.reshape(len(dynamic_ids), 3),
-                 direct_solver=direct)
+                 direct_solver=direct, support_ids=tuple(support_ids), static_ids=static_ids)
 
 
 def add_fixed_body(world: World, body: Body, position_m, orientation_xyzw) -> int:

@@ -1,0 +1,54 @@
+"""``bump``: what falls off a bumped table (paper Exp. 5): per group, the expected fraction of its
+objects that end below the table top, and ``bump_group``'s share of those that fell off."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .. import queries as predicates
+from ..errors import ConfigError
+from ..scene import Table
+from .base import Query, Reading, Samples
+
+
+class Bump(Query):
+    name = "bump"
+    fields = ("fell_off_fraction_by_group", "bump_group", "bump_ratio", "bump_rollouts")
+    summary = "what falls off a bumped table, by group (needs a table)"
+
+    def check(self, scene, spec) -> None:
+        if not isinstance(scene.support, Table):
+            raise ConfigError("queries", "the bump query needs a table support (it counts boxes that fall "
+                                         "off the table's edge); drop 'bump' or give the scene a table")
+
+    def decided_below_z(self, scene, spec, initial_m):
+        # below the table top a body is beside or under the table: nothing lifts it back
+        if not isinstance(scene.support, Table):
+            return None
+        return np.full(len(initial_m), scene.support.top_height_m)
+
+    def read(self, reading: Reading) -> dict[str, Any]:
+        support = reading.scene.support
+        if not isinstance(support, Table):
+            return {}
+        fell_off = predicates.fell_off_mask(reading.final_m, support.top_height_m)
+        groups = tuple(b.group for b in reading.scene.dynamic_objects)
+        return {"fell_off": fell_off, "bump_ratio": predicates.bump_ratio(fell_off, groups, reading.spec.bump_group)}
+
+    def aggregate(self, samples: Samples) -> dict[str, Any]:
+        fell_off = np.array([r.fell_off for r in samples.rollouts if r.fell_off is not None])
+        if not len(fell_off):
+            return {}
+        groups = [b.group for b in samples.scene.dynamic_objects]
+        by_group = {}
+        for group in dict.fromkeys(groups):
+            members = np.array([g == group for g in groups])
+            by_group[group] = float(fell_off[:, members].mean())
+        ratios = [r.bump_ratio for r in samples.rollouts if r.bump_ratio is not None]
+        return {"fell_off_fraction_by_group": by_group, "bump_ratio": float(np.mean(ratios)) if ratios else None,
+                "bump_rollouts": len(ratios), "bump_group": samples.spec.bump_group}
+
+
+QUERY = Bump()

@@ -1,0 +1,168 @@
+"""``contact``: will A touch B? For each asked pair ``A:B`` (B may be ``support``: the floor or
+the table, and the floor under it), the probability that they touch at some time within the
+horizon, its 95% interval, the median time of first contact over the rollouts in which they touch,
+and the share of samples in which they already touch at t = 0 (those count as touching at 0 s).
+Each rollout also keeps where they first touched (a point on B's surface), which recordings show.
+
+Touching: a contact point between the two, as the physics found it after a step, no farther apart
+than ``CONTACT_TOLERANCE_FRACTION`` of the smaller body's smallest extent. Looked at after every
+step, so an impact is seen whatever the step (the travel limit keeps a body from passing through
+another within one). A rollout asked only contacts ends once every pair has touched.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..errors import ConfigError, shown
+from .base import Query, Reading, Samples, StepWatch
+
+SUPPORT = "support"
+#: how far apart (a fraction of the smaller smallest extent) two bodies may be and still "touch":
+#: resting contacts sit within ~0.1% of a size; the margin absorbs the solver's slop, not a gap
+CONTACT_TOLERANCE_FRACTION = 0.02
+
+
+def pair_key(a: str, b: str) -> str:
+    return f"{a}:{b}"
+
+
+def parse_pair(text: str, field: str = "contact") -> tuple[str, str]:
+    """``"cup:glass"`` -> ("cup", "glass"); ConfigError naming ``field`` otherwise."""
+    if not isinstance(text, str) or text.count(":") != 1:
+        raise ConfigError(field, f"a pair is written A:B (B may be {SUPPORT}), got {shown(text)}")
+    a, b = (part.strip() for part in text.split(":"))
+    if not a or not b:
+        raise ConfigError(field, f"a pair is written A:B with both names given, got {shown(text)}")
+    return a, b
+
+
+def _extent_of(scene, name: str) -> float | None:
+    for body in scene.objects:
+        if body.name == name:
+            return body.smallest_extent_m
+    return None
+
+
+class ContactWatch(StepWatch):
+    """First contact time of each pair in one rollout."""
+
+    def __init__(self, scene, pairs: tuple[tuple[str, str], ...], world):
+        self._pairs = [(pair_key(a, b), _handles(scene, world, a), _handles(scene, world, b),
+                        CONTACT_TOLERANCE_FRACTION * min(e for e in (_extent_of(scene, a), _extent_of(scene, b))
+                                                         if e is not None))
+                       for a, b in pairs]
+        self.first_s: dict[str, float | None] = {key: None for key, *_ in self._pairs}
+        self.at_start: dict[str, bool] = {key: False for key, *_ in self._pairs}
+        self.where_m: dict[str, list[float] | None] = {key: None for key, *_ in self._pairs}  # on B
+        self._client = world.client
+
+    def start(self, world) -> None:
+        from ..simulation.world import pybullet
+
+        p = pybullet()
+        for key, first, second, tolerance in self._pairs:
+            for a in first:
+                for b in second:
+                    points = p.getClosestPoints(a, b, tolerance, physicsClientId=self._client)
+                    if points and self.first_s[key] is None:
+                        self.first_s[key], self.at_start[key] = 0.0, True
+                        self.where_m[key] = [float(v) for v in points[0][6]]
+
+    def after_step(self, world, t_s: float) -> None:
+        from ..simulation.world import pybullet
+
+        p = pybullet()
+        for key, first, second, tolerance in self._pairs:
+            if self.first_s[key] is not None:
+                continue
+            for a in first:
+                for b in second:
+                    touching = [c for c in p.getContactPoints(a, b, physicsClientId=self._client) if c[8] <= tolerance]
+                    if touching:
+                        self.first_s[key], self.where_m[key] = t_s, [float(v) for v in touching[0][6]]
+                        break
+                if self.first_s[key] is not None:
+                    break
+
+    @property
+    def decided(self) -> bool:
+        return all(t is not None for t in self.first_s.values())
+
+    def events(self) -> Any:
+        return {"first_s": dict(self.first_s), "at_start": dict(self.at_start), "where_m": dict(self.where_m)}
+
+
+def _handles(scene, world, name: str) -> tuple[int, ...]:
+    if name == SUPPORT:
+        return tuple(world.support_ids)
+    dynamic = [b.name for b in scene.dynamic_objects]
+    if name in dynamic:
+        return (world.dynamic_ids[dynamic.index(name)],)
+    static = [b.name for b in scene.static_objects]
+    return (world.static_ids[static.index(name)],)
+
+
+class Contact(Query):
+    name = "contact"
+    fields = ("contact_probability", "contact_probability_ci95", "contact_time_s", "contact_at_start")
+    summary = "P(A touches B) within the horizon for pairs A:B (B may be support), first-contact time"
+
+    def check(self, scene, spec) -> None:
+        if not spec.contact_pairs:
+            raise ConfigError("contact", "the contact query needs pairs to watch: give A:B (B may be "
+                                         f"{SUPPORT}), e.g. --contact ball:box")
+        dynamic = {b.name for b in scene.dynamic_objects}
+        known = {b.name for b in scene.objects} | {SUPPORT}
+        for a, b in spec.contact_pairs:
+            for name in (a, b):
+                if name not in known:
+                    raise ConfigError("contact", f"{pair_key(a, b)}: no object {shown(name)} in scene "
+                                                 f"{shown(scene.name)}; objects: {', '.join(sorted(known))}")
+            if a == b:
+                raise ConfigError("contact", f"{pair_key(a, b)}: an object always touches itself; name two")
+            if a not in dynamic and b not in dynamic:
+                raise ConfigError("contact", f"{pair_key(a, b)}: neither moves, so the answer is fixed; "
+                                             "name a dynamic object")
+
+    def watch(self, scene, spec, world) -> StepWatch | None:
+        return ContactWatch(scene, spec.contact_pairs, world)
+
+    def read(self, reading: Reading) -> dict[str, Any]:
+        return {"contact": reading.events["contact"]}
+
+    def aggregate(self, samples: Samples) -> dict[str, Any]:
+        keys = [pair_key(a, b) for a, b in samples.spec.contact_pairs]
+        probability, interval, time_s, at_start = {}, {}, {}, {}
+        for key in keys:
+            p = float(samples.per_sample(lambda r: r.value("contact")["first_s"][key] is not None).mean())
+            probability[key] = p
+            interval[key] = list(samples.fraction_interval(p))
+            times = [r.value("contact")["first_s"][key] for r in samples.rollouts]
+            touched = [t for t in times if t is not None]
+            time_s[key] = float(np.median(touched)) if touched else None
+            at_start[key] = float(samples.per_sample(lambda r: r.value("contact")["at_start"][key]).mean())
+        return {"contact_probability": probability, "contact_probability_ci95": interval,
+                "contact_time_s": time_s, "contact_at_start": at_start}
+
+    def describe(self, prediction) -> list[str]:
+        lines = []
+        for key, p in (prediction.contact_probability or {}).items():
+            lo, hi = prediction.contact_probability_ci95[key]
+            when = prediction.contact_time_s[key]
+            line = f"P({key.replace(':', ' touches ')}): {p:.3f} [{lo:.2f}, {hi:.2f}]"
+            line += "" if when is None else f", first at {when:.2f} s (median)"
+            if prediction.contact_at_start[key]:
+                line += f"; touching at the start in {prediction.contact_at_start[key]:.0%} of samples"
+            lines.append(line)
+        return lines
+
+    def sample_columns(self, outcome) -> dict[str, float]:
+        keys = outcome.rollouts[0].value("contact")["first_s"]
+        return {f"contact {key}": float(np.mean([r.value("contact")["first_s"][key] is not None
+                                                 for r in outcome.rollouts])) for key in keys}
+
+
+QUERY = Contact()

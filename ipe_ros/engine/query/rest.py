@@ -1,0 +1,52 @@
+"""``rest``: is everything at rest at the end? The probability that every dynamic object ends
+slower than ``QuerySpec.rest_speed_sizes_per_s`` (the scene's smallest extent per second) and
+``rest_spin_rad_s``, and the largest speed any object still has at the end.
+
+The end is the horizon, or earlier where early termination found everything at rest for its whole
+window; asked this, that reading of rest is made at least as strict as the query's, so a rollout
+ended early is at rest by the query's reading too.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+from .base import Query, Reading, Samples
+
+
+class Rest(Query):
+    name = "rest"
+    fields = ("rest_probability", "rest_probability_ci95", "max_final_speed_m_s")
+    summary = "P(everything at rest at the end) and the largest speed left"
+
+    def early_stop(self, early_stop, spec):
+        return dataclasses.replace(early_stop,
+                                   speed_sizes_per_s=min(early_stop.speed_sizes_per_s, spec.rest_speed_sizes_per_s),
+                                   angular_rad_s=min(early_stop.angular_rad_s, spec.rest_spin_rad_s))
+
+    def read(self, reading: Reading) -> dict[str, Any]:
+        scale = float(reading.smallest_extents_m.min())
+        speeds, spins = reading.final_speeds_m_s, reading.final_spins_rad_s
+        at_rest = bool(np.all(speeds < reading.spec.rest_speed_sizes_per_s * scale)
+                       and np.all(spins < reading.spec.rest_spin_rad_s))
+        return {"rest": {"at_rest": at_rest, "max_speed_m_s": float(speeds.max(initial=0.0))}}
+
+    def aggregate(self, samples: Samples) -> dict[str, Any]:
+        p = float(samples.per_sample(lambda r: r.value("rest")["at_rest"]).mean())
+        fastest = max(r.value("rest")["max_speed_m_s"] for r in samples.rollouts)
+        return {"rest_probability": p, "rest_probability_ci95": samples.fraction_interval(p),
+                "max_final_speed_m_s": float(fastest)}
+
+    def describe(self, prediction) -> list[str]:
+        lo, hi = prediction.rest_probability_ci95
+        return [f"P(everything at rest at the end): {prediction.rest_probability:.3f} [{lo:.2f}, {hi:.2f}]; "
+                f"fastest left: {prediction.max_final_speed_m_s:.3g} m/s"]
+
+    def sample_columns(self, outcome) -> dict[str, float]:
+        return {"at_rest": float(np.mean([r.value("rest")["at_rest"] for r in outcome.rollouts]))}
+
+
+QUERY = Rest()

@@ -1,0 +1,261 @@
+"""The query protocol and the event questions: contact, rest, final_pose.
+
+Contact is tested on scenes where the physics decides it (a ball that reaches a box within the
+horizon or not, a block slid at a box that friction stops short of it or not, a domino chain that
+reaches the last slab or has a gap it cannot bridge, a block dropped onto a target or beside it),
+in the ground truth (one deterministic rollout) at every preset.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from ipe_ros.engine import PRESETS, Body, Box, ConfigError, Floor, ModelConfig, QuerySpec, Scene, Sphere, preset
+from ipe_ros.engine.estimate import Prediction
+from ipe_ros.engine.query import ALL_QUERIES, ANSWER_FIELDS, QUERIES
+from ipe_ros.engine.query.contact import parse_pair
+from ipe_ros.engine.sampler import predict
+from tests.helpers import IDENTITY, block, floor_scene
+
+GROUND_TRUTH = ModelConfig(sigma_m=0.0, samples=1)
+
+
+def _ask(scene: Scene, *pairs: str, queries=("contact",), settings="default", model=GROUND_TRUTH, **kw) -> Prediction:
+    spec = QuerySpec(queries=frozenset(queries), contact_pairs=tuple(parse_pair(p) for p in pairs))
+    return predict(scene, model, preset(settings), spec, seed=3, check=None, **kw)
+
+
+def _ball(name: str, x: float, speed_m_s: float, radius: float = 0.05) -> Body:
+    return Body(name=name, shape=Sphere(radius), position_m=(x, 0.0, radius), orientation_xyzw=IDENTITY,
+                friction=0.5, restitution=0.0, mass_kg=0.5, linear_velocity_m_s=(speed_m_s, 0.0, 0.0))
+
+
+def _rolled(speed_m_s: float) -> Scene:
+    # 1.5 m to the box's face: within the 2 s horizon at 1.5 m/s, not at 0.5 m/s
+    return floor_scene(_ball("ball", 0.0, speed_m_s), block("box", 1.6, 0.0, 0.1, extents=(0.2, 0.4, 0.2)),
+                       name="rolled")
+
+
+def _slid(speed_m_s: float) -> Scene:
+    # friction 0.9 x 1.0: a block slid at v stops after v^2 / (2 mu g): 0.23 m at 2 m/s, 0.51 m at 3 m/s
+    slider = block("slider", 0.0, 0.0, 0.05, extents=(0.1, 0.1, 0.1), linear_velocity_m_s=(speed_m_s, 0.0, 0.0))
+    return floor_scene(slider, block("box", 0.45, 0.0, 0.1, extents=(0.2, 0.4, 0.2)), name="slid")
+
+
+def _dominoes(gap_at: int | None) -> Scene:
+    height, thickness, width, spacing = 0.15, 0.025, 0.08, 0.09
+    slabs, x = [], 0.0
+    for i in range(6):
+        fields = {}
+        if i == 0:
+            spin = 3.0
+            fields = {"angular_velocity_rad_s": (0.0, spin, 0.0),
+                      "linear_velocity_m_s": (spin * height / 2, 0.0, spin * thickness / 2)}
+        slabs.append(block(f"d{i}", x, 0.0, height / 2, extents=(thickness, width, height), mass_kg=0.2, **fields))
+        x += spacing * (2.5 if gap_at is not None and i + 1 == gap_at else 1.0)
+    return floor_scene(*slabs, name="dominoes")
+
+
+def _dropped(offset_m: float) -> Scene:
+    target = block("target", 0.0, 0.0, 0.05, extents=(0.2, 0.2, 0.1))
+    return floor_scene(target, block("drop", offset_m, 0.0, 0.6, extents=(0.1, 0.1, 0.1)), name="drop")
+
+
+CASES = [
+    ("ball reaches the box", _rolled(1.5), "ball:box", 1.0),
+    ("ball does not reach the box in time", _rolled(0.5), "ball:box", 0.0),
+    ("slid block reaches the box", _slid(3.0), "slider:box", 1.0),
+    ("slid block stops short", _slid(2.0), "slider:box", 0.0),
+    ("chain reaches the last slab", _dominoes(None), "d4:d5", 1.0),
+    ("chain stops at a gap", _dominoes(3), "d4:d5", 0.0),
+    ("dropped onto the target", _dropped(0.0), "drop:target", 1.0),
+    ("dropped beside the target", _dropped(0.4), "drop:target", 0.0),
+]
+
+
+@pytest.mark.parametrize("settings", sorted(PRESETS))
+@pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
+def test_contact_is_decided_by_the_physics_at_every_preset(case, settings):
+    _, scene, pair, expected = case
+    answer = _ask(scene, pair, settings=settings)
+    assert answer.samples == 1 and answer.deterministic
+    assert answer.contact_probability == {pair: expected}
+    assert answer.contact_probability_ci95 == {pair: [expected, expected]}
+    assert answer.contact_at_start == {pair: 0.0}
+    if expected:
+        assert 0.0 < answer.contact_time_s[pair] <= 2.0
+    else:
+        assert answer.contact_time_s[pair] is None
+
+
+def test_first_contact_time_is_when_the_ball_arrives():
+    # launched sliding at v0 = 1.5 m/s, friction (mu = 0.5 x 1.0) slows it until it rolls at 5/7 v0
+    # after 2 v0 / (7 mu g); then it rolls on (no rolling resistance) across the rest of the 1.45 m gap
+    v0, a = 1.5, 0.5 * 9.81
+    slip_s = 2 * v0 / (7 * a)
+    slip_m = v0 * slip_s - a * slip_s ** 2 / 2
+    arrival_s = slip_s + (1.45 - slip_m) / (5 / 7 * v0)
+    answer = _ask(_rolled(v0), "ball:box")
+    assert answer.contact_time_s["ball:box"] == pytest.approx(arrival_s, abs=0.03)
+
+
+def test_a_rollout_asked_only_contacts_ends_once_they_have_all_touched():
+    answer = _ask(_dropped(0.0), "drop:target")
+    (rollout,) = answer.outcomes[0].rollouts
+    assert rollout.simulated_s == pytest.approx(answer.contact_time_s["drop:target"])
+    assert rollout.simulated_s < 0.5
+    # asked with a query that reads the end, it runs on to rest
+    both = _ask(_dropped(0.0), "drop:target", queries=("contact", "final_pose"))
+    assert both.outcomes[0].rollouts[0].simulated_s > rollout.simulated_s + 0.2
+
+
+def test_pairs_touching_at_the_start_are_flagged_and_count_at_zero_seconds():
+    scene = floor_scene(block("low", 0.0, 0.0, 0.1), block("high", 0.0, 0.0, 0.3), name="stack")
+    answer = _ask(scene, "high:low", "low:support")
+    assert answer.contact_at_start == {"high:low": 1.0, "low:support": 1.0}
+    assert answer.contact_probability == {"high:low": 1.0, "low:support": 1.0}
+    assert answer.contact_time_s == {"high:low": 0.0, "low:support": 0.0}
+
+
+def test_support_includes_the_floor_under_a_table():
+    from ipe_ros.engine import Table
+
+    table = Table(size_m=(0.6, 0.6), center_xy_m=(0.0, 0.0), thickness_m=0.05, top_height_m=0.5, friction=0.8, restitution=0.0,
+                  floor_z_m=0.0)
+    off = block("off", 0.5, 0.0, 0.6, extents=(0.1, 0.1, 0.1))  # beside the table: falls to the floor
+    scene = Scene(name="table", objects=(off,), support=table, gravity_m_s2=(0.0, 0.0, -9.81))
+    answer = _ask(scene, "off:support")
+    assert answer.contact_probability == {"off:support": 1.0}
+    assert answer.contact_time_s["off:support"] == pytest.approx(math.sqrt(2 * 0.55 / 9.81), abs=0.05)
+
+
+def test_contact_with_noise_counts_samples_and_gives_an_interval():
+    # the dropped block lands on the target's edge: noise decides, about half the samples
+    scene = _dropped(0.15)
+    answer = _ask(scene, "drop:target", model=ModelConfig(sigma_m=0.03, samples=16))
+    p = answer.contact_probability["drop:target"]
+    lo, hi = answer.contact_probability_ci95["drop:target"]
+    assert 0.0 < p < 1.0 and lo < p < hi
+    touched = sum(r.value("contact")["first_s"]["drop:target"] is not None
+                  for o in answer.outcomes for r in o.rollouts)
+    assert p == touched / 16
+
+
+@pytest.mark.parametrize("pairs, message", [
+    ((), "the contact query needs pairs to watch"),
+    ((("ball", "nothing"),), "ball:nothing: no object 'nothing' in scene 'rolled'"),
+    ((("ball", "ball"),), "ball:ball: an object always touches itself"),
+])
+def test_contact_questions_that_cannot_be_answered_are_refused(pairs, message):
+    spec = QuerySpec(queries=frozenset({"contact"}), contact_pairs=pairs)
+    with pytest.raises(ConfigError, match=message):
+        predict(_rolled(1.0), GROUND_TRUTH, preset("default"), spec)
+
+
+def test_contact_pairs_without_the_query_and_badly_written_pairs_are_refused():
+    with pytest.raises(ConfigError, match="pairs were given but the contact query was not asked"):
+        QuerySpec(queries=frozenset({"fall"}), contact_pairs=(("a", "b"),))
+    with pytest.raises(ConfigError, match="a pair is written A:B"):
+        parse_pair("ab")
+    with pytest.raises(ConfigError, match="both names given"):
+        parse_pair("a:")
+
+
+def test_rest_tells_a_settled_scene_from_one_still_moving():
+    still = _ask(floor_scene(block("b", 0.0, 0.0, 0.1)), queries=("rest",))
+    assert still.rest_probability == 1.0 and still.rest_probability_ci95 == (1.0, 1.0)
+    assert still.max_final_speed_m_s < 0.005
+    rolling = _ask(_rolled(0.5), queries=("rest",))  # the ball still rolls at the horizon
+    assert rolling.rest_probability == 0.0
+    assert rolling.max_final_speed_m_s == pytest.approx(5 / 7 * 0.5, rel=0.02)  # rolling: 5/7 of its launch speed
+
+
+def test_rest_makes_early_termination_read_rest_strictly():
+    from ipe_ros.engine.rollout import query_settings
+
+    default = preset("default")
+    strict = query_settings(default, QuerySpec(queries=frozenset({"rest", "fall"})))
+    assert (strict.early_stop.speed_sizes_per_s, strict.early_stop.angular_rad_s) == (0.05, 0.05)
+    assert query_settings(default, QuerySpec(queries=frozenset({"fall"}))) is default
+
+
+def test_final_pose_reports_where_things_end_up():
+    answer = _ask(_slid(2.0), queries=("final_pose",))
+    slider = answer.final_pose["slider"]
+    # friction stops it after v^2 / (2 mu g) = 0.227 m (mu: 0.9 x 1.0)
+    assert slider["position_m"][0] == pytest.approx(4.0 / (2 * 0.9 * 9.81), abs=0.02)
+    assert slider["position_m"][2] == pytest.approx(0.05, abs=0.002)
+    assert slider["position_sd_m"] == [0.0, 0.0, 0.0]
+    assert slider["yaw_rad"] == pytest.approx(0.0, abs=1e-3)
+    box = answer.final_pose["box"]
+    assert box["position_m"] == pytest.approx([0.45, 0.0, 0.1], abs=1e-3)
+
+
+def test_final_pose_spread_follows_the_noise():
+    scene = floor_scene(block("b", 0.0, 0.0, 0.1, extents=(0.2, 0.2, 0.2)))
+    answer = _ask(scene, queries=("final_pose",), model=ModelConfig(sigma_m=0.05, samples=24))
+    sd = answer.final_pose["b"]["position_sd_m"]
+    assert sd[0] == pytest.approx(0.05, rel=0.4) and sd[1] == pytest.approx(0.05, rel=0.4)
+    assert sd[2] < 1e-3
+
+
+def test_every_query_is_registered_with_its_fields_and_none_when_not_asked():
+    assert ALL_QUERIES == ("fall", "any_fall", "direction", "far", "bump", "contact", "rest", "final_pose")
+    assert len(ANSWER_FIELDS) == len(set(ANSWER_FIELDS))
+    answer = _ask(_rolled(1.5), "ball:box")
+    data = answer.to_dict()
+    for name, query in QUERIES.items():
+        for field in query.fields:
+            assert field in data
+            if name != "contact":
+                assert data[field] is None and getattr(answer, field) is None
+    assert data["request"]["contact"] == ["ball:box"]
+    with pytest.raises(AttributeError):
+        answer.not_a_field  # noqa: B018
+    with pytest.raises(TypeError, match="not_a_field: not a field of any query"):
+        dataclasses.replace(answer, answers={"not_a_field": 1})
+
+
+def test_a_new_query_is_one_module_and_its_registration(monkeypatch):
+    """What the protocol promises: a query registered by name is asked, read, aggregated and
+    answered without touching the sampler, the rollout or the answer type."""
+    from ipe_ros.engine import query as registry
+    from ipe_ros.engine.query.base import Query
+
+    class Highest(Query):
+        name = "highest"
+        fields = ("fall_fraction",)  # reuses a field so the answer type accepts it
+
+        def read(self, reading):
+            return {"highest": float(reading.final_m[:, 2].max())}
+
+        def aggregate(self, samples):
+            return {"fall_fraction": float(np.mean([r.value("highest") for r in samples.rollouts]))}
+
+    monkeypatch.setitem(registry.QUERIES, "highest", Highest())
+    answer = _ask(floor_scene(block("b", 0.0, 0.0, 0.1)), queries=("highest",))
+    assert answer.fall_fraction == pytest.approx(0.1, abs=1e-3)
+
+
+def test_recordings_show_where_and_when_each_pair_first_touched(tmp_path):
+    from rerun.chunk import RrdReader
+
+    from ipe_ros.viz.rerun_log import write_prediction_rrd
+
+    scene = _dropped(0.0)
+    answer = _ask(scene, "drop:target", "drop:support", queries=("contact", "rest"),
+                  model=ModelConfig(sigma_m=0.01, samples=3), record_every=10, record_samples=2)
+    path = tmp_path / "contact.rrd"
+    write_prediction_rrd(path, scene, answer, answer=answer.to_dict(), stamp_ns=1, rollouts_logged=2)
+    entities = {chunk.entity_path for chunk in RrdReader(path).stream().to_chunks()}
+    # entity path parts escape the pair's ':' and the column's space
+    assert {"/world/rollouts/0/contacts/drop\\:target", "/world/rollouts/1/contacts/drop\\:target",
+            "/outcomes/contact\\ drop\\:target", "/outcomes/at_rest"} <= entities, sorted(entities)
+    assert "/world/rollouts/2/contacts/drop\\:target" not in entities  # not recorded
+    assert answer.contact_probability["drop:target"] == 1.0
+    where = answer.outcomes[0].rollouts[0].value("contact")["where_m"]["drop:target"]
+    assert where[2] == pytest.approx(0.1, abs=0.01)  # on the target's top face

@@ -22,6 +22,7 @@ import os
 from .engine import ConfigError, ModelConfig, WorkerPool, load_scenes, preset
 from .engine import actions as A
 from .engine.config import DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_SIGMA_M, PRESETS
+from .engine.query.contact import parse_pair
 
 #: Samples per variant: a question has many variants, and common random numbers make k = 16 enough
 #: to rank them (the paper's k = 48 is for one judgment).
@@ -39,6 +40,13 @@ def _numbers(count: tuple[int, ...], name: str):
                                              f"got {text!r}")
         return values
     return parse
+
+
+def _pair(text: str) -> tuple[str, str]:
+    try:
+        return parse_pair(text, "--contact")
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(exc.problem) from None
 
 
 def add_ask_parser(sub, finite, one_line_parser) -> None:
@@ -66,8 +74,13 @@ def add_ask_parser(sub, finite, one_line_parser) -> None:
         q.add_argument("--rrd", default=None, metavar="FILE",
                        help="record 4 rollouts of every variant to this rerun file (not for clear)")
 
+    def contact(q):
+        q.add_argument("--contact", type=_pair, action="append", default=None, metavar="A:B",
+                       help="also P(A touches B) per variant (repeatable; B may be 'support')")
+
     r = questions.add_parser("remove", help="P(anything else falls) if an object is taken away")
     common(r)
+    contact(r)
     r.add_argument("--object", action="append", default=None, metavar="NAME", help="repeatable; default: every object")
     r.add_argument("--safe-below", type=finite, default=None, metavar="P",
                    help="decide each removal safe or unsafe at this P(anything falls), sampling until decided")
@@ -81,6 +94,7 @@ def add_ask_parser(sub, finite, one_line_parser) -> None:
     c.add_argument("--target", default=None, metavar="NAME")
     p = questions.add_parser("place", help="how risky it is to put a new object here, or where it is safest")
     common(p)
+    contact(p)
     p.add_argument("--object", required=True, metavar="JSON", help="the new object in the scene format (/2)")
     p.add_argument("--at", action="append", type=_numbers((2, 3), "--at"), default=None, metavar="X,Y[,YAW_DEG]",
                    help="a candidate spot (repeatable); the object is lowered onto what is below")
@@ -92,6 +106,7 @@ def add_ask_parser(sub, finite, one_line_parser) -> None:
     p.add_argument("--candidates", type=int, default=16, help="spots on the --region grid")
     u = questions.add_parser("push", help="what falls when an object is pushed")
     common(u)
+    contact(u)
     u.add_argument("--object", required=True, metavar="NAME")
     u.add_argument("--velocity", required=True, type=_numbers((2,), "--velocity"), metavar="VX,VY",
                    help="the velocity the push gives, m/s (horizontal)")
@@ -124,6 +139,8 @@ def _table(answers: A.Answers) -> str:
         note = "" if v.simulated else "  (nothing within its reach: not simulated)"
         if v.stopped_by is not None:
             note += f"  [{v.decision or 'undecided'}: {v.stopped_by} after {v.samples_drawn} samples drawn]"
+        for key, q in (v.contact_probability or {}).items():
+            note += f"; P({key.replace(':', ' touches ')}) {q:.2f}"
         lines.append(f"{v.label:<32} {p:>12} {ci:>15} {v.samples:>4} {g:>14} "
                      f"{'-' if given is None else given.samples:>4}  {shown}{note}")
     if answers.alone is not None and answers.alone.unstable:
@@ -143,10 +160,17 @@ def cmd_ask(args) -> int:
         raise ConfigError("--workers", f"must be >= 0, got {args.workers}")
     pool = WorkerPool(min(args.workers, args.samples)) if args.workers > 0 else None
     kw = dict(seed=args.seed, map_fn=pool.map if pool else None, budget_s=args.budget, fell_off=args.fell_off)
+    if getattr(args, "contact", None):
+        kw["contact"] = tuple(args.contact)
     if args.rrd and args.question != "clear":
         kw.update(record_every=max(1, round(0.02 / settings.time_step_s)), record_samples=4)
     try:
         return _answer(args, scene, model, settings, kw)
+    except ConfigError as exc:  # named as the command line spells it
+        flag = {"contact": "--contact", "fell_off": "--fell-off", "budget_s": "--budget"}.get(exc.field)
+        if flag is None:
+            raise
+        raise ConfigError(flag, exc.problem) from None
     finally:
         if pool is not None:
             pool.close()

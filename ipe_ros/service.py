@@ -302,8 +302,11 @@ class PredictionService:
             raise SceneError(frame_field, f"{shown(frame_id)} is not a gravity-aligned frame ({', '.join(frames)}); "
                                           "transform the scene into one of them, or add the frame to the "
                                           "gravity_aligned_frames parameter if its -z axis is gravity")
-        check_request(scene, config.query, config.max_objects, model=config.model, settings=config.settings,
-                      budget_s=config.budget_s)
+        try:
+            check_request(scene, config.query, config.max_objects, model=config.model, settings=config.settings,
+                          budget_s=config.budget_s)
+        except ConfigError as exc:  # named as the node's parameters spell it
+            raise ConfigError({"contact": "contact_pairs"}.get(exc.field, exc.field), exc.problem) from None
 
     def submit(self, item: StampedScene) -> bool:
         """Queue a checked scene; returns True when it replaced one still waiting."""

@@ -165,7 +165,10 @@ def test_parameter_updates_accepted_and_rejected(ros, tower):
     assert ok.successful
     [bad_query] = set_params(ros, queries=["fall", "nope"])
     assert not bad_query.successful
-    assert bad_query.reason == "queries: unknown query 'nope'; choose from fall, any_fall, direction, far, bump"
+    assert bad_query.reason == ("queries: unknown query 'nope'; choose from fall, any_fall, direction, far, bump, "
+                                "contact, rest, final_pose")
+    [bad_pair] = set_params(ros, contact_pairs="ball")
+    assert bad_pair.reason == "contact_pairs: a pair is written A:B (B may be support), got 'ball'"
     [bad_preset] = set_params(ros, preset="fastest")
     assert bad_preset.reason == "preset: unknown preset 'fastest'; choose one of paper, accurate, fine, default"
     [bad_direction] = set_params(ros, force_direction_deg=math.inf)
@@ -190,6 +193,28 @@ def test_parameter_updates_accepted_and_rejected(ros, tower):
     wait_until(lambda: len(got), TIMEOUT_S, "a prediction with the new sample count")
     assert got[0]["samples"] == 3 and got[0]["request"]["preset"] == "default"
     assert got[0]["stopped_by"] == "samples"
+
+
+def test_contact_rest_and_final_pose_through_parameters(ros, tower):
+    """Event questions on the node: the pairs as a parameter, the answers in the JSON, and a scene
+    without an asked object answered with an error naming the parameter."""
+    from tests.test_queries import _rolled
+
+    node = ros.start_ipe_node(samples=4, sigma=0.01, seed=3, queries=["rest", "final_pose"],
+                              contact_pairs="ball:box, ball:support")
+    assert node.service.config.query.contact_pairs == (("ball", "box"), ("ball", "support"))
+    got = answers(ros)
+    pub = ros.publisher(String, "/ipe/scene_json")
+    pub.publish(String(data=scene_to_json(_rolled(1.5))))
+    wait_until(lambda: len(got), TIMEOUT_S, "an answer about the rolled ball")
+    answer = got[0]
+    assert answer["contact_probability"] == {"ball:box": 1.0, "ball:support": 1.0}
+    assert answer["contact_at_start"] == {"ball:box": 0.0, "ball:support": 1.0}
+    assert answer["request"]["contact"] == ["ball:box", "ball:support"]
+    assert set(answer["final_pose"]) == {"ball", "box"} and answer["rest_probability"] is not None
+    pub.publish(String(data=scene_to_json(tower)))  # no ball in it
+    wait_until(lambda: len(got) == 2, TIMEOUT_S, "the refusal of the tower")
+    assert got[1]["error"].startswith("contact_pairs: ball:box: no object 'ball' in scene")
 
 
 def test_gravity_aligned_frames_decide_which_scene_frames_are_answered(ros, tower):

@@ -259,3 +259,40 @@ def test_recordings_show_where_and_when_each_pair_first_touched(tmp_path):
     assert answer.contact_probability["drop:target"] == 1.0
     where = answer.outcomes[0].rollouts[0].value("contact")["where_m"]["drop:target"]
     assert where[2] == pytest.approx(0.1, abs=0.01)  # on the target's top face
+
+
+def _cup_and_glass() -> Scene:
+    return floor_scene(block("cup", 0.0, 0.0, 0.05, extents=(0.1, 0.1, 0.1)),
+                       block("glass", 0.4, 0.0, 0.1, extents=(0.1, 0.1, 0.2)), name="cup_and_glass")
+
+
+@pytest.mark.parametrize("speed, expected", [(1.0, 0.0), (3.0, 1.0)])
+def test_a_push_question_answers_whether_the_pushed_cup_touches_the_glass(speed, expected):
+    # friction 0.9: the cup slides v^2 / (2 mu g): 0.06 m at 1 m/s, 0.51 m at 3 m/s; the glass is 0.3 m away
+    from ipe_ros.engine.actions import Push, push
+
+    answers = push(_cup_and_glass(), [Push("cup", (speed, 0.0, 0.0))], GROUND_TRUTH, preset("default"),
+                   contact=(("cup", "glass"),))
+    as_is, pushed = answers.variants
+    assert as_is.contact_probability == {"cup:glass": 0.0}
+    assert pushed.contact_probability == {"cup:glass": expected}
+    assert pushed.to_dict()["contact_probability_ci95"] == {"cup:glass": [expected, expected]}
+
+
+def test_contact_on_robot_questions_through_the_question_json():
+    from ipe_ros.engine.actions import answer_question, question_from_dict
+
+    question = question_from_dict({"question": "push", "object": "cup", "velocity_m_s": [3.0, 0.0],
+                                   "direction_sigma_deg": 10, "samples": 8, "contact": ["cup:glass", "glass:support"]})
+    assert question.contact == (("cup", "glass"), ("glass", "support"))
+    answer, _ = answer_question(_cup_and_glass(), question, ModelConfig(sigma_m=0.005, samples=8), preset("default"))
+    pushed = answer["variants"][1]
+    assert pushed["contact_probability"]["cup:glass"] >= 0.75
+    assert pushed["contact_probability"]["glass:support"] == 1.0  # it stands on the floor from the start
+    lo, hi = pushed["contact_probability_ci95"]["cup:glass"]
+    assert lo <= pushed["contact_probability"]["cup:glass"] <= hi
+    with pytest.raises(ConfigError, match="contact: cup:mug: no object 'mug' in scene 'cup_and_glass'"):
+        answer_question(_cup_and_glass(), dataclasses.replace(question, contact=(("cup", "mug"),)),
+                        GROUND_TRUTH, preset("default"))
+    with pytest.raises(ConfigError, match="unknown field of a support question"):
+        question_from_dict({"question": "support", "contact": ["a:b"]})

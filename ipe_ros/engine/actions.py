@@ -36,7 +36,8 @@ from .errors import BudgetExceeded, ConfigError, PhysicsError, shown
 from .decide import Ranking, SafeBelow, Sequential, Supports, Tally
 from .estimate import wilson_interval, circular_mean
 from .perturb import draw_sample_inputs, is_deterministic, position_sigmas_m
-from .rollout import SampleTask, _decided_heights, collapse_heights, separated_world
+from .query.contact import parse_pair
+from .rollout import SampleTask, _decided_heights, collapse_heights, separated_world, watches_for
 from .sampler import MapFn, check_budget, rollout_cost
 from .scene import Body, Scene, Table, lowest_z_m, validate_body, validate_scene
 from .shapes import BoxShape, rotation_matrix
@@ -185,6 +186,7 @@ class VariantResult:
     trajectory: list | None = None  # (t, positions, orientations) frames when recorded
     fell_off: np.ndarray | None = None  # ended off the table (asked with fell_off)
     skipped: bool = False  # not run: the scene fell as it is, or the variant was already decided
+    contact: dict | None = None  # the contact query's first-contact times, by pair (asked with contact)
 
 
 def _action_rng(task: VariantTask, action: Action) -> np.random.Generator:
@@ -230,10 +232,12 @@ def _simulate_variant(task: VariantTask, scene: Scene, positions, orientations, 
     for i, phi in enumerate(task.model.phi_m_s2):
         if i > 0:
             world = simulation.build_world(scene, initial, masses, task.settings, orientations_xyzw=initial_orn)
+        watches, end_when_watched = watches_for(scene, task.query, world)
         end = simulation.simulate(world, scene, task.settings, simulation.Push(phi, push_direction,
                                                                               task.model.push_duration_s),
                                   decided=decided, collapse_below_z_m=collapse_below,
-                                  deadline_unix_s=task.deadline_unix_s, record_every=task.record_every)
+                                  deadline_unix_s=task.deadline_unix_s, record_every=task.record_every,
+                                  watches=watches, end_when_watched=end_when_watched)
     return initial, initial_orn, end
 
 
@@ -310,8 +314,9 @@ def _one_variant(task: VariantTask, action: Action, shared, shared_orn, inputs,
     if task.query.wants("bump"):  # started above the table top, ended below it: beside or under the table
         top = scene.support.top_height_m
         fell_off = (initial[:, 2] >= top) & queries.fell_off_mask(end.positions_m, top)
+    contact = end.events["contact"]["first_s"] if task.query.wants("contact") else None
     return VariantResult(tuple(b.name for b in variant_bodies), fallen, direction, trajectory=end.trajectory,
-                         fell_off=fell_off)
+                         fell_off=fell_off, contact=contact)
 
 
 # -- the answers ----------------------------------------------------------------------------------------
@@ -353,6 +358,11 @@ class VariantAnswer:
     decision: str | None = None
     stopped_by: str | None = None
     samples_drawn: int | None = None  # samples 0..n-1 were drawn for it (it ran in those that stood)
+    #: asked with contact pairs: per pair "A:B", P(they touch within the horizon), its 95% interval,
+    #: and the median first-contact time over the samples in which they touch (engine/query/contact.py)
+    contact_probability: dict[str, float] | None = None
+    contact_probability_ci95: dict[str, list[float]] | None = None
+    contact_time_s: dict[str, float | None] | None = None
 
     def to_dict(self) -> dict:
         off = {} if self.fell_off_probability is None else {
@@ -364,7 +374,10 @@ class VariantAnswer:
                 "not_simulated": list(self.not_simulated), "caused_fall_probability": self.caused_fall_probability,
                 "given_stands": None if self.given_stands is None else self.given_stands.to_dict(), **off,
                 **({} if self.stopped_by is None else {"decision": self.decision, "stopped_by": self.stopped_by,
-                                                       "samples_drawn": self.samples_drawn})}
+                                                       "samples_drawn": self.samples_drawn}),
+                **({} if self.contact_probability is None else {
+                    "contact_probability": self.contact_probability,
+                    "contact_probability_ci95": self.contact_probability_ci95, "contact_time_s": self.contact_time_s})}
 
 
 @dataclass(frozen=True)
@@ -416,9 +429,23 @@ def _aggregate(label: str, action: Action, results: list[VariantResult], simulat
         fell_off = np.array([r.fell_off for r in ok], bool)
         off = dict(fell_off_probability={n: float(p) for n, p in zip(names, fell_off.mean(axis=0))},
                    any_fell_off_probability=float(fell_off.any(axis=1).mean()))
+    if ok[0].contact is not None:
+        off.update(_contact_answer(ok, deterministic))
     return VariantAnswer(label, action, anything, interval,
                          {n: float(p) for n, p in zip(names, fallen.mean(axis=0))},
                          circular_mean(directions), len(ok), len(failed), simulated, **off)
+
+
+def _contact_answer(ok: list[VariantResult], deterministic: bool) -> dict:
+    probability, interval, time_s = {}, {}, {}
+    for key in ok[0].contact:
+        times = [r.contact[key] for r in ok]
+        touched = [t for t in times if t is not None]
+        p = len(touched) / len(ok)
+        probability[key] = p
+        interval[key] = [p, p] if deterministic else list(wilson_interval(p, len(ok)))
+        time_s[key] = float(np.median(touched)) if touched else None
+    return dict(contact_probability=probability, contact_probability_ci95=interval, contact_time_s=time_s)
 
 
 def _stood(alone: VariantResult) -> bool:
@@ -593,7 +620,7 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
         map_fn: MapFn | None = None, budget_s: float | None = None,
         fall_threshold_fraction: float = 0.125, record_every: int = 0, record_samples: int = 0,
         directions: bool = False, fell_off: bool = False, sequential: Sequential | None = None,
-        on_progress: Callable[[dict], None] | None = None) -> Answers:
+        on_progress: Callable[[dict], None] | None = None, contact: tuple[tuple[str, str], ...] = ()) -> Answers:
     """Answer every variant with common random numbers (see the module docstring). Removals that
     cannot change anything are answered from the scene's own samples (a variant "as is" is added
     for them when it is not asked). ``record_every`` / ``record_samples``: keep the trajectories of
@@ -604,7 +631,9 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     in batches until its rule decides each variant, simulating variants only in samples where the
     scene as it is stands (``decide``); needs an "as is" variant, ignored without noise.
     ``on_progress``: called after each batch of a sequential answer with what is decided so far
-    (``progress_dict``); whatever it raises ends the question there (a cancellation)."""
+    (``progress_dict``); whatever it raises ends the question there (a cancellation). ``contact``:
+    also, per variant, P(A touches B) for these (A, B) pairs (B may be "support"); every variant is
+    then simulated (none is read from the scene as it is)."""
     validate_scene(scene)
     check_budget(budget_s)
     for i, action in enumerate(actions):
@@ -612,6 +641,7 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     if fell_off and not isinstance(scene.support, Table):
         raise ConfigError("fell_off", f"{scene.name!r} stands on a floor: nothing can fall off it (ask it of a "
                                       "scene on a table)")
+    _check_contact(scene, actions, contact)
     margin = 3 * float(position_sigmas_m(scene, model).max(initial=0.0))  # noise can close gaps this wide
     everything = frozenset(b.name for b in scene.dynamic_objects)
     # a pushed support can slide every group into every other
@@ -619,7 +649,8 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     # a removal that nothing else is within reach of cannot change anything: the rest of the scene does
     # what it does anyway (read from "as is"). Touching is not enough to be left out: a counterweight
     # with nothing on it still holds down what it rests on, and a gap closes when the object above drops.
-    trivial = [isinstance(a, Remove) and _reached(scene_groups, a.names) <= set(a.names) for a in actions]
+    trivial = [isinstance(a, Remove) and _reached(scene_groups, a.names) <= set(a.names) and not contact
+               for a in actions]
     simulated_actions = [a for a, t in zip(actions, trivial) if not t]
     if any(trivial) and None not in simulated_actions:
         simulated_actions.append(None)
@@ -630,8 +661,10 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
                                           f"~{cost.seconds * len(simulated_actions):.3g} s, more than the budget of "
                                           f"{budget_s:g} s; ask fewer variants or raise the budget")
     regions = _regions(scene, simulated_actions, margin, scene_groups, model.pushes)
-    asked = {"fall"} | ({"direction"} if directions else set()) | ({"bump"} if fell_off else set())
-    query = QuerySpec(queries=frozenset(asked), fall_threshold_fraction=fall_threshold_fraction)
+    asked = {"fall"} | ({"direction"} if directions else set()) | ({"bump"} if fell_off else set()) \
+        | ({"contact"} if contact else set())
+    query = QuerySpec(queries=frozenset(asked), fall_threshold_fraction=fall_threshold_fraction,
+                      contact_pairs=tuple(contact))
     # no noise anywhere (scene, model, nor an action's own): one rollout per variant says everything
     deterministic = is_deterministic(scene, model) and not any(_draws_noise(scene, a, model)
                                                                for a in simulated_actions)
@@ -693,6 +726,18 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
                            alone.any_fall_probability_ci95 is not None
                            and alone.any_fall_probability_ci95[0] > DEFAULT_SAFE_BELOW)
     return Answers(scene.name, tuple(answers), k, time.perf_counter() - start, stopped, recorded, scene_alone)
+
+
+def _check_contact(scene: Scene, actions: list[Action], pairs) -> None:
+    """Contact pairs name objects of the scene, placed objects, or the support."""
+    known = {b.name for b in scene.objects} | {a.body.name for a in actions if isinstance(a, Place)} | {"support"}
+    for a, b in pairs:
+        for name in (a, b):
+            if name not in known:
+                raise ConfigError("contact", f"{a}:{b}: no object {shown(name)} in scene {shown(scene.name)} or "
+                                             f"placed by the question; objects: {', '.join(sorted(known))}")
+        if a == b:
+            raise ConfigError("contact", f"{a}:{b}: an object always touches itself; name two")
 
 
 def _run(tasks: list[VariantTask], map_fn: MapFn | None, scene: Scene) -> list[list[VariantResult]]:
@@ -1139,6 +1184,7 @@ class Question:
     fell_off: bool = False  # also: which objects end off the table (a scene on a table)
     sequential: bool = True  # decision questions sample until decided; False: the full k
     cancel_older: bool = False  # the node drops older questions about the same scene for this one
+    contact: tuple[tuple[str, str], ...] = ()  # remove, place, push: also P(A touches B) per variant
 
 
 def _field(data: dict, key: str, kind, default=None, *, path: str = ""):
@@ -1153,9 +1199,9 @@ def _field(data: dict, key: str, kind, default=None, *, path: str = ""):
 
 
 #: The fields each kind of question reads, besides id, question, samples and scene.
-_QUESTION_FIELDS = {"remove": {"objects", "safe_below"}, "support": {"threshold", "safe_below"}, "clear": {"target"},
-                    "place": {"object", "at", "region"},
-                    "push": {"object", "velocity_m_s", "point_m", "direction_sigma_deg", "speed_sigma"}}
+_QUESTION_FIELDS = {"remove": {"objects", "safe_below", "contact"}, "support": {"threshold", "safe_below"},
+                    "clear": {"target"}, "place": {"object", "at", "region", "contact"},
+                    "push": {"object", "velocity_m_s", "point_m", "direction_sigma_deg", "speed_sigma", "contact"}}
 
 
 def question_from_dict(data) -> Question:
@@ -1170,6 +1216,7 @@ def question_from_dict(data) -> Question:
          "yaw_deg": [a0, a1], "candidates": 16, "yaws": 1}
         {"id": "r5", "question": "push", "object": "block2", "velocity_m_s": [vx, vy],
          "point_m": [x, y, z], "direction_sigma_deg": 0, "speed_sigma": 0}
+        remove, place, push: "contact": ["A:B", ...] (also P(A touches B) per variant; B may be "support")
         any of them: "samples": k, "fell_off": true (also which objects end off the table),
         "sequential": false (the full k for every variant), "cancel_older": true (the node drops the
         older questions about the same scene, waiting or running)
@@ -1198,6 +1245,13 @@ def question_from_dict(data) -> Question:
         if not isinstance(flags[name], bool):
             raise ConfigError(name, "must be true or false")
     common = dict(kind=kind, request_id=request_id, samples=samples, **flags)
+    if "contact" in data:
+        pairs = data["contact"]
+        if not isinstance(pairs, list) or not pairs or len(pairs) > 32:
+            raise ConfigError("contact", "must be a list of 1-32 \"A:B\" pairs (B may be \"support\")")
+        common["contact"] = tuple(parse_pair(pair, "contact") for pair in pairs)
+        if len(set(common["contact"])) != len(common["contact"]):
+            raise ConfigError("contact", "a pair is asked twice; ask each once")
     if kind == "remove":
         objects = data.get("objects")
         if objects is not None and (not isinstance(objects, list) or not all(isinstance(o, str) for o in objects)):
@@ -1274,6 +1328,8 @@ def answer_question(scene: Scene, question: Question, model: ModelConfig, settin
         model = dataclasses.replace(model, samples=question.samples)
     if question.fell_off:
         kw["fell_off"] = True
+    if question.contact:
+        kw["contact"] = question.contact
     kind = question.kind
     if kind == "push":  # no decision to reach: the full k
         answers = push(scene, [question.push], model, settings, **kw)

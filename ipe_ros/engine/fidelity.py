@@ -49,6 +49,7 @@ import numpy as np
 
 from .config import PRESETS, SimSettings, _boolean, _integer, _positive
 from .errors import ConfigError, shown
+from .query import QUERIES
 from .rollout import SampleOutcome
 from .scene import Scene
 
@@ -146,7 +147,7 @@ def unhealthy(outcome: SampleOutcome, energy_scale_j: float, check: SelfCheck) -
 
 def outcome_flags(outcome: SampleOutcome) -> np.ndarray:
     """What a sample's answer is made of: its rollouts' yes/no outcomes (which objects fell, which
-    fell off, whether anything fell), as one 0/1 vector."""
+    fell off, whether anything fell, which pairs touched, whether all came to rest), as one 0/1 vector."""
     flags = []
     for r in outcome.rollouts:
         for value in (r.fallen, r.fell_off):
@@ -154,6 +155,10 @@ def outcome_flags(outcome: SampleOutcome) -> np.ndarray:
                 flags.append(np.asarray(value, float))
         if r.any_fell is not None:
             flags.append(np.array([float(r.any_fell)]))
+        for name, _ in r.extra:  # the other queries' yes/no outcomes (contact, rest)
+            own = QUERIES[name].flags(r) if name in QUERIES else None
+            if own is not None:
+                flags.append(np.asarray(own, float))
     return np.concatenate(flags) if flags else np.zeros(0)
 
 

@@ -19,6 +19,7 @@ from ..engine import ALL_QUERIES, PRESETS, AdaptiveStop, ConfigError, ModelConfi
 from ..engine.config import (DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M, anytime_batch_size,
                              default_workers)
 from ..engine.fidelity import DEFAULT_CHECK, SelfCheck
+from ..engine.query.contact import parse_pair
 from ..engine.scene import DEFAULT_MAX_OBJECTS
 from ..service import ServiceConfig
 
@@ -65,8 +66,13 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("mu", 0.0, _DOUBLE, "heavy/light density ratio for bodies in group 'heavy'; 0 keeps the scene's "
                                   "own masses", (0.0, 1000.0)),
     ParamSpec("queries", [q for q in ALL_QUERIES if q in DEFAULT_QUERIES], _STRINGS,
-              "queries to answer: any of " + ", ".join(ALL_QUERIES) + " (bump needs a table)",
+              "queries to answer: any of " + ", ".join(ALL_QUERIES) + " (bump needs a table, contact its "
+              "contact_pairs)",
               constraints="non-empty subset of " + ", ".join(ALL_QUERIES)),
+    ParamSpec("contact_pairs", "", _STRING,
+              "the contact query's pairs as 'A:B,C:support' (will A touch B within the horizon? B may be 'support'); "
+              "adds contact to queries; empty: none",
+              constraints="empty, or comma-separated A:B object name pairs"),
     ParamSpec("preset", DEFAULT_PRESET, _STRING, "simulation settings: " + ", ".join(
         f"{name} ({s.time_step_s * 1000:g} ms steps, {s.horizon_s:g} s, {s.solver.iterations} solver iterations)"
         for name, s in PRESETS.items()), constraints="one of " + ", ".join(PRESETS)),
@@ -152,7 +158,12 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
     if math.isinf(direction):
         raise ConfigError("force_direction_deg", f"must be finite degrees or NaN (any direction), got {direction}")
     queries = values["queries"]
-    query = QuerySpec(queries=frozenset(queries))
+    text = str(values["contact_pairs"]).strip()
+    pairs = tuple(parse_pair(part, "contact_pairs") for part in text.split(",")) if text else ()
+    try:
+        query = QuerySpec(queries=frozenset(queries) | ({"contact"} if pairs else set()), contact_pairs=pairs)
+    except ConfigError as exc:
+        raise ConfigError({"contact": "contact_pairs"}.get(exc.field, exc.field), exc.problem) from None
     settings = preset(values["preset"])
     horizon = float(values["horizon_s"])
     if horizon > 0:

@@ -141,6 +141,11 @@ class Query:
     def aggregate(self, samples: Samples) -> dict[str, Any]:
         raise NotImplementedError
 
+    def flags(self, rollout) -> list[float] | None:
+        """This query's yes/no outcomes in one rollout (1/0), which the self-check compares between
+        the fast and the reference physics; None: nothing of its own to compare."""
+        return None
+
     def describe(self, prediction) -> list[str]:
         """Lines for a human reading the answer (the CLI's table lists the paper's queries itself)."""
         return []

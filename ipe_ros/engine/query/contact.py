@@ -50,13 +50,16 @@ class ContactWatch(StepWatch):
     """First contact time of each pair in one rollout."""
 
     def __init__(self, scene, pairs: tuple[tuple[str, str], ...], world):
+        present = {b.name for b in scene.objects} | {SUPPORT}
+        # a pair with an object not in this world (a robot question's variant removed it, or left it
+        # out as beyond the action's reach) cannot touch: it stays None
         self._pairs = [(pair_key(a, b), _handles(scene, world, a), _handles(scene, world, b),
                         CONTACT_TOLERANCE_FRACTION * min(e for e in (_extent_of(scene, a), _extent_of(scene, b))
                                                          if e is not None))
-                       for a, b in pairs]
-        self.first_s: dict[str, float | None] = {key: None for key, *_ in self._pairs}
-        self.at_start: dict[str, bool] = {key: False for key, *_ in self._pairs}
-        self.where_m: dict[str, list[float] | None] = {key: None for key, *_ in self._pairs}  # on B
+                       for a, b in pairs if a in present and b in present]
+        self.first_s: dict[str, float | None] = {pair_key(a, b): None for a, b in pairs}
+        self.at_start: dict[str, bool] = {pair_key(a, b): False for a, b in pairs}
+        self.where_m: dict[str, list[float] | None] = {pair_key(a, b): None for a, b in pairs}  # on B
         self._client = world.client
 
     def start(self, world) -> None:
@@ -89,7 +92,7 @@ class ContactWatch(StepWatch):
 
     @property
     def decided(self) -> bool:
-        return all(t is not None for t in self.first_s.values())
+        return all(self.first_s[key] is not None for key, *_ in self._pairs)
 
     def events(self) -> Any:
         return {"first_s": dict(self.first_s), "at_start": dict(self.at_start), "where_m": dict(self.where_m)}
@@ -146,6 +149,9 @@ class Contact(Query):
             at_start[key] = float(samples.per_sample(lambda r: r.value("contact")["at_start"][key]).mean())
         return {"contact_probability": probability, "contact_probability_ci95": interval,
                 "contact_time_s": time_s, "contact_at_start": at_start}
+
+    def flags(self, rollout) -> list[float]:
+        return [float(t is not None) for t in rollout.value("contact")["first_s"].values()]
 
     def describe(self, prediction) -> list[str]:
         lines = []

@@ -14,6 +14,11 @@ from ..stats import circular_mean
 from .base import Query, Reading, Samples
 
 
+#: an object "moved" (the yes/no outcome the self-check compares) when its centre ends farther than
+#: this fraction of its smallest extent from where it started
+MOVED_FRACTION = 0.5
+
+
 def yaw_rad(orientations_xyzw: np.ndarray) -> np.ndarray:
     """Yaw (ZYX Euler) of each xyzw quaternion."""
     x, y, z, w = np.asarray(orientations_xyzw, float).T
@@ -26,8 +31,13 @@ class FinalPose(Query):
     summary = "per object: mean and spread of where it ends up (position, yaw)"
 
     def read(self, reading: Reading) -> dict[str, Any]:
+        moved = np.linalg.norm(reading.final_m - reading.initial_m, axis=1) > MOVED_FRACTION * reading.smallest_extents_m
         return {"final_pose": {"position_m": reading.final_m.copy(),
-                               "yaw_rad": yaw_rad(reading.final_orientations_xyzw)}}
+                               "yaw_rad": yaw_rad(reading.final_orientations_xyzw), "moved": moved}}
+
+    def flags(self, rollout) -> list[float]:
+        # what the self-check compares: which objects ended far from where they started
+        return [float(v) for v in rollout.value("final_pose")["moved"]]
 
     def aggregate(self, samples: Samples) -> dict[str, Any]:
         positions = np.array([r.value("final_pose")["position_m"] for r in samples.rollouts])  # (rollouts, n, 3)

@@ -40,6 +40,9 @@ class Rest(Query):
         return {"rest_probability": p, "rest_probability_ci95": samples.fraction_interval(p),
                 "max_final_speed_m_s": float(fastest)}
 
+    def flags(self, rollout) -> list[float]:
+        return [float(rollout.value("rest")["at_rest"])]
+
     def describe(self, prediction) -> list[str]:
         lo, hi = prediction.rest_probability_ci95
         return [f"P(everything at rest at the end): {prediction.rest_probability:.3f} [{lo:.2f}, {hi:.2f}]; "

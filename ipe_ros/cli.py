@@ -42,6 +42,7 @@ from .engine.catalogue import capped_tower, scene_catalogue
 from .engine.fidelity import DEFAULT_CHECK, SelfCheck
 from .engine.generators import generate_tables, generate_towers, state_pair
 from .engine.perturb import is_deterministic
+from .engine.inputs import as_spelled, spelled
 from .engine.query import QUERIES
 from .engine.query.contact import parse_pair
 from .engine.sampler import check_budget, check_request
@@ -396,8 +397,7 @@ def cmd_predict(args) -> int:
             check_request(scene, query, model=model, settings=sim, budget_s=args.budget)
             answerable.append(scene)
         except ConfigError as exc:
-            field = {"budget_s": f"--budget ({scene.name})", "contact": "--contact",
-                     "queries": "--query"}.get(exc.field, exc.field)
+            field = spelled(exc.field, "cli") + (f" ({scene.name})" if exc.field == "budget_s" else "")
             refused.append(RefusedScene(positions[id(scene)], scene.name, ConfigError(field, exc.problem)))
     if len(scenes) == 1 and not answerable and len(refused) == 1:  # one scene: its refusal is the command's error
         raise refused[-1].error
@@ -516,7 +516,11 @@ def cmd_demo(_args) -> int:
 
 
 def cmd_experiment(args) -> int:
+    from . import progress
+    from .analysis import reporting
     from .analysis.experiments import EXPERIMENTS, Options
+
+    reporting.use(progress.steps, progress.progress)  # bars on a terminal, lines in a log
     from .analysis.human import load_human_responses
     from .analysis.paper_data import shared_data_dir
 
@@ -573,7 +577,10 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "experiment":
             return cmd_experiment(args)
         return cmd_demo(args)
-    except (SceneError, ConfigError) as exc:
+    except ConfigError as exc:  # named as the command line spells it (engine.inputs)
+        print(f"ipe: error: {as_spelled(exc, 'cli')}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except SceneError as exc:
         print(f"ipe: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except (OSError, ValueError) as exc:

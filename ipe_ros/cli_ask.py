@@ -22,6 +22,7 @@ import os
 from .engine import ConfigError, ModelConfig, WorkerPool, load_scenes, preset
 from .engine import actions as A
 from .engine.config import DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_SIGMA_M, PRESETS
+from .engine.inputs import as_spelled
 from .engine.query.contact import parse_pair
 
 #: Samples per variant: a question has many variants, and common random numbers make k = 16 enough
@@ -167,10 +168,7 @@ def cmd_ask(args) -> int:
     try:
         return _answer(args, scene, model, settings, kw)
     except ConfigError as exc:  # named as the command line spells it
-        flag = {"contact": "--contact", "fell_off": "--fell-off", "budget_s": "--budget"}.get(exc.field)
-        if flag is None:
-            raise
-        raise ConfigError(flag, exc.problem) from None
+        raise as_spelled(exc, "cli") from None
     finally:
         if pool is not None:
             pool.close()

@@ -32,6 +32,7 @@ from .engine import (AdaptiveStop, ConfigError, ModelConfig, Prediction, QuerySp
                      predict, preset)
 from .engine.config import DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES
 from .engine.errors import SceneError, clip, shown
+from .engine.inputs import as_spelled
 from .engine.fidelity import DEFAULT_CHECK, SelfCheck
 from .engine.sampler import check_request
 from .engine.scene import DEFAULT_MAX_OBJECTS
@@ -306,7 +307,7 @@ class PredictionService:
             check_request(scene, config.query, config.max_objects, model=config.model, settings=config.settings,
                           budget_s=config.budget_s)
         except ConfigError as exc:  # named as the node's parameters spell it
-            raise ConfigError({"contact": "contact_pairs"}.get(exc.field, exc.field), exc.problem) from None
+            raise as_spelled(exc, "ros") from None
 
     def submit(self, item: StampedScene) -> bool:
         """Queue a checked scene; returns True when it replaced one still waiting."""

@@ -93,11 +93,16 @@ def test_generate_tower_and_table_write_loadable_scenes(tmp_path):
 @pytest.mark.parametrize("args, message", [
     (["predict", "/nonexistent.json"], "ipe: error: /nonexistent.json: no such file"),
     (["predict", "EXAMPLE", "--query", "fall,fly"], "ipe: error: argument --query: unknown query 'fly'; "
-                                                    "choose from fall, any_fall, direction, far, bump"),
-    (["predict", "EXAMPLE", "--samples", "0"], "ipe: error: samples: must be an integer in [1, 100000], got 0"),
+                                                    "choose from fall, any_fall, direction, far, bump, contact, rest, "
+                                                    "final_pose"),
+    (["predict", "EXAMPLE", "--samples", "0"], "ipe: error: --samples: must be an integer in [1, 100000], got 0"),
+    (["predict", "EXAMPLE", "--sigma", "99"], "ipe: error: --sigma: must be at most 10 m (check the units), got 99.0"),
+    (["ask", "remove", "EXAMPLE", "--sigma", "99"], "ipe: error: --sigma: must be at most 10 m (check the units), "
+                                                    "got 99.0"),
+    (["predict", "EXAMPLE", "--phi", "-1"], "ipe: error: --phi: must be a finite number >= 0, got -1.0"),
     (["predict", "EXAMPLE", "--sigma", "nan"], "ipe: error: argument --sigma: expected a finite number, got 'nan'"),
     (["predict", "EXAMPLE", "--tower", "nope"], "ipe: error: --tower: no scene named 'nope' in example_tower.json"),
-    (["predict", "EXAMPLE", "--query", "bump"], "ipe: error: queries: the bump query needs a table support (it "
+    (["predict", "EXAMPLE", "--query", "bump"], "ipe: error: --query: the bump query needs a table support (it "
                                                 "counts boxes that fall off the table's edge); drop 'bump' or give "
                                                 "the scene a table"),
 ])

@@ -34,7 +34,7 @@ from ..engine.perturb import is_deterministic
 from ..engine.rollout import SampleOutcome
 from ..engine.scene_io import scenes_from_tower_csv
 from ..engine.store import ResumableMap
-from ..progress import steps
+from .reporting import steps
 
 #: Tower blocks' short side in the stimulus files (metres here): the paper's unit for sigma.
 SHORT_SIDE_M = 0.2

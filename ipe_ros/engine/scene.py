@@ -335,14 +335,36 @@ def lowest_z_m(body: Body) -> float:
     return float(points[:, 2].min() + body.position_m[2])
 
 
+#: scenes (with their max_objects) already found valid: a request is checked where it is read, again
+#: where it is costed and where it is predicted; the check runs once (scenes are frozen values)
+_KNOWN_VALID: dict = {}
+_KNOWN_VALID_MAX = 64
+
+
 def validate_scene(scene: Scene, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scene:
     """Check a whole scene; return it unchanged or raise :class:`SceneError`.
 
     Checks: well-formed shapes, finite numbers, positive sizes and masses, unit quaternions, unique
     names, at least one dynamic body, no more than ``max_objects`` bodies, gravity pointing down, a
     horizon within MAX_HORIZON_S, and no body starting below its support (a tolerance of 1% of the
-    body's smallest extent absorbs rounding in the input).
+    body's smallest extent absorbs rounding in the input). A scene found valid before (an equal
+    one, the same max_objects) is not checked again.
     """
+    try:
+        key = (scene, max_objects)
+        if key in _KNOWN_VALID:
+            return scene
+    except TypeError:  # something unhashable where a number or tuple belongs: the checks say what
+        key = None
+    _validate(scene, max_objects)
+    if key is not None:
+        if len(_KNOWN_VALID) >= _KNOWN_VALID_MAX:
+            _KNOWN_VALID.pop(next(iter(_KNOWN_VALID), None), None)
+        _KNOWN_VALID[key] = None
+    return scene
+
+
+def _validate(scene: Scene, max_objects: int) -> Scene:
     _check_name(scene.name, "name")
     _check_vector(scene.gravity_m_s2, 3, "gravity_m_s2", "gravity in m/s^2")
     if scene.gravity_m_s2[2] >= 0:

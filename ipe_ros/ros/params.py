@@ -19,6 +19,7 @@ from ..engine import ALL_QUERIES, PRESETS, AdaptiveStop, ConfigError, ModelConfi
 from ..engine.config import (DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M, anytime_batch_size,
                              default_workers)
 from ..engine.fidelity import DEFAULT_CHECK, SelfCheck
+from ..engine.inputs import as_spelled
 from ..engine.query.contact import parse_pair
 from ..engine.scene import DEFAULT_MAX_OBJECTS
 from ..service import ServiceConfig
@@ -163,7 +164,7 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
     try:
         query = QuerySpec(queries=frozenset(queries) | ({"contact"} if pairs else set()), contact_pairs=pairs)
     except ConfigError as exc:
-        raise ConfigError({"contact": "contact_pairs"}.get(exc.field, exc.field), exc.problem) from None
+        raise as_spelled(exc, "ros") from None
     settings = preset(values["preset"])
     horizon = float(values["horizon_s"])
     if horizon > 0:
@@ -183,8 +184,7 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
                             mu=None if mu == 0 else mu, samples=int(values["samples"]),
                             perception=str(values["perception"]))
     except ConfigError as exc:
-        name = {"sigma_m": "sigma", "phi_m_s2": "phi", "force_direction_rad": "force_direction_deg"}.get(exc.field, exc.field)
-        raise ConfigError(name, exc.problem) from None
+        raise as_spelled(exc, "ros") from None
     width, deadline = float(values["target_ci_width"]), float(values["deadline_s"])
     stop = None
     if width > 0 or deadline > 0:

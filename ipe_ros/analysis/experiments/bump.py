@@ -12,7 +12,7 @@ from ...engine import ModelConfig, predict_many, preset
 from ...engine.generators import generate_tables
 from .. import stats
 from ..report import Report, pyplot
-from ...progress import steps
+from ..reporting import steps
 from ..runs import (PAPER_BUMP_PHIS, PAPER_SIGMA, PHI_M_S2_PER_PAPER_UNIT, map_batches, phi_m_s2, sigma_m,
                     stimulus_seed)
 from .common import BUMP, HumanComparison, Options, compare_with_people, render_people

@@ -9,7 +9,7 @@ import numpy as np
 from ...engine import preset
 from .. import stats
 from ..report import Report, pyplot
-from ...progress import progress
+from ..reporting import progress
 from ..runs import PAPER_SIGMAS, PAPER_TOWER_PHIS, PHI_M_S2_PER_PAPER_UNIT, load_tower_stimuli, run_model
 from .common import (FALL, HumanComparison, Options, authors_stable, compare_with_people, ground_truth_model,
                      ipe_model, render_people)

@@ -23,7 +23,7 @@ from ...engine.vision.render import render_views, scene_mesh
 from .. import stats
 from ..report import Report
 from ..runs import PAPER_PHI, PAPER_SIGMA, load_tower_stimuli, phi_m_s2, run_model, sigma_m, stimulus_seed
-from ...progress import steps
+from ..reporting import steps
 from .common import FALL, FALL_DIRECTION, Options, ipe_model
 
 PAPER_RHO = {"Exp. 1 (will it fall?)": "0.90 [0.84, 0.94]", "Exp. 2 (direction, circular)": "0.94 [0.91, 0.97]"}

@@ -277,7 +277,7 @@ def test_a_marker_of_denormal_size_is_refused_by_name():
 
 def test_the_cli_refuses_an_absurd_sigma_in_one_line(capsys):
     assert main(["predict", str(example_scene_path()), "--sigma", "1e308", "--json", "--workers", "0"]) == 2
-    assert capsys.readouterr().err.strip() == "ipe: error: sigma_m: must be at most 10 m (check the units), got 1e+308"
+    assert capsys.readouterr().err.strip() == "ipe: error: --sigma: must be at most 10 m (check the units), got 1e+308"
 
 
 def _closed_port() -> int:

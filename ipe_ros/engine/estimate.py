@@ -9,8 +9,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
-import numpy as np
-
 from .config import QuerySpec
 from .query import ANSWER_FIELDS, QUERIES, Samples
 from .query.any_fall import sample_any_fall  # noqa: F401 - re-exported
@@ -19,6 +17,11 @@ from .query.far import sample_far_m  # noqa: F401 - re-exported
 from .rollout import SampleOutcome
 from .scene import Scene
 from .stats import Z95, circular_mean, half_circle_decisiveness, mean_interval, wilson_interval  # noqa: F401
+
+# kept importable from here: the per-sample values and the statistics the answers are made of
+__all__ = ["Prediction", "Z95", "aggregate", "circular_mean", "half_circle_decisiveness", "mean_interval",
+           "sample_any_fall", "sample_fall_fraction", "sample_far_m", "wilson_interval"]
+
 
 @dataclass(frozen=True)
 class Prediction:

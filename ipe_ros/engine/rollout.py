@@ -19,7 +19,7 @@ from .query import QUERIES, Reading
 from .config import ModelConfig, QuerySpec, SimSettings
 from .errors import BudgetExceeded, PhysicsError
 from .perturb import draw_sample_inputs
-from .scene import Floor, Scene, Table
+from .scene import Floor, Scene
 from .simulation import NO_PROBE, DecidedHeights, Probe
 
 

@@ -146,3 +146,16 @@ def test_depth_benchmark_reports_coverage_and_the_towers_cost(tmp_path):
     assert report["calibration"]["scenes"] == 2 and 0 <= report["calibration"]["coverage"] <= 1
     assert report["tower"]["objects"] == 10 and report["tower"]["k"] == 4 and report["tower"]["total_s"] > 0
     assert "goal 90-98%" in (tmp_path / "depth.md").read_text()
+
+
+def test_queries_benchmark_compares_the_contact_watch_and_its_early_end(tmp_path):
+    result = subprocess.run(
+        [sys.executable, str(REPO / "benchmarks" / "queries.py"), "--per-family", "1", "--samples", "2",
+         "--out", str(tmp_path)], capture_output=True, text=True, timeout=600, env=ENV)
+    assert result.returncode == 0, result.stderr[-3000:]
+    rows = json.loads((tmp_path / "queries.json").read_text())
+    assert [r["family"] for r in rows] == ["launch", "dominoes", "ramp", "drop"]
+    # the contact question asked alone answers as the run to rest does (it only ends sooner)
+    assert all(r["same_contact_answer"] == "1/1" for r in rows)
+    assert all(0 < r["simulated_alone_vs_rest"] <= 1 for r in rows)
+    assert "| dominoes |" in (tmp_path / "queries.md").read_text()

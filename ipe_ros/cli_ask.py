@@ -23,6 +23,7 @@ from .engine import ConfigError, ModelConfig, WorkerPool, load_scenes, preset
 from .engine import actions as A
 from .engine.config import DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_SIGMA_M, PRESETS
 from .engine.inputs import as_spelled
+from .engine.question_io import new_object_from_dict
 from .engine.query.contact import parse_pair
 
 #: Samples per variant: a question has many variants, and common random numbers make k = 16 enough
@@ -227,7 +228,7 @@ def _place(args, scene, model, settings, kw, emit) -> None:
         data = json.loads(args.object)
     except json.JSONDecodeError as exc:
         raise ConfigError("--object", f"not JSON ({exc.msg} at column {exc.colno})") from None
-    body = A.new_object_from_dict(data, "--object")
+    body = new_object_from_dict(data, "--object")
     if (args.at is None) == (args.region is None):
         raise ConfigError("--at", "give candidate spots with --at, or a --region to search (not both)")
     if args.region is not None:

@@ -12,6 +12,7 @@ import pytest
 
 from ipe_ros.engine import Box, ConfigError, Floor, ModelConfig, Scene, Sphere, preset
 from ipe_ros.engine import actions as A
+from ipe_ros.engine.question_io import question_from_dict
 from ipe_ros.engine.scene import Body
 
 I = (0.0, 0.0, 0.0, 1.0)
@@ -289,7 +290,7 @@ def test_questions_ask_what_falls_off_the_table():
     assert answer["as_is"].any_fell_off_probability == 0.0
     assert answer["remove/weight"].fell_off_probability == {"post": 0.0, "plank": 1.0}
     assert answer["remove/weight"].to_dict()["any_fell_off_probability"] == 1.0
-    question = A.question_from_dict({"question": "remove", "objects": ["weight"], "fell_off": True})
+    question = question_from_dict({"question": "remove", "objects": ["weight"], "fell_off": True})
     reply, _ = A.answer_question(lever, question, MODEL, SETTINGS)
     assert reply["variants"][1]["fell_off_probability"]["plank"] == 1.0
     assert "fell_off_probability" not in A.remove(lever, ["weight"], MODEL, SETTINGS).to_dict()["variants"][1]
@@ -298,7 +299,7 @@ def test_questions_ask_what_falls_off_the_table():
     assert str(info.value) == ("fell_off: 'stack' stands on a floor: nothing can fall off it (ask it of a scene on a "
                                "table)")
     with pytest.raises(ConfigError, match="^fell_off: must be true or false$"):
-        A.question_from_dict({"question": "remove", "fell_off": "yes"})
+        question_from_dict({"question": "remove", "fell_off": "yes"})
 
 
 # -- sequential decisions ---------------------------------------------------------------------------------

@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from ipe_ros.engine import PRESETS, Body, Box, ConfigError, Floor, ModelConfig, QuerySpec, Scene, Sphere, preset
+from ipe_ros.engine import PRESETS, Body, ConfigError, ModelConfig, QuerySpec, Scene, Sphere, preset
 from ipe_ros.engine.estimate import Prediction
 from ipe_ros.engine.query import ALL_QUERIES, ANSWER_FIELDS, QUERIES
 from ipe_ros.engine.query.contact import parse_pair
@@ -280,7 +280,8 @@ def test_a_push_question_answers_whether_the_pushed_cup_touches_the_glass(speed,
 
 
 def test_contact_on_robot_questions_through_the_question_json():
-    from ipe_ros.engine.actions import answer_question, question_from_dict
+    from ipe_ros.engine.actions import answer_question
+    from ipe_ros.engine.question_io import question_from_dict
 
     question = question_from_dict({"question": "push", "object": "cup", "velocity_m_s": [3.0, 0.0],
                                    "direction_sigma_deg": 10, "samples": 8, "contact": ["cup:glass", "glass:support"]})

@@ -10,6 +10,9 @@ import pytest
 
 from ipe_ros.engine import ConfigError
 from ipe_ros.engine import actions as A
+from ipe_ros.engine.actions import questions
+from ipe_ros.engine.actions.kinds import _check_action
+from ipe_ros.engine.question_io import new_object_from_dict, question_from_dict
 from tests.test_actions import MODEL, SETTINGS, STACK, box, scene
 
 CUBE = {"name": "new", "shape": {"type": "box", "extents_m": [0.1, 0.1, 0.1]}, "mass_kg": 1.0, "friction": 0.5,
@@ -19,7 +22,7 @@ CUBE = {"name": "new", "shape": {"type": "box", "extents_m": [0.1, 0.1, 0.1]}, "
 def _refused(data) -> str:
     started = time.perf_counter()
     with pytest.raises(ConfigError) as caught:
-        A.question_from_dict(data)
+        question_from_dict(data)
     assert time.perf_counter() - started < 1.0  # refused by counting, not by trying
     return str(caught.value)
 
@@ -38,31 +41,31 @@ def test_a_placement_search_beyond_the_budget_is_refused_before_any_geometry():
     region = A.Region((-0.5, 0.5), (-0.5, 0.5))
     with pytest.raises(ConfigError, match=r"^budget_s: one sample of these 401 variants takes up to ~\S+ s, more "
                                           r"than the budget of 1 s; ask fewer variants or raise the budget$"):
-        A.best_place(STACK, A.new_object_from_dict(CUBE, "object"), region, MODEL, SETTINGS, candidates=400,
+        A.best_place(STACK, new_object_from_dict(CUBE, "object"), region, MODEL, SETTINGS, candidates=400,
                      budget_s=1.0)
 
 
 def test_lowering_candidates_stops_at_the_deadline(monkeypatch):
-    monkeypatch.setattr(A, "PLACEMENT_GEOMETRY_S", 0.0)  # let the estimate pass; the deadline must catch it
-    real = A._Lowering.height_m
+    monkeypatch.setattr(questions, "PLACEMENT_GEOMETRY_S", 0.0)  # let the estimate pass; the deadline must catch it
+    real = questions._Lowering.height_m
 
     def slow(self, *args):
         time.sleep(0.1)
         return real(self, *args)
 
-    monkeypatch.setattr(A._Lowering, "height_m", slow)
+    monkeypatch.setattr(questions._Lowering, "height_m", slow)
     spots = [(0.6 + 0.01 * i, 0.0, 0.0) for i in range(40)]
     started = time.perf_counter()
     with pytest.raises(ConfigError, match=r"^budget_s: lowering 40 candidate placements onto the scene took the "
                                           r"whole budget of 1 s \(\d+ done\); ask fewer candidates or raise the budget$"):
-        A.place_at(STACK, A.new_object_from_dict(CUBE, "object"), spots, MODEL, SETTINGS, budget_s=1.0)
+        A.place_at(STACK, new_object_from_dict(CUBE, "object"), spots, MODEL, SETTINGS, budget_s=1.0)
     assert time.perf_counter() - started < 1.5
 
 
 def test_lowering_in_one_world_gives_the_heights_of_one_world_per_spot():
-    body = A.new_object_from_dict(CUBE, "object")
+    body = new_object_from_dict(CUBE, "object")
     spots = [(0.0, 0.0, 0.0), (0.05, 0.02, 0.7), (0.6, 0.0, 0.0)]  # on the stack, tilted, on the floor
-    lowered = A._lowered(STACK, body, spots, A._Deadline(None))
+    lowered = questions._lowered(STACK, body, spots, questions._Deadline(None))
     assert [b.position_m[2] for b in lowered] == [A.resting_height_m(STACK, body, x, y, b.orientation_xyzw)
                                                   for (x, y, _), b in zip(spots, lowered)]
     assert lowered[0].position_m[2] == pytest.approx(0.45, abs=1e-3) and lowered[2].position_m[2] == pytest.approx(
@@ -88,7 +91,7 @@ def test_a_push_whose_implied_spin_exceeds_what_a_scene_may_start_with_is_refuse
                                           r"to \S+ rad/s, more than the 1000 rad/s a scene may start with; push "
                                           r"nearer its centre of mass or slower$"):
         A.push(small, [A.Push("chip", (50.0, 0.0, 0.0), corner)], MODEL, SETTINGS)
-    A._check_action(small, A.Push("chip", (0.5, 0.0, 0.0), corner), "push")  # slowly there: allowed
+    _check_action(small, A.Push("chip", (0.5, 0.0, 0.0), corner), "push")  # slowly there: allowed
 
 
 def test_a_removal_of_no_object_is_refused():
@@ -108,7 +111,7 @@ def test_a_clearing_order_spends_one_budget_over_all_its_steps(monkeypatch):
         time.sleep(0.6)
         return real(*args, **kw)
 
-    monkeypatch.setattr(A, "ask", slow)  # each step's removals
+    monkeypatch.setattr(questions, "ask", slow)  # each step's removals
     started = time.perf_counter()
     cut = A.clear_order(tall, MODEL, SETTINGS, budget_s=1.0)
     assert time.perf_counter() - started < 2.5  # before: each of the 3 steps had its own budget

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..engine.disjoint import DisjointSets
 from ..engine.generators import convex_hull
 from ..engine.perturb import dynamic_masses
 from ..engine.scene import Body, Scene, Table, box_corners, quaternion_to_matrix, support_top_below
@@ -128,22 +129,12 @@ def subtowers(scene: Scene) -> list[tuple[Body, ...]]:
     """Groups of dynamic boxes connected by contact (paper: disjoint, non-contacting subsets)."""
     boxes = scene.dynamic_objects
     tolerance = CONTACT_TOLERANCE_FRACTION * min(min(b.extents_m) for b in boxes)
-    parent = list(range(len(boxes)))
-
-    def find(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
+    sets = DisjointSets(len(boxes))
     for i in range(len(boxes)):
         for j in range(i + 1, len(boxes)):
             if _obb_gap(boxes[i], boxes[j]) <= tolerance:
-                parent[find(i)] = find(j)
-    groups: dict[int, list[Body]] = {}
-    for i, box in enumerate(boxes):
-        groups.setdefault(find(i), []).append(box)
-    return [tuple(g) for g in groups.values()]
+                sets.union(i, j)
+    return [tuple(boxes[i] for i in members) for members in sets.groups().values()]
 
 
 def _com(boxes: tuple[Body, ...], masses: np.ndarray) -> np.ndarray:

@@ -1,0 +1,195 @@
+"""What each variant does to the scene, over all samples and over those in which the scene as it
+is stands; a question's answers together."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import ModelConfig
+from ..estimate import circular_mean, wilson_interval
+from ..perturb import is_deterministic
+from ..scene import Scene
+from .kinds import Action, Place, Push
+from .variants import VariantResult
+
+
+# -- the answers ----------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class VariantAnswer:
+    """What one variant of a question does to the scene.
+
+    any_fall_probability: P(at least one object falls), objects the action removed not counted;
+        with its 95% Wilson interval.
+    object_fall_probability: per remaining (or added) object.
+    simulated: False when the answer was read from the scene's own samples because the action
+        cannot change anything (a removal that nothing rests on).
+    samples / failed_samples: samples used / samples whose rollout failed (budget cuts are neither).
+    """
+
+    label: str
+    action: Action
+    any_fall_probability: float | None
+    any_fall_probability_ci95: tuple[float, float] | None
+    object_fall_probability: dict[str, float]
+    direction_rad: float | None
+    samples: int
+    failed_samples: int
+    simulated: bool = True
+    not_simulated: tuple[str, ...] = ()  # objects the action cannot reach, left out of its rollouts
+    #: per object, P(it falls with the action and would not have without): sample s of the variant
+    #: against sample s of the scene as is (common random numbers make this pairing meaningful)
+    caused_fall_probability: dict[str, float] | None = None
+    #: the same answer over only the samples in which the scene as it is stands (nothing falls without
+    #: the action): what the action does, apart from what falls anyway; None without an "as is" variant
+    given_stands: "GivenStands | None" = None
+    #: per object, P(it ends off the table: its centre below the top); asked with fell_off
+    fell_off_probability: dict[str, float] | None = None
+    any_fell_off_probability: float | None = None
+    #: answered sequentially (``decide.Sequential``): what the rule decided ("safe", "unsafe",
+    #: "ranked out", "best"; None: undecided) and why sampling stopped ("decided", "cap", "budget");
+    #: the variant was then simulated only in samples where the scene as it is stands, so its
+    #: probabilities are over those (equal to ``given_stands``)
+    decision: str | None = None
+    stopped_by: str | None = None
+    samples_drawn: int | None = None  # samples 0..n-1 were drawn for it (it ran in those that stood)
+    #: asked with contact pairs: per pair "A:B", P(they touch within the horizon), its 95% interval,
+    #: and the median first-contact time over the samples in which they touch (engine/query/contact.py)
+    contact_probability: dict[str, float] | None = None
+    contact_probability_ci95: dict[str, list[float]] | None = None
+    contact_time_s: dict[str, float | None] | None = None
+
+    def to_dict(self) -> dict:
+        off = {} if self.fell_off_probability is None else {
+            "fell_off_probability": self.fell_off_probability, "any_fell_off_probability": self.any_fell_off_probability}
+        return {"label": self.label, "any_fall_probability": self.any_fall_probability,
+                "any_fall_probability_ci95": _listed(self.any_fall_probability_ci95),
+                "object_fall_probability": self.object_fall_probability, "direction_rad": self.direction_rad,
+                "samples": self.samples, "failed_samples": self.failed_samples, "simulated": self.simulated,
+                "not_simulated": list(self.not_simulated), "caused_fall_probability": self.caused_fall_probability,
+                "given_stands": None if self.given_stands is None else self.given_stands.to_dict(), **off,
+                **({} if self.stopped_by is None else {"decision": self.decision, "stopped_by": self.stopped_by,
+                                                       "samples_drawn": self.samples_drawn}),
+                **({} if self.contact_probability is None else {
+                    "contact_probability": self.contact_probability,
+                    "contact_probability_ci95": self.contact_probability_ci95, "contact_time_s": self.contact_time_s})}
+
+
+@dataclass(frozen=True)
+class GivenStands:
+    """A variant's answer conditioned on the scene standing as it is: over the ``samples`` samples in
+    which nothing fell without the action (common random numbers pair sample s of every variant),
+    P(anything falls with the action) with its 95% Wilson interval, and per object. None values when
+    no sample stood (the scene falls by itself whatever is done)."""
+
+    samples: int
+    any_fall_probability: float | None
+    any_fall_probability_ci95: tuple[float, float] | None
+    object_fall_probability: dict[str, float]
+
+    def to_dict(self) -> dict:
+        return {"samples": self.samples, "any_fall_probability": self.any_fall_probability,
+                "any_fall_probability_ci95": _listed(self.any_fall_probability_ci95),
+                "object_fall_probability": self.object_fall_probability}
+
+
+def _listed(interval: tuple[float, float] | None) -> list[float] | None:
+    """An interval as JSON writes it."""
+    return None if interval is None else list(interval)
+
+
+def _draws_noise(scene: Scene, action: Action, model: ModelConfig) -> bool:
+    """The action has randomness of its own: a push's uncertainty, a placed object's noise."""
+    if isinstance(action, Push):
+        return bool(action.direction_sigma_rad or action.speed_sigma_fraction)
+    if isinstance(action, Place):
+        return not is_deterministic(dataclasses.replace(scene, objects=(action.body,)), model)
+    return False
+
+
+def _aggregate(label: str, action: Action, results: list[VariantResult], simulated: bool = True, *,
+               deterministic: bool = False) -> VariantAnswer:
+    """``deterministic``: nothing was drawn, so the one sample's answer is exact (a point, not an interval)."""
+    ok = [r for r in results if r.error is None]
+    failed = [r for r in results if r.error is not None and not r.budget_stopped and not r.skipped]
+    if not ok:
+        return VariantAnswer(label, action, None, None, {}, None, 0, len(failed), simulated)
+    names = ok[0].names
+    fallen = np.array([r.fallen for r in ok], bool)
+    anything = float(fallen.any(axis=1).mean())
+    directions = np.array([r.direction_rad for r in ok if r.direction_rad is not None])
+    interval = (anything, anything) if deterministic else wilson_interval(anything, len(ok))
+    off = {}
+    if ok[0].fell_off is not None:
+        fell_off = np.array([r.fell_off for r in ok], bool)
+        off = dict(fell_off_probability={n: float(p) for n, p in zip(names, fell_off.mean(axis=0))},
+                   any_fell_off_probability=float(fell_off.any(axis=1).mean()))
+    if ok[0].contact is not None:
+        off.update(_contact_answer(ok, deterministic))
+    return VariantAnswer(label, action, anything, interval,
+                         {n: float(p) for n, p in zip(names, fallen.mean(axis=0))},
+                         circular_mean(directions), len(ok), len(failed), simulated, **off)
+
+
+def _contact_answer(ok: list[VariantResult], deterministic: bool) -> dict:
+    probability, interval, time_s = {}, {}, {}
+    for key in ok[0].contact:
+        times = [r.contact[key] for r in ok]
+        touched = [t for t in times if t is not None]
+        p = len(touched) / len(ok)
+        probability[key] = p
+        interval[key] = [p, p] if deterministic else list(wilson_interval(p, len(ok)))
+        time_s[key] = float(np.median(touched)) if touched else None
+    return dict(contact_probability=probability, contact_probability_ci95=interval, contact_time_s=time_s)
+
+
+def _stood(alone: VariantResult) -> bool:
+    """The scene as it is ran without failing and nothing in it fell."""
+    return alone.error is None and not bool(np.any(alone.fallen))
+
+
+def _aggregate_given(results: list[VariantResult], *, deterministic: bool) -> GivenStands:
+    """A variant's results over the samples in which the scene stands as it is."""
+    answer = _aggregate("", None, results, deterministic=deterministic)
+    return GivenStands(answer.samples, answer.any_fall_probability, answer.any_fall_probability_ci95,
+                       answer.object_fall_probability)
+
+
+@dataclass(frozen=True)
+class Answers:
+    """The variants of one question, in the order asked, and what they cost."""
+
+    scene: str
+    variants: tuple[VariantAnswer, ...]
+    samples_requested: int
+    wall_s: float
+    stopped_by: str = "samples"
+    #: label -> [(sample index, the variant's result with its trajectory)] for recorded samples
+    recorded: dict = dataclasses.field(default_factory=dict, repr=False, compare=False)
+    #: the scene left alone (None when no variant is "as is")
+    alone: "Alone | None" = None
+
+    def to_dict(self) -> dict:
+        return {"scene": self.scene, "variants": [v.to_dict() for v in self.variants],
+                "samples_requested": self.samples_requested, "wall_s": self.wall_s, "stopped_by": self.stopped_by,
+                "alone": None if self.alone is None else self.alone.to_dict()}
+
+
+@dataclass(frozen=True)
+class Alone:
+    """The scene left alone: P(anything falls by itself) with its 95% interval, the samples in which
+    it stands (those every ``given_stands`` answer is over), and ``unstable``: it falls by itself
+    more often than ``safe_below`` even at the low end of the interval. Whatever the robot does
+    then, things may fall that its action did not make fall."""
+
+    any_fall_probability: float | None
+    any_fall_probability_ci95: tuple[float, float] | None
+    samples_standing: int
+    unstable: bool
+
+    def to_dict(self) -> dict:
+        return {"any_fall_probability": self.any_fall_probability,
+                "any_fall_probability_ci95": _listed(self.any_fall_probability_ci95),
+                "samples_standing": self.samples_standing, "unstable": self.unstable}

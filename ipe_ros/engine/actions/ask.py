@@ -1,0 +1,257 @@
+"""Answering every variant of a question with common random numbers, in one map or sequentially
+until decided (``decide``)."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Callable
+
+import numpy as np
+
+from ..config import ModelConfig, QuerySpec, SimSettings
+from ..decide import Sequential, Tally
+from ..errors import ConfigError, shown
+from ..perturb import is_deterministic, position_sigmas_m
+from ..sampler import MapFn, check_budget, rollout_cost
+from ..scene import Scene, Table, validate_scene
+from .answers import Alone, Answers, _aggregate, _aggregate_given, _draws_noise, _stood
+from .geometry import _reached, _regions, groups
+from .kinds import DEFAULT_SAFE_BELOW, Action, Place, Remove, _check_action, _label
+from .variants import VariantResult, VariantTask, run_variants
+
+
+def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSettings, seed: int = 0,
+        map_fn: MapFn | None = None, budget_s: float | None = None,
+        fall_threshold_fraction: float = 0.125, record_every: int = 0, record_samples: int = 0,
+        directions: bool = False, fell_off: bool = False, sequential: Sequential | None = None,
+        on_progress: Callable[[dict], None] | None = None, contact: tuple[tuple[str, str], ...] = ()) -> Answers:
+    """Answer every variant with common random numbers (see the module docstring). Removals that
+    cannot change anything are answered from the scene's own samples (a variant "as is" is added
+    for them when it is not asked). ``record_every`` / ``record_samples``: keep the trajectories of
+    the first samples of every simulated variant (for rerun), in ``Answers.recorded``.
+    ``directions``: also where things fall (rollouts then run until everything rests; without it a
+    rollout ends as soon as what falls is decided). ``fell_off``: also which objects end off the
+    table (their centre below its top; the scene must stand on a table). ``sequential``: answer
+    in batches until its rule decides each variant, simulating variants only in samples where the
+    scene as it is stands (``decide``); needs an "as is" variant, ignored without noise.
+    ``on_progress``: called after each batch of a sequential answer with what is decided so far
+    (``progress_dict``); whatever it raises ends the question there (a cancellation). ``contact``:
+    also, per variant, P(A touches B) for these (A, B) pairs (B may be "support"); every variant is
+    then simulated (none is read from the scene as it is)."""
+    validate_scene(scene)
+    check_budget(budget_s)
+    for i, action in enumerate(actions):
+        _check_action(scene, action, f"actions[{i}]")
+    if fell_off and not isinstance(scene.support, Table):
+        raise ConfigError("fell_off", f"{scene.name!r} stands on a floor: nothing can fall off it (ask it of a "
+                                      "scene on a table)")
+    _check_contact(scene, actions, contact)
+    margin = 3 * float(position_sigmas_m(scene, model).max(initial=0.0))  # noise can close gaps this wide
+    everything = frozenset(b.name for b in scene.dynamic_objects)
+    # a pushed support can slide every group into every other
+    scene_groups = [everything] if model.pushes else groups(scene, margin)
+    # a removal that nothing else is within reach of cannot change anything: the rest of the scene does
+    # what it does anyway (read from "as is"). Touching is not enough to be left out: a counterweight
+    # with nothing on it still holds down what it rests on, and a gap closes when the object above drops.
+    trivial = [isinstance(a, Remove) and _reached(scene_groups, a.names) <= set(a.names) and not contact
+               for a in actions]
+    simulated_actions = [a for a, t in zip(actions, trivial) if not t]
+    if any(trivial) and None not in simulated_actions:
+        simulated_actions.append(None)
+    if budget_s is not None:
+        cost = rollout_cost(scene, model, settings)
+        if cost.seconds * max(1, len(simulated_actions)) > budget_s:
+            raise ConfigError("budget_s", f"one sample of these {len(simulated_actions)} variants takes up to "
+                                          f"~{cost.seconds * len(simulated_actions):.3g} s, more than the budget of "
+                                          f"{budget_s:g} s; ask fewer variants or raise the budget")
+    regions = _regions(scene, simulated_actions, margin, scene_groups, model.pushes)
+    asked = {"fall"} | ({"direction"} if directions else set()) | ({"bump"} if fell_off else set()) \
+        | ({"contact"} if contact else set())
+    query = QuerySpec(queries=frozenset(asked), fall_threshold_fraction=fall_threshold_fraction,
+                      contact_pairs=tuple(contact))
+    # no noise anywhere (scene, model, nor an action's own): one rollout per variant says everything
+    deterministic = is_deterministic(scene, model) and not any(_draws_noise(scene, a, model)
+                                                               for a in simulated_actions)
+    k = 1 if deterministic else model.samples
+    deadline = None if budget_s is None else time.time() + budget_s
+    seeds = np.random.SeedSequence(seed).spawn(k)
+
+    def tasks(indices, variants: list[int]) -> list[VariantTask]:
+        return [VariantTask(scene=scene, model=model, settings=settings, query=query, index=i, seed=seeds[i],
+                            actions=tuple(simulated_actions[j] for j in variants), deadline_unix_s=deadline,
+                            regions=tuple(regions[j] for j in variants),
+                            record_every=record_every if i < record_samples else 0)
+                for i in indices]
+
+    start = time.perf_counter()
+    as_is = simulated_actions.index(None) if None in simulated_actions else None
+    decisions: dict[str, tuple[str | None, str, int]] = {}
+    if sequential is None or deterministic or as_is is None:
+        per_sample = _run(tasks(range(k), list(range(len(simulated_actions)))), map_fn, scene)
+    else:
+        per_sample, decisions = _run_sequentially(tasks, simulated_actions, as_is, k, sequential, map_fn, scene,
+                                                  on_progress)
+    by_variant = {_label(a): dataclasses.replace(
+        _aggregate(_label(a), a, [s[j] for s in per_sample], deterministic=deterministic),
+        not_simulated=() if regions[j] is None else tuple(sorted(everything - regions[j])))
+        for j, a in enumerate(simulated_actions)}
+    if as_is is not None:
+        stands = [_stood(s[as_is]) for s in per_sample]
+        for j, a in enumerate(simulated_actions):
+            by_variant[_label(a)] = dataclasses.replace(
+                by_variant[_label(a)], caused_fall_probability=_caused(per_sample, j, as_is),
+                given_stands=_aggregate_given(
+                    [s[j] for s, ok in zip(per_sample, stands) if ok], deterministic=deterministic))
+    for label, (decision, why, drawn) in decisions.items():
+        by_variant[label] = dataclasses.replace(by_variant[label], decision=decision, stopped_by=why,
+                                                samples_drawn=drawn)
+    answers = []
+    for action, is_trivial in zip(actions, trivial):
+        if not is_trivial:
+            answers.append(by_variant[_label(action)])
+            continue
+        # nothing rests on it: the rest of the scene does what it does anyway, read from "as is"
+        others = [j for j, n in enumerate(b.name for b in scene.dynamic_objects) if n not in action.names]
+        results = [VariantResult(tuple(r.names[j] for j in others), None if r.fallen is None else r.fallen[others],
+                                 r.direction_rad, r.error, r.budget_stopped,
+                                 fell_off=None if r.fell_off is None else r.fell_off[others])
+                   for r in (s[as_is] for s in per_sample)]
+        answers.append(dataclasses.replace(
+            _aggregate(_label(action), action, results, deterministic=deterministic), simulated=False,
+            caused_fall_probability={n: 0.0 for n in results[0].names},
+            given_stands=_aggregate_given([r for r, ok in zip(results, stands) if ok], deterministic=deterministic)))
+    stopped = "budget" if any(r.budget_stopped for s in per_sample for r in s) else "samples"
+    recorded = {_label(a): [(i, s[j]) for i, s in enumerate(per_sample) if s[j].trajectory is not None]
+                for j, a in enumerate(simulated_actions)} if record_every else {}
+    scene_alone = None
+    if as_is is not None:
+        alone = by_variant["as_is"]
+        scene_alone = Alone(alone.any_fall_probability, alone.any_fall_probability_ci95, sum(stands),
+                           alone.any_fall_probability_ci95 is not None
+                           and alone.any_fall_probability_ci95[0] > DEFAULT_SAFE_BELOW)
+    return Answers(scene.name, tuple(answers), k, time.perf_counter() - start, stopped, recorded, scene_alone)
+
+
+def _check_contact(scene: Scene, actions: list[Action], pairs) -> None:
+    """Contact pairs name objects of the scene, placed objects, or the support."""
+    known = {b.name for b in scene.objects} | {a.body.name for a in actions if isinstance(a, Place)} | {"support"}
+    for a, b in pairs:
+        for name in (a, b):
+            if name not in known:
+                raise ConfigError("contact", f"{a}:{b}: no object {shown(name)} in scene {shown(scene.name)} or "
+                                             f"placed by the question; objects: {', '.join(sorted(known))}")
+        if a == b:
+            raise ConfigError("contact", f"{a}:{b}: an object always touches itself; name two")
+
+
+def _run(tasks: list[VariantTask], map_fn: MapFn | None, scene: Scene) -> list[list[VariantResult]]:
+    if map_fn is None:
+        return [run_variants(t) for t in tasks]
+    names = tuple(b.name for b in scene.dynamic_objects)
+    lost = lambda task, reason: [  # noqa: E731
+        VariantResult(names, None, None, f"WorkerLost: {reason}", worker_lost=True) for _ in task.actions]
+    return map_fn(run_variants, tasks, on_lost=lost)
+
+
+#: variants per task in a sequential batch: enough to amortise the shared draw and separation each
+#: task redoes, few enough that standing samples' variants spread over the workers
+VARIANTS_PER_TASK = 4
+
+
+def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequential: Sequential, map_fn: MapFn | None,
+                      scene: Scene, on_progress: Callable[[dict], None] | None = None
+                      ) -> tuple[list[list[VariantResult]], dict[str, tuple[str | None, str, int]]]:
+    """Batches of samples until the rule has decided every variant or k samples are drawn. Each
+    batch runs the scene as it is first, then the undecided variants of the samples in which it
+    stood, a few variants per task (the work of one sample varies too much - one rollout or all of
+    them - to spread by samples); a variant not run in a sample is a skipped result. Returns every
+    sample's results (in ``actions`` order) and, per variant label, (decision, why it stopped,
+    samples drawn for it)."""
+    names = tuple(b.name for b in scene.dynamic_objects)
+    others = [j for j in range(len(actions)) if j != as_is]
+    active = set(others)
+    decisions: dict[str, tuple[str | None, str, int]] = {}
+    per_sample: list[list[VariantResult]] = []
+    # counted as the batches come (recounting every sample at every look would grow with k x looks)
+    counts = {_label(actions[j]): _Counts() for j in others}
+    while len(per_sample) < k and active:
+        batch = range(len(per_sample), min(k, len(per_sample) + sequential.batch_samples))
+        rows = {}
+        for i, (alone,) in zip(batch, _run(tasks(batch, [as_is]), map_fn, scene)):
+            rows[i] = [VariantResult(names, None, None, "skipped: the scene fell as it is" if j in active
+                                     else "skipped: decided", skipped=True) for j in range(len(actions))]
+            rows[i][as_is] = alone
+        standing = [i for i in batch if _stood(rows[i][as_is])]
+        running = sorted(active)
+        chunks = [running[c:c + VARIANTS_PER_TASK] for c in range(0, len(running), VARIANTS_PER_TASK)]
+        jobs = [(i, chunk) for i in standing for chunk in chunks]
+        work = [task for i, chunk in jobs for task in tasks([i], chunk)]
+        for (i, chunk), results in zip(jobs, _run(work, map_fn, scene) if work else []):
+            for j, result in zip(chunk, results):
+                rows[i][j] = result
+        for i in batch:
+            per_sample.append(rows[i])
+            for j in running:
+                counts[_label(actions[j])].add(rows[i][j])
+        if any(r.budget_stopped for i in batch for r in rows[i]):
+            break
+        tallies = {label: c.tally() for label, c in counts.items()}
+        labels = {_label(actions[j]): j for j in active}
+        for label, decision in sequential.rule.decide(tallies, set(labels)).items():
+            decisions[label] = (decision, "decided", len(per_sample))
+            active.discard(labels[label])
+        if on_progress is not None:
+            on_progress(progress_dict(scene.name, k, len(per_sample), decisions,
+                                      [_label(actions[j]) for j in sorted(active)], tallies))
+    budget = any(r.budget_stopped for row in per_sample for r in row)
+    for j in active:
+        decisions[_label(actions[j])] = (None, "budget" if budget else "cap", len(per_sample))
+    return per_sample, decisions
+
+
+def progress_dict(scene: str, k: int, drawn: int, decisions: dict, undecided: list[str],
+                  tallies: dict[str, Tally]) -> dict:
+    """A partial answer: the samples drawn so far (of at most k), each decided variant's decision and
+    the samples it used, and the variants still sampling with their running P(anything falls)."""
+    def running(label):
+        t = tallies[label]
+        return {"label": label, "samples": t.samples,
+                "any_fall_probability": None if t.samples == 0 else t.any_falls / t.samples}
+    return {"scene": scene, "samples_requested": k, "samples_drawn": drawn,
+            "decided": [{"label": label, "decision": d, "samples_drawn": n, "samples": tallies[label].samples}
+                        for label, (d, _, n) in decisions.items()],
+            "undecided": [running(label) for label in undecided]}
+
+
+class _Counts:
+    """A variant's outcomes so far (skipped and failed samples left out), as a decide.Tally."""
+
+    def __init__(self):
+        self.samples, self.any_falls, self.object_falls = 0, 0, {}
+
+    def add(self, result: VariantResult) -> None:
+        if result.error is not None:
+            return
+        self.samples += 1
+        self.any_falls += bool(np.any(result.fallen))
+        for name, fell in zip(result.names, result.fallen):
+            self.object_falls[name] = self.object_falls.get(name, 0) + bool(fell)
+
+    def tally(self) -> Tally:
+        return Tally(self.samples, self.any_falls, dict(self.object_falls))
+
+
+def _caused(per_sample: list[list[VariantResult]], variant: int, as_is: int) -> dict[str, float] | None:
+    """Per object of the variant: the fraction of paired samples in which it fell with the action
+    and not in the scene as is."""
+    pairs = [(s[variant], s[as_is]) for s in per_sample if s[variant].error is None and s[as_is].error is None]
+    if not pairs:
+        return None
+    names = pairs[0][0].names
+    counts = dict.fromkeys(names, 0)
+    for with_action, without in pairs:
+        before = dict(zip(without.names, without.fallen))
+        for name, fell in zip(with_action.names, with_action.fallen):
+            counts[name] += bool(fell) and not before.get(name, False)
+    return {n: c / len(pairs) for n, c in counts.items()}

@@ -1,0 +1,186 @@
+"""One sample of every variant of a question: the shared draw (the s-th child seed's noisy,
+separated scene), then one rollout per action, an action's own randomness on a second stream."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+import traceback
+import zlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import queries, simulation
+from ..config import ModelConfig, QuerySpec, SimSettings
+from ..errors import BudgetExceeded, PhysicsError
+from ..perturb import draw_sample_inputs
+from ..rollout import SampleTask, _decided_heights, collapse_heights, separated_world, watches_for
+from ..scene import Scene
+from ..shapes import rotation_matrix
+from .kinds import Action, Place, Push, Remove, _label
+
+
+# -- one sample of every variant ----------------------------------------------------------------------
+@dataclass(frozen=True)
+class VariantTask:
+    """Sample ``index`` of every variant: the shared draw, then one rollout per action."""
+
+    scene: Scene
+    model: ModelConfig
+    settings: SimSettings
+    query: QuerySpec
+    index: int
+    seed: np.random.SeedSequence
+    actions: tuple[Action, ...]
+    deadline_unix_s: float | None = None
+    #: per action, the dynamic objects worth simulating (None: all); the rest cannot be reached
+    regions: tuple[frozenset[str] | None, ...] | None = None
+    record_every: int = 0  # record trajectories every N ticks (rerun), 0: none
+
+
+@dataclass(frozen=True)
+class VariantResult:
+    """One variant of one sample: which objects fell (names in the variant's order), the direction."""
+
+    names: tuple[str, ...]
+    fallen: np.ndarray | None
+    direction_rad: float | None
+    error: str | None = None
+    budget_stopped: bool = False
+    worker_lost: bool = False  # its worker process died twice
+    trajectory: list | None = None  # (t, positions, orientations) frames when recorded
+    fell_off: np.ndarray | None = None  # ended off the table (asked with fell_off)
+    skipped: bool = False  # not run: the scene fell as it is, or the variant was already decided
+    contact: dict | None = None  # the contact query's first-contact times, by pair (asked with contact)
+
+
+def _action_rng(task: VariantTask, action: Action) -> np.random.Generator:
+    """The second stream: this action's own randomness, independent of the shared draw and keyed
+    by what the action is (not where it stands in the list), so asking it among other variants
+    gives the same answer."""
+    key = zlib.crc32(_label(action).encode("utf-8", "backslashreplace"))
+    return np.random.default_rng(np.random.SeedSequence(task.seed.entropy, spawn_key=task.seed.spawn_key + (1, key)))
+
+
+def _push_velocities(push: Push, rng: np.random.Generator, centre_m: np.ndarray, orientation: np.ndarray,
+                     inertia_kg_m2: np.ndarray, mass_kg: float) -> tuple[tuple, tuple]:
+    v = np.asarray(push.velocity_m_s, float)
+    speed, angle = float(np.linalg.norm(v)), math.atan2(v[1], v[0])
+    if push.direction_sigma_rad:
+        angle += push.direction_sigma_rad * rng.standard_normal()
+    if push.speed_sigma_fraction:
+        speed *= max(0.0, 1 + push.speed_sigma_fraction * rng.standard_normal())
+    v = np.array([speed * math.cos(angle), speed * math.sin(angle), 0.0])
+    if push.point_m is None:
+        return tuple(v), (0.0, 0.0, 0.0)
+    # an impulse J = m v at r from the centre of mass also spins the body: w = I^-1 (r x J)
+    r = np.asarray(push.point_m, float) - centre_m
+    rot = rotation_matrix(orientation)
+    inertia_world = rot @ np.diag(inertia_kg_m2) @ rot.T
+    spin = np.linalg.solve(inertia_world, np.cross(r, mass_kg * v))
+    return tuple(v), tuple(spin)
+
+
+def _simulate_variant(task: VariantTask, scene: Scene, positions, orientations, masses, push_direction: float,
+                      separate: bool) -> tuple[np.ndarray, np.ndarray, simulation.RolloutEnd]:
+    """Build ``scene`` at the given state, optionally separate it, simulate (phi values in turn: the
+    last one's end is returned; actions are asked with one phi in practice)."""
+    sub = SampleTask(scene=scene, model=task.model, settings=task.settings, query=task.query, index=task.index,
+                     seed=task.seed, deadline_unix_s=task.deadline_unix_s)
+    world = simulation.build_world(scene, positions, masses, task.settings, orientations_xyzw=orientations)
+    if separate:
+        simulation.depenetrate(world, task.settings)
+    initial, initial_orn = simulation.read_poses(world)
+    decided = _decided_heights(sub, initial)
+    collapse_below = collapse_heights(sub, initial)
+    end = None
+    for i, phi in enumerate(task.model.phi_m_s2):
+        if i > 0:
+            world = simulation.build_world(scene, initial, masses, task.settings, orientations_xyzw=initial_orn)
+        watches, end_when_watched = watches_for(scene, task.query, world)
+        end = simulation.simulate(world, scene, task.settings, simulation.Push(phi, push_direction,
+                                                                              task.model.push_duration_s),
+                                  decided=decided, collapse_below_z_m=collapse_below,
+                                  deadline_unix_s=task.deadline_unix_s, record_every=task.record_every,
+                                  watches=watches, end_when_watched=end_when_watched)
+    return initial, initial_orn, end
+
+
+def run_variants(task: VariantTask) -> list[VariantResult]:
+    """Sample ``task.index`` of every variant; never raises for physics trouble (a failed variant
+    carries its error)."""
+    names = tuple(b.name for b in task.scene.dynamic_objects)
+    if task.deadline_unix_s is not None and time.time() >= task.deadline_unix_s:
+        return [VariantResult(names, None, None, "BudgetExceeded: not started", True) for _ in task.actions]
+    rng = np.random.default_rng(task.seed)
+    inputs = draw_sample_inputs(task.scene, task.model, rng)
+    try:
+        shared, shared_orn = simulation.read_poses(separated_world(task.scene, task.settings, inputs))
+    except PhysicsError as exc:
+        return [VariantResult(names, None, None, f"PhysicsError: {exc}") for _ in task.actions]
+    return [_run_one(task, action, v, shared, shared_orn, inputs, names) for v, action in enumerate(task.actions)]
+
+
+def _run_one(task: VariantTask, action: Action, v: int, shared, shared_orn, inputs, names) -> VariantResult:
+    """One variant of the sample; its physics trouble is its own result, never the others'."""
+    region = None if task.regions is None else task.regions[v]
+    try:
+        return _one_variant(task, action, shared, shared_orn, inputs, region)
+    except BudgetExceeded as exc:
+        return VariantResult(names, None, None, f"BudgetExceeded: {exc}", True)
+    except PhysicsError as exc:
+        return VariantResult(names, None, None, f"PhysicsError: {exc}")
+    except Exception as exc:  # noqa: BLE001 - one variant's trouble must not end the others
+        return VariantResult(names, None, None, traceback.format_exception_only(type(exc), exc)[-1].strip())
+
+
+def _one_variant(task: VariantTask, action: Action, shared, shared_orn, inputs,
+                 region: frozenset[str] | None) -> VariantResult:
+    scene = task.scene
+    bodies = scene.dynamic_objects
+    positions, orientations, masses = shared, shared_orn, inputs.masses_kg
+    if region is not None:  # objects the action cannot reach are left out of the simulation
+        keep = np.array([b.name in region for b in bodies])
+        scene = dataclasses.replace(scene, objects=tuple(b for b in scene.objects if b.static or b.name in region))
+        bodies = scene.dynamic_objects
+        positions, orientations, masses = positions[keep], orientations[keep], masses[keep]
+        shared, shared_orn = positions, orientations
+    separate = False
+    if isinstance(action, Remove):
+        keep = np.array([b.name not in action.names for b in bodies])
+        scene = dataclasses.replace(scene, objects=tuple(b for b in scene.objects if b.name not in action.names))
+        positions, orientations, masses = shared[keep], shared_orn[keep], masses[keep]
+    elif isinstance(action, Place):
+        rng = _action_rng(task, action)
+        new = action.body
+        added = dataclasses.replace(scene, objects=(new,))
+        drawn = draw_sample_inputs(added, task.model, rng)  # the new object's own noise, second stream
+        scene = dataclasses.replace(scene, objects=scene.objects + (new,))
+        positions = np.vstack([shared, drawn.positions_m])
+        orientations = np.vstack([shared_orn, drawn.orientations_xyzw])
+        masses = np.concatenate([masses, drawn.masses_kg])
+        separate = True  # the new object may overlap what is there
+    elif isinstance(action, Push):
+        i = next(k for k, b in enumerate(bodies) if b.name == action.name)
+        world = simulation.build_world(scene, shared, masses, task.settings, orientations_xyzw=shared_orn)
+        inertia = world.inertia_kg_m2[i]
+        velocity, spin = _push_velocities(action, _action_rng(task, action), shared[i], shared_orn[i], inertia,
+                                          float(masses[i]))
+        pushed = dataclasses.replace(bodies[i], linear_velocity_m_s=velocity, angular_velocity_rad_s=spin)
+        scene = dataclasses.replace(scene, objects=tuple(pushed if b.name == action.name else b
+                                                         for b in scene.objects))
+    initial, _, end = _simulate_variant(task, scene, positions, orientations, masses, inputs.push_direction_rad,
+                                        separate)
+    variant_bodies = scene.dynamic_objects
+    smallest = np.array([b.smallest_extent_m for b in variant_bodies])
+    fallen = queries.fallen_mask(initial, end.positions_m, smallest, task.query.fall_threshold_fraction)
+    direction = queries.fall_direction_rad(initial, end.positions_m, fallen) if task.query.wants("direction") else None
+    fell_off = None
+    if task.query.wants("bump"):  # started above the table top, ended below it: beside or under the table
+        top = scene.support.top_height_m
+        fell_off = (initial[:, 2] >= top) & queries.fell_off_mask(end.positions_m, top)
+    contact = end.events["contact"]["first_s"] if task.query.wants("contact") else None
+    return VariantResult(tuple(b.name for b in variant_bodies), fallen, direction, trajectory=end.trajectory,
+                         fell_off=fell_off, contact=contact)

@@ -43,9 +43,10 @@ from .engine.fidelity import DEFAULT_CHECK, SelfCheck
 from .engine.generators import generate_tables, generate_towers, state_pair
 from .engine.perturb import is_deterministic
 from .engine.inputs import as_spelled, spelled
+from .engine.request import build_request
 from .engine.query import QUERIES
 from .engine.query.contact import parse_pair
-from .engine.sampler import check_budget, check_request
+from .engine.sampler import check_request
 from .engine.scene_io import RefusedScene, write_scenes
 from .engine.zoo import FAMILIES, scene_zoo
 
@@ -268,7 +269,6 @@ def format_table(predictions: list[Prediction]) -> str:
 
 def describe_fidelity(p: Prediction) -> str:
     """One line on what the self-check did (engine.fidelity)."""
-    report = p.self_check or {}
     text = {"verified": "verified against the reference physics",
             "escalated": "the reference physics disagreed with the fast one: every sample rerun at the reference",
             "contradicted": "the reference physics disagreed and the budget ran out before it could answer: "
@@ -337,8 +337,6 @@ def _perceive_depth(args, scenes, model):
 def cmd_predict(args) -> int:
     refused: list[RefusedScene] = []  # scenes of the file that cannot be answered: reported, the rest answered
     scenes = load_scenes(args.path, towers=args.tower, on_refused=refused.append)
-    phi = (0.0,) if args.ground_truth else args.phi
-    sigma = 0.0 if args.ground_truth else args.sigma
     vision = None
     if args.perception == "vision":
         from .engine.vision import VisionSettings
@@ -361,29 +359,14 @@ def cmd_predict(args) -> int:
         raise ConfigError("--perception", "depth perception needs --depth IMAGE, --camera-info YAML and --camera-pose")
     if args.perception != "depth" and any(v is not None for v in depth_inputs):
         raise ConfigError("--perception", "--depth, --camera-info, --camera-pose and --depth-rrd need --perception depth")
-    model = ModelConfig(sigma_m=sigma, phi_m_s2=phi, mu=args.mu, samples=args.samples, perception=args.perception,
-                        vision=vision, object_noise=not args.ground_truth,
-                        force_direction_rad=None if args.force_direction is None else math.radians(args.force_direction))
-    queries = args.query | ({"contact"} if args.contact else set())
-    query = QuerySpec(queries=frozenset(queries), contact_pairs=tuple(args.contact or ()))
-    sim = preset(args.preset)
-    if args.horizon is not None:
-        sim = sim.changed(horizon_s=args.horizon)
-    if args.until_rest:
-        sim = sim.changed(early_stop={"enabled": True})
-    stop = None
-    if args.ci_width is not None or args.deadline is not None:
-        stop = AdaptiveStop(ci_width=args.ci_width, deadline_s=args.deadline)
-    if args.seed < 0:
-        raise ConfigError("--seed", f"must be >= 0, got {args.seed}")
-    try:
-        check = SelfCheck(enabled=not args.no_self_check, verify_samples=args.verify_samples)
-    except ConfigError as exc:
-        raise ConfigError("--verify-samples", exc.problem) from None
-    try:
-        check_budget(args.budget)
-    except ConfigError as exc:
-        raise ConfigError("--budget", exc.problem) from None
+    # one request from the options (engine.request); its errors read as the options (main: as_spelled)
+    request = build_request(samples=args.samples, sigma_m=args.sigma, phi_m_s2=args.phi,
+                            force_direction_deg=args.force_direction, mu=args.mu, ground_truth=args.ground_truth,
+                            perception=args.perception, vision=vision, queries=args.query, contact=args.contact or (),
+                            preset_name=args.preset, horizon_s=args.horizon, until_rest=args.until_rest,
+                            seed=args.seed, ci_width=args.ci_width, deadline_s=args.deadline, budget_s=args.budget,
+                            self_check=not args.no_self_check, verify_samples=args.verify_samples)
+    model, sim, query, stop, check = request.model, request.settings, request.query, request.stop, request.check
     if args.vision_rrd is not None and len(scenes) != 1:
         raise ConfigError("--vision-rrd", f"records one scene, but {args.path} holds {len(scenes)}; choose one with --tower")
     if args.png is not None and len(scenes) != 1:
@@ -422,7 +405,7 @@ def cmd_predict(args) -> int:
                          perceived, args.scheduler, check)
     else:
         k = 1 if all(is_deterministic(s, model) for s in scenes) else args.samples
-        print(f"sigma = {sigma:g} m, phi = {','.join(f'{v:g}' for v in phi)} m/s^2, mu = {args.mu}, "
+        print(f"sigma = {model.sigma_m:g} m, phi = {','.join(f'{v:g}' for v in model.phi_m_s2)} m/s^2, mu = {args.mu}, "
               f"k = {k}, preset = {sim.name}, seed = {args.seed}"
               + (f", perception = vision ({vision.chain_samples} MH samples, {vision.resolution_px} px)"
                  if vision is not None else "")

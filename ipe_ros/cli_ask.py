@@ -19,10 +19,11 @@ import json
 import math
 import os
 
-from .engine import ConfigError, ModelConfig, WorkerPool, load_scenes, preset
+from .engine import ConfigError, WorkerPool, load_scenes
 from .engine import actions as A
 from .engine.config import DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_SIGMA_M, PRESETS
 from .engine.inputs import as_spelled
+from .engine.request import build_request
 from .engine.question_io import new_object_from_dict
 from .engine.query.contact import parse_pair
 
@@ -155,9 +156,10 @@ def cmd_ask(args) -> int:
     scene = _scene(args)
     if args.samples < 1:
         raise ConfigError("--samples", f"must be >= 1, got {args.samples}")
-    model = ModelConfig(sigma_m=0.0 if args.ground_truth else args.sigma, samples=args.samples,
-                        object_noise=not args.ground_truth)
-    settings = preset(args.preset)
+    # the model and settings as ipe predict builds them (engine.request)
+    request = build_request(samples=args.samples, sigma_m=args.sigma, ground_truth=args.ground_truth,
+                            preset_name=args.preset, seed=args.seed, budget_s=args.budget)
+    model, settings = request.model, request.settings
     if args.workers < 0:
         raise ConfigError("--workers", f"must be >= 0, got {args.workers}")
     pool = WorkerPool(min(args.workers, args.samples)) if args.workers > 0 else None

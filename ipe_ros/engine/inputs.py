@@ -42,6 +42,7 @@ INPUTS: tuple[Input, ...] = (
     Input("queries", "--query", "queries", "names", "what to answer (engine/query)"),
     Input("contact", "--contact", "contact_pairs", "A:B pairs", "the contact query's pairs"),
     Input("ci_width", "--ci-width", "target_ci_width", "probability", "anytime sampling: target interval width"),
+    Input("self_check", "--no-self-check", "self_check", "flag", "check the fast physics against the reference"),
     Input("deadline_s", "--deadline", "deadline_s", "s", "anytime sampling: stop drawing samples by then"),
     Input("budget_s", "--budget", "budget_s", "s", "the most wall seconds one prediction may take"),
     Input("verify_samples", "--verify-samples", "verify_samples", "count", "samples rerun at the reference"),

@@ -15,11 +15,12 @@ from typing import Any, Mapping
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 
-from ..engine import ALL_QUERIES, PRESETS, AdaptiveStop, ConfigError, ModelConfig, QuerySpec, preset
+from ..engine import ALL_QUERIES, PRESETS, ConfigError
 from ..engine.config import (DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M, anytime_batch_size,
                              default_workers)
-from ..engine.fidelity import DEFAULT_CHECK, SelfCheck
+from ..engine.fidelity import DEFAULT_CHECK
 from ..engine.inputs import as_spelled
+from ..engine.request import build_request
 from ..engine.query.contact import parse_pair
 from ..engine.scene import DEFAULT_MAX_OBJECTS
 from ..service import ServiceConfig
@@ -152,60 +153,40 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
     if values["scene_reliability"] not in SCENE_RELIABILITY:
         raise ConfigError("scene_reliability", f"must be one of {', '.join(SCENE_RELIABILITY)}, got "
                                                f"{values['scene_reliability']!r}")
-    budget = float(values["budget_s"])
-    if not (math.isfinite(budget) and budget > 0):
-        raise ConfigError("budget_s", f"must be a finite number of seconds > 0, got {budget!r}")
     direction = float(values["force_direction_deg"])
     if math.isinf(direction):
         raise ConfigError("force_direction_deg", f"must be finite degrees or NaN (any direction), got {direction}")
-    queries = values["queries"]
-    text = str(values["contact_pairs"]).strip()
-    pairs = tuple(parse_pair(part, "contact_pairs") for part in text.split(",")) if text else ()
-    try:
-        query = QuerySpec(queries=frozenset(queries) | ({"contact"} if pairs else set()), contact_pairs=pairs)
-    except ConfigError as exc:
-        raise as_spelled(exc, "ros") from None
-    settings = preset(values["preset"])
-    horizon = float(values["horizon_s"])
-    if horizon > 0:
-        try:
-            settings = settings.changed(horizon_s=horizon)
-        except ConfigError as exc:
-            raise ConfigError("horizon_s", exc.problem) from None
-    if values["until_rest"]:
-        settings = settings.changed(early_stop={"enabled": True})
-    mu = float(values["mu"])
     if values["perception"] not in ("gaussian", "depth"):
         raise ConfigError("perception", f"must be gaussian or depth, got {values['perception']!r}")
     camera_pose(values)  # checked now, used by the node
-    try:
-        model = ModelConfig(sigma_m=float(values["sigma"]), phi_m_s2=(float(values["phi"]),),
-                            force_direction_rad=None if math.isnan(direction) else math.radians(direction),
-                            mu=None if mu == 0 else mu, samples=int(values["samples"]),
-                            perception=str(values["perception"]))
+    text = str(values["contact_pairs"]).strip()
+    pairs = tuple(parse_pair(part, "contact_pairs") for part in text.split(",")) if text else ()
+    mu, horizon = float(values["mu"]), float(values["horizon_s"])
+    width, deadline = float(values["target_ci_width"]), float(values["deadline_s"])
+    try:  # one request from the parameters (engine.request), its errors named as the parameters
+        request = build_request(
+            samples=int(values["samples"]), sigma_m=float(values["sigma"]), phi_m_s2=(float(values["phi"]),),
+            force_direction_deg=None if math.isnan(direction) else direction, mu=None if mu == 0 else mu,
+            perception=str(values["perception"]), queries=values["queries"], contact=pairs,
+            preset_name=values["preset"], horizon_s=horizon if horizon > 0 else None,
+            until_rest=bool(values["until_rest"]), seed=int(values["seed"]), ci_width=width or None,
+            deadline_s=deadline or None, batch_size=anytime_batch_size(int(values["workers"])),
+            budget_s=float(values["budget_s"]), self_check=bool(values["self_check"]),
+            verify_samples=int(values["verify_samples"]))
     except ConfigError as exc:
         raise as_spelled(exc, "ros") from None
-    width, deadline = float(values["target_ci_width"]), float(values["deadline_s"])
-    stop = None
-    if width > 0 or deadline > 0:
-        if width > 0 and "fall" not in queries and "any_fall" not in queries:
-            raise ConfigError("target_ci_width", "needs the fall or any_fall query; add one to queries or set it to 0")
-        stop = AdaptiveStop(ci_width=width or None, deadline_s=deadline or None,
-                            batch_size=anytime_batch_size(int(values["workers"])))
     save_dir = str(values["rerun.save_dir"]).strip()
     if save_dir and (".." in Path(save_dir).parts or "\0" in save_dir):
         # any participant on the DDS domain may set parameters: recordings stay where the operator points
         raise ConfigError("rerun.save_dir", f"must not climb out of a folder ('..'), got {save_dir!r}; give the "
                                             "folder itself")
     connect = str(values["rerun.connect_url"]).strip()
-    return ServiceConfig(model=model, settings=settings, query=query,
-                         seed=int(values["seed"]), max_objects=int(values["max_objects"]),
+    return ServiceConfig(model=request.model, settings=request.settings, query=request.query,
+                         seed=request.seed, max_objects=int(values["max_objects"]),
                          rerun_save_dir=save_dir or None, rerun_rollouts_logged=int(values["rerun.rollouts_logged"]),
                          rerun_frame_period_s=float(values["rerun.frame_period_s"]),
-                         rerun_connect_url=connect or None, stop=stop, budget_s=budget,
-                         gravity_aligned_frames=frames,
-                         check=SelfCheck(enabled=bool(values["self_check"]),
-                                         verify_samples=int(values["verify_samples"])),
+                         rerun_connect_url=connect or None, stop=request.stop, budget_s=request.budget_s,
+                         gravity_aligned_frames=frames, check=request.check,
                          depth_max_age_s=float(values["depth.max_age_s"]))
 
 

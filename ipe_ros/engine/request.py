@@ -1,0 +1,80 @@
+"""One prediction request, built and validated once from the inputs every caller has.
+
+The CLI's options and the node's parameters are two spellings of the same inputs (engine.inputs);
+``build_request`` turns them into the engine's values (model, settings, queries, stopping, budget,
+self-check) with one set of checks, so both refuse the same things with the same words. Errors
+name the engine's fields; ``inputs.as_spelled`` renames them for the caller's user.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Iterable
+
+from .config import (DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M, ModelConfig,
+                     QuerySpec, SimSettings, preset)
+from .errors import ConfigError, shown
+from .fidelity import DEFAULT_CHECK, SelfCheck
+from .sampler import AdaptiveStop, check_budget
+
+
+@dataclass(frozen=True)
+class Request:
+    """A validated request: predict with ``model``, ``settings``, ``query`` and ``seed``, stopping by
+    ``stop`` (None: all k samples), within ``budget_s`` wall seconds (None: no budget), checked by
+    ``check``."""
+
+    model: ModelConfig
+    settings: SimSettings
+    query: QuerySpec
+    seed: int = 0
+    stop: AdaptiveStop | None = None
+    budget_s: float | None = DEFAULT_BUDGET_S
+    check: SelfCheck = DEFAULT_CHECK
+
+    def predict_kwargs(self) -> dict[str, Any]:
+        """``sampler.predict``'s keyword arguments for this request."""
+        return dict(seed=self.seed, stop=self.stop, budget_s=self.budget_s, check=self.check)
+
+
+def build_request(*, samples: int = DEFAULT_SAMPLES, sigma_m: float = DEFAULT_SIGMA_M,
+                  phi_m_s2: Iterable[float] = (0.0,), force_direction_deg: float | None = None, mu: float | None = None,
+                  ground_truth: bool = False, perception: str = "gaussian", vision=None,
+                  queries: Iterable[str] = DEFAULT_QUERIES, contact: Iterable[tuple[str, str]] = (),
+                  preset_name: str = DEFAULT_PRESET, horizon_s: float | None = None, until_rest: bool = False,
+                  seed: int = 0, ci_width: float | None = None, deadline_s: float | None = None, batch_size: int = 4,
+                  budget_s: float | None = DEFAULT_BUDGET_S, self_check: bool = True,
+                  verify_samples: int = DEFAULT_CHECK.verify_samples) -> Request:
+    """The request these inputs ask for, or a ConfigError naming the engine's field.
+
+    ``ground_truth``: sigma = phi = 0 and no body's own noise (the scene as given, one rollout).
+    ``contact``: (A, B) pairs; giving any adds the contact query. ``horizon_s`` None and
+    ``force_direction_deg`` None: the preset's horizon, any push direction.
+    """
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ConfigError("seed", f"must be an integer >= 0, got {shown(seed)}")
+    if force_direction_deg is not None and not math.isfinite(force_direction_deg):
+        raise ConfigError("force_direction_rad", f"must be finite degrees (or none: any direction), got "
+                                                 f"{shown(force_direction_deg)}")
+    model = ModelConfig(sigma_m=0.0 if ground_truth else sigma_m,
+                        phi_m_s2=(0.0,) if ground_truth else tuple(phi_m_s2),
+                        force_direction_rad=None if force_direction_deg is None else math.radians(force_direction_deg),
+                        mu=mu, samples=samples, perception=perception, vision=vision, object_noise=not ground_truth)
+    contact = tuple(contact)
+    query = QuerySpec(queries=frozenset(queries) | ({"contact"} if contact else set()), contact_pairs=contact)
+    settings = preset(preset_name)
+    if horizon_s is not None:
+        settings = settings.changed(horizon_s=horizon_s)
+    if until_rest:
+        settings = settings.changed(early_stop={"enabled": True})
+    stop = None
+    if ci_width is not None or deadline_s is not None:
+        if ci_width is not None and not (query.wants("fall") or query.wants("any_fall")):
+            raise ConfigError("ci_width", "needs the fall or any_fall query; add one to the queries or drop the "
+                                          "target width")
+        stop = AdaptiveStop(ci_width=ci_width, deadline_s=deadline_s, batch_size=batch_size)
+    check_budget(budget_s)
+    check = SelfCheck(enabled=bool(self_check), verify_samples=verify_samples)
+    return Request(model=model, settings=settings, query=query, seed=seed, stop=stop, budget_s=budget_s, check=check)
+

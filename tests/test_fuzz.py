@@ -208,10 +208,10 @@ def test_the_unmutated_inputs_reach_the_engine():
 # -- questions (~/ask) --------------------------------------------------------------------------------------
 QUESTIONS = [
     {"id": "r1", "question": "support", "samples": 2},
-    {"id": "r2", "question": "remove", "objects": ["box0"], "samples": 2},
+    {"id": "r2", "question": "remove", "objects": ["box0"], "samples": 2, "contact": ["box1:support"]},
     {"id": "r3", "question": "clear", "target": "box1", "samples": 2},
     {"id": "r4", "question": "push", "object": "box1", "velocity_m_s": [1.0, 0.0], "point_m": [0.1, 0.0, 0.5],
-     "direction_sigma_deg": 5.0, "speed_sigma": 0.1, "samples": 2},
+     "direction_sigma_deg": 5.0, "speed_sigma": 0.1, "samples": 2, "contact": ["box1:box0", "cone:support"]},
     {"id": "r5", "question": "place", "object": {"name": "new", "shape": {"type": "box", "extents_m": [0.1, 0.1, 0.1]}, "mass_kg": 1.0,
                                                  "friction": 0.5, "restitution": 0.0},
      "at": [[0.6, 0.0, 30.0]], "samples": 2},
@@ -253,8 +253,10 @@ def _store_entry() -> tuple[str, dict]:
     from ipe_ros.engine.sampler import make_tasks
     from ipe_ros.engine.store import encode_entry
 
+    # the contact and final_pose values ride in the entry too (mappings of arrays and numbers)
     [task] = make_tasks(capped_tower(3.0), ModelConfig(sigma_m=0.02, samples=1), preset("default"),
-                        QuerySpec(queries=frozenset({"fall", "direction"})), 0)
+                        QuerySpec(queries=frozenset({"fall", "direction", "contact", "final_pose"}),
+                                  contact_pairs=(("cone", "support"),)), 0)
     return "k" * 64, json.loads(encode_entry(run_sample(task), "k" * 64))
 
 

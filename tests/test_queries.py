@@ -297,3 +297,21 @@ def test_contact_on_robot_questions_through_the_question_json():
                         GROUND_TRUTH, preset("default"))
     with pytest.raises(ConfigError, match="unknown field of a support question"):
         question_from_dict({"question": "support", "contact": ["a:b"]})
+
+
+def test_event_values_survive_the_result_store():
+    """Resumable runs store each sample's outcome: the new queries' values (mappings of times,
+    flags and arrays) come back equal."""
+    from ipe_ros.engine.rollout import run_sample
+    from ipe_ros.engine.sampler import make_tasks
+    from ipe_ros.engine.store import decode_entry, encode_entry
+
+    spec = QuerySpec(queries=frozenset({"contact", "rest", "final_pose"}), contact_pairs=(("drop", "target"),))
+    [task] = make_tasks(_dropped(0.0), ModelConfig(sigma_m=0.01, samples=1), preset("default"), spec, 0)
+    outcome = run_sample(task)
+    back = decode_entry(encode_entry(outcome, "k" * 64), "k" * 64)
+    (before,), (after,) = outcome.rollouts, back.rollouts
+    assert after.value("contact") == before.value("contact")
+    assert after.value("rest") == before.value("rest")
+    np.testing.assert_array_equal(after.value("final_pose")["position_m"], before.value("final_pose")["position_m"])
+    np.testing.assert_array_equal(after.value("final_pose")["moved"], before.value("final_pose")["moved"])

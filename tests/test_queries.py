@@ -315,3 +315,19 @@ def test_event_values_survive_the_result_store():
     assert after.value("rest") == before.value("rest")
     np.testing.assert_array_equal(after.value("final_pose")["position_m"], before.value("final_pose")["position_m"])
     np.testing.assert_array_equal(after.value("final_pose")["moved"], before.value("final_pose")["moved"])
+
+
+def test_bump_counts_only_what_started_on_the_table_as_fallen_off():
+    """One rule for "fell off the table" in predictions and robot questions: started on or above the
+    top and ended below it. A block standing on the floor beside the table never fell off (it was
+    counted as fallen off before: it ends below the top)."""
+    from ipe_ros.engine import Table
+
+    table = Table(size_m=(0.6, 0.6), center_xy_m=(0.0, 0.0), thickness_m=0.05, top_height_m=0.5, friction=0.8,
+                  restitution=0.0, floor_z_m=0.0)
+    on_table = block("on_table", 0.0, 0.0, 0.55, extents=(0.1, 0.1, 0.1), group="red")
+    beside = block("beside", 0.6, 0.0, 0.05, extents=(0.1, 0.1, 0.1), group="yellow")
+    scene = Scene(name="beside_table", objects=(on_table, beside), support=table, gravity_m_s2=(0.0, 0.0, -9.81))
+    answer = predict(scene, GROUND_TRUTH, preset("default"), QuerySpec(queries=frozenset({"bump"})), check=None)
+    assert answer.fell_off_fraction_by_group == {"red": 0.0, "yellow": 0.0}
+    assert answer.bump_rollouts == 0  # nothing fell off: no share to report

@@ -114,28 +114,27 @@ def _query(task: SampleTask, initial: np.ndarray, phi: float, end: simulation.Ro
                          energy_gain_j=end.energy_gain_j, penetration_fraction=end.penetration_fraction, extra=extra)
 
 
-def _smallest_extents(task: SampleTask) -> np.ndarray:
-    return np.array([b.smallest_extent_m for b in task.scene.dynamic_objects])
+def _smallest_extents(scene: Scene) -> np.ndarray:
+    return np.array([b.smallest_extent_m for b in scene.dynamic_objects])
 
 
-def _decided_heights(task: SampleTask, initial: np.ndarray) -> DecidedHeights | None:
+def decided_heights(scene: Scene, settings: SimSettings, spec: QuerySpec, initial: np.ndarray) -> DecidedHeights | None:
     """Early termination by heights, built from the queries asked: when every one of them says
     below which height each body's outcome is decided (fall, any_fall: its centre dropped by the fall
     threshold; bump: below the table top, beside or under it), a body is decided below the lowest
     of those heights. A query that reads where bodies end up (direction, far, rest, final_pose,
     contact) waits for rest instead: None.
     """
-    spec = task.query
-    if not task.settings.early_stop.enabled:
+    if not settings.early_stop.enabled:
         return None
     asked = [QUERIES[name] for name in sorted(spec.queries)]
-    heights = [q.decided_below_z(task.scene, spec, initial) for q in asked]
+    heights = [q.decided_below_z(scene, spec, initial) for q in asked]
     if any(h is None for h in heights):
         return None
     fallen_below_z = np.minimum.reduce(heights)
     # "will anything fall?" is decided by the first box that falls
     first_fall = all(getattr(q, "decided_by_first_fall", False) for q in asked)
-    return DecidedHeights(fallen_below_z_m=fallen_below_z, never_falls=_never_falls(task, fallen_below_z),
+    return DecidedHeights(fallen_below_z_m=fallen_below_z, never_falls=_never_falls(scene, fallen_below_z),
                           stop_at_first_fall=first_fall)
 
 
@@ -158,19 +157,19 @@ def watches_for(scene: Scene, spec: QuerySpec, world) -> tuple[dict, bool]:
     return watches, bool(watches) and len(watches) == len(spec.queries)
 
 
-def _never_falls(task: SampleTask, decided_below_z: np.ndarray) -> np.ndarray | None:
+def _never_falls(scene: Scene, decided_below_z: np.ndarray) -> np.ndarray | None:
     """Bodies that cannot end below their fallen height whatever happens: even resting in their
     lowest way on the lowest surface there is (the floor, also under a table) their centre stays
     above it, with 5% of the smallest extent to spare for contact penetration. A tower's bottom
     blocks are such bodies; without this, early termination waited for them to stop being shoved
     around by a collapse although their outcome (not fallen) was never in doubt.
     """
-    support = task.scene.support
+    support = scene.support
     lowest_surface_z = support.height_m if isinstance(support, Floor) else support.floor_z_m
     if lowest_surface_z is None:  # a table with nothing under it: boxes can drop without limit
         return None
-    smallest = _smallest_extents(task)
-    lowest_rest = np.array([shapes.min_rest_height_m(b.shape) for b in task.scene.dynamic_objects])
+    smallest = _smallest_extents(scene)
+    lowest_rest = np.array([shapes.min_rest_height_m(b.shape) for b in scene.dynamic_objects])
     return decided_below_z < lowest_surface_z + lowest_rest - 0.05 * smallest
 
 
@@ -188,11 +187,37 @@ def separated_world(scene: Scene, settings, inputs, probe: Probe = NO_PROBE) -> 
     return world
 
 
-def collapse_heights(task: SampleTask, initial: np.ndarray) -> np.ndarray | None:
+def collapse_heights(scene: Scene, settings: SimSettings, initial: np.ndarray) -> np.ndarray | None:
     """Per body, the height below which the collapse steps start (None: the preset has none)."""
-    if not task.settings.collapse.enabled:
+    if not settings.collapse.enabled:
         return None
-    return initial[:, 2] - task.settings.collapse.drop_fraction * _smallest_extents(task)
+    return initial[:, 2] - settings.collapse.drop_fraction * _smallest_extents(scene)
+
+
+def simulate_pushes(scene: Scene, model: ModelConfig, settings: SimSettings, spec: QuerySpec, world: simulation.World,
+                    initial: np.ndarray, initial_orn: np.ndarray, masses_kg: np.ndarray, push_direction_rad: float, *,
+                    fresh_first: bool = False, record_every: int = 0, deadline_unix_s: float | None = None,
+                    probe: Probe = NO_PROBE) -> list[tuple[float, simulation.RolloutEnd]]:
+    """One sample's rollouts, one per phi value, from its separated state (``world`` holds it; each
+    later phi value, and the first with ``fresh_first``, gets a fresh world built from ``initial``).
+    When each rollout may end is built from the queries asked (``decided_heights``, their step
+    watches, the reading of rest they need). The one rollout path of predictions and of robot
+    questions' variants."""
+    decided = decided_heights(scene, settings, spec, initial)
+    collapse_below_z = collapse_heights(scene, settings, initial)
+    run_settings = query_settings(settings, spec)
+    ends = []
+    for i, phi in enumerate(model.phi_m_s2):
+        if i > 0 or fresh_first:
+            with probe.part("build"):
+                world = simulation.build_world(scene, initial, masses_kg, settings, orientations_xyzw=initial_orn)
+        push = simulation.Push(phi, push_direction_rad, model.push_duration_s)
+        watches, end_when_watched = watches_for(scene, spec, world)
+        ends.append((phi, simulation.simulate(world, scene, run_settings, push, record_every=record_every,
+                                              decided=decided, collapse_below_z_m=collapse_below_z, probe=probe,
+                                              deadline_unix_s=deadline_unix_s, watches=watches,
+                                              end_when_watched=end_when_watched)))
+    return ends
 
 
 def _cut_off(task: SampleTask, push_direction_rad: float, why: str) -> SampleOutcome:
@@ -213,22 +238,12 @@ def run_sample(task: SampleTask, probe: Probe = NO_PROBE) -> SampleOutcome:
     try:
         world = separated_world(task.scene, task.settings, inputs, probe)
         initial, initial_orn = simulation.read_poses(world)
-        decided = _decided_heights(task, initial)
-        collapse_below_z = collapse_heights(task, initial)
-        settings = query_settings(task.settings, task.query)
-        results = []
-        for i, phi in enumerate(task.model.phi_m_s2):
-            if i > 0 or not task.settings.solver.maximal_coordinates:  # a fresh world from the separated state
-                with probe.part("build"):
-                    world = simulation.build_world(task.scene, initial, inputs.masses_kg, task.settings,
-                                                   orientations_xyzw=initial_orn)
-            push = simulation.Push(phi, inputs.push_direction_rad, task.model.push_duration_s)
-            watches, end_when_watched = watches_for(task.scene, task.query, world)
-            end = simulation.simulate(world, task.scene, settings, push, record_every=task.record_every,
-                                      decided=decided, collapse_below_z_m=collapse_below_z, probe=probe,
-                                      deadline_unix_s=task.deadline_unix_s, watches=watches,
-                                      end_when_watched=end_when_watched)
-            results.append(_query(task, initial, phi, end))
+        # the separation's world is in plain rigid bodies: another representation needs a fresh one
+        ends = simulate_pushes(task.scene, task.model, task.settings, task.query, world, initial, initial_orn,
+                               inputs.masses_kg, inputs.push_direction_rad,
+                               fresh_first=not task.settings.solver.maximal_coordinates,
+                               record_every=task.record_every, deadline_unix_s=task.deadline_unix_s, probe=probe)
+        results = [_query(task, initial, phi, end) for phi, end in ends]
     except BudgetExceeded as exc:
         return _cut_off(task, inputs.push_direction_rad, str(exc))
     except PhysicsError as exc:

@@ -12,11 +12,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import queries, simulation
+from .. import simulation
 from ..config import ModelConfig, QuerySpec, SimSettings
 from ..errors import BudgetExceeded, PhysicsError
 from ..perturb import draw_sample_inputs
-from ..rollout import SampleTask, _decided_heights, collapse_heights, separated_world, watches_for
+from ..rollout import read_rollout, separated_world, simulate_pushes
 from ..scene import Scene
 from ..shapes import rotation_matrix
 from .kinds import Action, Place, Push, Remove, _label
@@ -87,25 +87,13 @@ def _simulate_variant(task: VariantTask, scene: Scene, positions, orientations, 
                       separate: bool) -> tuple[np.ndarray, np.ndarray, simulation.RolloutEnd]:
     """Build ``scene`` at the given state, optionally separate it, simulate (phi values in turn: the
     last one's end is returned; actions are asked with one phi in practice)."""
-    sub = SampleTask(scene=scene, model=task.model, settings=task.settings, query=task.query, index=task.index,
-                     seed=task.seed, deadline_unix_s=task.deadline_unix_s)
     world = simulation.build_world(scene, positions, masses, task.settings, orientations_xyzw=orientations)
     if separate:
         simulation.depenetrate(world, task.settings)
     initial, initial_orn = simulation.read_poses(world)
-    decided = _decided_heights(sub, initial)
-    collapse_below = collapse_heights(sub, initial)
-    end = None
-    for i, phi in enumerate(task.model.phi_m_s2):
-        if i > 0:
-            world = simulation.build_world(scene, initial, masses, task.settings, orientations_xyzw=initial_orn)
-        watches, end_when_watched = watches_for(scene, task.query, world)
-        end = simulation.simulate(world, scene, task.settings, simulation.Push(phi, push_direction,
-                                                                              task.model.push_duration_s),
-                                  decided=decided, collapse_below_z_m=collapse_below,
-                                  deadline_unix_s=task.deadline_unix_s, record_every=task.record_every,
-                                  watches=watches, end_when_watched=end_when_watched)
-    return initial, initial_orn, end
+    ends = simulate_pushes(scene, task.model, task.settings, task.query, world, initial, initial_orn, masses,
+                           push_direction, record_every=task.record_every, deadline_unix_s=task.deadline_unix_s)
+    return initial, initial_orn, ends[-1][1]
 
 
 def run_variants(task: VariantTask) -> list[VariantResult]:
@@ -173,14 +161,7 @@ def _one_variant(task: VariantTask, action: Action, shared, shared_orn, inputs,
                                                          for b in scene.objects))
     initial, _, end = _simulate_variant(task, scene, positions, orientations, masses, inputs.push_direction_rad,
                                         separate)
-    variant_bodies = scene.dynamic_objects
-    smallest = np.array([b.smallest_extent_m for b in variant_bodies])
-    fallen = queries.fallen_mask(initial, end.positions_m, smallest, task.query.fall_threshold_fraction)
-    direction = queries.fall_direction_rad(initial, end.positions_m, fallen) if task.query.wants("direction") else None
-    fell_off = None
-    if task.query.wants("bump"):  # started above the table top, ended below it: beside or under the table
-        top = scene.support.top_height_m
-        fell_off = (initial[:, 2] >= top) & queries.fell_off_mask(end.positions_m, top)
-    contact = end.events["contact"]["first_s"] if task.query.wants("contact") else None
-    return VariantResult(tuple(b.name for b in variant_bodies), fallen, direction, trajectory=end.trajectory,
-                         fell_off=fell_off, contact=contact)
+    values = read_rollout(scene, task.query, initial, end)  # the same queries a prediction reads
+    contact = values["contact"]["first_s"] if "contact" in values else None
+    return VariantResult(tuple(b.name for b in scene.dynamic_objects), values["fallen"], values.get("direction_rad"),
+                         trajectory=end.trajectory, fell_off=values.get("fell_off"), contact=contact)

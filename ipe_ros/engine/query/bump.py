@@ -33,7 +33,10 @@ class Bump(Query):
         support = reading.scene.support
         if not isinstance(support, Table):
             return {}
-        fell_off = predicates.fell_off_mask(reading.final_m, support.top_height_m)
+        # started on or above the table top and ended below it: beside or under the table (an object
+        # that starts on the floor beside the table has not fallen off it)
+        fell_off = (reading.initial_m[:, 2] >= support.top_height_m) \
+            & predicates.fell_off_mask(reading.final_m, support.top_height_m)
         groups = tuple(b.group for b in reading.scene.dynamic_objects)
         return {"fell_off": fell_off, "bump_ratio": predicates.bump_ratio(fell_off, groups, reading.spec.bump_group)}
 

@@ -401,13 +401,16 @@ def test_questions_on_ask_are_answered_on_answer_with_their_id(ros, tower, tmp_p
     # about the newest scene the node accepted, and a bad question refused by name
     ros.publisher(String, "/ipe/scene_json").publish(String(data=scene_to_json(STACK)))
     wait_until(lambda: node.service.latest_scene() is not None, TIMEOUT_S, "the scene to be accepted")
-    ask.publish(String(data=json.dumps({"id": "r2", "question": "push", "object": "bottom", "velocity_m_s": [2, 0]})))
+    ask.publish(String(data=json.dumps({"id": "r2", "question": "push", "object": "bottom", "velocity_m_s": [2, 0],
+                                        "contact": ["top:support"]})))
     ask.publish(String(data=json.dumps({"id": "r3", "question": "fly"})))
     wait_until(lambda: len(finals()) >= 4, TIMEOUT_S, "answers to r2 and r3")
     by_id = {m["id"]: m for m in finals()}
     assert by_id["r3"]["error"] == "question: must be one of remove, support, clear, place, push, got 'fly'"
-    pushed = by_id["r2"]["answer"]["variants"][1]
+    as_is, pushed = by_id["r2"]["answer"]["variants"]
     assert pushed["label"] == "push/bottom" and pushed["object_fall_probability"]["top"] == 1.0
+    # the event question on ~/ask: pushed away at 2 m/s, the bottom leaves the top to fall to the floor
+    assert pushed["contact_probability"] == {"top:support": 1.0} and as_is["contact_probability"] == {"top:support": 0.0}
 
 
 

@@ -11,10 +11,11 @@ import numpy as np
 
 from ..config import ModelConfig, QuerySpec, SimSettings
 from ..decide import Sequential, Tally
-from ..errors import ConfigError, shown
+from ..errors import ConfigError
 from ..perturb import is_deterministic, position_sigmas_m
 from ..sampler import MapFn, check_budget, rollout_cost
 from ..scene import Scene, Table, validate_scene
+from ..query.contact import check_pairs
 from .answers import Alone, Answers, _aggregate, _aggregate_given, _draws_noise, _stood
 from .geometry import _reached, _regions, groups
 from .kinds import DEFAULT_SAFE_BELOW, Action, Place, Remove, _check_action, _label
@@ -135,14 +136,7 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
 
 def _check_contact(scene: Scene, actions: list[Action], pairs) -> None:
     """Contact pairs name objects of the scene, placed objects, or the support."""
-    known = {b.name for b in scene.objects} | {a.body.name for a in actions if isinstance(a, Place)} | {"support"}
-    for a, b in pairs:
-        for name in (a, b):
-            if name not in known:
-                raise ConfigError("contact", f"{a}:{b}: no object {shown(name)} in scene {shown(scene.name)} or "
-                                             f"placed by the question; objects: {', '.join(sorted(known))}")
-        if a == b:
-            raise ConfigError("contact", f"{a}:{b}: an object always touches itself; name two")
+    check_pairs(pairs, scene, tuple(a.body.name for a in actions if isinstance(a, Place)))
 
 
 def _run(tasks: list[VariantTask], map_fn: MapFn | None, scene: Scene) -> list[list[VariantResult]]:

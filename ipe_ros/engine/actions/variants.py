@@ -13,10 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import simulation
-from ..config import ModelConfig, QuerySpec, SimSettings
 from ..errors import BudgetExceeded, PhysicsError
 from ..perturb import draw_sample_inputs
-from ..rollout import read_rollout, separated_world, simulate_pushes
+from ..rollout import SampleTask, read_rollout, separated_world, simulate_pushes
 from ..scene import Scene
 from ..shapes import rotation_matrix
 from .kinds import Action, Place, Push, Remove, _label
@@ -24,20 +23,13 @@ from .kinds import Action, Place, Push, Remove, _label
 
 # -- one sample of every variant ----------------------------------------------------------------------
 @dataclass(frozen=True)
-class VariantTask:
-    """Sample ``index`` of every variant: the shared draw, then one rollout per action."""
+class VariantTask(SampleTask):
+    """Sample ``index`` of every variant: a prediction's sample (the same seed, scene, settings,
+    queries, budget and recording), whose shared draw is then simulated once per action."""
 
-    scene: Scene
-    model: ModelConfig
-    settings: SimSettings
-    query: QuerySpec
-    index: int
-    seed: np.random.SeedSequence
-    actions: tuple[Action, ...]
-    deadline_unix_s: float | None = None
+    actions: tuple[Action, ...] = ()
     #: per action, the dynamic objects worth simulating (None: all); the rest cannot be reached
     regions: tuple[frozenset[str] | None, ...] | None = None
-    record_every: int = 0  # record trajectories every N ticks (rerun), 0: none
 
 
 @dataclass(frozen=True)

@@ -39,6 +39,24 @@ def parse_pair(text: str, field: str = "contact") -> tuple[str, str]:
     return a, b
 
 
+def check_pairs(pairs, scene, added: tuple[str, ...] = ()) -> None:
+    """Each pair names two objects of the scene (or ``added`` ones: objects a robot question places),
+    or the support, and one of them can move; ConfigError naming ``contact`` otherwise."""
+    dynamic = {b.name for b in scene.dynamic_objects} | set(added)
+    known = {b.name for b in scene.objects} | set(added) | {SUPPORT}
+    where = f"in scene {shown(scene.name)}" + (" or placed by the question" if added else "")
+    for a, b in pairs:
+        for name in (a, b):
+            if name not in known:
+                raise ConfigError("contact", f"{pair_key(a, b)}: no object {shown(name)} {where}; objects: "
+                                             f"{', '.join(sorted(known))}")
+        if a == b:
+            raise ConfigError("contact", f"{pair_key(a, b)}: an object always touches itself; name two")
+        if a not in dynamic and b not in dynamic:
+            raise ConfigError("contact", f"{pair_key(a, b)}: neither moves, so the answer is fixed; "
+                                         "name a dynamic object")
+
+
 def _extent_of(scene, name: str) -> float | None:
     for body in scene.objects:
         if body.name == name:
@@ -117,18 +135,7 @@ class Contact(Query):
         if not spec.contact_pairs:
             raise ConfigError("contact", "the contact query needs pairs to watch: give A:B (B may be "
                                          f"{SUPPORT}), e.g. --contact ball:box")
-        dynamic = {b.name for b in scene.dynamic_objects}
-        known = {b.name for b in scene.objects} | {SUPPORT}
-        for a, b in spec.contact_pairs:
-            for name in (a, b):
-                if name not in known:
-                    raise ConfigError("contact", f"{pair_key(a, b)}: no object {shown(name)} in scene "
-                                                 f"{shown(scene.name)}; objects: {', '.join(sorted(known))}")
-            if a == b:
-                raise ConfigError("contact", f"{pair_key(a, b)}: an object always touches itself; name two")
-            if a not in dynamic and b not in dynamic:
-                raise ConfigError("contact", f"{pair_key(a, b)}: neither moves, so the answer is fixed; "
-                                             "name a dynamic object")
+        check_pairs(spec.contact_pairs, scene)
 
     def watch(self, scene, spec, world) -> StepWatch | None:
         return ContactWatch(scene, spec.contact_pairs, world)

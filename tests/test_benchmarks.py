@@ -159,3 +159,15 @@ def test_queries_benchmark_compares_the_contact_watch_and_its_early_end(tmp_path
     assert all(r["same_contact_answer"] == "1/1" for r in rows)
     assert all(0 < r["simulated_alone_vs_rest"] <= 1 for r in rows)
     assert "| dominoes |" in (tmp_path / "queries.md").read_text()
+
+
+def test_check_policy_replays_every_policy_on_the_same_samples(tmp_path):
+    result = subprocess.run(
+        [sys.executable, str(REPO / "benchmarks" / "check_policy.py"), "--towers", "1", "--zoo", "0", "--samples", "2",
+         "--out", str(tmp_path)], capture_output=True, text=True, timeout=600, env=ENV)
+    assert result.returncode == 0, result.stderr[-3000:]
+    rows = json.loads((tmp_path / "check_policy.json").read_text())
+    by_policy = {r["policy"]: r for r in rows}
+    assert set(by_policy) >= {"current", "no confirmation", "unchecked"}
+    assert by_policy["unchecked"]["reference_samples_per_prediction"] == 0
+    assert by_policy["current"]["reference_samples_per_prediction"] >= 1  # the verified sample at least

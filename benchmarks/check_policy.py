@@ -1,0 +1,133 @@
+"""What the self-check costs and catches, policy by policy, replayed offline on the same samples.
+
+    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST .venv/bin/python benchmarks/check_policy.py --towers 12 --zoo 2 --samples 48
+
+Every sample of every scene is simulated once at the fast settings (`default`, unchecked) and once at
+the reference (`paper`'s physics, ending at rest by the strict reading), same seeds, 2 workers; then
+``sampler.self_check`` is replayed for each policy with a ``run`` that hands back the stored
+reference outcomes, so each policy's verdicts, reference samples and answers are exactly what
+``predict`` would have produced, at no new simulation. Per policy and scene set: reference samples
+per prediction, the estimated speed-up against `paper` (fast time + reference samples x their
+measured mean time, perfect balance over the workers), escalations, and the checked answer's
+mean / worst |dP(object falls)| against the full reference answer. Authors' towers need
+``../shared``; without it generated towers are used.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, preset  # noqa: E402
+from ipe_ros.engine.fidelity import DEFAULT_CHECK, SelfCheck, reference_settings  # noqa: E402
+from ipe_ros.engine.generators import generate_towers  # noqa: E402
+from ipe_ros.engine.sampler import _run_tasks, at_settings, make_tasks, self_check  # noqa: E402
+from ipe_ros.engine.zoo import FAMILIES, scene_zoo, zoo_sigma_m  # noqa: E402
+
+POLICIES = {
+    "current": DEFAULT_CHECK,
+    "confirm 1 per round": dataclasses.replace(DEFAULT_CHECK, confirm_samples=1),
+    "one confirmation round": dataclasses.replace(DEFAULT_CHECK, confirm_rounds=1),
+    "no confirmation": dataclasses.replace(DEFAULT_CHECK, confirm_rounds=0),
+    "verify 2": dataclasses.replace(DEFAULT_CHECK, verify_samples=2),
+    "unchecked": SelfCheck(enabled=False),
+}
+QUERY = QuerySpec(queries=frozenset({"fall", "any_fall", "direction", "far"}))
+
+
+def _scenes(args) -> list[tuple[str, object, ModelConfig]]:
+    path = Path(os.environ.get("IPE_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared/data/battaglia2013"))
+    towers_csv = path / "stability_all_towers.csv"
+    towers = load_scenes(towers_csv)[::5][:args.towers] if towers_csv.exists() else generate_towers(2013, args.towers)
+    out = [("towers", t, ModelConfig(sigma_m=0.04, samples=args.samples)) for t in towers]
+    for family in FAMILIES:
+        for scene in scene_zoo(2026, args.zoo, (family,)):
+            out.append((f"zoo/{family}", scene, ModelConfig(sigma_m=zoo_sigma_m(scene), samples=min(16, args.samples))))
+    return out
+
+
+def _object_p(outcomes) -> np.ndarray:
+    ok = [o for o in outcomes if o.ok]
+    return np.mean([np.mean([r.fallen for r in o.rollouts], axis=0) for o in ok], axis=0)
+
+
+def main() -> int:
+    assert os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE") == "LOCALHOST", "set ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST"
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--towers", type=int, default=12)
+    parser.add_argument("--zoo", type=int, default=2, help="scenes per zoo family")
+    parser.add_argument("--samples", type=int, default=48)
+    parser.add_argument("--out", default="benchmarks/results/check_policy")
+    args = parser.parse_args()
+    fast_settings, reference = preset("default"), reference_settings()
+    stored = []
+    with WorkerPool(2) as pool:
+        scenes = _scenes(args)
+        group, scene, model = scenes[0]  # workers started and imports done before any timing
+        _run_tasks(make_tasks(scene, dataclasses.replace(model, samples=2), fast_settings, QUERY, seed=0), pool.map)
+        for group, scene, model in scenes:
+            tasks = make_tasks(scene, model, fast_settings, QUERY, seed=11)
+            start = time.perf_counter()
+            fast = _run_tasks(tasks, pool.map)
+            fast_s = time.perf_counter() - start
+            start = time.perf_counter()
+            ref = _run_tasks([at_settings(t, reference) for t in tasks], pool.map)
+            ref_s = time.perf_counter() - start
+            stored.append((group, scene.name, tasks, fast, ref, fast_s, ref_s))
+            print(f"{group} {scene.name}: fast {fast_s:.2f} s, reference {ref_s:.2f} s", flush=True)
+    rows = []
+    for name, check in POLICIES.items():
+        per_group: dict[str, dict] = {}
+        for group, scene_name, tasks, fast, ref, fast_s, ref_s in stored:
+            used: list[int] = []
+
+            def run(batch, ref=ref, used=used):
+                used.extend(t.index for t in batch)
+                return [ref[t.index] for t in batch]
+
+            verified = list(ref[:min(check.verify_samples, len(tasks))]) if check.enabled else []
+            used.extend(range(len(verified)))
+            answer, report = self_check(tasks, list(fast), verified, check, reference, run, "default")
+            dp = np.abs(_object_p(answer) - _object_p(ref))
+            g = per_group.setdefault(group, {"scenes": 0, "reference_samples": 0, "fast_s": 0.0, "ref_s": 0.0,
+                                             "paper_s": 0.0, "escalated": 0, "dp": [], "worst": 0.0})
+            per_sample_ref = ref_s / len(tasks)
+            g["scenes"] += 1
+            g["reference_samples"] += len(set(used))
+            g["fast_s"] += fast_s
+            g["ref_s"] += per_sample_ref * len(set(used))
+            g["paper_s"] += ref_s  # the reference at every sample: what `paper` itself costs, about
+            g["escalated"] += report.verdict == "escalated"
+            g["dp"].append(float(dp.mean()))
+            g["worst"] = max(g["worst"], float(dp.max()))
+        for group, g in per_group.items():
+            rows.append({"policy": name, "group": group, "scenes": g["scenes"],
+                         "reference_samples_per_prediction": g["reference_samples"] / g["scenes"],
+                         "speedup_vs_reference": g["paper_s"] / (g["fast_s"] + g["ref_s"]),
+                         "escalated": g["escalated"], "mean_abs_dp": float(np.mean(g["dp"])),
+                         "worst_abs_dp": g["worst"]})
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "check_policy.json").write_text(json.dumps(rows, indent=1))
+    lines = ["| policy | set | scenes | reference samples / prediction | speed-up vs reference | escalated | "
+             "mean \\|dP\\| | worst \\|dP\\| |", "|---" * 8 + "|"]
+    for r in sorted(rows, key=lambda r: (r["group"] != "towers", r["group"])):
+        lines.append(f"| {r['policy']} | {r['group']} | {r['scenes']} | {r['reference_samples_per_prediction']:.2f} | "
+                     f"{r['speedup_vs_reference']:.1f}x | {r['escalated']} | {r['mean_abs_dp']:.3f} | "
+                     f"{r['worst_abs_dp']:.3f} |")
+    (out / "check_policy.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -27,7 +27,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, preset  # noqa: E402
+from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, parse_queries, preset  # noqa: E402
+from ipe_ros.engine.config import DEFAULT_QUERIES  # noqa: E402
 from ipe_ros.engine.fidelity import DEFAULT_CHECK, SelfCheck, reference_settings  # noqa: E402
 from ipe_ros.engine.generators import generate_towers  # noqa: E402
 from ipe_ros.engine.sampler import _run_tasks, at_settings, make_tasks, self_check  # noqa: E402
@@ -41,7 +42,6 @@ POLICIES = {
     "verify 2": dataclasses.replace(DEFAULT_CHECK, verify_samples=2),
     "unchecked": SelfCheck(enabled=False),
 }
-QUERY = QuerySpec(queries=frozenset({"fall", "any_fall", "direction", "far"}))
 
 
 def _scenes(args) -> list[tuple[str, object, ModelConfig]]:
@@ -66,16 +66,19 @@ def main() -> int:
     parser.add_argument("--towers", type=int, default=12)
     parser.add_argument("--zoo", type=int, default=2, help="scenes per zoo family")
     parser.add_argument("--samples", type=int, default=48)
+    parser.add_argument("--query", type=parse_queries, default=DEFAULT_QUERIES,
+                        help="the queries asked (default: the node's and the CLI's, fall,any_fall,direction,far)")
     parser.add_argument("--out", default="benchmarks/results/check_policy")
     args = parser.parse_args()
     fast_settings, reference = preset("default"), reference_settings()
+    query = QuerySpec(queries=args.query)
     stored = []
     with WorkerPool(2) as pool:
         scenes = _scenes(args)
         group, scene, model = scenes[0]  # workers started and imports done before any timing
-        _run_tasks(make_tasks(scene, dataclasses.replace(model, samples=2), fast_settings, QUERY, seed=0), pool.map)
+        _run_tasks(make_tasks(scene, dataclasses.replace(model, samples=2), fast_settings, query, seed=0), pool.map)
         for group, scene, model in scenes:
-            tasks = make_tasks(scene, model, fast_settings, QUERY, seed=11)
+            tasks = make_tasks(scene, model, fast_settings, query, seed=11)
             start = time.perf_counter()
             fast = _run_tasks(tasks, pool.map)
             fast_s = time.perf_counter() - start

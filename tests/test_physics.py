@@ -306,7 +306,7 @@ def test_changed_names_the_unknown_field():
     from ipe_ros.engine import ConfigError
 
     with pytest.raises(ConfigError, match=r"^collapse: .*unexpected keyword argument 'factor'.*; its fields are "
-                                          r"step_factor, solver_iterations, drop_fraction, fine_before_end_s$"):
+                                          r"step_factor, solver_iterations, drop_fraction, fine_before_end_s, end_substeps$"):
         preset("default").changed(collapse={"factor": 2})
     with pytest.raises(ConfigError, match="^solver_iterations: not a field of SimSettings$"):
         preset("default").changed(solver_iterations=2)
@@ -326,3 +326,19 @@ def test_a_sliding_box_stops_where_coulomb_friction_says_under_every_preset(name
     p = predict(scene, ModelConfig(sigma_m=0.0), preset(name), QuerySpec(queries=frozenset({"far"})), check=None)
     coulomb_m = speed ** 2 / (2 * friction * 9.81)
     assert p.outcomes[0].rollouts[0].final_positions_m[0, 0] == pytest.approx(coulomb_m, rel=0.01)
+
+
+def test_end_substeps_read_a_collapse_at_the_horizon_at_a_finer_step():
+    """A tower collapsing at the horizon: with half steps for the last 0.1 s nothing ends inside
+    another by more than the default's own end (and the setting changes only that last part)."""
+    from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes
+    from ipe_ros.engine.sampler import predict
+
+    tower = load_scenes("ipe_ros/data/example_tower.json")[0]
+    query = QuerySpec(queries=frozenset({"fall", "direction"}))  # run to the horizon, every pose read
+    model = ModelConfig(sigma_m=0.04, samples=6)
+    plain = predict(tower, model, preset("default"), query, seed=2, check=None)
+    halved = predict(tower, model, preset("default").changed(collapse={"end_substeps": 2}), query, seed=2, check=None)
+    assert halved.max_penetration_fraction <= max(plain.max_penetration_fraction, 0.05)
+    for a, b in zip(plain.outcomes, halved.outcomes):  # the same noisy scenes
+        np.testing.assert_array_equal(a.initial_positions_m, b.initial_positions_m)

@@ -251,12 +251,21 @@ class CollapseSettings:
     pushed out again. ``drop_fraction`` is far above
     the fall query's 0.125, which a 30-block stack compressing under its own weight can reach
     without anything falling. ``step_factor`` = 1 switches this off.
+
+    ``end_substeps``: those last ``fine_before_end_s`` run in this many substeps per tick. A collapse
+    still under way at the horizon is read mid-impact: at 1/180 s steps 49 of 576 tower rollouts run
+    to 2 s (asked where things land) end with a body > 5% inside another, each then rerun at the
+    reference by the self-check; at half steps for the last 0.1 s, 2. Not on in ``default``: those
+    reruns are also how the self-check notices a fast physics that is wrong on a strike scene
+    (zoo_strike_7: light1 falls in half the fast samples, never at the reference), and without them
+    it did not (benchmarks/README.md, "the self-check's policies").
     """
 
     step_factor: int = 1
     solver_iterations: int | None = None
     drop_fraction: float = 0.5
     fine_before_end_s: float = 0.1
+    end_substeps: int = 1
 
     def __post_init__(self) -> None:
         _integer(self.step_factor, "collapse.step_factor", 1, 100, " (1: no collapse steps)")
@@ -264,6 +273,7 @@ class CollapseSettings:
             _integer(self.solver_iterations, "collapse.solver_iterations", 1, 10_000, " or None")
         _positive(self.drop_fraction, "collapse.drop_fraction")
         _non_negative(self.fine_before_end_s, "collapse.fine_before_end_s")
+        _integer(self.end_substeps, "collapse.end_substeps", 1, 16)
 
     @property
     def enabled(self) -> bool:

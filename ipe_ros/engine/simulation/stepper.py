@@ -139,6 +139,7 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
         watch.start(world)
     tick = 0
     solver_switch_due = world.direct_solver
+    end_phase_due = settings.collapse.end_substeps > 1
     if settling.ticks or travel_substeps > 1:
         steps.set(1, max(travel_substeps, settling.substeps if settling.ticks else 1))
     while tick < total_ticks:
@@ -150,6 +151,9 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
             p.setTimeStep(dt * step_ticks, physicsClientId=cid)
         # the end on the sequential-impulse solver: the direct one (for bounces) leaves resting
         # bodies sunk into each other (config.SolverSettings.direct_solver_for_restitution)
+        if end_phase_due and tick >= fine_from_tick:
+            end_phase_due = False
+            steps.end_phase()
         if solver_switch_due and tick >= fine_from_tick:
             solver_switch_due = False
             use_sequential_solver(world)

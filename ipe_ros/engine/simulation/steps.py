@@ -31,6 +31,12 @@ class StepControl:
         self._settings, self._world = settings, world
         self.ticks, self.substeps = 1, 1
         self._contact_distance_m = world.contact_distance_m
+        self._least_substeps = 1  # raised for the end of the horizon (collapse.end_substeps)
+
+    def end_phase(self) -> None:
+        """From now on every tick runs in at least ``collapse.end_substeps`` substeps."""
+        self._least_substeps = self._settings.collapse.end_substeps
+        self.set(self.ticks, self.substeps)
 
     def find_contacts_ahead(self, fastest_m_s: float) -> None:
         """Contacts as far ahead as the fastest corner travels in the step in force (changed only
@@ -43,7 +49,7 @@ class StepControl:
             set_contact_distance(world, distance)
 
     def set(self, ticks: int, substeps: int) -> None:
-        substeps = min(substeps, self._settings.max_substeps)
+        substeps = min(max(substeps, self._least_substeps), self._settings.max_substeps)
         if (ticks, substeps) == (self.ticks, self.substeps):
             return
         self.ticks, self.substeps = ticks, substeps

@@ -36,7 +36,7 @@ from .engine import (ALL_QUERIES, PRESETS, AdaptiveStop, ConfigError, ModelConfi
 from .progress import steps
 from .engine.config import (DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M,
                             anytime_batch_size)
-from .cli_ask import add_ask_parser, cmd_ask
+from .cli_ask import add_ask_parser, cmd_ask, contact_pair
 from .engine.examples import example_scene_path
 from .engine.catalogue import capped_tower, scene_catalogue
 from .engine.fidelity import DEFAULT_CHECK, SelfCheck
@@ -45,7 +45,6 @@ from .engine.perturb import is_deterministic
 from .engine.inputs import as_spelled, spelled
 from .engine.request import build_request
 from .engine.query import QUERIES
-from .engine.query.contact import parse_pair
 from .engine.sampler import check_request
 from .engine.scene_io import RefusedScene, write_scenes
 from .engine.zoo import FAMILIES, scene_zoo
@@ -67,13 +66,6 @@ class _OneLineParser(argparse.ArgumentParser):
 def _queries(text: str) -> frozenset[str]:
     try:
         return parse_queries(text)
-    except ConfigError as exc:
-        raise argparse.ArgumentTypeError(exc.problem) from None
-
-
-def _pair(text: str) -> tuple[str, str]:
-    try:
-        return parse_pair(text, "--contact")
     except ConfigError as exc:
         raise argparse.ArgumentTypeError(exc.problem) from None
 
@@ -109,7 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
     default_queries = ",".join(q for q in ALL_QUERIES if q in DEFAULT_QUERIES)
     p.add_argument("--query", type=_queries, default=DEFAULT_QUERIES,
                    help=f"comma-separated queries from {','.join(ALL_QUERIES)} (default {default_queries})")
-    p.add_argument("--contact", type=_pair, action="append", default=None, metavar="A:B",
+    p.add_argument("--contact", type=contact_pair, action="append", default=None, metavar="A:B",
                    help="the contact query: will A touch B within the horizon? (repeatable; B may be 'support'; "
                         "adds contact to --query)")
     p.add_argument("--samples", type=int, default=DEFAULT_SAMPLES,

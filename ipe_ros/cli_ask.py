@@ -45,7 +45,8 @@ def _numbers(count: tuple[int, ...], name: str):
     return parse
 
 
-def _pair(text: str) -> tuple[str, str]:
+def contact_pair(text: str) -> tuple[str, str]:
+    """argparse type of --contact (ipe predict and ipe ask)."""
     try:
         return parse_pair(text, "--contact")
     except ConfigError as exc:
@@ -78,7 +79,7 @@ def add_ask_parser(sub, finite, one_line_parser) -> None:
                        help="record 4 rollouts of every variant to this rerun file (not for clear)")
 
     def contact(q):
-        q.add_argument("--contact", type=_pair, action="append", default=None, metavar="A:B",
+        q.add_argument("--contact", type=contact_pair, action="append", default=None, metavar="A:B",
                        help="also P(A touches B) per variant (repeatable; B may be 'support')")
 
     r = questions.add_parser("remove", help="P(anything else falls) if an object is taken away")

@@ -176,8 +176,8 @@ def test_parameter_updates_accepted_and_rejected(ros, tower):
     [width] = set_params(ros, target_ci_width=0.3)
     assert width.successful
     [bad_queries] = set_params(ros, queries=["far"])  # the width target needs the fall or any_fall query
-    assert bad_queries.reason == ("target_ci_width: needs the fall or any_fall query; add one to the queries or drop "
-                                  "the target width")
+    assert bad_queries.reason == ("target_ci_width: a target interval width needs the fall or any_fall query; add one "
+                                  "to the queries or drop the target width")
     assert set_params(ros, target_ci_width=0.0)[0].successful
     [out_of_range] = set_params(ros, samples=0)
     assert not out_of_range.successful and "samples" in out_of_range.reason

@@ -69,7 +69,7 @@ class Prediction:
     outcomes: tuple[SampleOutcome, ...] = field(default=(), repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        unknown = sorted(set(self.answers) - set(ANSWER_FIELDS))
+        unknown = sorted(set(self.answers) - _ANSWER_FIELD_SET)
         if unknown:
             raise TypeError(f"{unknown[0]}: not a field of any query (engine/query)")
 

@@ -16,7 +16,7 @@ from .config import (DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_
                      QuerySpec, SimSettings, preset)
 from .errors import ConfigError, shown
 from .fidelity import DEFAULT_CHECK, SelfCheck
-from .sampler import AdaptiveStop, check_budget
+from .sampler import AdaptiveStop, check_budget, check_ci_width
 
 
 @dataclass(frozen=True)
@@ -70,9 +70,7 @@ def build_request(*, samples: int = DEFAULT_SAMPLES, sigma_m: float = DEFAULT_SI
         settings = settings.changed(early_stop={"enabled": True})
     stop = None
     if ci_width is not None or deadline_s is not None:
-        if ci_width is not None and not (query.wants("fall") or query.wants("any_fall")):
-            raise ConfigError("ci_width", "needs the fall or any_fall query; add one to the queries or drop the "
-                                          "target width")
+        check_ci_width(ci_width, query)
         stop = AdaptiveStop(ci_width=ci_width, deadline_s=deadline_s, batch_size=batch_size)
     check_budget(budget_s)
     check = SelfCheck(enabled=bool(self_check), verify_samples=verify_samples)

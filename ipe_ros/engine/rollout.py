@@ -16,6 +16,7 @@ import numpy as np
 
 from . import shapes, simulation
 from .query import QUERIES, Reading
+from .query.base import smallest_extents_m
 from .config import ModelConfig, QuerySpec, SimSettings
 from .errors import BudgetExceeded, PhysicsError
 from .perturb import draw_sample_inputs
@@ -114,10 +115,6 @@ def _query(task: SampleTask, initial: np.ndarray, phi: float, end: simulation.Ro
                          energy_gain_j=end.energy_gain_j, penetration_fraction=end.penetration_fraction, extra=extra)
 
 
-def _smallest_extents(scene: Scene) -> np.ndarray:
-    return np.array([b.smallest_extent_m for b in scene.dynamic_objects])
-
-
 def decided_heights(scene: Scene, settings: SimSettings, spec: QuerySpec, initial: np.ndarray) -> DecidedHeights | None:
     """Early termination by heights, built from the queries asked: when every one of them says
     below which height each body's outcome is decided (fall, any_fall: its centre dropped by the fall
@@ -133,7 +130,7 @@ def decided_heights(scene: Scene, settings: SimSettings, spec: QuerySpec, initia
         return None
     fallen_below_z = np.minimum.reduce(heights)
     # "will anything fall?" is decided by the first box that falls
-    first_fall = all(getattr(q, "decided_by_first_fall", False) for q in asked)
+    first_fall = all(q.decided_by_first_fall for q in asked)
     return DecidedHeights(fallen_below_z_m=fallen_below_z, never_falls=_never_falls(scene, fallen_below_z),
                           stop_at_first_fall=first_fall)
 
@@ -168,7 +165,7 @@ def _never_falls(scene: Scene, decided_below_z: np.ndarray) -> np.ndarray | None
     lowest_surface_z = support.height_m if isinstance(support, Floor) else support.floor_z_m
     if lowest_surface_z is None:  # a table with nothing under it: boxes can drop without limit
         return None
-    smallest = _smallest_extents(scene)
+    smallest = smallest_extents_m(scene)
     lowest_rest = np.array([shapes.min_rest_height_m(b.shape) for b in scene.dynamic_objects])
     return decided_below_z < lowest_surface_z + lowest_rest - 0.05 * smallest
 
@@ -191,7 +188,7 @@ def collapse_heights(scene: Scene, settings: SimSettings, initial: np.ndarray) -
     """Per body, the height below which the collapse steps start (None: the preset has none)."""
     if not settings.collapse.enabled:
         return None
-    return initial[:, 2] - settings.collapse.drop_fraction * _smallest_extents(scene)
+    return initial[:, 2] - settings.collapse.drop_fraction * smallest_extents_m(scene)
 
 
 def simulate_pushes(scene: Scene, model: ModelConfig, settings: SimSettings, spec: QuerySpec, world: simulation.World,

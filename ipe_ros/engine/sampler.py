@@ -149,6 +149,13 @@ def check_request(scene: Scene, query: QuerySpec, max_objects: int = DEFAULT_MAX
                                           "raise the budget, shorten horizon_s, or simplify the scene")
 
 
+def check_ci_width(ci_width: float | None, query: QuerySpec) -> None:
+    """A target interval width needs an interval to watch: the fall or the any_fall query's."""
+    if ci_width is not None and not (query.wants("fall") or query.wants("any_fall")):
+        raise ConfigError("ci_width", "a target interval width needs the fall or any_fall query; add one to the "
+                                      "queries or drop the target width")
+
+
 def check_budget(budget_s: float | None) -> None:
     if budget_s is not None and (isinstance(budget_s, bool) or not isinstance(budget_s, (int, float))
                                  or not math.isfinite(budget_s) or budget_s <= 0):
@@ -182,9 +189,7 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
     check_budget(budget_s)
     check_fidelity_request(check)
     check_request(scene, query, max_objects, model=model, settings=settings, budget_s=budget_s)
-    if stop is not None and stop.ci_width is not None and not (query.wants("fall") or query.wants("any_fall")):
-        raise ConfigError("ci_width", "a target interval width needs the fall or any_fall query; ask for one "
-                                      "or drop it")
+    check_ci_width(None if stop is None else stop.ci_width, query)
     per_sample_answer = sample_fall_fraction if query.wants("fall") else sample_any_fall
     tasks = make_tasks(scene, model, settings, query, seed, record_every, record_samples)
     if model.perception == "depth" and perceived is None:

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from .base import Query, Reading, Samples
-from .fall import fallen_below_z_m, smallest_extents_m
+from .fall import fallen_below_z_m
 
 
 def sample_any_fall(outcome) -> float:
@@ -20,11 +20,10 @@ class AnyFall(Query):
     name = "any_fall"
     fields = ("any_fall_probability", "any_fall_probability_ci95")
     summary = "probability that anything falls (its rollouts end at the first fall)"
-    #: the whole rollout's answer is decided once any body has fallen
     decided_by_first_fall = True
 
     def decided_below_z(self, scene, spec, initial_m):
-        return fallen_below_z_m(spec, initial_m, smallest_extents_m(scene))
+        return fallen_below_z_m(scene, spec, initial_m)
 
     def read(self, reading: Reading) -> dict[str, Any]:
         return {"any_fell": bool(reading.fallen.any())}

@@ -35,6 +35,11 @@ if TYPE_CHECKING:  # config imports this package: types only
     from ..rollout import RolloutResult, SampleOutcome
 
 
+def smallest_extents_m(scene: Scene) -> np.ndarray:
+    """Each dynamic body's smallest extent, in scene order (the unit of the fall threshold)."""
+    return np.array([b.smallest_extent_m for b in scene.dynamic_objects])
+
+
 @dataclass
 class Reading:
     """One rollout as a query reads it. Arrays follow ``scene.dynamic_objects``.
@@ -57,7 +62,7 @@ class Reading:
 
     @cached_property
     def smallest_extents_m(self) -> np.ndarray:
-        return np.array([b.smallest_extent_m for b in self.scene.dynamic_objects])
+        return smallest_extents_m(self.scene)
 
     @cached_property
     def fallen(self) -> np.ndarray:
@@ -120,6 +125,8 @@ class Query:
     fields: ClassVar[tuple[str, ...]]
     #: one line for help texts
     summary: ClassVar[str] = ""
+    #: the whole rollout's answer is decided once any body has fallen (any_fall)
+    decided_by_first_fall: ClassVar[bool] = False
 
     def check(self, scene: Scene, spec: "QuerySpec") -> None:
         """Refuse, with a ConfigError naming the field, what this scene cannot answer."""

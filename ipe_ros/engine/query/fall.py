@@ -8,16 +8,12 @@ from typing import Any
 
 import numpy as np
 
-from .base import Query, Reading, Samples
+from .base import Query, Reading, Samples, smallest_extents_m
 
 
-def fallen_below_z_m(spec, reading_initial_m: np.ndarray, smallest_extents_m: np.ndarray) -> np.ndarray:
+def fallen_below_z_m(scene, spec, initial_m: np.ndarray) -> np.ndarray:
     """The height below which a body's centre has fallen: decided, whatever it does next."""
-    return reading_initial_m[:, 2] - spec.fall_threshold_fraction * smallest_extents_m
-
-
-def smallest_extents_m(scene) -> np.ndarray:
-    return np.array([b.smallest_extent_m for b in scene.dynamic_objects])
+    return initial_m[:, 2] - spec.fall_threshold_fraction * smallest_extents_m(scene)
 
 
 def sample_fall_fraction(outcome) -> float:
@@ -31,7 +27,7 @@ class Fall(Query):
     summary = "expected fraction of objects that fall, and each one's probability"
 
     def decided_below_z(self, scene, spec, initial_m):
-        return fallen_below_z_m(spec, initial_m, smallest_extents_m(scene))
+        return fallen_below_z_m(scene, spec, initial_m)
 
     def read(self, reading: Reading) -> dict[str, Any]:
         return {"fallen": reading.fallen}

@@ -19,6 +19,7 @@ import argparse
 import dataclasses
 import json
 import os
+import pickle
 import sys
 import time
 from pathlib import Path
@@ -36,6 +37,8 @@ from ipe_ros.engine.zoo import FAMILIES, scene_zoo, zoo_sigma_m  # noqa: E402
 
 POLICIES = {
     "current": DEFAULT_CHECK,
+    "no coverage": dataclasses.replace(DEFAULT_CHECK, cover_samples=0),
+    "cover 2": dataclasses.replace(DEFAULT_CHECK, cover_samples=2),
     "confirm 1 per round": dataclasses.replace(DEFAULT_CHECK, confirm_samples=1),
     "one confirmation round": dataclasses.replace(DEFAULT_CHECK, confirm_rounds=1),
     "no confirmation": dataclasses.replace(DEFAULT_CHECK, confirm_rounds=0),
@@ -68,26 +71,62 @@ def main() -> int:
     parser.add_argument("--samples", type=int, default=48)
     parser.add_argument("--query", type=parse_queries, default=DEFAULT_QUERIES,
                         help="the queries asked (default: the node's and the CLI's, fall,any_fall,direction,far)")
+    parser.add_argument("--end-substeps", type=int, default=None,
+                        help="the fast physics with collapse.end_substeps set to this (default: `default`'s own)")
+    parser.add_argument("--cache", type=Path, default=None,
+                        help="a pickle of the simulated samples: read when it exists (no simulation), else written, "
+                             "so that policies can be replayed again on the same samples")
+    parser.add_argument("--reference-from", type=Path, default=None,
+                        help="take the reference samples from this cache (same scenes, seeds and queries) instead "
+                             "of simulating them again")
     parser.add_argument("--out", default="benchmarks/results/check_policy")
     args = parser.parse_args()
     fast_settings, reference = preset("default"), reference_settings()
+    if args.end_substeps is not None:
+        fast_settings = fast_settings.changed(f"default-end{args.end_substeps}",
+                                              collapse={"end_substeps": args.end_substeps})
     query = QuerySpec(queries=args.query)
+    if args.cache is not None and args.cache.exists():
+        stored = pickle.loads(args.cache.read_bytes())
+    else:
+        stored = _simulate(args, fast_settings, reference, query)
+        if args.cache is not None:
+            args.cache.write_bytes(pickle.dumps(stored))
+    rows, scenes = _replay(stored, reference)
+    _write(rows, Path(args.out))
+    (Path(args.out) / "check_policy_scenes.json").write_text(json.dumps(scenes, indent=1))
+    return 0
+
+
+def _simulate(args, fast_settings, reference, query) -> list:
+    """Every sample of every scene at the fast settings and at the reference, same seeds."""
     stored = []
+    earlier = pickle.loads(args.reference_from.read_bytes()) if args.reference_from else None
     with WorkerPool(2) as pool:
         scenes = _scenes(args)
         group, scene, model = scenes[0]  # workers started and imports done before any timing
         _run_tasks(make_tasks(scene, dataclasses.replace(model, samples=2), fast_settings, query, seed=0), pool.map)
-        for group, scene, model in scenes:
+        for n, (group, scene, model) in enumerate(scenes):
             tasks = make_tasks(scene, model, fast_settings, query, seed=11)
             start = time.perf_counter()
             fast = _run_tasks(tasks, pool.map)
             fast_s = time.perf_counter() - start
-            start = time.perf_counter()
-            ref = _run_tasks([at_settings(t, reference) for t in tasks], pool.map)
-            ref_s = time.perf_counter() - start
+            if earlier is not None:
+                if earlier[n][1] != scene.name or len(earlier[n][4]) != len(tasks):
+                    raise SystemExit(f"--reference-from holds other scenes ({earlier[n][1]} for {scene.name})")
+                ref, ref_s = earlier[n][4], earlier[n][6]
+            else:
+                start = time.perf_counter()
+                ref = _run_tasks([at_settings(t, reference) for t in tasks], pool.map)
+                ref_s = time.perf_counter() - start
             stored.append((group, scene.name, tasks, fast, ref, fast_s, ref_s))
             print(f"{group} {scene.name}: fast {fast_s:.2f} s, reference {ref_s:.2f} s", flush=True)
-    rows = []
+    return stored
+
+
+def _replay(stored: list, reference) -> list[dict]:
+    """Each policy's self-check on the stored samples, the reference outcomes handed back as reruns."""
+    rows, scenes = [], []
     for name, check in POLICIES.items():
         per_group: dict[str, dict] = {}
         for group, scene_name, tasks, fast, ref, fast_s, ref_s in stored:
@@ -112,13 +151,18 @@ def main() -> int:
             g["escalated"] += report.verdict == "escalated"
             g["dp"].append(float(dp.mean()))
             g["worst"] = max(g["worst"], float(dp.max()))
+            scenes.append({"policy": name, "scene": scene_name, "verdict": report.verdict,
+                           "reference_samples": len(set(used)), "worst_abs_dp": float(dp.max())})
         for group, g in per_group.items():
             rows.append({"policy": name, "group": group, "scenes": g["scenes"],
                          "reference_samples_per_prediction": g["reference_samples"] / g["scenes"],
                          "speedup_vs_reference": g["paper_s"] / (g["fast_s"] + g["ref_s"]),
                          "escalated": g["escalated"], "mean_abs_dp": float(np.mean(g["dp"])),
                          "worst_abs_dp": g["worst"]})
-    out = Path(args.out)
+    return rows, scenes
+
+
+def _write(rows: list[dict], out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     (out / "check_policy.json").write_text(json.dumps(rows, indent=1))
     lines = ["| policy | set | scenes | reference samples / prediction | speed-up vs reference | escalated | "
@@ -129,7 +173,6 @@ def main() -> int:
                      f"{r['worst_abs_dp']:.3f} |")
     (out / "check_policy.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
-    return 0
 
 
 if __name__ == "__main__":

@@ -17,7 +17,7 @@ import pytest
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
 from ipe_ros.engine.config import DEFAULT_QUERIES
 from ipe_ros.engine.errors import ConfigError
-from ipe_ros.engine.fidelity import VERDICTS, SelfCheck, confirmation_samples, reference_settings
+from ipe_ros.engine.fidelity import VERDICTS, SelfCheck, confirmation_samples, coverage_samples, reference_settings
 from ipe_ros.engine.rollout import SampleOutcome, run_sample
 from ipe_ros.engine.scene_io import load_scenes
 from ipe_ros.engine.examples import example_scene_path
@@ -178,6 +178,41 @@ def test_confirmation_is_sought_where_the_suspect_difference_can_show():
     assert confirmation_samples({}, differences, 2) == [] and confirmation_samples(fast, differences, 0) == []
 
 
+def test_coverage_looks_where_a_bias_could_hide_from_the_samples_compared():
+    """Sample 0 (compared, no difference) kept both objects: a bias making either fall could not
+    show on it. Object 0 falls in 3 fast samples (2, 5, 6), object 1 in 2 (6, 7): with 3 needed
+    to escalate only object 0's "yes" side is uncovered, and of its samples 2, 5 and 6 (equal
+    cover) the first is picked; with 2 needed, 6 covers both objects' "yes" sides (5 samples) at once."""
+    fast = {1: _flags_of(0, 0), 2: _flags_of(1, 0), 3: _flags_of(0, 0), 4: _flags_of(0, 0), 5: _flags_of(1, 0),
+            6: _flags_of(1, 1), 7: _flags_of(0, 1)}
+    looked = [_flags_of(0, 0)]
+    assert coverage_samples(fast, looked, at_least=3, count=1) == [2]
+    assert coverage_samples(fast, looked, at_least=2, count=2) == [6]  # after 6 nothing is uncovered
+    # the "no" side: everything fell in the compared sample, object 1 stands in 5 fast samples
+    assert coverage_samples(fast, [_flags_of(1, 1)], at_least=3, count=1) == [1]
+    # both sides of both objects already seen, or too few samples to escalate: nothing to look at
+    assert coverage_samples(fast, [_flags_of(0, 0), _flags_of(1, 1)], at_least=3, count=2) == []
+    assert coverage_samples(fast, looked, at_least=4, count=2) == []
+    assert coverage_samples({}, looked, 3, 1) == [] and coverage_samples(fast, looked, 3, 0) == []
+
+
+def test_a_bias_the_verified_sample_could_not_show_is_found_by_coverage(contradicted_scene):
+    """The fast physics topples the stack in samples 3, 5 and 6 of 8 and keeps it in sample 0, the
+    verified one, as the reference does everywhere: no difference, yet nothing compared could
+    have shown this bias. Coverage verifies sample 3, finds it, confirmation finds it at 5 and 6,
+    and the scene is escalated instead of being called verified."""
+    spy = _toppled_only_in(contradicted_scene, (3, 5, 6))
+    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), preset("default"), QUERY, seed=0,
+                map_fn=spy)
+    assert [[t.index for t in call] for call in spy.calls[1:3]] == [[3], [5, 6]]
+    assert p.fidelity == "escalated" and p.object_fall_probability["block1"] == 0.0
+    no_coverage = dataclasses.replace(SelfCheck(), cover_samples=0)
+    spy = _toppled_only_in(contradicted_scene, (3, 5, 6))
+    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), preset("default"), QUERY, seed=0,
+                map_fn=spy, check=no_coverage)
+    assert p.fidelity == "verified" and p.object_fall_probability["block1"] == 3 / 8  # what it was
+
+
 def _toppled_only_in(scene, kept: tuple[int, ...], unhealthy: bool = False):
     """A map under which the fast physics topples the stack at the ramp's foot in the samples
     ``kept`` only (its other samples stand, as every one of the reference's does); ``unhealthy``:
@@ -251,11 +286,13 @@ def test_a_failed_fast_sample_is_rerun_at_the_reference(tower):
 
 
 def test_a_rollout_ending_inside_another_body_is_refined(tower):
-    """A real hard case: at the default's steps one rollout of the example tower ends mid-impact at
-    the horizon, a block 6% of its size inside another (sample 2 of seed 2)."""
+    """A real hard case: at the default's steps without its finer end (``collapse.end_substeps``)
+    one rollout of the example tower ends mid-impact at the horizon, a block 6% of its size inside
+    another (sample 2 of seed 2)."""
     model = ModelConfig(sigma_m=0.01, samples=3)
-    unchecked = predict(tower, model, preset("default"), QUERY, seed=2, check=None)
-    checked = predict(tower, model, preset("default"), QUERY, seed=2)
+    coarse_end = preset("default").changed("default-coarse-end", collapse={"end_substeps": 1})
+    unchecked = predict(tower, model, coarse_end, QUERY, seed=2, check=None)
+    checked = predict(tower, model, coarse_end, QUERY, seed=2)
     assert unchecked.max_penetration_fraction > 0.05
     assert checked.max_penetration_fraction <= 0.05
     assert checked.self_check["refined_reasons"] == {"2": "penetration"}

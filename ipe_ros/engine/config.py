@@ -255,10 +255,9 @@ class CollapseSettings:
     ``end_substeps``: those last ``fine_before_end_s`` run in this many substeps per tick. A collapse
     still under way at the horizon is read mid-impact: at 1/180 s steps 49 of 576 tower rollouts run
     to 2 s (asked where things land) end with a body > 5% inside another, each then rerun at the
-    reference by the self-check; at half steps for the last 0.1 s, 2. Not on in ``default``: those
-    reruns are also how the self-check notices a fast physics that is wrong on a strike scene
-    (zoo_strike_7: light1 falls in half the fast samples, never at the reference), and without them
-    it did not (benchmarks/README.md, "the self-check's policies").
+    reference by the self-check (9.8 reference samples per k = 48 tower prediction); at half steps
+    for the last 0.1 s, 2 (2.75 with the check's coverage; benchmarks/README.md, "the self-check's
+    policies"). ``default`` uses 2.
     """
 
     step_factor: int = 1
@@ -430,7 +429,7 @@ PRESETS: dict[str, SimSettings] = {
                            solver=SolverSettings(iterations=100, residual_threshold=3e-6, warm_start_factor=1.0,
                                                  maximal_coordinates=True),
                            settling=SettlingSettings(duration_s=0.1, substeps=2),
-                           collapse=CollapseSettings(step_factor=4, solver_iterations=50),
+                           collapse=CollapseSettings(step_factor=4, solver_iterations=50, end_substeps=2),
                            early_stop=EarlyStopSettings(enabled=True, speed_sizes_per_s=0.4, angular_rad_s=0.4,
                                                         duration_s=0.15, min_time_s=0.2)),
 }

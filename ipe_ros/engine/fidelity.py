@@ -92,6 +92,10 @@ class SelfCheck:
         differences in three samples are what chaos gives a collapsing tower's marginal block now
         and then (on tower 292 of the authors' set a block `default` and the reference both drop in
         about a third of the samples differed in 2 of 3 targeted samples); three are rare.
+    cover_samples: when the samples compared so far show no difference, this many more are verified
+        where a bias could hide from them (``coverage_samples``): a fast physics that topples a block
+        in half the samples and the reference in none agrees with the reference on every sample where
+        the fast block stood, so a verified sample drawn there says nothing about it (0: off).
     max_end_penetration_fraction: a rollout ending with a body deeper than this fraction of its
         smallest extent inside another is refined.
     max_energy_gain_fraction: a rollout that gained more energy than this fraction of the scene's
@@ -104,6 +108,7 @@ class SelfCheck:
     confirm_rounds: int = 2
     escalate_share: float = 0.6
     escalate_min_samples: int = 3
+    cover_samples: int = 1
     max_end_penetration_fraction: float = 0.05
     max_energy_gain_fraction: float = 0.01
 
@@ -113,6 +118,7 @@ class SelfCheck:
         _integer(self.confirm_samples, "self_check.confirm_samples", 0, 1000)
         _integer(self.confirm_rounds, "self_check.confirm_rounds", 0, 100)
         _integer(self.escalate_min_samples, "self_check.escalate_min_samples", 1, 1000)
+        _integer(self.cover_samples, "self_check.cover_samples", 0, 1000)
         if isinstance(self.escalate_share, bool) or not isinstance(self.escalate_share, (int, float)) \
                 or not 0 < self.escalate_share <= 1:
             raise ConfigError("self_check.escalate_share", f"must be in (0, 1], got {shown(self.escalate_share)}")
@@ -214,6 +220,39 @@ def confirmation_samples(fast_flags: dict[int, np.ndarray], differences: dict[in
             best = (key, candidates)
     picked = (best[1] if best else [])[:count]
     return picked + [i for i in rest if i not in picked][:count - len(picked)]
+
+
+def coverage_samples(fast_flags: dict[int, np.ndarray], looked: Sequence[np.ndarray], at_least: int,
+                     count: int) -> list[int]:
+    """Which samples (at most ``count``) to verify so that the comparison could see any bias big
+    enough to escalate, given the fast outcomes (sample index -> 0/1 flags) of the samples not yet
+    verified and those of the samples already compared (``looked``).
+
+    A bias that makes outcome j "yes" where the reference says "no" shows only on samples whose fast
+    outcome j is "yes" (and the other way round). A side of an outcome that at least ``at_least``
+    fast samples take (fewer could not escalate) and no compared sample took is uncovered; each pick
+    is the sample covering the most uncovered fast samples (summed over the sides it takes; lowest
+    index among equals), until every side is covered or ``count`` are picked.
+    """
+    shape = next(iter(fast_flags.values()), np.zeros(0)).shape
+    rest = {i: f.astype(bool) for i, f in sorted(fast_flags.items()) if f.shape == shape}
+    if count <= 0 or not rest or len(shape) != 1 or not shape[0]:
+        return []
+    seen = np.array([f for f in looked if f.shape == shape], bool).reshape(-1, *shape)
+    flags = np.concatenate([np.array(list(rest.values())), seen])
+    yes, no = flags.sum(axis=0), (~flags).sum(axis=0)
+    weight_yes = np.where((yes >= at_least) & ~seen.any(axis=0), yes, 0)
+    weight_no = np.where((no >= at_least) & ~(~seen).any(axis=0), no, 0)
+    picked: list[int] = []
+    while len(picked) < count:
+        scores = {i: int(weight_yes[f].sum() + weight_no[~f].sum()) for i, f in rest.items() if i not in picked}
+        best = max(scores, key=lambda i: (scores[i], -i), default=None)
+        if best is None or scores[best] == 0:
+            break
+        picked.append(best)
+        weight_yes[rest[best]] = 0
+        weight_no[~rest[best]] = 0
+    return picked
 
 
 @dataclass(frozen=True)

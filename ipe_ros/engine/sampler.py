@@ -21,7 +21,7 @@ from .errors import ConfigError, shown
 from .estimate import Prediction, aggregate, sample_any_fall, sample_fall_fraction, wilson_interval
 from .fidelity import check_request as check_fidelity_request
 from .fidelity import (DEFAULT_CHECK, NO_CHECK, FidelityReport, SelfCheck, confirmation_samples, contradicts,
-                       difference, is_reference, merge, outcome_flags, reference_settings, scale_of, suspect,
+                       coverage_samples, difference, is_reference, merge, outcome_flags, reference_settings, scale_of, suspect,
                        unhealthy, verification_count)
 from .perturb import is_deterministic
 from .rollout import SampleOutcome, SampleTask, run_sample
@@ -301,15 +301,25 @@ def self_check(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified:
     # 3. confirmation: every sample rerun so far is a paired comparison, refined ones included (a
     # fast physics whose unhealthy rollouts topple what the reference's keep standing is wrong on
     # this scene, and replacing only those would bias the answer), and a suspect difference is
-    # looked for again where it can show before it is believed
-    for round_ in range(check.confirm_rounds):
+    # looked for again where it can show before it is believed; while nothing differs, one round
+    # looks where a bias could hide from the samples compared so far (coverage)
+    confirmations, covered = 0, False
+    while True:
         compared = differences()
         found = suspect(list(compared.values()))
-        # nothing differs, or it is decided; a second round only while something is suspicious
-        if not found or repair >= at_least or contradicted(compared) or (round_ and found < 2):
-            break
+        if repair >= at_least or contradicted(compared):
+            break  # decided
         fast = {i: outcome_flags(o) for i, o in enumerate(outcomes) if i not in checked and o.ok}
-        picked = confirmation_samples(fast, compared, check.confirm_samples)
+        # a second confirmation round only while something is suspicious
+        if found and confirmations < check.confirm_rounds and not (confirmations and found < 2):
+            picked = confirmation_samples(fast, compared, check.confirm_samples)
+            confirmations += 1
+        elif not found and not covered:
+            looked = [outcome_flags(outcomes[i]) for i in compared]
+            picked = coverage_samples(fast, looked, at_least, check.cover_samples)
+            covered = True
+        else:
+            break
         if not picked:
             break
         checked.update(zip(picked, at_reference([tasks[i] for i in picked])))
@@ -317,7 +327,9 @@ def self_check(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified:
     disagreeing = [i for i, d in compared.items() if d.any()]
     common = dict(verified_samples=len(compared), disagreeing_samples=len(disagreeing),
                   refined_samples=len(refined), refined_reasons=tuple((i, reasons[i]) for i in sorted(refined)))
-    if not contradicted(compared) and repair < at_least:
+    # every sample already has its reference rerun and some differ: the reference's answer is at hand
+    known = bool(disagreeing) and len(compared) == len(outcomes)
+    if not contradicted(compared) and repair < at_least and not known:
         first = min(check.verify_samples, len(tasks))
         # a disagreement whose confirmation the budget cut off was neither confirmed nor dismissed
         unconfirmed = disagreeing and any(o.budget_stopped for o in checked.values())

@@ -93,7 +93,11 @@ def main() -> int:
         if args.cache is not None:
             args.cache.write_bytes(pickle.dumps(stored))
     rows, scenes = _replay(stored, reference)
-    _write(rows, Path(args.out))
+    tasks = stored[0][2]
+    title = (f"# Self-check policies replayed on the same samples ({time.strftime('%Y-%m-%d')}): fast "
+             f"`{tasks[0].settings.name}` (collapse.end_substeps {tasks[0].settings.collapse.end_substeps}), "
+             f"queries {', '.join(sorted(tasks[0].query.queries))}, against `{reference.name}`\n\n")
+    _write(rows, Path(args.out), title)
     (Path(args.out) / "check_policy_scenes.json").write_text(json.dumps(scenes, indent=1))
     return 0
 
@@ -162,7 +166,7 @@ def _replay(stored: list, reference) -> list[dict]:
     return rows, scenes
 
 
-def _write(rows: list[dict], out: Path) -> None:
+def _write(rows: list[dict], out: Path, title: str) -> None:
     out.mkdir(parents=True, exist_ok=True)
     (out / "check_policy.json").write_text(json.dumps(rows, indent=1))
     lines = ["| policy | set | scenes | reference samples / prediction | speed-up vs reference | escalated | "
@@ -171,7 +175,7 @@ def _write(rows: list[dict], out: Path) -> None:
         lines.append(f"| {r['policy']} | {r['group']} | {r['scenes']} | {r['reference_samples_per_prediction']:.2f} | "
                      f"{r['speedup_vs_reference']:.1f}x | {r['escalated']} | {r['mean_abs_dp']:.3f} | "
                      f"{r['worst_abs_dp']:.3f} |")
-    (out / "check_policy.md").write_text("\n".join(lines) + "\n")
+    (out / "check_policy.md").write_text(title + "\n".join(lines) + "\n")
     print("\n".join(lines))
 
 

@@ -269,6 +269,18 @@ def test_two_same_way_differences_in_three_samples_look_again_before_escalating(
     assert (p.self_check["verified_samples"], p.self_check["disagreeing_samples"]) == (5, 2)
 
 
+def test_an_answer_whose_every_sample_was_rerun_is_the_reference_answer(contradicted_scene):
+    """k = 4, toppled in samples 0 and 2 only: two same-way differences can never make the three
+    that escalate, but confirming them reruns all four samples, and with every reference outcome
+    at hand the answer is the reference's (as escalation would give), not the fast one's."""
+    spy = _toppled_only_in(contradicted_scene, (0, 2))
+    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 4), preset("default"), QUERY, seed=0,
+                map_fn=spy)
+    assert [[t.index for t in call] for call in spy.calls[1:]] == [[2, 1], [3]]
+    assert p.fidelity == "escalated" and p.object_fall_probability["block1"] == 0.0
+    assert p.self_check["verified_samples"] == 4 and p.self_check["disagreeing_samples"] == 2
+
+
 def test_a_failed_fast_sample_is_rerun_at_the_reference(tower):
     def fail_second(task, outcome: SampleOutcome):
         if task.settings.name == "default" and task.index == 1:

@@ -331,8 +331,8 @@ def self_check(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified:
     known = bool(disagreeing) and len(compared) == len(outcomes)
     if not contradicted(compared) and repair < at_least and not known:
         first = min(check.verify_samples, len(tasks))
-        # a disagreement whose confirmation the budget cut off was neither confirmed nor dismissed
-        unconfirmed = disagreeing and any(o.budget_stopped for o in checked.values())
+        # a confirmation or a coverage rerun the budget cut off neither confirmed nor dismissed a bias
+        unconfirmed = any(o.budget_stopped for o in checked.values())
         verdict = "verified" if first and all(i in compared for i in range(first)) and not unconfirmed \
             else "unverified"
         return merge(outcomes, refined), FidelityReport(verdict, settings=tuple(parts), **common)

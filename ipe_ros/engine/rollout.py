@@ -80,7 +80,12 @@ _OWN_FIELDS = frozenset({"fallen", "any_fell", "direction_rad", "far_m", "fell_o
 
 @dataclass(frozen=True)
 class SampleOutcome:
-    """The result of one sample: its initial (noisy, separated) state and one result per phi value."""
+    """The result of one sample: its initial (noisy, separated) state and one result per phi value.
+
+    A robot question's variant has one of these per sample too (``actions.variants``): its
+    rollouts' arrays then follow ``names`` (the variant's objects: one removed, one added), and a
+    variant not run in a sample (the scene fell as it is, or the variant was decided) is ``skipped``.
+    """
 
     index: int
     ok: bool
@@ -91,6 +96,8 @@ class SampleOutcome:
     rollouts: tuple[RolloutResult, ...] = ()
     budget_stopped: bool = False  # cut off by the compute budget: neither used nor a failure
     worker_lost: bool = False  # its worker process died twice: a failure of the machine, not of the sample
+    names: tuple[str, ...] | None = None  # the objects the rollouts' arrays follow (None: the task scene's)
+    skipped: bool = False  # not run (a question's variant in a sample it did not need): neither used nor a failure
 
 
 def read_rollout(scene: Scene, spec: QuerySpec, initial: np.ndarray, end: simulation.RolloutEnd) -> dict:
@@ -105,7 +112,13 @@ def read_rollout(scene: Scene, spec: QuerySpec, initial: np.ndarray, end: simula
 
 
 def _query(task: SampleTask, initial: np.ndarray, phi: float, end: simulation.RolloutEnd) -> RolloutResult:
-    values = read_rollout(task.scene, task.query, initial, end)
+    return rollout_result(task.scene, task.query, initial, phi, end)
+
+
+def rollout_result(scene: Scene, spec: QuerySpec, initial: np.ndarray, phi: float,
+                   end: simulation.RolloutEnd) -> RolloutResult:
+    """One rollout's result: every asked query's values, the end state and its health."""
+    values = read_rollout(scene, spec, initial, end)
     own = {k: v for k, v in values.items() if k in _OWN_FIELDS}
     extra = tuple(sorted((k, v) for k, v in values.items() if k not in _OWN_FIELDS))
     return RolloutResult(phi_m_s2=phi, final_positions_m=end.positions_m, final_orientations_xyzw=end.orientations_xyzw,

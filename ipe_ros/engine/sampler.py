@@ -12,7 +12,7 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from typing import Callable, Generator, Sequence
 
 import numpy as np
 
@@ -267,12 +267,52 @@ def self_check(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified:
 
     ``verified[i]`` is sample i rerun at ``reference``; ``run`` reruns tasks (through the map).
     """
+    (result,) = self_check_many([checking(tasks, outcomes, verified, check, reference, fast_name)], reference, run)
+    return result
+
+
+Checking = Generator[list[SampleTask], list[SampleOutcome], tuple[list[SampleOutcome], FidelityReport]]
+
+
+def self_check_many(checks: list[Checking], reference: SimSettings,
+                    run: Callable[[list[SampleTask]], list[SampleOutcome]]) -> list[tuple[list[SampleOutcome],
+                                                                                             FidelityReport]]:
+    """Drive several checks (``checking``) together: each round, the tasks every unfinished check
+    wants rerun go to ``run`` at ``reference`` in one batch (one map call keeps the workers busy),
+    and each check gets its own back. The checks' results, in order."""
+    results: list = [None] * len(checks)
+    pending: dict[int, list[SampleTask]] = {}
+
+    def advance(n: int, sent: list[SampleOutcome] | None) -> None:
+        try:
+            pending[n] = checks[n].send(sent)
+        except StopIteration as done:
+            pending.pop(n, None)
+            results[n] = done.value
+
+    for n in range(len(checks)):
+        advance(n, None)
+    while pending:
+        order = sorted(pending)
+        batch = [at_settings(t, reference) for n in order for t in pending[n]]
+        reruns = run(batch) if batch else []
+        at = 0
+        for n in order:
+            count = len(pending[n])
+            advance(n, reruns[at:at + count])
+            at += count
+    return results
+
+
+def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: list[SampleOutcome],
+             check: SelfCheck, reference: SimSettings, fast_name: str) -> Checking:
+    """The self-check of one answer's samples, as a generator: it yields the tasks it wants rerun at
+    the reference, is sent their reruns, and returns the outcomes the answer uses and the report
+    (``self_check`` and ``self_check_many`` drive it). ``verified[i]``: sample i already rerun."""
     parts = [("samples", fast_name)]
     if not check.enabled:
         return outcomes, FidelityReport("unverified", settings=tuple(parts))
-
-    def at_reference(batch: list[SampleTask]) -> list[SampleOutcome]:
-        return run([at_settings(t, reference) for t in batch])
+        yield  # a generator even when it returns at once
 
     def differences() -> dict[int, np.ndarray]:
         return {i: difference(outcomes[i], ref) for i, ref in checked.items() if ref.ok and outcomes[i].ok}
@@ -282,8 +322,13 @@ def self_check(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified:
     def contradicted(compared: dict[int, np.ndarray]) -> bool:
         return contradicts(list(compared.values()), check.escalate_share, at_least)
 
-    # 1. verification (its sample ran in the first map)
-    checked = dict(enumerate(list(verified)[:len(outcomes)]))  # anytime sampling may have stopped before them
+    # 1. verification: the first samples with a fast outcome (a prediction's ran beside the fast
+    # samples, in the first map; anytime sampling may have stopped before them)
+    checked = dict(enumerate(list(verified)[:len(outcomes)]))
+    first = [i for i, o in enumerate(outcomes) if o.ok][:verification_count(check, len(outcomes))]
+    missing = [i for i in first if i not in checked]
+    if missing:
+        checked.update(zip(missing, (yield [tasks[i] for i in missing])))
     if checked:
         parts.append(("verification", reference.name))
     # 2. refinement: the rollouts that ended unhealthy are rerun (a verified sample's rerun is at hand)
@@ -291,7 +336,7 @@ def self_check(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified:
                if (why := unhealthy(outcome, scale_of(task.scene), check)) is not None}
     rerun = [i for i in reasons if i not in checked]
     if rerun:
-        checked.update(zip(rerun, at_reference([tasks[i] for i in rerun])))
+        checked.update(zip(rerun, (yield [tasks[i] for i in rerun])))
     refined = {i: checked[i] for i in reasons if checked[i].ok}
     if refined:
         parts.append(("refined", reference.name))
@@ -322,7 +367,7 @@ def self_check(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified:
             break
         if not picked:
             break
-        checked.update(zip(picked, at_reference([tasks[i] for i in picked])))
+        checked.update(zip(picked, (yield [tasks[i] for i in picked])))
     compared = differences()
     disagreeing = [i for i, d in compared.items() if d.any()]
     common = dict(verified_samples=len(compared), disagreeing_samples=len(disagreeing),
@@ -330,17 +375,15 @@ def self_check(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified:
     # every sample already has its reference rerun and some differ: the reference's answer is at hand
     known = bool(disagreeing) and len(compared) == len(outcomes)
     if not contradicted(compared) and repair < at_least and not known:
-        first = min(check.verify_samples, len(tasks))
         # a confirmation or a coverage rerun the budget cut off neither confirmed nor dismissed a bias
         unconfirmed = any(o.budget_stopped for o in checked.values())
-        verdict = "verified" if first and all(i in compared for i in range(first)) and not unconfirmed \
-            else "unverified"
+        verdict = "verified" if first and all(i in compared for i in first) and not unconfirmed else "unverified"
         return merge(outcomes, refined), FidelityReport(verdict, settings=tuple(parts), **common)
     # 4. escalation: contradicted on this scene, so every sample at the reference
     done = dict(checked)
-    rest = [i for i in range(len(outcomes)) if i not in done]
+    rest = [i for i in range(len(outcomes)) if i not in done and not outcomes[i].skipped]
     if rest:
-        done.update(zip(rest, at_reference([tasks[i] for i in rest])))
+        done.update(zip(rest, (yield [tasks[i] for i in rest])))
     parts.append(("escalation", reference.name))
     if any(o.budget_stopped for o in done.values()):
         return merge(outcomes, refined), FidelityReport("contradicted", settings=tuple(parts), **common)

@@ -391,8 +391,9 @@ def write_question_rrd(path: str | Path, scene: Scene, answers, *, stamp_ns: int
                                                                 media_type="text/markdown"), static=True)
         for label, samples in answers.recorded.items():
             for index, result in samples:
+                rollout = result.rollouts[-1]
                 _log_trajectory(rec, f"world/{entity(label)}/sample_{index}", [bodies.get(n) for n in result.names],
-                                result.trajectory, result.fallen, None)
+                                rollout.trajectory, rollout.fallen, None)
                 logged += 1
         rec.flush()
     finally:

@@ -29,11 +29,11 @@ from .geometry import Contacts, contacts, dependents, groups, reach_m, resting_o
 from .kinds import DEFAULT_SAFE_BELOW, DEFAULT_SUPPORT_THRESHOLD, Action, Place, Push, Region, Remove
 from .questions import (PLACEMENT_GEOMETRY_S, ClearOrder, ClearStep, SupportGraph, answer_question, best_place,
                         clear_order, place, place_at, placements_to_dict, push, remove, resting_height_m, support_graph)
-from .variants import VariantResult, VariantTask, run_variants
+from .variants import VariantTask, run_variants
 
 __all__ = ["Action", "Alone", "Answers", "ClearOrder", "ClearStep", "Contacts", "DEFAULT_SAFE_BELOW",
            "DEFAULT_SUPPORT_THRESHOLD", "GivenStands", "PLACEMENT_GEOMETRY_S", "Place", "Push", "Region", "Remove",
-           "SupportGraph", "VARIANTS_PER_TASK", "VariantAnswer", "VariantResult", "VariantTask", "answer_question",
+           "SupportGraph", "VARIANTS_PER_TASK", "VariantAnswer", "VariantTask", "answer_question",
            "ask", "best_place", "clear_order", "contacts", "dependents", "groups", "place", "place_at",
            "placements_to_dict", "progress_dict", "push", "reach_m", "remove", "resting_height_m", "resting_on",
            "run_variants", "support_graph"]

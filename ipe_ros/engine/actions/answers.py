@@ -13,7 +13,7 @@ from ..estimate import circular_mean, wilson_interval
 from ..perturb import is_deterministic
 from ..scene import Scene
 from .kinds import Action, Place, Push
-from .variants import VariantResult
+from ..rollout import RolloutResult, SampleOutcome
 
 
 # -- the answers ----------------------------------------------------------------------------------------
@@ -109,34 +109,40 @@ def _draws_noise(scene: Scene, action: Action, model: ModelConfig) -> bool:
     return False
 
 
-def _aggregate(label: str, action: Action, results: list[VariantResult], simulated: bool = True, *,
+def ran(outcome: SampleOutcome) -> RolloutResult:
+    """A variant's rollout in one sample (actions are asked with one push magnitude)."""
+    return outcome.rollouts[-1]
+
+
+def _aggregate(label: str, action: Action, results: list[SampleOutcome], simulated: bool = True, *,
                deterministic: bool = False) -> VariantAnswer:
     """``deterministic``: nothing was drawn, so the one sample's answer is exact (a point, not an interval)."""
-    ok = [r for r in results if r.error is None]
-    failed = [r for r in results if r.error is not None and not r.budget_stopped and not r.skipped]
+    ok = [r for r in results if r.ok]
+    failed = [r for r in results if not r.ok and not r.budget_stopped and not r.skipped]
     if not ok:
         return VariantAnswer(label, action, None, None, {}, None, 0, len(failed), simulated)
     names = ok[0].names
-    fallen = np.array([r.fallen for r in ok], bool)
+    fallen = np.array([ran(r).fallen for r in ok], bool)
     anything = float(fallen.any(axis=1).mean())
-    directions = np.array([r.direction_rad for r in ok if r.direction_rad is not None])
+    directions = np.array([ran(r).direction_rad for r in ok if ran(r).direction_rad is not None])
     interval = (anything, anything) if deterministic else wilson_interval(anything, len(ok))
     off = {}
-    if ok[0].fell_off is not None:
-        fell_off = np.array([r.fell_off for r in ok], bool)
+    if ran(ok[0]).fell_off is not None:
+        fell_off = np.array([ran(r).fell_off for r in ok], bool)
         off = dict(fell_off_probability={n: float(p) for n, p in zip(names, fell_off.mean(axis=0))},
                    any_fell_off_probability=float(fell_off.any(axis=1).mean()))
-    if ok[0].contact is not None:
+    if any(name == "contact" for name, _ in ran(ok[0]).extra):
         off.update(_contact_answer(ok, deterministic))
     return VariantAnswer(label, action, anything, interval,
                          {n: float(p) for n, p in zip(names, fallen.mean(axis=0))},
                          circular_mean(directions), len(ok), len(failed), simulated, **off)
 
 
-def _contact_answer(ok: list[VariantResult], deterministic: bool) -> dict:
+def _contact_answer(ok: list[SampleOutcome], deterministic: bool) -> dict:
     probability, interval, time_s = {}, {}, {}
-    for key in ok[0].contact:
-        times = [r.contact[key] for r in ok]
+    firsts = [ran(r).value("contact")["first_s"] for r in ok]
+    for key in firsts[0]:
+        times = [first[key] for first in firsts]
         touched = [t for t in times if t is not None]
         p = len(touched) / len(ok)
         probability[key] = p
@@ -145,12 +151,12 @@ def _contact_answer(ok: list[VariantResult], deterministic: bool) -> dict:
     return dict(contact_probability=probability, contact_probability_ci95=interval, contact_time_s=time_s)
 
 
-def _stood(alone: VariantResult) -> bool:
+def _stood(alone: SampleOutcome) -> bool:
     """The scene as it is ran without failing and nothing in it fell."""
-    return alone.error is None and not bool(np.any(alone.fallen))
+    return alone.ok and not bool(np.any(ran(alone).fallen))
 
 
-def _aggregate_given(results: list[VariantResult], *, deterministic: bool) -> GivenStands:
+def _aggregate_given(results: list[SampleOutcome], *, deterministic: bool) -> GivenStands:
     """A variant's results over the samples in which the scene stands as it is."""
     answer = _aggregate("", None, results, deterministic=deterministic)
     return GivenStands(answer.samples, answer.any_fall_probability, answer.any_fall_probability_ci95,

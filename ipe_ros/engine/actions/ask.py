@@ -16,10 +16,11 @@ from ..perturb import is_deterministic, position_sigmas_m
 from ..sampler import MapFn, check_budget, rollout_cost
 from ..scene import Scene, Table, validate_scene
 from ..query.contact import check_pairs
-from .answers import Alone, Answers, _aggregate, _aggregate_given, _draws_noise, _stood
+from ..rollout import SampleOutcome
+from .answers import Alone, Answers, _aggregate, _aggregate_given, _draws_noise, _stood, ran
 from .geometry import _reached, _regions, groups
 from .kinds import DEFAULT_SAFE_BELOW, Action, Place, Remove, _check_action, _label
-from .variants import VariantResult, VariantTask, run_variants
+from .variants import VariantTask, failed, run_variants, skipped
 
 
 def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSettings, seed: int = 0,
@@ -89,7 +90,7 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     as_is = simulated_actions.index(None) if None in simulated_actions else None
     decisions: dict[str, tuple[str | None, str, int]] = {}
     if sequential is None or deterministic or as_is is None:
-        per_sample = _run(tasks(range(k), list(range(len(simulated_actions)))), map_fn, scene)
+        per_sample = _run(tasks(range(k), list(range(len(simulated_actions)))), map_fn)
     else:
         per_sample, decisions = _run_sequentially(tasks, simulated_actions, as_is, k, sequential, map_fn, scene,
                                                   on_progress)
@@ -114,16 +115,14 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
             continue
         # nothing rests on it: the rest of the scene does what it does anyway, read from "as is"
         others = [j for j, n in enumerate(b.name for b in scene.dynamic_objects) if n not in action.names]
-        results = [VariantResult(tuple(r.names[j] for j in others), None if r.fallen is None else r.fallen[others],
-                                 r.direction_rad, r.error, r.budget_stopped,
-                                 fell_off=None if r.fell_off is None else r.fell_off[others])
-                   for r in (s[as_is] for s in per_sample)]
+        results = [_without(r, others) for r in (s[as_is] for s in per_sample)]
         answers.append(dataclasses.replace(
             _aggregate(_label(action), action, results, deterministic=deterministic), simulated=False,
-            caused_fall_probability={n: 0.0 for n in results[0].names},
+            caused_fall_probability={n: 0.0 for j, n in enumerate(b.name for b in scene.dynamic_objects)
+                                     if j in others},
             given_stands=_aggregate_given([r for r, ok in zip(results, stands) if ok], deterministic=deterministic)))
     stopped = "budget" if any(r.budget_stopped for s in per_sample for r in s) else "samples"
-    recorded = {_label(a): [(i, s[j]) for i, s in enumerate(per_sample) if s[j].trajectory is not None]
+    recorded = {_label(a): [(i, s[j]) for i, s in enumerate(per_sample) if s[j].ok and ran(s[j]).trajectory is not None]
                 for j, a in enumerate(simulated_actions)} if record_every else {}
     scene_alone = None
     if as_is is not None:
@@ -139,12 +138,23 @@ def _check_contact(scene: Scene, actions: list[Action], pairs) -> None:
     check_pairs(pairs, scene, tuple(a.body.name for a in actions if isinstance(a, Place)))
 
 
-def _run(tasks: list[VariantTask], map_fn: MapFn | None, scene: Scene) -> list[list[VariantResult]]:
+def _without(outcome: SampleOutcome, kept: list[int]) -> SampleOutcome:
+    """The scene-as-is outcome read for a removal nothing rests on: only the ``kept`` objects."""
+    if not outcome.ok:
+        return outcome
+    r = ran(outcome)
+    rollout = dataclasses.replace(r, final_positions_m=r.final_positions_m[kept],
+                                  final_orientations_xyzw=r.final_orientations_xyzw[kept],
+                                  fallen=None if r.fallen is None else r.fallen[kept],
+                                  fell_off=None if r.fell_off is None else r.fell_off[kept], trajectory=None)
+    return dataclasses.replace(outcome, rollouts=(rollout,), names=tuple(outcome.names[j] for j in kept))
+
+
+def _run(tasks: list[VariantTask], map_fn: MapFn | None) -> list[list[SampleOutcome]]:
     if map_fn is None:
         return [run_variants(t) for t in tasks]
-    names = tuple(b.name for b in scene.dynamic_objects)
     lost = lambda task, reason: [  # noqa: E731
-        VariantResult(names, None, None, f"WorkerLost: {reason}", worker_lost=True) for _ in task.actions]
+        failed(task, f"WorkerLost: {reason}", worker_lost=True) for _ in task.actions]
     return map_fn(run_variants, tasks, on_lost=lost)
 
 
@@ -155,33 +165,31 @@ VARIANTS_PER_TASK = 4
 
 def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequential: Sequential, map_fn: MapFn | None,
                       scene: Scene, on_progress: Callable[[dict], None] | None = None
-                      ) -> tuple[list[list[VariantResult]], dict[str, tuple[str | None, str, int]]]:
+                      ) -> tuple[list[list[SampleOutcome]], dict[str, tuple[str | None, str, int]]]:
     """Batches of samples until the rule has decided every variant or k samples are drawn. Each
     batch runs the scene as it is first, then the undecided variants of the samples in which it
     stood, a few variants per task (the work of one sample varies too much - one rollout or all of
     them - to spread by samples); a variant not run in a sample is a skipped result. Returns every
     sample's results (in ``actions`` order) and, per variant label, (decision, why it stopped,
     samples drawn for it)."""
-    names = tuple(b.name for b in scene.dynamic_objects)
     others = [j for j in range(len(actions)) if j != as_is]
     active = set(others)
     decisions: dict[str, tuple[str | None, str, int]] = {}
-    per_sample: list[list[VariantResult]] = []
+    per_sample: list[list[SampleOutcome]] = []
     # counted as the batches come (recounting every sample at every look would grow with k x looks)
     counts = {_label(actions[j]): _Counts() for j in others}
     while len(per_sample) < k and active:
         batch = range(len(per_sample), min(k, len(per_sample) + sequential.batch_samples))
         rows = {}
-        for i, (alone,) in zip(batch, _run(tasks(batch, [as_is]), map_fn, scene)):
-            rows[i] = [VariantResult(names, None, None, "skipped: the scene fell as it is" if j in active
-                                     else "skipped: decided", skipped=True) for j in range(len(actions))]
+        for i, (alone,) in zip(batch, _run(tasks(batch, [as_is]), map_fn)):
+            rows[i] = [skipped(i, "the scene fell as it is" if j in active else "decided") for j in range(len(actions))]
             rows[i][as_is] = alone
         standing = [i for i in batch if _stood(rows[i][as_is])]
         running = sorted(active)
         chunks = [running[c:c + VARIANTS_PER_TASK] for c in range(0, len(running), VARIANTS_PER_TASK)]
         jobs = [(i, chunk) for i in standing for chunk in chunks]
         work = [task for i, chunk in jobs for task in tasks([i], chunk)]
-        for (i, chunk), results in zip(jobs, _run(work, map_fn, scene) if work else []):
+        for (i, chunk), results in zip(jobs, _run(work, map_fn) if work else []):
             for j, result in zip(chunk, results):
                 rows[i][j] = result
         for i in batch:
@@ -224,28 +232,28 @@ class _Counts:
     def __init__(self):
         self.samples, self.any_falls, self.object_falls = 0, 0, {}
 
-    def add(self, result: VariantResult) -> None:
-        if result.error is not None:
+    def add(self, result: SampleOutcome) -> None:
+        if not result.ok:
             return
         self.samples += 1
-        self.any_falls += bool(np.any(result.fallen))
-        for name, fell in zip(result.names, result.fallen):
+        self.any_falls += bool(np.any(ran(result).fallen))
+        for name, fell in zip(result.names, ran(result).fallen):
             self.object_falls[name] = self.object_falls.get(name, 0) + bool(fell)
 
     def tally(self) -> Tally:
         return Tally(self.samples, self.any_falls, dict(self.object_falls))
 
 
-def _caused(per_sample: list[list[VariantResult]], variant: int, as_is: int) -> dict[str, float] | None:
+def _caused(per_sample: list[list[SampleOutcome]], variant: int, as_is: int) -> dict[str, float] | None:
     """Per object of the variant: the fraction of paired samples in which it fell with the action
     and not in the scene as is."""
-    pairs = [(s[variant], s[as_is]) for s in per_sample if s[variant].error is None and s[as_is].error is None]
+    pairs = [(s[variant], s[as_is]) for s in per_sample if s[variant].ok and s[as_is].ok]
     if not pairs:
         return None
     names = pairs[0][0].names
     counts = dict.fromkeys(names, 0)
     for with_action, without in pairs:
-        before = dict(zip(without.names, without.fallen))
-        for name, fell in zip(with_action.names, with_action.fallen):
+        before = dict(zip(without.names, ran(without).fallen))
+        for name, fell in zip(with_action.names, ran(with_action).fallen):
             counts[name] += bool(fell) and not before.get(name, False)
     return {n: c / len(pairs) for n, c in counts.items()}

@@ -15,7 +15,7 @@ import numpy as np
 from .. import simulation
 from ..errors import BudgetExceeded, PhysicsError
 from ..perturb import draw_sample_inputs
-from ..rollout import SampleTask, read_rollout, separated_world, simulate_pushes
+from ..rollout import SampleOutcome, SampleTask, rollout_result, separated_world, simulate_pushes
 from ..scene import Scene
 from ..shapes import rotation_matrix
 from .kinds import Action, Place, Push, Remove, _label
@@ -32,20 +32,18 @@ class VariantTask(SampleTask):
     regions: tuple[frozenset[str] | None, ...] | None = None
 
 
-@dataclass(frozen=True)
-class VariantResult:
-    """One variant of one sample: which objects fell (names in the variant's order), the direction."""
+def skipped(index: int, why: str) -> SampleOutcome:
+    """A variant not run in sample ``index`` (``why``: "the scene fell as it is", "decided")."""
+    return SampleOutcome(index=index, ok=False, error=f"skipped: {why}", push_direction_rad=float("nan"),
+                         initial_positions_m=None, initial_orientations_xyzw=None, skipped=True)
 
-    names: tuple[str, ...]
-    fallen: np.ndarray | None
-    direction_rad: float | None
-    error: str | None = None
-    budget_stopped: bool = False
-    worker_lost: bool = False  # its worker process died twice
-    trajectory: list | None = None  # (t, positions, orientations) frames when recorded
-    fell_off: np.ndarray | None = None  # ended off the table (asked with fell_off)
-    skipped: bool = False  # not run: the scene fell as it is, or the variant was already decided
-    contact: dict | None = None  # the contact query's first-contact times, by pair (asked with contact)
+
+def failed(task: SampleTask, error: str, *, budget_stopped: bool = False, worker_lost: bool = False,
+           push_direction_rad: float = float("nan")) -> SampleOutcome:
+    """A variant's sample that did not run to its end (physics trouble, the budget, a lost worker)."""
+    return SampleOutcome(index=task.index, ok=False, error=error, push_direction_rad=push_direction_rad,
+                         initial_positions_m=None, initial_orientations_xyzw=None, budget_stopped=budget_stopped,
+                         worker_lost=worker_lost)
 
 
 def _action_rng(task: VariantTask, action: Action) -> np.random.Generator:
@@ -76,7 +74,7 @@ def _push_velocities(push: Push, rng: np.random.Generator, centre_m: np.ndarray,
 
 
 def _simulate_variant(task: VariantTask, scene: Scene, positions, orientations, masses, push_direction: float,
-                      separate: bool) -> tuple[np.ndarray, np.ndarray, simulation.RolloutEnd]:
+                      separate: bool) -> tuple[np.ndarray, np.ndarray, float, simulation.RolloutEnd]:
     """Build ``scene`` at the given state, optionally separate it, simulate (phi values in turn: the
     last one's end is returned; actions are asked with one phi in practice)."""
     world = simulation.build_world(scene, positions, masses, task.settings, orientations_xyzw=orientations)
@@ -85,39 +83,42 @@ def _simulate_variant(task: VariantTask, scene: Scene, positions, orientations, 
     initial, initial_orn = simulation.read_poses(world)
     ends = simulate_pushes(scene, task.model, task.settings, task.query, world, initial, initial_orn, masses,
                            push_direction, record_every=task.record_every, deadline_unix_s=task.deadline_unix_s)
-    return initial, initial_orn, ends[-1][1]
+    phi, end = ends[-1]
+    return initial, initial_orn, phi, end
 
 
-def run_variants(task: VariantTask) -> list[VariantResult]:
-    """Sample ``task.index`` of every variant; never raises for physics trouble (a failed variant
-    carries its error)."""
-    names = tuple(b.name for b in task.scene.dynamic_objects)
+def run_variants(task: VariantTask) -> list[SampleOutcome]:
+    """Sample ``task.index`` of every variant (one outcome per action, its rollout's arrays in the
+    variant's own objects, ``SampleOutcome.names``); never raises for physics trouble (a failed
+    variant carries its error)."""
     if task.deadline_unix_s is not None and time.time() >= task.deadline_unix_s:
-        return [VariantResult(names, None, None, "BudgetExceeded: not started", True) for _ in task.actions]
+        return [failed(task, "BudgetExceeded: not started", budget_stopped=True) for _ in task.actions]
     rng = np.random.default_rng(task.seed)
     inputs = draw_sample_inputs(task.scene, task.model, rng)
     try:
         shared, shared_orn = simulation.read_poses(separated_world(task.scene, task.settings, inputs))
     except PhysicsError as exc:
-        return [VariantResult(names, None, None, f"PhysicsError: {exc}") for _ in task.actions]
-    return [_run_one(task, action, v, shared, shared_orn, inputs, names) for v, action in enumerate(task.actions)]
+        return [failed(task, f"PhysicsError: {exc}", push_direction_rad=inputs.push_direction_rad)
+                for _ in task.actions]
+    return [_run_one(task, action, v, shared, shared_orn, inputs) for v, action in enumerate(task.actions)]
 
 
-def _run_one(task: VariantTask, action: Action, v: int, shared, shared_orn, inputs, names) -> VariantResult:
+def _run_one(task: VariantTask, action: Action, v: int, shared, shared_orn, inputs) -> SampleOutcome:
     """One variant of the sample; its physics trouble is its own result, never the others'."""
     region = None if task.regions is None else task.regions[v]
+    direction = inputs.push_direction_rad
     try:
         return _one_variant(task, action, shared, shared_orn, inputs, region)
     except BudgetExceeded as exc:
-        return VariantResult(names, None, None, f"BudgetExceeded: {exc}", True)
+        return failed(task, f"BudgetExceeded: {exc}", budget_stopped=True, push_direction_rad=direction)
     except PhysicsError as exc:
-        return VariantResult(names, None, None, f"PhysicsError: {exc}")
+        return failed(task, f"PhysicsError: {exc}", push_direction_rad=direction)
     except Exception as exc:  # noqa: BLE001 - one variant's trouble must not end the others
-        return VariantResult(names, None, None, traceback.format_exception_only(type(exc), exc)[-1].strip())
+        return failed(task, traceback.format_exception_only(type(exc), exc)[-1].strip(), push_direction_rad=direction)
 
 
 def _one_variant(task: VariantTask, action: Action, shared, shared_orn, inputs,
-                 region: frozenset[str] | None) -> VariantResult:
+                 region: frozenset[str] | None) -> SampleOutcome:
     scene = task.scene
     bodies = scene.dynamic_objects
     positions, orientations, masses = shared, shared_orn, inputs.masses_kg
@@ -151,9 +152,9 @@ def _one_variant(task: VariantTask, action: Action, shared, shared_orn, inputs,
         pushed = dataclasses.replace(bodies[i], linear_velocity_m_s=velocity, angular_velocity_rad_s=spin)
         scene = dataclasses.replace(scene, objects=tuple(pushed if b.name == action.name else b
                                                          for b in scene.objects))
-    initial, _, end = _simulate_variant(task, scene, positions, orientations, masses, inputs.push_direction_rad,
-                                        separate)
-    values = read_rollout(scene, task.query, initial, end)  # the same queries a prediction reads
-    contact = values["contact"]["first_s"] if "contact" in values else None
-    return VariantResult(tuple(b.name for b in scene.dynamic_objects), values["fallen"], values.get("direction_rad"),
-                         trajectory=end.trajectory, fell_off=values.get("fell_off"), contact=contact)
+    initial, initial_orn, phi, end = _simulate_variant(task, scene, positions, orientations, masses,
+                                                       inputs.push_direction_rad, separate)
+    result = rollout_result(scene, task.query, initial, phi, end)  # the same queries a prediction reads
+    return SampleOutcome(index=task.index, ok=True, error=None, push_direction_rad=inputs.push_direction_rad,
+                         initial_positions_m=initial, initial_orientations_xyzw=initial_orn, rollouts=(result,),
+                         names=tuple(b.name for b in scene.dynamic_objects))

@@ -2,9 +2,11 @@
 
     .venv/bin/python benchmarks/actions.py [--workers 2] [--out benchmarks/results/actions]
 
-Each decision question is answered twice on the same seeds, interleaved: sequentially (the default:
-variants sampled in batches until decided, ``engine/decide.py``) and at fixed k (``sequential=False``),
-and the decisions are compared:
+Each decision question is answered three times on the same seeds, interleaved: sequentially with the
+self-check (the default: variants sampled in batches until decided, ``engine/decide.py``, then each
+variant checked against the reference physics, ``engine/fidelity.py``), sequentially without it, and
+at fixed k without it (``sequential=False``); the decisions of the two unchecked runs are compared,
+and the checked run's cost and escalations reported:
 - the support graph of a 10-block paper tower at k = 16 per variant (target <= 1 s);
 - "safe to remove?" for the top block at k = 48 (target <= 0.4 s);
 - best place on a 20 x 20 cm region, 16 candidates, k = 16 (target <= 2 s);
@@ -33,6 +35,7 @@ from ipe_ros.engine import Box, Floor, ModelConfig, Scene, WorkerPool, preset  #
 from ipe_ros.engine import actions as A  # noqa: E402
 from ipe_ros.engine.config import DEFAULT_SIGMA_M  # noqa: E402
 from ipe_ros.engine.decide import Ranking, SafeBelow, Supports, Tally  # noqa: E402
+from ipe_ros.engine.fidelity import DEFAULT_CHECK  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 I = (0.0, 0.0, 0.0, 1.0)
@@ -121,11 +124,16 @@ def compare(rule, sequential: A.Answers, fixed: A.Answers) -> dict:
 
 
 def both(name: str, target_s: float | None, run, rule, repeats: int, first=None) -> dict:
-    """One question answered sequentially and at fixed k on the same seeds, interleaved."""
-    seq_s, seq = timed(lambda: run(True), repeats)
-    fixed_s, fixed = timed(lambda: run(False), repeats)
-    seq_answers, fixed_answers = (seq, fixed) if first is None else (seq[1], fixed[1])
-    row = {"question": name, "target_s": target_s, "sequential_s": seq_s, "fixed_s": fixed_s,
+    """One question answered sequentially with and without the self-check and at fixed k without
+    it, on the same seeds, interleaved. ``run(sequential, check)``."""
+    checked_s, checked = timed(lambda: run(True, DEFAULT_CHECK), repeats)
+    seq_s, seq = timed(lambda: run(True, None), repeats)
+    fixed_s, fixed = timed(lambda: run(False, None), repeats)
+    seq_answers, fixed_answers, checked_answers = (seq, fixed, checked) if first is None else \
+        (seq[1], fixed[1], checked[1])
+    verdicts = [v.fidelity for v in checked_answers.variants if v.fidelity is not None]
+    row = {"question": name, "target_s": target_s, "checked_s": checked_s, "sequential_s": seq_s, "fixed_s": fixed_s,
+           "checked_variants": len(verdicts), "escalated_variants": verdicts.count("escalated"),
            **compare(rule, seq_answers, fixed_answers)}
     if first is not None:  # a ranking: the candidate each run puts first, and its fixed-k P
         chosen, best = first(seq), first(fixed)
@@ -154,30 +162,33 @@ def main() -> int:
 
         supports = Supports(A.DEFAULT_SUPPORT_THRESHOLD, A.DEFAULT_SAFE_BELOW)
         rows.append(both(f"support graph, {tower.name} (10 blocks), k = 16 per variant", 1.0,
-                         lambda seq: A.support_graph(tower, model(16), settings, sequential=seq, **kw).answers,
+                         lambda seq, check: A.support_graph(tower, model(16), settings, sequential=seq,
+                                                            check=check, **kw).answers,
                          supports, args.repeats))
         rows.append(both(f"safe to remove the top block ({top}), k = 48", 0.4,
-                         lambda seq: A.remove(tower, [top], model(48), settings, safe_below=A.DEFAULT_SAFE_BELOW,
-                                              sequential=seq, **kw), SafeBelow(A.DEFAULT_SAFE_BELOW), args.repeats))
+                         lambda seq, check: A.remove(tower, [top], model(48), settings,
+                                                     safe_below=A.DEFAULT_SAFE_BELOW, sequential=seq, check=check,
+                                                     **kw), SafeBelow(A.DEFAULT_SAFE_BELOW), args.repeats))
         block = Box(name="new", extents_m=(0.2, 0.2, 0.2), position_m=(0.0, 0.0, 0.0), orientation_xyzw=I,
                     friction=0.6, restitution=0.0, mass_kg=1.0)
         centre = max(tower.dynamic_objects, key=lambda b: b.position_m[2]).position_m
         region = A.Region((centre[0] - 0.1, centre[0] + 0.1), (centre[1] - 0.1, centre[1] + 0.1))
         rows.append(both("best place on the tower's top, 20 x 20 cm, 16 candidates, k = 16", 2.0,
-                         lambda seq: A.best_place(tower, block, region, model(16), settings, candidates=16,
-                                                  sequential=seq, **kw), Ranking(), args.repeats,
+                         lambda seq, check: A.best_place(tower, block, region, model(16), settings, candidates=16,
+                                                         sequential=seq, check=check, **kw), Ranking(), args.repeats,
                          first=lambda result: result[0][0][0].position_m))
         for n in map(int, args.heights.split(",")):
             scene = column(n)
             rows.append(both(f"support graph, column of {n} 10 cm cubes, k = 8 per variant (one run)",
                              8.0 if n == 40 else None,
-                             lambda seq: A.support_graph(scene, ModelConfig(sigma_m=0.005, samples=8), settings,
-                                                         sequential=seq, **kw).answers, supports, 1))
+                             lambda seq, check: A.support_graph(scene, ModelConfig(sigma_m=0.005, samples=8),
+                                                                settings, sequential=seq, check=check,
+                                                                **kw).answers, supports, 1))
         shelves = []
         for copies in map(int, args.shelves.split(",")):
             scene = shelf(tower, copies)
             seconds, _ = timed(lambda: A.ask(scene, [A.Remove((f"t0_{tower.dynamic_objects[0].name}",))], model(16),
-                                             settings, **kw), args.repeats)
+                                             settings, check=None, **kw), args.repeats)
             shelves.append({"towers": copies, "seconds": seconds})
     report = {"date": time.strftime("%Y-%m-%d"), "workers": args.workers, "tower": tower.name, "questions": rows,
               "unrelated_towers": shelves}
@@ -189,11 +200,12 @@ def main() -> int:
              "run), sequential and fixed-k interleaved on the same seeds. Decisions: where the fixed-k run's own "
              "interval decided a variant, is the sequential decision the same; where it did not, how often the "
              "point-estimate answers (edges, safe) differ.", "",
-             "| question | sequential s | fixed-k s | target s | decided at fixed k: same | undecided: answers differ "
-             "| mean samples drawn |", "|---|---|---|---|---|---|---|"]
+             "| question | self-checked s (escalated variants) | sequential s | fixed-k s | target s | decided at fixed k: "
+             "same | undecided: answers differ | mean samples drawn |", "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         extra = "" if "same_first_choice" not in r else f"; first choice {'same' if r['same_first_choice'] else 'differs'}"
-        lines.append(f"| {r['question']} | {r['sequential_s']:.2f} | {r['fixed_s']:.2f} | "
+        lines.append(f"| {r['question']} | {r['checked_s']:.2f} ({r['escalated_variants']} of {r['checked_variants']}) | "
+                     f"{r['sequential_s']:.2f} | {r['fixed_s']:.2f} | "
                      f"{'-' if r['target_s'] is None else format(r['target_s'], 'g')} | "
                      f"{r['same_decision']} of {r['fixed_decided']} | {r['point_answer_differs']} of "
                      f"{r['fixed_undecided']}{extra} | "

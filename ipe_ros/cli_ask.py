@@ -9,7 +9,8 @@
                       [--speed-sigma F]                 what a push makes fall, and where
 
 Common options: --scene NAME (a file holding several), --samples K (default 16), --sigma M, --preset,
---seed, --workers, --budget S, --json (one JSON object per line). See ipe_ros.engine.actions.
+--seed, --workers, --budget S, --no-self-check, --verify-samples N, --json (one JSON object per line).
+See ipe_ros.engine.actions.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import os
 from .engine import ConfigError, WorkerPool, load_scenes
 from .engine import actions as A
 from .engine.config import DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_SIGMA_M, PRESETS
+from .engine.fidelity import DEFAULT_CHECK
 from .engine.inputs import as_spelled
 from .engine.request import build_request
 from .engine.question_io import new_object_from_dict
@@ -72,6 +74,12 @@ def add_ask_parser(sub, finite, one_line_parser) -> None:
                        help="compute budget per batch of variants, seconds")
         q.add_argument("--fell-off", action="store_true",
                        help="also which objects end off the table (a scene on a table)")
+        q.add_argument("--no-self-check", action="store_true",
+                       help="answer every variant with the fast physics alone (fidelity: unverified) instead of "
+                            "checking it against the converged reference (docs/model.md, 'Self-checking answers')")
+        q.add_argument("--verify-samples", type=int, default=DEFAULT_CHECK.verify_samples, metavar="N",
+                       help=f"samples of each variant rerun at the reference to verify it (default "
+                            f"{DEFAULT_CHECK.verify_samples})")
         q.add_argument("--fixed-k", action="store_true",
                        help="every variant runs all --samples (default: decision questions sample until decided)")
         q.add_argument("--json", action="store_true", help="one JSON object per line")
@@ -143,6 +151,8 @@ def _table(answers: A.Answers) -> str:
         note = "" if v.simulated else "  (nothing within its reach: not simulated)"
         if v.stopped_by is not None:
             note += f"  [{v.decision or 'undecided'}: {v.stopped_by} after {v.samples_drawn} samples drawn]"
+        if v.fidelity not in (None, "verified"):  # escalated: the reference's answer; contradicted: do not act on it
+            note += f"  ({v.fidelity})"
         for key, q in (v.contact_probability or {}).items():
             note += f"; P({key.replace(':', ' touches ')}) {q:.2f}"
         lines.append(f"{v.label:<32} {p:>12} {ci:>15} {v.samples:>4} {g:>14} "
@@ -159,12 +169,14 @@ def cmd_ask(args) -> int:
         raise ConfigError("--samples", f"must be >= 1, got {args.samples}")
     # the model and settings as ipe predict builds them (engine.request)
     request = build_request(samples=args.samples, sigma_m=args.sigma, ground_truth=args.ground_truth,
-                            preset_name=args.preset, seed=args.seed, budget_s=args.budget)
+                            preset_name=args.preset, seed=args.seed, budget_s=args.budget,
+                            self_check=not args.no_self_check, verify_samples=args.verify_samples)
     model, settings = request.model, request.settings
     if args.workers < 0:
         raise ConfigError("--workers", f"must be >= 0, got {args.workers}")
     pool = WorkerPool(min(args.workers, args.samples)) if args.workers > 0 else None
-    kw = dict(seed=args.seed, map_fn=pool.map if pool else None, budget_s=args.budget, fell_off=args.fell_off)
+    kw = dict(seed=args.seed, map_fn=pool.map if pool else None, budget_s=args.budget, fell_off=args.fell_off,
+              check=request.check)
     if getattr(args, "contact", None):
         kw["contact"] = tuple(args.contact)
     if args.rrd and args.question != "clear":

@@ -691,7 +691,8 @@ class QuestionService:
                                   record_samples=config.rerun_rollouts_logged)
                 answer, answers = answer_question(source.scene, question, model, config.settings, seed=config.seed,
                                                   map_fn=pool.map if pool is not None else None,
-                                                  budget_s=config.budget_s, on_progress=progress, **record)
+                                                  budget_s=config.budget_s, on_progress=progress, check=config.check,
+                                                  **record)
                 message = {**head, "final": True, "answer": answer, "compute_s": time.perf_counter() - start}
                 if config.model.perception != "gaussian":
                     message["perception"] = (f"gaussian (sigma = {config.model.sigma_m:g} m): questions do not use "

@@ -162,11 +162,18 @@ def test_queries_benchmark_compares_the_contact_watch_and_its_early_end(tmp_path
 
 
 def test_check_policy_replays_every_policy_on_the_same_samples(tmp_path):
-    result = subprocess.run(
-        [sys.executable, str(REPO / "benchmarks" / "check_policy.py"), "--towers", "1", "--zoo", "0", "--samples", "2",
-         "--out", str(tmp_path)], capture_output=True, text=True, timeout=600, env=ENV)
-    assert result.returncode == 0, result.stderr[-3000:]
-    rows = json.loads((tmp_path / "check_policy.json").read_text())
+    def replay(out):
+        result = subprocess.run(
+            [sys.executable, str(REPO / "benchmarks" / "check_policy.py"), "--towers", "1", "--zoo", "0", "--samples",
+             "2", "--cache", str(tmp_path / "samples.pkl"), "--out", str(out)], capture_output=True, text=True,
+            timeout=600, env=ENV)
+        assert result.returncode == 0, result.stderr[-3000:]
+        return json.loads((out / "check_policy.json").read_text())
+
+    rows = replay(tmp_path / "first")
+    # the second run reads the samples the first simulated: the same verdicts and counts
+    assert [{k: v for k, v in r.items() if k != "speedup_vs_reference"} for r in replay(tmp_path / "again")] == \
+        [{k: v for k, v in r.items() if k != "speedup_vs_reference"} for r in rows]
     by_policy = {r["policy"]: r for r in rows}
     assert set(by_policy) >= {"current", "no confirmation", "unchecked"}
     assert by_policy["unchecked"]["reference_samples_per_prediction"] == 0

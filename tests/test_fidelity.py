@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
+from ipe_ros.engine import actions as A
 from ipe_ros.engine.config import DEFAULT_QUERIES
 from ipe_ros.engine.errors import ConfigError
 from ipe_ros.engine.fidelity import VERDICTS, SelfCheck, confirmation_samples, coverage_samples, reference_settings
@@ -359,3 +360,59 @@ def test_anytime_sampling_is_checked_on_the_samples_it_drew(tower):
                 check=SelfCheck(verify_samples=3))
     assert (p.samples, p.stopped_by) == (2, "deadline")
     assert p.fidelity == "verified" and p.self_check["verified_samples"] == 2
+
+
+@pytest.fixture(scope="module")
+def ramp_3():
+    """On this ramp the ball topples block1 in 7 of 8 `default` samples (seed 0), in 1 of 8 of the reference's."""
+    return zoo_scene("ramp", 2026, 3)
+
+
+def test_a_question_checks_every_variant_and_answers_a_contradicted_one_at_the_reference(ramp_3):
+    """Robot questions run the same check per variant: the scene as it is topples block1 under
+    `default` where the reference mostly keeps it, so that variant is escalated and answered as the
+    reference answers it; without the rolling ball nothing moves in either physics, and that
+    variant is verified. Each round of both variants' checks is one map call."""
+    model = _ramp_model(ramp_3, 8)
+    actions = [None, A.Remove(("mover",))]
+    spy = CountingMap()
+    as_is, without = A.ask(ramp_3, actions, model, preset("default"), seed=0, map_fn=spy).variants
+    reference = A.ask(ramp_3, actions, model, reference_settings(), seed=0).variants
+    assert as_is.fidelity == "escalated" and as_is.self_check["escalated_samples"] == 8
+    assert as_is.object_fall_probability == reference[0].object_fall_probability
+    assert as_is.object_fall_probability["block1"] == 0.125
+    assert without.fidelity == "verified" and set(without.object_fall_probability.values()) == {0.0}
+    assert reference[0].fidelity is None  # the reference settings are not checked
+    # the fast samples of both variants, then the verification of sample 0 of each, together
+    assert len(spy.calls[0]) == 8 and all(t.settings.name == "default" for t in spy.calls[0])
+    assert [(t.settings.name, t.index, t.actions) for t in spy.calls[1]] == [
+        (REFERENCE, 0, (None,)), (REFERENCE, 0, (A.Remove(("mover",)),))]
+    unchecked = A.ask(ramp_3, actions, model, preset("default"), seed=0, check=None)
+    assert unchecked.variants[0].fidelity is None and "fidelity" not in unchecked.variants[0].to_dict()
+    assert unchecked.variants[0].object_fall_probability["block1"] == 0.875  # the fast physics alone
+
+
+def test_a_sequential_decision_is_read_again_from_the_checked_samples():
+    """Is it safe to take the top block off a stack of two? A fast physics made to drop the bottom
+    block whenever the top one is taken decides "unsafe" after one batch of 4; the check finds the
+    reference keeps it standing, escalates the variant, and reads the decision again from the
+    reference's 4 samples: 0 of 4 falls is no longer "unsafe", nor yet "safe" below 0.3."""
+    from tests.test_actions import STACK
+
+    take_top = A.Remove(("top",))
+
+    def drop_the_bottom(task, outcomes):
+        if task.settings.name != "default" or task.actions != (take_top,):
+            return outcomes
+        return [dataclasses.replace(o, rollouts=(dataclasses.replace(o.rollouts[-1], fallen=np.array([True])),))
+                if o.ok else o for o in outcomes]
+
+    model = ModelConfig(sigma_m=0.005, samples=8)
+    ask = dict(seed=0, safe_below=0.3)
+    (_, fast) = A.remove(STACK, ["top"], model, preset("default"), map_fn=CountingMap(drop_the_bottom), check=None,
+                         **ask).variants
+    assert (fast.decision, fast.stopped_by, fast.samples, fast.any_fall_probability) == ("unsafe", "decided", 4, 1.0)
+    (_, checked) = A.remove(STACK, ["top"], model, preset("default"), map_fn=CountingMap(drop_the_bottom), **ask).variants
+    assert checked.fidelity == "escalated" and checked.self_check["escalated_samples"] == 4
+    assert (checked.decision, checked.stopped_by, checked.samples, checked.any_fall_probability) == \
+        (None, "checked", 4, 0.0)

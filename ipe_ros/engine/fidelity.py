@@ -139,8 +139,8 @@ def is_reference(settings: SimSettings) -> bool:
 
 def unhealthy(outcome: SampleOutcome, energy_scale_j: float, check: SelfCheck) -> str | None:
     """Why a fast rollout cannot be trusted as it ended, or None when it can."""
-    if outcome.budget_stopped or outcome.worker_lost:
-        return None  # not the physics' doing: counted as before
+    if outcome.budget_stopped or outcome.worker_lost or outcome.skipped:
+        return None  # not the physics' doing (or not run): counted as before
     if not outcome.ok:
         return "failed"
     for r in outcome.rollouts:

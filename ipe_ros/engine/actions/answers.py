@@ -60,6 +60,11 @@ class VariantAnswer:
     contact_probability: dict[str, float] | None = None
     contact_probability_ci95: dict[str, list[float]] | None = None
     contact_time_s: dict[str, float | None] | None = None
+    #: the self-check of the variant's samples (``engine.fidelity``): "verified", "escalated" (the
+    #: answer is the reference physics'), "contradicted", "unverified"; None: not simulated, or the
+    #: settings are the reference's own. ``self_check``: what it did (FidelityReport.to_dict)
+    fidelity: str | None = None
+    self_check: dict | None = None
 
     def to_dict(self) -> dict:
         off = {} if self.fell_off_probability is None else {
@@ -74,7 +79,8 @@ class VariantAnswer:
                                                        "samples_drawn": self.samples_drawn}),
                 **({} if self.contact_probability is None else {
                     "contact_probability": self.contact_probability,
-                    "contact_probability_ci95": self.contact_probability_ci95, "contact_time_s": self.contact_time_s})}
+                    "contact_probability_ci95": self.contact_probability_ci95, "contact_time_s": self.contact_time_s}),
+                **({} if self.fidelity is None else {"fidelity": self.fidelity, "self_check": self.self_check})}
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,9 @@ from ..config import ModelConfig, QuerySpec, SimSettings
 from ..decide import Sequential, Tally
 from ..errors import ConfigError
 from ..perturb import is_deterministic, position_sigmas_m
-from ..sampler import MapFn, check_budget, rollout_cost
+from ..fidelity import DEFAULT_CHECK, FidelityReport, SelfCheck, is_reference, reference_settings
+from ..fidelity import check_request as check_fidelity_request
+from ..sampler import MapFn, check_budget, checking, rollout_cost, self_check_many
 from ..scene import Scene, Table, validate_scene
 from ..query.contact import check_pairs
 from ..rollout import SampleOutcome
@@ -27,7 +29,8 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
         map_fn: MapFn | None = None, budget_s: float | None = None,
         fall_threshold_fraction: float = 0.125, record_every: int = 0, record_samples: int = 0,
         directions: bool = False, fell_off: bool = False, sequential: Sequential | None = None,
-        on_progress: Callable[[dict], None] | None = None, contact: tuple[tuple[str, str], ...] = ()) -> Answers:
+        on_progress: Callable[[dict], None] | None = None, contact: tuple[tuple[str, str], ...] = (),
+        check: SelfCheck | None = DEFAULT_CHECK) -> Answers:
     """Answer every variant with common random numbers (see the module docstring). Removals that
     cannot change anything are answered from the scene's own samples (a variant "as is" is added
     for them when it is not asked). ``record_every`` / ``record_samples``: keep the trajectories of
@@ -40,9 +43,13 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     ``on_progress``: called after each batch of a sequential answer with what is decided so far
     (``progress_dict``); whatever it raises ends the question there (a cancellation). ``contact``:
     also, per variant, P(A touches B) for these (A, B) pairs (B may be "support"); every variant is
-    then simulated (none is read from the scene as it is)."""
+    then simulated (none is read from the scene as it is). ``check``: each simulated variant's
+    samples check themselves against the reference physics as a prediction's do
+    (``engine.fidelity``; the checks of all variants share each round's map call); a variant's
+    ``fidelity`` says what happened, and a contradicted variant is answered at the reference."""
     validate_scene(scene)
     check_budget(budget_s)
+    check_fidelity_request(check)
     for i, action in enumerate(actions):
         _check_action(scene, action, f"actions[{i}]")
     if fell_off and not isinstance(scene.support, Table):
@@ -94,9 +101,13 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     else:
         per_sample, decisions = _run_sequentially(tasks, simulated_actions, as_is, k, sequential, map_fn, scene,
                                                   on_progress)
+    reports = _check_variants(per_sample, simulated_actions, tasks, settings, check, map_fn)
+    if sequential is not None and any(r.verdict == "escalated" or r.refined_samples for r in reports.values()):
+        decisions = _decide_again(decisions, per_sample, simulated_actions, as_is, sequential)
     by_variant = {_label(a): dataclasses.replace(
         _aggregate(_label(a), a, [s[j] for s in per_sample], deterministic=deterministic),
-        not_simulated=() if regions[j] is None else tuple(sorted(everything - regions[j])))
+        not_simulated=() if regions[j] is None else tuple(sorted(everything - regions[j])),
+        **_fidelity(reports.get(j)))
         for j, a in enumerate(simulated_actions)}
     if as_is is not None:
         stands = [_stood(s[as_is]) for s in per_sample]
@@ -136,6 +147,54 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
 def _check_contact(scene: Scene, actions: list[Action], pairs) -> None:
     """Contact pairs name objects of the scene, placed objects, or the support."""
     check_pairs(pairs, scene, tuple(a.body.name for a in actions if isinstance(a, Place)))
+
+
+def _check_variants(per_sample: list[list[SampleOutcome]], actions: list[Action], tasks, settings: SimSettings,
+                    check: SelfCheck | None, map_fn: MapFn | None) -> dict[int, FidelityReport]:
+    """Each simulated variant's self-check (``sampler.checking``), all driven together; the checked
+    outcomes replace the fast ones in ``per_sample``. Variant index -> what its check did."""
+    if check is None or not check.enabled or is_reference(settings) or not per_sample:
+        return {}
+    reference = reference_settings(settings.horizon_s)
+    samples = range(len(per_sample))
+    checks = [checking(tasks(samples, [j]), [row[j] for row in per_sample], [], check, reference, settings.name)
+              for j in range(len(actions))]
+
+    def rerun(batch: list[VariantTask]) -> list[SampleOutcome]:
+        return [only for (only,) in _run(batch, map_fn)]
+
+    reports = {}
+    for j, (outcomes, report) in enumerate(self_check_many(checks, reference, rerun)):
+        for row, outcome in zip(per_sample, outcomes):
+            row[j] = outcome
+        reports[j] = report
+    return reports
+
+
+def _fidelity(report: FidelityReport | None) -> dict:
+    if report is None:
+        return {}
+    return dict(fidelity=report.verdict, self_check=report.to_dict())
+
+
+def _decide_again(decisions: dict, per_sample: list[list[SampleOutcome]], actions: list[Action], as_is: int,
+                  sequential: Sequential) -> dict:
+    """The decisions read again from the checked outcomes: a variant the check escalated or refined
+    may fall on the other side of its threshold now, or on neither (None); a changed decision
+    stopped by "checked"."""
+    counts = {_label(a): _Counts() for j, a in enumerate(actions) if j != as_is}
+    for row in per_sample:
+        for j, a in enumerate(actions):
+            if j != as_is:
+                counts[_label(a)].add(row[j])
+    tallies = {label: c.tally() for label, c in counts.items()}
+    decided = {label for label, (decision, _, _) in decisions.items() if decision is not None}
+    again = sequential.rule.decide(tallies, decided)
+    out = {}
+    for label, (decision, why, drawn) in decisions.items():
+        now = again.get(label) if label in decided else decision
+        out[label] = (now, why if now == decision else "checked", drawn)
+    return out
 
 
 def _without(outcome: SampleOutcome, kept: list[int]) -> SampleOutcome:

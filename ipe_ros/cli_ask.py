@@ -9,7 +9,7 @@
                       [--speed-sigma F]                 what a push makes fall, and where
 
 Common options: --scene NAME (a file holding several), --samples K (default 16), --sigma M, --preset,
---seed, --workers, --budget S, --no-self-check, --verify-samples N, --json (one JSON object per line).
+--seed, --workers, --budget S, --self-check, --verify-samples N, --json (one JSON object per line).
 See ipe_ros.engine.actions.
 """
 
@@ -74,11 +74,12 @@ def add_ask_parser(sub, finite, one_line_parser) -> None:
                        help="compute budget per batch of variants, seconds")
         q.add_argument("--fell-off", action="store_true",
                        help="also which objects end off the table (a scene on a table)")
-        q.add_argument("--no-self-check", action="store_true",
-                       help="answer every variant with the fast physics alone (fidelity: unverified) instead of "
-                            "checking it against the converged reference (docs/model.md, 'Self-checking answers')")
+        q.add_argument("--self-check", action="store_true",
+                       help="check every variant's fast physics against the converged reference and answer a "
+                            "contradicted one at the reference (docs/model.md, 'Self-checking answers'); costs "
+                            "2-11x the question's time; without it each variant says fidelity: unverified")
         q.add_argument("--verify-samples", type=int, default=DEFAULT_CHECK.verify_samples, metavar="N",
-                       help=f"samples of each variant rerun at the reference to verify it (default "
+                       help=f"with --self-check: samples of each variant rerun at the reference to verify it (default "
                             f"{DEFAULT_CHECK.verify_samples})")
         q.add_argument("--fixed-k", action="store_true",
                        help="every variant runs all --samples (default: decision questions sample until decided)")
@@ -170,13 +171,13 @@ def cmd_ask(args) -> int:
     # the model and settings as ipe predict builds them (engine.request)
     request = build_request(samples=args.samples, sigma_m=args.sigma, ground_truth=args.ground_truth,
                             preset_name=args.preset, seed=args.seed, budget_s=args.budget,
-                            self_check=not args.no_self_check, verify_samples=args.verify_samples)
+                            self_check=args.self_check, verify_samples=args.verify_samples)
     model, settings = request.model, request.settings
     if args.workers < 0:
         raise ConfigError("--workers", f"must be >= 0, got {args.workers}")
     pool = WorkerPool(min(args.workers, args.samples)) if args.workers > 0 else None
     kw = dict(seed=args.seed, map_fn=pool.map if pool else None, budget_s=args.budget, fell_off=args.fell_off,
-              check=request.check)
+              check=request.check if args.self_check else None)
     if getattr(args, "contact", None):
         kw["contact"] = tuple(args.contact)
     if args.rrd and args.question != "clear":

@@ -145,6 +145,28 @@ def _exhaustive_total_risk(start: Scene) -> float:
     return best[frozenset()]
 
 
+@pytest.mark.parametrize("settings", [SETTINGS, preset("paper")], ids=["default", "paper"])
+def test_the_scene_as_it_is_is_exactly_a_prediction(settings):
+    """A question's "as is" variant is a prediction's sample, bit for bit (the same task, the same
+    separated world simulated on): its answer is the prediction's, whatever else is asked beside it."""
+    from ipe_ros.engine import QuerySpec, predict
+    from ipe_ros.engine.rollout import SampleTask, run_sample
+
+    model = ModelConfig(sigma_m=0.03, samples=6)
+    query = QuerySpec(queries=frozenset({"fall"}))
+    prediction = predict(LINTEL, model, settings, query, seed=7, check=None)
+    for actions in ([None], [None, A.Remove(("left",))]):
+        (as_is, *_) = A.ask(LINTEL, actions, model, settings, seed=7, check=None).variants
+        assert as_is.object_fall_probability == prediction.object_fall_probability
+    seed = np.random.SeedSequence(7).spawn(6)[2]
+    alone = run_sample(SampleTask(scene=LINTEL, model=model, settings=settings, query=query, index=2, seed=seed))
+    (variant,) = A.run_variants(A.VariantTask(scene=LINTEL, model=model, settings=settings, query=query, index=2,
+                                              seed=seed, actions=(None,), regions=(None,)))
+    assert variant.names == tuple(b.name for b in LINTEL.dynamic_objects)
+    assert (variant.rollouts[0].final_positions_m == alone.rollouts[0].final_positions_m).all()
+    assert dataclasses.replace(variant, names=None).rollouts[0].fallen.tolist() == alone.rollouts[0].fallen.tolist()
+
+
 def test_the_greedy_clear_order_matches_exhaustive_search_on_a_small_scene():
     small = scene("small", *LINTEL.objects, box("block", 0, 0, 0.8))
     order = A.clear_order(small, MODEL, SETTINGS)

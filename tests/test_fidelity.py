@@ -18,7 +18,8 @@ from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
 from ipe_ros.engine import actions as A
 from ipe_ros.engine.config import DEFAULT_QUERIES
 from ipe_ros.engine.errors import ConfigError
-from ipe_ros.engine.fidelity import VERDICTS, SelfCheck, confirmation_samples, coverage_samples, reference_settings
+from ipe_ros.engine.fidelity import (DEFAULT_CHECK, VERDICTS, SelfCheck, confirmation_samples, coverage_samples,
+                                     reference_settings)
 from ipe_ros.engine.rollout import SampleOutcome, run_sample
 from ipe_ros.engine.scene_io import load_scenes
 from ipe_ros.engine.examples import example_scene_path
@@ -364,32 +365,32 @@ def test_anytime_sampling_is_checked_on_the_samples_it_drew(tower):
 
 @pytest.fixture(scope="module")
 def ramp_3():
-    """On this ramp the ball topples block1 in 7 of 8 `default` samples (seed 0), in 1 of 8 of the reference's."""
+    """On this ramp the ball topples block1 in every `default` sample (k = 8, seed 0), in 1 of 8 of the reference's."""
     return zoo_scene("ramp", 2026, 3)
 
 
 def test_a_question_checks_every_variant_and_answers_a_contradicted_one_at_the_reference(ramp_3):
-    """Robot questions run the same check per variant: the scene as it is topples block1 under
+    """Robot questions asked to check themselves run the same check per variant: the scene as it is topples block1 under
     `default` where the reference mostly keeps it, so that variant is escalated and answered as the
     reference answers it; without the rolling ball nothing moves in either physics, and that
     variant is verified. Each round of both variants' checks is one map call."""
     model = _ramp_model(ramp_3, 8)
     actions = [None, A.Remove(("mover",))]
     spy = CountingMap()
-    as_is, without = A.ask(ramp_3, actions, model, preset("default"), seed=0, map_fn=spy).variants
+    as_is, without = A.ask(ramp_3, actions, model, preset("default"), seed=0, map_fn=spy, check=DEFAULT_CHECK).variants
     reference = A.ask(ramp_3, actions, model, reference_settings(), seed=0).variants
     assert as_is.fidelity == "escalated" and as_is.self_check["escalated_samples"] == 8
     assert as_is.object_fall_probability == reference[0].object_fall_probability
     assert as_is.object_fall_probability["block1"] == 0.125
     assert without.fidelity == "verified" and set(without.object_fall_probability.values()) == {0.0}
-    assert reference[0].fidelity is None  # the reference settings are not checked
+    assert reference[0].fidelity == "reference"  # the reference settings are not checked
     # the fast samples of both variants, then the verification of sample 0 of each, together
     assert len(spy.calls[0]) == 8 and all(t.settings.name == "default" for t in spy.calls[0])
     assert [(t.settings.name, t.index, t.actions) for t in spy.calls[1]] == [
         (REFERENCE, 0, (None,)), (REFERENCE, 0, (A.Remove(("mover",)),))]
-    unchecked = A.ask(ramp_3, actions, model, preset("default"), seed=0, check=None)
-    assert unchecked.variants[0].fidelity is None and "fidelity" not in unchecked.variants[0].to_dict()
-    assert unchecked.variants[0].object_fall_probability["block1"] == 0.875  # the fast physics alone
+    unchecked = A.ask(ramp_3, actions, model, preset("default"), seed=0)  # questions' default: not checked
+    assert unchecked.variants[0].fidelity == "unverified" and unchecked.variants[0].to_dict()["fidelity"] == "unverified"
+    assert unchecked.variants[0].object_fall_probability["block1"] == 1.0  # the fast physics alone
 
 
 def test_a_sequential_decision_is_read_again_from_the_checked_samples():
@@ -412,7 +413,20 @@ def test_a_sequential_decision_is_read_again_from_the_checked_samples():
     (_, fast) = A.remove(STACK, ["top"], model, preset("default"), map_fn=CountingMap(drop_the_bottom), check=None,
                          **ask).variants
     assert (fast.decision, fast.stopped_by, fast.samples, fast.any_fall_probability) == ("unsafe", "decided", 4, 1.0)
-    (_, checked) = A.remove(STACK, ["top"], model, preset("default"), map_fn=CountingMap(drop_the_bottom), **ask).variants
+    (_, checked) = A.remove(STACK, ["top"], model, preset("default"), map_fn=CountingMap(drop_the_bottom),
+                            check=DEFAULT_CHECK, **ask).variants
     assert checked.fidelity == "escalated" and checked.self_check["escalated_samples"] == 4
     assert (checked.decision, checked.stopped_by, checked.samples, checked.any_fall_probability) == \
         (None, "checked", 4, 0.0)
+
+
+def test_a_question_sent_as_json_checks_itself_only_when_it_asks_to(ramp_3):
+    from ipe_ros.engine.question_io import question_from_dict
+
+    model = _ramp_model(ramp_3, 8)
+    for asked, verdict in ((True, "escalated"), (False, "unverified")):
+        question = question_from_dict({"question": "remove", "objects": ["mover"], "self_check": asked})
+        answer, _ = A.answer_question(ramp_3, question, model, preset("default"), seed=0, check=DEFAULT_CHECK)
+        assert answer["variants"][0]["label"] == "as_is" and answer["variants"][0]["fidelity"] == verdict
+    with pytest.raises(ConfigError, match=r"^self_check: must be true or false$"):
+        question_from_dict({"question": "remove", "self_check": "yes"})

@@ -41,6 +41,7 @@ class Question:
     sequential: bool = True  # decision questions sample until decided; False: the full k
     cancel_older: bool = False  # the node drops older questions about the same scene for this one
     contact: tuple[tuple[str, str], ...] = ()  # remove, place, push: also P(A touches B) per variant
+    self_check: bool = False  # check each variant's fast physics against the reference (engine.fidelity)
 
 
 def _field(data: dict, key: str, kind, default=None, *, path: str = ""):
@@ -74,7 +75,8 @@ def question_from_dict(data) -> Question:
          "point_m": [x, y, z], "direction_sigma_deg": 0, "speed_sigma": 0}
         remove, place, push: "contact": ["A:B", ...] (also P(A touches B) per variant; B may be "support")
         any of them: "samples": k, "fell_off": true (also which objects end off the table),
-        "sequential": false (the full k for every variant), "cancel_older": true (the node drops the
+        "sequential": false (the full k for every variant), "self_check": true (each variant checked
+        against the reference physics, engine.fidelity), "cancel_older": true (the node drops the
         older questions about the same scene, waiting or running)
     """
     if not isinstance(data, dict):
@@ -82,7 +84,7 @@ def question_from_dict(data) -> Question:
     kind = data.get("question")
     if kind not in QUESTIONS:
         raise ConfigError("question", f"must be one of {', '.join(QUESTIONS)}, got {kind!r}"[:300])
-    common_fields = {"id", "question", "samples", "scene", "fell_off", "sequential", "cancel_older"}
+    common_fields = {"id", "question", "samples", "scene", "fell_off", "sequential", "cancel_older", "self_check"}
     unknown = sorted(set(data) - _QUESTION_FIELDS[kind] - common_fields, key=str)
     if unknown:
         key = unknown[0]
@@ -96,7 +98,7 @@ def question_from_dict(data) -> Question:
     if samples is not None and (isinstance(samples, bool) or not isinstance(samples, int) or not 1 <= samples <= 1000):
         raise ConfigError("samples", "must be an integer in [1, 1000]")
     flags = {}
-    for name, default in (("fell_off", False), ("sequential", True), ("cancel_older", False)):
+    for name, default in (("fell_off", False), ("sequential", True), ("cancel_older", False), ("self_check", False)):
         flags[name] = data.get(name, default)
         if not isinstance(flags[name], bool):
             raise ConfigError(name, "must be true or false")

@@ -243,28 +243,38 @@ def run_sample(task: SampleTask, probe: Probe = NO_PROBE) -> SampleOutcome:
     """
     if task.deadline_unix_s is not None and time.time() >= task.deadline_unix_s:
         return _cut_off(task, float("nan"), "the budget was spent before this sample started")
-    rng = np.random.default_rng(task.seed)
-    inputs = draw_sample_inputs(task.scene, task.model, rng)
-    try:
-        world = separated_world(task.scene, task.settings, inputs, probe)
-        initial, initial_orn = simulation.read_poses(world)
-        # the separation's world is in plain rigid bodies: another representation needs a fresh one
-        ends = simulate_pushes(task.scene, task.model, task.settings, task.query, world, initial, initial_orn,
-                               inputs.masses_kg, inputs.push_direction_rad,
-                               fresh_first=not task.settings.solver.maximal_coordinates,
-                               record_every=task.record_every, deadline_unix_s=task.deadline_unix_s, probe=probe)
-        results = [_query(task, initial, phi, end) for phi, end in ends]
-    except BudgetExceeded as exc:
-        return _cut_off(task, inputs.push_direction_rad, str(exc))
-    except PhysicsError as exc:
-        return SampleOutcome(index=task.index, ok=False, error=f"PhysicsError: {exc}",
-                             push_direction_rad=inputs.push_direction_rad, initial_positions_m=None,
-                             initial_orientations_xyzw=None)
-    except Exception as exc:  # noqa: BLE001 - one sample's bug must not end the prediction
-        detail = traceback.format_exception_only(type(exc), exc)[-1].strip()
-        return SampleOutcome(index=task.index, ok=False, error=detail,
-                             push_direction_rad=inputs.push_direction_rad, initial_positions_m=None,
-                             initial_orientations_xyzw=None)
+    inputs = draw_sample_inputs(task.scene, task.model, np.random.default_rng(task.seed))
+    return guarded(task, inputs.push_direction_rad,
+                   lambda: simulate_sample(task, inputs, separated_world(task.scene, task.settings, inputs, probe),
+                                           probe))
+
+
+def simulate_sample(task: SampleTask, inputs, world: simulation.World, probe: Probe = NO_PROBE) -> SampleOutcome:
+    """The sample's rollouts, one per phi value, from its separated ``world`` (the scene as it is:
+    a prediction's sample, and a robot question's "as is" variant, which is therefore exactly the
+    prediction's sample). Raises for physics trouble (``guarded`` turns that into the outcome)."""
+    initial, initial_orn = simulation.read_poses(world)
+    # the separation's world is in plain rigid bodies: another representation needs a fresh one
+    ends = simulate_pushes(task.scene, task.model, task.settings, task.query, world, initial, initial_orn,
+                           inputs.masses_kg, inputs.push_direction_rad,
+                           fresh_first=not task.settings.solver.maximal_coordinates,
+                           record_every=task.record_every, deadline_unix_s=task.deadline_unix_s, probe=probe)
+    results = [_query(task, initial, phi, end) for phi, end in ends]
     return SampleOutcome(index=task.index, ok=True, error=None, push_direction_rad=inputs.push_direction_rad,
                          initial_positions_m=initial, initial_orientations_xyzw=initial_orn,
                          rollouts=tuple(results))
+
+
+def guarded(task: SampleTask, push_direction_rad: float, simulate) -> SampleOutcome:
+    """``simulate()``'s outcome, or the sample's failure as an outcome: the budget (cut off), a
+    physics error, or any other exception (one sample's bug must not end the prediction)."""
+    try:
+        return simulate()
+    except BudgetExceeded as exc:
+        return _cut_off(task, push_direction_rad, str(exc))
+    except PhysicsError as exc:
+        error = f"PhysicsError: {exc}"
+    except Exception as exc:  # noqa: BLE001 - one sample's bug must not end the prediction
+        error = traceback.format_exception_only(type(exc), exc)[-1].strip()
+    return SampleOutcome(index=task.index, ok=False, error=error, push_direction_rad=push_direction_rad,
+                         initial_positions_m=None, initial_orientations_xyzw=None)

@@ -61,8 +61,9 @@ class VariantAnswer:
     contact_probability_ci95: dict[str, list[float]] | None = None
     contact_time_s: dict[str, float | None] | None = None
     #: the self-check of the variant's samples (``engine.fidelity``): "verified", "escalated" (the
-    #: answer is the reference physics'), "contradicted", "unverified"; None: not simulated, or the
-    #: settings are the reference's own. ``self_check``: what it did (FidelityReport.to_dict)
+    #: answer is the reference physics'), "contradicted", "unverified" (not checked: the default for
+    #: questions), "reference" (the settings are the reference's own); None: not simulated.
+    #: ``self_check``: what it did (FidelityReport.to_dict)
     fidelity: str | None = None
     self_check: dict | None = None
 

@@ -13,7 +13,7 @@ from ..config import ModelConfig, QuerySpec, SimSettings
 from ..decide import Sequential, Tally
 from ..errors import ConfigError
 from ..perturb import is_deterministic, position_sigmas_m
-from ..fidelity import DEFAULT_CHECK, FidelityReport, SelfCheck, is_reference, reference_settings
+from ..fidelity import FidelityReport, SelfCheck, is_reference, reference_settings
 from ..fidelity import check_request as check_fidelity_request
 from ..sampler import MapFn, check_budget, checking, rollout_cost, self_check_many
 from ..scene import Scene, Table, validate_scene
@@ -30,7 +30,7 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
         fall_threshold_fraction: float = 0.125, record_every: int = 0, record_samples: int = 0,
         directions: bool = False, fell_off: bool = False, sequential: Sequential | None = None,
         on_progress: Callable[[dict], None] | None = None, contact: tuple[tuple[str, str], ...] = (),
-        check: SelfCheck | None = DEFAULT_CHECK) -> Answers:
+        check: SelfCheck | None = None) -> Answers:
     """Answer every variant with common random numbers (see the module docstring). Removals that
     cannot change anything are answered from the scene's own samples (a variant "as is" is added
     for them when it is not asked). ``record_every`` / ``record_samples``: keep the trajectories of
@@ -43,10 +43,11 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     ``on_progress``: called after each batch of a sequential answer with what is decided so far
     (``progress_dict``); whatever it raises ends the question there (a cancellation). ``contact``:
     also, per variant, P(A touches B) for these (A, B) pairs (B may be "support"); every variant is
-    then simulated (none is read from the scene as it is). ``check``: each simulated variant's
-    samples check themselves against the reference physics as a prediction's do
-    (``engine.fidelity``; the checks of all variants share each round's map call); a variant's
-    ``fidelity`` says what happened, and a contradicted variant is answered at the reference."""
+    then simulated (none is read from the scene as it is). ``check`` (e.g. ``fidelity.DEFAULT_CHECK``):
+    each simulated variant's samples check themselves against the reference physics as a
+    prediction's do (``engine.fidelity``; the checks of all variants share each round's map call),
+    and a contradicted variant is answered at the reference. Off by default: it costs 2-11x a
+    question's time (benchmarks/README.md); each variant's ``fidelity`` then says "unverified"."""
     validate_scene(scene)
     check_budget(budget_s)
     check_fidelity_request(check)
@@ -153,8 +154,10 @@ def _check_variants(per_sample: list[list[SampleOutcome]], actions: list[Action]
                     check: SelfCheck | None, map_fn: MapFn | None) -> dict[int, FidelityReport]:
     """Each simulated variant's self-check (``sampler.checking``), all driven together; the checked
     outcomes replace the fast ones in ``per_sample``. Variant index -> what its check did."""
-    if check is None or not check.enabled or is_reference(settings) or not per_sample:
-        return {}
+    if is_reference(settings):
+        return {j: FidelityReport("reference", settings=(("samples", settings.name),)) for j in range(len(actions))}
+    if check is None or not check.enabled or not per_sample:
+        return {j: FidelityReport("unverified", settings=(("samples", settings.name),)) for j in range(len(actions))}
     reference = reference_settings(settings.horizon_s)
     samples = range(len(per_sample))
     checks = [checking(tasks(samples, [j]), [row[j] for row in per_sample], [], check, reference, settings.name)

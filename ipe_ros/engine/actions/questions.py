@@ -309,13 +309,16 @@ def push(scene: Scene, pushes: list[Push], model: ModelConfig, settings: SimSett
 def answer_question(scene: Scene, question: Question, model: ModelConfig, settings: SimSettings,
                     **kw) -> tuple[dict, Answers | None]:
     """Answer a Question: the JSON-ready answer, and the variants' Answers (None for ``clear``,
-    which asks once per step) for a recording."""
+    which asks once per step) for a recording. ``check`` (in ``kw``): how a question asking for
+    ``self_check`` is checked; without it, the fast physics alone."""
     if question.samples is not None:
         model = dataclasses.replace(model, samples=question.samples)
     if question.fell_off:
         kw["fell_off"] = True
     if question.contact:
         kw["contact"] = question.contact
+    if not question.self_check:
+        kw["check"] = None
     kind = question.kind
     if kind == "push":  # no decision to reach: the full k
         answers = push(scene, [question.push], model, settings, **kw)

@@ -6,16 +6,16 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-import traceback
 import zlib
 from dataclasses import dataclass
 
 import numpy as np
 
 from .. import simulation
-from ..errors import BudgetExceeded, PhysicsError
+from ..errors import PhysicsError
 from ..perturb import draw_sample_inputs
-from ..rollout import SampleOutcome, SampleTask, rollout_result, separated_world, simulate_pushes
+from ..rollout import (SampleOutcome, SampleTask, guarded, rollout_result, separated_world, simulate_pushes,
+                       simulate_sample)
 from ..scene import Scene
 from ..shapes import rotation_matrix
 from .kinds import Action, Place, Push, Remove, _label
@@ -90,31 +90,32 @@ def _simulate_variant(task: VariantTask, scene: Scene, positions, orientations, 
 def run_variants(task: VariantTask) -> list[SampleOutcome]:
     """Sample ``task.index`` of every variant (one outcome per action, its rollout's arrays in the
     variant's own objects, ``SampleOutcome.names``); never raises for physics trouble (a failed
-    variant carries its error)."""
+    variant carries its error, the others run). The scene as it is (action None, every object in
+    reach) simulates on in the separated world, exactly as a prediction's sample does
+    (``rollout.simulate_sample``); the other variants start from its separated poses."""
     if task.deadline_unix_s is not None and time.time() >= task.deadline_unix_s:
         return [failed(task, "BudgetExceeded: not started", budget_stopped=True) for _ in task.actions]
-    rng = np.random.default_rng(task.seed)
-    inputs = draw_sample_inputs(task.scene, task.model, rng)
+    inputs = draw_sample_inputs(task.scene, task.model, np.random.default_rng(task.seed))
     try:
-        shared, shared_orn = simulation.read_poses(separated_world(task.scene, task.settings, inputs))
+        world = separated_world(task.scene, task.settings, inputs)
+        shared, shared_orn = simulation.read_poses(world)
     except PhysicsError as exc:
         return [failed(task, f"PhysicsError: {exc}", push_direction_rad=inputs.push_direction_rad)
                 for _ in task.actions]
-    return [_run_one(task, action, v, shared, shared_orn, inputs) for v, action in enumerate(task.actions)]
-
-
-def _run_one(task: VariantTask, action: Action, v: int, shared, shared_orn, inputs) -> SampleOutcome:
-    """One variant of the sample; its physics trouble is its own result, never the others'."""
-    region = None if task.regions is None else task.regions[v]
-    direction = inputs.push_direction_rad
-    try:
-        return _one_variant(task, action, shared, shared_orn, inputs, region)
-    except BudgetExceeded as exc:
-        return failed(task, f"BudgetExceeded: {exc}", budget_stopped=True, push_direction_rad=direction)
-    except PhysicsError as exc:
-        return failed(task, f"PhysicsError: {exc}", push_direction_rad=direction)
-    except Exception as exc:  # noqa: BLE001 - one variant's trouble must not end the others
-        return failed(task, traceback.format_exception_only(type(exc), exc)[-1].strip(), push_direction_rad=direction)
+    regions = task.regions or (None,) * len(task.actions)
+    out: dict[int, SampleOutcome] = {}
+    # the scene as it is first: a process holds one world at a time, and the next variant's replaces it
+    for v, (action, region) in enumerate(zip(task.actions, regions)):
+        if action is None and region is None:  # a prediction's sample, simulated on in the separated world
+            outcome = guarded(task, inputs.push_direction_rad, lambda: simulate_sample(task, inputs, world))
+            names = tuple(b.name for b in task.scene.dynamic_objects)
+            out[v] = dataclasses.replace(outcome, names=names) if outcome.ok else outcome
+            break
+    for v, (action, region) in enumerate(zip(task.actions, regions)):
+        if v not in out:
+            out[v] = guarded(task, inputs.push_direction_rad,
+                             lambda: _one_variant(task, action, shared, shared_orn, inputs, region))
+    return [out[v] for v in range(len(task.actions))]
 
 
 def _one_variant(task: VariantTask, action: Action, shared, shared_orn, inputs,

@@ -389,7 +389,7 @@ def test_a_question_checks_every_variant_and_answers_a_contradicted_one_at_the_r
     assert [(t.settings.name, t.index, t.actions) for t in spy.calls[1]] == [
         (REFERENCE, 0, (None,)), (REFERENCE, 0, (A.Remove(("mover",)),))]
     unchecked = A.ask(ramp_3, actions, model, preset("default"), seed=0)  # questions' default: not checked
-    assert unchecked.variants[0].fidelity == "unverified" and unchecked.variants[0].to_dict()["fidelity"] == "unverified"
+    assert unchecked.variants[0].fidelity == unchecked.variants[0].to_dict()["fidelity"] == "unverified"
     assert unchecked.variants[0].object_fall_probability["block1"] == 1.0  # the fast physics alone
 
 

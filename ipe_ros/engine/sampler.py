@@ -21,8 +21,8 @@ from .errors import ConfigError, shown
 from .estimate import Prediction, aggregate, sample_any_fall, sample_fall_fraction, wilson_interval
 from .fidelity import check_request as check_fidelity_request
 from .fidelity import (DEFAULT_CHECK, NO_CHECK, FidelityReport, SelfCheck, confirmation_samples, contradicts,
-                       coverage_samples, difference, is_reference, merge, outcome_flags, reference_settings, scale_of, suspect,
-                       unhealthy, verification_count)
+                       coverage_samples, difference, is_reference, merge, outcome_flags, reference_settings,
+                       scale_of, suspect, unhealthy, verification_count)
 from .perturb import is_deterministic
 from .rollout import SampleOutcome, SampleTask, run_sample
 from .query import QUERIES

@@ -230,10 +230,17 @@ def simulate_pushes(scene: Scene, model: ModelConfig, settings: SimSettings, spe
     return ends
 
 
+def failed(task: SampleTask, error: str, *, budget_stopped: bool = False, worker_lost: bool = False,
+           push_direction_rad: float = float("nan")) -> SampleOutcome:
+    """A sample (or a question's variant) that did not run to its end: physics trouble, the budget
+    (``budget_stopped``), a worker lost twice (``worker_lost``)."""
+    return SampleOutcome(index=task.index, ok=False, error=error, push_direction_rad=push_direction_rad,
+                         initial_positions_m=None, initial_orientations_xyzw=None, budget_stopped=budget_stopped,
+                         worker_lost=worker_lost)
+
+
 def _cut_off(task: SampleTask, push_direction_rad: float, why: str) -> SampleOutcome:
-    return SampleOutcome(index=task.index, ok=False, error=f"BudgetExceeded: {why}",
-                         push_direction_rad=push_direction_rad, initial_positions_m=None,
-                         initial_orientations_xyzw=None, budget_stopped=True)
+    return failed(task, f"BudgetExceeded: {why}", budget_stopped=True, push_direction_rad=push_direction_rad)
 
 
 def run_sample(task: SampleTask, probe: Probe = NO_PROBE) -> SampleOutcome:
@@ -276,5 +283,4 @@ def guarded(task: SampleTask, push_direction_rad: float, simulate) -> SampleOutc
         error = f"PhysicsError: {exc}"
     except Exception as exc:  # noqa: BLE001 - one sample's bug must not end the prediction
         error = traceback.format_exception_only(type(exc), exc)[-1].strip()
-    return SampleOutcome(index=task.index, ok=False, error=error, push_direction_rad=push_direction_rad,
-                         initial_positions_m=None, initial_orientations_xyzw=None)
+    return failed(task, error, push_direction_rad=push_direction_rad)

@@ -24,7 +24,7 @@ from .fidelity import (DEFAULT_CHECK, NO_CHECK, FidelityReport, SelfCheck, confi
                        coverage_samples, difference, is_reference, merge, outcome_flags, reference_settings,
                        scale_of, suspect, unhealthy, verification_count)
 from .perturb import is_deterministic
-from .rollout import SampleOutcome, SampleTask, run_sample
+from .rollout import SampleOutcome, SampleTask, failed, run_sample
 from .query import QUERIES
 from .scene import DEFAULT_MAX_OBJECTS, Scene, validate_scene
 
@@ -85,9 +85,7 @@ def _run_tasks(tasks: list[SampleTask], map_fn: MapFn | None) -> list[SampleOutc
 
 
 def _lost(task: SampleTask, reason: str) -> SampleOutcome:
-    return SampleOutcome(index=task.index, ok=False, error=f"WorkerLost: {reason}",
-                         push_direction_rad=float("nan"), initial_positions_m=None,
-                         initial_orientations_xyzw=None, worker_lost=True)
+    return failed(task, f"WorkerLost: {reason}", worker_lost=True)
 
 
 def make_tasks(scene: Scene, model: ModelConfig, settings: SimSettings, query: QuerySpec, seed: int,

@@ -14,7 +14,7 @@ import numpy as np
 from .. import simulation
 from ..errors import PhysicsError
 from ..perturb import draw_sample_inputs
-from ..rollout import (SampleOutcome, SampleTask, guarded, rollout_result, separated_world, simulate_pushes,
+from ..rollout import (SampleOutcome, SampleTask, failed, guarded, rollout_result, separated_world, simulate_pushes,
                        simulate_sample)
 from ..scene import Scene
 from ..shapes import rotation_matrix
@@ -36,14 +36,6 @@ def skipped(index: int, why: str) -> SampleOutcome:
     """A variant not run in sample ``index`` (``why``: "the scene fell as it is", "decided")."""
     return SampleOutcome(index=index, ok=False, error=f"skipped: {why}", push_direction_rad=float("nan"),
                          initial_positions_m=None, initial_orientations_xyzw=None, skipped=True)
-
-
-def failed(task: SampleTask, error: str, *, budget_stopped: bool = False, worker_lost: bool = False,
-           push_direction_rad: float = float("nan")) -> SampleOutcome:
-    """A variant's sample that did not run to its end (physics trouble, the budget, a lost worker)."""
-    return SampleOutcome(index=task.index, ok=False, error=error, push_direction_rad=push_direction_rad,
-                         initial_positions_m=None, initial_orientations_xyzw=None, budget_stopped=budget_stopped,
-                         worker_lost=worker_lost)
 
 
 def _action_rng(task: VariantTask, action: Action) -> np.random.Generator:

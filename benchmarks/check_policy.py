@@ -30,7 +30,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, parse_queries, preset  # noqa: E402
 from ipe_ros.engine.config import DEFAULT_QUERIES  # noqa: E402
-from ipe_ros.engine.fidelity import DEFAULT_CHECK, SelfCheck, reference_settings  # noqa: E402
+from ipe_ros.engine.fidelity import (DEFAULT_CHECK, SelfCheck, coverage_ahead, look_ahead_split,  # noqa: E402
+                                     reference_settings, verification_count)
 from ipe_ros.engine.generators import generate_towers  # noqa: E402
 from ipe_ros.engine.sampler import _run_tasks, at_settings, make_tasks, self_check  # noqa: E402
 from ipe_ros.engine.zoo import FAMILIES, scene_zoo, zoo_sigma_m  # noqa: E402
@@ -140,8 +141,12 @@ def _replay(stored: list, reference) -> list[dict]:
                 used.extend(t.index for t in batch)
                 return [ref[t.index] for t in batch]
 
-            verified = list(ref[:min(check.verify_samples, len(tasks))]) if check.enabled else []
-            used.extend(range(len(verified)))
+            # as predict runs it: the verification, and the coverage sample picked ahead of the last samples
+            verified = {i: ref[i] for i in range(verification_count(check, len(tasks)))}
+            split = look_ahead_split(check, len(tasks))
+            if split < len(tasks):
+                verified.update({i: ref[i] for i in coverage_ahead(fast[:split], verified, check, len(tasks))})
+            used.extend(verified)
             answer, report = self_check(tasks, list(fast), verified, check, reference, run, "default")
             dp = np.abs(_object_p(answer) - _object_p(ref))
             g = per_group.setdefault(group, {"scenes": 0, "reference_samples": 0, "fast_s": 0.0, "ref_s": 0.0,

@@ -290,6 +290,33 @@ def verification_count(check: SelfCheck, samples: int) -> int:
     return min(check.verify_samples, samples) if check.enabled else 0
 
 
+def look_ahead_split(check: SelfCheck, samples: int) -> int:
+    """Where a fixed-k prediction splits its fast samples so that the coverage sample can run beside
+    the last ones instead of in a round of its own (``coverage_ahead``): samples before the split run
+    in the first map with the verification, the rest (a quarter) in a second map with the coverage
+    sample picked from the first ones. A function of k alone, so the answer does not depend on the
+    worker count; ``samples`` (no split) when coverage is off or k < 8."""
+    if not check.enabled or not check.cover_samples or not verification_count(check, samples) or samples < 8:
+        return samples
+    return samples - samples // 4
+
+
+def coverage_ahead(outcomes: Sequence[SampleOutcome], verified: dict[int, SampleOutcome], check: SelfCheck,
+                   samples: int) -> list[int]:
+    """The coverage pick (``coverage_samples``) made before the last fast samples are in: from the
+    fast outcomes at hand and the verified samples among them, when none of those differs from its
+    reference rerun (a difference calls for confirmation, not coverage). The check itself looks
+    again once every outcome is in, and covers a side these could not see in a round of its own."""
+    compared = [difference(outcomes[i], ref) for i, ref in verified.items()
+                if i < len(outcomes) and ref.ok and outcomes[i].ok]
+    if not compared or suspect(compared):
+        return []
+    fast = {i: outcome_flags(o) for i, o in enumerate(outcomes) if i not in verified and o.ok}
+    looked = [outcome_flags(outcomes[i]) for i, ref in verified.items() if i < len(outcomes) and ref.ok
+              and outcomes[i].ok]
+    return coverage_samples(fast, looked, min(check.escalate_min_samples, samples), check.cover_samples)
+
+
 def merge(outcomes: Sequence[SampleOutcome], replacements: dict[int, SampleOutcome]) -> list[SampleOutcome]:
     """``outcomes`` with some samples (by position) replaced by their rerun."""
     return [replacements.get(i, o) for i, o in enumerate(outcomes)]

@@ -21,8 +21,8 @@ from .errors import ConfigError, shown
 from .estimate import Prediction, aggregate, sample_any_fall, sample_fall_fraction, wilson_interval
 from .fidelity import check_request as check_fidelity_request
 from .fidelity import (DEFAULT_CHECK, NO_CHECK, FidelityReport, SelfCheck, confirmation_samples, contradicts,
-                       coverage_samples, difference, is_reference, merge, outcome_flags, reference_settings,
-                       scale_of, suspect, unhealthy, verification_count)
+                       coverage_ahead, coverage_samples, difference, is_reference, look_ahead_split, merge,
+                       outcome_flags, reference_settings, scale_of, suspect, unhealthy, verification_count)
 from .perturb import is_deterministic
 from .rollout import SampleOutcome, SampleTask, failed, run_sample
 from .query import QUERIES
@@ -209,19 +209,26 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
     at_reference = is_reference(settings)
     check = NO_CHECK if check is None or at_reference else check
     reference = reference_settings(settings.horizon_s)
-    # the verification runs in the first map, first (the longest tasks start first)
-    verify_tasks = [at_settings(t, reference) for t in tasks[:verification_count(check, len(tasks))]]
+
+    def run_verifying(samples: list[int], batch: list[SampleTask]) -> list[SampleOutcome]:
+        """``batch`` with ``samples`` rerun at the reference in the same map, first (the longest
+        tasks start first); their reruns go to ``verified``."""
+        both = run([at_settings(tasks[i], reference) for i in samples] + batch)
+        verified.update(zip(samples, both[:len(samples)]))
+        return both[len(samples):]
 
     def run_first(batch: list[SampleTask]) -> list[SampleOutcome]:
-        both = run(verify_tasks + batch)
-        verified[:] = both[:len(verify_tasks)]
-        return both[len(verify_tasks):]
+        return run_verifying(list(range(verification_count(check, len(tasks)))), batch)
 
-    verified: list[SampleOutcome] = []
+    verified: dict[int, SampleOutcome] = {}
     start = time.perf_counter()
     stopped_by = "samples"
     if stop is None or is_deterministic(scene, model):
-        outcomes: list[SampleOutcome] = run_first(tasks)
+        # the coverage sample runs beside the last quarter of the fast samples, picked from the rest
+        split = look_ahead_split(check, len(tasks))
+        outcomes: list[SampleOutcome] = run_first(tasks[:split])
+        if split < len(tasks):
+            outcomes += run_verifying(coverage_ahead(outcomes, verified, check, len(tasks)), tasks[split:])
     else:
         outcomes = []
         for first in range(0, len(tasks), stop.batch_size):
@@ -258,7 +265,7 @@ def at_settings(task: SampleTask, settings: SimSettings) -> SampleTask:
     return dataclasses.replace(task, settings=settings, record_every=every)
 
 
-def self_check(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: list[SampleOutcome],
+def self_check(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: dict[int, SampleOutcome],
                check: SelfCheck, reference: SimSettings, run: Callable[[list[SampleTask]], list[SampleOutcome]],
                fast_name: str) -> tuple[list[SampleOutcome], FidelityReport]:
     """Verify, refine and escalate (``engine.fidelity``): the outcomes the answer uses, and what happened.
@@ -302,7 +309,7 @@ def self_check_many(checks: list[Checking], reference: SimSettings,
     return results
 
 
-def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: list[SampleOutcome],
+def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: dict[int, SampleOutcome],
              check: SelfCheck, reference: SimSettings, fast_name: str) -> Checking:
     """The self-check of one answer's samples, as a generator: it yields the tasks it wants rerun at
     the reference, is sent their reruns, and returns the outcomes the answer uses and the report
@@ -322,7 +329,7 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: l
 
     # 1. verification: the first samples with a fast outcome (a prediction's ran beside the fast
     # samples, in the first map; anytime sampling may have stopped before them)
-    checked = dict(enumerate(list(verified)[:len(outcomes)]))
+    checked = {i: ref for i, ref in verified.items() if i < len(outcomes)}
     first = [i for i, o in enumerate(outcomes) if o.ok][:verification_count(check, len(outcomes))]
     missing = [i for i in first if i not in checked]
     if missing:
@@ -346,7 +353,9 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: l
     # this scene, and replacing only those would bias the answer), and a suspect difference is
     # looked for again where it can show before it is believed; while nothing differs, one round
     # looks where a bias could hide from the samples compared so far (coverage)
-    confirmations, covered = 0, False
+    # samples verified ahead beyond the first (``fidelity.coverage_ahead``) were coverage's picks
+    cover = check.cover_samples - len([i for i in verified if i < len(outcomes) and i not in first])
+    confirmations = 0
     while True:
         compared = differences()
         found = suspect(list(compared.values()))
@@ -357,10 +366,10 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: l
         if found and confirmations < check.confirm_rounds and not (confirmations and found < 2):
             picked = confirmation_samples(fast, compared, check.confirm_samples)
             confirmations += 1
-        elif not found and not covered:
+        elif not found and cover > 0:
             looked = [outcome_flags(outcomes[i]) for i in compared]
-            picked = coverage_samples(fast, looked, at_least, check.cover_samples)
-            covered = True
+            picked = coverage_samples(fast, looked, at_least, cover)
+            cover = 0
         else:
             break
         if not picked:

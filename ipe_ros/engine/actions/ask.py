@@ -160,7 +160,7 @@ def _check_variants(per_sample: list[list[SampleOutcome]], actions: list[Action]
         return {j: FidelityReport("unverified", settings=(("samples", settings.name),)) for j in range(len(actions))}
     reference = reference_settings(settings.horizon_s)
     samples = range(len(per_sample))
-    checks = [checking(tasks(samples, [j]), [row[j] for row in per_sample], [], check, reference, settings.name)
+    checks = [checking(tasks(samples, [j]), [row[j] for row in per_sample], {}, check, reference, settings.name)
               for j in range(len(actions))]
 
     def rerun(batch: list[VariantTask]) -> list[SampleOutcome]:

@@ -337,6 +337,29 @@ def test_a_decided_variant_stops_and_an_undecided_one_runs_to_the_cap():
     assert variants["as_is"].samples == 24 and variants["as_is"].stopped_by is None
 
 
+def test_the_next_batch_of_the_scene_as_it_is_runs_beside_this_batch_of_variants():
+    """Two variants undecided: samples 4-7 of the scene as it is run in the map call of batch 0's
+    variants. Both are decided after batch 0 (the top falls without the bottom in 4 of 4; nothing
+    falls without the top, safe below 0.5 after 4 of 4), so samples 4-7 are dropped: the answer is
+    the batch-by-batch one, 4 samples."""
+    calls = []
+
+    def spy(fn, items, on_lost=None):
+        items = list(items)
+        calls.append([(t.index, tuple("as_is" if a is None else a.label for a in t.actions)) for t in items])
+        return [fn(t) for t in items]
+
+    variants = _by_label(A.support_graph(STACK, ModelConfig(sigma_m=0.005, samples=24), SETTINGS, safe_below=0.5,
+                                         map_fn=spy).answers)
+    as_is = ("as_is",)
+    assert calls[0] == [(i, as_is) for i in range(4)]
+    assert calls[1] == [(i, ("remove/bottom", "remove/top")) for i in range(4)] + [(i, as_is) for i in range(4, 8)]
+    assert len(calls) == 2
+    assert {label: (v.decision, v.samples_drawn) for label, v in variants.items() if label != "as_is"} == {
+        "remove/bottom": ("unsafe", 4), "remove/top": ("safe", 4)}
+    assert variants["as_is"].samples == 4
+
+
 def test_a_sequential_answer_equals_the_fixed_k_answer_cut_where_it_stopped():
     """Sample i keeps seed i: in the edge stack (falls by itself in about half the samples) the
     removal decided after n drawn samples answers what a fixed-k run of n samples answers over its

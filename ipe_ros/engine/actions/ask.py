@@ -233,27 +233,40 @@ def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequenti
     stood, a few variants per task (the work of one sample varies too much - one rollout or all of
     them - to spread by samples); a variant not run in a sample is a skipped result. Returns every
     sample's results (in ``actions`` order) and, per variant label, (decision, why it stopped,
-    samples drawn for it)."""
+    samples drawn for it).
+
+    With more than one variant undecided, the next batch's scene-as-it-is samples run in the same
+    map call as this batch's variants (one map call per batch instead of two, no worker idle while
+    the few as-is rollouts finish). Nothing depends on them until the next batch: when the rule
+    decides everything first, they are dropped, so the answer is the one batch by batch."""
     others = [j for j in range(len(actions)) if j != as_is]
     active = set(others)
     decisions: dict[str, tuple[str | None, str, int]] = {}
     per_sample: list[list[SampleOutcome]] = []
     # counted as the batches come (recounting every sample at every look would grow with k x looks)
     counts = {_label(actions[j]): _Counts() for j in others}
+
+    def batch_from(first: int) -> range:
+        return range(first, min(k, first + sequential.batch_samples))
+
+    batch = batch_from(0)
+    alone = dict(zip(batch, (only for (only,) in _run(tasks(batch, [as_is]), map_fn))))
     while len(per_sample) < k and active:
-        batch = range(len(per_sample), min(k, len(per_sample) + sequential.batch_samples))
         rows = {}
-        for i, (alone,) in zip(batch, _run(tasks(batch, [as_is]), map_fn)):
+        for i in batch:
             rows[i] = [skipped(i, "the scene fell as it is" if j in active else "decided") for j in range(len(actions))]
-            rows[i][as_is] = alone
+            rows[i][as_is] = alone[i]
         standing = [i for i in batch if _stood(rows[i][as_is])]
         running = sorted(active)
         chunks = [running[c:c + VARIANTS_PER_TASK] for c in range(0, len(running), VARIANTS_PER_TASK)]
         jobs = [(i, chunk) for i in standing for chunk in chunks]
         work = [task for i, chunk in jobs for task in tasks([i], chunk)]
-        for (i, chunk), results in zip(jobs, _run(work, map_fn) if work else []):
-            for j, result in zip(chunk, results):
+        ahead = batch_from(batch.stop) if len(active) > 1 else range(0)
+        results = _run(work + tasks(ahead, [as_is]), map_fn) if work or ahead else []
+        for (i, chunk), variant_results in zip(jobs, results[:len(jobs)]):
+            for j, result in zip(chunk, variant_results):
                 rows[i][j] = result
+        alone = dict(zip(ahead, (only for (only,) in results[len(jobs):])))
         for i in batch:
             per_sample.append(rows[i])
             for j in running:
@@ -268,6 +281,9 @@ def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequenti
         if on_progress is not None:
             on_progress(progress_dict(scene.name, k, len(per_sample), decisions,
                                       [_label(actions[j]) for j in sorted(active)], tallies))
+        batch = batch_from(batch.stop)
+        if batch and active and not alone:
+            alone = dict(zip(batch, (only for (only,) in _run(tasks(batch, [as_is]), map_fn))))
     budget = any(r.budget_stopped for row in per_sample for r in row)
     for j in active:
         decisions[_label(actions[j])] = (None, "budget" if budget else "cap", len(per_sample))

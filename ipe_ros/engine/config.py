@@ -187,7 +187,8 @@ class SolverSettings:
     #: without restitution (the paper's towers) keep the sequential-impulse solver. The direct solver
     #: pushes resting bodies out of each other poorly (a 183 kg hull under an 861 kg one chattered 6% of
     #: its size deep in the floor at the horizon), so a rollout's last ``collapse.fine_before_end_s``
-    #: runs on the sequential-impulse solver again: what rests at the end is pushed out.
+    #: runs on the sequential-impulse solver again, and a rollout at rest before the horizon runs
+    #: that end phase before it ends: what rests at the end is pushed out.
     direct_solver_for_restitution: bool = True
     direct_solver_max_mass_ratio: float = 100.0
 

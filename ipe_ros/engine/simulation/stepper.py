@@ -221,7 +221,8 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
                 # at rest on the direct solver, which leaves resting bodies sunk a little into each
                 # other (a bouncy block 3 mm into the one below, read as 8.1 cm fallen against a
                 # threshold of 8.0): end as at the horizon, on the sequential solver for the end phase
-                ending = True
+                # (at full steps: the half steps are for ends in mid-collapse, and nothing moves here)
+                ending, end_phase_due = True, False
                 fine_from_tick = tick
                 total_ticks = min(total_ticks, tick + end_phase_ticks)
                 continue

@@ -202,12 +202,11 @@ def test_a_bias_the_verified_sample_could_not_show_is_found_by_coverage(contradi
     """The fast physics topples the stack in samples 3, 5 and 6 of 8 and keeps it in sample 0, the
     verified one, as the reference does everywhere: no difference, yet nothing compared could
     have shown this bias. Coverage verifies sample 3, finds it, confirmation finds it at 5 and 6,
-    and the scene is escalated instead of being called verified. (Samples 0-5 run first, 6-7 in a
-    second map; only two of the first six topple, too few to pick the coverage sample ahead.)"""
+    and the scene is escalated instead of being called verified."""
     spy = _toppled_only_in(contradicted_scene, (3, 5, 6))
     p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), preset("default"), QUERY, seed=0,
                 map_fn=spy)
-    assert [[t.index for t in call] for call in spy.calls[1:4]] == [[6, 7], [3], [5, 6]]
+    assert [[t.index for t in call] for call in spy.calls[1:3]] == [[3], [5, 6]]
     assert p.fidelity == "escalated" and p.object_fall_probability["block1"] == 0.0
     no_coverage = dataclasses.replace(SelfCheck(), cover_samples=0)
     spy = _toppled_only_in(contradicted_scene, (3, 5, 6))
@@ -217,20 +216,20 @@ def test_a_bias_the_verified_sample_could_not_show_is_found_by_coverage(contradi
 
 
 def test_the_coverage_sample_is_picked_ahead_and_runs_beside_the_last_fast_samples(contradicted_scene):
-    """Samples 0-5 run with the verification (sample 0, standing like the reference's); three of
-    them topple (2, 3, 5), a side no compared sample took: sample 2 is verified in the map that
-    runs the last two fast samples, not in a round of its own. It differs; confirmation finds 3 and
-    5 differing too, and the scene is escalated. Where the split falls depends on k alone."""
+    """k = 32: samples 0-23 run with the verification (sample 0, standing like the reference's);
+    three of them topple (2, 3, 5), a side no compared sample took: sample 2 is verified in the map
+    that runs the last 8 fast samples, not in a round of its own. It differs; confirmation finds 3
+    and 5 differing too, and the scene is escalated. Where the split falls depends on k alone."""
     spy = _toppled_only_in(contradicted_scene, (2, 3, 5))
-    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), preset("default"), QUERY, seed=0,
+    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 32), preset("default"), QUERY, seed=0,
                 map_fn=spy)
     calls = [[(t.index, t.settings.name) for t in call] for call in spy.calls]
-    assert calls[0] == [(0, REFERENCE)] + [(i, "default") for i in range(6)]
-    assert calls[1] == [(2, REFERENCE), (6, "default"), (7, "default")]
+    assert calls[0] == [(0, REFERENCE)] + [(i, "default") for i in range(24)]
+    assert calls[1] == [(2, REFERENCE)] + [(i, "default") for i in range(24, 32)]
     assert calls[2] == [(3, REFERENCE), (5, REFERENCE)]
     assert p.fidelity == "escalated" and p.object_fall_probability["block1"] == 0.0
     assert (p.self_check["verified_samples"], p.self_check["disagreeing_samples"]) == (4, 3)
-    assert look_ahead_split(SelfCheck(), 48) == 36 and look_ahead_split(SelfCheck(), 7) == 7
+    assert look_ahead_split(SelfCheck(), 48) == 36 and look_ahead_split(SelfCheck(), 31) == 31
     assert look_ahead_split(SelfCheck(cover_samples=0), 48) == 48
 
 
@@ -261,7 +260,7 @@ def test_a_bias_on_a_minority_of_samples_is_confirmed_where_it_shows(contradicte
     spy = _toppled_only_in(contradicted_scene, (0, 3, 5))
     p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), preset("default"), QUERY, seed=0,
                 map_fn=spy)
-    assert [t.index for t in spy.calls[2]] == [3, 5]
+    assert [t.index for t in spy.calls[1]] == [3, 5]
     assert p.fidelity == "escalated" and p.object_fall_probability["block1"] == 0.0
 
 
@@ -273,8 +272,7 @@ def test_refined_rollouts_that_differ_the_same_way_are_evidence_too(contradicted
     spy = _toppled_only_in(contradicted_scene, (2, 3, 5), unhealthy=True)
     p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), preset("default"), QUERY, seed=0,
                 map_fn=spy)
-    # sample 0 agreed; 2 is verified ahead (coverage), beside the last fast samples; 3 and 5 refined
-    assert [[t.index for t in call] for call in spy.calls[1:3]] == [[2, 6, 7], [3, 5]]
+    assert [t.index for t in spy.calls[1]] == [2, 3, 5]  # the refinement; sample 0 agreed
     assert p.self_check["refined_reasons"] == {"2": "penetration", "3": "penetration", "5": "penetration"}
     assert p.fidelity == "escalated" and p.self_check["disagreeing_samples"] == 3
 
@@ -286,7 +284,7 @@ def test_two_same_way_differences_in_three_samples_look_again_before_escalating(
     spy = _toppled_only_in(contradicted_scene, (0, 5))
     p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), preset("default"), QUERY, seed=0,
                 map_fn=spy)
-    assert [[t.index for t in call] for call in spy.calls[1:]] == [[6, 7], [5, 1], [2, 3]]
+    assert [[t.index for t in call] for call in spy.calls[1:]] == [[5, 1], [2, 3]]
     assert p.fidelity == "verified"
     assert (p.self_check["verified_samples"], p.self_check["disagreeing_samples"]) == (5, 2)
 

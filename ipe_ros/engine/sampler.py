@@ -353,8 +353,8 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: d
     # this scene, and replacing only those would bias the answer), and a suspect difference is
     # looked for again where it can show before it is believed; while nothing differs, one round
     # looks where a bias could hide from the samples compared so far (coverage)
-    # samples verified ahead beyond the first (``fidelity.coverage_ahead``) were coverage's picks
-    cover = check.cover_samples - len([i for i in verified if i < len(outcomes) and i not in first])
+    # samples verified beyond the first ones (``fidelity.coverage_ahead``) were coverage's picks
+    cover = check.cover_samples - len([i for i in verified if i >= verification_count(check, len(tasks))])
     confirmations = 0
     while True:
         compared = differences()

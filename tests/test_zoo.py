@@ -21,6 +21,8 @@ from ipe_ros.engine.config import DEFAULT_QUERIES
 from ipe_ros.engine.scene_io import scene_from_dict, scene_to_dict
 from ipe_ros.engine.shapes import BoxShape, Capsule, Compound, ConvexHull, Cylinder, Sphere
 from ipe_ros.engine.perturb import draw_sample_inputs
+from ipe_ros.engine.rollout import run_sample
+from ipe_ros.engine.sampler import make_tasks
 from ipe_ros.engine.simulation import build_world
 from ipe_ros.engine.simulation.health import deepest_penetration_fraction, energy_scale_j
 from ipe_ros.engine.zoo import FAMILIES, family_of, scene_zoo, zoo_scene, zoo_sigma_m
@@ -121,9 +123,6 @@ def test_a_rollout_at_rest_early_on_the_direct_solver_ends_as_at_the_horizon():
     one below under every physics, against a fall threshold of 8.0 cm. `default` is at rest at
     0.4 s on the direct solver, which left it 3 mm into the block below (read as fallen); the end
     phase on the sequential-impulse solver pushes it out before the pose is read."""
-    from ipe_ros.engine.rollout import run_sample
-    from ipe_ros.engine.sampler import make_tasks
-
     scene = zoo_scene("bouncy", 2026, 4)
     model = ModelConfig(sigma_m=zoo_sigma_m(scene), samples=16)
     ends = {}

@@ -316,13 +316,12 @@ def coverage_ahead(outcomes: Sequence[SampleOutcome], verified: dict[int, Sample
     fast outcomes at hand and the verified samples among them, when none of those differs from its
     reference rerun (a difference calls for confirmation, not coverage). The check itself looks
     again once every outcome is in, and covers a side these could not see in a round of its own."""
-    compared = [difference(outcomes[i], ref) for i, ref in verified.items()
-                if i < len(outcomes) and ref.ok and outcomes[i].ok]
-    if not compared or suspect(compared):
+    compared = [i for i, ref in verified.items() if i < len(outcomes) and ref.ok and outcomes[i].ok]
+    differences = [difference(outcomes[i], verified[i]) for i in compared]
+    if not differences or suspect(differences):
         return []
     fast = {i: outcome_flags(o) for i, o in enumerate(outcomes) if i not in verified and o.ok}
-    looked = [outcome_flags(outcomes[i]) for i, ref in verified.items() if i < len(outcomes) and ref.ok
-              and outcomes[i].ok]
+    looked = [outcome_flags(outcomes[i]) for i in compared]
     return coverage_samples(fast, looked, min(check.escalate_min_samples, samples), check.cover_samples)
 
 

@@ -249,9 +249,14 @@ def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequenti
     def batch_from(first: int) -> range:
         return range(first, min(k, first + sequential.batch_samples))
 
+    def as_is_of(indices: range, results) -> dict[int, SampleOutcome]:
+        return dict(zip(indices, (only for (only,) in results)))
+
     batch = batch_from(0)
-    alone = dict(zip(batch, (only for (only,) in _run(tasks(batch, [as_is]), map_fn))))
+    alone: dict[int, SampleOutcome] = {}  # this batch's scene-as-it-is samples
     while len(per_sample) < k and active:
+        if not alone:  # not run ahead beside the last batch's variants
+            alone = as_is_of(batch, _run(tasks(batch, [as_is]), map_fn))
         rows = {}
         for i in batch:
             rows[i] = [skipped(i, "the scene fell as it is" if j in active else "decided") for j in range(len(actions))]
@@ -266,7 +271,7 @@ def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequenti
         for (i, chunk), variant_results in zip(jobs, results[:len(jobs)]):
             for j, result in zip(chunk, variant_results):
                 rows[i][j] = result
-        alone = dict(zip(ahead, (only for (only,) in results[len(jobs):])))
+        alone = as_is_of(ahead, results[len(jobs):])
         for i in batch:
             per_sample.append(rows[i])
             for j in running:
@@ -282,8 +287,6 @@ def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequenti
             on_progress(progress_dict(scene.name, k, len(per_sample), decisions,
                                       [_label(actions[j]) for j in sorted(active)], tallies))
         batch = batch_from(batch.stop)
-        if batch and active and not alone:
-            alone = dict(zip(batch, (only for (only,) in _run(tasks(batch, [as_is]), map_fn))))
     budget = any(r.budget_stopped for row in per_sample for r in row)
     for j in active:
         decisions[_label(actions[j])] = (None, "budget" if budget else "cap", len(per_sample))

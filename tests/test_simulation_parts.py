@@ -82,6 +82,37 @@ def test_health_names_divergence_and_watches_energy_after_the_inputs():
     watch.look(4.0)
     watch.look(5.5)
     assert watch.max_gain_j == pytest.approx(0.5)
+    # energy made since the least seen: collisions took 1 J, the solver gave 0.5 J back
+    assert watch.lowest_j == pytest.approx(4.0) and watch.created_j(4.5) == pytest.approx(0.5)
+
+
+def test_a_collapse_trial_puts_the_world_and_the_loop_back_as_they_were():
+    from ipe_ros.engine.simulation.collapse import CollapseTrial
+    from ipe_ros.engine.simulation.world import build_world, pybullet, read_state
+
+    from .helpers import block, floor_scene
+
+    scene = floor_scene(block("low", 0.0, 0.0, 0.1), block("high", 0.0, 0.0, 0.6))
+    world = build_world(scene, np.array([b.position_m for b in scene.dynamic_objects]), np.ones(2), DEFAULT)
+    p = pybullet()
+    for _ in range(10):
+        p.stepSimulation(physicsClientId=world.client)
+    saved = tuple(a.copy() for a in read_state(world))
+    parts = {"watched": [1, 2]}
+    trajectory = ["frame 0", "frame 1"]
+    trial = CollapseTrial(world, 10, saved, parts, len(trajectory))
+    parts["watched"].append(3)  # the loop goes on: its parts change after the trial was taken
+    for _ in range(40):
+        p.stepSimulation(physicsClientId=world.client)
+        trajectory.append("later frame")
+    assert not np.allclose(read_state(world)[0], saved[0])
+    looked, restored = trial.restore(trajectory)
+    assert trajectory == ["frame 0", "frame 1"] and restored == {"watched": [1, 2]}
+    for now, then in zip(read_state(world), saved):
+        np.testing.assert_array_equal(now, then)
+    assert looked is saved
+    trial.close()
+    trial.close()  # once freed, closing again does nothing
 
 
 def test_the_quick_depth_test_agrees_with_the_deepest_penetration():

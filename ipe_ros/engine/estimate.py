@@ -59,6 +59,8 @@ class Prediction:
     budget_skipped_samples: int = 0
     max_penetration_fraction: float | None = None
     max_energy_gain_j: float | None = None
+    #: rollouts whose collapse steps made energy and were undone (run on at the fine step instead)
+    collapse_undone_rollouts: int = 0
     #: the self-check's verdict (engine.fidelity.VERDICTS): "verified", "escalated", "contradicted",
     #: "unverified" or "reference"; ``refined_samples``: rollouts rerun at the reference because they
     #: ended unhealthy; ``self_check``: what ran at which settings (FidelityReport.to_dict()).
@@ -119,4 +121,5 @@ def aggregate(scene: Scene, outcomes: Sequence[SampleOutcome], *, query: QuerySp
             answers.update(asked.aggregate(samples))
     return Prediction(**base, answers=answers,
                       max_penetration_fraction=float(max(r.penetration_fraction for r in rollouts)),
-                      max_energy_gain_j=float(max(r.energy_gain_j for r in rollouts)))
+                      max_energy_gain_j=float(max(r.energy_gain_j for r in rollouts)),
+                      collapse_undone_rollouts=sum(r.collapse_undone for r in rollouts))

@@ -63,6 +63,8 @@ class RolloutResult:
     any_fell: bool | None = None  # the any_fall query: did at least one body fall?
     energy_gain_j: float = 0.0  # the most energy gained beyond what the push and initial velocities put in
     penetration_fraction: float = 0.0  # the deepest any body ends inside another, / its smallest extent
+    #: its collapse steps made energy and were undone (config.CollapseSettings.max_created_energy_fraction)
+    collapse_undone: bool = False
     extra: tuple[tuple[str, object], ...] = ()
 
     def value(self, name: str):
@@ -125,7 +127,8 @@ def rollout_result(scene: Scene, spec: QuerySpec, initial: np.ndarray, phi: floa
                          fallen=own.get("fallen"), direction_rad=own.get("direction_rad"), far_m=own.get("far_m"),
                          fell_off=own.get("fell_off"), bump_ratio=own.get("bump_ratio"),
                          trajectory=end.trajectory, simulated_s=end.simulated_s, any_fell=own.get("any_fell"),
-                         energy_gain_j=end.energy_gain_j, penetration_fraction=end.penetration_fraction, extra=extra)
+                         energy_gain_j=end.energy_gain_j, penetration_fraction=end.penetration_fraction,
+                         collapse_undone=end.collapse_undone_s is not None, extra=extra)
 
 
 def decided_heights(scene: Scene, settings: SimSettings, spec: QuerySpec, initial: np.ndarray) -> DecidedHeights | None:

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from ..config import SimSettings
+from .world import pybullet
 
 
 class CollapseWatch:
@@ -40,3 +43,36 @@ class CollapseWatch:
     def coarse_factor(self, allowed_ticks: int) -> int:
         """Ticks per step while collapsing: as coarse as the preset and the travel limit allow."""
         return max(1, min(self._group.step_factor, allowed_ticks))
+
+
+class CollapseTrial:
+    """Collapse steps on trial: the rollout as it was at the look where they began, to go back to
+    when they make energy (``config.CollapseSettings.max_created_energy_fraction``).
+
+    pybullet's own saveState keeps the contact caches: the solver warm-starts resting contacts from
+    them, and a 39-cube column put back by poses and velocities alone starts with cold contacts and
+    kicks its lower cubes over (2 of 8 samples), where going back with its caches leaves it
+    standing as `paper` does. Everything else the loop keeps (its watches, the step in force, the
+    values read at that look) is copied beside it. Going back gives exactly the rollout that never
+    took collapse steps (tests/test_simulation_parts.py).
+    """
+
+    def __init__(self, world, tick: int, looked: tuple, parts: dict, frames: int):
+        self._world = world
+        self._state = pybullet().saveState(physicsClientId=world.client)
+        self.tick = tick
+        self._looked = looked  # what the loop read and worked out at that look
+        self._parts = copy.deepcopy(parts)  # the loop's watches, as they were before the collapse began
+        self._frames = frames
+
+    def restore(self, trajectory: list | None) -> tuple[tuple, dict]:
+        """Put the world back; returns the look's values and fresh copies of the loop's parts."""
+        pybullet().restoreState(stateId=self._state, physicsClientId=self._world.client)
+        if trajectory is not None:
+            del trajectory[self._frames:]
+        return self._looked, copy.deepcopy(self._parts)
+
+    def close(self) -> None:
+        if self._state is not None:
+            pybullet().removeState(self._state, physicsClientId=self._world.client)
+            self._state = None

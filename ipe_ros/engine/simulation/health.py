@@ -81,16 +81,24 @@ class EnergyWatch:
         self._masses, self._inertia, self._gravity = masses_kg, inertia_kg_m2, gravity_m_s2
         self._reference: float | None = None
         self.max_gain_j = 0.0
+        #: the least energy seen since the reference: what the scene holds at most from then on
+        self.lowest_j: float | None = None
 
     def energy(self, positions, orientations, velocities, spins) -> float:
         return energy_j(self._masses, self._inertia, self._gravity, positions, orientations, velocities, spins)
 
     def reference(self, energy: float) -> None:
-        self._reference = energy
+        self._reference = self.lowest_j = energy
 
     def look(self, energy: float) -> None:
         if self._reference is not None:
             self.max_gain_j = max(self.max_gain_j, energy - self._reference)
+            self.lowest_j = min(self.lowest_j, energy)
+
+    def created_j(self, energy: float) -> float:
+        """Energy above the least seen since the reference (0 before it): made by the solver, since
+        what collisions and friction took cannot come back."""
+        return 0.0 if self.lowest_j is None else energy - self.lowest_j
 
 
 def deepest_penetration_fraction(world, smallest_extents_m: np.ndarray, among: np.ndarray | None = None,

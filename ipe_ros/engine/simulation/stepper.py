@@ -30,7 +30,7 @@ from ..config import SimSettings
 from ..errors import BudgetExceeded
 from ..scene import Scene
 from . import health
-from .collapse import CollapseWatch
+from .collapse import CollapseTrial, CollapseWatch
 from .probe import NO_PROBE, Probe
 from .settling import Settling
 from .steps import StepControl, substeps_for, ticks_allowed
@@ -74,6 +74,9 @@ class RolloutEnd:
     speeds_m_s: np.ndarray | None = None  # (n,) linear speeds at the end
     spins_rad_s: np.ndarray | None = None  # (n,) angular speeds at the end
     events: dict | None = None  # what each watch recorded, by the name it was given under
+    #: collapse steps made energy and were undone: the rollout went back to where they began, at this
+    #: time, and ran on without them (None: they were kept, or never taken)
+    collapse_undone_s: float | None = None
 
 
 def _crossed(tick: int, previous: int, period: int) -> bool:
@@ -81,10 +84,7 @@ def _crossed(tick: int, previous: int, period: int) -> bool:
     return tick // period > previous // period
 
 
-def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, record_every: int = 0,
-             decided: DecidedHeights | None = None, collapse_below_z_m: np.ndarray | None = None,
-             probe: Probe = NO_PROBE, deadline_unix_s: float | None = None,
-             watches: dict | None = None, end_when_watched: bool = False) -> RolloutEnd:
+def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, **kw) -> RolloutEnd:
     """Run a built world (bodies at rest; the scene's initial velocities are given here) to the
     horizon, or until early termination ends it.
 
@@ -95,6 +95,19 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
     PhysicsError on non-finite states or speeds above ``health.speed_limit_m_s``, and
     BudgetExceeded once ``time.time()`` passes ``deadline_unix_s``.
     """
+    trials: list[CollapseTrial] = []  # saved world states, freed however the rollout ends
+    try:
+        return _simulate(world, scene, settings, push, trials, **kw)
+    finally:
+        for trial in trials:
+            trial.close()
+
+
+def _simulate(world: World, scene: Scene, settings: SimSettings, push: Push, trials: list, *,
+              record_every: int = 0, decided: DecidedHeights | None = None,
+              collapse_below_z_m: np.ndarray | None = None, probe: Probe = NO_PROBE,
+              deadline_unix_s: float | None = None, watches: dict | None = None,
+              end_when_watched: bool = False) -> RolloutEnd:
     p = pybullet()
     cid = world.client
     dt = world.time_step_s
@@ -128,6 +141,9 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
     half_diagonals_m = np.array([np.linalg.norm(b.extents_m) / 2 for b in scene.dynamic_objects])
     smallest = np.array([b.smallest_extent_m for b in scene.dynamic_objects])
     collapse = CollapseWatch(settings, collapse_below_z_m)
+    created_limit_j = settings.collapse.max_created_energy_fraction * health.energy_scale_j(scene)
+    trial: CollapseTrial | None = None  # the collapse steps' start, while they are on trial
+    undone_s = None
     steps = StepControl(settings, world)
     rest = RestWatch(settings.early_stop, world.scale_m, max(push_ticks * dt, settings.early_stop.min_time_s),
                      decided, len(scene.dynamic_objects))
@@ -182,6 +198,20 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
         if not (look_due or health_due):
             continue
         positions, orientations, velocities = read_state(world)  # one read serves every part
+        energy_now_j = energy.energy(positions, orientations, velocities[:, 0], velocities[:, 1])
+        if trial is not None and look_due and not ending and tick <= fine_from_tick \
+                and not energy.created_j(energy_now_j) <= created_limit_j:
+            # the collapse steps made energy (NaN: they diverged): back to the look where they
+            # began, which then goes on as if they had never been taken (config.CollapseSettings)
+            (positions, orientations, velocities, energy_now_j), parts = trial.restore(trajectory)
+            tick, undone_s = trial.tick, trial.tick * dt
+            energy, rest, watches = parts["energy"], parts["rest"], parts["watches"]
+            steps.restore(parts["steps"])
+            trial.close()
+            trial = None
+            collapse.end()
+            p.setPhysicsEngineParameter(numSolverIterations=settings.iterations_for(mass_ratio(world.masses_kg)),
+                                        physicsClientId=cid)
         speeds, spins = speeds_of(velocities)
         if health_due:
             health.check_speeds(speeds, limit, tick * dt)
@@ -189,17 +219,23 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
         period_ticks = look_every if look_due else health_every
         fastest_m_s = float((speeds + spins * half_diagonals_m).max()) + g * period_ticks * dt
         travel_substeps = substeps_for(fastest_m_s, settings, world)
-        energy.look(energy.energy(positions, orientations, velocities[:, 0], velocities[:, 1]))
+        energy.look(energy_now_j)
         if not look_due:
             if not settling.covers(tick):
                 steps.set(steps.ticks, travel_substeps if steps.ticks == 1 else 1)
             steps.find_contacts_ahead(fastest_m_s)
             continue
         heights = positions[:, 2]
-        if collapse.look(tick, max(push_ticks, settling.ticks), heights) \
-                and settings.collapse.solver_iterations is not None:
-            iterations = settings.iterations_for(mass_ratio(world.masses_kg), settings.collapse.solver_iterations)
-            p.setPhysicsEngineParameter(numSolverIterations=iterations, physicsClientId=cid)
+        if collapse.look(tick, max(push_ticks, settling.ticks), heights):
+            if tick < fine_from_tick:  # on trial: everything this look read and holds, as it is now
+                trial = CollapseTrial(world, tick, (positions.copy(), orientations.copy(), velocities.copy(),
+                                                    energy_now_j),
+                                      {"energy": energy, "rest": rest, "watches": watches, "steps": steps.snapshot()},
+                                      0 if trajectory is None else len(trajectory))
+                trials.append(trial)
+            if settings.collapse.solver_iterations is not None:
+                iterations = settings.iterations_for(mass_ratio(world.masses_kg), settings.collapse.solver_iterations)
+                p.setPhysicsEngineParameter(numSolverIterations=iterations, physicsClientId=cid)
         if collapse.collapsing:
             # coarse, but no body may travel more than the travel limit per step, and none while a
             # body is deep inside another: the solver pushes it out by a fraction per step, so coarse
@@ -239,4 +275,4 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, *, r
     return RolloutEnd(positions, orientations, trajectory, tick * dt, energy_gain_j=energy.max_gain_j,
                       penetration_fraction=health.deepest_penetration_fraction(world, smallest, read),
                       speeds_m_s=np.array(speeds, float), spins_rad_s=np.array(spins, float),
-                      events={name: w.events() for name, w in watches.items()})
+                      events={name: w.events() for name, w in watches.items()}, collapse_undone_s=undone_s)

@@ -48,6 +48,18 @@ class StepControl:
             self._contact_distance_m = distance
             set_contact_distance(world, distance)
 
+    def snapshot(self) -> tuple[int, int, float, int]:
+        return self.ticks, self.substeps, self._contact_distance_m, self._least_substeps
+
+    def restore(self, snapshot: tuple[int, int, float, int]) -> None:
+        """Back to a ``snapshot()``, in pybullet too (its step and contact distance are not part of
+        a saved world state)."""
+        self.ticks, self.substeps, self._contact_distance_m, self._least_substeps = snapshot
+        world = self._world
+        factor = self.ticks / self.substeps
+        set_step(world, world.time_step_s * factor, residual_threshold(self._settings, world.scale_m, factor))
+        set_contact_distance(world, self._contact_distance_m)
+
     def set(self, ticks: int, substeps: int) -> None:
         substeps = min(max(substeps, self._least_substeps), self._settings.max_substeps)
         if (ticks, substeps) == (self.ticks, self.substeps):

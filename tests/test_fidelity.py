@@ -1,8 +1,8 @@
 """Self-checking answers (ipe_ros.engine.fidelity): refinement, verification, escalation, verdicts.
 
 Each path is forced deterministically: a real scene on which `default` and the reference disagree
-(zoo ramp 2026/4, seed 0: the stack at the ramp's foot topples in 7 of 8 `default` samples and in
-none of `paper`'s), a real
+(zoo ramp 2026/4, seed 0: the stack at the ramp's foot topples in 7 of 8 samples of `default` as it
+was before its collapse steps were checked, ``WRONG_HERE``, and in none of `paper`'s), a real
 rollout that ends deep inside another body at the default's settings, and injected maps that fail a
 sample or cut the escalation off as a spent budget would.
 """
@@ -53,6 +53,12 @@ def tower():
     return load_scenes(example_scene_path())[0]
 
 
+#: `default` as it was before its collapse steps were checked (never undone for the energy they
+#: make, never ended once everything is slow): the fast physics that topples the stack on this ramp.
+#: `default` itself now agrees with the reference here; the check's paths are tested against this one.
+WRONG_HERE = preset("default").changed(collapse={"max_created_energy_fraction": 1e9, "quiet_sizes_per_s": 1e-9})
+
+
 @pytest.fixture(scope="module")
 def contradicted_scene():
     """On this ramp `default` topples the stack the reference keeps standing (see the module doc)."""
@@ -94,8 +100,8 @@ def test_reference_settings_are_not_checked_and_no_check_runs_nothing_more(tower
 
 def test_a_contradicted_scene_is_escalated_to_the_reference_answer(contradicted_scene):
     model = _ramp_model(contradicted_scene)
-    unchecked = predict(contradicted_scene, model, preset("default"), QUERY, seed=0, check=None)
-    checked = predict(contradicted_scene, model, preset("default"), QUERY, seed=0)
+    unchecked = predict(contradicted_scene, model, WRONG_HERE, QUERY, seed=0, check=None)
+    checked = predict(contradicted_scene, model, WRONG_HERE, QUERY, seed=0)
     reference = predict(contradicted_scene, model, reference_settings(), QUERY, seed=0, check=None)
     assert unchecked.object_fall_probability["block1"] - reference.object_fall_probability["block1"] >= 0.5
     assert checked.fidelity == "escalated"
@@ -124,8 +130,8 @@ def _spent_from_call(calls: int):
 def test_contradicted_when_the_budget_ends_before_the_escalation(contradicted_scene):
     model = _ramp_model(contradicted_scene)
     spy = _spent_from_call(3)  # verification and confirmation run; the escalation is cut off
-    p = predict(contradicted_scene, model, preset("default"), QUERY, seed=0, map_fn=spy)
-    unchecked = predict(contradicted_scene, model, preset("default"), QUERY, seed=0, check=None)
+    p = predict(contradicted_scene, model, WRONG_HERE, QUERY, seed=0, map_fn=spy)
+    unchecked = predict(contradicted_scene, model, WRONG_HERE, QUERY, seed=0, check=None)
     assert p.fidelity == "contradicted" and len(spy.calls) == 3
     assert _answer(p) == _answer(unchecked)  # the fast answer, flagged: the robot must not act on it
 
@@ -134,7 +140,7 @@ def test_unverified_when_the_budget_ends_before_a_disagreement_is_confirmed(cont
     """One verified sample disagrees and the budget cuts its confirmation off: neither verified
     nor contradicted."""
     model = _ramp_model(contradicted_scene)
-    p = predict(contradicted_scene, model, preset("default"), QUERY, seed=0, map_fn=_spent_from_call(2))
+    p = predict(contradicted_scene, model, WRONG_HERE, QUERY, seed=0, map_fn=_spent_from_call(2))
     assert p.fidelity == "unverified"
     assert (p.self_check["verified_samples"], p.self_check["disagreeing_samples"]) == (1, 1)
 
@@ -204,13 +210,13 @@ def test_a_bias_the_verified_sample_could_not_show_is_found_by_coverage(contradi
     have shown this bias. Coverage verifies sample 3, finds it, confirmation finds it at 5 and 6,
     and the scene is escalated instead of being called verified."""
     spy = _toppled_only_in(contradicted_scene, (3, 5, 6))
-    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), preset("default"), QUERY, seed=0,
+    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), WRONG_HERE, QUERY, seed=0,
                 map_fn=spy)
     assert [[t.index for t in call] for call in spy.calls[1:3]] == [[3], [5, 6]]
     assert p.fidelity == "escalated" and p.object_fall_probability["block1"] == 0.0
     no_coverage = dataclasses.replace(SelfCheck(), cover_samples=0)
     spy = _toppled_only_in(contradicted_scene, (3, 5, 6))
-    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), preset("default"), QUERY, seed=0,
+    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), WRONG_HERE, QUERY, seed=0,
                 map_fn=spy, check=no_coverage)
     assert p.fidelity == "verified" and p.object_fall_probability["block1"] == 3 / 8  # what it was
 
@@ -221,7 +227,7 @@ def test_the_coverage_sample_is_picked_ahead_and_runs_beside_the_last_fast_sampl
     that runs the last 8 fast samples, not in a round of its own. It differs; confirmation finds 3
     and 5 differing too, and the scene is escalated. Where the split falls depends on k alone."""
     spy = _toppled_only_in(contradicted_scene, (2, 3, 5))
-    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 32), preset("default"), QUERY, seed=0,
+    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 32), WRONG_HERE, QUERY, seed=0,
                 map_fn=spy)
     calls = [[(t.index, t.settings.name) for t in call] for call in spy.calls]
     assert calls[0] == [(0, REFERENCE)] + [(i, "default") for i in range(24)]
@@ -235,22 +241,27 @@ def test_the_coverage_sample_is_picked_ahead_and_runs_beside_the_last_fast_sampl
 
 def _toppled_only_in(scene, kept: tuple[int, ...], unhealthy: bool = False):
     """A map under which the fast physics topples the stack at the ramp's foot in the samples
-    ``kept`` only (its other samples stand, as every one of the reference's does); ``unhealthy``:
-    those end with a body half its size inside another."""
-    unchecked = predict(scene, _ramp_model(scene, 8), preset("default"), QUERY, seed=0, check=None)
+    ``kept`` only, and keeps it standing in the others, as every one of the reference's does: each
+    fast sample is a real fast outcome, toppled or standing, under its own index. ``unhealthy``:
+    the toppled ones end with a body half its size inside another."""
+    unchecked = predict(scene, _ramp_model(scene, 8), WRONG_HERE, QUERY, seed=0, check=None)
     block1 = [b.name for b in scene.dynamic_objects].index("block1")
     standing = [o for o in unchecked.outcomes if not o.rollouts[0].fallen[block1]]
-    assert standing and all(unchecked.outcomes[i].rollouts[0].fallen[block1] for i in kept)
+    toppled = [o for o in unchecked.outcomes if o.rollouts[0].fallen[block1]]
+    assert standing and toppled
 
-    def stand_unless_kept(task, outcome):
-        if task.settings.name == "default" and task.index not in kept:
+    def topple_only_kept(task, outcome):
+        if task.settings.name != "default":
+            return outcome
+        if task.index not in kept:
             return dataclasses.replace(standing[0], index=task.index)
-        if task.settings.name == "default" and unhealthy:
-            deep = tuple(dataclasses.replace(r, penetration_fraction=0.5) for r in outcome.rollouts)
-            return dataclasses.replace(outcome, rollouts=deep)
-        return outcome
+        made = dataclasses.replace(toppled[0], index=task.index)
+        if unhealthy:
+            return dataclasses.replace(made, rollouts=tuple(dataclasses.replace(r, penetration_fraction=0.5)
+                                                            for r in made.rollouts))
+        return made
 
-    return CountingMap(stand_unless_kept)
+    return CountingMap(topple_only_kept)
 
 
 def test_a_bias_on_a_minority_of_samples_is_confirmed_where_it_shows(contradicted_scene):
@@ -258,7 +269,7 @@ def test_a_bias_on_a_minority_of_samples_is_confirmed_where_it_shows(contradicte
     5, not at 1 and 2 where no bias could show, and three verified samples differing the same way
     escalate."""
     spy = _toppled_only_in(contradicted_scene, (0, 3, 5))
-    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), preset("default"), QUERY, seed=0,
+    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), WRONG_HERE, QUERY, seed=0,
                 map_fn=spy)
     assert [t.index for t in spy.calls[1]] == [3, 5]
     assert p.fidelity == "escalated" and p.object_fall_probability["block1"] == 0.0
@@ -270,7 +281,7 @@ def test_refined_rollouts_that_differ_the_same_way_are_evidence_too(contradicted
     escalated instead of three samples being quietly replaced (which, where the reference's
     outcomes are chaotic, would bias the answer towards whatever the healthy rollouts said)."""
     spy = _toppled_only_in(contradicted_scene, (2, 3, 5), unhealthy=True)
-    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), preset("default"), QUERY, seed=0,
+    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), WRONG_HERE, QUERY, seed=0,
                 map_fn=spy)
     assert [t.index for t in spy.calls[1]] == [2, 3, 5]  # the refinement; sample 0 agreed
     assert p.self_check["refined_reasons"] == {"2": "penetration", "3": "penetration", "5": "penetration"}
@@ -282,7 +293,7 @@ def test_two_same_way_differences_in_three_samples_look_again_before_escalating(
     three are suspicious, not proof; a second round verifies two more, and two of five do not
     escalate."""
     spy = _toppled_only_in(contradicted_scene, (0, 5))
-    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), preset("default"), QUERY, seed=0,
+    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), WRONG_HERE, QUERY, seed=0,
                 map_fn=spy)
     assert [[t.index for t in call] for call in spy.calls[1:]] == [[5, 1], [2, 3]]
     assert p.fidelity == "verified"
@@ -294,7 +305,7 @@ def test_an_answer_whose_every_sample_was_rerun_is_the_reference_answer(contradi
     that escalate, but confirming them reruns all four samples, and with every reference outcome
     at hand the answer is the reference's (as escalation would give), not the fast one's."""
     spy = _toppled_only_in(contradicted_scene, (0, 2))
-    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 4), preset("default"), QUERY, seed=0,
+    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 4), WRONG_HERE, QUERY, seed=0,
                 map_fn=spy)
     assert [[t.index for t in call] for call in spy.calls[1:]] == [[2, 1], [3]]
     assert p.fidelity == "escalated" and p.object_fall_probability["block1"] == 0.0
@@ -408,7 +419,7 @@ def test_a_question_checks_every_variant_and_answers_a_contradicted_one_at_the_r
         (REFERENCE, 0, (None,)), (REFERENCE, 0, (A.Remove(("mover",)),))]
     unchecked = A.ask(ramp_3, actions, model, preset("default"), seed=0)  # questions' default: not checked
     assert unchecked.variants[0].fidelity == unchecked.variants[0].to_dict()["fidelity"] == "unverified"
-    assert unchecked.variants[0].object_fall_probability["block1"] == 1.0  # the fast physics alone
+    assert unchecked.variants[0].object_fall_probability["block1"] >= 0.75  # the fast physics alone
 
 
 def test_a_sequential_decision_is_read_again_from_the_checked_samples():

@@ -24,13 +24,26 @@ def test_settling_covers_the_first_ticks_only_when_it_has_substeps():
 
 
 def test_collapse_starts_at_the_first_clear_fall_after_the_quiet_period():
-    watch = CollapseWatch(DEFAULT, np.array([0.5, 0.5]))
+    smallest = np.array([0.2, 0.2])  # default: collapsing below half of it, 0.1 m down
+    watch = CollapseWatch(DEFAULT, np.array([0.5, 0.5]), smallest)
     assert watch.watching and not watch.collapsing
-    assert not watch.look(10, 36, np.array([0.4, 0.6]))  # below, but still in the push / settling
-    assert not watch.look(40, 36, np.array([0.6, 0.6]))
-    assert watch.look(45, 36, np.array([0.6, 0.49])) and watch.collapsing and not watch.watching
+    assert not watch.look(10, 36, np.array([0.4, 0.6]), True)  # below, but still in the push / settling
+    assert not watch.look(40, 36, np.array([0.6, 0.6]), True)
+    assert watch.look(45, 36, np.array([0.6, 0.49]), True) and watch.collapsing and not watch.watching
     assert watch.coarse_factor(10) == 4 and watch.coarse_factor(2) == 2 and watch.coarse_factor(0) == 1
-    assert not CollapseWatch(preset("fine"), np.array([0.5])).active  # no collapse steps in `fine`
+    assert not CollapseWatch(preset("fine"), np.array([0.5]), smallest[:1]).active  # no collapse steps in `fine`
+
+
+def test_a_collapse_is_over_once_nothing_moves_fast_and_the_watch_starts_again_from_there():
+    watch = CollapseWatch(DEFAULT, np.array([0.5, 0.5]), np.array([0.2, 0.2]))
+    # fallen, but already still: no coarse steps, and what fell is where the watch starts again
+    assert not watch.look(45, 36, np.array([0.6, 0.45]), False) and watch.watching
+    assert not watch.look(50, 36, np.array([0.6, 0.40]), True)  # 5 cm further: not a clear fall
+    assert watch.look(55, 36, np.array([0.6, 0.34]), True) and watch.collapsing
+    watch.settled(np.array([0.6, 0.1]))
+    assert watch.watching and not watch.collapsing
+    assert not watch.look(60, 36, np.array([0.51, 0.1]), True)
+    assert watch.look(65, 36, np.array([0.49, 0.1]), True)
 
 
 def test_the_travel_limit_sets_substeps_and_coarse_steps():

@@ -14,12 +14,14 @@ class CollapseWatch:
     """Watches for the first clear fall; from then on the scene is collapsing.
 
     ``collapse_below_z_m`` (per dynamic body): the scene is collapsing once any body is below its
-    height, looked at after the push and the settling.
+    height, looked at after the push and the settling, while something still moves fast; once
+    nothing does, the collapse is over (``settled``) and the watch starts again from there.
     """
 
-    def __init__(self, settings: SimSettings, collapse_below_z_m: np.ndarray | None):
+    def __init__(self, settings: SimSettings, collapse_below_z_m: np.ndarray | None, smallest_m: np.ndarray):
         self._group = settings.collapse
         self._below_z = collapse_below_z_m
+        self._smallest_m = smallest_m
         self.watching = collapse_below_z_m is not None and settings.collapse.enabled
         self.collapsing = False
 
@@ -27,14 +29,29 @@ class CollapseWatch:
     def active(self) -> bool:
         return self.watching or self.collapsing
 
-    def look(self, tick: int, quiet_from_tick: int, heights_m: np.ndarray | None) -> bool:
-        """True when the collapse starts at this look."""
+    def look(self, tick: int, quiet_from_tick: int, heights_m: np.ndarray | None, moving: bool) -> bool:
+        """True when the collapse starts at this look. ``moving``: some body is faster than
+        ``collapse.quiet_sizes_per_s``."""
         if self.watching and tick >= quiet_from_tick and np.any(heights_m < self._below_z):
+            if not moving:  # it fell and is still again: nothing left to step through coarsely
+                self._watch_from(heights_m)
+                return False
             # Something fell: what follows is chaotic at any step size, so only its statistics
             # matter and coarser steps reproduce them (benchmarks/accuracy_vs_time.py).
             self.watching, self.collapsing = False, True
             return True
         return False
+
+    def settled(self, heights_m: np.ndarray) -> None:
+        """Nothing moves fast any more: the collapse is over. What still stands is as delicate as
+        before it (a column rocked at coarse steps until it fell, one `paper` leaves standing), so
+        fine steps again, and a new collapse once something clearly falls from where it is now."""
+        self.collapsing = False
+        self.watching = True
+        self._watch_from(heights_m)
+
+    def _watch_from(self, heights_m: np.ndarray) -> None:
+        self._below_z = heights_m - self._group.drop_fraction * self._smallest_m
 
     def end(self) -> None:
         """Back to fine steps for the rest of the rollout."""

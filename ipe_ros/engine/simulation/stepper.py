@@ -140,7 +140,8 @@ def _simulate(world: World, scene: Scene, settings: SimSettings, push: Push, tri
     settling = Settling(settings, dt)
     half_diagonals_m = np.array([np.linalg.norm(b.extents_m) / 2 for b in scene.dynamic_objects])
     smallest = np.array([b.smallest_extent_m for b in scene.dynamic_objects])
-    collapse = CollapseWatch(settings, collapse_below_z_m)
+    collapse = CollapseWatch(settings, collapse_below_z_m, smallest)
+    quiet_m_s = settings.collapse.quiet_sizes_per_s * world.scale_m
     created_limit_j = settings.collapse.max_created_energy_fraction * health.energy_scale_j(scene)
     trial: CollapseTrial | None = None  # the collapse steps' start, while they are on trial
     undone_s = None
@@ -217,7 +218,8 @@ def _simulate(world: World, scene: Scene, settings: SimSettings, push: Push, tri
             health.check_speeds(speeds, limit, tick * dt)
         # the fastest any corner can get until the next read
         period_ticks = look_every if look_due else health_every
-        fastest_m_s = float((speeds + spins * half_diagonals_m).max()) + g * period_ticks * dt
+        fastest_corner_m_s = float((speeds + spins * half_diagonals_m).max())
+        fastest_m_s = fastest_corner_m_s + g * period_ticks * dt
         travel_substeps = substeps_for(fastest_m_s, settings, world)
         energy.look(energy_now_j)
         if not look_due:
@@ -226,7 +228,15 @@ def _simulate(world: World, scene: Scene, settings: SimSettings, push: Push, tri
             steps.find_contacts_ahead(fastest_m_s)
             continue
         heights = positions[:, 2]
-        if collapse.look(tick, max(push_ticks, settling.ticks), heights):
+        moving = fastest_corner_m_s > quiet_m_s
+        if collapse.collapsing and not moving:
+            collapse.settled(heights)  # the fall is over: fine steps and the full solver again
+            if trial is not None:
+                trial.close()
+                trial = None
+            p.setPhysicsEngineParameter(numSolverIterations=settings.iterations_for(mass_ratio(world.masses_kg)),
+                                        physicsClientId=cid)
+        if collapse.look(tick, max(push_ticks, settling.ticks), heights, moving):
             if tick < fine_from_tick:  # on trial: everything this look read and holds, as it is now
                 trial = CollapseTrial(world, tick, (positions.copy(), orientations.copy(), velocities.copy(),
                                                     energy_now_j),

@@ -15,7 +15,8 @@ Per family and configuration: seconds per prediction and speed-up over `paper` (
 turns scene by scene, so the machine's drift hits each alike), mean and max |dP(object falls)| and
 |dP(anything falls)| against `paper`, per-sample agreement on "did anything fall?", the worst end
 penetration and the rollouts ending > 5% inside another, the worst energy gain (% of the scene's
-scale), the share of samples the self-check refined or escalated, and each answer's fidelity.
+scale), the share of samples the self-check refined or escalated, the share of rollouts whose
+collapse steps made energy and were undone (config.CollapseSettings), and each answer's fidelity.
 """
 
 from __future__ import annotations
@@ -78,6 +79,8 @@ def compare_family(rows: list[dict], reference: list[dict]) -> dict:
     wall = sum(r["wall_s"] for r in rows)
     samples = sum(r["prediction"].samples for r in rows)
     refined = sum(r["prediction"].refined_samples for r in rows)
+    rollouts = sum(len(o.rollouts) for r in rows for o in r["prediction"].outcomes if o.ok)
+    undone = sum(r["prediction"].collapse_undone_rollouts for r in rows)
     return {
         "scenes": len(rows), "wall_s_per_prediction": wall / len(rows),
         "speedup_vs_paper": sum(r["wall_s"] for r in reference) / wall,
@@ -87,6 +90,7 @@ def compare_family(rows: list[dict], reference: list[dict]) -> dict:
         "max_end_penetration_fraction": float(max(pen)), "rollouts_over_5_percent": int(over5),
         "max_energy_gain_percent": float(max(gain)),
         "refined_share": refined / max(1, samples),
+        "collapse_undone_share": undone / max(1, rollouts),
         "fidelity": dict(Counter(str(r["prediction"].fidelity) for r in rows)),
         "failed_samples": int(sum(r["prediction"].failed_samples for r in rows)),
     }
@@ -113,8 +117,8 @@ def markdown(report: dict) -> str:
              f"wall time {report['wall_s'] / 60:.0f} min.", "",
              "| family | configuration | s / prediction | speed-up | mean \\|ΔP(object)\\| | worst scene \\|ΔP\\| | "
              "mean \\|ΔP(any)\\| | per-sample agreement | worst end penetration | rollouts > 5% | worst energy gain | "
-             "refined | fidelity |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "refined | collapse steps undone | fidelity |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for family, rows in report["families"].items():
         for name, row in rows.items():
             fid = ", ".join(f"{k} {v}" for k, v in sorted(row["fidelity"].items()) if k != "None") or "-"
@@ -123,7 +127,7 @@ def markdown(report: dict) -> str:
                          f"{row['mean_abs_dp_object']:.3f} | {row['max_abs_dp_scene']:.3f} | "
                          f"{row['mean_abs_dp_any']:.3f} | {agree} | {row['max_end_penetration_fraction']:.1%} | "
                          f"{row['rollouts_over_5_percent']} | {row['max_energy_gain_percent']:.2f}% | "
-                         f"{row['refined_share']:.1%} | {fid} |")
+                         f"{row['refined_share']:.1%} | {row.get('collapse_undone_share', 0):.1%} | {fid} |")
     lines += ["", "Against the bar (mean \\|ΔP\\| <= max(0.03, 1.5x yardstick); worst scene <= yardstick's worst + "
               "0.1; no rollout ending > 5% inside another; energy gain <= 1% of the scale):", "",
               "| family | mean | worst scene | penetration | energy |", "|---|---|---|---|---|"]

@@ -40,6 +40,7 @@ def test_a_collapse_is_over_once_nothing_moves_fast_and_the_watch_starts_again_f
     assert not watch.look(45, 36, np.array([0.6, 0.45]), False) and watch.watching
     assert not watch.look(50, 36, np.array([0.6, 0.40]), True)  # 5 cm further: not a clear fall
     assert watch.look(55, 36, np.array([0.6, 0.34]), True) and watch.collapsing
+    assert watch.still_standing(np.array([0.6, 0.1])) and not watch.still_standing(np.array([0.3, 0.1]))
     watch.settled(np.array([0.6, 0.1]))
     assert watch.watching and not watch.collapsing
     assert not watch.look(60, 36, np.array([0.51, 0.1]), True)

@@ -42,6 +42,10 @@ class CollapseWatch:
             return True
         return False
 
+    def still_standing(self, heights_m: np.ndarray) -> bool:
+        """Some body has not clearly fallen (since the watch began): it can still fall."""
+        return bool(np.any(heights_m >= self._below_z))
+
     def settled(self, heights_m: np.ndarray) -> None:
         """Nothing moves fast any more: the collapse is over. What still stands is as delicate as
         before it (a column rocked at coarse steps until it fell, one `paper` leaves standing), so

@@ -186,8 +186,14 @@ def _simulate(world: World, scene: Scene, settings: SimSettings, push: Push, tri
         if watches:
             for watch in watches.values():
                 watch.after_step(world, tick * dt)
-            if end_when_watched and all(w.decided for w in watches.values()):
-                break
+            if (end_when_watched or trial is not None) and all(w.decided for w in watches.values()):
+                if trial is not None:
+                    # what the watches saw stands, and with it the collapse steps that got there:
+                    # a question that ends at its event and one that runs on must answer it alike
+                    trial.close()
+                    trial = None
+                if end_when_watched:
+                    break
         if tick == push_ticks:
             p.setGravity(*gravity.tolist(), physicsClientId=cid)
             positions, orientations, velocities = read_state(world)
@@ -229,7 +235,7 @@ def _simulate(world: World, scene: Scene, settings: SimSettings, push: Push, tri
             continue
         heights = positions[:, 2]
         moving = fastest_corner_m_s > quiet_m_s
-        if collapse.collapsing and not moving:
+        if collapse.collapsing and not moving and collapse.still_standing(heights):
             collapse.settled(heights)  # the fall is over: fine steps and the full solver again
             if trial is not None:
                 trial.close()

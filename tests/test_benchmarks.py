@@ -178,3 +178,17 @@ def test_check_policy_replays_every_policy_on_the_same_samples(tmp_path):
     assert set(by_policy) >= {"current", "no confirmation", "unchecked"}
     assert by_policy["unchecked"]["reference_samples_per_prediction"] == 0
     assert by_policy["current"]["reference_samples_per_prediction"] >= 1  # the verified sample at least
+
+
+def test_collapse_trial_benchmark_compares_each_rule_on_columns_the_zoo_and_towers(tmp_path):
+    result = subprocess.run(
+        [sys.executable, str(REPO / "benchmarks" / "collapse_trial.py"), "--samples", "2", "--per-family", "1",
+         "--towers", "2", "--columns", "10:8", "--families", "drop", "--out", str(tmp_path)],
+        capture_output=True, text=True, timeout=600, env=ENV)
+    assert result.returncode == 0, result.stderr[-3000:]
+    report = json.loads((tmp_path / "collapse_trial.json").read_text())
+    (column,) = report["columns"]
+    assert column["scene"] == "column_10_without_c8" and column["both"] == 0.0  # the column stands, as in paper
+    assert [r["family"] for r in report["zoo"]] == ["drop"] and report["zoo"][0]["both"]["speedup"] > 0
+    assert report["towers"].get("towers", 2) == 2
+    assert "| column_10_without_c8 |" in (tmp_path / "collapse_trial.md").read_text()

@@ -77,7 +77,7 @@ def add_ask_parser(sub, finite, one_line_parser) -> None:
         q.add_argument("--self-check", action="store_true",
                        help="check every variant's fast physics against the converged reference and answer a "
                             "contradicted one at the reference (docs/model.md, 'Self-checking answers'); costs "
-                            "1.5-11x the question's time; without it each variant says fidelity: unverified")
+                            "1.5-6x the question's time; without it each variant says fidelity: unverified")
         q.add_argument("--verify-samples", type=int, default=DEFAULT_CHECK.verify_samples, metavar="N",
                        help=f"with --self-check: samples of each variant rerun at the reference to verify it (default "
                             f"{DEFAULT_CHECK.verify_samples})")

@@ -46,7 +46,7 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     then simulated (none is read from the scene as it is). ``check`` (e.g. ``fidelity.DEFAULT_CHECK``):
     each simulated variant's samples check themselves against the reference physics as a
     prediction's do (``engine.fidelity``; the checks of all variants share each round's map call),
-    and a contradicted variant is answered at the reference. Off by default: it costs 1.5-11x a
+    and a contradicted variant is answered at the reference. Off by default: it costs 1.5-6x a
     question's time (benchmarks/README.md); each variant's ``fidelity`` then says "unverified"."""
     validate_scene(scene)
     check_budget(budget_s)

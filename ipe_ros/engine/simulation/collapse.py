@@ -74,8 +74,9 @@ class CollapseTrial:
     them, and a 39-cube column put back by poses and velocities alone starts with cold contacts and
     kicks its lower cubes over (2 of 8 samples), where going back with its caches leaves it
     standing as `paper` does. Everything else the loop keeps (its watches, the step in force, the
-    values read at that look) is copied beside it. Going back gives exactly the rollout that never
-    took collapse steps (tests/test_simulation_parts.py).
+    values read at that look) is copied beside it. Going back gives the rollout that never took
+    collapse steps, to within pybullet's restore (~1e-6 m after 200 steps, not bit for bit;
+    tests/test_hard_cases.py compares the answers).
     """
 
     def __init__(self, world, tick: int, looked: tuple, parts: dict, frames: int):

@@ -112,13 +112,15 @@ def test_bad_worker_count_is_named():
 
 
 def test_the_self_check_is_counted_and_can_be_turned_off():
-    """The zoo ramp of tests/test_fidelity.py: its answer is escalated to the reference, and the
-    service counts it; with the check off the same scene is answered unverified."""
+    """The zoo ramp of tests/test_fidelity.py, under the fast physics that topples its stack
+    (``WRONG_HERE``): its answer is escalated to the reference, and the service counts it; with the
+    check off the same scene is answered unverified."""
     from ipe_ros.engine.fidelity import SelfCheck
     from ipe_ros.engine.zoo import zoo_scene, zoo_sigma_m
+    from tests.test_fidelity import WRONG_HERE
 
     ramp = zoo_scene("ramp", 2026, 4)
-    config = ServiceConfig(model=ModelConfig(sigma_m=zoo_sigma_m(ramp), samples=4), seed=0)
+    config = ServiceConfig(model=ModelConfig(sigma_m=zoo_sigma_m(ramp), samples=4), settings=WRONG_HERE, seed=0)
     svc = PredictionService(config, workers=0, publish=lambda answer: None)
     svc.start()
     try:

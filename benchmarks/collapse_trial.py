@@ -20,6 +20,7 @@ Configurations take turns scene by scene; 2 workers, one run.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -31,8 +32,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np  # noqa: E402
 
-from ipe_ros.engine import (Box, Floor, ModelConfig, QuerySpec, Scene, WorkerPool, predict,  # noqa: E402
-                            preset, scenes_from_tower_csv)
+from actions import column  # noqa: E402 - the robot-question benchmark's column of 10 cm cubes
+from ipe_ros.engine import ModelConfig, QuerySpec, Scene, WorkerPool, predict, preset, scenes_from_tower_csv  # noqa: E402
 from ipe_ros.engine.config import DEFAULT_QUERIES, DEFAULT_SIGMA_M  # noqa: E402
 from ipe_ros.engine.zoo import zoo_scene, zoo_sigma_m  # noqa: E402
 
@@ -54,11 +55,9 @@ def settings(name: str):
 
 
 def column_with_a_gap(count: int, gap: int) -> Scene:
-    boxes = tuple(Box(name=f"c{i}", extents_m=(0.1, 0.1, 0.1), position_m=(0.0, 0.0, 0.1 * (i + 0.5)),
-                      orientation_xyzw=(0.0, 0.0, 0.0, 1.0), friction=0.6, restitution=0.0, mass_kg=1.0)
-                  for i in range(count) if i != gap)
-    return Scene(name=f"column_{count}_without_c{gap}", objects=boxes, support=Floor(friction=0.6, restitution=0.0),
-                 gravity_m_s2=(0.0, 0.0, -9.81))
+    whole = column(count)
+    return dataclasses.replace(whole, name=f"column_{count}_without_c{gap}",
+                               objects=tuple(b for b in whole.objects if b.name != f"c{gap}"))
 
 
 def columns(pool, names, spec: str) -> list[dict]:

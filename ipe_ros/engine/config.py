@@ -270,7 +270,7 @@ class CollapseSettings:
     pushing the cubes out of each other launched the top of a 39-cube column 0.9 m up (20-30 J, half
     the scene's energy scale) and knocked the cubes below over, which `paper` leaves standing
     (tests/test_hard_cases.py, benchmarks/README.md). ``RolloutResult.collapse_undone`` says where.
-    1%, the bar the self-check holds a rollout's energy gain to: 17 of 2880 rollouts of the authors'
+    1%, the bar the self-check holds a rollout's energy gain to: 31 of 2880 rollouts of the authors'
     60 towers (k = 48) make 1-3.3% and are undone; the landing column makes 47-52%.
 
     ``quiet_sizes_per_s``: a collapse is over once no body's corner moves faster than this many
@@ -282,10 +282,11 @@ class CollapseSettings:
     the look that would start the collapse takes no collapse steps at all. Where everything has
     fallen nothing is delicate, and the collapse steps go on.
 
-    Measured on the zoo (6 scenes per family, k = 16, against `paper`, unchecked): the undo at 1%
-    takes ramp's mean / worst |dP| from 0.086 / 0.875 to 0.016 / 0.188 and drop's from 0.016 / 0.188
-    to 0 (at 5%: ramp 0.070 / 0.562), at 10-45% more time there and on dominoes; the end at quiet
-    changes no zoo answer and costs plates 25%.
+    Measured on the zoo (benchmarks/collapse_trial.py: 6 scenes per family, k = 16, against `paper`,
+    unchecked): the undo at 1% takes ramp's mean / worst |dP| from 0.086 / 0.875 to 0.016 / 0.188
+    and drop's from 0.016 / 0.188 to 0 (at 5%: ramp 0.070 / 0.562), at 15-60% more time on ramps,
+    drops and domino chains (no domino answer changed); the end at quiet changes no zoo answer and
+    costs plates 15%.
     """
 
     step_factor: int = 1

@@ -145,6 +145,12 @@ def _simulate(world: World, scene: Scene, settings: SimSettings, push: Push, tri
     created_limit_j = settings.collapse.max_created_energy_fraction * health.energy_scale_j(scene)
     trial: CollapseTrial | None = None  # the collapse steps' start, while they are on trial
     undone_s = None
+    full_iterations = settings.iterations_for(mass_ratio(world.masses_kg))  # as the world was built
+    collapse_iterations = settings.iterations_for(mass_ratio(world.masses_kg), settings.collapse.solver_iterations)
+
+    def use_iterations(iterations: int) -> None:
+        p.setPhysicsEngineParameter(numSolverIterations=iterations, physicsClientId=cid)
+
     steps = StepControl(settings, world)
     rest = RestWatch(settings.early_stop, world.scale_m, max(push_ticks * dt, settings.early_stop.min_time_s),
                      decided, len(scene.dynamic_objects))
@@ -217,8 +223,7 @@ def _simulate(world: World, scene: Scene, settings: SimSettings, push: Push, tri
             trial.close()
             trial = None
             collapse.end()
-            p.setPhysicsEngineParameter(numSolverIterations=settings.iterations_for(mass_ratio(world.masses_kg)),
-                                        physicsClientId=cid)
+            use_iterations(full_iterations)
         speeds, spins = speeds_of(velocities)
         if health_due:
             health.check_speeds(speeds, limit, tick * dt)
@@ -240,8 +245,7 @@ def _simulate(world: World, scene: Scene, settings: SimSettings, push: Push, tri
             if trial is not None:
                 trial.close()
                 trial = None
-            p.setPhysicsEngineParameter(numSolverIterations=settings.iterations_for(mass_ratio(world.masses_kg)),
-                                        physicsClientId=cid)
+            use_iterations(full_iterations)
         if collapse.look(tick, max(push_ticks, settling.ticks), heights, moving):
             if tick < fine_from_tick:  # on trial: everything this look read and holds, as it is now
                 trial = CollapseTrial(world, tick, (positions.copy(), orientations.copy(), velocities.copy(),
@@ -250,8 +254,7 @@ def _simulate(world: World, scene: Scene, settings: SimSettings, push: Push, tri
                                       0 if trajectory is None else len(trajectory))
                 trials.append(trial)
             if settings.collapse.solver_iterations is not None:
-                iterations = settings.iterations_for(mass_ratio(world.masses_kg), settings.collapse.solver_iterations)
-                p.setPhysicsEngineParameter(numSolverIterations=iterations, physicsClientId=cid)
+                use_iterations(collapse_iterations)
         if collapse.collapsing:
             # coarse, but no body may travel more than the travel limit per step, and none while a
             # body is deep inside another: the solver pushes it out by a fraction per step, so coarse

@@ -22,7 +22,7 @@ import time
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 import rclpy  # noqa: E402
-from rclpy.executors import MultiThreadedExecutor  # noqa: E402
+from ipe_ros.ros.executor import SubmitOnceExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
@@ -63,7 +63,7 @@ def engine_times(scene, k: int, workers: int, repeats: int) -> list[float]:
 def node_times(scene, k: int, workers: int, repeats: int, rerun_dir: str | None) -> tuple[list[float], list[float]]:
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=int(os.environ.get("ROS_DOMAIN_ID", "0") or 0))
-    executor = MultiThreadedExecutor(num_threads=4, context=context)
+    executor = SubmitOnceExecutor(num_threads=4, context=context)
     overrides = [Parameter("samples", value=k), Parameter("workers", value=workers)]
     if rerun_dir:
         overrides.append(Parameter("rerun.save_dir", value=rerun_dir))

@@ -14,8 +14,9 @@ from typing import Any, Callable
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 import rclpy  # noqa: E402
-from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
+
+from ipe_ros.ros.executor import SubmitOnceExecutor  # noqa: E402
 
 
 def domain_id_for_tests() -> int:
@@ -44,7 +45,7 @@ class RosHarness:
     def __init__(self) -> None:
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=domain_id_for_tests())
-        self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
+        self.executor = SubmitOnceExecutor(num_threads=4, context=self.context)  # as the node's main() spins
         self.client = rclpy.create_node("ipe_test_client", context=self.context)
         self.executor.add_node(self.client)
         self._thread = threading.Thread(target=self.executor.spin, name="executor", daemon=True)

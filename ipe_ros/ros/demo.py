@@ -22,7 +22,6 @@ from pathlib import Path
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")  # DDS stays on this machine
 
 import rclpy  # noqa: E402
-from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
@@ -33,6 +32,7 @@ from msg_bridge.markers import scene_to_markers  # noqa: E402
 from ..engine import load_scenes  # noqa: E402
 from ..engine.config import DEFAULT_SAMPLES, DEFAULT_SIGMA_M, default_workers  # noqa: E402
 from ..engine.examples import example_scene_path  # noqa: E402
+from .executor import SubmitOnceExecutor  # noqa: E402
 from .node import LATCHED_QOS, IpeNode  # noqa: E402
 
 
@@ -78,7 +78,7 @@ def describe(answer: dict) -> str:
 def run(output_dir: Path, samples: int, workers: int, timeout_s: float) -> list[dict]:
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=int(os.environ.get("ROS_DOMAIN_ID", "0") or 0))
-    executor = MultiThreadedExecutor(num_threads=4, context=context)
+    executor = SubmitOnceExecutor(num_threads=4, context=context)
     ipe = robot = None
     spinner = threading.Thread(target=executor.spin, name="executor", daemon=True)
     try:

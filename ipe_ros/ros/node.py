@@ -18,7 +18,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.lifecycle.node import LifecycleNodeMixin
 from rclpy.node import Node
@@ -44,6 +44,7 @@ from ..service import (Answer, NoSceneError, PredictionFailed, PredictionService
                        StampedScene, error_answer, refusal_answer)
 from . import params
 from .diagnostics import diagnostics_msg
+from .executor import SubmitOnceExecutor
 
 #: Outputs are "latched": reliable + transient-local, depth 1, so a late joiner gets the latest answer.
 LATCHED_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
@@ -440,7 +441,7 @@ def main(args: list[str] | None = None, node_class: type = IpeNode) -> int:
     code = 0
     try:
         node = node_class()
-        executor = MultiThreadedExecutor(num_threads=4)
+        executor = SubmitOnceExecutor(num_threads=4)
         executor.add_node(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):

@@ -10,6 +10,9 @@ and the checked run's cost and escalations reported:
 - the support graph of a 10-block paper tower at k = 16 per variant (target <= 1 s);
 - "safe to remove?" for the top block at k = 48 (target <= 0.4 s);
 - best place on a 20 x 20 cm region, 16 candidates, k = 16 (target <= 2 s);
+  these three at the paper's noise (sigma 4 cm), at which the tower falls by itself in most samples
+  and the variants run only in the few where it stands, and at a robot's (``--robot-sigma``, 5 mm),
+  at which it stands in most;
 - the support graph of a column of 5-40 cubes at k = 8 (target for 40: <= 8 s);
 - cost of one removal question vs the number of unrelated towers 10 m apart (1-8): objects an
   action cannot reach are left out of its rollouts, so it should cost about one tower.
@@ -132,9 +135,12 @@ def both(name: str, target_s: float | None, run, rule, repeats: int, first=None)
     seq_answers, fixed_answers, checked_answers = (seq, fixed, checked) if first is None else \
         (seq[1], fixed[1], checked[1])
     verdicts = [v.fidelity for v in checked_answers.variants if v.fidelity is not None]
+    alone = fixed_answers.alone
     row = {"question": name, "target_s": target_s, "checked_s": checked_s, "sequential_s": seq_s, "fixed_s": fixed_s,
            "checked_variants": len(verdicts), "escalated_variants": verdicts.count("escalated"),
-           **compare(rule, seq_answers, fixed_answers)}
+           # the variants are simulated only in the samples where the scene as it is stands
+           "as_is_standing": None if alone is None else alone.samples_standing,
+           "samples": fixed_answers.samples_requested, **compare(rule, seq_answers, fixed_answers)}
     if first is not None:  # a ranking: the candidate each run puts first, and its fixed-k P
         chosen, best = first(seq), first(fixed)
         row["same_first_choice"] = chosen == best
@@ -148,6 +154,8 @@ def main() -> int:
     parser.add_argument("--out", default=str(REPO / "benchmarks/results/actions"))
     parser.add_argument("--heights", default="5,10,20,40")
     parser.add_argument("--shelves", default="1,2,4,8")
+    parser.add_argument("--robot-sigma", type=float, default=0.005,
+                        help="the second noise level the tower's questions are asked at, m")
     args = parser.parse_args()
     settings = preset("default")
     tower = stable_tower()
@@ -161,22 +169,32 @@ def main() -> int:
             return ModelConfig(sigma_m=DEFAULT_SIGMA_M, samples=k)
 
         supports = Supports(A.DEFAULT_SUPPORT_THRESHOLD, A.DEFAULT_SAFE_BELOW)
-        rows.append(both(f"support graph, {tower.name} (10 blocks), k = 16 per variant", 1.0,
-                         lambda seq, check: A.support_graph(tower, model(16), settings, sequential=seq,
-                                                            check=check, **kw).answers,
-                         supports, args.repeats))
-        rows.append(both(f"safe to remove the top block ({top}), k = 48", 0.4,
-                         lambda seq, check: A.remove(tower, [top], model(48), settings,
-                                                     safe_below=A.DEFAULT_SAFE_BELOW, sequential=seq, check=check,
-                                                     **kw), SafeBelow(A.DEFAULT_SAFE_BELOW), args.repeats))
         block = Box(name="new", extents_m=(0.2, 0.2, 0.2), position_m=(0.0, 0.0, 0.0), orientation_xyzw=I,
                     friction=0.6, restitution=0.0, mass_kg=1.0)
         centre = max(tower.dynamic_objects, key=lambda b: b.position_m[2]).position_m
         region = A.Region((centre[0] - 0.1, centre[0] + 0.1), (centre[1] - 0.1, centre[1] + 0.1))
-        rows.append(both("best place on the tower's top, 20 x 20 cm, 16 candidates, k = 16", 2.0,
-                         lambda seq, check: A.best_place(tower, block, region, model(16), settings, candidates=16,
-                                                         sequential=seq, check=check, **kw), Ranking(), args.repeats,
-                         first=lambda result: result[0][0][0].position_m))
+        # the paper's perceptual noise, at which this tower falls by itself in most samples (so that its
+        # variants run in few), and a robot's (a few mm), at which it stands in most
+        for sigma in (DEFAULT_SIGMA_M, args.robot_sigma):
+            noise = f"sigma {sigma * 1000:g} mm"
+
+            def model(k, sigma=sigma):
+                return ModelConfig(sigma_m=sigma, samples=k)
+
+            rows.append(both(f"support graph, {tower.name} (10 blocks), k = 16 per variant, {noise}", 1.0,
+                             lambda seq, check, model=model: A.support_graph(tower, model(16), settings, sequential=seq,
+                                                                             check=check, **kw).answers,
+                             supports, args.repeats))
+            rows.append(both(f"safe to remove the top block ({top}), k = 48, {noise}", 0.4,
+                             lambda seq, check, model=model: A.remove(tower, [top], model(48), settings,
+                                                                      safe_below=A.DEFAULT_SAFE_BELOW, sequential=seq,
+                                                                      check=check, **kw),
+                             SafeBelow(A.DEFAULT_SAFE_BELOW), args.repeats))
+            rows.append(both(f"best place on the tower's top, 20 x 20 cm, 16 candidates, k = 16, {noise}", 2.0,
+                             lambda seq, check, model=model: A.best_place(tower, block, region, model(16), settings,
+                                                                          candidates=16, sequential=seq, check=check,
+                                                                          **kw),
+                             Ranking(), args.repeats, first=lambda result: result[0][0][0].position_m))
         for n in map(int, args.heights.split(",")):
             scene = column(n)
             rows.append(both(f"support graph, column of {n} 10 cm cubes, k = 8 per variant (one run)",
@@ -187,8 +205,9 @@ def main() -> int:
         shelves = []
         for copies in map(int, args.shelves.split(",")):
             scene = shelf(tower, copies)
-            seconds, _ = timed(lambda: A.ask(scene, [A.Remove((f"t0_{tower.dynamic_objects[0].name}",))], model(16),
-                                             settings, check=None, **kw), args.repeats)
+            seconds, _ = timed(lambda: A.ask(scene, [A.Remove((f"t0_{tower.dynamic_objects[0].name}",))],
+                                             ModelConfig(sigma_m=DEFAULT_SIGMA_M, samples=16), settings, check=None,
+                                             **kw), args.repeats)
             shelves.append({"towers": copies, "seconds": seconds})
     report = {"date": time.strftime("%Y-%m-%d"), "workers": args.workers, "tower": tower.name, "questions": rows,
               "unrelated_towers": shelves}
@@ -199,12 +218,15 @@ def main() -> int:
              f"`.venv/bin/python benchmarks/actions.py`; medians of {args.repeats} runs with a warm pool (columns: one "
              "run), sequential and fixed-k interleaved on the same seeds. Decisions: where the fixed-k run's own "
              "interval decided a variant, is the sequential decision the same; where it did not, how often the "
-             "point-estimate answers (edges, safe) differ.", "",
-             "| question | self-checked s (escalated variants) | sequential s | fixed-k s | target s | decided at fixed k: "
-             "same | undecided: answers differ | mean samples drawn |", "|---|---|---|---|---|---|---|---|"]
+             "point-estimate answers (edges, safe) differ. The variants are simulated only in the samples where the "
+             "scene as it is stands (column 'stands').", "",
+             "| question | stands | self-checked s (escalated variants) | sequential s | fixed-k s | target s | decided at "
+             "fixed k: same | undecided: answers differ | mean samples drawn |", "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         extra = "" if "same_first_choice" not in r else f"; first choice {'same' if r['same_first_choice'] else 'differs'}"
-        lines.append(f"| {r['question']} | {r['checked_s']:.2f} ({r['escalated_variants']} of {r['checked_variants']}) | "
+        stands = "-" if r["as_is_standing"] is None else f"{r['as_is_standing']} of {r['samples']}"
+        lines.append(f"| {r['question']} | {stands} | {r['checked_s']:.2f} ({r['escalated_variants']} of "
+                     f"{r['checked_variants']}) | "
                      f"{r['sequential_s']:.2f} | {r['fixed_s']:.2f} | "
                      f"{'-' if r['target_s'] is None else format(r['target_s'], 'g')} | "
                      f"{r['same_decision']} of {r['fixed_decided']} | {r['point_answer_differs']} of "

@@ -385,3 +385,22 @@ def test_best_place_ranks_hopeless_spots_out_early_and_says_so():
     assert on_top.decision == "best" and on_top.stopped_by == "decided"
     fixed_rows, _ = A.place_at(STACK, new, [(0.0, 0.0, 0.0), (0.17, 0.0, 0.0)], model, SETTINGS, sequential=False)
     assert [b.position_m for b, _ in fixed_rows] == [b.position_m for b, _ in rows]  # the same order
+
+
+def test_candidates_are_ranked_on_the_samples_where_the_scene_stands():
+    # what falls anyway weighs on every candidate alike (common random numbers): the ranking reads
+    # the standing samples, as the sequential rule does, so a sequential and a fixed-k answer agree
+    from ipe_ros.engine.actions.answers import GivenStands, VariantAnswer
+    from ipe_ros.engine.actions.questions import _rank_key
+
+    def candidate(label, p_all, p_standing):
+        return VariantAnswer(label=label, action=None, any_fall_probability=p_all, any_fall_probability_ci95=None,
+                             object_fall_probability={}, direction_rad=None, samples=16, failed_samples=0,
+                             given_stands=GivenStands(12, p_standing, None, {}))
+
+    # "a" props the scene up in two of the four samples where it falls by itself but topples it in one
+    # of the twelve where it stands; "b" never makes anything fall: "b" first (over all samples, "a")
+    props_up, harmless = candidate("a", 0.1875, 1 / 12), candidate("b", 0.25, 0.0)
+    assert [v.label for v in sorted([props_up, harmless], key=_rank_key)] == ["b", "a"]
+    never_stands = dataclasses.replace(candidate("c", 0.5, None), given_stands=GivenStands(0, None, None, {}))
+    assert _rank_key(never_stands) == (False, 0.5)

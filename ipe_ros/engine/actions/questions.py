@@ -277,7 +277,8 @@ def _lowered(scene: Scene, body: Body, spots, deadline: _Deadline) -> list[Body]
 def best_place(scene: Scene, body: Body, region: Region, model: ModelConfig, settings: SimSettings,
                candidates: int = 16, yaws: int = 1, **kw) -> tuple[list[tuple[Body, VariantAnswer]], Answers]:
     """Candidate poses on a grid over ``region`` (about ``candidates`` of them, times ``yaws``
-    orientations), each lowered onto what is below; returned most stable first."""
+    orientations), each lowered onto what is below; returned most stable first: least likely to make
+    anything fall in the samples where the scene as it is stands (``_rank_key``)."""
     for name, value in (("candidates", candidates), ("yaws", yaws)):
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise ConfigError(name, f"must be an integer >= 1, got {value!r}")
@@ -296,9 +297,14 @@ def best_place(scene: Scene, body: Body, region: Region, model: ModelConfig, set
 
 
 def _rank_key(variant: VariantAnswer) -> tuple:
-    """Least likely to make anything fall first; a sequential answer's ranked-out ones last."""
-    return (variant.decision == "ranked out",
-            1.0 if variant.any_fall_probability is None else variant.any_fall_probability)
+    """Least likely to make anything fall first, over the samples in which the scene as it is
+    stands (what the ranking rule decides on: a sequential answer simulates only those, a fixed-k
+    one all, and what falls anyway is common to every candidate); a sequential answer's ranked-out
+    ones last. Over all samples where no sample stood."""
+    given = variant.given_stands
+    p = given.any_fall_probability if given is not None and given.any_fall_probability is not None \
+        else variant.any_fall_probability
+    return (variant.decision == "ranked out", 1.0 if p is None else p)
 
 
 def push(scene: Scene, pushes: list[Push], model: ModelConfig, settings: SimSettings, **kw) -> Answers:

@@ -226,8 +226,9 @@ def test_a_stack_landing_on_a_column_leaves_the_column_standing(preset_name, cou
     assert {name: p for name, p in falls.items() if int(name[1:]) < gap and p > 0} == {}
     assert all(falls[f"c{i}"] == 1.0 for i in range(gap + 1, count))  # what was above the gap dropped
     if settings.collapse.enabled:
-        if count - gap > 2:  # a stack landing makes half the scene's energy scale at collapse steps
-            assert prediction.collapse_undone_rollouts > 0
+        # a stack landing makes half the scene's energy scale at collapse steps and is undone; one cube
+        # landing makes none (not even 0.1%, measured) and is ended at quiet instead
+        assert (prediction.collapse_undone_rollouts > 0) == (count - gap > 2)
         without = predict(scene, model, settings.changed(collapse={"step_factor": 1}), query, seed=0,
                           map_fn=pool.map, check=None)
         assert without.collapse_undone_rollouts == 0

@@ -159,41 +159,38 @@ def main() -> int:
     args = parser.parse_args()
     settings = preset("default")
     tower = stable_tower()
-    top = max(tower.dynamic_objects, key=lambda b: b.position_m[2]).name
+    top_block = max(tower.dynamic_objects, key=lambda b: b.position_m[2])
+    top = top_block.name
     rows = []
     with WorkerPool(args.workers) as pool:
         pool.warm()
         kw = dict(map_fn=pool.map)
 
-        def model(k):
-            return ModelConfig(sigma_m=DEFAULT_SIGMA_M, samples=k)
+        def model(k, sigma=DEFAULT_SIGMA_M):
+            return ModelConfig(sigma_m=sigma, samples=k)
 
         supports = Supports(A.DEFAULT_SUPPORT_THRESHOLD, A.DEFAULT_SAFE_BELOW)
         block = Box(name="new", extents_m=(0.2, 0.2, 0.2), position_m=(0.0, 0.0, 0.0), orientation_xyzw=I,
                     friction=0.6, restitution=0.0, mass_kg=1.0)
-        centre = max(tower.dynamic_objects, key=lambda b: b.position_m[2]).position_m
+        centre = top_block.position_m
         region = A.Region((centre[0] - 0.1, centre[0] + 0.1), (centre[1] - 0.1, centre[1] + 0.1))
         # the paper's perceptual noise, at which this tower falls by itself in most samples (so that its
         # variants run in few), and a robot's (a few mm), at which it stands in most
         for sigma in (DEFAULT_SIGMA_M, args.robot_sigma):
             noise = f"sigma {sigma * 1000:g} mm"
-
-            def model(k, sigma=sigma):
-                return ModelConfig(sigma_m=sigma, samples=k)
-
             rows.append(both(f"support graph, {tower.name} (10 blocks), k = 16 per variant, {noise}", 1.0,
-                             lambda seq, check, model=model: A.support_graph(tower, model(16), settings, sequential=seq,
-                                                                             check=check, **kw).answers,
+                             lambda seq, check, sigma=sigma: A.support_graph(tower, model(16, sigma), settings,
+                                                                             sequential=seq, check=check, **kw).answers,
                              supports, args.repeats))
             rows.append(both(f"safe to remove the top block ({top}), k = 48, {noise}", 0.4,
-                             lambda seq, check, model=model: A.remove(tower, [top], model(48), settings,
+                             lambda seq, check, sigma=sigma: A.remove(tower, [top], model(48, sigma), settings,
                                                                       safe_below=A.DEFAULT_SAFE_BELOW, sequential=seq,
                                                                       check=check, **kw),
                              SafeBelow(A.DEFAULT_SAFE_BELOW), args.repeats))
             rows.append(both(f"best place on the tower's top, 20 x 20 cm, 16 candidates, k = 16, {noise}", 2.0,
-                             lambda seq, check, model=model: A.best_place(tower, block, region, model(16), settings,
-                                                                          candidates=16, sequential=seq, check=check,
-                                                                          **kw),
+                             lambda seq, check, sigma=sigma: A.best_place(tower, block, region, model(16, sigma),
+                                                                          settings, candidates=16, sequential=seq,
+                                                                          check=check, **kw),
                              Ranking(), args.repeats, first=lambda result: result[0][0][0].position_m))
         for n in map(int, args.heights.split(",")):
             scene = column(n)
@@ -205,9 +202,8 @@ def main() -> int:
         shelves = []
         for copies in map(int, args.shelves.split(",")):
             scene = shelf(tower, copies)
-            seconds, _ = timed(lambda: A.ask(scene, [A.Remove((f"t0_{tower.dynamic_objects[0].name}",))],
-                                             ModelConfig(sigma_m=DEFAULT_SIGMA_M, samples=16), settings, check=None,
-                                             **kw), args.repeats)
+            seconds, _ = timed(lambda: A.ask(scene, [A.Remove((f"t0_{tower.dynamic_objects[0].name}",))], model(16),
+                                             settings, check=None, **kw), args.repeats)
             shelves.append({"towers": copies, "seconds": seconds})
     report = {"date": time.strftime("%Y-%m-%d"), "workers": args.workers, "tower": tower.name, "questions": rows,
               "unrelated_towers": shelves}

@@ -127,7 +127,7 @@ def markdown(report: dict) -> str:
                          f"{row['mean_abs_dp_object']:.3f} | {row['max_abs_dp_scene']:.3f} | "
                          f"{row['mean_abs_dp_any']:.3f} | {agree} | {row['max_end_penetration_fraction']:.1%} | "
                          f"{row['rollouts_over_5_percent']} | {row['max_energy_gain_percent']:.2f}% | "
-                         f"{row['refined_share']:.1%} | {row.get('collapse_undone_share', 0):.1%} | {fid} |")
+                         f"{row['refined_share']:.1%} | {row['collapse_undone_share']:.1%} | {fid} |")
     lines += ["", "Against the bar (mean \\|ΔP\\| <= max(0.03, 1.5x yardstick); worst scene <= yardstick's worst + "
               "0.1; no rollout ending > 5% inside another; energy gain <= 1% of the scale):", "",
               "| family | mean | worst scene | penetration | energy |", "|---|---|---|---|---|"]

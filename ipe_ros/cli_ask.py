@@ -97,6 +97,8 @@ def add_ask_parser(sub, finite, one_line_parser) -> None:
     r.add_argument("--object", action="append", default=None, metavar="NAME", help="repeatable; default: every object")
     r.add_argument("--safe-below", type=finite, default=None, metavar="P",
                    help="decide each removal safe or unsafe at this P(anything falls), sampling until decided")
+    r.add_argument("--what-falls", action="store_true",
+                   help="with --safe-below: also which objects fall (otherwise each rollout ends at its first fall)")
     s = questions.add_parser("support", help="which objects hold which up, and what is safe to remove now")
     common(s)
     s.add_argument("--threshold", type=finite, default=A.DEFAULT_SUPPORT_THRESHOLD)
@@ -117,6 +119,8 @@ def add_ask_parser(sub, finite, one_line_parser) -> None:
                    help="yaw range in degrees for --region")
     p.add_argument("--yaws", type=int, default=1, help="yaw values tried in the range")
     p.add_argument("--candidates", type=int, default=16, help="spots on the --region grid")
+    p.add_argument("--what-falls", action="store_true",
+                   help="also which objects fall (otherwise each rollout ends at its first fall)")
     u = questions.add_parser("push", help="what falls when an object is pushed")
     common(u)
     contact(u)
@@ -145,8 +149,11 @@ def _table(answers: A.Answers) -> str:
         ci = "-" if v.any_fall_probability_ci95 is None else "[{:.2f}, {:.2f}]".format(*v.any_fall_probability_ci95)
         given = v.given_stands
         g = "-" if given is None or given.any_fall_probability is None else f"{given.any_fall_probability:.3f}"
-        worst = sorted(v.object_fall_probability.items(), key=lambda kv: -kv[1])[:3]
-        shown = ", ".join(f"{n} {q:.2f}" for n, q in worst if q > 0) or "-"
+        if v.object_fall_probability is None:
+            shown = "(not asked: --what-falls)"
+        else:
+            worst = sorted(v.object_fall_probability.items(), key=lambda kv: -kv[1])[:3]
+            shown = ", ".join(f"{n} {q:.2f}" for n, q in worst if q > 0) or "-"
         if v.any_fell_off_probability is not None:
             shown += f"; P(any falls off) {v.any_fell_off_probability:.2f}"
         note = "" if v.simulated else "  (nothing within its reach: not simulated)"
@@ -196,7 +203,7 @@ def _answer(args, scene, model, settings, kw) -> int:
     answers = None
     if args.question == "remove":
         answers = A.remove(scene, args.object, model, settings, safe_below=args.safe_below,
-                           sequential=not args.fixed_k, **kw)
+                           sequential=not args.fixed_k, what_falls=args.what_falls or args.safe_below is None, **kw)
         print(json.dumps(answers.to_dict(), allow_nan=False, sort_keys=True) if emit else _table(answers))
     elif args.question == "support":
         graph = A.support_graph(scene, model, settings, threshold=args.threshold, safe_below=args.safe_below,
@@ -251,10 +258,11 @@ def _place(args, scene, model, settings, kw, emit) -> None:
         x0, x1, y0, y1 = args.region
         region = A.Region((x0, x1), (y0, y1), (math.radians(args.yaw[0]), math.radians(args.yaw[1])))
         rows, answers = A.best_place(scene, body, region, model, settings, candidates=args.candidates,
-                                     yaws=args.yaws, sequential=not args.fixed_k, **kw)
+                                     yaws=args.yaws, sequential=not args.fixed_k, what_falls=args.what_falls, **kw)
     else:
         spots = [(s[0], s[1], math.radians(s[2]) if len(s) == 3 else 0.0) for s in args.at]
-        rows, answers = A.place_at(scene, body, spots, model, settings, sequential=not args.fixed_k, **kw)
+        rows, answers = A.place_at(scene, body, spots, model, settings, sequential=not args.fixed_k,
+                                   what_falls=args.what_falls, **kw)
     if emit:
         emit(A.placements_to_dict(scene, rows, answers))
         return answers

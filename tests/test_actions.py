@@ -12,6 +12,7 @@ import pytest
 
 from ipe_ros.engine import Box, ConfigError, Floor, ModelConfig, Scene, Sphere, preset
 from ipe_ros.engine import actions as A
+from ipe_ros.engine.actions.answers import fell, ran
 from ipe_ros.engine.question_io import question_from_dict
 from ipe_ros.engine.scene import Body
 
@@ -180,13 +181,64 @@ def test_clearing_towards_a_target_removes_what_rests_on_it_first():
     assert [s.name for s in order.steps] == ["c", "b"] and order.total_risk == 0.0
 
 
+TOWER_3 = scene("tower_3", box("a", 0, 0, 0.1), box("b", 0, 0, 0.3), box("c", 0, 0, 0.5))
+
+
+def test_an_object_is_lowered_onto_the_top_of_a_stack_of_identical_boxes():
+    """pybullet makes identical boxes in one batched call, and its body count then misses all but one
+    of them: the probe sank through a and b to the floor (0.1 m)."""
+    new = box("new", 0, 0, 1.0)
+    assert A.resting_height_m(TOWER_3, new, 0.0, 0.0, I) == pytest.approx(0.7, abs=1e-3)
+    assert A.resting_height_m(TOWER_3, new, 0.17, 0.0, I) == pytest.approx(0.7, abs=1e-3)
+
+
+def _recording_map(seen: list):
+    """A map that runs tasks here and keeps (sample, variant label, simulated s, anything fell) per rollout."""
+    def run(fn, items, on_lost=None):
+        out = [fn(t) for t in items]
+        for task, results in zip(items, out):
+            for action, result in zip(task.actions, results):
+                if result.ok:
+                    seen.append((task.index, "as_is" if action is None else action.label, ran(result).simulated_s,
+                                 fell(ran(result))))
+        return out
+    return run
+
+
+def test_a_question_that_reads_only_whether_anything_falls_ends_each_rollout_at_the_first_fall():
+    """Placing decides on P(anything falls): unless what falls is asked, each rollout ends at its
+    first fall. The same samples then give the same P (the physics is the same up to that fall),
+    the rollouts in which something fell end sooner, and what else falls is None, not a guess."""
+    new = box("new", 0, 0, 1.0)
+    flat, over = (dataclasses.replace(new, position_m=(x, 0.0, A.resting_height_m(TOWER_3, new, x, 0.0, I)))
+                  for x in (0.0, 0.17))
+    runs = {}
+    for what_falls in (False, True):
+        seen = []
+        answers = A.place(TOWER_3, [flat, over], MODEL, SETTINGS, what_falls=what_falls, sequential=False,
+                          map_fn=_recording_map(seen))
+        runs[what_falls] = answers, sorted(seen)
+    (first_fall, short), (everything, full) = runs[False], runs[True]
+    assert [v.any_fall_probability for v in first_fall.variants] == [v.any_fall_probability
+                                                                    for v in everything.variants] == [0.0, 0.0, 1.0]
+    assert all(v.object_fall_probability is None and v.caused_fall_probability is None
+               and v.given_stands.object_fall_probability is None for v in first_fall.variants)
+    assert everything.variants[2].object_fall_probability == {"a": 0.0, "b": 0.0, "c": 0.0, "new": 1.0}
+    assert [(i, label, f) for i, label, _, f in short] == [(i, label, f) for i, label, _, f in full]
+    for (_, _, short_s, fell_here), (_, _, full_s, _) in zip(short, full):
+        assert short_s < full_s if fell_here else short_s == full_s
+    # "is it safe to take?" likewise; "what falls if I take it?" says what falls
+    assert A.remove(TOWER_3, ["c"], MODEL, SETTINGS, safe_below=0.05).variants[1].object_fall_probability is None
+    assert A.remove(TOWER_3, ["c"], MODEL, SETTINGS).variants[1].object_fall_probability == {"a": 0.0, "b": 0.0}
+
+
 def test_placing_on_a_flat_top_or_across_a_gap_is_safe_and_overhanging_or_on_a_ball_is_not():
     post = scene("post", box("post", 0, 0, 0.2, (0.2, 0.2, 0.4)))
     new = box("new", 0, 0, 1.0)
     flat = dataclasses.replace(new, position_m=(0.0, 0.0, A.resting_height_m(post, new, 0.0, 0.0, I)))
     overhang = dataclasses.replace(new, position_m=(0.16, 0.0, A.resting_height_m(post, new, 0.16, 0.0, I)))
     assert flat.position_m[2] == pytest.approx(0.5, abs=1e-3) and overhang.position_m[2] == pytest.approx(0.5, abs=1e-3)
-    answers = _by_label(A.place(post, [flat, overhang], MODEL, SETTINGS))
+    answers = _by_label(A.place(post, [flat, overhang], MODEL, SETTINGS, what_falls=True))
     assert answers[A.Place(flat).label].any_fall_probability == 0.0
     assert answers[A.Place(overhang).label].object_fall_probability["new"] == 1.0
     # across a gap: a plank spanning two posts 10 cm apart rests on both and stays
@@ -322,6 +374,19 @@ def test_questions_ask_what_falls_off_the_table():
                                "table)")
     with pytest.raises(ConfigError, match="^fell_off: must be true or false$"):
         question_from_dict({"question": "remove", "fell_off": "yes"})
+
+
+def test_a_question_sent_as_json_asks_what_falls_or_not():
+    safe = {"question": "remove", "objects": ["c"], "safe_below": 0.05}
+    for extra, objects in (({}, None), ({"what_falls": True}, {"a": 0.0, "b": 0.0})):
+        reply, _ = A.answer_question(TOWER_3, question_from_dict({**safe, **extra}), MODEL, SETTINGS)
+        assert reply["variants"][1]["object_fall_probability"] == objects
+    reply, _ = A.answer_question(TOWER_3, question_from_dict({"question": "remove", "objects": ["c"]}), MODEL, SETTINGS)
+    assert reply["variants"][1]["object_fall_probability"] == {"a": 0.0, "b": 0.0}
+    with pytest.raises(ConfigError, match="^what_falls: must be true or false$"):
+        question_from_dict({**safe, "what_falls": 1})
+    with pytest.raises(ConfigError, match="^what_falls: unknown field of a support question"):
+        question_from_dict({"question": "support", "what_falls": True})
 
 
 # -- sequential decisions ---------------------------------------------------------------------------------

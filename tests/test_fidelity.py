@@ -434,7 +434,8 @@ def test_a_sequential_decision_is_read_again_from_the_checked_samples():
     def drop_the_bottom(task, outcomes):
         if task.settings.name != "default" or task.actions != (take_top,):
             return outcomes
-        return [dataclasses.replace(o, rollouts=(dataclasses.replace(o.rollouts[-1], fallen=np.array([True])),))
+        # "is it safe?" asks only whether anything falls (its rollouts end at the first fall)
+        return [dataclasses.replace(o, rollouts=(dataclasses.replace(o.rollouts[-1], any_fell=True),))
                 if o.ok else o for o in outcomes]
 
     model = ModelConfig(sigma_m=0.005, samples=8)

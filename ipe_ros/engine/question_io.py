@@ -42,6 +42,9 @@ class Question:
     cancel_older: bool = False  # the node drops older questions about the same scene for this one
     contact: tuple[tuple[str, str], ...] = ()  # remove, place, push: also P(A touches B) per variant
     self_check: bool = False  # check each variant's fast physics against the reference (engine.fidelity)
+    #: remove, place: also which objects fall (None: remove without safe_below only; a decision reads
+    #: "does anything fall?", and its rollouts end at the first fall)
+    what_falls: bool | None = None
 
 
 def _field(data: dict, key: str, kind, default=None, *, path: str = ""):
@@ -56,8 +59,9 @@ def _field(data: dict, key: str, kind, default=None, *, path: str = ""):
 
 
 #: The fields each kind of question reads, besides id, question, samples and scene.
-_QUESTION_FIELDS = {"remove": {"objects", "safe_below", "contact"}, "support": {"threshold", "safe_below"},
-                    "clear": {"target"}, "place": {"object", "at", "region", "contact"},
+_QUESTION_FIELDS = {"remove": {"objects", "safe_below", "contact", "what_falls"},
+                    "support": {"threshold", "safe_below"}, "clear": {"target"},
+                    "place": {"object", "at", "region", "contact", "what_falls"},
                     "push": {"object", "velocity_m_s", "point_m", "direction_sigma_deg", "speed_sigma", "contact"}}
 
 
@@ -74,6 +78,9 @@ def question_from_dict(data) -> Question:
         {"id": "r5", "question": "push", "object": "block2", "velocity_m_s": [vx, vy],
          "point_m": [x, y, z], "direction_sigma_deg": 0, "speed_sigma": 0}
         remove, place, push: "contact": ["A:B", ...] (also P(A touches B) per variant; B may be "support")
+        remove, place: "what_falls": true/false (also which objects fall; default: a remove question
+        without safe_below only - a decision reads "does anything fall?" and its rollouts end at the
+        first fall)
         any of them: "samples": k, "fell_off": true (also which objects end off the table),
         "sequential": false (the full k for every variant), "self_check": true (each variant checked
         against the reference physics, engine.fidelity), "cancel_older": true (the node drops the
@@ -103,6 +110,10 @@ def question_from_dict(data) -> Question:
         if not isinstance(flags[name], bool):
             raise ConfigError(name, "must be true or false")
     common = dict(kind=kind, request_id=request_id, samples=samples, **flags)
+    if "what_falls" in data:
+        if not isinstance(data["what_falls"], bool):
+            raise ConfigError("what_falls", "must be true or false")
+        common["what_falls"] = data["what_falls"]
     if "contact" in data:
         pairs = data["contact"]
         if not isinstance(pairs, list) or not pairs or len(pairs) > 32:

@@ -23,7 +23,9 @@ class VariantAnswer:
 
     any_fall_probability: P(at least one object falls), objects the action removed not counted;
         with its 95% Wilson interval.
-    object_fall_probability: per remaining (or added) object.
+    object_fall_probability: per remaining (or added) object; None when the question did not ask
+        what falls (``ask(what_falls=False)``: its rollouts end at the first fall, which decides
+        "does anything fall?" exactly but leaves open what else would have).
     simulated: False when the answer was read from the scene's own samples because the action
         cannot change anything (a removal that nothing rests on).
     samples / failed_samples: samples used / samples whose rollout failed (budget cuts are neither).
@@ -33,14 +35,15 @@ class VariantAnswer:
     action: Action
     any_fall_probability: float | None
     any_fall_probability_ci95: tuple[float, float] | None
-    object_fall_probability: dict[str, float]
+    object_fall_probability: dict[str, float] | None
     direction_rad: float | None
     samples: int
     failed_samples: int
     simulated: bool = True
     not_simulated: tuple[str, ...] = ()  # objects the action cannot reach, left out of its rollouts
     #: per object, P(it falls with the action and would not have without): sample s of the variant
-    #: against sample s of the scene as is (common random numbers make this pairing meaningful)
+    #: against sample s of the scene as is (common random numbers make this pairing meaningful);
+    #: None when what falls was not asked
     caused_fall_probability: dict[str, float] | None = None
     #: the same answer over only the samples in which the scene as it is stands (nothing falls without
     #: the action): what the action does, apart from what falls anyway; None without an "as is" variant
@@ -94,7 +97,7 @@ class GivenStands:
     samples: int
     any_fall_probability: float | None
     any_fall_probability_ci95: tuple[float, float] | None
-    object_fall_probability: dict[str, float]
+    object_fall_probability: dict[str, float] | None  # None: what falls was not asked
 
     def to_dict(self) -> dict:
         return {"samples": self.samples, "any_fall_probability": self.any_fall_probability,
@@ -121,6 +124,12 @@ def ran(outcome: SampleOutcome) -> RolloutResult:
     return outcome.rollouts[-1]
 
 
+def fell(result: RolloutResult) -> bool:
+    """Anything fell in this rollout: from the per-object flags, or from the yes/no answer where
+    only that was asked (the rollout then ended at the first fall)."""
+    return bool(np.any(result.fallen)) if result.fallen is not None else bool(result.any_fell)
+
+
 def _aggregate(label: str, action: Action, results: list[SampleOutcome], simulated: bool = True, *,
                deterministic: bool = False) -> VariantAnswer:
     """``deterministic``: nothing was drawn, so the one sample's answer is exact (a point, not an interval)."""
@@ -129,8 +138,11 @@ def _aggregate(label: str, action: Action, results: list[SampleOutcome], simulat
     if not ok:
         return VariantAnswer(label, action, None, None, {}, None, 0, len(failed), simulated)
     names = ok[0].names
-    fallen = np.array([ran(r).fallen for r in ok], bool)
-    anything = float(fallen.any(axis=1).mean())
+    anything = float(np.mean([fell(ran(r)) for r in ok]))
+    objects = None
+    if ran(ok[0]).fallen is not None:
+        fallen = np.array([ran(r).fallen for r in ok], bool)
+        objects = {n: float(p) for n, p in zip(names, fallen.mean(axis=0))}
     directions = np.array([ran(r).direction_rad for r in ok if ran(r).direction_rad is not None])
     interval = (anything, anything) if deterministic else wilson_interval(anything, len(ok))
     off = {}
@@ -140,9 +152,8 @@ def _aggregate(label: str, action: Action, results: list[SampleOutcome], simulat
                    any_fell_off_probability=float(fell_off.any(axis=1).mean()))
     if any(name == "contact" for name, _ in ran(ok[0]).extra):
         off.update(_contact_answer(ok, deterministic))
-    return VariantAnswer(label, action, anything, interval,
-                         {n: float(p) for n, p in zip(names, fallen.mean(axis=0))},
-                         circular_mean(directions), len(ok), len(failed), simulated, **off)
+    return VariantAnswer(label, action, anything, interval, objects, circular_mean(directions), len(ok), len(failed),
+                         simulated, **off)
 
 
 def _contact_answer(ok: list[SampleOutcome], deterministic: bool) -> dict:
@@ -160,7 +171,7 @@ def _contact_answer(ok: list[SampleOutcome], deterministic: bool) -> dict:
 
 def _stood(alone: SampleOutcome) -> bool:
     """The scene as it is ran without failing and nothing in it fell."""
-    return alone.ok and not bool(np.any(ran(alone).fallen))
+    return alone.ok and not fell(ran(alone))
 
 
 def _aggregate_given(results: list[SampleOutcome], *, deterministic: bool) -> GivenStands:

@@ -19,7 +19,7 @@ from ..sampler import MapFn, check_budget, checking, rollout_cost, self_check_ma
 from ..scene import Scene, Table, validate_scene
 from ..query.contact import check_pairs
 from ..rollout import SampleOutcome
-from .answers import Alone, Answers, _aggregate, _aggregate_given, _draws_noise, _stood, ran
+from .answers import Alone, Answers, _aggregate, _aggregate_given, _draws_noise, _stood, fell, ran
 from .geometry import _reached, _regions, groups
 from .kinds import DEFAULT_SAFE_BELOW, Action, Place, Remove, _check_action, _label
 from .variants import VariantTask, failed, run_variants, skipped
@@ -30,7 +30,7 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
         fall_threshold_fraction: float = 0.125, record_every: int = 0, record_samples: int = 0,
         directions: bool = False, fell_off: bool = False, sequential: Sequential | None = None,
         on_progress: Callable[[dict], None] | None = None, contact: tuple[tuple[str, str], ...] = (),
-        check: SelfCheck | None = None) -> Answers:
+        check: SelfCheck | None = None, what_falls: bool = True) -> Answers:
     """Answer every variant with common random numbers (see the module docstring). Removals that
     cannot change anything are answered from the scene's own samples (a variant "as is" is added
     for them when it is not asked). ``record_every`` / ``record_samples``: keep the trajectories of
@@ -76,7 +76,9 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
                                           f"~{cost.seconds * len(simulated_actions):.3g} s, more than the budget of "
                                           f"{budget_s:g} s; ask fewer variants or raise the budget")
     regions = _regions(scene, simulated_actions, margin, scene_groups, model.pushes)
-    asked = {"fall"} | ({"direction"} if directions else set()) | ({"bump"} if fell_off else set()) \
+    # a removal read from "as is" needs each other object's outcome there; a direction, what fell
+    what_falls = what_falls or any(trivial) or directions
+    asked = {"fall" if what_falls else "any_fall"} | ({"direction"} if directions else set()) | ({"bump"} if fell_off else set()) \
         | ({"contact"} if contact else set())
     query = QuerySpec(queries=frozenset(asked), fall_threshold_fraction=fall_threshold_fraction,
                       contact_pairs=tuple(contact))
@@ -317,9 +319,11 @@ class _Counts:
         if not result.ok:
             return
         self.samples += 1
-        self.any_falls += bool(np.any(ran(result).fallen))
-        for name, fell in zip(result.names, ran(result).fallen):
-            self.object_falls[name] = self.object_falls.get(name, 0) + bool(fell)
+        self.any_falls += fell(ran(result))
+        if ran(result).fallen is None:  # what falls not asked
+            return
+        for name, fallen in zip(result.names, ran(result).fallen):
+            self.object_falls[name] = self.object_falls.get(name, 0) + bool(fallen)
 
     def tally(self) -> Tally:
         return Tally(self.samples, self.any_falls, dict(self.object_falls))
@@ -327,9 +331,9 @@ class _Counts:
 
 def _caused(per_sample: list[list[SampleOutcome]], variant: int, as_is: int) -> dict[str, float] | None:
     """Per object of the variant: the fraction of paired samples in which it fell with the action
-    and not in the scene as is."""
+    and not in the scene as is (None: what falls was not asked)."""
     pairs = [(s[variant], s[as_is]) for s in per_sample if s[variant].ok and s[as_is].ok]
-    if not pairs:
+    if not pairs or any(ran(outcome).fallen is None for outcome in pairs[0]):
         return None
     names = pairs[0][0].names
     counts = dict.fromkeys(names, 0)

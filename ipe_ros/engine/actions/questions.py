@@ -33,16 +33,21 @@ _NO_OBJECTS = "names no object; name at least one, or leave it out to ask about 
 
 
 def remove(scene: Scene, names: list[str] | None, model: ModelConfig, settings: SimSettings,
-           safe_below: float | None = None, sequential: bool = True, **kw) -> Answers:
+           safe_below: float | None = None, sequential: bool = True, what_falls: bool | None = None,
+           **kw) -> Answers:
     """P(anything else falls) and per-object probabilities if each named object (None: every
     dynamic object, one at a time) is taken away; the scene as it is comes first. ``safe_below``:
     "is it safe to take?" - each removal decided safe or unsafe at this level, sampled until decided
-    (``sequential``; False: the full k for every removal)."""
+    (``sequential``; False: the full k for every removal). ``what_falls``: also which objects fall
+    (default: without ``safe_below`` only; the decision reads "does anything fall?", and rollouts
+    that need not say what else falls end at the first fall, ``ask``)."""
     rule = None
     if safe_below is not None:
         _check_level("safe_below", safe_below)
         rule = Sequential(SafeBelow(safe_below)) if sequential else None
-    return ask(scene, _removals(scene, names), model, settings, sequential=rule, **kw)
+    if what_falls is None:
+        what_falls = safe_below is None
+    return ask(scene, _removals(scene, names), model, settings, sequential=rule, what_falls=what_falls, **kw)
 
 
 def _removals(scene: Scene, names: list[str] | None) -> list[Action]:
@@ -188,8 +193,9 @@ def clear_order(scene: Scene, model: ModelConfig, settings: SimSettings, target:
             stopped_by = "budget"
             break
         try:
+            # each step is ranked on "does anything fall?" alone
             answers = ask(current, _removals(current, candidates), model, settings, budget_s=deadline.remaining_s(),
-                          sequential=Sequential(Ranking()) if sequential else None, **kw)
+                          sequential=Sequential(Ranking()) if sequential else None, what_falls=False, **kw)
         except ConfigError as exc:
             if exc.field != "budget_s" or not steps:  # the first step must fit: refused as any question
                 raise
@@ -210,12 +216,13 @@ def clear_order(scene: Scene, model: ModelConfig, settings: SimSettings, target:
 
 
 def place(scene: Scene, bodies: list[Body], model: ModelConfig, settings: SimSettings, sequential: bool = True,
-          **kw) -> Answers:
+          what_falls: bool = False, **kw) -> Answers:
     """P(anything falls, the new object included) for each candidate placement (one object each);
     the scene as it is comes first. ``sequential``: sample the candidates until all but the least
-    risky are ranked out (ties run to k)."""
+    risky are ranked out (ties run to k). ``what_falls``: also which objects fall (the ranking reads
+    "does anything fall?" alone; without it every rollout ends at its first fall, ``ask``)."""
     return ask(scene, [None] + [Place(b) for b in bodies], model, settings,
-               sequential=Sequential(Ranking()) if sequential else None, **kw)
+               sequential=Sequential(Ranking()) if sequential else None, what_falls=what_falls, **kw)
 
 
 def resting_height_m(scene: Scene, body: Body, x_m: float, y_m: float, orientation_xyzw) -> float:
@@ -326,6 +333,8 @@ def answer_question(scene: Scene, question: Question, model: ModelConfig, settin
     if not question.self_check:
         kw["check"] = None
     kind = question.kind
+    if question.what_falls is not None:  # read by remove and place only
+        kw["what_falls"] = question.what_falls
     if kind == "push":  # no decision to reach: the full k
         answers = push(scene, [question.push], model, settings, **kw)
         return answers.to_dict(), answers

@@ -346,8 +346,9 @@ def gap_to_others_m(world: World, handle: int, within_m: float) -> float:
     overlapping), or ``within_m`` when nothing is that close."""
     p = pybullet()
     gap = within_m
-    for other in range(p.getNumBodies(physicsClientId=world.client)):
-        other = p.getBodyUniqueId(other, physicsClientId=world.client)
+    # the world's own handles: pybullet's getNumBodies / getBodyUniqueId miss all but one of the
+    # bodies a batched createMultiBody makes (identical boxes), so a probe would sink through them
+    for other in (*world.support_ids, *world.static_ids, *world.dynamic_ids):
         if other == handle:
             continue
         for point in p.getClosestPoints(handle, other, within_m, physicsClientId=world.client):

@@ -13,6 +13,7 @@ import pytest
 from ipe_ros.engine import Box, ConfigError, Floor, ModelConfig, Scene, Sphere, preset
 from ipe_ros.engine import actions as A
 from ipe_ros.engine.actions.answers import fell, ran
+from ipe_ros.engine.decide import Ranking, SafeBelow, Tally
 from ipe_ros.engine.question_io import question_from_dict
 from ipe_ros.engine.scene import Body
 
@@ -400,6 +401,27 @@ def test_a_decided_variant_stops_and_an_undecided_one_runs_to_the_cap():
     # nothing falls: "safe below 0.05" needs 73 samples of 0 for a 95% Wilson interval, more than the cap
     assert (top.decision, top.stopped_by, top.samples_drawn, top.samples) == (None, "cap", 24, 24)
     assert variants["as_is"].samples == 24 and variants["as_is"].stopped_by is None
+
+
+def test_a_variant_no_further_sample_could_decide_stops_before_the_cap():
+    """Curtailment: taking the top off the stack, nothing falls. "Safe below 0.05" needs 73 samples
+    of no fall; with a cap of 48, 4 more falls after 44 samples could not make it "unsafe" either
+    (Wilson low end of 4 of 48: 0.03), so it stops there, undecided as the fixed-k run is."""
+    model = ModelConfig(sigma_m=0.005, samples=48)
+    top = _by_label(A.remove(STACK, ["top"], model, SETTINGS, safe_below=0.05))["remove/top"]
+    assert (top.decision, top.stopped_by, top.samples_drawn, top.samples) == (None, "undecidable", 44, 44)
+    fixed = _by_label(A.remove(STACK, ["top"], model, SETTINGS, safe_below=0.05, sequential=False))["remove/top"]
+    assert fixed.samples == 48 and SafeBelow(0.05).decide({"t": Tally(48, 0, {})}, {"t"}) == {}
+    # two spots on two posts, tied at no fall: after 12 of 16 samples, neither could be ranked out by
+    # the last 4 (the low end of 4 of 16 is below the high end of 0 of 16), nor so be left as best
+    posts = scene("posts", box("p1", -0.5, 0, 0.1), box("p2", 0.5, 0, 0.1))
+    new = box("new", 0, 0, 1.0)
+    spots = [dataclasses.replace(new, position_m=(x, 0.0, A.resting_height_m(posts, new, x, 0.0, I)))
+             for x in (-0.5, 0.5, 0.62)]
+    answers = A.place(posts, spots, ModelConfig(sigma_m=0.005, samples=16), SETTINGS)
+    assert [(v.decision, v.stopped_by, v.samples_drawn) for v in answers.variants[1:]] == [
+        (None, "undecidable", 12), (None, "undecidable", 12), ("ranked out", "decided", 4)]
+    assert Ranking().decide({"a": Tally(16, 0, {}), "b": Tally(16, 0, {})}, {"a", "b"}) == {}
 
 
 def test_the_next_batch_of_the_scene_as_it_is_runs_beside_this_batch_of_variants():

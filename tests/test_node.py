@@ -393,8 +393,8 @@ def test_questions_on_ask_are_answered_on_answer_with_their_id(ros, tower, tmp_p
     # before it, what was decided after the one batch of 4 samples (anytime)
     (partial,) = [json.loads(m.data) for m in got if not json.loads(m.data)["final"]]
     assert partial["id"] == "r1" and partial["progress"]["samples_drawn"] == 4
-    assert partial["progress"]["decided"] == [{"label": "remove/bottom", "decision": "unsafe", "samples_drawn": 4,
-                                               "samples": 4}]
+    assert partial["progress"]["decided"] == [{"label": "remove/bottom", "decision": "unsafe", "stopped_by": "decided",
+                                               "samples_drawn": 4, "samples": 4}]
     assert [u["label"] for u in partial["progress"]["undecided"]] == ["remove/top"]
     lines = [m for m in graph_markers[-1].markers if m.type == Marker.LINE_LIST]
     assert len(lines) == 1 and len(lines[0].points) == 2

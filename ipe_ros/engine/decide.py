@@ -6,6 +6,10 @@ drawn in batches, and a variant stops as soon as its 95% Wilson interval - the i
 reports - lies on one side of the threshold, or (ranking) entirely above another candidate's. Sample
 i keeps seed i whatever stops when, so a sequential answer equals the fixed-k answer cut at the
 samples it used. The rules read counts only (``Tally``): they are the statistics, not the physics.
+
+A variant also stops, undecided, once no outcome of the samples left before the cap could decide
+it (curtailment, ``undecidable``): whatever they would show, the fixed-k run's decision there is
+"undecided" too. Two safe spots tied at no fall stop there instead of running to the cap.
 """
 
 from __future__ import annotations
@@ -40,6 +44,23 @@ def _side(count: int, n: int, level: float) -> str | None:
     return "below" if high < level else "above" if low > level else None
 
 
+def _reachable(count: int, n: int, more: int, level: float) -> set[str]:
+    """The sides of ``level`` the interval could lie on after up to ``more`` further samples: the
+    high end is lowest when none of them falls, the low end highest when all do (for every number
+    of them: a variant runs only in the samples where the scene as it is stands)."""
+    sides = set()
+    for extra in range(more + 1):
+        if n + extra == 0:
+            continue
+        if _interval(count, n + extra)[1] < level:
+            sides.add("below")
+        if _interval(count + extra, n + extra)[0] > level:
+            sides.add("above")
+        if len(sides) == 2:
+            break
+    return sides
+
+
 @dataclass(frozen=True)
 class SafeBelow:
     """Safe to do: P(anything falls) below ``level`` ("safe") or above it ("unsafe")."""
@@ -53,6 +74,11 @@ class SafeBelow:
             if side is not None:
                 out[label] = "safe" if side == "below" else "unsafe"
         return out
+
+    def undecidable(self, tallies: dict[str, Tally], active: set[str], more: int) -> set[str]:
+        """The active variants that ``more`` samples could not decide either way."""
+        return {label for label in active
+                if not _reachable(tallies[label].any_falls, tallies[label].samples, more, self.level)}
 
 
 @dataclass(frozen=True)
@@ -68,6 +94,13 @@ class Supports:
         return {label: verdict for label, verdict in safe.items()
                 if all(_side(c, tallies[label].samples, self.threshold) is not None
                        for c in tallies[label].object_falls.values())}
+
+    def undecidable(self, tallies: dict[str, Tally], active: set[str], more: int) -> set[str]:
+        """The active removals whose safety, or an object's edge, ``more`` samples could not decide."""
+        def open_for_good(t: Tally) -> bool:
+            return not _reachable(t.any_falls, t.samples, more, self.safe_below) or any(
+                not _reachable(c, t.samples, more, self.threshold) for c in t.object_falls.values())
+        return {label for label in active if open_for_good(tallies[label])}
 
 
 @dataclass(frozen=True)
@@ -86,6 +119,26 @@ class Ranking:
         if len(left) == 1 and len(active) > 1:
             out[next(iter(left))] = "best"
         return out
+
+    def undecidable(self, tallies: dict[str, Tally], active: set[str], more: int) -> set[str]:
+        """All active candidates when none of them could be ranked out whatever ``more`` samples show
+        (and so none could be left alone as best): they are tied for good. Otherwise none: one
+        candidate's further samples narrow the interval that may rank another out."""
+        if len(active) < 2:
+            return set()
+        # the lowest high end any candidate could reach (none of its further samples falls)
+        lowest_high = {label: min(_interval(t.any_falls, t.samples + extra)[1]
+                                  for extra in range((more if label in active else 0) + 1) if t.samples + extra)
+                       for label, t in tallies.items() if t.samples or label in active and more}
+        for label in active:
+            t = tallies[label]
+            others = [high for other, high in lowest_high.items() if other != label]
+            # the highest low end it could reach: all of its further samples fall
+            highest_low = max((_interval(t.any_falls + extra, t.samples + extra)[0]
+                               for extra in range(more + 1) if t.samples + extra), default=0.0)
+            if others and highest_low > min(others):
+                return set()
+        return set(active)
 
 
 Rule = SafeBelow | Supports | Ranking

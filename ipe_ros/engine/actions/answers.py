@@ -52,7 +52,8 @@ class VariantAnswer:
     fell_off_probability: dict[str, float] | None = None
     any_fell_off_probability: float | None = None
     #: answered sequentially (``decide.Sequential``): what the rule decided ("safe", "unsafe",
-    #: "ranked out", "best"; None: undecided) and why sampling stopped ("decided", "cap", "budget");
+    #: "ranked out", "best"; None: undecided) and why sampling stopped ("decided"; "cap"; "undecidable":
+    #: no outcome of the samples left before the cap could decide it, ``decide``; "budget");
     #: the variant was then simulated only in samples where the scene as it is stands, so its
     #: probabilities are over those (equal to ``given_stands``)
     decision: str | None = None

@@ -285,6 +285,11 @@ def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequenti
         for label, decision in sequential.rule.decide(tallies, set(labels)).items():
             decisions[label] = (decision, "decided", len(per_sample))
             active.discard(labels[label])
+        if len(per_sample) < k:  # at the cap they are undecided anyway ("cap")
+            labels = {_label(actions[j]): j for j in active}
+            for label in sequential.rule.undecidable(tallies, set(labels), k - len(per_sample)):
+                decisions[label] = (None, "undecidable", len(per_sample))
+                active.discard(labels[label])
         if on_progress is not None:
             on_progress(progress_dict(scene.name, k, len(per_sample), decisions,
                                       [_label(actions[j]) for j in sorted(active)], tallies))
@@ -297,15 +302,16 @@ def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequenti
 
 def progress_dict(scene: str, k: int, drawn: int, decisions: dict, undecided: list[str],
                   tallies: dict[str, Tally]) -> dict:
-    """A partial answer: the samples drawn so far (of at most k), each decided variant's decision and
-    the samples it used, and the variants still sampling with their running P(anything falls)."""
+    """A partial answer: the samples drawn so far (of at most k), each variant done sampling with its
+    decision (None: "undecidable", ``decide``), why it stopped and the samples it used, and the
+    variants still sampling with their running P(anything falls)."""
     def running(label):
         t = tallies[label]
         return {"label": label, "samples": t.samples,
                 "any_fall_probability": None if t.samples == 0 else t.any_falls / t.samples}
     return {"scene": scene, "samples_requested": k, "samples_drawn": drawn,
-            "decided": [{"label": label, "decision": d, "samples_drawn": n, "samples": tallies[label].samples}
-                        for label, (d, _, n) in decisions.items()],
+            "decided": [{"label": label, "decision": d, "stopped_by": why, "samples_drawn": n,
+                         "samples": tallies[label].samples} for label, (d, why, n) in decisions.items()],
             "undecided": [running(label) for label in undecided]}
 
 

@@ -94,7 +94,7 @@ def _tallies(answers: A.Answers) -> dict[str, Tally]:
             continue
         n = given.samples
         out[v.label] = Tally(n, round((given.any_fall_probability or 0.0) * n),
-                             {name: round(p * n) for name, p in given.object_fall_probability.items()})
+                             {name: round(p * n) for name, p in (given.object_fall_probability or {}).items()})
     return out
 
 
@@ -155,7 +155,7 @@ def main() -> int:
     parser.add_argument("--heights", default="5,10,20,40")
     parser.add_argument("--shelves", default="1,2,4,8")
     parser.add_argument("--robot-sigma", type=float, default=0.005,
-                        help="the second noise level the tower's questions are asked at, m")
+                        help="the second noise level the tower's questions are asked at, m (0: none)")
     args = parser.parse_args()
     settings = preset("default")
     tower = stable_tower()
@@ -176,7 +176,7 @@ def main() -> int:
         region = A.Region((centre[0] - 0.1, centre[0] + 0.1), (centre[1] - 0.1, centre[1] + 0.1))
         # the paper's perceptual noise, at which this tower falls by itself in most samples (so that its
         # variants run in few), and a robot's (a few mm), at which it stands in most
-        for sigma in (DEFAULT_SIGMA_M, args.robot_sigma):
+        for sigma in (DEFAULT_SIGMA_M, args.robot_sigma) if args.robot_sigma else (DEFAULT_SIGMA_M,):
             noise = f"sigma {sigma * 1000:g} mm"
             rows.append(both(f"support graph, {tower.name} (10 blocks), k = 16 per variant, {noise}", 1.0,
                              lambda seq, check, sigma=sigma: A.support_graph(tower, model(16, sigma), settings,

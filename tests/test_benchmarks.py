@@ -192,3 +192,18 @@ def test_collapse_trial_benchmark_compares_each_rule_on_columns_the_zoo_and_towe
     assert [r["family"] for r in report["zoo"]] == ["drop"] and report["zoo"][0]["both"]["speedup"] > 0
     assert report["towers"].get("towers", 2) == 2
     assert "| column_10_without_c8 |" in (tmp_path / "collapse_trial.md").read_text()
+
+
+def test_actions_benchmark_compares_sequential_fixed_k_and_checked_answers(tmp_path):
+    result = subprocess.run(
+        [sys.executable, str(REPO / "benchmarks" / "actions.py"), "--repeats", "1", "--heights", "5", "--shelves", "1",
+         "--robot-sigma", "0", "--out", str(tmp_path)], capture_output=True, text=True, timeout=600, env=ENV)
+    assert result.returncode == 0, result.stderr[-3000:]
+    data = json.loads((tmp_path / "actions.json").read_text())
+    questions = [row["question"] for row in data["questions"]]
+    assert len(questions) == 4 and questions[0].startswith("support graph") and "column of 5" in questions[-1]
+    for row in data["questions"]:
+        # every decision the fixed-k interval made, the sequential run made the same
+        assert row["same_decision"] == row["fixed_decided"], row
+    assert [r["towers"] for r in data["unrelated_towers"]] == [1]
+    assert "| question | stands |" in (tmp_path / "actions.md").read_text()

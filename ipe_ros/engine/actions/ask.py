@@ -78,8 +78,8 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     regions = _regions(scene, simulated_actions, margin, scene_groups, model.pushes)
     # a removal read from "as is" needs each other object's outcome there; a direction, what fell
     what_falls = what_falls or any(trivial) or directions
-    asked = {"fall" if what_falls else "any_fall"} | ({"direction"} if directions else set()) | ({"bump"} if fell_off else set()) \
-        | ({"contact"} if contact else set())
+    asked = {"fall" if what_falls else "any_fall"} | ({"direction"} if directions else set()) \
+        | ({"bump"} if fell_off else set()) | ({"contact"} if contact else set())
     query = QuerySpec(queries=frozenset(asked), fall_threshold_fraction=fall_threshold_fraction,
                       contact_pairs=tuple(contact))
     # no noise anywhere (scene, model, nor an action's own): one rollout per variant says everything

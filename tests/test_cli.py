@@ -138,6 +138,12 @@ def test_ask_support_clear_place_push_on_the_command_line(tmp_path, capsys):
     assert main(["ask", "place", str(path), *common, "--object", box, "--at", "0,0", "--json"]) == 0
     placed = json.loads(capsys.readouterr().out)["candidates"][0]
     assert placed["position_m"][2] == pytest.approx(0.5, abs=1e-3) and placed["any_fall_probability"] == 0.0
+    assert placed["object_fall_probability"] is None  # the ranking reads "does anything fall?" alone
+    assert main(["ask", "place", str(path), *common, "--object", box, "--at", "0,0", "--json", "--what-falls"]) == 0
+    placed = json.loads(capsys.readouterr().out)["candidates"][0]
+    assert placed["object_fall_probability"] == {"bottom": 0.0, "top": 0.0, "new": 0.0}
+    assert main(["ask", "remove", str(path), *common, "--object", "top", "--safe-below", "0.05"]) == 0
+    assert "(not asked: --what-falls)" in capsys.readouterr().out
     assert main(["ask", "push", str(path), *common, "--object", "bottom", "--velocity", "2,0"]) == 0
     assert "push/bottom" in capsys.readouterr().out
     assert main(["ask", "remove", str(path), *common, "--object", "nope"]) == 2

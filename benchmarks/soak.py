@@ -48,6 +48,11 @@ from msg_bridge.markers import scene_to_markers  # noqa: E402
 REPO = Path(__file__).resolve().parents[1]
 
 
+#: What the driver sends each second or so: each kind up to its share of the draw.
+MIX = (("good", 0.45), ("bad", 0.65), ("questions", 0.78), ("hostile_questions", 0.9), ("flood", 0.95),
+       ("question_floods", 1.0))
+
+
 def _family(pid: int) -> list[int]:
     """pid and all its descendants, from /proc."""
     children: dict[int, list[int]] = {}
@@ -129,6 +134,8 @@ def main() -> int:
     parser.add_argument("--minutes", type=float, default=30.0)
     parser.add_argument("--out", default=str(REPO / "benchmarks/results/soak"))
     parser.add_argument("--seed", type=int, default=2026)
+    parser.add_argument("--only", choices=[k for k, _ in MIX], default=None,
+                        help="send only this kind of input, at the same pace (which input makes memory grow?)")
     parser.add_argument("--settle-s", type=float, default=15.0, help="wait for the last answers before SIGINT")
     args = parser.parse_args()
     rng = random.Random(args.seed)
@@ -241,20 +248,21 @@ def main() -> int:
             memory.append((now - start, _rss_mb(family_now), _rss_mb([node.pid])))
             next_memory += 10.0
         draw = rng.random()
-        if draw < 0.45:
+        kind = args.only or next(k for k, upto in MIX if draw < upto)
+        if kind == "good":
             send_good(rng.random() < 0.3)
             counts["good"] += 1
-        elif draw < 0.65:
+        elif kind == "bad":
             kind, msg = rng.choice(bads)
             (json_pub if kind == "json" else marker_pub).publish(msg)
             counts["bad"] += 1
-        elif draw < 0.78:
+        elif kind == "questions":
             ask(rng.choice(good_questions))
             counts["questions"] += 1
-        elif draw < 0.9:
+        elif kind == "hostile_questions":
             ask(rng.choice(hostile_questions))
             counts["hostile_questions"] += 1
-        elif draw < 0.95:
+        elif kind == "flood":
             for _ in range(20):
                 send_good(False)
             counts["flood"] += 1
@@ -300,7 +308,7 @@ def main() -> int:
         twice = sum(1 for n in asked.values() if n > 1)
     node_rss = np.array([m for _, _, m in memory])
     result = {
-        "minutes": args.minutes, "date": time.strftime("%Y-%m-%d"), "sent": counts,
+        "minutes": args.minutes, "only": args.only, "date": time.strftime("%Y-%m-%d"), "sent": counts,
         "good_scenes_sent": counts["good"] + 20 * counts["flood"], "answers": answers,
         "answered_distinct_scenes": len(latencies), "node_alive_until_the_end": alive_at_end,
         "questions": {"asked": len(asked), "replies": replies, "without_reply": unanswered, "replied_twice": twice,
@@ -317,9 +325,11 @@ def main() -> int:
     out.mkdir(parents=True, exist_ok=True)
     (out / "soak.json").write_text(json.dumps(result, indent=1) + "\n")
     d = result["diagnostics_at_end"] or {}
-    md = [f"# Soak: ipe_node for {args.minutes:g} min of mixed input ({result['date']})", "",
+    what = "mixed input" if args.only is None else f"{args.only} only"
+    md = [f"# Soak: ipe_node for {args.minutes:g} min of {what} ({result['date']})", "",
           "`.venv/bin/python benchmarks/soak.py --minutes "
-          f"{args.minutes:g}`; 2 workers, k = 8, budget 10 s, on this project's 2-core machine.", "",
+          f"{args.minutes:g}{'' if args.only is None else ' --only ' + args.only}`; 2 workers, k = 8, budget 10 s, "
+          "on this project's 2-core machine.", "",
           "| what | value |", "|---|---|",
           f"| sent | {counts['good']} good scenes, {counts['bad']} bad inputs, {counts['flood']} floods of 20; "
           f"{counts['questions']} questions, {counts['hostile_questions']} hostile ones, "

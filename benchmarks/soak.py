@@ -241,6 +241,9 @@ def main() -> int:
         else:
             json_pub.publish(String(data=scene_to_json(scene)))
 
+    if args.only in ("questions", "question_floods"):  # questions are about the newest scene: one to ask about
+        send_good(False)
+        counts["good"] += 1
     while time.monotonic() < end:
         now = time.monotonic()
         if now >= next_memory:

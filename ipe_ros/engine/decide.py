@@ -107,7 +107,8 @@ class Supports:
 class Ranking:
     """Least likely to make anything fall first: a candidate is out ("ranked out") once the low end of
     its interval is above the high end of another candidate's; the last one in is "best". Candidates
-    equally good within their intervals (two safe spots) run to the cap: they are tied."""
+    equally good within their intervals (two safe spots) are tied: they run until no further sample
+    could rank any of them out (``undecidable``), at most to the cap."""
 
     def decide(self, tallies: dict[str, Tally], active: set[str]) -> dict[str, str]:
         bounds = {label: _interval(t.any_falls, t.samples) for label, t in tallies.items() if t.samples}

@@ -219,8 +219,9 @@ def place(scene: Scene, bodies: list[Body], model: ModelConfig, settings: SimSet
           what_falls: bool = False, **kw) -> Answers:
     """P(anything falls, the new object included) for each candidate placement (one object each);
     the scene as it is comes first. ``sequential``: sample the candidates until all but the least
-    risky are ranked out (ties run to k). ``what_falls``: also which objects fall (the ranking reads
-    "does anything fall?" alone; without it every rollout ends at its first fall, ``ask``)."""
+    risky are ranked out (ties run until no further sample could separate them, at most k).
+    ``what_falls``: also which objects fall (the ranking reads "does anything fall?" alone; without
+    it every rollout ends at its first fall, ``ask``)."""
     return ask(scene, [None] + [Place(b) for b in bodies], model, settings,
                sequential=Sequential(Ranking()) if sequential else None, what_falls=what_falls, **kw)
 

@@ -256,8 +256,8 @@ def main() -> int:
             send_good(rng.random() < 0.3)
             counts["good"] += 1
         elif kind == "bad":
-            kind, msg = rng.choice(bads)
-            (json_pub if kind == "json" else marker_pub).publish(msg)
+            channel, msg = rng.choice(bads)
+            (json_pub if channel == "json" else marker_pub).publish(msg)
             counts["bad"] += 1
         elif kind == "questions":
             ask(rng.choice(good_questions))

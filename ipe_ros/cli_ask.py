@@ -203,7 +203,7 @@ def _answer(args, scene, model, settings, kw) -> int:
     answers = None
     if args.question == "remove":
         answers = A.remove(scene, args.object, model, settings, safe_below=args.safe_below,
-                           sequential=not args.fixed_k, what_falls=args.what_falls or args.safe_below is None, **kw)
+                           sequential=not args.fixed_k, what_falls=args.what_falls or None, **kw)  # None: remove's default
         print(json.dumps(answers.to_dict(), allow_nan=False, sort_keys=True) if emit else _table(answers))
     elif args.question == "support":
         graph = A.support_graph(scene, model, settings, threshold=args.threshold, safe_below=args.safe_below,

@@ -44,21 +44,22 @@ def _side(count: int, n: int, level: float) -> str | None:
     return "below" if high < level else "above" if low > level else None
 
 
+def _lowest_high(count: int, n: int, more: int) -> float:
+    """The lowest high end of the interval after up to ``more`` further samples: none of them falls
+    (for every number of them: a variant runs only in the samples where the scene as it is stands).
+    1.0 with no sample at all."""
+    return min((_interval(count, n + extra)[1] for extra in range(more + 1) if n + extra), default=1.0)
+
+
+def _highest_low(count: int, n: int, more: int) -> float:
+    """The highest low end of the interval after up to ``more`` further samples: all of them fall."""
+    return max((_interval(count + extra, n + extra)[0] for extra in range(more + 1) if n + extra), default=0.0)
+
+
 def _reachable(count: int, n: int, more: int, level: float) -> set[str]:
-    """The sides of ``level`` the interval could lie on after up to ``more`` further samples: the
-    high end is lowest when none of them falls, the low end highest when all do (for every number
-    of them: a variant runs only in the samples where the scene as it is stands)."""
-    sides = set()
-    for extra in range(more + 1):
-        if n + extra == 0:
-            continue
-        if _interval(count, n + extra)[1] < level:
-            sides.add("below")
-        if _interval(count + extra, n + extra)[0] > level:
-            sides.add("above")
-        if len(sides) == 2:
-            break
-    return sides
+    """The sides of ``level`` the interval could lie on after up to ``more`` further samples."""
+    return ({"below"} if _lowest_high(count, n, more) < level else set()) | \
+        ({"above"} if _highest_low(count, n, more) > level else set())
 
 
 @dataclass(frozen=True)
@@ -127,17 +128,13 @@ class Ranking:
         candidate's further samples narrow the interval that may rank another out."""
         if len(active) < 2:
             return set()
-        # the lowest high end any candidate could reach (none of its further samples falls)
-        lowest_high = {label: min(_interval(t.any_falls, t.samples + extra)[1]
-                                  for extra in range((more if label in active else 0) + 1) if t.samples + extra)
-                       for label, t in tallies.items() if t.samples or label in active and more}
+        # the lowest high end each candidate could reach (those done sampling: their own)
+        lowest_high = {label: _lowest_high(t.any_falls, t.samples, more if label in active else 0)
+                       for label, t in tallies.items()}
         for label in active:
             t = tallies[label]
             others = [high for other, high in lowest_high.items() if other != label]
-            # the highest low end it could reach: all of its further samples fall
-            highest_low = max((_interval(t.any_falls + extra, t.samples + extra)[0]
-                               for extra in range(more + 1) if t.samples + extra), default=0.0)
-            if others and highest_low > min(others):
+            if others and _highest_low(t.any_falls, t.samples, more) > min(others):
                 return set()
         return set(active)
 

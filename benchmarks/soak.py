@@ -136,6 +136,8 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--only", choices=[k for k, _ in MIX], default=None,
                         help="send only this kind of input, at the same pace (which input makes memory grow?)")
+    parser.add_argument("--question-kinds", default=None,
+                        help="ask only these kinds of good question (comma-separated, of support,remove,push,place)")
     parser.add_argument("--settle-s", type=float, default=15.0, help="wait for the last answers before SIGINT")
     args = parser.parse_args()
     rng = random.Random(args.seed)
@@ -209,6 +211,11 @@ def main() -> int:
     goods = [tower, capped_tower(3.0)] + [s for s in scene_catalogue(7, 12) if len(s.objects) <= 12]
     bads = _bad_inputs(capped_tower(3.0))
     good_questions, hostile_questions = _questions()
+    if args.question_kinds:
+        kinds = set(args.question_kinds.split(","))
+        good_questions = [q for q in good_questions if q["question"] in kinds]
+        if not good_questions:
+            raise SystemExit(f"--question-kinds: none of {sorted(kinds)} is a good question's kind")
     counts = {"good": 0, "bad": 0, "flood": 0, "questions": 0, "hostile_questions": 0, "question_floods": 0}
     question_serial = 0
 
@@ -311,7 +318,7 @@ def main() -> int:
         twice = sum(1 for n in asked.values() if n > 1)
     node_rss = np.array([m for _, _, m in memory])
     result = {
-        "minutes": args.minutes, "only": args.only, "date": time.strftime("%Y-%m-%d"), "sent": counts,
+        "minutes": args.minutes, "only": args.only, "question_kinds": args.question_kinds, "date": time.strftime("%Y-%m-%d"), "sent": counts,
         "good_scenes_sent": counts["good"] + 20 * counts["flood"], "answers": answers,
         "answered_distinct_scenes": len(latencies), "node_alive_until_the_end": alive_at_end,
         "questions": {"asked": len(asked), "replies": replies, "without_reply": unanswered, "replied_twice": twice,
@@ -331,7 +338,8 @@ def main() -> int:
     what = "mixed input" if args.only is None else f"{args.only} only"
     md = [f"# Soak: ipe_node for {args.minutes:g} min of {what} ({result['date']})", "",
           "`.venv/bin/python benchmarks/soak.py --minutes "
-          f"{args.minutes:g}{'' if args.only is None else ' --only ' + args.only}`; 2 workers, k = 8, budget 10 s, "
+          f"{args.minutes:g}{'' if args.only is None else ' --only ' + args.only}"
+          f"{'' if not args.question_kinds else ' --question-kinds ' + args.question_kinds}`; 2 workers, k = 8, budget 10 s, "
           "on this project's 2-core machine.", "",
           "| what | value |", "|---|---|",
           f"| sent | {counts['good']} good scenes, {counts['bad']} bad inputs, {counts['flood']} floods of 20; "

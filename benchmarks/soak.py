@@ -18,6 +18,7 @@ are recorded. Results: JSON and Markdown in ``--out``. DDS stays on loopback.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import os
@@ -69,6 +70,21 @@ def _family(pid: int) -> list[int]:
             found.append(child)
             todo.append(child)
     return found
+
+
+@contextlib.contextmanager
+def _ended_on_error(node: subprocess.Popen):
+    """End the node (our own child, by its pid) when the driver fails before stopping it itself."""
+    try:
+        yield
+    except BaseException:
+        node.send_signal(signal.SIGINT)
+        try:
+            node.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            node.kill()
+            node.wait()
+        raise
 
 
 def _rss_mb(pids: list[int]) -> float:
@@ -140,157 +156,158 @@ def main() -> int:
                         help="ask only these kinds of good question (comma-separated, of support,remove,push,place)")
     parser.add_argument("--settle-s", type=float, default=15.0, help="wait for the last answers before SIGINT")
     args = parser.parse_args()
-    rng = random.Random(args.seed)
-    domain = 150 + os.getpid() % 80
-    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(domain))
-    node = subprocess.Popen([sys.executable, "-m", "ipe_ros.ros.node", "--ros-args", "-p", "workers:=2",
-                             "-p", "samples:=8", "-p", "budget_s:=10.0", "--log-level", "warn"],
-                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain)
-    client = rclpy.create_node("ipe_soak_driver", context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(client)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
-
-    sent_at: dict[str, float] = {}
-    latencies: list[float] = []
-    answers = {"ok": 0, "error": 0, "budget": 0}
-    diagnostics: list[dict] = []
-    lock = threading.Lock()
-
-    def on_answer(msg: String) -> None:
-        data = json.loads(msg.data)
-        with lock:
-            if "error" in data:
-                answers["error"] += 1
-                return
-            answers["ok"] += 1
-            answers["budget"] += data.get("stopped_by") == "budget"
-            start = sent_at.pop(data.get("scene_id"), None)
-            if start is not None:
-                latencies.append(time.monotonic() - start)
-
-    def on_diagnostics(msg: DiagnosticArray) -> None:
-        if msg.status and msg.status[0].name.startswith("/ipe"):
-            with lock:
-                diagnostics[:] = [{kv.key: kv.value for kv in msg.status[0].values}
-                                  | {"level": int.from_bytes(msg.status[0].level, "little")}]
-
-    asked: dict[str, int] = {}  # question id -> replies received
-    replies = {"answer": 0, "error": 0, "busy": 0, "partial": 0}
-    unreadable = {"sent": 0, "replies": 0}  # malformed JSON: its id cannot be read, so the reply carries ""
-
-    def on_reply(msg: String) -> None:
-        data = json.loads(msg.data)
-        with lock:
-            if not data["final"]:  # what a decision question has decided so far; its final reply follows
-                replies["partial"] += 1
-                return
-            if data["id"] == "":
-                unreadable["replies"] += 1
-            else:
-                asked[data["id"]] = asked.get(data["id"], 0) + 1
-            kind = "answer" if "answer" in data else "busy" if data.get("error", "").startswith("busy") else "error"
-            replies[kind] += 1
-
-    client.create_subscription(String, "/ipe/prediction", on_answer, LATCHED_QOS)
-    client.create_subscription(String, "/ipe/answer", on_reply, ASK_QOS)
-    ask_pub = client.create_publisher(String, "/ipe/ask", ASK_QOS)
-    client.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
-    json_pub = client.create_publisher(String, "/ipe/scene_json", 10)
-    marker_pub = client.create_publisher(MarkerArray, "/ipe/scene", 10)
-    deadline = time.monotonic() + 120
-    while json_pub.get_subscription_count() == 0 or marker_pub.get_subscription_count() == 0:
-        if time.monotonic() > deadline:
-            raise SystemExit("the node did not subscribe within 120 s")
-        time.sleep(0.1)
-
-    tower = load_scenes(example_scene_path())[0]
-    goods = [tower, capped_tower(3.0)] + [s for s in scene_catalogue(7, 12) if len(s.objects) <= 12]
-    bads = _bad_inputs(capped_tower(3.0))
     good_questions, hostile_questions = _questions()
     if args.question_kinds:
         kinds = set(args.question_kinds.split(","))
         good_questions = [q for q in good_questions if q["question"] in kinds]
         if not good_questions:
             raise SystemExit(f"--question-kinds: none of {sorted(kinds)} is a good question's kind")
-    counts = {"good": 0, "bad": 0, "flood": 0, "questions": 0, "hostile_questions": 0, "question_floods": 0}
-    question_serial = 0
+    rng = random.Random(args.seed)
+    domain = 150 + os.getpid() % 80
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(domain))
+    node = subprocess.Popen([sys.executable, "-m", "ipe_ros.ros.node", "--ros-args", "-p", "workers:=2",
+                             "-p", "samples:=8", "-p", "budget_s:=10.0", "--log-level", "warn"],
+                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    with _ended_on_error(node):  # the node must not outlive a driver that fails
+        context = rclpy.Context()
+        rclpy.init(context=context, domain_id=domain)
+        client = rclpy.create_node("ipe_soak_driver", context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(client)
+        spinner = threading.Thread(target=executor.spin, daemon=True)
+        spinner.start()
 
-    def ask(question: dict) -> None:
-        nonlocal question_serial
-        question_serial += 1
-        key = f"q{question_serial}"
-        malformed = question.get("question") == "fly"
-        with lock:
-            if malformed:
-                unreadable["sent"] += 1
+        sent_at: dict[str, float] = {}
+        latencies: list[float] = []
+        answers = {"ok": 0, "error": 0, "budget": 0}
+        diagnostics: list[dict] = []
+        lock = threading.Lock()
+
+        def on_answer(msg: String) -> None:
+            data = json.loads(msg.data)
+            with lock:
+                if "error" in data:
+                    answers["error"] += 1
+                    return
+                answers["ok"] += 1
+                answers["budget"] += data.get("stopped_by") == "budget"
+                start = sent_at.pop(data.get("scene_id"), None)
+                if start is not None:
+                    latencies.append(time.monotonic() - start)
+
+        def on_diagnostics(msg: DiagnosticArray) -> None:
+            if msg.status and msg.status[0].name.startswith("/ipe"):
+                with lock:
+                    diagnostics[:] = [{kv.key: kv.value for kv in msg.status[0].values}
+                                      | {"level": int.from_bytes(msg.status[0].level, "little")}]
+
+        asked: dict[str, int] = {}  # question id -> replies received
+        replies = {"answer": 0, "error": 0, "busy": 0, "partial": 0}
+        unreadable = {"sent": 0, "replies": 0}  # malformed JSON: its id cannot be read, so the reply carries ""
+
+        def on_reply(msg: String) -> None:
+            data = json.loads(msg.data)
+            with lock:
+                if not data["final"]:  # what a decision question has decided so far; its final reply follows
+                    replies["partial"] += 1
+                    return
+                if data["id"] == "":
+                    unreadable["replies"] += 1
+                else:
+                    asked[data["id"]] = asked.get(data["id"], 0) + 1
+                kind = "answer" if "answer" in data else "busy" if data.get("error", "").startswith("busy") else "error"
+                replies[kind] += 1
+
+        client.create_subscription(String, "/ipe/prediction", on_answer, LATCHED_QOS)
+        client.create_subscription(String, "/ipe/answer", on_reply, ASK_QOS)
+        ask_pub = client.create_publisher(String, "/ipe/ask", ASK_QOS)
+        client.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
+        json_pub = client.create_publisher(String, "/ipe/scene_json", 10)
+        marker_pub = client.create_publisher(MarkerArray, "/ipe/scene", 10)
+        deadline = time.monotonic() + 120
+        while json_pub.get_subscription_count() == 0 or marker_pub.get_subscription_count() == 0:
+            if time.monotonic() > deadline:
+                raise SystemExit("the node did not subscribe within 120 s")
+            time.sleep(0.1)
+
+        tower = load_scenes(example_scene_path())[0]
+        goods = [tower, capped_tower(3.0)] + [s for s in scene_catalogue(7, 12) if len(s.objects) <= 12]
+        bads = _bad_inputs(capped_tower(3.0))
+        counts = {"good": 0, "bad": 0, "flood": 0, "questions": 0, "hostile_questions": 0, "question_floods": 0}
+        question_serial = 0
+
+        def ask(question: dict) -> None:
+            nonlocal question_serial
+            question_serial += 1
+            key = f"q{question_serial}"
+            malformed = question.get("question") == "fly"
+            with lock:
+                if malformed:
+                    unreadable["sent"] += 1
+                else:
+                    asked.setdefault(key, 0)
+            text = '{"id": "%s", "question": ' % key if malformed else json.dumps({"id": key, **question})
+            ask_pub.publish(String(data=text))
+        memory: list[tuple[float, float]] = []
+        start = time.monotonic()
+        end = start + 60 * args.minutes
+        next_memory = start
+        serial = 0
+
+        def send_good(via_markers: bool) -> None:
+            nonlocal serial
+            serial += 1
+            scene = dataclasses.replace(rng.choice(goods), name=f"soak_{serial}")
+            with lock:
+                sent_at[scene.name] = time.monotonic()
+            if via_markers and all(b.shape.type in ("box", "sphere", "cylinder", "convex") for b in scene.objects):
+                marker_pub.publish(scene_to_markers(scene, "world", time.time_ns()))
             else:
-                asked.setdefault(key, 0)
-        text = '{"id": "%s", "question": ' % key if malformed else json.dumps({"id": key, **question})
-        ask_pub.publish(String(data=text))
-    memory: list[tuple[float, float]] = []
-    start = time.monotonic()
-    end = start + 60 * args.minutes
-    next_memory = start
-    serial = 0
+                json_pub.publish(String(data=scene_to_json(scene)))
 
-    def send_good(via_markers: bool) -> None:
-        nonlocal serial
-        serial += 1
-        scene = dataclasses.replace(rng.choice(goods), name=f"soak_{serial}")
-        with lock:
-            sent_at[scene.name] = time.monotonic()
-        if via_markers and all(b.shape.type in ("box", "sphere", "cylinder", "convex") for b in scene.objects):
-            marker_pub.publish(scene_to_markers(scene, "world", time.time_ns()))
-        else:
-            json_pub.publish(String(data=scene_to_json(scene)))
-
-    if args.only in ("questions", "question_floods"):  # questions are about the newest scene: one to ask about
-        send_good(False)
-        counts["good"] += 1
-    while time.monotonic() < end:
-        now = time.monotonic()
-        if now >= next_memory:
-            family_now = _family(node.pid)
-            memory.append((now - start, _rss_mb(family_now), _rss_mb([node.pid])))
-            next_memory += 10.0
-        draw = rng.random()
-        kind = args.only or next(k for k, upto in MIX if draw < upto)
-        if kind == "good":
-            send_good(rng.random() < 0.3)
+        if args.only in ("questions", "question_floods"):  # questions are about the newest scene: one to ask about
+            send_good(False)
             counts["good"] += 1
-        elif kind == "bad":
-            channel, msg = rng.choice(bads)
-            (json_pub if channel == "json" else marker_pub).publish(msg)
-            counts["bad"] += 1
-        elif kind == "questions":
-            ask(rng.choice(good_questions))
-            counts["questions"] += 1
-        elif kind == "hostile_questions":
-            ask(rng.choice(hostile_questions))
-            counts["hostile_questions"] += 1
-        elif kind == "flood":
-            for _ in range(20):
-                send_good(False)
-            counts["flood"] += 1
-        else:
-            for _ in range(200):
+        while time.monotonic() < end:
+            now = time.monotonic()
+            if now >= next_memory:
+                family_now = _family(node.pid)
+                memory.append((now - start, _rss_mb(family_now), _rss_mb([node.pid])))
+                next_memory += 10.0
+            draw = rng.random()
+            kind = args.only or next(k for k, upto in MIX if draw < upto)
+            if kind == "good":
+                send_good(rng.random() < 0.3)
+                counts["good"] += 1
+            elif kind == "bad":
+                channel, msg = rng.choice(bads)
+                (json_pub if channel == "json" else marker_pub).publish(msg)
+                counts["bad"] += 1
+            elif kind == "questions":
                 ask(rng.choice(good_questions))
-            counts["question_floods"] += 1
-        time.sleep(rng.uniform(0.5, 1.5))
-        if node.poll() is not None:
-            break
-    alive_at_end = node.poll() is None
-    settled = time.monotonic() + args.settle_s  # let the last answers and diagnostics arrive,
-    while time.monotonic() < settled + 120:  # and every question still waiting get its reply
-        with lock:
-            waiting = sum(1 for n in asked.values() if n == 0) + unreadable["sent"] - unreadable["replies"]
-        if time.monotonic() >= settled and not waiting:
-            break
-        time.sleep(0.5)
+                counts["questions"] += 1
+            elif kind == "hostile_questions":
+                ask(rng.choice(hostile_questions))
+                counts["hostile_questions"] += 1
+            elif kind == "flood":
+                for _ in range(20):
+                    send_good(False)
+                counts["flood"] += 1
+            else:
+                for _ in range(200):
+                    ask(rng.choice(good_questions))
+                counts["question_floods"] += 1
+            time.sleep(rng.uniform(0.5, 1.5))
+            if node.poll() is not None:
+                break
+        alive_at_end = node.poll() is None
+        settled = time.monotonic() + args.settle_s  # let the last answers and diagnostics arrive,
+        while time.monotonic() < settled + 120:  # and every question still waiting get its reply
+            with lock:
+                waiting = sum(1 for n in asked.values() if n == 0) + unreadable["sent"] - unreadable["replies"]
+            if time.monotonic() >= settled and not waiting:
+                break
+            time.sleep(0.5)
     family = _family(node.pid)
     stop_started = time.monotonic()
     node.send_signal(signal.SIGINT)

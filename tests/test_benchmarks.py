@@ -207,3 +207,17 @@ def test_actions_benchmark_compares_sequential_fixed_k_and_checked_answers(tmp_p
         assert row["same_decision"] == row["fixed_decided"], row
     assert [r["towers"] for r in data["unrelated_towers"]] == [1]
     assert "| question | stands |" in (tmp_path / "actions.md").read_text()
+
+
+def test_check_cost_sorts_the_checked_predictions_map_calls_into_its_parts(tmp_path):
+    result = subprocess.run([sys.executable, "benchmarks/check_cost.py", "--towers", "1", "--samples", "4",
+                             "--out", str(tmp_path)], cwd=REPO, env=ENV, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-3000:]
+    report = json.loads((tmp_path / "check_cost.json").read_text())
+    (tower,) = report["towers"]
+    # k = 4: no look-ahead split; the first map holds the 4 fast samples and the verified one
+    assert tower["maps"][0][:2] == [5, 1]
+    assert tower["reference_reruns"] == sum(references for _, references, _ in tower["maps"]) >= 1
+    assert math.isclose(sum(tower["parts_s"].values()), sum(wall for _, _, wall in tower["maps"]))
+    assert report["summary"]["verdicts"] == {tower["verdict"]: 1}
+    assert "| fast + verification |" in (tmp_path / "check_cost.md").read_text()

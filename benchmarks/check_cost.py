@@ -1,0 +1,124 @@
+"""Where a self-checked prediction's time goes, map call by map call, against the unchecked one.
+
+    .venv/bin/python benchmarks/check_cost.py --towers 60 --samples 48
+
+Each tower is predicted twice on the same seeds and the same warm pool (2 workers, `default`,
+queries fall), unchecked and self-checked, one after the other. The checked prediction's map calls
+are sorted by what they ran: the fast samples with the verification (the first map), the last
+quarter with the coverage sample picked ahead, a round of confirmation or coverage, and the
+escalation (every sample at the reference). Per tower and overall: wall seconds per part, the
+reference reruns, the verdict. It measures the floor that the README's "Self-checking answers"
+argues: what the check adds beyond the fast samples, and which of its parts add it. Authors'
+towers need ``../shared``; without it generated towers are used.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, preset  # noqa: E402
+from ipe_ros.engine.fidelity import DEFAULT_CHECK, NO_CHECK  # noqa: E402
+from ipe_ros.engine.generators import generate_towers  # noqa: E402
+from ipe_ros.engine.sampler import predict  # noqa: E402
+
+PARTS = ("fast + verification", "last quarter + coverage", "confirmation or coverage round", "escalation")
+
+
+def _towers(count: int):
+    path = Path(os.environ.get("IPE_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared/data/battaglia2013"))
+    csv = path / "willitfall.csv"
+    if csv.exists():
+        return load_scenes(csv)[:count], str(csv)
+    return generate_towers(2013, count), "generated towers (seed 2013)"
+
+
+def _part(n: int, tasks: int, references: int, samples: int) -> str:
+    """What a checked prediction's n-th map call ran (its tasks, of them at the reference)."""
+    if n == 0:
+        return PARTS[0]
+    if references > samples // 4:  # more than a round's few: every sample at the reference
+        return PARTS[3]
+    if n == 1 and tasks > references:  # the last quarter's fast samples, with or without a reference
+        return PARTS[1]
+    return PARTS[2]
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--towers", type=int, default=60)
+    parser.add_argument("--samples", type=int, default=48)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "benchmarks/results/check_cost"))
+    args = parser.parse_args()
+    towers, source = _towers(args.towers)
+    query = QuerySpec(queries=frozenset({"fall"}))
+    settings = preset("default")
+    rows = []
+    with WorkerPool(args.workers) as pool:
+        pool.warm()
+        calls: list[tuple[int, int, float]] = []
+
+        def timed_map(fn, items, on_lost=None):
+            items = list(items)
+            start = time.perf_counter()
+            out = pool.map(fn, items, on_lost)
+            calls.append((len(items), sum(1 for t in items if t.settings.name != settings.name),
+                          time.perf_counter() - start))
+            return out
+
+        model = ModelConfig(sigma_m=0.04, samples=args.samples)
+        predict(towers[0], ModelConfig(sigma_m=0.04, samples=2), settings, query, map_fn=timed_map)  # imports, caches
+        for i, tower in enumerate(towers):
+            walls = {}
+            for name, check in (("unchecked", NO_CHECK), ("checked", DEFAULT_CHECK)):
+                calls.clear()
+                start = time.perf_counter()
+                prediction = predict(tower, model, settings, query, seed=i, map_fn=timed_map, check=check)
+                walls[name] = time.perf_counter() - start
+            parts = Counter()
+            for n, (tasks, references, wall) in enumerate(calls):
+                parts[_part(n, tasks, references, args.samples)] += wall
+            rows.append({"tower": tower.name, "unchecked_s": walls["unchecked"], "checked_s": walls["checked"],
+                         "verdict": prediction.fidelity, "maps": [list(c) for c in calls],
+                         "reference_reruns": sum(r for _, r, _ in calls), "parts_s": dict(parts)})
+            print(f"{tower.name}: unchecked {walls['unchecked']:.2f} s, checked {walls['checked']:.2f} s "
+                  f"({prediction.fidelity}), maps {[(t, r, round(w, 2)) for t, r, w in calls]}", flush=True)
+    unchecked = float(np.mean([r["unchecked_s"] for r in rows]))
+    checked = float(np.mean([r["checked_s"] for r in rows]))
+    per_part = {part: float(np.sum([r["parts_s"].get(part, 0.0) for r in rows])) / len(rows) for part in PARTS}
+    verdicts = Counter(r["verdict"] for r in rows)
+    summary = {"date": time.strftime("%Y-%m-%d"), "source": source, "towers": len(rows), "samples": args.samples,
+               "workers": args.workers, "unchecked_s": unchecked, "checked_s": checked,
+               "checked_over_unchecked": checked / unchecked, "per_part_s": per_part,
+               "predictions_with_part": {part: sum(1 for r in rows if part in r["parts_s"]) for part in PARTS},
+               "reference_reruns_per_prediction": float(np.mean([r["reference_reruns"] for r in rows])),
+               "verdicts": dict(verdicts)}
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "check_cost.json").write_text(json.dumps({"summary": summary, "towers": rows}, indent=1) + "\n")
+    lines = [f"# Where the self-check's time goes ({summary['date']})", "",
+             f"`.venv/bin/python benchmarks/check_cost.py --towers {args.towers} --samples {args.samples}`; {source}, "
+             f"k = {args.samples}, sigma 0.04 m, queries fall, `default`, {args.workers} workers, unchecked and checked "
+             "one after the other on the same seeds.", "",
+             f"Unchecked {unchecked:.2f} s per prediction, checked {checked:.2f} s ({checked / unchecked:.2f}x); "
+             f"{summary['reference_reruns_per_prediction']:.2f} reference reruns per prediction; verdicts "
+             + ", ".join(f"{v} {n}" for v, n in sorted(verdicts.items())) + ".", "",
+             "| part of the checked prediction | s per prediction (mean over all) | predictions with it |", "|---|---|---|"]
+    lines += [f"| {part} | {per_part[part]:.3f} | {summary['predictions_with_part'][part]} |" for part in PARTS]
+    (out / "check_cost.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -139,6 +139,35 @@ def test_json_topic_uses_the_frame_parameter(ros, tower):
     assert got[0]["samples"] == 6 and 0.0 <= got[0]["fall_fraction"] <= 1.0
 
 
+def test_ground_truth_takes_the_scene_exactly_as_given_even_where_its_bodies_carry_their_own_noise(ros, tower):
+    # a perception stack may give each body its own noise; sigma = phi = 0 only drops the model's own
+    noisy = dataclasses.replace(tower, objects=tuple(dataclasses.replace(b, position_sigma_m=0.02)
+                                                     for b in tower.objects))
+    node = ros.start_ipe_node(samples=4, sigma=0.0, phi=0.0, queries=["fall"])
+    got = answers(ros)
+    ros.publisher(String, "/ipe/scene_json").publish(String(data=scene_to_json(noisy)))
+    wait_until(lambda: len(got), TIMEOUT_S, "the answer at sigma = phi = 0")
+    assert got[0]["deterministic"] is False and got[0]["samples"] == 4  # the bodies' own noise, drawn
+    (result,) = set_params(ros, ground_truth=True)
+    assert result.successful, result.reason
+    response = ros.call(Trigger, "/ipe/predict", Trigger.Request(), timeout_s=TIMEOUT_S)
+    assert response.success, response.message
+    answer = json.loads(response.message)
+    assert answer["deterministic"] is True and answer["samples"] == 1  # the scene exactly as given
+    assert node.service.config.model.object_noise is False
+    # questions are asked of the same model: one rollout per variant
+    replies = ros.collect(String, "/ipe/answer", LATCHED_QOS)
+    ros.publisher(String, "/ipe/ask").publish(String(data=json.dumps(
+        {"id": "g", "question": "remove", "objects": [tower.objects[-1].name]})))
+    wait_until(lambda: any(json.loads(m.data)["final"] for m in list(replies)), TIMEOUT_S, "the question's answer")
+    reply = next(json.loads(m.data) for m in replies if json.loads(m.data)["final"])
+    assert reply["answer"]["samples_requested"] == 1, reply
+    # the ground truth with a push is no ground truth: phi is read as 0 while it is on
+    (result,) = set_params(ros, phi=2.0)
+    assert result.successful, result.reason
+    assert node.service.config.model.phi_m_s2 == (0.0,)
+
+
 def test_trigger_service_without_and_with_a_scene(ros, tower):
     node = ros.start_ipe_node(**FAST)
     response = ros.call(Trigger, "/ipe/predict", Trigger.Request())

@@ -3,7 +3,7 @@
 1. starts ``IpeNode`` (worker processes, rerun recording on) and a small "robot" node beside it;
 2. the robot publishes the built-in tower as a ``visualization_msgs/MarkerArray`` on ``/ipe/scene``;
    each answer on ``/ipe/prediction`` is printed as it arrives;
-3. it switches the node to the ground-truth model (parameters ``sigma`` = 0, ``phi`` = 0) and asks
+3. it switches the node to the ground-truth model (parameter ``ground_truth``) and asks
    the ``/ipe/predict`` Trigger service for an answer on the same scene;
 4. it prints where the ``.rrd`` recordings are (replay: ``rerun FILE.rrd``) and shuts down cleanly.
 """
@@ -107,11 +107,11 @@ def run(output_dir: Path, samples: int, workers: int, timeout_s: float) -> list[
         scene_pub.publish(scene_to_markers(tower, "world", robot.get_clock().now().nanoseconds))
         _wait(lambda: len(answers) >= 1, timeout_s, "the IPE prediction")
 
-        print("\nswitching the node to the ground-truth model (sigma = 0, phi = 0) and calling /ipe/predict",
-              flush=True)
-        results = ipe.set_parameters([Parameter("sigma", value=0.0), Parameter("phi", value=0.0)])
+        print("\nswitching the node to the ground-truth model (ground_truth = true: the scene exactly as given) "
+              "and calling /ipe/predict", flush=True)
+        results = ipe.set_parameters([Parameter("ground_truth", value=True)])
         if not all(r.successful for r in results):
-            raise DemoFailed("setting sigma = 0: " + "; ".join(r.reason for r in results))
+            raise DemoFailed("setting ground_truth: " + "; ".join(r.reason for r in results))
         client = robot.create_client(Trigger, "/ipe/predict")
         _wait(client.service_is_ready, 30.0, "the /ipe/predict service")
         future = client.call_async(Trigger.Request())

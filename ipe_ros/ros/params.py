@@ -58,9 +58,13 @@ _STRING, _STRINGS = ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_STRI
 PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("samples", DEFAULT_SAMPLES, _INT, "Monte Carlo samples k per prediction (paper: 48)", (1, 10000)),
     ParamSpec("sigma", DEFAULT_SIGMA_M, _DOUBLE, "position noise SD, metres (paper: 0.2 block short sides = 0.04 m "
-                                      "for 0.2 m blocks; 0 with phi 0 is the deterministic ground truth)", (0.0, 10.0)),
+                                      "for 0.2 m blocks; 0 drops the model's own noise, not the noise a scene "
+                                      "gives its bodies: ground_truth drops both)", (0.0, 10.0)),
     ParamSpec("phi", 0.0, _DOUBLE, "latent push: horizontal acceleration of the support for 0.2 s, m/s^2 "
                                    "(0: no push)", (0.0, 100.0)),
+    ParamSpec("ground_truth", False, ParameterType.PARAMETER_BOOL,
+              "the ground-truth model: the scene exactly as given, one deterministic rollout (sigma and phi "
+              "read as 0 while on, and no body's own position or yaw noise); questions on ~/ask too"),
     ParamSpec("force_direction_deg", math.nan, _DOUBLE,
               "cued push direction in degrees in the scene frame (0 = +x, counter-clockwise), pushes drawn "
               "within +-45 deg of it; NaN (default) draws the direction uniformly",
@@ -166,6 +170,7 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
     try:  # one request from the parameters (engine.request), its errors named as the parameters
         request = build_request(
             samples=int(values["samples"]), sigma_m=float(values["sigma"]), phi_m_s2=(float(values["phi"]),),
+            ground_truth=bool(values["ground_truth"]),
             force_direction_deg=None if math.isnan(direction) else direction, mu=None if mu == 0 else mu,
             perception=str(values["perception"]), queries=values["queries"], contact=pairs,
             preset_name=values["preset"], horizon_s=horizon if horizon > 0 else None,

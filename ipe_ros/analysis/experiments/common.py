@@ -75,7 +75,8 @@ def ipe_model(k: int, phi_paper: float = PAPER_PHI, sigma_sides: float = PAPER_S
 
 
 def ground_truth_model(mu: float | None = None) -> ModelConfig:
-    return ModelConfig(mu=mu)
+    """sigma = phi = 0 and no body's own noise: the stimulus exactly as given, one rollout."""
+    return ModelConfig(mu=mu, object_noise=False)
 
 
 def authors_stable(data_dir: Path, dataset: str) -> dict[str, bool]:

@@ -57,3 +57,18 @@ def test_a_scene_is_checked_once_however_often_a_request_validates_it(monkeypatc
         with pytest.raises(Exception, match="below the support surface"):
             check_request(broken, query)
     assert calls.count("broken") == 2
+
+
+def test_the_ground_truth_refuses_a_perception_that_draws_the_scene():
+    """The ground truth is the scene exactly as given: with perception from images it would silently
+    be k samples of their posterior instead."""
+    from ipe_ros.engine.request import build_request
+
+    assert build_request(ground_truth=True).model.object_noise is False
+    for perception in ("vision", "depth"):
+        with pytest.raises(ConfigError) as caught:
+            build_request(ground_truth=True, perception=perception)
+        problem = (f"takes the scene exactly as given, but perception {perception} draws it from a posterior of "
+                   "images; ask the ground truth with perception gaussian")
+        assert str(as_spelled(caught.value, "cli")) == f"--ground-truth: {problem}"
+        assert str(as_spelled(caught.value, "ros")) == f"ground_truth: {problem}"

@@ -47,6 +47,7 @@ INPUTS: tuple[Input, ...] = (
     Input("budget_s", "--budget", "budget_s", "s", "the most wall seconds one prediction may take"),
     Input("verify_samples", "--verify-samples", "verify_samples", "count", "samples rerun at the reference"),
     Input("perception", "--perception", "perception", "name", "where the noisy scenes come from"),
+    Input("ground_truth", "--ground-truth", "ground_truth", "flag", "the scene exactly as given: no noise, one rollout"),
     Input("max_objects", None, "max_objects", "count", "scenes with more objects are refused"),
     Input("workers", "--workers", "workers", "count", "worker processes"),
     Input("fell_off", "--fell-off", None, "flag", "robot questions: also which objects end off the table"),

@@ -70,6 +70,7 @@ def test_ground_truth_takes_the_scene_as_given_even_where_bodies_give_their_own_
     noisy = ground_truth(_uncertain_tower(tmp_path, 0.05))
     assert noisy["deterministic"] and noisy["samples"] == 1
     assert noisy["object_fall_probability"] == exact["object_fall_probability"]
+    assert noisy["request"]["object_noise"] is False  # the answer says it drew no body's own noise
 
 
 def test_sigma_zero_with_bodies_own_noise_is_not_deterministic(tmp_path, capsys):
@@ -80,6 +81,7 @@ def test_sigma_zero_with_bodies_own_noise_is_not_deterministic(tmp_path, capsys)
                  "--no-self-check"]) == 0
     record = json.loads(capsys.readouterr().out)
     assert not record["deterministic"] and record["samples"] == 3
+    assert "object_noise" not in record["request"]  # drawn, as by default
 
 
 def test_generate_tower_and_table_write_loadable_scenes(tmp_path):

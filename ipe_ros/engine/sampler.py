@@ -408,6 +408,8 @@ def _aggregate(scene: Scene, model: ModelConfig, settings: SimSettings, query: Q
         "time_step_s": settings.time_step_s, "horizon_s": settings.horizon_for(scene.horizon_s),  # what ran
         "solver_iterations": settings.solver.iterations, "seed": seed, "queries": sorted(query.queries),
     }
+    if not model.object_noise:  # the ground truth: no body's own noise drawn either
+        request.update(object_noise=False)
     if query.contact_pairs:
         request.update(contact=[f"{a}:{b}" for a, b in query.contact_pairs])
     if stop is not None:

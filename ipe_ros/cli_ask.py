@@ -66,7 +66,8 @@ def add_ask_parser(sub, finite, one_line_parser) -> None:
                        help=f"samples per variant (default {DEFAULT_ASK_SAMPLES})")
         q.add_argument("--sigma", type=finite, default=DEFAULT_SIGMA_M, help="position noise SD, metres")
         q.add_argument("--ground-truth", action="store_true",
-                       help="no noise at all (sigma = 0, no body's own noise): one rollout per variant")
+                       help="no noise at all (sigma = 0, no body's own noise; a push with noise of its own is "
+                            "refused): one rollout per variant")
         q.add_argument("--preset", default=DEFAULT_PRESET, choices=sorted(PRESETS))
         q.add_argument("--seed", type=int, default=0)
         q.add_argument("--workers", type=int, default=os.cpu_count() or 1)

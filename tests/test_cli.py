@@ -167,6 +167,12 @@ def test_ask_takes_the_ground_truth_too(tmp_path, capsys):
     removal = next(v for v in answer["variants"] if v["label"] == "remove/bottom")
     assert removal["simulated"] and removal["samples"] == 1 and removal["object_fall_probability"] == {"top": 1.0}
     assert removal["any_fall_probability_ci95"] == [1.0, 1.0]
+    # a push with noise of its own is no ground truth: refused, not answered from k noisy samples
+    assert main(["ask", "push", str(path), "--object", "top", "--velocity", "1,0", "--speed-sigma", "0.1",
+                 "--ground-truth", "--workers", "0"]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "ipe: error: actions[1]: the ground truth takes a push exactly as given, but this one has noise of its own "
+        "(a direction or speed sigma); drop it, or ask without the ground truth")
 
 
 def test_long_work_shows_plain_progress_lines_off_a_terminal_and_a_bar_on_one(capsys, monkeypatch):

@@ -21,7 +21,7 @@ from ..query.contact import check_pairs
 from ..rollout import SampleOutcome
 from .answers import Alone, Answers, _aggregate, _aggregate_given, _draws_noise, _stood, fell, ran
 from .geometry import _reached, _regions, groups
-from .kinds import DEFAULT_SAFE_BELOW, Action, Place, Remove, _check_action, _label
+from .kinds import DEFAULT_SAFE_BELOW, Action, Place, Push, Remove, _check_action, _label
 from .variants import VariantTask, failed, run_variants, skipped
 
 
@@ -53,6 +53,11 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     check_fidelity_request(check)
     for i, action in enumerate(actions):
         _check_action(scene, action, f"actions[{i}]")
+        if not model.object_noise and isinstance(action, Push) and (action.direction_sigma_rad
+                                                                     or action.speed_sigma_fraction):
+            raise ConfigError(f"actions[{i}]", "the ground truth takes a push exactly as given, but this one has "
+                                               "noise of its own (a direction or speed sigma); drop it, or ask "
+                                               "without the ground truth")
     if fell_off and not isinstance(scene.support, Table):
         raise ConfigError("fell_off", f"{scene.name!r} stands on a floor: nothing can fall off it (ask it of a "
                                       "scene on a table)")

@@ -83,8 +83,10 @@ class RosHarness:
 
     def close(self) -> None:
         self.executor.shutdown(timeout_sec=5.0)
+        # the spin thread may still be finishing a callback that touches a node's handles: let it
+        # leave before the nodes go (else rclpy's InvalidHandle in that thread)
+        self._thread.join(10.0)
         for node in self._nodes:
             node.destroy_node()
         self.client.destroy_node()
         rclpy.try_shutdown(context=self.context)
-        self._thread.join(10.0)

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from collections import Counter
@@ -26,20 +25,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, preset  # noqa: E402
+from accuracy_vs_time import REPO, SIGMA_M, load_towers  # noqa: E402 - the same towers and noise
+from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, preset  # noqa: E402
 from ipe_ros.engine.fidelity import DEFAULT_CHECK, NO_CHECK  # noqa: E402
-from ipe_ros.engine.generators import generate_towers  # noqa: E402
 from ipe_ros.engine.sampler import predict  # noqa: E402
 
 PARTS = ("fast + verification", "last quarter + coverage", "confirmation or coverage round", "escalation")
-
-
-def _towers(count: int):
-    path = Path(os.environ.get("IPE_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared/data/battaglia2013"))
-    csv = path / "willitfall.csv"
-    if csv.exists():
-        return load_scenes(csv)[:count], str(csv)
-    return generate_towers(2013, count), "generated towers (seed 2013)"
 
 
 def _part(n: int, tasks: int, references: int, samples: int) -> str:
@@ -58,9 +49,9 @@ def main() -> int:
     parser.add_argument("--towers", type=int, default=60)
     parser.add_argument("--samples", type=int, default=48)
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "benchmarks/results/check_cost"))
+    parser.add_argument("--out", default=str(REPO / "benchmarks/results/check_cost"))
     args = parser.parse_args()
-    towers, source = _towers(args.towers)
+    towers, _, source = load_towers(args.towers)
     query = QuerySpec(queries=frozenset({"fall"}))
     settings = preset("default")
     rows = []
@@ -76,8 +67,8 @@ def main() -> int:
                           time.perf_counter() - start))
             return out
 
-        model = ModelConfig(sigma_m=0.04, samples=args.samples)
-        predict(towers[0], ModelConfig(sigma_m=0.04, samples=2), settings, query, map_fn=timed_map)  # imports, caches
+        model = ModelConfig(sigma_m=SIGMA_M, samples=args.samples)
+        predict(towers[0], ModelConfig(sigma_m=SIGMA_M, samples=2), settings, query, map_fn=timed_map)  # imports, caches
         for i, tower in enumerate(towers):
             walls = {}
             for name, check in (("unchecked", NO_CHECK), ("checked", DEFAULT_CHECK)):
@@ -108,7 +99,7 @@ def main() -> int:
     (out / "check_cost.json").write_text(json.dumps({"summary": summary, "towers": rows}, indent=1) + "\n")
     lines = [f"# Where the self-check's time goes ({summary['date']})", "",
              f"`.venv/bin/python benchmarks/check_cost.py --towers {args.towers} --samples {args.samples}`; {source}, "
-             f"k = {args.samples}, sigma 0.04 m, queries fall, `default`, {args.workers} workers, unchecked and checked "
+             f"k = {args.samples}, sigma {SIGMA_M:g} m, queries fall, `default`, {args.workers} workers, unchecked and checked "
              "one after the other on the same seeds.", "",
              f"Unchecked {unchecked:.2f} s per prediction, checked {checked:.2f} s ({checked / unchecked:.2f}x); "
              f"{summary['reference_reruns_per_prediction']:.2f} reference reruns per prediction; verdicts "

@@ -72,18 +72,23 @@ def _family(pid: int) -> list[int]:
     return found
 
 
+def _stop(node: subprocess.Popen) -> int:
+    """SIGINT the node, kill it (our own child, by its pid) if it is not gone in 30 s; its exit code."""
+    node.send_signal(signal.SIGINT)
+    try:
+        return node.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        node.kill()
+        return node.wait()
+
+
 @contextlib.contextmanager
 def _ended_on_error(node: subprocess.Popen):
-    """End the node (our own child, by its pid) when the driver fails before stopping it itself."""
+    """End the node when the driver fails before stopping it itself."""
     try:
         yield
     except BaseException:
-        node.send_signal(signal.SIGINT)
-        try:
-            node.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            node.kill()
-            node.wait()
+        _stop(node)
         raise
 
 
@@ -310,12 +315,7 @@ def main() -> int:
             time.sleep(0.5)
     family = _family(node.pid)
     stop_started = time.monotonic()
-    node.send_signal(signal.SIGINT)
-    try:
-        code = node.wait(timeout=30)
-    except subprocess.TimeoutExpired:
-        node.kill()  # our own child, by pid
-        code = node.wait()
+    code = _stop(node)
     exit_s = time.monotonic() - stop_started
     time.sleep(1.0)
     left = [pid for pid in family if Path(f"/proc/{pid}").exists()

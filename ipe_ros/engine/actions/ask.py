@@ -53,8 +53,7 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     check_fidelity_request(check)
     for i, action in enumerate(actions):
         _check_action(scene, action, f"actions[{i}]")
-        if not model.object_noise and isinstance(action, Push) and (action.direction_sigma_rad
-                                                                     or action.speed_sigma_fraction):
+        if not model.object_noise and isinstance(action, Push) and _draws_noise(scene, action, model):
             raise ConfigError(f"actions[{i}]", "the ground truth takes a push exactly as given, but this one has "
                                                "noise of its own (a direction or speed sigma); drop it, or ask "
                                                "without the ground truth")

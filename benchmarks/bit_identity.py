@@ -5,9 +5,12 @@
 
 Each case is one prediction (paper towers from ../shared/data/battaglia2013/stability_all_towers.csv,
 or generated towers without it; generated Exp. 5 tables): presets default, fine and paper, the fall,
-any_fall, direction/far and bump queries, phi > 0, mu, the ground truth and recorded trajectories.
-A digest hashes every sample's initial and final poses, simulated time and trajectory, and the
-answer's fields, so equal digests mean bit-identical answers. Exit status 1 when any digest differs.
+any_fall, direction/far and bump queries, phi > 0, mu, the ground truth and recorded trajectories;
+and robot questions (remove, support, place, push; each with and without the self-check) on a
+generated tower. A prediction's digest hashes every sample's initial and final poses, simulated time
+and trajectory, and the answer's fields; a question's hashes its JSON answer without wall-clock times
+and the trajectories of its recorded samples. Equal digests mean bit-identical answers. Exit status 1
+when any digest differs.
 """
 
 from __future__ import annotations
@@ -22,6 +25,8 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 from ipe_ros.analysis.paper_data import shared_data_dir  # noqa: E402
 from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes, predict, preset  # noqa: E402
+from ipe_ros.engine.actions import answer_question  # noqa: E402
+from ipe_ros.engine.fidelity import DEFAULT_CHECK  # noqa: E402
 from ipe_ros.engine.generators import generate_tables, generate_towers  # noqa: E402
 
 ANSWER_FIELDS = ("fall_fraction", "fall_fraction_ci95", "object_fall_probability", "any_fall_probability",
@@ -29,9 +34,8 @@ ANSWER_FIELDS = ("fall_fraction", "fall_fraction_ci95", "object_fall_probability
                  "bump_ratio", "samples", "failed_samples", "failure_reasons")
 
 
-def digest(prediction) -> str:
-    h = hashlib.sha256()
-    for o in prediction.outcomes:
+def _hash_outcomes(h, outcomes) -> None:
+    for o in outcomes:
         h.update(repr((o.index, o.ok, o.error, o.push_direction_rad)).encode())
         if o.ok:
             h.update(o.initial_positions_m.tobytes())
@@ -43,6 +47,11 @@ def digest(prediction) -> str:
                 for t, positions, _ in r.trajectory or ():
                     h.update(repr(t).encode())
                     h.update(positions.tobytes())
+
+
+def digest(prediction) -> str:
+    h = hashlib.sha256()
+    _hash_outcomes(h, prediction.outcomes)
     answer = {k: getattr(prediction, k) for k in ANSWER_FIELDS}
     h.update(json.dumps(answer, sort_keys=True, default=list).encode())
     return h.hexdigest()[:16]
@@ -69,6 +78,48 @@ def cases():
         yield f"default/{table.name}/bump", table, model, "default", {"bump"}, 0
 
 
+#: robot questions as a robot sends them (the node's ~/ask JSON), on a generated tower
+QUESTIONS = {
+    "remove": {"question": "remove", "samples": 8},
+    "remove_safe": {"question": "remove", "safe_below": 0.05, "samples": 8},
+    "support": {"question": "support", "samples": 8},
+    "place": {"question": "place", "object": {"name": "new", "shape": {"type": "box", "extents_m": [0.1, 0.1, 0.1]},
+                                              "mass_kg": 1.0, "friction": 0.5, "restitution": 0.0},
+              "at": [[0.0, 0.0, 30.0], [0.3, 0.1, 0.0]], "samples": 8, "what_falls": True},
+    "push": {"question": "push", "object": "block2", "velocity_m_s": [0.4, 0.0], "direction_sigma_deg": 5.0,
+             "speed_sigma": 0.1, "samples": 8},
+}
+
+
+def _without_times(value):
+    """A JSON answer without its wall-clock fields (they differ run to run)."""
+    if isinstance(value, dict):
+        return {k: _without_times(v) for k, v in value.items() if not (k == "wall_s" or k.endswith("wall_s"))}
+    if isinstance(value, list):
+        return [_without_times(v) for v in value]
+    return value
+
+
+def question_digest(reply: dict, answers) -> str:
+    h = hashlib.sha256()
+    h.update(json.dumps(_without_times(reply), sort_keys=True, default=list).encode())
+    for label, rows in sorted((answers.recorded if answers is not None else {}).items()):
+        h.update(label.encode())
+        h.update(repr([index for index, _ in rows]).encode())
+        _hash_outcomes(h, [outcome for _, outcome in rows])
+    return h.hexdigest()[:16]
+
+
+def question_cases():
+    from ipe_ros.engine.question_io import question_from_dict
+    tower = generate_towers(2013, 1)[0]
+    model = ModelConfig(sigma_m=0.04, samples=8)
+    for name, data in QUESTIONS.items():
+        for checked in (False, True):
+            question = question_from_dict({**data, "self_check": checked})
+            yield f"question/{name}" + ("/checked" if checked else ""), tower, question, model
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("out")
@@ -80,6 +131,11 @@ def main() -> int:
         p = predict(scene, model, preset(preset_name), QuerySpec(queries=frozenset(queries)), seed=7,
                     record_every=record_every, check=None)
         result[key] = digest(p)
+        print(key, result[key], flush=True)
+    for key, scene, question, model in question_cases():
+        reply, answers = answer_question(scene, question, model, preset("default"), seed=7, check=DEFAULT_CHECK,
+                                          record_every=8, record_samples=2)
+        result[key] = question_digest(reply, answers)
         print(key, result[key], flush=True)
     with open(args.out, "w") as handle:
         json.dump(result, handle, indent=1)

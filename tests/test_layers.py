@@ -133,3 +133,150 @@ def test_starting_the_cli_or_the_node_imports_nothing_heavy_it_may_not_need(modu
     loaded = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
     assert loaded.returncode == 0, loaded.stderr
     assert loaded.stdout.strip() == ""
+
+
+# -- one house: no import circles, no private names across modules -----------------------------------------
+PACKAGES = ("ipe_ros", "msg_bridge")
+
+
+def _internal_modules() -> dict[str, Path]:
+    return {_module_name(path): path for package in PACKAGES for path in sorted((REPO / package).rglob("*.py"))}
+
+
+def _known(module: str, known) -> str | None:
+    """The longest internal module a dotted import name falls in (None: not ours)."""
+    while module and module not in known:
+        module = module.rpartition(".")[0]
+    return module or None
+
+
+def imported_modules(path: Path, known) -> set[str]:
+    """The internal modules a file imports (function-local and TYPE_CHECKING imports included).
+    ``from package import module`` imports the module, not the package's ``__init__`` (which Python
+    has begun importing already); ``from package import name`` imports the package."""
+    here = _module_name(path)
+    package = here if path.name == "__init__.py" else here.rpartition(".")[0]
+    targets = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            targets.update(_known(alias.name, known) for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[:len(package.split(".")) - (node.level - 1)]
+                base = ".".join(anchor + ([base] if base else []))
+            names = [f"{base}.{alias.name}" for alias in node.names]
+            targets.update(n for n in names if n in known)
+            if any(n not in known for n in names):
+                targets.add(_known(base, known))
+    return {t for t in targets if t and t != here}
+
+
+def import_graph(modules: dict[str, Path]) -> dict[str, set[str]]:
+    """module -> the internal modules it imports."""
+    return {name: imported_modules(path, modules) for name, path in modules.items()}
+
+
+def circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components of more than one module (Tarjan's algorithm, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found = []
+    for start in sorted(graph):
+        if start in index:
+            continue
+        index[start] = low[start] = len(index)
+        stack.append(start)
+        on_stack.add(start)
+        work = [(start, iter(sorted(graph[start])))]
+        while work:
+            node, successors = work[-1]
+            for successor in successors:
+                if successor not in index:
+                    index[successor] = low[successor] = len(index)
+                    stack.append(successor)
+                    on_stack.add(successor)
+                    work.append((successor, iter(sorted(graph.get(successor, ())))))
+                    break
+                if successor in on_stack:
+                    low[node] = min(low[node], index[successor])
+            else:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[node])
+                if low[node] == index[node]:
+                    component = []
+                    while True:
+                        member = stack.pop()
+                        on_stack.discard(member)
+                        component.append(member)
+                        if member == node:
+                            break
+                    if len(component) > 1:
+                        found.append(sorted(component))
+    return found
+
+
+def private_names_across_modules(path: Path, known) -> list[str]:
+    """``from ours import _name`` and ``ours_module._name`` in one file, for modules other than itself."""
+    here = _module_name(path)
+    package = here if path.name == "__init__.py" else here.rpartition(".")[0]
+    tree = ast.parse(path.read_text(), str(path))
+    bound: dict[str, str] = {}  # local name -> the internal module it is
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[:len(package.split(".")) - (node.level - 1)]
+                base = ".".join(anchor + ([base] if base else []))
+            for alias in node.names:
+                full = f"{base}.{alias.name}"
+                if full in known:
+                    bound[alias.asname or alias.name] = full
+                elif _known(base, known) and base != here and alias.name.startswith("_") \
+                        and not alias.name.startswith("__"):
+                    found.append(f"{here} imports {alias.name} from {base}")
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name in known and alias.asname:
+                    bound[alias.asname] = alias.name
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in bound \
+                and node.attr.startswith("_") and not node.attr.startswith("__") and bound[node.value.id] != here:
+            found.append(f"{here} reads {node.attr} of {bound[node.value.id]}")
+    return found
+
+
+def test_no_import_circles_inside_the_package():
+    """A circle means two modules can be understood, tested and changed only together; the checker
+    reads imports inside functions and under TYPE_CHECKING too (a circle hidden there is one still)."""
+    assert circles(import_graph(_internal_modules())) == []
+
+
+def test_no_private_name_is_used_outside_its_module():
+    """A name that begins with ``_`` is its module's own: another module that needs it needs it public."""
+    modules = _internal_modules()
+    found = [line for path in modules.values() for line in private_names_across_modules(path, modules)]
+    assert found == []
+
+
+def test_the_circle_and_private_name_checkers_are_not_blind(tmp_path):
+    pkg = tmp_path / "ipe_ros"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("from .b import thing\n")
+    (pkg / "b.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from .c import other\n")
+    (pkg / "c.py").write_text("def f():\n    from . import a\n    return a._hidden\n")
+    (pkg / "d.py").write_text("from .a import _secret\n")
+    global REPO
+    saved, REPO = REPO, tmp_path
+    try:
+        modules = {_module_name(p): p for p in sorted(pkg.rglob("*.py"))}
+        assert circles(import_graph(modules)) == [["ipe_ros.a", "ipe_ros.b", "ipe_ros.c"]]
+        found = sorted(line for p in modules.values() for line in private_names_across_modules(p, modules))
+        assert found == ["ipe_ros.c reads _hidden of ipe_ros.a", "ipe_ros.d imports _secret from ipe_ros.a"]
+    finally:
+        REPO = saved

@@ -27,11 +27,11 @@ def test_the_committed_schema_is_the_generated_one_and_a_valid_schema():
 
 def test_schema_and_reader_name_the_same_fields():
     defs = scene_schema()["$defs"]
-    assert set(defs["object"]["properties"]) == set(io._OBJECT_REQUIRED) | set(io._OBJECT_OPTIONAL)
-    assert set(defs["object"]["required"]) == set(io._OBJECT_REQUIRED)
-    assert set(defs["scene"]["properties"]) == {"format", "horizon_s", *io._SCENE_REQUIRED}
-    assert set(defs["floor"]["properties"]) == set(io._FLOOR_FIELDS)
-    assert set(defs["table"]["properties"]) == set(io._TABLE_FIELDS)
+    assert set(defs["object"]["properties"]) == set(io.OBJECT_REQUIRED) | set(io._OBJECT_OPTIONAL)
+    assert set(defs["object"]["required"]) == set(io.OBJECT_REQUIRED)
+    assert set(defs["scene"]["properties"]) == {"format", "horizon_s", *io.SCENE_REQUIRED}
+    assert set(defs["floor"]["properties"]) == set(io.FLOOR_FIELDS)
+    assert set(defs["table"]["properties"]) == set(io.TABLE_FIELDS)
     for kind, fields in io._SHAPE_FIELDS.items():
         assert set(defs[kind]["properties"]) == {"type", *fields}, kind
 

@@ -31,7 +31,7 @@ from ..engine import ModelConfig, Prediction, QuerySpec, Scene, SimSettings, pre
 from ..engine.estimate import sample_fall_fraction, sample_far_m
 from ..engine.generators import generate_towers
 from ..engine.perturb import is_deterministic
-from ..engine.rollout import SampleOutcome
+from ..engine.outcome import SampleOutcome
 from ..engine.scene_io import scenes_from_tower_csv
 from ..engine.store import ResumableMap
 from .reporting import steps

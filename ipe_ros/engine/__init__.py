@@ -3,7 +3,8 @@
 Importing this package never imports rclpy or any ROS message package (a test checks it).
 """
 
-from .config import ALL_QUERIES, PRESETS, ModelConfig, QuerySpec, SimSettings, parse_queries, preset
+from .config import PRESETS, ModelConfig, SimSettings, preset
+from .query import ALL_QUERIES, QuerySpec, parse_queries
 from .errors import ConfigError, PhysicsError, SceneError
 from .estimate import Prediction
 from .pool import WorkerPool

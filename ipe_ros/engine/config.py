@@ -25,11 +25,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from . import limits
+from .checks import at_most, boolean, integer, non_negative, positive
 from .errors import ConfigError, shown
-
-#: Every query the engine can answer, one module each in engine/query (fall, any_fall, direction,
-#: far, bump, contact, rest, final_pose).
-from .query import ALL_QUERIES, QUERIES  # noqa: E402
 
 #: The paper's IPE, as the CLI, the node and the service answer by default: sigma = 0.2 block short
 #: sides (0.04 m for 0.2 m blocks), k = 48 samples, the fall fraction, the probability that anything
@@ -60,33 +57,6 @@ def default_workers() -> int:
     return max(1, min(os.cpu_count() or 1, 8))
 
 
-def _boolean(value: Any, field: str) -> None:
-    if not isinstance(value, bool):
-        raise ConfigError(field, f"must be true or false, got {shown(value)}")
-
-
-def _positive(value: float, field: str) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-            or value <= 0:
-        raise ConfigError(field, f"must be a finite number > 0, got {shown(value)}")
-
-
-def _non_negative(value: float, field: str) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-            or value < 0:
-        raise ConfigError(field, f"must be a finite number >= 0, got {shown(value)}")
-
-
-def _at_most(value: float, field: str, limit: float, unit: str) -> None:
-    if value > limit:
-        raise ConfigError(field, f"must be at most {limit:g} {unit}, got {shown(value)}")
-
-
-def _integer(value: Any, field: str, lo: int, hi: int, meaning: str = "") -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
-        raise ConfigError(field, f"must be an integer in [{lo}, {hi}]{meaning}, got {shown(value)}")
-
-
 @dataclass(frozen=True)
 class ModelConfig:
     """The IPE's inputs (paper SI, "Inputs") and its sample count k."""
@@ -108,24 +78,24 @@ class ModelConfig:
     object_noise: bool = True
 
     def __post_init__(self) -> None:
-        _non_negative(self.sigma_m, "sigma_m")
-        _at_most(self.sigma_m, "sigma_m", limits.MAX_SIGMA_M, "m (check the units)")
+        non_negative(self.sigma_m, "sigma_m")
+        at_most(self.sigma_m, "sigma_m", limits.MAX_SIGMA_M, "m (check the units)")
         if not isinstance(self.phi_m_s2, tuple) or not self.phi_m_s2:
             raise ConfigError("phi_m_s2", f"must be a non-empty tuple of accelerations, got {shown(self.phi_m_s2)}")
         for value in self.phi_m_s2:
-            _non_negative(value, "phi_m_s2")
-            _at_most(value, "phi_m_s2", limits.MAX_PHI_M_S2, "m/s^2 (10 g)")
+            non_negative(value, "phi_m_s2")
+            at_most(value, "phi_m_s2", limits.MAX_PHI_M_S2, "m/s^2 (10 g)")
         if self.force_direction_rad is not None and (
                 isinstance(self.force_direction_rad, bool) or not math.isfinite(self.force_direction_rad)):
             raise ConfigError("force_direction_rad", f"must be a finite angle or None, got {shown(self.force_direction_rad)}")
         if not 0 <= self.cue_half_width_rad <= math.pi:
             raise ConfigError("cue_half_width_rad", f"must be in [0, pi], got {shown(self.cue_half_width_rad)}")
-        _positive(self.push_duration_s, "push_duration_s")
+        positive(self.push_duration_s, "push_duration_s")
         if self.mu is not None:
-            _positive(self.mu, "mu")
-            _at_most(self.mu, "mu", limits.MAX_MASS_RATIO, "(the solver's mass-ratio limit)")
-        _integer(self.samples, "samples", 1, 100_000)
-        _boolean(self.object_noise, "object_noise")
+            positive(self.mu, "mu")
+            at_most(self.mu, "mu", limits.MAX_MASS_RATIO, "(the solver's mass-ratio limit)")
+        integer(self.samples, "samples", 1, 100_000)
+        boolean(self.object_noise, "object_noise")
         if self.perception not in PERCEPTIONS:
             raise ConfigError("perception", f"must be one of {', '.join(PERCEPTIONS)}, got {shown(self.perception)}")
 
@@ -193,11 +163,11 @@ class SolverSettings:
     direct_solver_max_mass_ratio: float = 100.0
 
     def __post_init__(self) -> None:
-        _integer(self.iterations, "solver.iterations", 1, 10_000)
-        _non_negative(self.iterations_per_mass_ratio, "solver.iterations_per_mass_ratio")
-        _integer(self.max_iterations, "solver.max_iterations", 1, 100_000)
+        integer(self.iterations, "solver.iterations", 1, 10_000)
+        non_negative(self.iterations_per_mass_ratio, "solver.iterations_per_mass_ratio")
+        integer(self.max_iterations, "solver.max_iterations", 1, 100_000)
 
-        _positive(self.residual_threshold, "solver.residual_threshold")
+        positive(self.residual_threshold, "solver.residual_threshold")
         if not 0 <= self.warm_start_factor <= 1:
             raise ConfigError("solver.warm_start_factor", f"must be in [0, 1], got {shown(self.warm_start_factor)}")
 
@@ -215,8 +185,8 @@ class DepenetrationSettings:
     max_iterations: int = 200
 
     def __post_init__(self) -> None:
-        _positive(self.tolerance_fraction, "depenetration.tolerance_fraction")
-        _integer(self.max_iterations, "depenetration.max_iterations", 1, 100_000)
+        positive(self.tolerance_fraction, "depenetration.tolerance_fraction")
+        integer(self.max_iterations, "depenetration.max_iterations", 1, 100_000)
 
 
 @dataclass(frozen=True)
@@ -232,8 +202,8 @@ class SettlingSettings:
     substeps: int = 1
 
     def __post_init__(self) -> None:
-        _non_negative(self.duration_s, "settling.duration_s")
-        _integer(self.substeps, "settling.substeps", 1, 100, " (1: no settling substeps)")
+        non_negative(self.duration_s, "settling.duration_s")
+        integer(self.substeps, "settling.substeps", 1, 100, " (1: no settling substeps)")
 
 
 @dataclass(frozen=True)
@@ -298,14 +268,14 @@ class CollapseSettings:
     quiet_sizes_per_s: float = 1.0
 
     def __post_init__(self) -> None:
-        _integer(self.step_factor, "collapse.step_factor", 1, 100, " (1: no collapse steps)")
+        integer(self.step_factor, "collapse.step_factor", 1, 100, " (1: no collapse steps)")
         if self.solver_iterations is not None:
-            _integer(self.solver_iterations, "collapse.solver_iterations", 1, 10_000, " or None")
-        _positive(self.drop_fraction, "collapse.drop_fraction")
-        _non_negative(self.fine_before_end_s, "collapse.fine_before_end_s")
-        _integer(self.end_substeps, "collapse.end_substeps", 1, 16)
-        _positive(self.max_created_energy_fraction, "collapse.max_created_energy_fraction")
-        _positive(self.quiet_sizes_per_s, "collapse.quiet_sizes_per_s")
+            integer(self.solver_iterations, "collapse.solver_iterations", 1, 10_000, " or None")
+        positive(self.drop_fraction, "collapse.drop_fraction")
+        non_negative(self.fine_before_end_s, "collapse.fine_before_end_s")
+        integer(self.end_substeps, "collapse.end_substeps", 1, 16)
+        positive(self.max_created_energy_fraction, "collapse.max_created_energy_fraction")
+        positive(self.quiet_sizes_per_s, "collapse.quiet_sizes_per_s")
 
     @property
     def enabled(self) -> bool:
@@ -337,11 +307,11 @@ class EarlyStopSettings:
     max_penetration_fraction: float = 0.05
 
     def __post_init__(self) -> None:
-        _positive(self.max_penetration_fraction, "early_stop.max_penetration_fraction")
-        _boolean(self.enabled, "early_stop.enabled")
+        positive(self.max_penetration_fraction, "early_stop.max_penetration_fraction")
+        boolean(self.enabled, "early_stop.enabled")
         for name in ("speed_sizes_per_s", "angular_rad_s", "duration_s"):
-            _positive(getattr(self, name), f"early_stop.{name}")
-        _non_negative(self.min_time_s, "early_stop.min_time_s")
+            positive(getattr(self, name), f"early_stop.{name}")
+        non_negative(self.min_time_s, "early_stop.min_time_s")
         if not isinstance(self.growth_factor, (int, float)) or not 1 <= self.growth_factor < 10:
             raise ConfigError("early_stop.growth_factor", f"must be in [1, 10), got {shown(self.growth_factor)}")
 
@@ -385,12 +355,12 @@ class SimSettings:
     early_stop: EarlyStopSettings = EarlyStopSettings()
 
     def __post_init__(self) -> None:
-        _positive(self.time_step_s, "time_step_s")
-        _positive(self.horizon_s, "horizon_s")
-        _positive(self.max_step_fraction_of_time_scale, "max_step_fraction_of_time_scale")
-        _positive(self.max_travel_fraction, "max_travel_fraction")
-        _positive(self.min_contact_fraction, "min_contact_fraction")
-        _integer(self.max_substeps, "max_substeps", 1, 1000)
+        positive(self.time_step_s, "time_step_s")
+        positive(self.horizon_s, "horizon_s")
+        positive(self.max_step_fraction_of_time_scale, "max_step_fraction_of_time_scale")
+        positive(self.max_travel_fraction, "max_travel_fraction")
+        positive(self.min_contact_fraction, "min_contact_fraction")
+        integer(self.max_substeps, "max_substeps", 1, 1000)
         if self.time_step_s > self.horizon_s:
             raise ConfigError("time_step_s", "must not exceed horizon_s")
         for group, kind in _GROUPS.items():
@@ -473,56 +443,3 @@ def preset(name: str) -> SimSettings:
         return PRESETS[name]
     except KeyError:
         raise ConfigError("preset", f"unknown preset {shown(name)}; choose one of {', '.join(PRESETS)}") from None
-
-
-@dataclass(frozen=True)
-class QuerySpec:
-    """Which queries to compute and their thresholds.
-
-    fall_threshold_fraction: an object has fallen when its centre's z dropped by more than this
-        fraction of its own smallest extent. The default 0.125 is the paper's "0.025 unit" read in
-        the stimulus files' units (0.025 m on 0.2 m blocks).
-    bump_group: the group whose share of fallen-off objects the ``bump`` query reports (paper:
-        red / (red + yellow)).
-    """
-
-    queries: frozenset[str] = frozenset({"fall"})
-    fall_threshold_fraction: float = 0.125
-    bump_group: str = "red"
-    #: the contact query's pairs (A, B): B may be "support"
-    contact_pairs: tuple[tuple[str, str], ...] = ()
-    #: the rest query: at rest when slower than this many of the scene's smallest extents per
-    #: second and ``rest_spin_rad_s`` (the strict reading the self-check's reference uses)
-    rest_speed_sizes_per_s: float = 0.05
-    rest_spin_rad_s: float = 0.05
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.queries, frozenset) or not all(isinstance(q, str) for q in self.queries):
-            raise ConfigError("queries", f"must be a set of query names from {', '.join(ALL_QUERIES)}")
-        unknown = sorted(set(self.queries) - set(QUERIES))
-        if unknown:
-            raise ConfigError("queries", f"unknown query {shown(unknown[0])}; choose from {', '.join(ALL_QUERIES)}")
-        if not self.queries:
-            raise ConfigError("queries", f"ask for at least one of {', '.join(ALL_QUERIES)}")
-        _positive(self.fall_threshold_fraction, "fall_threshold_fraction")
-        _positive(self.rest_speed_sizes_per_s, "rest_speed_sizes_per_s")
-        _positive(self.rest_spin_rad_s, "rest_spin_rad_s")
-        if not isinstance(self.contact_pairs, tuple) or not all(
-                isinstance(pair, tuple) and len(pair) == 2 and all(isinstance(n, str) and n for n in pair)
-                for pair in self.contact_pairs):
-            raise ConfigError("contact", "pairs must be a tuple of (A, B) object names")
-        if self.contact_pairs and "contact" not in self.queries:
-            raise ConfigError("contact", "pairs were given but the contact query was not asked; add contact "
-                                         "to the queries")
-        if len(set(self.contact_pairs)) != len(self.contact_pairs):
-            raise ConfigError("contact", "a pair is asked twice; ask each once")
-
-    def wants(self, name: str) -> bool:
-        return name in self.queries
-
-
-def parse_queries(text: str) -> frozenset[str]:
-    """``"fall,direction"`` -> frozenset; raises ConfigError for unknown names."""
-    names = frozenset(part.strip() for part in text.split(",") if part.strip())
-    QuerySpec(queries=names)  # validates
-    return names

@@ -9,12 +9,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
-from .config import QuerySpec
-from .query import ANSWER_FIELDS, QUERIES, Samples
+from .query import ANSWER_FIELDS, QUERIES, QuerySpec, Samples
 from .query.any_fall import sample_any_fall  # noqa: F401 - re-exported
 from .query.fall import sample_fall_fraction  # noqa: F401 - re-exported
 from .query.far import sample_far_m  # noqa: F401 - re-exported
-from .rollout import SampleOutcome
+from .outcome import SampleOutcome
 from .scene import Scene
 from .stats import Z95, circular_mean, half_circle_decisiveness, mean_interval, wilson_interval  # noqa: F401
 

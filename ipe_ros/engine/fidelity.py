@@ -47,10 +47,11 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .config import PRESETS, SimSettings, _boolean, _integer, _positive
+from .checks import boolean, integer, positive
+from .config import PRESETS, SimSettings
 from .errors import ConfigError, shown
 from .query import QUERIES
-from .rollout import SampleOutcome
+from .outcome import SampleOutcome
 from .scene import Scene
 
 #: The verdicts, from best to worst for a robot about to act.
@@ -113,17 +114,17 @@ class SelfCheck:
     max_energy_gain_fraction: float = 0.01
 
     def __post_init__(self) -> None:
-        _boolean(self.enabled, "self_check.enabled")
-        _integer(self.verify_samples, "self_check.verify_samples", 0, 1000)
-        _integer(self.confirm_samples, "self_check.confirm_samples", 0, 1000)
-        _integer(self.confirm_rounds, "self_check.confirm_rounds", 0, 100)
-        _integer(self.escalate_min_samples, "self_check.escalate_min_samples", 1, 1000)
-        _integer(self.cover_samples, "self_check.cover_samples", 0, 1000)
+        boolean(self.enabled, "self_check.enabled")
+        integer(self.verify_samples, "self_check.verify_samples", 0, 1000)
+        integer(self.confirm_samples, "self_check.confirm_samples", 0, 1000)
+        integer(self.confirm_rounds, "self_check.confirm_rounds", 0, 100)
+        integer(self.escalate_min_samples, "self_check.escalate_min_samples", 1, 1000)
+        integer(self.cover_samples, "self_check.cover_samples", 0, 1000)
         if isinstance(self.escalate_share, bool) or not isinstance(self.escalate_share, (int, float)) \
                 or not 0 < self.escalate_share <= 1:
             raise ConfigError("self_check.escalate_share", f"must be in (0, 1], got {shown(self.escalate_share)}")
-        _positive(self.max_end_penetration_fraction, "self_check.max_end_penetration_fraction")
-        _positive(self.max_energy_gain_fraction, "self_check.max_energy_gain_fraction")
+        positive(self.max_end_penetration_fraction, "self_check.max_end_penetration_fraction")
+        positive(self.max_energy_gain_fraction, "self_check.max_energy_gain_fraction")
 
 
 DEFAULT_CHECK = SelfCheck()

@@ -12,8 +12,7 @@ from . import limits
 from .errors import ConfigError, shown
 from .query.contact import parse_pair
 from .scene import Body, validate_body
-from .actions.kinds import DEFAULT_SAFE_BELOW, DEFAULT_SUPPORT_THRESHOLD, Push, Region
-from .actions.questions import _NO_OBJECTS, _check_level
+from .actions.kinds import DEFAULT_SAFE_BELOW, DEFAULT_SUPPORT_THRESHOLD, NO_OBJECTS, Push, Region, check_level
 
 
 # -- questions as data (the node's ~/ask, scripts) ------------------------------------------------------
@@ -126,16 +125,16 @@ def question_from_dict(data) -> Question:
         if objects is not None and (not isinstance(objects, list) or not all(isinstance(o, str) for o in objects)):
             raise ConfigError("objects", "must be a list of object names")
         if objects == []:  # refused when read, before the question waits its turn (remove() refuses it too)
-            raise ConfigError("objects", _NO_OBJECTS)
+            raise ConfigError("objects", NO_OBJECTS)
         safe_below = _field(data, "safe_below", float, None)
         if safe_below is not None:
-            _check_level("safe_below", safe_below)
+            check_level("safe_below", safe_below)
         return Question(objects=None if objects is None else tuple(objects), safe_below=safe_below, **common)
     if kind == "support":
         question = Question(threshold=_field(data, "threshold", float, DEFAULT_SUPPORT_THRESHOLD),
                             safe_below=_field(data, "safe_below", float, DEFAULT_SAFE_BELOW), **common)
-        _check_level("threshold", question.threshold)
-        _check_level("safe_below", question.safe_below)
+        check_level("threshold", question.threshold)
+        check_level("safe_below", question.safe_below)
         return question
     if kind == "clear":
         return Question(target=_field(data, "target", str), **common)

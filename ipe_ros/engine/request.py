@@ -13,9 +13,10 @@ from dataclasses import dataclass
 from typing import Any, Iterable
 
 from .config import (DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M, ModelConfig,
-                     QuerySpec, SimSettings, preset)
+                     SimSettings, preset)
 from .errors import ConfigError, shown
 from .fidelity import DEFAULT_CHECK, SelfCheck
+from .query import QuerySpec
 from .sampler import AdaptiveStop, check_budget, check_ci_width
 
 

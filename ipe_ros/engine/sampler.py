@@ -16,7 +16,7 @@ from typing import Callable, Generator, Sequence
 
 import numpy as np
 
-from .config import ModelConfig, QuerySpec, SimSettings
+from .config import ModelConfig, SimSettings
 from .errors import ConfigError, shown
 from .estimate import Prediction, aggregate, sample_any_fall, sample_fall_fraction, wilson_interval
 from .fidelity import check_request as check_fidelity_request
@@ -25,7 +25,7 @@ from .fidelity import (DEFAULT_CHECK, NO_CHECK, FidelityReport, SelfCheck, confi
                        outcome_flags, reference_settings, scale_of, suspect, unhealthy, verification_count)
 from .perturb import is_deterministic
 from .rollout import SampleOutcome, SampleTask, failed, run_sample
-from .query import QUERIES
+from .query import QUERIES, QuerySpec
 from .scene import DEFAULT_MAX_OBJECTS, Scene, validate_scene
 
 MapFn = Callable[..., list]

@@ -57,15 +57,15 @@ SCENE_FORMAT_V1 = "ipe_ros.scene/1"
 
 _BOX_REQUIRED = ("name", "extents_m", "position_m", "orientation_xyzw", "friction", "restitution")
 _BOX_OPTIONAL = ("mass_kg", "density_kg_m3", "group", "static")
-_OBJECT_REQUIRED = ("name", "shape", "position_m", "orientation_xyzw", "friction", "restitution")
+OBJECT_REQUIRED = ("name", "shape", "position_m", "orientation_xyzw", "friction", "restitution")
 _OBJECT_OPTIONAL = ("mass_kg", "density_kg_m3", "group", "static", "linear_velocity_m_s", "angular_velocity_rad_s",
                     "position_sigma_m", "yaw_sigma_rad")
 _SHAPE_FIELDS = {"box": ("extents_m",), "sphere": ("radius_m",), "cylinder": ("radius_m", "length_m"),
                  "capsule": ("radius_m", "length_m"), "convex": ("vertices_m",), "compound": ("parts",)}
-_FLOOR_FIELDS = ("type", "height_m", "friction", "restitution")
-_TABLE_FIELDS = ("type", "top_height_m", "size_m", "center_xy_m", "thickness_m", "friction",
+FLOOR_FIELDS = ("type", "height_m", "friction", "restitution")
+TABLE_FIELDS = ("type", "top_height_m", "size_m", "center_xy_m", "thickness_m", "friction",
                  "restitution", "floor_z_m", "obstacles")
-_SCENE_REQUIRED = ("name", "gravity_m_s2", "support", "objects")
+SCENE_REQUIRED = ("name", "gravity_m_s2", "support", "objects")
 _SCENE_REQUIRED_V1 = ("name", "gravity_m_s2", "support", "boxes")
 
 
@@ -239,7 +239,7 @@ def box_from_dict(data: Any, path: str) -> Body:
 def object_from_dict(data: Any, path: str) -> Body:
     """A ``/2`` object."""
     data = _require_mapping(data, path)
-    _check_keys(data, _OBJECT_REQUIRED, _OBJECT_OPTIONAL, path)
+    _check_keys(data, OBJECT_REQUIRED, _OBJECT_OPTIONAL, path)
     fields = _common_fields(data, path)
     sigma = data.get("position_sigma_m")
     if sigma is not None and not isinstance(sigma, list):
@@ -260,12 +260,12 @@ def _support_from_dict(data: Any, read_object) -> Floor | Table:
     data = _require_mapping(data, "support")
     kind = data.get("type")
     if kind == "floor":
-        _check_keys(data, _FLOOR_FIELDS, (), "support")
+        _check_keys(data, FLOOR_FIELDS, (), "support")
         return Floor(friction=_num(data["friction"], "support.friction"),
                      restitution=_num(data["restitution"], "support.restitution"),
                      height_m=_num(data["height_m"], "support.height_m"))
     if kind == "table":
-        _check_keys(data, _TABLE_FIELDS, (), "support")
+        _check_keys(data, TABLE_FIELDS, (), "support")
         obstacles = data["obstacles"]
         if not isinstance(obstacles, list):
             raise SceneError("support.obstacles", "must be a list of objects (may be empty)")
@@ -292,7 +292,7 @@ def scene_from_dict(data: Any, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scene:
         _check_keys(data, _SCENE_REQUIRED_V1, ("format",), "")
         key, read_object = "boxes", box_from_dict
     elif fmt == SCENE_FORMAT:
-        _check_keys(data, _SCENE_REQUIRED, ("format", "horizon_s"), "")
+        _check_keys(data, SCENE_REQUIRED, ("format", "horizon_s"), "")
         key, read_object = "objects", object_from_dict
     else:
         raise SceneError("format", f"unsupported format {shown(fmt)}; this version reads {shown(SCENE_FORMAT)} and "

@@ -109,10 +109,10 @@ def _object_properties() -> dict[str, Any]:
 def scene_schema() -> dict[str, Any]:
     """The JSON Schema of one scene file: a scene object or a list of them."""
     coordinate = limits.MAX_COORDINATE_M
-    obj = _closed(_object_properties(), io._OBJECT_REQUIRED, "a rigid body")
+    obj = _closed(_object_properties(), io.OBJECT_REQUIRED, "a rigid body")
     floor = _closed({"type": {"const": "floor"}, "height_m": _number("m", -coordinate, coordinate),
                      "friction": _number("Coulomb friction", 0.0, limits.MAX_FRICTION), "restitution": _number("restitution", 0.0, 1.0)},
-                    io._FLOOR_FIELDS, "an infinite horizontal plane")
+                    io.FLOOR_FIELDS, "an infinite horizontal plane")
     table = _closed({
         "type": {"const": "table"},
         "top_height_m": _number("m", -coordinate, coordinate),
@@ -127,7 +127,7 @@ def scene_schema() -> dict[str, Any]:
                                                            {"properties": {"static": {"const": True}},
                                                             "required": ["static"]}]},
                       "description": "static objects attached to the table"},
-    }, io._TABLE_FIELDS, "a table top of finite size: objects can fall off its edge")
+    }, io.TABLE_FIELDS, "a table top of finite size: objects can fall off its edge")
     scene = _closed({
         "format": {"const": io.SCENE_FORMAT},
         "name": _name("the scene's id in answers"),
@@ -141,7 +141,7 @@ def scene_schema() -> dict[str, Any]:
         "objects": {"type": "array", "items": {"$ref": "#/$defs/object"}, "minItems": 1,
                     "maxItems": DEFAULT_MAX_OBJECTS,
                     "description": f"at most max_objects ({DEFAULT_MAX_OBJECTS} by default), one dynamic at least"},
-    }, io._SCENE_REQUIRED, f"a scene in the {io.SCENE_FORMAT} format")
+    }, io.SCENE_REQUIRED, f"a scene in the {io.SCENE_FORMAT} format")
     shapes = _shapes()
     part = _closed({"shape": _by_type([k for k in shapes if k != "compound"]),
                     "position_m": _vector(3, "the part's origin in the object frame, m"),

@@ -174,7 +174,7 @@ class ResumableMap:
 @functools.cache
 def _result_types() -> dict[str, type]:
     """The dataclasses an entry may hold, by name (imported here: the vision package imports the engine)."""
-    from .rollout import RolloutResult, SampleOutcome
+    from .outcome import RolloutResult, SampleOutcome
     from .vision.mcmc import Chain
     from .vision.perception import PerceivedScenes
 
@@ -352,7 +352,7 @@ def _fits(value, hint) -> bool:
 
 def _check_shapes(result) -> None:
     """The arrays of a sample's outcome agree with each other (code reading it indexes them together)."""
-    from .rollout import SampleOutcome
+    from .outcome import SampleOutcome
 
     if not isinstance(result, SampleOutcome) or result.initial_positions_m is None:
         return

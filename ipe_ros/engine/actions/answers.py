@@ -13,7 +13,7 @@ from ..estimate import circular_mean, wilson_interval
 from ..perturb import is_deterministic
 from ..scene import Scene
 from .kinds import Action, Place, Push
-from ..rollout import RolloutResult, SampleOutcome
+from ..outcome import RolloutResult, SampleOutcome
 
 
 # -- the answers ----------------------------------------------------------------------------------------
@@ -111,7 +111,7 @@ def _listed(interval: tuple[float, float] | None) -> list[float] | None:
     return None if interval is None else list(interval)
 
 
-def _draws_noise(scene: Scene, action: Action, model: ModelConfig) -> bool:
+def draws_noise(scene: Scene, action: Action, model: ModelConfig) -> bool:
     """The action has randomness of its own: a push's uncertainty, a placed object's noise."""
     if isinstance(action, Push):
         return bool(action.direction_sigma_rad or action.speed_sigma_fraction)
@@ -131,8 +131,8 @@ def fell(result: RolloutResult) -> bool:
     return bool(np.any(result.fallen)) if result.fallen is not None else bool(result.any_fell)
 
 
-def _aggregate(label: str, action: Action, results: list[SampleOutcome], simulated: bool = True, *,
-               deterministic: bool = False) -> VariantAnswer:
+def aggregate_variant(label: str, action: Action, results: list[SampleOutcome], simulated: bool = True, *,
+                      deterministic: bool = False) -> VariantAnswer:
     """``deterministic``: nothing was drawn, so the one sample's answer is exact (a point, not an interval)."""
     ok = [r for r in results if r.ok]
     failed = [r for r in results if not r.ok and not r.budget_stopped and not r.skipped]
@@ -170,14 +170,14 @@ def _contact_answer(ok: list[SampleOutcome], deterministic: bool) -> dict:
     return dict(contact_probability=probability, contact_probability_ci95=interval, contact_time_s=time_s)
 
 
-def _stood(alone: SampleOutcome) -> bool:
+def stood(alone: SampleOutcome) -> bool:
     """The scene as it is ran without failing and nothing in it fell."""
     return alone.ok and not fell(ran(alone))
 
 
-def _aggregate_given(results: list[SampleOutcome], *, deterministic: bool) -> GivenStands:
+def aggregate_given(results: list[SampleOutcome], *, deterministic: bool) -> GivenStands:
     """A variant's results over the samples in which the scene stands as it is."""
-    answer = _aggregate("", None, results, deterministic=deterministic)
+    answer = aggregate_variant("", None, results, deterministic=deterministic)
     return GivenStands(answer.samples, answer.any_fall_probability, answer.any_fall_probability_ci95,
                        answer.object_fall_probability)
 

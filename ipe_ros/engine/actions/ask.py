@@ -9,7 +9,8 @@ from typing import Callable
 
 import numpy as np
 
-from ..config import ModelConfig, QuerySpec, SimSettings
+from ..config import ModelConfig, SimSettings
+from ..query import QuerySpec
 from ..decide import Sequential, Tally
 from ..errors import ConfigError
 from ..perturb import is_deterministic, position_sigmas_m
@@ -18,10 +19,11 @@ from ..fidelity import check_request as check_fidelity_request
 from ..sampler import MapFn, check_budget, checking, rollout_cost, self_check_many
 from ..scene import Scene, Table, validate_scene
 from ..query.contact import check_pairs
-from ..rollout import SampleOutcome
-from .answers import Alone, Answers, _aggregate, _aggregate_given, _draws_noise, _stood, fell, ran
-from .geometry import _reached, _regions, groups
-from .kinds import DEFAULT_SAFE_BELOW, Action, Place, Push, Remove, _check_action, _label
+from ..outcome import SampleOutcome
+from .answers import Alone, Answers, aggregate_variant, aggregate_given, draws_noise, stood, fell, ran
+from .checks import check_action
+from .geometry import affected_regions, groups, reached
+from .kinds import DEFAULT_SAFE_BELOW, Action, Place, Push, Remove, label_of
 from .variants import VariantTask, failed, run_variants, skipped
 
 
@@ -52,8 +54,8 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     check_budget(budget_s)
     check_fidelity_request(check)
     for i, action in enumerate(actions):
-        _check_action(scene, action, f"actions[{i}]")
-        if not model.object_noise and isinstance(action, Push) and _draws_noise(scene, action, model):
+        check_action(scene, action, f"actions[{i}]")
+        if not model.object_noise and isinstance(action, Push) and draws_noise(scene, action, model):
             raise ConfigError(f"actions[{i}]", "the ground truth takes a push exactly as given, but this one has "
                                                "noise of its own (a direction or speed sigma); drop it, or ask "
                                                "without the ground truth")
@@ -68,7 +70,7 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     # a removal that nothing else is within reach of cannot change anything: the rest of the scene does
     # what it does anyway (read from "as is"). Touching is not enough to be left out: a counterweight
     # with nothing on it still holds down what it rests on, and a gap closes when the object above drops.
-    trivial = [isinstance(a, Remove) and _reached(scene_groups, a.names) <= set(a.names) and not contact
+    trivial = [isinstance(a, Remove) and reached(scene_groups, a.names) <= set(a.names) and not contact
                for a in actions]
     simulated_actions = [a for a, t in zip(actions, trivial) if not t]
     if any(trivial) and None not in simulated_actions:
@@ -79,7 +81,7 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
             raise ConfigError("budget_s", f"one sample of these {len(simulated_actions)} variants takes up to "
                                           f"~{cost.seconds * len(simulated_actions):.3g} s, more than the budget of "
                                           f"{budget_s:g} s; ask fewer variants or raise the budget")
-    regions = _regions(scene, simulated_actions, margin, scene_groups, model.pushes)
+    regions = affected_regions(scene, simulated_actions, margin, scene_groups, model.pushes)
     # a removal read from "as is" needs each other object's outcome there; a direction, what fell
     what_falls = what_falls or any(trivial) or directions
     asked = {"fall" if what_falls else "any_fall"} | ({"direction"} if directions else set()) \
@@ -87,7 +89,7 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     query = QuerySpec(queries=frozenset(asked), fall_threshold_fraction=fall_threshold_fraction,
                       contact_pairs=tuple(contact))
     # no noise anywhere (scene, model, nor an action's own): one rollout per variant says everything
-    deterministic = is_deterministic(scene, model) and not any(_draws_noise(scene, a, model)
+    deterministic = is_deterministic(scene, model) and not any(draws_noise(scene, a, model)
                                                                for a in simulated_actions)
     k = 1 if deterministic else model.samples
     deadline = None if budget_s is None else time.time() + budget_s
@@ -111,17 +113,17 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     reports = _check_variants(per_sample, simulated_actions, tasks, settings, check, map_fn)
     if sequential is not None and any(r.verdict == "escalated" or r.refined_samples for r in reports.values()):
         decisions = _decide_again(decisions, per_sample, simulated_actions, as_is, sequential)
-    by_variant = {_label(a): dataclasses.replace(
-        _aggregate(_label(a), a, [s[j] for s in per_sample], deterministic=deterministic),
+    by_variant = {label_of(a): dataclasses.replace(
+        aggregate_variant(label_of(a), a, [s[j] for s in per_sample], deterministic=deterministic),
         not_simulated=() if regions[j] is None else tuple(sorted(everything - regions[j])),
         **_fidelity(reports.get(j)))
         for j, a in enumerate(simulated_actions)}
     if as_is is not None:
-        stands = [_stood(s[as_is]) for s in per_sample]
+        stands = [stood(s[as_is]) for s in per_sample]
         for j, a in enumerate(simulated_actions):
-            by_variant[_label(a)] = dataclasses.replace(
-                by_variant[_label(a)], caused_fall_probability=_caused(per_sample, j, as_is),
-                given_stands=_aggregate_given(
+            by_variant[label_of(a)] = dataclasses.replace(
+                by_variant[label_of(a)], caused_fall_probability=_caused(per_sample, j, as_is),
+                given_stands=aggregate_given(
                     [s[j] for s, ok in zip(per_sample, stands) if ok], deterministic=deterministic))
     for label, (decision, why, drawn) in decisions.items():
         by_variant[label] = dataclasses.replace(by_variant[label], decision=decision, stopped_by=why,
@@ -129,18 +131,18 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     answers = []
     for action, is_trivial in zip(actions, trivial):
         if not is_trivial:
-            answers.append(by_variant[_label(action)])
+            answers.append(by_variant[label_of(action)])
             continue
         # nothing rests on it: the rest of the scene does what it does anyway, read from "as is"
         others = [j for j, n in enumerate(b.name for b in scene.dynamic_objects) if n not in action.names]
         results = [_without(r, others) for r in (s[as_is] for s in per_sample)]
         answers.append(dataclasses.replace(
-            _aggregate(_label(action), action, results, deterministic=deterministic), simulated=False,
+            aggregate_variant(label_of(action), action, results, deterministic=deterministic), simulated=False,
             caused_fall_probability={n: 0.0 for j, n in enumerate(b.name for b in scene.dynamic_objects)
                                      if j in others},
-            given_stands=_aggregate_given([r for r, ok in zip(results, stands) if ok], deterministic=deterministic)))
+            given_stands=aggregate_given([r for r, ok in zip(results, stands) if ok], deterministic=deterministic)))
     stopped = "budget" if any(r.budget_stopped for s in per_sample for r in s) else "samples"
-    recorded = {_label(a): [(i, s[j]) for i, s in enumerate(per_sample) if s[j].ok and ran(s[j]).trajectory is not None]
+    recorded = {label_of(a): [(i, s[j]) for i, s in enumerate(per_sample) if s[j].ok and ran(s[j]).trajectory is not None]
                 for j, a in enumerate(simulated_actions)} if record_every else {}
     scene_alone = None
     if as_is is not None:
@@ -191,11 +193,11 @@ def _decide_again(decisions: dict, per_sample: list[list[SampleOutcome]], action
     """The decisions read again from the checked outcomes: a variant the check escalated or refined
     may fall on the other side of its threshold now, or on neither (None); a changed decision
     stopped by "checked"."""
-    counts = {_label(a): _Counts() for j, a in enumerate(actions) if j != as_is}
+    counts = {label_of(a): _Counts() for j, a in enumerate(actions) if j != as_is}
     for row in per_sample:
         for j, a in enumerate(actions):
             if j != as_is:
-                counts[_label(a)].add(row[j])
+                counts[label_of(a)].add(row[j])
     tallies = {label: c.tally() for label, c in counts.items()}
     decided = {label for label, (decision, _, _) in decisions.items() if decision is not None}
     again = sequential.rule.decide(tallies, decided)
@@ -250,7 +252,7 @@ def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequenti
     decisions: dict[str, tuple[str | None, str, int]] = {}
     per_sample: list[list[SampleOutcome]] = []
     # counted as the batches come (recounting every sample at every look would grow with k x looks)
-    counts = {_label(actions[j]): _Counts() for j in others}
+    counts = {label_of(actions[j]): _Counts() for j in others}
 
     def batch_from(first: int) -> range:
         return range(first, min(k, first + sequential.batch_samples))
@@ -267,7 +269,7 @@ def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequenti
         for i in batch:
             rows[i] = [skipped(i, "the scene fell as it is" if j in active else "decided") for j in range(len(actions))]
             rows[i][as_is] = alone[i]
-        standing = [i for i in batch if _stood(rows[i][as_is])]
+        standing = [i for i in batch if stood(rows[i][as_is])]
         running = sorted(active)
         chunks = [running[c:c + VARIANTS_PER_TASK] for c in range(0, len(running), VARIANTS_PER_TASK)]
         jobs = [(i, chunk) for i in standing for chunk in chunks]
@@ -281,26 +283,26 @@ def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequenti
         for i in batch:
             per_sample.append(rows[i])
             for j in running:
-                counts[_label(actions[j])].add(rows[i][j])
+                counts[label_of(actions[j])].add(rows[i][j])
         if any(r.budget_stopped for i in batch for r in rows[i]):
             break
         tallies = {label: c.tally() for label, c in counts.items()}
-        labels = {_label(actions[j]): j for j in active}
+        labels = {label_of(actions[j]): j for j in active}
         for label, decision in sequential.rule.decide(tallies, set(labels)).items():
             decisions[label] = (decision, "decided", len(per_sample))
             active.discard(labels[label])
         if len(per_sample) < k:  # at the cap they are undecided anyway ("cap")
-            labels = {_label(actions[j]): j for j in active}
+            labels = {label_of(actions[j]): j for j in active}
             for label in sequential.rule.undecidable(tallies, set(labels), k - len(per_sample)):
                 decisions[label] = (None, "undecidable", len(per_sample))
                 active.discard(labels[label])
         if on_progress is not None:
             on_progress(progress_dict(scene.name, k, len(per_sample), decisions,
-                                      [_label(actions[j]) for j in sorted(active)], tallies))
+                                      [label_of(actions[j]) for j in sorted(active)], tallies))
         batch = batch_from(batch.stop)
     budget = any(r.budget_stopped for row in per_sample for r in row)
     for j in active:
-        decisions[_label(actions[j])] = (None, "budget" if budget else "cap", len(per_sample))
+        decisions[label_of(actions[j])] = (None, "budget" if budget else "cap", len(per_sample))
     return per_sample, decisions
 
 
@@ -349,6 +351,6 @@ def _caused(per_sample: list[list[SampleOutcome]], variant: int, as_is: int) -> 
     counts = dict.fromkeys(names, 0)
     for with_action, without in pairs:
         before = dict(zip(without.names, ran(without).fallen))
-        for name, fell in zip(with_action.names, ran(with_action).fallen):
-            counts[name] += bool(fell) and not before.get(name, False)
+        for name, fallen in zip(with_action.names, ran(with_action).fallen):
+            counts[name] += bool(fallen) and not before.get(name, False)
     return {n: c / len(pairs) for n, c in counts.items()}

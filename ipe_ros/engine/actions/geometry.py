@@ -23,7 +23,8 @@ _GEOMETRY_SETTINGS = SimSettings(name="geometry", time_step_s=1 / 240, horizon_s
                                  solver=SolverSettings(iterations=10))
 
 
-def _geometry_world(scene: Scene):
+def geometry_world(scene: Scene):
+    """The scene at rest in a pybullet world of its own (contacts, and inertias as the rollout has them)."""
     bodies = scene.dynamic_objects
     return simulation.build_world(scene, np.array([b.centre_of_mass_m for b in bodies]),
                                   np.array([max(b.resolved_mass_kg, 1e-6) for b in bodies]), _GEOMETRY_SETTINGS)
@@ -41,7 +42,7 @@ class Contacts:
 
 def contacts(scene: Scene, margin_m: float = 0.0) -> Contacts:
     bodies = scene.dynamic_objects
-    world = _geometry_world(scene)
+    world = geometry_world(scene)
     p = simulation.world.pybullet()
     reach = margin_m + 0.01 * world.scale_m
     pairs = tuple((i, j) for (i, a), (j, b) in itertools.combinations(enumerate(world.dynamic_ids), 2)
@@ -127,20 +128,20 @@ def dependents(resting: dict[str, set[str]], name: str) -> set[str]:
     return found
 
 
-def _reached(scene_groups: list[frozenset[str]], names) -> frozenset[str]:
+def reached(scene_groups: list[frozenset[str]], names) -> frozenset[str]:
     """Every object in a group with one of ``names``: all that removing them could affect."""
     return frozenset().union(*(g for g in scene_groups if g & set(names)))
 
 
-def _regions(scene: Scene, actions: list[Action], margin_m: float, scene_groups: list[frozenset[str]],
-             pushes: bool) -> tuple[frozenset[str] | None, ...]:
+def affected_regions(scene: Scene, actions: list[Action], margin_m: float, scene_groups: list[frozenset[str]],
+                     pushes: bool) -> tuple[frozenset[str] | None, ...]:
     """Per action, the groups of objects it can affect (None: the whole scene)."""
     everything = frozenset(b.name for b in scene.dynamic_objects)
     out = []
     for action in actions:
         region = None
         if isinstance(action, Remove):
-            region = _reached(scene_groups, action.names)
+            region = reached(scene_groups, action.names)
         elif isinstance(action, Place) and not pushes:
             with_it = dataclasses.replace(scene, objects=scene.objects + (action.body,))
             region = next(g for g in groups(with_it, margin_m) if action.body.name in g)

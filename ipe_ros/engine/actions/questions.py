@@ -21,17 +21,15 @@ from ..sampler import check_budget, rollout_cost
 from ..scene import Body, Scene, validate_body
 from .answers import Answers, VariantAnswer
 from .ask import ask
-from .geometry import _geometry_world, dependents, resting_on
-from .kinds import DEFAULT_SAFE_BELOW, DEFAULT_SUPPORT_THRESHOLD, Action, Place, Push, Region, Remove
+from .geometry import geometry_world, dependents, resting_on
+from .kinds import (DEFAULT_SAFE_BELOW, DEFAULT_SUPPORT_THRESHOLD, NO_OBJECTS, Action, Place, Push, Region, Remove,
+                    check_level)
 
 if TYPE_CHECKING:
     from ..question_io import Question
 
 
 # -- the questions ----------------------------------------------------------------------------------------
-_NO_OBJECTS = "names no object; name at least one, or leave it out to ask about every one"
-
-
 def remove(scene: Scene, names: list[str] | None, model: ModelConfig, settings: SimSettings,
            safe_below: float | None = None, sequential: bool = True, what_falls: bool | None = None,
            **kw) -> Answers:
@@ -43,7 +41,7 @@ def remove(scene: Scene, names: list[str] | None, model: ModelConfig, settings: 
     that need not say what else falls end at the first fall, ``ask``)."""
     rule = None
     if safe_below is not None:
-        _check_level("safe_below", safe_below)
+        check_level("safe_below", safe_below)
         rule = Sequential(SafeBelow(safe_below)) if sequential else None
     if what_falls is None:
         what_falls = safe_below is None
@@ -53,14 +51,9 @@ def remove(scene: Scene, names: list[str] | None, model: ModelConfig, settings: 
 def _removals(scene: Scene, names: list[str] | None) -> list[Action]:
     """The scene as it is, then each named object (None: every dynamic one) taken away on its own."""
     if names is not None and not names:
-        raise ConfigError("objects", _NO_OBJECTS)
+        raise ConfigError("objects", NO_OBJECTS)
     names = [b.name for b in scene.dynamic_objects] if names is None else list(names)
     return [None] + [Remove((n,)) for n in names]
-
-
-def _check_level(name: str, value) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value <= 1:
-        raise ConfigError(name, f"must be in (0, 1], got {value!r}")
 
 
 #: Estimated seconds to lower one candidate placement onto what is below it (measured 2-8 ms).
@@ -126,7 +119,7 @@ def support_graph(scene: Scene, model: ModelConfig, settings: SimSettings, thres
     """``sequential``: sample each removal until its edges and its safety are decided (False: the
     full k for every removal)."""
     for name, value in (("threshold", threshold), ("safe_below", safe_below)):
-        _check_level(name, value)
+        check_level(name, value)
     answers = ask(scene, _removals(scene, None), model, settings,
                   sequential=Sequential(Supports(threshold, safe_below)) if sequential else None, **kw)
     edges, safe = [], []
@@ -241,7 +234,7 @@ class _Lowering:
         from ..simulation import world as world_module
 
         self._world_module, self.scene, self.body = world_module, scene, body
-        self.world = _geometry_world(scene)
+        self.world = geometry_world(scene)
         self.size = max(body.extents_m)
         self.top = max([scene.support.top_m] + [float(b.position_m[2]) + max(b.extents_m)
                                                 for b in scene.objects]) + self.size

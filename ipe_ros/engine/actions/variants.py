@@ -18,7 +18,7 @@ from ..rollout import (SampleOutcome, SampleTask, failed, guarded, rollout_resul
                        simulate_sample)
 from ..scene import Scene
 from ..shapes import rotation_matrix
-from .kinds import Action, Place, Push, Remove, _label
+from .kinds import Action, Place, Push, Remove, label_of
 
 
 # -- one sample of every variant ----------------------------------------------------------------------
@@ -42,12 +42,12 @@ def _action_rng(task: VariantTask, action: Action) -> np.random.Generator:
     """The second stream: this action's own randomness, independent of the shared draw and keyed
     by what the action is (not where it stands in the list), so asking it among other variants
     gives the same answer."""
-    key = zlib.crc32(_label(action).encode("utf-8", "backslashreplace"))
+    key = zlib.crc32(label_of(action).encode("utf-8", "backslashreplace"))
     return np.random.default_rng(np.random.SeedSequence(task.seed.entropy, spawn_key=task.seed.spawn_key + (1, key)))
 
 
-def _push_velocities(push: Push, rng: np.random.Generator, centre_m: np.ndarray, orientation: np.ndarray,
-                     inertia_kg_m2: np.ndarray, mass_kg: float) -> tuple[tuple, tuple]:
+def push_velocities(push: Push, rng: np.random.Generator, centre_m: np.ndarray, orientation: np.ndarray,
+                    inertia_kg_m2: np.ndarray, mass_kg: float) -> tuple[tuple, tuple]:
     v = np.asarray(push.velocity_m_s, float)
     speed, angle = float(np.linalg.norm(v)), math.atan2(v[1], v[0])
     if push.direction_sigma_rad:
@@ -140,7 +140,7 @@ def _one_variant(task: VariantTask, action: Action, shared, shared_orn, inputs,
         i = next(k for k, b in enumerate(bodies) if b.name == action.name)
         world = simulation.build_world(scene, shared, masses, task.settings, orientations_xyzw=shared_orn)
         inertia = world.inertia_kg_m2[i]
-        velocity, spin = _push_velocities(action, _action_rng(task, action), shared[i], shared_orn[i], inertia,
+        velocity, spin = push_velocities(action, _action_rng(task, action), shared[i], shared_orn[i], inertia,
                                           float(masses[i]))
         pushed = dataclasses.replace(bodies[i], linear_velocity_m_s=velocity, angular_velocity_rad_s=spin)
         scene = dataclasses.replace(scene, objects=tuple(pushed if b.name == action.name else b

@@ -30,9 +30,11 @@ from .. import queries as predicates
 from ..scene import Scene
 from ..stats import wilson_interval
 
-if TYPE_CHECKING:  # config imports this package: types only
-    from ..config import EarlyStopSettings, QuerySpec
-    from ..rollout import RolloutResult, SampleOutcome
+from .spec import QuerySpec
+
+if TYPE_CHECKING:
+    from ..config import EarlyStopSettings
+    from ..outcome import RolloutResult, SampleOutcome
 
 
 def smallest_extents_m(scene: Scene) -> np.ndarray:

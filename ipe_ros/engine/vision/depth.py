@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from ..config import _integer, _positive
+from ..checks import integer, positive
 from ..errors import ConfigError
 from ..scene import Floor, Scene
 from ..shapes import quaternion_product, rotation_matrix
@@ -59,13 +59,13 @@ class DepthCamera:
 
     def __post_init__(self) -> None:
         for name in ("fx", "fy"):
-            _positive(getattr(self, name), f"camera_info.{name}")
+            positive(getattr(self, name), f"camera_info.{name}")
         for name in ("cx", "cy"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 raise ConfigError(f"camera_info.{name}", f"must be a finite number, got {value!r}")
         for name in ("width_px", "height_px"):
-            _integer(getattr(self, name), f"camera_info.{name}", 8, 4096)
+            integer(getattr(self, name), f"camera_info.{name}", 8, 4096)
         position = np.asarray(self.position_m, float)
         q = np.asarray(self.orientation_xyzw, float)
         if position.shape != (3,) or not np.all(np.isfinite(position)):
@@ -132,13 +132,13 @@ class DepthSettings:
     def __post_init__(self) -> None:
         for name in ("sd_m", "max_range_m", "reach_m", "temperature", "prior_sd_m", "prior_yaw_sd_rad",
                      "proposal_sd_m", "proposal_yaw_sd_rad"):
-            _positive(getattr(self, name), f"depth.{name}")
+            positive(getattr(self, name), f"depth.{name}")
         if not isinstance(self.sd_per_m2, (int, float)) or not 0 <= self.sd_per_m2 < 1:
             raise ConfigError("depth.sd_per_m2", f"must be in [0, 1), got {self.sd_per_m2!r}")
         if not isinstance(self.outlier, (int, float)) or not 0 < self.outlier < 1:
             raise ConfigError("depth.outlier", f"must be in (0, 1), got {self.outlier!r}")
-        _integer(self.pixel_stride, "depth.pixel_stride", 1, 16)
-        _integer(self.updates_per_object, "depth.updates_per_object", 1, 100_000)
+        integer(self.pixel_stride, "depth.pixel_stride", 1, 16)
+        integer(self.updates_per_object, "depth.updates_per_object", 1, 100_000)
         if not isinstance(self.burn_in_fraction, (int, float)) or not 0 <= self.burn_in_fraction < 1:
             raise ConfigError("depth.burn_in_fraction", f"must be in [0, 1), got {self.burn_in_fraction!r}")
 

@@ -68,7 +68,7 @@ class VisionSettings:
 
 
 @lru_cache(maxsize=8)
-def _blur_matrices(size: int, sigma_px: float) -> tuple[np.ndarray, np.ndarray]:
+def blur_matrices(size: int, sigma_px: float) -> tuple[np.ndarray, np.ndarray]:
     """A normalised 1-D Gaussian (cut at 4 sigma, as scipy's) as a (size, size) matrix K and its
     transpose: blur(image) = K @ image @ K.T, each row renormalised where the kernel leaves the
     image, so a plain background stays plain."""
@@ -81,7 +81,7 @@ def _blur_matrices(size: int, sigma_px: float) -> tuple[np.ndarray, np.ndarray]:
 
 def blur(images: np.ndarray, sigma_px: float) -> np.ndarray:
     """Normalised separable Gaussian blur of (..., size, size) images."""
-    k, k_t = _blur_matrices(images.shape[-1], float(sigma_px))
+    k, k_t = blur_matrices(images.shape[-1], float(sigma_px))
     return np.matmul(np.matmul(k, images), k_t)
 
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .camera import Camera
-from .likelihood import VisionSettings, _blur_matrices, blur, log_likelihood
+from .likelihood import VisionSettings, blur_matrices, blur, log_likelihood
 from .render import BACKGROUND_GREY, EMPTY, Patch, SceneMesh, body_patch, render
 
 
@@ -85,7 +85,7 @@ class ImageModel:
         self.blur_px = settings.blur_at_resolution_px
         self.sd = settings.sd_at_resolution_grey
         self.observed_blurred = blur(np.asarray(observed, float), self.blur_px)
-        self._k, self._k_t = _blur_matrices(settings.resolution_px, float(self.blur_px))
+        self._k, self._k_t = blur_matrices(settings.resolution_px, float(self.blur_px))
 
     def log_likelihood(self, positions_m: np.ndarray) -> float:
         """From scratch: render every view, blur, compare."""

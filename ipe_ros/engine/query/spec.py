@@ -1,0 +1,84 @@
+"""Which queries a prediction answers and their parameters (:class:`QuerySpec`), and the registry
+of queries by name that it checks names against.
+
+The registry is filled by ``engine.query`` (each built-in query module's ``QUERY``) and by
+:func:`register` for a query added at run time; it holds no query code itself, so the query modules
+can read a QuerySpec without an import circle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from ..checks import positive
+from ..errors import ConfigError, shown
+
+#: every registered query (an ``engine.query.base.Query``) by name, in the order answers list them
+QUERIES: dict[str, Any] = {}
+
+
+def register(query: Any) -> Any:
+    """Add a query to the registry (its ``name`` must be new); returns it. A name is then accepted by
+    QuerySpec, and the query's ``read`` and ``aggregate`` run wherever it is asked."""
+    name = getattr(query, "name", None)
+    if not isinstance(name, str) or not name.isidentifier():
+        raise ConfigError("query.name", f"must be an identifier, got {shown(name)}")
+    if name in QUERIES:
+        raise ConfigError("query.name", f"{name!r} is registered already; choose another name")
+    QUERIES[name] = query
+    return query
+
+
+@dataclass(frozen=True)
+class QuerySpec:
+    """Which queries to compute and their thresholds.
+
+    fall_threshold_fraction: an object has fallen when its centre's z dropped by more than this
+        fraction of its own smallest extent. The default 0.125 is the paper's "0.025 unit" read in
+        the stimulus files' units (0.025 m on 0.2 m blocks).
+    bump_group: the group whose share of fallen-off objects the ``bump`` query reports (paper:
+        red / (red + yellow)).
+    """
+
+    queries: frozenset[str] = frozenset({"fall"})
+    fall_threshold_fraction: float = 0.125
+    bump_group: str = "red"
+    #: the contact query's pairs (A, B): B may be "support"
+    contact_pairs: tuple[tuple[str, str], ...] = ()
+    #: the rest query: at rest when slower than this many of the scene's smallest extents per
+    #: second and ``rest_spin_rad_s`` (the strict reading the self-check's reference uses)
+    rest_speed_sizes_per_s: float = 0.05
+    rest_spin_rad_s: float = 0.05
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.queries, frozenset) or not all(isinstance(q, str) for q in self.queries):
+            raise ConfigError("queries", f"must be a set of query names from {', '.join(QUERIES)}")
+        unknown = sorted(set(self.queries) - set(QUERIES))
+        if unknown:
+            raise ConfigError("queries", f"unknown query {shown(unknown[0])}; choose from {', '.join(QUERIES)}")
+        if not self.queries:
+            raise ConfigError("queries", f"ask for at least one of {', '.join(QUERIES)}")
+        positive(self.fall_threshold_fraction, "fall_threshold_fraction")
+        positive(self.rest_speed_sizes_per_s, "rest_speed_sizes_per_s")
+        positive(self.rest_spin_rad_s, "rest_spin_rad_s")
+        if not isinstance(self.contact_pairs, tuple) or not all(
+                isinstance(pair, tuple) and len(pair) == 2 and all(isinstance(n, str) and n for n in pair)
+                for pair in self.contact_pairs):
+            raise ConfigError("contact", "pairs must be a tuple of (A, B) object names")
+        if self.contact_pairs and "contact" not in self.queries:
+            raise ConfigError("contact", "pairs were given but the contact query was not asked; add contact "
+                                         "to the queries")
+        if len(set(self.contact_pairs)) != len(self.contact_pairs):
+            raise ConfigError("contact", "a pair is asked twice; ask each once")
+
+    def wants(self, name: str) -> bool:
+        return name in self.queries
+
+
+def parse_queries(text: str) -> frozenset[str]:
+    """``"fall,direction"`` -> frozenset; raises ConfigError for unknown names."""
+    names = frozenset(part.strip() for part in text.split(",") if part.strip())
+    QuerySpec(queries=names)  # validates
+    return names
+

@@ -25,7 +25,6 @@ import argparse
 import dataclasses
 import json
 import math
-import os
 import sys
 from pathlib import Path
 
@@ -35,7 +34,7 @@ from .engine import (ALL_QUERIES, PRESETS, AdaptiveStop, ConfigError, ModelConfi
                      WorkerPool, load_scenes, parse_queries, predict, preset)
 from .progress import steps
 from .engine.config import (DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M,
-                            anytime_batch_size)
+                            anytime_batch_size, default_workers)
 from .cli_ask import add_ask_parser, cmd_ask, contact_pair
 from .engine.examples import example_scene_path
 from .engine.catalogue import capped_tower, scene_catalogue
@@ -135,7 +134,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "to a rerun recording (one scene only)")
     p.add_argument("--preset", default=DEFAULT_PRESET, choices=sorted(PRESETS), help="simulation settings")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+    p.add_argument("--workers", type=int, default=default_workers(),
                    help="worker processes (default: CPU count; 0 runs in this process)")
     p.add_argument("--ground-truth", action="store_true",
                    help="sigma = phi = 0 and no body's own noise: the scene as given, one deterministic rollout")
@@ -210,7 +209,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--stimuli", type=int, default=None, help="use the first N stimuli of each set")
     e.add_argument("--grid-samples", type=int, default=None, help="k per cell of fall's sigma x phi grid")
     e.add_argument("--seed", type=int, default=0)
-    e.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="worker processes (0: in-process)")
+    e.add_argument("--workers", type=int, default=default_workers(), help="worker processes (0: in-process)")
     e.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run the samples on a Dask cluster (default: $IPE_DASK_SCHEDULER, else --workers here)")
     e.add_argument("--resume", default=None, metavar="DIR",
@@ -470,7 +469,7 @@ def cmd_generate(args) -> int:
 
 def cmd_demo(_args) -> int:
     scenes = load_scenes(example_scene_path())
-    workers = os.cpu_count() or 1
+    workers = default_workers()
     query = QuerySpec(queries=DEFAULT_QUERIES)
     print(f"Built-in example: {example_scene_path().name} ({len(scenes[0].objects)} blocks of 0.2 x 0.6 x 0.2 m)\n")
     ipe_title = (f"IPE (sigma = {DEFAULT_MODEL.sigma_m:g} m = 0.2 block short sides, phi = 0, "

@@ -18,11 +18,10 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 
 from .engine import ConfigError, WorkerPool, load_scenes
 from .engine import actions as A
-from .engine.config import DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_SIGMA_M, PRESETS
+from .engine.config import DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_SIGMA_M, PRESETS, default_workers
 from .engine.fidelity import DEFAULT_CHECK
 from .engine.inputs import as_spelled
 from .engine.request import build_request
@@ -70,7 +69,7 @@ def add_ask_parser(sub, finite, one_line_parser) -> None:
                             "refused): one rollout per variant")
         q.add_argument("--preset", default=DEFAULT_PRESET, choices=sorted(PRESETS))
         q.add_argument("--seed", type=int, default=0)
-        q.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+        q.add_argument("--workers", type=int, default=default_workers())
         q.add_argument("--budget", type=finite, default=DEFAULT_BUDGET_S, metavar="S",
                        help="compute budget per batch of variants, seconds")
         q.add_argument("--fell-off", action="store_true",

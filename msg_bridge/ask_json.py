@@ -56,10 +56,6 @@ def string_to_question(msg: String, *, max_objects: int = DEFAULT_MAX_OBJECTS) -
     return question_from_dict(data), scene
 
 
-def answer_to_string(answer: dict[str, Any]) -> String:
-    return String(data=json.dumps(answer, allow_nan=False, sort_keys=True))
-
-
 def support_graph_markers(scene: Scene, answer: dict[str, Any], frame_id: str, stamp_ns: int) -> MarkerArray:
     """A support graph answer as RViz/Foxglove markers: a line from each supporter's centre of mass
     to each object it holds up, coloured by the probability (green 0 .. red 1), after a DELETEALL."""

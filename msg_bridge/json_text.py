@@ -1,4 +1,4 @@
-"""``std_msgs/String`` carrying JSON <-> scenes and answers (the engine's ``ipe_ros.scene/1`` format)."""
+"""``std_msgs/String`` carrying JSON <-> scenes and answers (the engine's JSON scene format, ``ipe_ros.scene/2``; ``/1`` is read too)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from ipe_ros.engine.scene_io import scene_to_json, scenes_from_json
 def string_to_scene(msg: String, *, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scene:
     """Exactly one validated scene from a JSON text (a scene object, or a list holding one)."""
     if not msg.data.strip():
-        raise SceneError("data", "is empty; publish one scene in the ipe_ros.scene/1 JSON format")
+        raise SceneError("data", "is empty; publish one scene in the ipe_ros.scene/2 JSON format")
     scenes = scenes_from_json(msg.data, max_objects=max_objects)
     if len(scenes) != 1:
         raise SceneError("data", f"holds {len(scenes)} scenes; publish one scene per message")
@@ -41,7 +41,8 @@ def scene_to_string(scene: Scene) -> String:
 
 
 def answer_to_string(answer: dict[str, Any]) -> String:
-    """A prediction answer (``Answer.to_dict()``) as compact JSON; NaN/inf are refused (not JSON)."""
+    """An answer (a prediction's ``Answer.to_dict()``, a question's reply) as compact JSON; NaN/inf are refused
+    (not JSON)."""
     return String(data=json.dumps(answer, allow_nan=False, sort_keys=True))
 
 

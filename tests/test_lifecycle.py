@@ -27,9 +27,11 @@ def ros():
     harness.close()
 
 
-def _transition(ros: RosHarness, transition_id: int) -> bool:
-    return ros.call(ChangeState, "/ipe/change_state",
-                    ChangeState.Request(transition=Transition(id=transition_id)), timeout_s=TIMEOUT_S).success
+def _transition(ros: RosHarness, transition: int | str) -> bool:
+    """Ask for a transition by id or, as ``ros2 lifecycle set`` may, by label."""
+    asked = Transition(label=transition) if isinstance(transition, str) else Transition(id=transition)
+    return ros.call(ChangeState, "/ipe/change_state", ChangeState.Request(transition=asked),
+                    timeout_s=TIMEOUT_S).success
 
 
 def _alive(pid: int) -> bool:
@@ -98,6 +100,8 @@ def _managed_node(ros: RosHarness, **values) -> IpeLifecycleNode:
     ("unconfigured", Transition.TRANSITION_CLEANUP),
     ("inactive", Transition.TRANSITION_CONFIGURE),
     ("unconfigured", 99),  # no such transition
+    ("inactive", "configure"),  # by label
+    ("unconfigured", "fly"),  # no such label
 ])
 def test_a_transition_not_allowed_from_the_state_is_refused_and_the_state_kept(ros, in_state, transition_id):
     node = _managed_node(ros, samples=2, workers=1)

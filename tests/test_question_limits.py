@@ -11,7 +11,7 @@ import pytest
 from ipe_ros.engine import ConfigError
 from ipe_ros.engine import actions as A
 from ipe_ros.engine.actions import questions
-from ipe_ros.engine.actions.kinds import _check_action
+from ipe_ros.engine.actions.checks import check_action
 from ipe_ros.engine.question_io import new_object_from_dict, question_from_dict
 from tests.test_actions import MODEL, SETTINGS, STACK, box, scene
 
@@ -91,7 +91,7 @@ def test_a_push_whose_implied_spin_exceeds_what_a_scene_may_start_with_is_refuse
                                           r"to \S+ rad/s, more than the 1000 rad/s a scene may start with; push "
                                           r"nearer its centre of mass or slower$"):
         A.push(small, [A.Push("chip", (50.0, 0.0, 0.0), corner)], MODEL, SETTINGS)
-    _check_action(small, A.Push("chip", (0.5, 0.0, 0.0), corner), "push")  # slowly there: allowed
+    check_action(small, A.Push("chip", (0.5, 0.0, 0.0), corner), "push")  # slowly there: allowed
 
 
 def test_a_removal_of_no_object_is_refused():

@@ -172,3 +172,31 @@ def test_a_corner_inside_the_table_top_is_refused_where_the_centre_is_off_the_ta
     message = error_for(data)
     assert message.startswith("objects[0] ('brick').position_m: the body's lowest point z = ")
     assert "below the support surface at z = 0.5 m; raise it by at least" in message
+
+
+def test_a_scene_is_checked_in_full_once_and_its_count_every_time(monkeypatch):
+    """A request's scene is checked where it is read, costed and predicted: the full check runs once,
+    marked on the scene itself (no table shared between the node's threads), and max_objects still
+    applies at each later check."""
+    import dataclasses
+
+    from ipe_ros.engine import scene as scene_module
+
+    tower = dataclasses.replace(generate_towers(5, 1)[0])  # a fresh value, never checked
+    calls = []
+    full_check = scene_module._validate
+    monkeypatch.setattr(scene_module, "_validate", lambda s, n: calls.append(s.name) or full_check(s, n))
+    for _ in range(3):
+        assert scene_module.validate_scene(tower) is tower
+    assert calls == [tower.name]
+    with pytest.raises(SceneError, match=r"^objects: 10 objects exceed the maximum of 4; split the scene"):
+        scene_module.validate_scene(tower, max_objects=4)
+    renamed = dataclasses.replace(tower, name="renamed")  # a new value is checked anew
+    scene_module.validate_scene(renamed)
+    assert calls == [tower.name, "renamed"]
+    mutable = dataclasses.replace(tower, name="mutable", objects=list(tower.objects))  # could change later
+    scene_module.validate_scene(mutable)
+    scene_module.validate_scene(mutable)
+    assert calls == [tower.name, "renamed", "mutable", "mutable"]
+    assert not any(isinstance(v, dict) and v and isinstance(next(iter(v)), tuple)
+                   for v in vars(scene_module).values())  # no memo keyed by scenes

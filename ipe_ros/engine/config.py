@@ -367,10 +367,6 @@ class SimSettings:
             if not isinstance(getattr(self, group), kind):
                 raise ConfigError(group, f"must be a {kind.__name__}, got {shown(getattr(self, group))}")
 
-    @property
-    def steps(self) -> int:
-        return int(round(self.horizon_s / self.time_step_s))
-
     def time_step_for(self, scale_m: float, gravity_m_s2: float, fastest_m_s: float = 0.0) -> float:
         """The step for a scene whose smallest extent is ``scale_m`` and whose fastest body starts
         at ``fastest_m_s`` (see ``time_step_s`` and ``max_travel_fraction``)."""

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Iterable
+from typing import Iterable
 
 from .config import (DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M, ModelConfig,
                      SimSettings, preset)
@@ -33,10 +33,6 @@ class Request:
     stop: AdaptiveStop | None = None
     budget_s: float | None = DEFAULT_BUDGET_S
     check: SelfCheck = DEFAULT_CHECK
-
-    def predict_kwargs(self) -> dict[str, Any]:
-        """``sampler.predict``'s keyword arguments for this request."""
-        return dict(seed=self.seed, stop=self.stop, budget_s=self.budget_s, check=self.check)
 
 
 def build_request(*, samples: int = DEFAULT_SAMPLES, sigma_m: float = DEFAULT_SIGMA_M,

@@ -335,10 +335,9 @@ def lowest_z_m(body: Body) -> float:
     return float(points[:, 2].min() + body.position_m[2])
 
 
-#: scenes (with their max_objects) already found valid: a request is checked where it is read, again
-#: where it is costed and where it is predicted; the check runs once (scenes are frozen values)
-_KNOWN_VALID: dict = {}
-_KNOWN_VALID_MAX = 64
+#: the attribute a scene found valid carries (set on the value, not in a shared table: every thread
+#: and process that holds the scene knows it, and nothing grows)
+_CHECKED = "_ipe_checked"
 
 
 def validate_scene(scene: Scene, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scene:
@@ -347,21 +346,28 @@ def validate_scene(scene: Scene, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scen
     Checks: well-formed shapes, finite numbers, positive sizes and masses, unit quaternions, unique
     names, at least one dynamic body, no more than ``max_objects`` bodies, gravity pointing down, a
     horizon within MAX_HORIZON_S, and no body starting below its support (a tolerance of 1% of the
-    body's smallest extent absorbs rounding in the input). A scene found valid before (an equal
-    one, the same max_objects) is not checked again.
+    body's smallest extent absorbs rounding in the input). A scene is checked in full once: found
+    valid and immutable all the way down (hashable), it is marked so, and a later check (where a
+    request is costed, where it is predicted) compares only its object count with ``max_objects``.
     """
-    try:
-        key = (scene, max_objects)
-        if key in _KNOWN_VALID:
-            return scene
-    except TypeError:  # something unhashable where a number or tuple belongs: the checks say what
-        key = None
+    if getattr(scene, _CHECKED, False):
+        _check_count(scene, max_objects)
+        return scene
     _validate(scene, max_objects)
-    if key is not None:
-        if len(_KNOWN_VALID) >= _KNOWN_VALID_MAX:
-            _KNOWN_VALID.pop(next(iter(_KNOWN_VALID), None), None)
-        _KNOWN_VALID[key] = None
+    try:
+        hash(scene)  # a list where a tuple belongs could change after the check: checked every time
+    except TypeError:
+        return scene
+    object.__setattr__(scene, _CHECKED, True)  # frozen: the mark is not a field (equality, replace ignore it)
     return scene
+
+
+def _check_count(scene: Scene, max_objects: int) -> None:
+    support = scene.support
+    n_objects = len(scene.objects) + (len(support.obstacles) if isinstance(support, Table) else 0)
+    if n_objects > max_objects:
+        raise SceneError("objects", f"{n_objects} objects exceed the maximum of {max_objects}; "
+                                    "split the scene or raise max_objects")
 
 
 def _validate(scene: Scene, max_objects: int) -> Scene:
@@ -406,10 +412,7 @@ def _validate(scene: Scene, max_objects: int) -> Scene:
     if scene.horizon_s is not None:
         _check_number(scene.horizon_s, "horizon_s", "the simulated time in seconds", lo=0.0, lo_open=True,
                       hi=MAX_HORIZON_S)
-    n_objects = len(scene.objects) + (len(support.obstacles) if isinstance(support, Table) else 0)
-    if n_objects > max_objects:
-        raise SceneError("objects", f"{n_objects} objects exceed the maximum of {max_objects}; "
-                                    "split the scene or raise max_objects")
+    _check_count(scene, max_objects)
     if not scene.dynamic_objects:
         raise SceneError("objects", "the scene has no dynamic object: nothing can fall")
 

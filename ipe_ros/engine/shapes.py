@@ -84,11 +84,6 @@ Shape = Union[BoxShape, Sphere, Cylinder, Capsule, ConvexHull, Compound]
 SHAPE_TYPES = ("box", "sphere", "cylinder", "capsule", "convex", "compound")
 
 
-def rotation_matrices(q_xyzw) -> np.ndarray:
-    """(n, 3, 3) rotation matrices of (n, 4) quaternions in (x, y, z, w) order (normalised here)."""
-    return Rotation.from_quat(np.asarray(q_xyzw, dtype=float)).as_matrix()
-
-
 def rotation_matrix(q_xyzw) -> np.ndarray:
     """Rotation matrix of one (normalised here) quaternion in (x, y, z, w) order."""
     return Rotation.from_quat(np.asarray(q_xyzw, dtype=float)).as_matrix()

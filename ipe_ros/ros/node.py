@@ -20,17 +20,16 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
-from rclpy.lifecycle.node import LifecycleNodeMixin
 from rclpy.node import Node
 from rclpy.service import Service as RclpyService
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
+from lifecycle_msgs.srv import ChangeState, GetAvailableTransitions
 from sensor_msgs.msg import CameraInfo, Image
 from visualization_msgs.msg import MarkerArray
 
-from msg_bridge.ask_json import answer_to_string as ask_answer_to_string
 from msg_bridge.ask_json import request_id_of, string_to_question, support_graph_markers
 from msg_bridge.depth import camera_info_to_dict, image_to_depth_m, pose_to_tuples
 from msg_bridge.json_text import answer_to_string, scene_name_of, string_to_scene
@@ -318,10 +317,10 @@ class _IpeInterface:
             refused = f"data: unreadable question ({type(exc).__name__})"
         if refused is not None:
             self._log_refusal(f"question {request_id!r} refused: {refused}")
-            self._pub_answer.publish(ask_answer_to_string({"id": request_id, "final": True, "error": clip(refused, 1000)}))
+            self._pub_answer.publish(answer_to_string({"id": request_id, "final": True, "error": clip(refused, 1000)}))
 
     def _publish_question_answer(self, message: dict, source: StampedScene) -> None:
-        self._pub_answer.publish(ask_answer_to_string(message))
+        self._pub_answer.publish(answer_to_string(message))
         if message.get("question") == "support" and "answer" in message:
             self._pub_support_graph.publish(support_graph_markers(source.scene, message["answer"], source.frame_id,
                                                                   source.stamp_ns))
@@ -391,6 +390,7 @@ class IpeLifecycleNode(_IpeInterface, LifecycleNode):
         super().__init__(node_name, **node_kwargs)
         self._start_method = start_method
         self._declare()
+        self._guard_transitions()
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         try:
@@ -416,18 +416,32 @@ class IpeLifecycleNode(_IpeInterface, LifecycleNode):
         self._close("the node is shutting down (lifecycle shutdown)")
         return TransitionCallbackReturn.SUCCESS
 
-    def _LifecycleNodeMixin__change_state(self, transition_id: int) -> TransitionCallbackReturn:  # noqa: N802
-        """Every transition request (the ~/change_state service and trigger_*) passes here. rclpy
-        (7.1) lets the state machine raise on a transition not allowed from the current state, which
-        ends the node without a reply; refuse it instead (success false) and keep the state."""
-        allowed = {transition[0]: transition[1] for transition in self._state_machine.available_transitions}
-        if transition_id not in allowed:
-            current = self._state_machine.current_state[1]
-            self.get_logger().warning(
-                f"transition {transition_id} refused: not allowed from state '{current}' (allowed: "
-                + (", ".join(f"{label} ({tid})" for tid, label in sorted(allowed.items())) or "none") + ")")
-            return TransitionCallbackReturn.FAILURE
-        return LifecycleNodeMixin._LifecycleNodeMixin__change_state(self, transition_id)
+    def _guard_transitions(self) -> None:
+        """rclpy (7.1) lets the state machine raise on a transition not allowed from the current state,
+        which ends the node without a reply. Wrap the ~/change_state service's callback (found
+        through the public ``services`` and ``Service.callback``) so that such a request is refused
+        instead (success false), the state kept; ~/get_available_transitions says what is allowed."""
+        by_name = {service.srv_name.rpartition("/")[2]: service for service in self.services}
+        change, available = by_name.get("change_state"), by_name.get("get_available_transitions")
+        if change is None or available is None:  # the communication interface is off: nothing to guard
+            return
+        serve_change, list_transitions = change.callback, available.callback
+
+        def guarded_change_state(request: ChangeState.Request, response: ChangeState.Response):
+            transitions = list_transitions(GetAvailableTransitions.Request(),
+                                           GetAvailableTransitions.Response()).available_transitions
+            allowed = {t.transition.id: t.transition.label for t in transitions}
+            asked = request.transition.label or request.transition.id
+            if asked not in allowed and asked not in allowed.values():
+                state = transitions[0].start_state.label if transitions else "finalized"
+                self.get_logger().warning(
+                    f"transition {asked} refused: not allowed from state '{state}' (allowed: "
+                    + (", ".join(f"{label} ({tid})" for tid, label in sorted(allowed.items())) or "none") + ")")
+                response.success = False
+                return response
+            return serve_change(request, response)
+
+        change.callback = guarded_change_state
 
     def destroy_node(self) -> None:
         self._close_services()

@@ -35,7 +35,7 @@ EXIT_NO_ANSWER, EXIT_BAD_INPUT, EXIT_ERROR_ANSWER = 1, 2, 3
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="ipe_send_scene", description="Publish a scene to ipe_node and print the answer.")
-    parser.add_argument("path", help="a JSON scene file (ipe_ros.scene/1) or a paper-format tower CSV")
+    parser.add_argument("path", help="a JSON scene file (ipe_ros.scene/2 or /1) or a paper-format tower CSV")
     parser.add_argument("--scene", default=None, help="which scene/tower of the file (needed when it holds several)")
     parser.add_argument("--node", default="/ipe", help="the node's fully qualified name (default /ipe)")
     parser.add_argument("--timeout", type=float, default=120.0, help="seconds to wait for the answer")

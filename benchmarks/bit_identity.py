@@ -25,7 +25,6 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 from ipe_ros.analysis.paper_data import shared_data_dir  # noqa: E402
 from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes, predict, preset  # noqa: E402
-from ipe_ros.engine.actions import answer_question  # noqa: E402
 from ipe_ros.engine.fidelity import DEFAULT_CHECK  # noqa: E402
 from ipe_ros.engine.generators import generate_tables, generate_towers  # noqa: E402
 
@@ -111,7 +110,7 @@ def question_digest(reply: dict, answers) -> str:
 
 
 def question_cases():
-    from ipe_ros.engine.question_io import question_from_dict
+    from ipe_ros.engine.actions.question import question_from_dict
     tower = generate_towers(2013, 1)[0]
     model = ModelConfig(sigma_m=0.04, samples=8)
     for name, data in QUESTIONS.items():
@@ -133,9 +132,9 @@ def main() -> int:
         result[key] = digest(p)
         print(key, result[key], flush=True)
     for key, scene, question, model in question_cases():
-        reply, answers = answer_question(scene, question, model, preset("default"), seed=7, check=DEFAULT_CHECK,
-                                          record_every=8, record_samples=2)
-        result[key] = question_digest(reply, answers)
+        reply = question.answer(scene, model, preset("default"), seed=7, check=DEFAULT_CHECK, record_every=8,
+                                record_samples=2)
+        result[key] = question_digest(reply.data, reply.answers)
         print(key, result[key], flush=True)
     with open(args.out, "w") as handle:
         json.dump(result, handle, indent=1)

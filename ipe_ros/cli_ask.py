@@ -25,7 +25,6 @@ from .engine.config import DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_SIGMA_M, PR
 from .engine.fidelity import DEFAULT_CHECK
 from .engine.inputs import as_spelled
 from .engine.request import build_request
-from .engine.question_io import new_object_from_dict
 from .engine.query.contact import parse_pair
 
 #: Samples per variant: a question has many variants, and common random numbers make k = 16 enough
@@ -183,11 +182,8 @@ def cmd_ask(args) -> int:
     if args.workers < 0:
         raise ConfigError("--workers", f"must be >= 0, got {args.workers}")
     pool = WorkerPool(min(args.workers, args.samples)) if args.workers > 0 else None
-    kw = dict(seed=args.seed, map_fn=pool.map if pool else None, budget_s=args.budget, fell_off=args.fell_off,
-              check=request.check if args.self_check else None)
-    if getattr(args, "contact", None):
-        kw["contact"] = tuple(args.contact)
-    if args.rrd and args.question != "clear":
+    kw = dict(seed=args.seed, map_fn=pool.map if pool else None, budget_s=args.budget, check=request.check)
+    if args.rrd:
         kw.update(record_every=max(1, round(0.02 / settings.time_step_s)), record_samples=4)
     try:
         return _answer(args, scene, model, settings, kw)
@@ -199,82 +195,88 @@ def cmd_ask(args) -> int:
 
 
 def _answer(args, scene, model, settings, kw) -> int:
-    emit = (lambda d: print(json.dumps(d, allow_nan=False, sort_keys=True), flush=True)) if args.json else None
-    answers = None
-    if args.question == "remove":
-        answers = A.remove(scene, args.object, model, settings, safe_below=args.safe_below,
-                           sequential=not args.fixed_k, what_falls=args.what_falls or None, **kw)  # None: remove's default
-        print(json.dumps(answers.to_dict(), allow_nan=False, sort_keys=True) if emit else _table(answers))
-    elif args.question == "support":
-        graph = A.support_graph(scene, model, settings, threshold=args.threshold, safe_below=args.safe_below,
-                                sequential=not args.fixed_k, **kw)
-        answers = graph.answers
-        if emit:
-            emit(graph.to_dict())
-        else:
-            print(_table(graph.answers))
-            print("supports (remover -> falls, P): " + (", ".join(f"{a} -> {b} {p:.2f}" for a, b, p in graph.edges) or "none"))
-            print("safe to remove now: " + (", ".join(f"{n} (P {p:.2f}, <= {hi:.2f})" for n, p, hi in graph.safe) or "none"))
-        if args.png:
-            draw_support_graph(scene, graph, args.png)
-    elif args.question == "clear":
-        order = A.clear_order(scene, model, settings, target=args.target, sequential=not args.fixed_k, **kw)
-        if emit:
-            emit(order.to_dict())
-        else:
-            for i, step in enumerate(order.steps, 1):
-                print(f"{i:>3}. remove {step.name:<24} P(anything falls) {step.p_anything_falls:.3f} "
-                      f"[{step.ci95[0]:.2f}, {step.ci95[1]:.2f}]")
-            print(f"total risk: {order.total_risk:.3f}")
-    elif args.question == "place":
-        answers = _place(args, scene, model, settings, kw, emit)
+    question = question_from_args(args)
+    reply = question.answer(scene, model, settings, **kw)
+    if args.json:
+        print(json.dumps(reply.data, allow_nan=False, sort_keys=True), flush=True)
     else:
-        point = None if args.point is None else tuple(args.point)
-        action = A.Push(args.object, (args.velocity[0], args.velocity[1], 0.0), point,
-                        math.radians(args.direction_sigma_deg), args.speed_sigma)
-        answers = A.push(scene, [action], model, settings, **kw)
-        if emit:
-            emit(answers.to_dict())
-        else:
-            print(_table(answers))
-            d = answers.variants[1].direction_rad
-            print(f"fall direction: {'-' if d is None else f'{math.degrees(d):.0f} deg'}")
-    if args.rrd and answers is not None:
+        print(TEXT[question.kind](reply))
+    if question.kind == "support" and args.png:
+        draw_support_graph(scene, reply.result, args.png)
+    if args.rrd and reply.answers is not None:
         from .viz import rerun_log
 
-        rerun_log.write_question_rrd(args.rrd, scene, answers)
+        rerun_log.write_question_rrd(args.rrd, scene, reply.answers)
     return 0
 
 
-def _place(args, scene, model, settings, kw, emit) -> None:
+def question_from_args(args) -> A.Question:
+    """The question the options ask, as the node would read it from JSON (engine.actions.question)."""
+    common = dict(fell_off=args.fell_off, sequential=not args.fixed_k, self_check=args.self_check)
+    contact = tuple(getattr(args, "contact", None) or ())
+    if args.question == "remove":
+        return A.RemoveQuestion(objects=None if args.object is None else tuple(args.object), safe_below=args.safe_below,
+                                what_falls=args.what_falls or None, contact=contact, **common)  # None: remove's default
+    if args.question == "support":
+        return A.SupportQuestion(threshold=args.threshold, safe_below=args.safe_below, **common)
+    if args.question == "clear":
+        return A.ClearQuestion(target=args.target, **common)
+    if args.question == "push":
+        point = None if args.point is None else tuple(args.point)
+        action = A.Push(args.object, (args.velocity[0], args.velocity[1], 0.0), point,
+                        math.radians(args.direction_sigma_deg), args.speed_sigma)
+        return A.PushQuestion(push=action, contact=contact, **common)
     try:
         data = json.loads(args.object)
     except json.JSONDecodeError as exc:
         raise ConfigError("--object", f"not JSON ({exc.msg} at column {exc.colno})") from None
-    body = new_object_from_dict(data, "--object")
+    body = A.new_object_from_dict(data, "--object")
     if (args.at is None) == (args.region is None):
         raise ConfigError("--at", "give candidate spots with --at, or a --region to search (not both)")
+    place = dict(body=body, what_falls=args.what_falls, contact=contact, **common)
     if args.region is not None:
         x0, x1, y0, y1 = args.region
         region = A.Region((x0, x1), (y0, y1), (math.radians(args.yaw[0]), math.radians(args.yaw[1])))
-        rows, answers = A.best_place(scene, body, region, model, settings, candidates=args.candidates,
-                                     yaws=args.yaws, sequential=not args.fixed_k, what_falls=args.what_falls, **kw)
-    else:
-        spots = [(s[0], s[1], math.radians(s[2]) if len(s) == 3 else 0.0) for s in args.at]
-        rows, answers = A.place_at(scene, body, spots, model, settings, sequential=not args.fixed_k,
-                                   what_falls=args.what_falls, **kw)
-    if emit:
-        emit(A.placements_to_dict(scene, rows, answers))
-        return answers
-    print(f"{'x m':>8} {'y m':>8} {'z m':>8} {'yaw deg':>8} {'P(any falls)':>12} {'95% interval':>15} {'k':>4}")
-    for b, v in rows:
+        return A.PlaceQuestion(region=region, candidates=args.candidates, yaws=args.yaws, **place)
+    spots = tuple((s[0], s[1], math.radians(s[2]) if len(s) == 3 else 0.0) for s in args.at)
+    return A.PlaceQuestion(spots=spots, **place)
+
+
+def _support_text(reply: A.Reply) -> str:
+    graph = reply.result
+    return "\n".join([
+        _table(graph.answers),
+        "supports (remover -> falls, P): " + (", ".join(f"{a} -> {b} {p:.2f}" for a, b, p in graph.edges) or "none"),
+        "safe to remove now: " + (", ".join(f"{n} (P {p:.2f}, <= {hi:.2f})" for n, p, hi in graph.safe) or "none")])
+
+
+def _clear_text(reply: A.Reply) -> str:
+    order = reply.result
+    lines = [f"{i:>3}. remove {step.name:<24} P(anything falls) {step.p_anything_falls:.3f} "
+             f"[{step.ci95[0]:.2f}, {step.ci95[1]:.2f}]" for i, step in enumerate(order.steps, 1)]
+    return "\n".join(lines + [f"total risk: {order.total_risk:.3f}"])
+
+
+def _place_text(reply: A.Reply) -> str:
+    lines = [f"{'x m':>8} {'y m':>8} {'z m':>8} {'yaw deg':>8} {'P(any falls)':>12} {'95% interval':>15} {'k':>4}"]
+    for b, v in reply.result:
         yaw = math.degrees(2 * math.atan2(b.orientation_xyzw[2], b.orientation_xyzw[3]))
         p = "-" if v.any_fall_probability is None else f"{v.any_fall_probability:.3f}"
         ci = "-" if v.any_fall_probability_ci95 is None else "[{:.2f}, {:.2f}]".format(*v.any_fall_probability_ci95)
         decided = "" if v.decision is None else f"  {v.decision}"
-        print(f"{b.position_m[0]:>8.3f} {b.position_m[1]:>8.3f} {b.position_m[2]:>8.3f} {yaw:>8.1f} {p:>12} {ci:>15} "
-              f"{v.samples:>4}{decided}")
-    return answers
+        lines.append(f"{b.position_m[0]:>8.3f} {b.position_m[1]:>8.3f} {b.position_m[2]:>8.3f} {yaw:>8.1f} {p:>12} "
+                     f"{ci:>15} {v.samples:>4}{decided}")
+    return "\n".join(lines)
+
+
+def _push_text(reply: A.Reply) -> str:
+    d = reply.answers.variants[1].direction_rad
+    return _table(reply.answers) + f"\nfall direction: {'-' if d is None else f'{math.degrees(d):.0f} deg'}"
+
+
+#: each kind's reply as terminal lines (``--json`` prints the reply the node publishes instead)
+TEXT = {"remove": lambda reply: _table(reply.answers), "support": _support_text, "clear": _clear_text,
+        "place": _place_text, "push": _push_text}
 
 
 def draw_support_graph(scene, graph: A.SupportGraph, path: str) -> None:

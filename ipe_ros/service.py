@@ -657,7 +657,6 @@ class QuestionService:
         return None
 
     def _run(self) -> None:
-        from .engine.actions import answer_question
 
         while True:
             with self._cond:
@@ -689,16 +688,15 @@ class QuestionService:
                 if config.rerun_save_dir and config.rerun_rollouts_logged > 0:
                     record = dict(record_every=max(1, round(config.rerun_frame_period_s / config.settings.time_step_s)),
                                   record_samples=config.rerun_rollouts_logged)
-                answer, answers = answer_question(source.scene, question, model, config.settings, seed=config.seed,
-                                                  map_fn=pool.map if pool is not None else None,
-                                                  budget_s=config.budget_s, on_progress=progress, check=config.check,
-                                                  **record)
-                message = {**head, "final": True, "answer": answer, "compute_s": time.perf_counter() - start}
+                reply = question.answer(source.scene, model, config.settings, seed=config.seed,
+                                        map_fn=pool.map if pool is not None else None, budget_s=config.budget_s,
+                                        on_progress=progress, check=config.check, **record)
+                message = {**head, "final": True, "answer": reply.data, "compute_s": time.perf_counter() - start}
                 if config.model.perception != "gaussian":
                     message["perception"] = (f"gaussian (sigma = {config.model.sigma_m:g} m): questions do not use "
                                              f"{config.model.perception} perception")
-                if record and answers is not None:
-                    message["rrd_path"] = self._write_rrd(config, question, source, answers)
+                if record and reply.answers is not None:
+                    message["rrd_path"] = self._write_rrd(config, question, source, reply.answers)
                 answered = True
             except Exception as exc:  # noqa: BLE001 - one question's trouble is its answer, never the thread's end
                 error = str(exc) if isinstance(exc, (ValueError, QuestionCancelled)) else "".join(

@@ -1,6 +1,6 @@
 """``std_msgs/String`` JSON <-> questions about actions (``~/ask``) and their answers (``~/answer``).
 
-A question is ``ipe_ros.engine.question_io.question_from_dict``'s JSON, plus optionally ``"scene"``: a
+A question is ``ipe_ros.engine.actions.question_from_dict``'s JSON, plus optionally ``"scene"``: a
 scene in the ``ipe_ros.scene/2`` format to ask about (default: the newest scene the node accepted).
 """
 
@@ -14,7 +14,7 @@ from geometry_msgs.msg import Point
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ipe_ros.engine import ConfigError, Scene, SceneError
-from ipe_ros.engine.question_io import Question, question_from_dict
+from ipe_ros.engine.actions.question import Question, question_from_dict
 from ipe_ros.engine.errors import json_type
 from ipe_ros.engine.limits import MAX_JSON_CHARS
 from ipe_ros.engine.scene import DEFAULT_MAX_OBJECTS

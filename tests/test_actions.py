@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import json
 import math
 
 import numpy as np
@@ -14,7 +15,7 @@ from ipe_ros.engine import Box, ConfigError, Floor, ModelConfig, Scene, Sphere, 
 from ipe_ros.engine import actions as A
 from ipe_ros.engine.actions.answers import fell, ran
 from ipe_ros.engine.decide import Ranking, SafeBelow, Tally
-from ipe_ros.engine.question_io import question_from_dict
+from ipe_ros.engine.actions.question import question_from_dict
 from ipe_ros.engine.scene import Body
 
 I = (0.0, 0.0, 0.0, 1.0)
@@ -366,7 +367,7 @@ def test_questions_ask_what_falls_off_the_table():
     assert answer["remove/weight"].fell_off_probability == {"post": 0.0, "plank": 1.0}
     assert answer["remove/weight"].to_dict()["any_fell_off_probability"] == 1.0
     question = question_from_dict({"question": "remove", "objects": ["weight"], "fell_off": True})
-    reply, _ = A.answer_question(lever, question, MODEL, SETTINGS)
+    reply = question.answer(lever, MODEL, SETTINGS).data
     assert reply["variants"][1]["fell_off_probability"]["plank"] == 1.0
     assert "fell_off_probability" not in A.remove(lever, ["weight"], MODEL, SETTINGS).to_dict()["variants"][1]
     with pytest.raises(ConfigError) as info:
@@ -380,9 +381,9 @@ def test_questions_ask_what_falls_off_the_table():
 def test_a_question_sent_as_json_asks_what_falls_or_not():
     safe = {"question": "remove", "objects": ["c"], "safe_below": 0.05}
     for extra, objects in (({}, None), ({"what_falls": True}, {"a": 0.0, "b": 0.0})):
-        reply, _ = A.answer_question(TOWER_3, question_from_dict({**safe, **extra}), MODEL, SETTINGS)
+        reply = question_from_dict({**safe, **extra}).answer(TOWER_3, MODEL, SETTINGS).data
         assert reply["variants"][1]["object_fall_probability"] == objects
-    reply, _ = A.answer_question(TOWER_3, question_from_dict({"question": "remove", "objects": ["c"]}), MODEL, SETTINGS)
+    reply = question_from_dict({"question": "remove", "objects": ["c"]}).answer(TOWER_3, MODEL, SETTINGS).data
     assert reply["variants"][1]["object_fall_probability"] == {"a": 0.0, "b": 0.0}
     with pytest.raises(ConfigError, match="^what_falls: must be true or false$"):
         question_from_dict({**safe, "what_falls": 1})
@@ -491,3 +492,65 @@ def test_candidates_are_ranked_on_the_samples_where_the_scene_stands():
     assert [v.label for v in sorted([props_up, harmless], key=_rank_key)] == ["b", "a"]
     never_stands = dataclasses.replace(candidate("c", 0.5, None), given_stands=GivenStands(0, None, None, {}))
     assert _rank_key(never_stands) == (False, 0.5)
+
+
+# -- questions as objects: read, answered and written back by one class per kind ---------------------------------
+QUESTION_JSON = [
+    {"id": "r1", "question": "support", "threshold": 0.4, "samples": 2},
+    {"id": "r2", "question": "remove", "objects": ["box0"], "safe_below": 0.1, "contact": ["box1:support"],
+     "what_falls": True, "fell_off": True},
+    {"id": "r3", "question": "clear", "target": "box1", "sequential": False},
+    {"id": "r4", "question": "push", "object": "box1", "velocity_m_s": [1.0, 0.0], "point_m": [0.1, 0.0, 0.5],
+     "direction_sigma_deg": 5.0, "speed_sigma": 0.1, "contact": ["box1:box0"], "cancel_older": True},
+    {"id": "r5", "question": "place", "object": {"name": "new", "shape": {"type": "box", "extents_m": [0.1, 0.1, 0.1]},
+                                                 "mass_kg": 1.0, "friction": 0.5, "restitution": 0.0},
+     "at": [[0.6, 0.0, 30.0], [0.2, 0.1]], "what_falls": False, "self_check": True},
+    {"id": "r6", "question": "place", "object": {"name": "new", "shape": {"type": "sphere", "radius_m": 0.05},
+                                                 "mass_kg": 1.0, "friction": 0.5, "restitution": 0.0},
+     "region": {"x_m": [0.5, 0.9], "y_m": [-0.2, 0.2], "yaw_deg": [0, 90], "candidates": 4, "yaws": 2}},
+]
+
+
+@pytest.mark.parametrize("data", QUESTION_JSON, ids=lambda d: d["id"])
+def test_a_question_writes_itself_back_to_the_json_it_was_read_from(data):
+    question = question_from_dict(data)
+    assert type(question) is A.QUESTION_KINDS[data["question"]]
+    written = question.to_dict()
+    assert question_from_dict(json.loads(json.dumps(written))) == question
+    assert {k: written[k] for k in data if k not in ("object", "at")} == {k: v for k, v in data.items()
+                                                                          if k not in ("object", "at")}
+
+
+def test_a_question_built_in_python_is_checked_as_the_json_is():
+    with pytest.raises(ConfigError, match=r"^safe_below: must be in \(0, 1\], got 2$"):
+        A.RemoveQuestion(safe_below=2)
+    with pytest.raises(ConfigError, match=r"^objects: names no object"):
+        A.RemoveQuestion(objects=())
+    with pytest.raises(ConfigError, match=r"^threshold: must be in \(0, 1\], got 0$"):
+        A.SupportQuestion(threshold=0)
+    body = question_from_dict(QUESTION_JSON[4]).body
+    with pytest.raises(ConfigError, match=r"^at: give candidate spots in \"at\" or a \"region\""):
+        A.PlaceQuestion(body=body)
+    with pytest.raises(ConfigError, match=r"^region.candidates: 200 candidates x 3 yaws are 600 placements"):
+        A.PlaceQuestion(body=body, region=A.Region((0, 1), (0, 1)), candidates=200, yaws=3)
+
+
+@pytest.mark.parametrize("argv, data", [
+    (["remove", "--object", "c", "--what-falls", "--contact", "a:b"],
+     {"question": "remove", "objects": ["c"], "what_falls": True, "contact": ["a:b"]}),
+    (["support", "--threshold", "0.4", "--fixed-k", "--self-check"],
+     {"question": "support", "threshold": 0.4, "sequential": False, "self_check": True}),
+    (["clear", "--target", "b"], {"question": "clear", "target": "b"}),
+    (["push", "--object", "b", "--velocity", "0.5,0", "--direction-sigma-deg", "5", "--speed-sigma", "0.1"],
+     {"question": "push", "object": "b", "velocity_m_s": [0.5, 0.0], "direction_sigma_deg": 5.0, "speed_sigma": 0.1}),
+    (["place", "--object", json.dumps(QUESTION_JSON[4]["object"]), "--at", "0.6,0,30", "--at", "0.2,0.1"],
+     {**{k: QUESTION_JSON[4][k] for k in ("object", "at")}, "question": "place", "what_falls": False}),
+])
+def test_ipe_ask_asks_the_very_question_the_node_reads_from_json(argv, data):
+    """One class per kind answers both doors: the command line's options make the same object as the
+    node's ~/ask JSON, so both are answered alike (benchmarks/bit_identity.py holds the answers)."""
+    from ipe_ros.cli import build_parser
+    from ipe_ros.cli_ask import question_from_args
+
+    args = build_parser().parse_args(["ask", argv[0], "scene.json", *argv[1:]])
+    assert question_from_args(args) == question_from_dict(data)

@@ -451,12 +451,12 @@ def test_a_sequential_decision_is_read_again_from_the_checked_samples():
 
 
 def test_a_question_sent_as_json_checks_itself_only_when_it_asks_to(ramp_3):
-    from ipe_ros.engine.question_io import question_from_dict
+    from ipe_ros.engine.actions.question import question_from_dict
 
     model = _ramp_model(ramp_3, 8)
     for asked, verdict in ((True, "escalated"), (False, "unverified")):
         question = question_from_dict({"question": "remove", "objects": ["mover"], "self_check": asked})
-        answer, _ = A.answer_question(ramp_3, question, model, preset("default"), seed=0, check=DEFAULT_CHECK)
+        answer = question.answer(ramp_3, model, preset("default"), seed=0, check=DEFAULT_CHECK).data
         assert answer["variants"][0]["label"] == "as_is" and answer["variants"][0]["fidelity"] == verdict
     with pytest.raises(ConfigError, match=r"^self_check: must be true or false$"):
         question_from_dict({"question": "remove", "self_check": "yes"})

@@ -232,14 +232,12 @@ def mutated_questions(draw):
 def test_mutated_questions_are_answered_within_budget_or_refused_by_name(question):
     """The node's question path: read (msg_bridge), then answer with the node's budget. Either a
     one-line error naming a field, or a JSON answer within the budget (+ slack)."""
-    from ipe_ros.engine.actions import answer_question
     from msg_bridge.ask_json import string_to_question
 
     start = time.monotonic()
     try:
         parsed, _ = string_to_question(String(data=json.dumps(question)))
-        answer, _ = answer_question(QUESTION_SCENE, parsed, CONFIG.model, CONFIG.settings, seed=1,
-                                    budget_s=BUDGET_S)
+        answer = parsed.answer(QUESTION_SCENE, CONFIG.model, CONFIG.settings, seed=1, budget_s=BUDGET_S).data
     except ValueError as exc:
         _check_error(exc)
         return
@@ -284,10 +282,9 @@ def test_any_store_entry_reads_back_as_a_result_or_is_refused_in_one_line(data):
 
 def test_the_unmutated_questions_are_answered():
     """The fuzz starts from questions the engine answers (else it would only exercise refusals)."""
-    from ipe_ros.engine.actions import answer_question
     from msg_bridge.ask_json import string_to_question
 
     for question in QUESTIONS:
         parsed, _ = string_to_question(String(data=json.dumps(question)))
-        answer, _ = answer_question(QUESTION_SCENE, parsed, CONFIG.model, CONFIG.settings, seed=1, budget_s=BUDGET_S)
+        answer = parsed.answer(QUESTION_SCENE, CONFIG.model, CONFIG.settings, seed=1, budget_s=BUDGET_S).data
         json.dumps(answer, allow_nan=False)

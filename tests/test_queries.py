@@ -280,21 +280,20 @@ def test_a_push_question_answers_whether_the_pushed_cup_touches_the_glass(speed,
 
 
 def test_contact_on_robot_questions_through_the_question_json():
-    from ipe_ros.engine.actions import answer_question
-    from ipe_ros.engine.question_io import question_from_dict
+    from ipe_ros.engine.actions.question import question_from_dict
 
     question = question_from_dict({"question": "push", "object": "cup", "velocity_m_s": [3.0, 0.0],
                                    "direction_sigma_deg": 10, "samples": 8, "contact": ["cup:glass", "glass:support"]})
     assert question.contact == (("cup", "glass"), ("glass", "support"))
-    answer, _ = answer_question(_cup_and_glass(), question, ModelConfig(sigma_m=0.005, samples=8), preset("default"))
+    answer = question.answer(_cup_and_glass(), ModelConfig(sigma_m=0.005, samples=8), preset("default")).data
     pushed = answer["variants"][1]
     assert pushed["contact_probability"]["cup:glass"] >= 0.75
     assert pushed["contact_probability"]["glass:support"] == 1.0  # it stands on the floor from the start
     lo, hi = pushed["contact_probability_ci95"]["cup:glass"]
     assert lo <= pushed["contact_probability"]["cup:glass"] <= hi
     with pytest.raises(ConfigError, match="contact: cup:mug: no object 'mug' in scene 'cup_and_glass'"):
-        answer_question(_cup_and_glass(), dataclasses.replace(question, contact=(("cup", "mug"),)),
-                        GROUND_TRUTH, preset("default"))
+        dataclasses.replace(question, contact=(("cup", "mug"),)).answer(_cup_and_glass(), GROUND_TRUTH,
+                                                                        preset("default"))
     with pytest.raises(ConfigError, match="unknown field of a support question"):
         question_from_dict({"question": "support", "contact": ["a:b"]})
 

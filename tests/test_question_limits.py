@@ -12,7 +12,7 @@ from ipe_ros.engine import ConfigError
 from ipe_ros.engine import actions as A
 from ipe_ros.engine.actions import questions
 from ipe_ros.engine.actions.checks import check_action
-from ipe_ros.engine.question_io import new_object_from_dict, question_from_dict
+from ipe_ros.engine.actions.question import new_object_from_dict, question_from_dict
 from tests.test_actions import MODEL, SETTINGS, STACK, box, scene
 
 CUBE = {"name": "new", "shape": {"type": "box", "extents_m": [0.1, 0.1, 0.1]}, "mass_kg": 1.0, "friction": 0.5,

@@ -19,21 +19,25 @@ The package, one job per module: kinds.py (what a robot may do: Remove, Place, P
 geometry.py (contacts, what rests on what, reach and the groups it leaves apart), variants.py (one
 sample of every variant), answers.py (what each variant does, over all samples and the standing
 ones), ask.py (every variant with common random numbers, in one map or until decided), questions.py
-(the questions built on ask). A question as data (the node's ``~/ask`` JSON) is read in
-``engine/question_io.py``, beside ``scene_io``.
+(the questions built on ask). question.py: a question as an object, one class per kind
+(the node's ``~/ask`` JSON read, answered, written back).
 """
 
 from .answers import Alone, Answers, GivenStands, VariantAnswer
 from .ask import VARIANTS_PER_TASK, ask, progress_dict
 from .geometry import Contacts, contacts, dependents, groups, reach_m, resting_on
 from .kinds import DEFAULT_SAFE_BELOW, DEFAULT_SUPPORT_THRESHOLD, Action, Place, Push, Region, Remove
-from .questions import (PLACEMENT_GEOMETRY_S, ClearOrder, ClearStep, SupportGraph, answer_question, best_place,
+from .questions import (PLACEMENT_GEOMETRY_S, ClearOrder, ClearStep, SupportGraph, best_place,
                         clear_order, place, place_at, placements_to_dict, push, remove, resting_height_m, support_graph)
+from .question import (QUESTION_KINDS, QUESTIONS, ClearQuestion, PlaceQuestion, PushQuestion, Question, RemoveQuestion,
+                       Reply, SupportQuestion, new_object_from_dict, question_from_dict)
 from .variants import VariantTask, run_variants
 
-__all__ = ["Action", "Alone", "Answers", "ClearOrder", "ClearStep", "Contacts", "DEFAULT_SAFE_BELOW",
-           "DEFAULT_SUPPORT_THRESHOLD", "GivenStands", "PLACEMENT_GEOMETRY_S", "Place", "Push", "Region", "Remove",
-           "SupportGraph", "VARIANTS_PER_TASK", "VariantAnswer", "VariantTask", "answer_question",
-           "ask", "best_place", "clear_order", "contacts", "dependents", "groups", "place", "place_at",
-           "placements_to_dict", "progress_dict", "push", "reach_m", "remove", "resting_height_m", "resting_on",
-           "run_variants", "support_graph"]
+__all__ = ["Action", "Alone", "Answers", "ClearOrder", "ClearQuestion", "ClearStep", "Contacts",
+           "DEFAULT_SAFE_BELOW", "DEFAULT_SUPPORT_THRESHOLD", "GivenStands", "PLACEMENT_GEOMETRY_S", "Place",
+           "PlaceQuestion", "Push", "PushQuestion", "QUESTIONS", "QUESTION_KINDS", "Question", "Region", "Remove",
+           "RemoveQuestion", "Reply", "SupportGraph", "SupportQuestion", "VARIANTS_PER_TASK", "VariantAnswer",
+           "VariantTask", "ask", "best_place", "clear_order", "contacts", "dependents", "groups",
+           "new_object_from_dict", "place", "place_at", "placements_to_dict", "progress_dict", "push",
+           "question_from_dict", "reach_m", "remove", "resting_height_m", "resting_on", "run_variants",
+           "support_graph"]

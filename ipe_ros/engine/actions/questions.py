@@ -1,6 +1,6 @@
 """The questions built on ``ask``: what falls if objects are removed, what supports what, an
 order to clear the scene, where to place a new object, what a push does; and a question given as
-data (``question_io.Question``) answered."""
+data is a ``question.Question``."""
 
 from __future__ import annotations
 
@@ -9,7 +9,6 @@ import itertools
 import math
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -25,8 +24,6 @@ from .geometry import geometry_world, dependents, resting_on
 from .kinds import (DEFAULT_SAFE_BELOW, DEFAULT_SUPPORT_THRESHOLD, NO_OBJECTS, Action, Place, Push, Region, Remove,
                     check_level)
 
-if TYPE_CHECKING:
-    from ..question_io import Question
 
 
 # -- the questions ----------------------------------------------------------------------------------------
@@ -311,45 +308,6 @@ def _rank_key(variant: VariantAnswer) -> tuple:
 def push(scene: Scene, pushes: list[Push], model: ModelConfig, settings: SimSettings, **kw) -> Answers:
     """What falls, and in which direction, when each push is made; the scene as it is comes first."""
     return ask(scene, [None] + list(pushes), model, settings, directions=True, **kw)
-
-
-def answer_question(scene: Scene, question: Question, model: ModelConfig, settings: SimSettings,
-                    **kw) -> tuple[dict, Answers | None]:
-    """Answer a Question: the JSON-ready answer, and the variants' Answers (None for ``clear``,
-    which asks once per step) for a recording. ``check`` (in ``kw``): how a question asking for
-    ``self_check`` is checked; without it, the fast physics alone."""
-    if question.samples is not None:
-        model = dataclasses.replace(model, samples=question.samples)
-    if question.fell_off:
-        kw["fell_off"] = True
-    if question.contact:
-        kw["contact"] = question.contact
-    if not question.self_check:
-        kw["check"] = None
-    kind = question.kind
-    if question.what_falls is not None:  # read by remove and place only
-        kw["what_falls"] = question.what_falls
-    if kind == "push":  # no decision to reach: the full k
-        answers = push(scene, [question.push], model, settings, **kw)
-        return answers.to_dict(), answers
-    kw["sequential"] = question.sequential
-    if kind == "remove":
-        answers = remove(scene, None if question.objects is None else list(question.objects), model, settings,
-                         safe_below=question.safe_below, **kw)
-        return answers.to_dict(), answers
-    if kind == "support":
-        graph = support_graph(scene, model, settings, threshold=question.threshold, safe_below=question.safe_below,
-                              **kw)
-        return graph.to_dict(), graph.answers
-    if kind == "clear":
-        kw = {k: v for k, v in kw.items() if k not in ("record_every", "record_samples")}
-        return clear_order(scene, model, settings, target=question.target, **kw).to_dict(), None
-    if question.region is not None:
-        rows, answers = best_place(scene, question.body, question.region, model, settings,
-                                   candidates=question.candidates, yaws=question.yaws, **kw)
-    else:
-        rows, answers = place_at(scene, question.body, question.spots, model, settings, **kw)
-    return placements_to_dict(scene, rows, answers), answers
 
 
 def place_at(scene: Scene, body: Body, spots, model: ModelConfig, settings: SimSettings,

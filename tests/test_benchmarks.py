@@ -10,6 +10,10 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+import pytest
+
+#: runs every benchmark script small: minutes, not part of the fast subset
+pytestmark = pytest.mark.slow
 
 REPO = Path(__file__).resolve().parents[1]
 ENV = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")

@@ -55,6 +55,7 @@ def test_the_catalogue_spans_what_it_promises(catalogue):
     assert scene_catalogue(2026, 2) == catalogue[:2]  # scene i depends on (seed, i) only
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["paper", "accurate", "fine", "default"])
 def test_every_rollout_ends_healthy(answers, name):
     for prediction in answers[name]:
@@ -65,6 +66,7 @@ def test_every_rollout_ends_healthy(answers, name):
                 assert rollout.penetration_fraction <= MAX_END_PENETRATION, (prediction.scene, outcome.index)
 
 
+@pytest.mark.slow
 def test_default_agrees_with_paper_on_anything_falling(answers):
     agree = [bool(a.rollouts[0].fallen.any()) == bool(b.rollouts[0].fallen.any())
              for fast, slow in zip(answers["default"], answers["paper"])
@@ -72,6 +74,7 @@ def test_default_agrees_with_paper_on_anything_falling(answers):
     assert np.mean(agree) >= MIN_AGREEMENT, f"{np.mean(agree):.3f} of {len(agree)} samples"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["paper", "accurate", "fine", "default"])
 def test_no_rollout_gains_energy(answers, catalogue, name):
     for scene, prediction in zip(catalogue, answers[name]):

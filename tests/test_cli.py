@@ -193,6 +193,7 @@ def test_long_work_shows_plain_progress_lines_off_a_terminal_and_a_bar_on_one(ca
     assert "towers:" in terminal.getvalue() and "/3 [" in terminal.getvalue() and "\r" in terminal.getvalue()  # a bar
 
 
+@pytest.mark.slow
 def test_predict_draws_the_answer_as_a_png(tmp_path):
     out = tmp_path / "tower.png"
     run = run_cli("predict", str(example_scene_path()), "--samples", "4", "--workers", "0", "--png", str(out))

@@ -12,6 +12,9 @@ distributed = pytest.importorskip("distributed", reason="dask/distributed are pi
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, predict, preset  # noqa: E402
 from ipe_ros.engine.cluster import DaskMap, local_cluster, scheduler_address  # noqa: E402
 
+#: a Dask LocalCluster per test
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def cluster():

@@ -12,6 +12,9 @@ import pytest
 
 from tests.conftest import REPO
 
+#: builds the package with colcon
+pytestmark = pytest.mark.build
+
 SKIP = shutil.ignore_patterns(".git", ".venv", "build", "install", "log", "__pycache__", "*.egg-info", "*.rrd",
                               ".pytest_cache")
 SCRIPTS = ("ipe", "ipe_node", "ipe_lifecycle_node", "ipe_ros_demo", "ipe_send_scene")

@@ -112,6 +112,7 @@ def test_depth_perception_needs_its_images_and_names_what_is_wrong():
         D.parse_pose("1,2,3")
 
 
+@pytest.mark.slow
 def test_the_cli_predicts_from_the_built_in_depth_example(tmp_path, capsys):
     assert main(["generate", "depth-example", "-o", str(tmp_path)]) == 0
     pose = (tmp_path / "camera_pose.txt").read_text().strip()

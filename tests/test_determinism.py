@@ -14,6 +14,7 @@ MODEL = ModelConfig(sigma_m=0.04, samples=6)
 QUERY = QuerySpec(queries=frozenset({"fall", "direction", "far"}))
 
 
+@pytest.mark.slow
 def test_same_seed_same_json_whatever_the_worker_count(pool):
     scene = load_scenes(example_scene_path())[0]
     serial = predict(scene, MODEL, preset("default"), QUERY, seed=11)

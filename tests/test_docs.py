@@ -19,6 +19,9 @@ import pytest
 from tests.conftest import REPO
 from tests.ros_harness import domain_id_for_tests
 
+#: runs the documents' commands
+pytestmark = pytest.mark.slow
+
 DOCUMENTS = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md")), REPO / "benchmarks" / "README.md"]
 SHELL = {"bash", "sh", "shell", "console"}
 FENCE = re.compile(r"^```(\S*)\s*$")

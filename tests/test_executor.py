@@ -16,6 +16,9 @@ from std_msgs.msg import String  # noqa: E402
 
 from ipe_ros.ros.executor import SubmitOnceExecutor  # noqa: E402
 
+#: starts rclpy (a Context of its own, DDS on loopback)
+pytestmark = pytest.mark.ros
+
 
 def submissions_while_both_threads_are_busy(executor_class) -> tuple[int, int, int]:
     """Two message callbacks hold both of a 2-thread executor's threads while a third message's

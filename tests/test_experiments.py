@@ -14,6 +14,9 @@ from ipe_ros.analysis.experiments import EXPERIMENTS
 
 from .conftest import SHARED_DATA
 
+#: the paper's analyses, small
+pytestmark = pytest.mark.slow
+
 
 def run_cli(*args, timeout=900):
     return subprocess.run([sys.executable, "-m", "ipe_ros.cli", "experiment", *args], capture_output=True,

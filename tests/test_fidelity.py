@@ -221,6 +221,7 @@ def test_a_bias_the_verified_sample_could_not_show_is_found_by_coverage(contradi
     assert p.fidelity == "verified" and p.object_fall_probability["block1"] == 3 / 8  # what it was
 
 
+@pytest.mark.slow
 def test_the_coverage_sample_is_picked_ahead_and_runs_beside_the_last_fast_samples(contradicted_scene):
     """k = 32: samples 0-23 run with the verification (sample 0, standing like the reference's);
     three of them topple (2, 3, 5), a side no compared sample took: sample 2 is verified in the map

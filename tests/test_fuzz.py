@@ -16,6 +16,8 @@ import copy
 import json
 import time
 
+import pytest
+
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from geometry_msgs.msg import Point
@@ -147,6 +149,7 @@ def mutated_scenes(draw):
 
 @settings(suppress_health_check=[HealthCheck.too_slow])
 @given(mutated_scenes())
+@pytest.mark.slow
 def test_mutated_scenes_are_answered_within_budget_or_refused_by_name(scene):
     _through_the_node(lambda: string_to_scene(String(data=json.dumps(scene))))
 
@@ -193,6 +196,7 @@ def marker_arrays(draw):
 
 @settings(suppress_health_check=[HealthCheck.too_slow])
 @given(marker_arrays())
+@pytest.mark.slow
 def test_random_marker_arrays_are_answered_within_budget_or_refused_by_name(msg):
     _through_the_node(lambda: markers_to_scene(msg, max_objects=CONFIG.max_objects).scene)
 

@@ -1,6 +1,7 @@
 """Generated towers and tables are well-formed, seeded, and built by the paper's rules."""
 
 import numpy as np
+import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
 from ipe_ros.engine import simulation
@@ -20,6 +21,7 @@ def test_towers_are_seeded_inside_the_column_and_free_of_overlaps():
         assert simulation.depenetrate(world, settings) == 0  # nothing to separate: stacked, not interpenetrating
 
 
+@pytest.mark.slow
 def test_each_block_stands_on_its_own_support_when_placed():
     # The paper's rule: no block, as placed, would fall off its support (later blocks may topple it).
     # For every prefix of blocks 0..i whose earlier blocks stay put, the newly placed block i must too.

@@ -17,6 +17,9 @@ from ipe_ros.engine.scene_io import scene_to_json
 from ipe_ros.ros.node import LATCHED_QOS, IpeLifecycleNode
 from tests.ros_harness import RosHarness, wait_until
 
+#: starts rclpy (a Context of its own, DDS on loopback)
+pytestmark = pytest.mark.ros
+
 TIMEOUT_S = 90.0
 
 

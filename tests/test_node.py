@@ -26,6 +26,9 @@ from ipe_ros.engine.scene_io import scene_to_json  # noqa: E402
 from ipe_ros.ros.node import INPUT_QOS as RELIABLE_QOS, LATCHED_QOS  # noqa: E402
 from msg_bridge.markers import scene_to_markers  # noqa: E402
 
+#: starts rclpy (a Context of its own, DDS on loopback)
+pytestmark = pytest.mark.ros
+
 EXAMPLE = "ipe_ros/data/example_tower.json"
 TIMEOUT_S = 90.0
 FAST = dict(samples=6)  # enough samples to be a real Monte Carlo run, few enough to be quick

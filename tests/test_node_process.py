@@ -15,6 +15,9 @@ import pytest
 
 from tests.ros_harness import domain_id_for_tests, wait_until
 
+#: starts rclpy (a Context of its own, DDS on loopback)
+pytestmark = pytest.mark.ros
+
 
 def _children(pid: int) -> set[int]:
     """Direct children of ``pid``, read from /proc (no psutil needed)."""

@@ -9,6 +9,7 @@ import sys
 import types
 import xml.etree.ElementTree as ET
 
+import pytest
 import yaml
 
 from tests.conftest import REPO
@@ -92,6 +93,7 @@ def test_config_yaml_lists_every_parameter_with_its_default():
     assert set(shipped) <= {spec.name for spec in PARAMETERS}, set(shipped) - {s.name for s in PARAMETERS}
 
 
+@pytest.mark.ros
 def test_the_node_reads_a_params_file(tmp_path):
     """--ros-args --params-file, as ``ros2 run`` and the launch file pass it (rcl's own YAML parser)."""
     changed = (REPO / "config" / "ipe.yaml").read_text().replace("    samples: 48", "    samples: 7") \

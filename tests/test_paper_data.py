@@ -12,6 +12,9 @@ from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes, predict, preset
 
 from .conftest import shared_file
 
+#: the authors' 60 towers and more at paper settings
+pytestmark = pytest.mark.slow
+
 FALL = QuerySpec(queries=frozenset({"fall"}))
 #: the authors' later code counts a block as moved when its 3-D displacement exceeds a quarter short side
 MOVED_M = 0.05

@@ -81,6 +81,7 @@ def test_bad_arguments():
         WorkerPool(1, start_method="fork")
 
 
+@pytest.mark.slow
 def test_workers_end_by_themselves_when_their_owner_is_killed(tmp_path):
     """An owner killed with SIGKILL cannot close its pool: the workers notice and exit."""
     import subprocess

@@ -135,6 +135,7 @@ def test_the_self_check_is_counted_and_can_be_turned_off():
         svc.close()
 
 
+@pytest.mark.slow
 def test_a_newer_question_may_replace_older_ones_about_the_same_scene_each_answered_once(service):
     from ipe_ros.engine.actions.question import question_from_dict
     from ipe_ros.service import QuestionService

@@ -10,6 +10,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes, predict, preset
 from ipe_ros.engine.store import ResumableMap, result_key
@@ -60,6 +61,7 @@ def test_keys_follow_what_a_result_depends_on_and_not_when_it_ran():
     assert result_key(run_sample, a) == result_key(run_sample, dataclasses.replace(a, deadline_unix_s=1e9))
 
 
+@pytest.mark.slow
 def test_ipe_experiment_resume_reads_everything_back_the_second_time(tmp_path):
     command = [sys.executable, "-m", "ipe_ros.cli", "experiment", "far", "--quick", "--workers", "2", "--resamples",
                "500", "--resume", str(tmp_path / "store")]

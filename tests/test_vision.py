@@ -82,6 +82,7 @@ def test_incremental_rendering_equals_rendering_from_scratch():
             state = trial
 
 
+@pytest.mark.slow
 def test_one_block_posterior_matches_the_blur_limited_laplace_approximation():
     """For one visible block the log-likelihood is locally quadratic in its offset d:
     -d' H d / 2 with H = sum over pixels of J J' / sd^2, J the blurred image's derivative. The chain's
@@ -120,6 +121,7 @@ def test_the_effective_sample_size_of_known_chains():
     assert effective_sample_size(np.ones(100)) == 1.0
 
 
+@pytest.mark.slow
 def test_chains_and_vision_predictions_are_determined_by_the_seed_whatever_the_workers():
     first = perceive(TOWER, 4, SMALL, np.random.default_rng(9), check_ess=False)
     again = perceive(TOWER, 4, SMALL, np.random.default_rng(9), check_ess=False)
@@ -170,6 +172,7 @@ def test_the_likelihood_scales_with_resolution_to_the_same_evidence():
     assert log_likelihood(np.zeros((2, 2)), np.ones((2, 2)), 1.0) == -2.0
 
 
+@pytest.mark.slow
 def test_ipe_predict_with_vision_perception_and_its_recording(tmp_path):
     import json
     import subprocess

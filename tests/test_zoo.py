@@ -96,6 +96,7 @@ def zoo_answers(pool):
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("family", list(FAMILIES))
 def test_zoo_family_self_checking_default_against_paper(family, zoo_answers):
     scene, fast, paper = zoo_answers[family]

@@ -92,7 +92,7 @@ def _wait(event: threading.Event) -> None:
 
 
 def test_the_prediction_thread_survives_an_exception_and_a_logger_that_raises(monkeypatch):
-    import ipe_ros.service as service_module
+    import ipe_ros.service.predictions as service_module
 
     calls = {"n": 0}
     real_predict = service_module.predict

@@ -25,7 +25,7 @@ LAYERS = {
     "viz": ("ipe_ros/viz", ("ipe_ros.ros", "ipe_ros.service", "ipe_ros.cli", "ipe_ros.analysis", "msg_bridge")),
     # progress display is the caller's (analysis.reporting): the analyses never import the CLI's bars
     "analysis": ("ipe_ros/analysis", ("ipe_ros.ros", "ipe_ros.service", "ipe_ros.cli", "ipe_ros.progress", "msg_bridge")),
-    "service": ("ipe_ros/service.py", ("ipe_ros.ros", "ipe_ros.cli", "ipe_ros.analysis", "msg_bridge")),
+    "service": ("ipe_ros/service", ("ipe_ros.ros", "ipe_ros.cli", "ipe_ros.analysis", "msg_bridge")),
     "cli": ("ipe_ros/cli.py", ("ipe_ros.ros", "ipe_ros.service", "msg_bridge")),
     "cli_ask": ("ipe_ros/cli_ask.py", ("ipe_ros.ros", "ipe_ros.service", "ipe_ros.analysis", "msg_bridge")),
     "progress": ("ipe_ros/progress.py", ("ipe_ros.ros", "ipe_ros.service", "ipe_ros.cli", "ipe_ros.engine",

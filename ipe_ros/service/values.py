@@ -1,0 +1,153 @@
+"""What the service's parts pass around: its config, a scene as received, a published answer, the
+counters diagnostics read, and the errors a caller may catch."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from ..engine import AdaptiveStop, ModelConfig, Prediction, QuerySpec, Scene, SimSettings, preset
+from ..engine.config import DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES
+from ..engine.fidelity import DEFAULT_CHECK, SelfCheck
+from ..engine.scene import DEFAULT_MAX_OBJECTS
+
+
+
+@dataclass(frozen=True)
+class ServiceConfig:
+    """Everything a prediction depends on besides the scene; replaced as a whole on updates.
+
+    model, settings, query, seed: the IPE's inputs, the simulation settings, the queries, the seed.
+    max_objects: scenes with more objects are refused.
+    rerun_save_dir: folder for one ``.rrd`` per prediction, or None for no rerun logging.
+    rerun_rollouts_logged: how many sampled rollouts each ``.rrd`` shows.
+    rerun_frame_period_s: simulated seconds between recorded frames of a logged rollout.
+    rerun_connect_url: also stream to a running viewer at this gRPC URL (never spawns one).
+    """
+
+    model: ModelConfig = DEFAULT_MODEL
+    settings: SimSettings = preset(DEFAULT_PRESET)
+    query: QuerySpec = QuerySpec(queries=DEFAULT_QUERIES)
+    seed: int = 0
+    max_objects: int = DEFAULT_MAX_OBJECTS
+    rerun_save_dir: str | None = None
+    rerun_rollouts_logged: int = 8
+    rerun_frame_period_s: float = 0.02
+    rerun_connect_url: str | None = None
+    stop: AdaptiveStop | None = None  # anytime sampling (deadline / interval width), None: all k
+    budget_s: float = DEFAULT_BUDGET_S  # wall seconds a prediction may take (see engine.predict)
+    gravity_aligned_frames: tuple[str, ...] = ()  # frames whose -z is gravity; () trusts every frame
+    check: SelfCheck = DEFAULT_CHECK  # how each prediction checks its fast physics (engine.fidelity)
+    #: ``model.perception == "depth"``: a scene is predicted from the newest depth image taken at most
+    #: this many seconds before or after its stamp
+    depth_max_age_s: float = 0.5
+
+
+@dataclass(frozen=True)
+class StampedScene:
+    """A scene as received: its header (stamp in ns since the epoch, frame), an id and a sequence number."""
+
+    scene: Scene
+    stamp_ns: int
+    frame_id: str
+    scene_id: str
+    seq: int = 0
+    received_monotonic_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class Answer:
+    """One published prediction: the scene it answers, the prediction, and what it cost.
+
+    compute_s: wall time of the Monte Carlo run (+ rerun logging), seconds.
+    latency_s: from receipt of the scene to the answer, seconds (includes waiting behind another).
+    """
+
+    source: StampedScene
+    prediction: Prediction
+    compute_s: float
+    latency_s: float
+    config_version: int
+    rrd_path: str | None = None
+    rollouts_logged: int = 0
+    rrd_error: str | None = None  # why the recording could not be written, if it could not
+
+    def to_dict(self) -> dict[str, Any]:
+        """The published JSON: ``ipe predict --json``'s fields plus stamp, frame, ids and timing."""
+        out = self.prediction.to_dict()
+        out.update(stamp=stamp_dict(self.source.stamp_ns), frame_id=self.source.frame_id,
+                   scene_id=self.source.scene_id, scene_seq=self.source.seq, compute_s=self.compute_s,
+                   latency_s=self.latency_s, rrd_path=self.rrd_path, rollouts_logged=self.rollouts_logged,
+                   rrd_error=self.rrd_error)
+        return out
+
+
+def stamp_dict(stamp_ns: int) -> dict[str, int]:
+    """A stamp in ns since the epoch as the published JSON writes it: {"sec", "nanosec"}."""
+    sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+    return {"sec": sec, "nanosec": nanosec}
+
+
+def error_answer(source: StampedScene, error: str) -> dict[str, Any]:
+    """What ~/prediction carries when a prediction failed: the scene it was for and why."""
+    return {"error": error, "scene": source.scene.name, "scene_id": source.scene_id, "scene_seq": source.seq,
+            "stamp": stamp_dict(source.stamp_ns), "frame_id": source.frame_id}
+
+
+def refusal_answer(reason: str, scene_id: str, stamp_ns: int, frame_id: str, input_topic: str) -> dict[str, Any]:
+    """What ~/prediction carries for a scene refused on arrival: the same fields as a failed
+    prediction's error answer (no sequence number: the scene was never accepted) and the topic it came on."""
+    return {"error": reason, "scene": scene_id or None, "scene_id": scene_id, "scene_seq": None,
+            "stamp": stamp_dict(max(0, stamp_ns)), "frame_id": frame_id, "refused_on": input_topic}
+
+
+RECENT_EVENTS = 10
+
+
+@dataclass(frozen=True)
+class ServiceStats:
+    """Counters for diagnostics.
+
+    received: scenes accepted; predicted: distinct scenes answered (never more than received);
+    predictions: answers made (a scene is predicted again after a parameter change); dropped:
+    scenes replaced while waiting (keep-latest); budget_stops: answers cut short by the budget.
+    refined_samples: rollouts the self-check reran at the reference because they ended unhealthy;
+    escalated / contradicted: answers whose fast physics the reference contradicted, recomputed at
+    the reference / left as they were because the budget ran out (engine.fidelity).
+    recent: the last RECENT_EVENTS inputs and predictions, oldest first: "ok", "rejected",
+    "failed", "partial" (some samples failed or were cut by the budget), "contradicted" or "rrd_failed".
+    in_flight_s: how long the prediction in flight has run (None: none in flight).
+    """
+
+    received: int
+    predicted: int
+    predictions: int
+    dropped: int
+    rejected: int
+    failed_predictions: int
+    failed_samples: int
+    budget_stops: int
+    rrd_failures: int
+    waiting: int
+    in_flight: bool
+    in_flight_s: float | None
+    workers: int
+    workers_alive: int
+    worker_replacements: int
+    last_compute_s: float | None
+    last_error: str | None
+    closed: bool
+    recent: tuple[str, ...] = ()
+    budget_s: float | None = None
+    refined_samples: int = 0
+    escalated: int = 0
+    contradicted: int = 0
+
+
+class NoSceneError(RuntimeError):
+    """The service was asked to predict before any valid scene arrived."""
+
+
+class PredictionFailed(RuntimeError):
+    """A prediction could not be made (the reason says why); the service keeps running."""
+

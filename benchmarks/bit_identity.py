@@ -111,12 +111,16 @@ def question_digest(reply: dict, answers) -> str:
 
 def question_cases():
     from ipe_ros.engine.actions.question import question_from_dict
+    from ipe_ros.engine.catalogue import capped_tower
     tower = generate_towers(2013, 1)[0]
     model = ModelConfig(sigma_m=0.04, samples=8)
     for name, data in QUESTIONS.items():
         for checked in (False, True):
             question = question_from_dict({**data, "self_check": checked})
             yield f"question/{name}" + ("/checked" if checked else ""), tower, question, model
+    # removals read from the scene as it is (the ball is out of everything's reach) beside simulated ones
+    apart = question_from_dict({"question": "remove", "objects": ["ball", "cone", "box0"], "samples": 8})
+    yield "question/remove_apart", capped_tower(3.0), apart, ModelConfig(sigma_m=0.01, samples=8)
 
 
 def main() -> int:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
@@ -50,6 +51,40 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     prediction's do (``engine.fidelity``; the checks of all variants share each round's map call),
     and a contradicted variant is answered at the reference. Off by default: it costs 1.5-6x a
     question's time (benchmarks/README.md); each variant's ``fidelity`` then says "unverified"."""
+    _check_question(scene, actions, model, budget_s, check, fell_off, contact)
+    plan = _plan(scene, actions, model, settings, budget_s, fall_threshold_fraction, directions, fell_off, contact,
+                 what_falls)
+    k, simulated_actions, as_is = plan.samples, plan.simulated_actions, plan.as_is
+    deadline = None if budget_s is None else time.time() + budget_s
+    seeds = np.random.SeedSequence(seed).spawn(k)
+
+    def tasks(indices, variants: list[int]) -> list[VariantTask]:
+        return [VariantTask(scene=scene, model=model, settings=settings, query=plan.query, index=i, seed=seeds[i],
+                            actions=tuple(simulated_actions[j] for j in variants), deadline_unix_s=deadline,
+                            regions=tuple(plan.regions[j] for j in variants),
+                            record_every=record_every if i < record_samples else 0)
+                for i in indices]
+
+    start = time.perf_counter()
+    decisions: dict[str, tuple[str | None, str, int]] = {}
+    if sequential is None or plan.deterministic or as_is is None:
+        per_sample = _run(tasks(range(k), list(range(len(simulated_actions)))), map_fn)
+    else:
+        per_sample, decisions = _run_sequentially(tasks, simulated_actions, as_is, k, sequential, map_fn, scene,
+                                                  on_progress)
+    reports = _check_variants(per_sample, simulated_actions, tasks, settings, check, map_fn)
+    if sequential is not None and any(r.verdict == "escalated" or r.refined_samples for r in reports.values()):
+        decisions = _decide_again(decisions, per_sample, simulated_actions, as_is, sequential)
+    answers, scene_alone = _answers(scene, actions, plan, per_sample, decisions, reports)
+    stopped = "budget" if any(r.budget_stopped for s in per_sample for r in s) else "samples"
+    recorded = {label_of(a): [(i, s[j]) for i, s in enumerate(per_sample) if s[j].ok and ran(s[j]).trajectory is not None]
+                for j, a in enumerate(simulated_actions)} if record_every else {}
+    return Answers(scene.name, tuple(answers), k, time.perf_counter() - start, stopped, recorded, scene_alone)
+
+
+def _check_question(scene: Scene, actions: list[Action], model: ModelConfig, budget_s: float | None,
+                    check: SelfCheck | None, fell_off: bool, contact) -> None:
+    """Everything a question asks, checked before anything is simulated."""
     validate_scene(scene)
     check_budget(budget_s)
     check_fidelity_request(check)
@@ -63,6 +98,29 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
         raise ConfigError("fell_off", f"{scene.name!r} stands on a floor: nothing can fall off it (ask it of a "
                                       "scene on a table)")
     _check_contact(scene, actions, contact)
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """What a question simulates: the variants run (``simulated_actions``; the asked ones that are
+    ``trivial`` are read from "as is" instead), the objects each can affect (``regions``, None: all),
+    the queries, and the samples (one when nothing draws noise)."""
+
+    simulated_actions: list[Action]
+    trivial: list[bool]
+    regions: tuple[frozenset[str] | None, ...]
+    everything: frozenset[str]
+    query: QuerySpec
+    deterministic: bool
+    samples: int
+
+    @property
+    def as_is(self) -> int | None:
+        return self.simulated_actions.index(None) if None in self.simulated_actions else None
+
+
+def _plan(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSettings, budget_s: float | None,
+          fall_threshold_fraction: float, directions: bool, fell_off: bool, contact, what_falls: bool) -> _Plan:
     margin = 3 * float(position_sigmas_m(scene, model).max(initial=0.0))  # noise can close gaps this wide
     everything = frozenset(b.name for b in scene.dynamic_objects)
     # a pushed support can slide every group into every other
@@ -91,36 +149,23 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     # no noise anywhere (scene, model, nor an action's own): one rollout per variant says everything
     deterministic = is_deterministic(scene, model) and not any(draws_noise(scene, a, model)
                                                                for a in simulated_actions)
-    k = 1 if deterministic else model.samples
-    deadline = None if budget_s is None else time.time() + budget_s
-    seeds = np.random.SeedSequence(seed).spawn(k)
+    return _Plan(simulated_actions, trivial, regions, everything, query, deterministic,
+                 1 if deterministic else model.samples)
 
-    def tasks(indices, variants: list[int]) -> list[VariantTask]:
-        return [VariantTask(scene=scene, model=model, settings=settings, query=query, index=i, seed=seeds[i],
-                            actions=tuple(simulated_actions[j] for j in variants), deadline_unix_s=deadline,
-                            regions=tuple(regions[j] for j in variants),
-                            record_every=record_every if i < record_samples else 0)
-                for i in indices]
 
-    start = time.perf_counter()
-    as_is = simulated_actions.index(None) if None in simulated_actions else None
-    decisions: dict[str, tuple[str | None, str, int]] = {}
-    if sequential is None or deterministic or as_is is None:
-        per_sample = _run(tasks(range(k), list(range(len(simulated_actions)))), map_fn)
-    else:
-        per_sample, decisions = _run_sequentially(tasks, simulated_actions, as_is, k, sequential, map_fn, scene,
-                                                  on_progress)
-    reports = _check_variants(per_sample, simulated_actions, tasks, settings, check, map_fn)
-    if sequential is not None and any(r.verdict == "escalated" or r.refined_samples for r in reports.values()):
-        decisions = _decide_again(decisions, per_sample, simulated_actions, as_is, sequential)
+def _answers(scene: Scene, actions: list[Action], plan: _Plan, per_sample, decisions,
+             reports) -> tuple[list, Alone | None]:
+    """Each asked variant's answer, in the order asked, and the scene left alone."""
+    deterministic, as_is = plan.deterministic, plan.as_is
     by_variant = {label_of(a): dataclasses.replace(
         aggregate_variant(label_of(a), a, [s[j] for s in per_sample], deterministic=deterministic),
-        not_simulated=() if regions[j] is None else tuple(sorted(everything - regions[j])),
+        not_simulated=() if plan.regions[j] is None else tuple(sorted(plan.everything - plan.regions[j])),
         **_fidelity(reports.get(j)))
-        for j, a in enumerate(simulated_actions)}
+        for j, a in enumerate(plan.simulated_actions)}
+    stands = []
     if as_is is not None:
         stands = [stood(s[as_is]) for s in per_sample]
-        for j, a in enumerate(simulated_actions):
+        for j, a in enumerate(plan.simulated_actions):
             by_variant[label_of(a)] = dataclasses.replace(
                 by_variant[label_of(a)], caused_fall_probability=_caused(per_sample, j, as_is),
                 given_stands=aggregate_given(
@@ -129,7 +174,7 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
         by_variant[label] = dataclasses.replace(by_variant[label], decision=decision, stopped_by=why,
                                                 samples_drawn=drawn)
     answers = []
-    for action, is_trivial in zip(actions, trivial):
+    for action, is_trivial in zip(actions, plan.trivial):
         if not is_trivial:
             answers.append(by_variant[label_of(action)])
             continue
@@ -141,16 +186,13 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
             caused_fall_probability={n: 0.0 for j, n in enumerate(b.name for b in scene.dynamic_objects)
                                      if j in others},
             given_stands=aggregate_given([r for r, ok in zip(results, stands) if ok], deterministic=deterministic)))
-    stopped = "budget" if any(r.budget_stopped for s in per_sample for r in s) else "samples"
-    recorded = {label_of(a): [(i, s[j]) for i, s in enumerate(per_sample) if s[j].ok and ran(s[j]).trajectory is not None]
-                for j, a in enumerate(simulated_actions)} if record_every else {}
     scene_alone = None
     if as_is is not None:
         alone = by_variant["as_is"]
         scene_alone = Alone(alone.any_fall_probability, alone.any_fall_probability_ci95, sum(stands),
                            alone.any_fall_probability_ci95 is not None
                            and alone.any_fall_probability_ci95[0] > DEFAULT_SAFE_BELOW)
-    return Answers(scene.name, tuple(answers), k, time.perf_counter() - start, stopped, recorded, scene_alone)
+    return answers, scene_alone
 
 
 def _check_contact(scene: Scene, actions: list[Action], pairs) -> None:

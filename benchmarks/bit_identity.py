@@ -16,6 +16,7 @@ when any digest differs.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import hashlib
 import json
 import os
@@ -111,16 +112,18 @@ def question_digest(reply: dict, answers) -> str:
 
 def question_cases():
     from ipe_ros.engine.actions.question import question_from_dict
-    from ipe_ros.engine.catalogue import capped_tower
     tower = generate_towers(2013, 1)[0]
     model = ModelConfig(sigma_m=0.04, samples=8)
     for name, data in QUESTIONS.items():
         for checked in (False, True):
             question = question_from_dict({**data, "self_check": checked})
             yield f"question/{name}" + ("/checked" if checked else ""), tower, question, model
-    # removals read from the scene as it is (the ball is out of everything's reach) beside simulated ones
-    apart = question_from_dict({"question": "remove", "objects": ["ball", "cone", "box0"], "samples": 8})
-    yield "question/remove_apart", capped_tower(3.0), apart, ModelConfig(sigma_m=0.01, samples=8)
+    # a removal read from the scene as it is (a block 5 m from the tower: out of everything's reach)
+    # beside simulated ones
+    first = tower.objects[0]
+    lone = dataclasses.replace(first, name="lone", position_m=(5.0, 0.0, first.position_m[2]))
+    apart = question_from_dict({"question": "remove", "objects": ["lone", "block9", "block0"], "samples": 8})
+    yield "question/remove_apart", dataclasses.replace(tower, objects=tower.objects + (lone,)), apart, model
 
 
 def main() -> int:

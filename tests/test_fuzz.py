@@ -28,6 +28,7 @@ from ipe_ros.engine import ModelConfig, QuerySpec, SceneError, ConfigError, pred
 from ipe_ros.engine.catalogue import capped_tower
 from ipe_ros.engine.errors import MAX_PROBLEM_CHARS, MAX_SHOWN_CHARS
 from ipe_ros.engine.scene_io import scene_to_dict
+from ipe_ros.engine.request import Request
 from ipe_ros.service import ServiceConfig
 from msg_bridge.json_text import string_to_scene
 from msg_bridge.markers import markers_to_scene, scene_to_markers
@@ -35,9 +36,10 @@ from msg_bridge.markers import markers_to_scene, scene_to_markers
 BUDGET_S = 3.0
 #: what a prediction may overrun its budget by: the rollout in flight notices within one step
 BUDGET_SLACK_S = 1.0
-CONFIG = ServiceConfig(model=ModelConfig(sigma_m=0.02, samples=2), settings=preset("default"),
-                       query=QuerySpec(queries=frozenset({"fall", "direction", "far", "any_fall"})),
-                       max_objects=20, budget_s=BUDGET_S)
+CONFIG = ServiceConfig(request=Request(model=ModelConfig(sigma_m=0.02, samples=2), settings=preset("default"),
+                                       query=QuerySpec(queries=frozenset({"fall", "direction", "far", "any_fall"})),
+                                       budget_s=BUDGET_S), max_objects=20)
+REQUEST = CONFIG.request
 BASE = scene_to_dict(capped_tower(3.0))
 
 
@@ -58,13 +60,13 @@ def _through_the_node(read):
 
     try:
         scene = read()
-        check_request(scene, CONFIG.query, CONFIG.max_objects, model=CONFIG.model, settings=CONFIG.settings,
-                      budget_s=CONFIG.budget_s)
+        check_request(scene, REQUEST.query, CONFIG.max_objects, model=REQUEST.model, settings=REQUEST.settings,
+                      budget_s=REQUEST.budget_s)
     except ValueError as exc:
         _check_error(exc)
         return None
     start = time.monotonic()
-    prediction = predict(scene, CONFIG.model, CONFIG.settings, CONFIG.query, seed=1, budget_s=CONFIG.budget_s,
+    prediction = predict(scene, REQUEST.model, REQUEST.settings, REQUEST.query, seed=1, budget_s=REQUEST.budget_s,
                          max_objects=CONFIG.max_objects)
     assert time.monotonic() - start <= BUDGET_S + BUDGET_SLACK_S
     assert prediction.samples + prediction.failed_samples + prediction.budget_skipped_samples == \
@@ -206,7 +208,7 @@ def test_the_unmutated_inputs_reach_the_engine():
     for read in (lambda: string_to_scene(String(data=json.dumps(BASE))),
                  lambda: markers_to_scene(scene_to_markers(capped_tower(3.0), "world"), max_objects=20).scene):
         prediction = _through_the_node(read)
-        assert prediction is not None and prediction.samples == CONFIG.model.samples
+        assert prediction is not None and prediction.samples == REQUEST.model.samples
 
 
 # -- questions (~/ask) --------------------------------------------------------------------------------------
@@ -241,7 +243,7 @@ def test_mutated_questions_are_answered_within_budget_or_refused_by_name(questio
     start = time.monotonic()
     try:
         parsed, _ = string_to_question(String(data=json.dumps(question)))
-        answer = parsed.answer(QUESTION_SCENE, CONFIG.model, CONFIG.settings, seed=1, budget_s=BUDGET_S).data
+        answer = parsed.answer(QUESTION_SCENE, REQUEST.model, REQUEST.settings, seed=1, budget_s=BUDGET_S).data
     except ValueError as exc:
         _check_error(exc)
         return
@@ -290,5 +292,5 @@ def test_the_unmutated_questions_are_answered():
 
     for question in QUESTIONS:
         parsed, _ = string_to_question(String(data=json.dumps(question)))
-        answer = parsed.answer(QUESTION_SCENE, CONFIG.model, CONFIG.settings, seed=1, budget_s=BUDGET_S).data
+        answer = parsed.answer(QUESTION_SCENE, REQUEST.model, REQUEST.settings, seed=1, budget_s=BUDGET_S).data
         json.dumps(answer, allow_nan=False)

@@ -23,6 +23,7 @@ from ipe_ros.engine import ConfigError, ModelConfig, QuerySpec, SceneError, pred
 from ipe_ros.engine.estimate import mean_interval
 from ipe_ros.engine.examples import example_scene_path
 from ipe_ros.engine.scene_io import scene_to_dict, scenes_from_json, scenes_from_tower_csv
+from ipe_ros.engine.request import Request
 from ipe_ros.service import PredictionService, ServiceConfig, StampedScene
 from tests.helpers import block, floor_scene
 
@@ -108,7 +109,7 @@ def test_the_prediction_thread_survives_an_exception_and_a_logger_that_raises(mo
 
     monkeypatch.setattr(service_module, "predict", flaky_predict)
     out = _Recorder()
-    service = PredictionService(ServiceConfig(model=ModelConfig(sigma_m=0.01, samples=2)), workers=0,
+    service = PredictionService(ServiceConfig(request=Request(model=ModelConfig(sigma_m=0.01, samples=2))), workers=0,
                                 publish=out.publish, publish_error=out.publish_error, log_error=hostile_logger)
     service.start()
     try:
@@ -217,15 +218,15 @@ def test_a_scene_predicted_again_counts_once_and_recordings_get_their_own_ids(tm
 
     monkeypatch.setattr(rr, "RecordingStream", recording)
     out = _Recorder()
-    config = ServiceConfig(model=ModelConfig(sigma_m=0.01, samples=2), rerun_save_dir=str(tmp_path),
+    config = ServiceConfig(request=Request(model=ModelConfig(sigma_m=0.01, samples=2)), rerun_save_dir=str(tmp_path),
                            rerun_rollouts_logged=1)
     service = PredictionService(config, workers=0, publish=out.publish, publish_error=out.publish_error)
     service.start()
     try:
         service.submit(_stamped(service, floor_scene(block("a", 0, 0, 0.1))))
         _wait(out.done)
-        service.update_config(ServiceConfig(model=ModelConfig(sigma_m=0.02, samples=2), rerun_save_dir=str(tmp_path),
-                                            rerun_rollouts_logged=1))
+        service.update_config(ServiceConfig(request=Request(model=ModelConfig(sigma_m=0.02, samples=2)),
+                                            rerun_save_dir=str(tmp_path), rerun_rollouts_logged=1))
         service.predict_latest(60.0)  # the same scene under the new parameters
         stats = service.stats()
         assert (stats.received, stats.predicted, stats.predictions) == (1, 1, 2)
@@ -238,7 +239,8 @@ def test_a_failed_recording_is_counted_and_said_in_the_answer(tmp_path):
     blocker = tmp_path / "not_a_folder"
     blocker.write_text("")
     out = _Recorder()
-    config = ServiceConfig(model=ModelConfig(sigma_m=0.01, samples=2), rerun_save_dir=str(blocker / "rrd"))
+    config = ServiceConfig(request=Request(model=ModelConfig(sigma_m=0.01, samples=2)),
+                           rerun_save_dir=str(blocker / "rrd"))
     service = PredictionService(config, workers=0, publish=out.publish)
     service.start()
     try:
@@ -291,7 +293,7 @@ def _closed_port() -> int:
 def test_a_dead_viewer_never_holds_up_an_answer_and_is_reported(tmp_path):
     port = _closed_port()
     out = _Recorder()
-    config = ServiceConfig(model=ModelConfig(sigma_m=0.01, samples=2), rerun_save_dir=str(tmp_path),
+    config = ServiceConfig(request=Request(model=ModelConfig(sigma_m=0.01, samples=2)), rerun_save_dir=str(tmp_path),
                            rerun_connect_url=f"rerun+http://127.0.0.1:{port}/proxy")
     service = PredictionService(config, workers=0, publish=out.publish)
     service.start()

@@ -157,7 +157,7 @@ def test_ground_truth_takes_the_scene_exactly_as_given_even_where_its_bodies_car
     assert response.success, response.message
     answer = json.loads(response.message)
     assert answer["deterministic"] is True and answer["samples"] == 1  # the scene exactly as given
-    assert node.service.config.model.object_noise is False
+    assert node.service.config.request.model.object_noise is False
     # questions are asked of the same model: one rollout per variant
     replies = ros.collect(String, "/ipe/answer", LATCHED_QOS)
     ros.publisher(String, "/ipe/ask").publish(String(data=json.dumps(
@@ -168,7 +168,7 @@ def test_ground_truth_takes_the_scene_exactly_as_given_even_where_its_bodies_car
     # the ground truth with a push is no ground truth: phi is read as 0 while it is on
     (result,) = set_params(ros, phi=2.0)
     assert result.successful, result.reason
-    assert node.service.config.model.phi_m_s2 == (0.0,)
+    assert node.service.config.request.model.phi_m_s2 == (0.0,)
 
 
 def test_trigger_service_without_and_with_a_scene(ros, tower):
@@ -216,7 +216,7 @@ def test_parameter_updates_accepted_and_rejected(ros, tower):
     [empty_frame] = set_params(ros, frame_id="")
     assert empty_frame.reason == "frame_id: must be a non-empty frame name without surrounding spaces, got ''"
     [budget] = set_params(ros, budget_s=30.0)
-    assert budget.successful and node.service.config.budget_s == 30.0
+    assert budget.successful and node.service.config.request.budget_s == 30.0
     [read_only] = set_params(ros, workers=1)
     assert not read_only.successful and "read-only" in read_only.reason
     assert node.get_parameter("samples").value == 3
@@ -235,7 +235,7 @@ def test_contact_rest_and_final_pose_through_parameters(ros, tower):
 
     node = ros.start_ipe_node(samples=4, sigma=0.01, seed=3, queries=["rest", "final_pose"],
                               contact_pairs="ball:box, ball:support")
-    assert node.service.config.query.contact_pairs == (("ball", "box"), ("ball", "support"))
+    assert node.service.config.request.query.contact_pairs == (("ball", "box"), ("ball", "support"))
     got = answers(ros)
     pub = ros.publisher(String, "/ipe/scene_json")
     pub.publish(String(data=scene_to_json(_rolled(1.5))))

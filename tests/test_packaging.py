@@ -112,7 +112,8 @@ def test_the_node_reads_a_params_file(tmp_path):
         node = IpeNode(context=ros.context, cli_args=["--ros-args", "--params-file", str(custom)])
         ros._nodes.append(node)
         config = node.service.config
-        assert (config.model.samples, config.settings.name, node.get_parameter("workers").value) == (7, "fine", 1)
+        assert (config.request.model.samples, config.request.settings.name,
+                node.get_parameter("workers").value) == (7, "fine", 1)
     finally:
         ros.close()
 

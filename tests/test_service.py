@@ -9,11 +9,12 @@ import time
 import pytest
 
 from ipe_ros.engine import ModelConfig, load_scenes
+from ipe_ros.engine.request import Request
 from ipe_ros.service import NoSceneError, PredictionFailed, PredictionService, ServiceConfig, StampedScene
 from tests.ros_harness import wait_until
 
 TOWER = load_scenes("ipe_ros/data/example_tower.json")[0]
-SETTINGS = ServiceConfig(model=ModelConfig(sigma_m=0.04, samples=4))
+SETTINGS = ServiceConfig(request=Request(model=ModelConfig(sigma_m=0.04, samples=4)))
 
 
 def item(seq: int, scene=TOWER) -> StampedScene:
@@ -50,7 +51,7 @@ def test_trigger_semantics(service):
     first = service.predict_latest(60.0)
     assert first.source.seq == 1 and first.prediction.samples == 4
     assert service.predict_latest(60.0) is first          # nothing changed: no new simulation
-    service.update_config(dataclasses.replace(SETTINGS, model=ModelConfig(sigma_m=0.04, samples=2)))
+    service.update_config(SETTINGS.replace_request(model=ModelConfig(sigma_m=0.04, samples=2)))
     second = service.predict_latest(60.0)                   # new settings: predicted again
     assert second.prediction.samples == 2 and second.config_version == 1
     service.reject("markers: bad")
@@ -60,7 +61,7 @@ def test_trigger_semantics(service):
 
 
 def test_trigger_timeout_says_the_answer_will_still_come(service):
-    slow = dataclasses.replace(SETTINGS, model=ModelConfig(sigma_m=0.04, samples=40))
+    slow = SETTINGS.replace_request(model=ModelConfig(sigma_m=0.04, samples=40))
     service.update_config(slow)
     service.submit(item(1))
     with pytest.raises(TimeoutError, match=r"^no answer within 0.01 s; the prediction goes on and will be "
@@ -70,7 +71,7 @@ def test_trigger_timeout_says_the_answer_will_still_come(service):
 
 
 def test_a_failing_prediction_is_reported_and_the_service_goes_on(service):
-    bump = dataclasses.replace(SETTINGS, query=dataclasses.replace(SETTINGS.query, queries=frozenset({"bump"})))
+    bump = SETTINGS.replace_request(query=dataclasses.replace(SETTINGS.request.query, queries=frozenset({"bump"})))
     service.update_config(bump)  # the tower stands on a floor: bump cannot be answered
     service.submit(item(1))
     wait_until(lambda: service.stats().failed_predictions == 1, 30.0, "the failure to be counted")
@@ -82,7 +83,7 @@ def test_a_failing_prediction_is_reported_and_the_service_goes_on(service):
 
 def test_close_during_a_prediction_ends_promptly_and_wakes_waiters():
     published = []
-    svc = PredictionService(dataclasses.replace(SETTINGS, model=ModelConfig(sigma_m=0.04, samples=24)),
+    svc = PredictionService(SETTINGS.replace_request(model=ModelConfig(sigma_m=0.04, samples=24)),
                             workers=1, publish=published.append)
     svc.start()
     svc.submit(item(1))
@@ -120,7 +121,8 @@ def test_the_self_check_is_counted_and_can_be_turned_off():
     from tests.test_fidelity import WRONG_HERE
 
     ramp = zoo_scene("ramp", 2026, 4)
-    config = ServiceConfig(model=ModelConfig(sigma_m=zoo_sigma_m(ramp), samples=4), settings=WRONG_HERE, seed=0)
+    config = ServiceConfig(request=Request(model=ModelConfig(sigma_m=zoo_sigma_m(ramp), samples=4), settings=WRONG_HERE,
+                                           seed=0))
     svc = PredictionService(config, workers=0, publish=lambda answer: None)
     svc.start()
     try:
@@ -128,7 +130,7 @@ def test_the_self_check_is_counted_and_can_be_turned_off():
         assert svc.predict_latest(120.0).prediction.fidelity == "escalated"
         stats = svc.stats()
         assert (stats.escalated, stats.contradicted, stats.recent) == (1, 0, ("ok",))
-        svc.update_config(dataclasses.replace(config, check=SelfCheck(enabled=False)))
+        svc.update_config(config.replace_request(check=SelfCheck(enabled=False)))
         assert svc.predict_latest(120.0).prediction.fidelity == "unverified"
         assert svc.stats().escalated == 1
     finally:

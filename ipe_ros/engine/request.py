@@ -12,8 +12,8 @@ import math
 from dataclasses import dataclass
 from typing import Iterable
 
-from .config import (DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M, ModelConfig,
-                     SimSettings, preset)
+from .config import (DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M,
+                     ModelConfig, SimSettings, preset)
 from .errors import ConfigError, shown
 from .fidelity import DEFAULT_CHECK, SelfCheck
 from .query import QuerySpec
@@ -24,11 +24,11 @@ from .sampler import AdaptiveStop, check_budget, check_ci_width
 class Request:
     """A validated request: predict with ``model``, ``settings``, ``query`` and ``seed``, stopping by
     ``stop`` (None: all k samples), within ``budget_s`` wall seconds (None: no budget), checked by
-    ``check``."""
+    ``check``. The defaults are the CLI's and the node's."""
 
-    model: ModelConfig
-    settings: SimSettings
-    query: QuerySpec
+    model: ModelConfig = DEFAULT_MODEL
+    settings: SimSettings = preset(DEFAULT_PRESET)
+    query: QuerySpec = QuerySpec(queries=DEFAULT_QUERIES)
     seed: int = 0
     stop: AdaptiveStop | None = None
     budget_s: float | None = DEFAULT_BUDGET_S

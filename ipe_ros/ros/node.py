@@ -146,8 +146,8 @@ class _IpeInterface:
                                                 callback_group=MutuallyExclusiveCallbackGroup()))
         config = self.service.config
         self.get_logger().info(
-            f"ready: k = {config.model.samples}, sigma = {config.model.sigma_m:g} m, "
-            f"phi = {config.model.phi_m_s2[0]:g} m/s^2, preset {config.settings.name}, "
+            f"ready: k = {config.request.model.samples}, sigma = {config.request.model.sigma_m:g} m, "
+            f"phi = {config.request.model.phi_m_s2[0]:g} m/s^2, preset {config.request.settings.name}, "
             f"{self._values['workers']} worker(s); scenes on {self.resolve_topic_name('~/scene')} and "
             f"{self.resolve_topic_name('~/scene_json')}")
 

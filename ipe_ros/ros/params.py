@@ -186,12 +186,10 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
         raise ConfigError("rerun.save_dir", f"must not climb out of a folder ('..'), got {save_dir!r}; give the "
                                             "folder itself")
     connect = str(values["rerun.connect_url"]).strip()
-    return ServiceConfig(model=request.model, settings=request.settings, query=request.query,
-                         seed=request.seed, max_objects=int(values["max_objects"]),
+    return ServiceConfig(request=request, max_objects=int(values["max_objects"]),
                          rerun_save_dir=save_dir or None, rerun_rollouts_logged=int(values["rerun.rollouts_logged"]),
                          rerun_frame_period_s=float(values["rerun.frame_period_s"]),
-                         rerun_connect_url=connect or None, stop=request.stop, budget_s=request.budget_s,
-                         gravity_aligned_frames=frames, check=request.check,
+                         rerun_connect_url=connect or None, gravity_aligned_frames=frames,
                          depth_max_age_s=float(values["depth.max_age_s"]))
 
 

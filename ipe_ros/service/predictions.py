@@ -134,8 +134,9 @@ class PredictionService:
                                           "transform the scene into one of them, or add the frame to the "
                                           "gravity_aligned_frames parameter if its -z axis is gravity")
         try:
-            check_request(scene, config.query, config.max_objects, model=config.model, settings=config.settings,
-                          budget_s=config.budget_s)
+            request = config.request
+            check_request(scene, request.query, config.max_objects, model=request.model, settings=request.settings,
+                          budget_s=request.budget_s)
         except ConfigError as exc:  # named as the node's parameters spell it
             raise as_spelled(exc, "ros") from None
 
@@ -209,7 +210,7 @@ class PredictionService:
             return ServiceStats(**self._counts, waiting=int(self._pending is not None),
                                 in_flight=self._in_flight is not None,
                                 in_flight_s=None if since is None else time.monotonic() - since,
-                                recent=tuple(self._recent), budget_s=self._config.budget_s, workers=self.workers,
+                                recent=tuple(self._recent), budget_s=self._config.request.budget_s, workers=self.workers,
                                 workers_alive=len(pids) if self._pool is not None else 0,
                                 worker_replacements=self._pool.replacements if self._pool is not None else 0,
                                 last_compute_s=self._last_compute_s, last_error=self._last_error,
@@ -335,20 +336,21 @@ class PredictionService:
         if age > config.depth_max_age_s:
             raise ConfigError("perception", f"depth: the newest depth image is {age:.3g} s from the scene's stamp, more "
                                             f"than depth.max_age_s = {config.depth_max_age_s:g} s")
-        return depth.perceive_depth_for(item.scene, config.model.samples, (observation,), config.seed)
+        return depth.perceive_depth_for(item.scene, config.request.model.samples, (observation,), config.request.seed)
 
     def _predict(self, item: StampedScene, config: ServiceConfig, version: int) -> tuple[Answer | None, str | None]:
         start = time.perf_counter()
+        request = config.request
         record_every = 0
         if config.rerun_save_dir and config.rerun_rollouts_logged > 0:
-            record_every = max(1, round(config.rerun_frame_period_s / config.settings.time_step_s))
+            record_every = max(1, round(config.rerun_frame_period_s / request.settings.time_step_s))
         try:
-            perceived = self._perceived(item, config) if config.model.perception == "depth" else None
-            prediction = predict(item.scene, config.model, config.settings, config.query, seed=config.seed,
+            perceived = self._perceived(item, config) if request.model.perception == "depth" else None
+            prediction = predict(item.scene, request.model, request.settings, request.query, seed=request.seed,
                                  map_fn=self._pool.map if self._pool is not None else None,
                                  record_every=record_every, record_samples=config.rerun_rollouts_logged,
-                                 max_objects=config.max_objects, stop=config.stop, budget_s=config.budget_s,
-                                 check=config.check, perceived=perceived)
+                                 max_objects=config.max_objects, stop=request.stop, budget_s=request.budget_s,
+                                 check=request.check, perceived=perceived)
         except ValueError as exc:  # SceneError / ConfigError: the scene no longer fits a new config
             return None, str(exc)
         except Exception as exc:  # noqa: BLE001 - report, keep serving

@@ -122,6 +122,7 @@ class QuestionService:
                 question, source = self._current = self._queue.popleft()
                 self._cancel_current = None
             config = self._predictions.config
+            request = config.request
             head = _question_head(question, source)
             start = time.perf_counter()
 
@@ -137,19 +138,19 @@ class QuestionService:
             try:
                 # questions draw their noise from sigma: depth perception serves predictions only, and
                 # the reply says so rather than answering as if it had been used
-                model = dataclasses.replace(config.model, samples=DEFAULT_QUESTION_SAMPLES, perception="gaussian")
+                model = dataclasses.replace(request.model, samples=DEFAULT_QUESTION_SAMPLES, perception="gaussian")
                 pool = self._predictions.pool
                 record = {}
                 if config.rerun_save_dir and config.rerun_rollouts_logged > 0:
-                    record = dict(record_every=max(1, round(config.rerun_frame_period_s / config.settings.time_step_s)),
+                    record = dict(record_every=max(1, round(config.rerun_frame_period_s / request.settings.time_step_s)),
                                   record_samples=config.rerun_rollouts_logged)
-                reply = question.answer(source.scene, model, config.settings, seed=config.seed,
-                                        map_fn=pool.map if pool is not None else None, budget_s=config.budget_s,
-                                        on_progress=progress, check=config.check, **record)
+                reply = question.answer(source.scene, model, request.settings, seed=request.seed,
+                                        map_fn=pool.map if pool is not None else None, budget_s=request.budget_s,
+                                        on_progress=progress, check=request.check, **record)
                 message = {**head, "final": True, "answer": reply.data, "compute_s": time.perf_counter() - start}
-                if config.model.perception != "gaussian":
-                    message["perception"] = (f"gaussian (sigma = {config.model.sigma_m:g} m): questions do not use "
-                                             f"{config.model.perception} perception")
+                if request.model.perception != "gaussian":
+                    message["perception"] = (f"gaussian (sigma = {request.model.sigma_m:g} m): questions do not use "
+                                             f"{request.model.perception} perception")
                 if record and reply.answers is not None:
                     self._recordings += 1
                     message["rrd_path"] = record_question(config, question, source, reply.answers, self._recordings,

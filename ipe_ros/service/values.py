@@ -3,12 +3,12 @@ counters diagnostics read, and the errors a caller may catch."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
-from ..engine import AdaptiveStop, ModelConfig, Prediction, QuerySpec, Scene, SimSettings, preset
-from ..engine.config import DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES
-from ..engine.fidelity import DEFAULT_CHECK, SelfCheck
+from ..engine import Prediction, Scene
+from ..engine.request import Request
 from ..engine.scene import DEFAULT_MAX_OBJECTS
 
 
@@ -17,7 +17,9 @@ from ..engine.scene import DEFAULT_MAX_OBJECTS
 class ServiceConfig:
     """Everything a prediction depends on besides the scene; replaced as a whole on updates.
 
-    model, settings, query, seed: the IPE's inputs, the simulation settings, the queries, the seed.
+    request: the prediction's own inputs (engine.request: model, settings, queries, seed, stopping,
+        budget, self-check), built once from the node's parameters as ``ipe predict`` builds it
+        from its options.
     max_objects: scenes with more objects are refused.
     rerun_save_dir: folder for one ``.rrd`` per prediction, or None for no rerun logging.
     rerun_rollouts_logged: how many sampled rollouts each ``.rrd`` shows.
@@ -25,22 +27,20 @@ class ServiceConfig:
     rerun_connect_url: also stream to a running viewer at this gRPC URL (never spawns one).
     """
 
-    model: ModelConfig = DEFAULT_MODEL
-    settings: SimSettings = preset(DEFAULT_PRESET)
-    query: QuerySpec = QuerySpec(queries=DEFAULT_QUERIES)
-    seed: int = 0
+    request: Request = Request()
     max_objects: int = DEFAULT_MAX_OBJECTS
     rerun_save_dir: str | None = None
     rerun_rollouts_logged: int = 8
     rerun_frame_period_s: float = 0.02
     rerun_connect_url: str | None = None
-    stop: AdaptiveStop | None = None  # anytime sampling (deadline / interval width), None: all k
-    budget_s: float = DEFAULT_BUDGET_S  # wall seconds a prediction may take (see engine.predict)
     gravity_aligned_frames: tuple[str, ...] = ()  # frames whose -z is gravity; () trusts every frame
-    check: SelfCheck = DEFAULT_CHECK  # how each prediction checks its fast physics (engine.fidelity)
-    #: ``model.perception == "depth"``: a scene is predicted from the newest depth image taken at most
-    #: this many seconds before or after its stamp
+    #: ``request.model.perception == "depth"``: a scene is predicted from the newest depth image taken
+    #: at most this many seconds before or after its stamp
     depth_max_age_s: float = 0.5
+
+    def replace_request(self, **changes) -> "ServiceConfig":
+        """This config with the request's fields ``changes`` (model=..., seed=...) replaced."""
+        return dataclasses.replace(self, request=dataclasses.replace(self.request, **changes))
 
 
 @dataclass(frozen=True)

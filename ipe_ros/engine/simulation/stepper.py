@@ -103,195 +103,255 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, **kw
             trial.close()
 
 
-def _simulate(world: World, scene: Scene, settings: SimSettings, push: Push, trials: list, *,
-              record_every: int = 0, decided: DecidedHeights | None = None,
-              collapse_below_z_m: np.ndarray | None = None, probe: Probe = NO_PROBE,
-              deadline_unix_s: float | None = None, watches: dict | None = None,
-              end_when_watched: bool = False) -> RolloutEnd:
-    p = pybullet()
-    cid = world.client
-    dt = world.time_step_s
-    horizon_s = settings.horizon_for(scene.horizon_s)
-    total_ticks = int(round(horizon_s / dt))
-    gravity = np.asarray(scene.gravity_m_s2, float)
-    g = float(np.linalg.norm(gravity))
-    set_initial_velocities(world, scene)
-    energy = health.EnergyWatch(world.masses_kg, world.inertia_kg_m2, gravity)
-    positions, orientations, initial_velocities = read_state(world)
-    initial_energy = energy.energy(positions, orientations, initial_velocities[:, 0], initial_velocities[:, 1])
-    push_ticks = 0
-    if push.acceleration_m_s2 > 0:
-        push_ticks = int(round(push.duration_s / dt))
-        tilt = push.acceleration_m_s2 * np.array([math.cos(push.direction_rad), math.sin(push.direction_rad), 0.0])
-        p.setGravity(*(gravity - tilt).tolist(), physicsClientId=cid)
-    else:
-        energy.reference(initial_energy)
-    fastest_start_m_s = float(np.max(speeds_of(initial_velocities)[0], initial=0.0))
-    limit = health.speed_limit_m_s(g, horizon_s, push.acceleration_m_s2, push.duration_s) + 2 * fastest_start_m_s
-    trajectory: list | None = [] if record_every > 0 else None
-    if trajectory is not None:
-        trajectory.append((0.0, *read_poses(world)))
-    health_every = max(1, int(round(HEALTH_PERIOD_S / dt)))
-    end_phase_ticks = int(round(settings.collapse.fine_before_end_s / dt))
-    fine_from_tick = total_ticks - end_phase_ticks
-    ending = False  # at rest early: only the end phase is left
-    look_every = max(1, int(round(LOOK_PERIOD_S / dt)))
+def _simulate(world: World, scene: Scene, settings: SimSettings, push: Push, trials: list, **kw) -> RolloutEnd:
+    return _Rollout(world, scene, settings, push, trials, **kw).run()
 
-    settling = Settling(settings, dt)
-    half_diagonals_m = np.array([np.linalg.norm(b.extents_m) / 2 for b in scene.dynamic_objects])
-    smallest = np.array([b.smallest_extent_m for b in scene.dynamic_objects])
-    collapse = CollapseWatch(settings, collapse_below_z_m, smallest)
-    quiet_m_s = settings.collapse.quiet_sizes_per_s * world.scale_m
-    created_limit_j = settings.collapse.max_created_energy_fraction * health.energy_scale_j(scene)
-    trial: CollapseTrial | None = None  # the collapse steps' start, while they are on trial
-    undone_s = None
-    full_iterations = settings.iterations_for(mass_ratio(world.masses_kg))  # as the world was built
-    collapse_iterations = settings.iterations_for(mass_ratio(world.masses_kg), settings.collapse.solver_iterations)
 
-    def use_iterations(iterations: int) -> None:
-        p.setPhysicsEngineParameter(numSolverIterations=iterations, physicsClientId=cid)
+class _Rollout:
+    """One rollout's loop and the state its parts share: ``run`` steps on the tick grid and, at each
+    health check or look, reads the world once and hands that reading to each part in turn."""
 
-    steps = StepControl(settings, world)
-    rest = RestWatch(settings.early_stop, world.scale_m, max(push_ticks * dt, settings.early_stop.min_time_s),
-                     decided, len(scene.dynamic_objects))
-    travel_substeps = substeps_for(fastest_start_m_s + g * look_every * dt, settings, world) if fastest_start_m_s else 1
+    def __init__(self, world: World, scene: Scene, settings: SimSettings, push: Push, trials: list, *,
+                 record_every: int = 0, decided: DecidedHeights | None = None,
+                 collapse_below_z_m: np.ndarray | None = None, probe: Probe = NO_PROBE,
+                 deadline_unix_s: float | None = None, watches: dict | None = None,
+                 end_when_watched: bool = False):
+        self.world, self.settings, self.trials, self.probe = world, settings, trials, probe
+        self.deadline_unix_s, self.end_when_watched = deadline_unix_s, end_when_watched
+        self.p = p = pybullet()
+        self.cid = world.client
+        self.dt = dt = world.time_step_s
+        horizon_s = settings.horizon_for(scene.horizon_s)
+        self.total_ticks = int(round(horizon_s / dt))
+        self.gravity = gravity = np.asarray(scene.gravity_m_s2, float)
+        self.g = g = float(np.linalg.norm(gravity))
+        set_initial_velocities(world, scene)
+        self.energy = health.EnergyWatch(world.masses_kg, world.inertia_kg_m2, gravity)
+        positions, orientations, initial_velocities = read_state(world)
+        initial_energy = self.energy.energy(positions, orientations, initial_velocities[:, 0], initial_velocities[:, 1])
+        self.push_ticks = 0
+        if push.acceleration_m_s2 > 0:
+            self.push_ticks = int(round(push.duration_s / dt))
+            tilt = push.acceleration_m_s2 * np.array([math.cos(push.direction_rad), math.sin(push.direction_rad), 0.0])
+            p.setGravity(*(gravity - tilt).tolist(), physicsClientId=self.cid)
+        else:
+            self.energy.reference(initial_energy)
+        fastest_start_m_s = float(np.max(speeds_of(initial_velocities)[0], initial=0.0))
+        self.limit = health.speed_limit_m_s(g, horizon_s, push.acceleration_m_s2, push.duration_s) \
+            + 2 * fastest_start_m_s
+        self.record_every = record_every
+        self.trajectory: list | None = [] if record_every > 0 else None
+        if self.trajectory is not None:
+            self.trajectory.append((0.0, *read_poses(world)))
+        self.health_every = max(1, int(round(HEALTH_PERIOD_S / dt)))
+        self.end_phase_ticks = int(round(settings.collapse.fine_before_end_s / dt))
+        self.fine_from_tick = self.total_ticks - self.end_phase_ticks
+        self.ending = False  # at rest early: only the end phase is left
+        self.look_every = max(1, int(round(LOOK_PERIOD_S / dt)))
 
-    def step() -> None:
-        p.stepSimulation(physicsClientId=cid)
+        self.settling = Settling(settings, dt)
+        self.half_diagonals_m = np.array([np.linalg.norm(b.extents_m) / 2 for b in scene.dynamic_objects])
+        self.smallest = np.array([b.smallest_extent_m for b in scene.dynamic_objects])
+        self.collapse = CollapseWatch(settings, collapse_below_z_m, self.smallest)
+        self.quiet_m_s = settings.collapse.quiet_sizes_per_s * world.scale_m
+        self.created_limit_j = settings.collapse.max_created_energy_fraction * health.energy_scale_j(scene)
+        self.trial: CollapseTrial | None = None  # the collapse steps' start, while they are on trial
+        self.undone_s = None
+        self.full_iterations = settings.iterations_for(mass_ratio(world.masses_kg))  # as the world was built
+        self.collapse_iterations = settings.iterations_for(mass_ratio(world.masses_kg),
+                                                           settings.collapse.solver_iterations)
+        self.steps = StepControl(settings, world)
+        self.rest = RestWatch(settings.early_stop, world.scale_m,
+                              max(self.push_ticks * dt, settings.early_stop.min_time_s), decided,
+                              len(scene.dynamic_objects))
+        self.travel_substeps = substeps_for(fastest_start_m_s + g * self.look_every * dt, settings, world) \
+            if fastest_start_m_s else 1
+        self.watches = watches or {}
+        for watch in self.watches.values():
+            watch.start(world)
+        self.tick = 0
+        self.solver_switch_due = world.direct_solver
+        self.end_phase_due = settings.collapse.end_substeps > 1
+        if self.settling.ticks or self.travel_substeps > 1:
+            self.steps.set(1, max(self.travel_substeps, self.settling.substeps if self.settling.ticks else 1))
 
-    watches = watches or {}
-    for watch in watches.values():
-        watch.start(world)
-    tick = 0
-    solver_switch_due = world.direct_solver
-    end_phase_due = settings.collapse.end_substeps > 1
-    if settling.ticks or travel_substeps > 1:
-        steps.set(1, max(travel_substeps, settling.substeps if settling.ticks else 1))
-    while tick < total_ticks:
-        if deadline_unix_s is not None and time.time() > deadline_unix_s:
-            raise BudgetExceeded(f"the compute budget ran out at t = {tick * dt:.3f} s of the rollout")
+    def run(self) -> RolloutEnd:
+        while self.tick < self.total_ticks:
+            previous = self._step()
+            if self._watched():
+                break
+            self._after_step(previous)
+            look_due = (self.rest.enabled or self.collapse.active) and _crossed(self.tick, previous, self.look_every)
+            health_due = _crossed(self.tick, previous, self.health_every) or self.tick == self.total_ticks
+            if (look_due or health_due) and self._look(look_due, health_due):
+                break
+        return self._end()
+
+    # -- between looks ---------------------------------------------------------------------------------
+    def _step(self) -> int:
+        """One step (of one tick or, coarse, of several) in its substeps; returns the tick it began at."""
+        if self.deadline_unix_s is not None and time.time() > self.deadline_unix_s:
+            raise BudgetExceeded(f"the compute budget ran out at t = {self.tick * self.dt:.3f} s of the rollout")
         # the push ends exactly on its tick, and the last step ends exactly on the horizon
-        step_ticks = min(steps.ticks, total_ticks - tick)
-        if step_ticks != steps.ticks:  # a shorter last step (coarse steps only)
-            p.setTimeStep(dt * step_ticks, physicsClientId=cid)
+        step_ticks = min(self.steps.ticks, self.total_ticks - self.tick)
+        if step_ticks != self.steps.ticks:  # a shorter last step (coarse steps only)
+            self.p.setTimeStep(self.dt * step_ticks, physicsClientId=self.cid)
         # the end on the sequential-impulse solver: the direct one (for bounces) leaves resting
         # bodies sunk into each other (config.SolverSettings.direct_solver_for_restitution)
-        if end_phase_due and tick >= fine_from_tick:
-            end_phase_due = False
-            steps.end_phase()
-        if solver_switch_due and tick >= fine_from_tick:
-            solver_switch_due = False
-            use_sequential_solver(world)
-        settling_now = settling.covers(tick)
-        phase = "settle" if settling_now else "collapse" if collapse.collapsing else "fine"
-        for _ in range(steps.substeps):
-            probe.step(phase, step)
-        if settling_now and tick + 1 == settling.ticks:
-            steps.set(1, travel_substeps)
-        previous, tick = tick, tick + step_ticks
-        if watches:
-            for watch in watches.values():
-                watch.after_step(world, tick * dt)
-            if (end_when_watched or trial is not None) and all(w.decided for w in watches.values()):
-                if trial is not None:
-                    # what the watches saw stands, and with it the collapse steps that got there:
-                    # a question that ends at its event and one that runs on must answer it alike
-                    trial.close()
-                    trial = None
-                if end_when_watched:
-                    break
-        if tick == push_ticks:
-            p.setGravity(*gravity.tolist(), physicsClientId=cid)
-            positions, orientations, velocities = read_state(world)
-            energy.reference(energy.energy(positions, orientations, velocities[:, 0], velocities[:, 1]))
-        if trajectory is not None and _crossed(tick, previous, record_every):
-            trajectory.append((tick * dt, *read_poses(world)))
-        look_due = (rest.enabled or collapse.active) and _crossed(tick, previous, look_every)
-        health_due = _crossed(tick, previous, health_every) or tick == total_ticks
-        if not (look_due or health_due):
-            continue
-        positions, orientations, velocities = read_state(world)  # one read serves every part
-        energy_now_j = energy.energy(positions, orientations, velocities[:, 0], velocities[:, 1])
-        if trial is not None and look_due and not ending and tick <= fine_from_tick \
-                and not energy.created_j(energy_now_j) <= created_limit_j:
-            # the collapse steps made energy (NaN: they diverged): back to the look where they
-            # began, which then goes on as if they had never been taken (config.CollapseSettings)
-            (positions, orientations, velocities, energy_now_j), parts = trial.restore(trajectory)
-            tick, undone_s = trial.tick, trial.tick * dt
-            energy, rest, watches = parts["energy"], parts["rest"], parts["watches"]
-            steps.restore(parts["steps"])
-            trial.close()
-            trial = None
-            collapse.end()
-            use_iterations(full_iterations)
+        if self.end_phase_due and self.tick >= self.fine_from_tick:
+            self.end_phase_due = False
+            self.steps.end_phase()
+        if self.solver_switch_due and self.tick >= self.fine_from_tick:
+            self.solver_switch_due = False
+            use_sequential_solver(self.world)
+        settling_now = self.settling.covers(self.tick)
+        phase = "settle" if settling_now else "collapse" if self.collapse.collapsing else "fine"
+        for _ in range(self.steps.substeps):
+            self.probe.step(phase, self._step_simulation)
+        if settling_now and self.tick + 1 == self.settling.ticks:
+            self.steps.set(1, self.travel_substeps)
+        previous, self.tick = self.tick, self.tick + step_ticks
+        return previous
+
+    def _step_simulation(self) -> None:
+        self.p.stepSimulation(physicsClientId=self.cid)
+
+    def _use_iterations(self, iterations: int) -> None:
+        self.p.setPhysicsEngineParameter(numSolverIterations=iterations, physicsClientId=self.cid)
+
+    def _watched(self) -> bool:
+        """Show the world to the watches; True when they have all decided and the rollout may end there."""
+        if not self.watches:
+            return False
+        for watch in self.watches.values():
+            watch.after_step(self.world, self.tick * self.dt)
+        if (self.end_when_watched or self.trial is not None) and all(w.decided for w in self.watches.values()):
+            if self.trial is not None:
+                # what the watches saw stands, and with it the collapse steps that got there:
+                # a question that ends at its event and one that runs on must answer it alike
+                self.trial.close()
+                self.trial = None
+            if self.end_when_watched:
+                return True
+        return False
+
+    def _after_step(self, previous: int) -> None:
+        """The push's end (gravity upright again, the energy's reference taken) and the recorded frames."""
+        if self.tick == self.push_ticks:
+            self.p.setGravity(*self.gravity.tolist(), physicsClientId=self.cid)
+            positions, orientations, velocities = read_state(self.world)
+            self.energy.reference(self.energy.energy(positions, orientations, velocities[:, 0], velocities[:, 1]))
+        if self.trajectory is not None and _crossed(self.tick, previous, self.record_every):
+            self.trajectory.append((self.tick * self.dt, *read_poses(self.world)))
+
+    # -- at a health check or a look ---------------------------------------------------------------------
+    def _look(self, look_due: bool, health_due: bool) -> bool:
+        """Read the world once and hand it to each part; True when the rollout ends here (at rest)."""
+        positions, orientations, velocities = read_state(self.world)  # one read serves every part
+        energy_now_j = self.energy.energy(positions, orientations, velocities[:, 0], velocities[:, 1])
+        if self.trial is not None and look_due and not self.ending and self.tick <= self.fine_from_tick \
+                and not self.energy.created_j(energy_now_j) <= self.created_limit_j:
+            positions, orientations, velocities, energy_now_j = self._undo_trial()
         speeds, spins = speeds_of(velocities)
         if health_due:
-            health.check_speeds(speeds, limit, tick * dt)
+            health.check_speeds(speeds, self.limit, self.tick * self.dt)
         # the fastest any corner can get until the next read
-        period_ticks = look_every if look_due else health_every
-        fastest_corner_m_s = float((speeds + spins * half_diagonals_m).max())
-        fastest_m_s = fastest_corner_m_s + g * period_ticks * dt
-        travel_substeps = substeps_for(fastest_m_s, settings, world)
-        energy.look(energy_now_j)
+        period_ticks = self.look_every if look_due else self.health_every
+        fastest_corner_m_s = float((speeds + spins * self.half_diagonals_m).max())
+        fastest_m_s = fastest_corner_m_s + self.g * period_ticks * self.dt
+        self.travel_substeps = substeps_for(fastest_m_s, self.settings, self.world)
+        self.energy.look(energy_now_j)
         if not look_due:
-            if not settling.covers(tick):
-                steps.set(steps.ticks, travel_substeps if steps.ticks == 1 else 1)
-            steps.find_contacts_ahead(fastest_m_s)
-            continue
+            if not self.settling.covers(self.tick):
+                self.steps.set(self.steps.ticks, self.travel_substeps if self.steps.ticks == 1 else 1)
+            self.steps.find_contacts_ahead(fastest_m_s)
+            return False
         heights = positions[:, 2]
-        moving = fastest_corner_m_s > quiet_m_s
-        if collapse.collapsing and not moving and collapse.still_standing(heights):
-            collapse.settled(heights)  # the fall is over: fine steps and the full solver again
-            if trial is not None:
-                trial.close()
-                trial = None
-            use_iterations(full_iterations)
-        if collapse.look(tick, max(push_ticks, settling.ticks), heights, moving):
-            if tick < fine_from_tick:  # on trial: everything this look read and holds, as it is now
-                trial = CollapseTrial(world, tick, (positions.copy(), orientations.copy(), velocities.copy(),
-                                                    energy_now_j),
-                                      {"energy": energy, "rest": rest, "watches": watches, "steps": steps.snapshot()},
-                                      0 if trajectory is None else len(trajectory))
-                trials.append(trial)
-            if settings.collapse.solver_iterations is not None:
-                use_iterations(collapse_iterations)
-        if collapse.collapsing:
+        self._collapse_look(heights, fastest_corner_m_s > self.quiet_m_s, fastest_m_s,
+                            (positions, orientations, velocities, energy_now_j))
+        self.steps.find_contacts_ahead(fastest_m_s)
+        return self._at_rest(speeds, spins, heights)
+
+    def _undo_trial(self) -> tuple:
+        """The collapse steps made energy (NaN: they diverged): back to the look where they began,
+        which then goes on as if they had never been taken (config.CollapseSettings)."""
+        state, parts = self.trial.restore(self.trajectory)
+        self.tick, self.undone_s = self.trial.tick, self.trial.tick * self.dt
+        self.energy, self.rest, self.watches = parts["energy"], parts["rest"], parts["watches"]
+        self.steps.restore(parts["steps"])
+        self.trial.close()
+        self.trial = None
+        self.collapse.end()
+        self._use_iterations(self.full_iterations)
+        return state
+
+    def _collapse_look(self, heights: np.ndarray, moving: bool, fastest_m_s: float, state: tuple) -> None:
+        """The collapse steps: begun (on trial while the fine steps could still follow) once something
+        has clearly fallen, ended once the fall is over; and the step they allow."""
+        if self.collapse.collapsing and not moving and self.collapse.still_standing(heights):
+            self.collapse.settled(heights)  # the fall is over: fine steps and the full solver again
+            if self.trial is not None:
+                self.trial.close()
+                self.trial = None
+            self._use_iterations(self.full_iterations)
+        if self.collapse.look(self.tick, max(self.push_ticks, self.settling.ticks), heights, moving):
+            if self.tick < self.fine_from_tick:  # on trial: everything this look read and holds, as it is now
+                positions, orientations, velocities, energy_now_j = state
+                self.trial = CollapseTrial(self.world, self.tick, (positions.copy(), orientations.copy(),
+                                                                   velocities.copy(), energy_now_j),
+                                           {"energy": self.energy, "rest": self.rest, "watches": self.watches,
+                                            "steps": self.steps.snapshot()},
+                                           0 if self.trajectory is None else len(self.trajectory))
+                self.trials.append(self.trial)
+            if self.settings.collapse.solver_iterations is not None:
+                self._use_iterations(self.collapse_iterations)
+        if self.collapse.collapsing:
             # coarse, but no body may travel more than the travel limit per step, and none while a
             # body is deep inside another: the solver pushes it out by a fraction per step, so coarse
             # steps leave it there (a heavy body on a light one, a landing at a coarse step)
-            ticks = collapse.coarse_factor(ticks_allowed(fastest_m_s, settings, world))
-            deep = ticks > 1 and tick < fine_from_tick and health.deeper_than(
-                world, smallest, settings.early_stop.max_penetration_fraction, detect=False)
-            if ticks > 1 and (tick >= fine_from_tick or deep):
+            ticks = self.collapse.coarse_factor(ticks_allowed(fastest_m_s, self.settings, self.world))
+            deep = ticks > 1 and self.tick < self.fine_from_tick and health.deeper_than(
+                self.world, self.smallest, self.settings.early_stop.max_penetration_fraction, detect=False)
+            if ticks > 1 and (self.tick >= self.fine_from_tick or deep):
                 ticks = 1
-            steps.set(ticks, travel_substeps if ticks == 1 else 1)
-        elif not settling.covers(tick):
-            steps.set(1, travel_substeps)
-        steps.find_contacts_ahead(fastest_m_s)
-        if rest.enabled and not ending and rest.should_stop(tick * dt, speeds, spins, heights):
-            # only bodies whose outcome is still open must be out of the others
-            if not health.deeper_than(world, smallest, settings.early_stop.max_penetration_fraction, rest.undecided):
-                if not solver_switch_due:
-                    break
-                # at rest on the direct solver, which leaves resting bodies sunk a little into each
-                # other (a bouncy block 3 mm into the one below, read as 8.1 cm fallen against a
-                # threshold of 8.0): end as at the horizon, on the sequential solver for the end phase
-                # (at full steps: the half steps are for ends in mid-collapse, and nothing moves here)
-                ending, end_phase_due = True, False
-                fine_from_tick = tick
-                total_ticks = min(total_ticks, tick + end_phase_ticks)
-                continue
-            collapse.end()  # at rest but still inside another body: push it out at the fine step
-            steps.set(1, travel_substeps)
-    positions, orientations, velocities = read_state(world)
-    positions, orientations = positions.copy(), orientations.copy()  # RolloutEnd's own, contiguous
-    health.check_final_poses(positions, orientations)
-    energy.look(energy.energy(positions, orientations, velocities[:, 0], velocities[:, 1]))
-    # the bodies whose final pose the answer reads: not those already decided by height (a body that
-    # has fallen, or can never fall, is answered whatever pose it ends in mid-collapse)
-    read = rest.undecided if rest.needs_heights else None
-    speeds, spins = speeds_of(velocities)
-    return RolloutEnd(positions, orientations, trajectory, tick * dt, energy_gain_j=energy.max_gain_j,
-                      penetration_fraction=health.deepest_penetration_fraction(world, smallest, read),
-                      speeds_m_s=np.array(speeds, float), spins_rad_s=np.array(spins, float),
-                      events={name: w.events() for name, w in watches.items()}, collapse_undone_s=undone_s)
+            self.steps.set(ticks, self.travel_substeps if ticks == 1 else 1)
+        elif not self.settling.covers(self.tick):
+            self.steps.set(1, self.travel_substeps)
+
+    def _at_rest(self, speeds: np.ndarray, spins: np.ndarray, heights: np.ndarray) -> bool:
+        """True when everything whose outcome is open has come to rest out of the others."""
+        if not (self.rest.enabled and not self.ending and self.rest.should_stop(self.tick * self.dt, speeds, spins,
+                                                                                heights)):
+            return False
+        # only bodies whose outcome is still open must be out of the others
+        if not health.deeper_than(self.world, self.smallest, self.settings.early_stop.max_penetration_fraction,
+                                  self.rest.undecided):
+            if not self.solver_switch_due:
+                return True
+            # at rest on the direct solver, which leaves resting bodies sunk a little into each
+            # other (a bouncy block 3 mm into the one below, read as 8.1 cm fallen against a
+            # threshold of 8.0): end as at the horizon, on the sequential solver for the end phase
+            # (at full steps: the half steps are for ends in mid-collapse, and nothing moves here)
+            self.ending, self.end_phase_due = True, False
+            self.fine_from_tick = self.tick
+            self.total_ticks = min(self.total_ticks, self.tick + self.end_phase_ticks)
+            return False
+        self.collapse.end()  # at rest but still inside another body: push it out at the fine step
+        self.steps.set(1, self.travel_substeps)
+        return False
+
+    def _end(self) -> RolloutEnd:
+        positions, orientations, velocities = read_state(self.world)
+        positions, orientations = positions.copy(), orientations.copy()  # RolloutEnd's own, contiguous
+        health.check_final_poses(positions, orientations)
+        self.energy.look(self.energy.energy(positions, orientations, velocities[:, 0], velocities[:, 1]))
+        # the bodies whose final pose the answer reads: not those already decided by height (a body that
+        # has fallen, or can never fall, is answered whatever pose it ends in mid-collapse)
+        read = self.rest.undecided if self.rest.needs_heights else None
+        speeds, spins = speeds_of(velocities)
+        return RolloutEnd(positions, orientations, self.trajectory, self.tick * self.dt,
+                          energy_gain_j=self.energy.max_gain_j,
+                          penetration_fraction=health.deepest_penetration_fraction(self.world, self.smallest, read),
+                          speeds_m_s=np.array(speeds, float), spins_rad_s=np.array(spins, float),
+                          events={name: w.events() for name, w in self.watches.items()},
+                          collapse_undone_s=self.undone_s)

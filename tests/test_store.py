@@ -184,3 +184,54 @@ def test_every_stored_result_type_reads_back_equal():
     assert (back.acceptance_rate, back.effective_sample_size) == (seen.acceptance_rate, seen.effective_sample_size)
     np.testing.assert_array_equal(back.chain.positions_m, seen.chain.positions_m)
     np.testing.assert_array_equal(back.chain.accepted, seen.chain.accepted)
+
+
+def test_the_store_writes_only_inside_itself_whatever_links_are_planted_in_it(tmp_path):
+    """A link planted where an entry or a whole shard folder belongs is never written through: the
+    entry's link is replaced by the entry, a shard that is a link is left alone and reported, and a
+    file outside the store stays as it was (ipe experiment --resume ran as root once overwrote one)."""
+    _, fresh = _one_sample_run(tmp_path / "store")
+    entry = _only_entry(tmp_path / "store")
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    entry.unlink()
+    entry.symlink_to(victim)
+    lines = []
+    _one_sample_run(tmp_path / "store", report=lines.append)
+    assert victim.read_text() == "precious"
+    assert entry.is_file() and not entry.is_symlink()
+    assert [p.name for p in entry.parent.iterdir()] == [entry.name]  # no temporary file left behind
+    # the whole shard folder a link to a folder outside the store
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    shard = entry.parent
+    for p in shard.iterdir():
+        p.unlink()
+    shard.rmdir()
+    shard.symlink_to(outside, target_is_directory=True)
+    lines = []
+    store, answer = _one_sample_run(tmp_path / "store", report=lines.append)
+    assert list(outside.iterdir()) == []
+    assert (store.hits, store.computed, store.rejected) == (0, 1, 1)
+    refusal = f"its folder {shard} is not a folder of the store (a link or a file)"
+    assert lines == [f"ipe: ignoring store entry {entry} and computing it again: {refusal}",
+                     f"ipe: not storing {entry}: {refusal}; remove it to store results there again"]
+    assert answer.to_dict()["object_fall_probability"] == fresh.to_dict()["object_fall_probability"]
+
+
+def test_a_link_planted_at_the_temporary_file_s_name_is_never_written_through(tmp_path, monkeypatch):
+    import ipe_ros.engine.store as store_module
+
+    _one_sample_run(tmp_path / "store")
+    entry = _only_entry(tmp_path / "store")
+    entry.unlink()
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    monkeypatch.setattr(store_module.secrets, "token_hex", lambda _n: "guessed")
+    planted = entry.parent / f"{entry.stem}.{os.getpid()}.guessed.part"
+    planted.symlink_to(victim)
+    lines = []
+    store, _ = _one_sample_run(tmp_path / "store", report=lines.append)
+    assert victim.read_text() == "precious" and planted.is_symlink() and not entry.exists()
+    assert store.computed == 1 and len(lines) == 1
+    assert lines[0].startswith(f"ipe: not storing {entry}: its temporary file {planted.name} exists already")

@@ -554,3 +554,9 @@ def test_ipe_ask_asks_the_very_question_the_node_reads_from_json(argv, data):
 
     args = build_parser().parse_args(["ask", argv[0], "scene.json", *argv[1:]])
     assert question_from_args(args) == question_from_dict(data)
+
+
+@pytest.mark.parametrize("kind", [[], {}, None, 3, "fly"])
+def test_a_question_of_no_known_kind_is_refused_by_name(kind):
+    with pytest.raises(ConfigError, match=r"^question: must be one of remove, support, clear, place, push, got "):
+        question_from_dict({"question": kind})

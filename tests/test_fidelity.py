@@ -378,9 +378,9 @@ def test_the_node_parameters_set_the_check():
     from ipe_ros.ros.params import PARAMETERS, config_from_values
 
     values = {spec.name: spec.default for spec in PARAMETERS}
-    assert config_from_values(values).check == SelfCheck()
+    assert config_from_values(values).request.check == SelfCheck()
     values.update({"self_check": False, "verify_samples": 3})
-    assert config_from_values(values).check == SelfCheck(enabled=False, verify_samples=3)
+    assert config_from_values(values).request.check == SelfCheck(enabled=False, verify_samples=3)
 
 
 def test_anytime_sampling_is_checked_on_the_samples_it_drew(tower):
@@ -461,3 +461,4 @@ def test_a_question_sent_as_json_checks_itself_only_when_it_asks_to(ramp_3):
         assert answer["variants"][0]["label"] == "as_is" and answer["variants"][0]["fidelity"] == verdict
     with pytest.raises(ConfigError, match=r"^self_check: must be true or false$"):
         question_from_dict({"question": "remove", "self_check": "yes"})
+

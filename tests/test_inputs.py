@@ -72,3 +72,20 @@ def test_the_ground_truth_refuses_a_perception_that_draws_the_scene():
                    "images; ask the ground truth with perception gaussian")
         assert str(as_spelled(caught.value, "cli")) == f"--ground-truth: {problem}"
         assert str(as_spelled(caught.value, "ros")) == f"ground_truth: {problem}"
+
+
+@pytest.mark.parametrize("changes, reason", [
+    ({"queries": ["fall", "contact"]}, "contact_pairs: the contact query needs pairs to watch: give A:B (B may be "
+                                       "support), or drop contact from the queries"),
+    ({"contact_pairs": "A:A"}, "contact_pairs: A:A: an object always touches itself; name two"),
+    ({"contact_pairs": "support:support"}, "contact_pairs: support:support: an object always touches itself; name two"),
+])
+def test_node_settings_no_scene_could_answer_are_refused_when_set_naming_the_parameter(changes, reason):
+    """Accepted, they made every later scene fail, with errors naming the CLI's --contact."""
+    from ipe_ros.engine import ConfigError
+    from ipe_ros.ros.params import PARAMETERS, config_from_values
+
+    values = {spec.name: spec.default for spec in PARAMETERS} | changes
+    with pytest.raises(ConfigError) as info:
+        config_from_values(values)
+    assert str(info.value) == reason

@@ -151,9 +151,9 @@ def test_contact_with_noise_counts_samples_and_gives_an_interval():
     ((("ball", "ball"),), "ball:ball: an object always touches itself"),
 ])
 def test_contact_questions_that_cannot_be_answered_are_refused(pairs, message):
-    spec = QuerySpec(queries=frozenset({"contact"}), contact_pairs=pairs)
-    with pytest.raises(ConfigError, match=message):
-        predict(_rolled(1.0), GROUND_TRUTH, preset("default"), spec)
+    with pytest.raises(ConfigError, match=message):  # refused by QuerySpec where no scene could answer it
+        predict(_rolled(1.0), GROUND_TRUTH, preset("default"), QuerySpec(queries=frozenset({"contact"}),
+                                                                         contact_pairs=pairs))
 
 
 def test_contact_pairs_without_the_query_and_badly_written_pairs_are_refused():

@@ -334,7 +334,7 @@ def question_from_dict(data) -> Question:
     if not isinstance(data, dict):
         raise ConfigError("question", "must be a JSON object with a \"question\" field")
     kind = data.get("question")
-    if kind not in QUESTION_KINDS:
+    if not isinstance(kind, str) or kind not in QUESTION_KINDS:  # a list or a dict is no name (nor hashable)
         raise ConfigError("question", f"must be one of {', '.join(QUESTIONS)}, got {kind!r}"[:300])
     cls = QUESTION_KINDS[kind]
     unknown = sorted(set(data) - cls.fields - COMMON_FIELDS, key=str)

@@ -132,10 +132,7 @@ class Contact(Query):
     summary = "P(A touches B) within the horizon for pairs A:B (B may be support), first-contact time"
 
     def check(self, scene, spec) -> None:
-        if not spec.contact_pairs:
-            raise ConfigError("contact", "the contact query needs pairs to watch: give A:B (B may be "
-                                         f"{SUPPORT}), e.g. --contact ball:box")
-        check_pairs(spec.contact_pairs, scene)
+        check_pairs(spec.contact_pairs, scene)  # QuerySpec has refused a contact query without pairs
 
     def watch(self, scene, spec, world) -> StepWatch | None:
         return ContactWatch(scene, spec.contact_pairs, world)

@@ -69,6 +69,12 @@ class QuerySpec:
         if self.contact_pairs and "contact" not in self.queries:
             raise ConfigError("contact", "pairs were given but the contact query was not asked; add contact "
                                          "to the queries")
+        if "contact" in self.queries and not self.contact_pairs:
+            raise ConfigError("contact", "the contact query needs pairs to watch: give A:B (B may be support), "
+                                         "or drop contact from the queries")
+        for a, b in self.contact_pairs:  # what no scene can answer, refused before any scene arrives
+            if a == b:
+                raise ConfigError("contact", f"{a}:{b}: an object always touches itself; name two")
         if len(set(self.contact_pairs)) != len(self.contact_pairs):
             raise ConfigError("contact", "a pair is asked twice; ask each once")
 

@@ -35,7 +35,7 @@ from .engine import (ALL_QUERIES, PRESETS, AdaptiveStop, ConfigError, ModelConfi
 from .progress import steps
 from .engine.config import (DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M,
                             anytime_batch_size, default_workers)
-from .cli_ask import add_ask_parser, cmd_ask, contact_pair
+from .cli_ask import add_ask_parser, cmd_ask, contact_pair, verify_samples
 from .engine.examples import example_scene_path
 from .engine.catalogue import capped_tower, scene_catalogue
 from .engine.fidelity import DEFAULT_CHECK, SelfCheck
@@ -153,7 +153,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-self-check", action="store_true",
                    help="answer with the fast physics alone (fidelity: unverified) instead of checking it against "
                         "the converged reference on the same noisy scenes (docs/model.md, 'Self-checking answers')")
-    p.add_argument("--verify-samples", type=int, default=DEFAULT_CHECK.verify_samples, metavar="N",
+    p.add_argument("--verify-samples", type=int, default=None, metavar="N",
                    help=f"samples rerun at the reference settings to verify the answer (default "
                         f"{DEFAULT_CHECK.verify_samples})")
     p.add_argument("--json", action="store_true", help="one JSON object per scene per line")
@@ -356,7 +356,8 @@ def cmd_predict(args) -> int:
                             perception=args.perception, vision=vision, queries=args.query, contact=args.contact or (),
                             preset_name=args.preset, horizon_s=args.horizon, until_rest=args.until_rest,
                             seed=args.seed, ci_width=args.ci_width, deadline_s=args.deadline, budget_s=args.budget,
-                            self_check=not args.no_self_check, verify_samples=args.verify_samples)
+                            self_check=not args.no_self_check,
+                            verify_samples=verify_samples(args, checked=not args.no_self_check, off="--no-self-check"))
     model, sim, query, stop, check = request.model, request.settings, request.query, request.stop, request.check
     if args.vision_rrd is not None and len(scenes) != 1:
         raise ConfigError("--vision-rrd", f"records one scene, but {args.path} holds {len(scenes)}; choose one with --tower")

@@ -77,7 +77,7 @@ def add_ask_parser(sub, finite, one_line_parser) -> None:
                        help="check every variant's fast physics against the converged reference and answer a "
                             "contradicted one at the reference (docs/model.md, 'Self-checking answers'); costs "
                             "1.5-6x the question's time; without it each variant says fidelity: unverified")
-        q.add_argument("--verify-samples", type=int, default=DEFAULT_CHECK.verify_samples, metavar="N",
+        q.add_argument("--verify-samples", type=int, default=None, metavar="N",
                        help=f"with --self-check: samples of each variant rerun at the reference to verify it (default "
                             f"{DEFAULT_CHECK.verify_samples})")
         q.add_argument("--fixed-k", action="store_true",
@@ -170,6 +170,15 @@ def _table(answers: A.Answers) -> str:
     return "\n".join(lines)
 
 
+def verify_samples(args, *, checked: bool, off: str) -> int:
+    """``--verify-samples``, refused where the self-check it sets is off (it would be ignored)."""
+    if args.verify_samples is None:
+        return DEFAULT_CHECK.verify_samples
+    if not checked:
+        raise ConfigError("--verify-samples", f"sets the self-check, which is off ({off}); drop one of them")
+    return args.verify_samples
+
+
 def cmd_ask(args) -> int:
     scene = _scene(args)
     if args.samples < 1:
@@ -177,7 +186,8 @@ def cmd_ask(args) -> int:
     # the model and settings as ipe predict builds them (engine.request)
     request = build_request(samples=args.samples, sigma_m=args.sigma, ground_truth=args.ground_truth,
                             preset_name=args.preset, seed=args.seed, budget_s=args.budget,
-                            self_check=args.self_check, verify_samples=args.verify_samples)
+                            self_check=args.self_check,
+                            verify_samples=verify_samples(args, checked=args.self_check, off="no --self-check"))
     model, settings = request.model, request.settings
     if args.workers < 0:
         raise ConfigError("--workers", f"must be >= 0, got {args.workers}")

@@ -107,6 +107,15 @@ def test_generate_tower_and_table_write_loadable_scenes(tmp_path):
     (["predict", "EXAMPLE", "--query", "bump"], "ipe: error: --query: the bump query needs a table support (it "
                                                 "counts boxes that fall off the table's edge); drop 'bump' or give "
                                                 "the scene a table"),
+    (["predict", "EXAMPLE", "--verify-samples", "5000"], "ipe: error: --verify-samples: must be an integer in "
+                                                         "[0, 1000], got 5000"),
+    (["predict", "EXAMPLE", "--no-self-check", "--verify-samples", "3"],
+     "ipe: error: --verify-samples: sets the self-check, which is off (--no-self-check); drop one of them"),
+    (["ask", "remove", "EXAMPLE", "--verify-samples", "3"],
+     "ipe: error: --verify-samples: sets the self-check, which is off (no --self-check); drop one of them"),
+    (["predict", "EXAMPLE", "--query", "fall,contact"], "ipe: error: --contact: the contact query needs pairs to "
+                                                        "watch: give A:B (B may be support), or drop contact from "
+                                                        "the queries"),
 ])
 def test_bad_input_exits_2_with_one_line(args, message):
     args = [str(example_scene_path()) if a == "EXAMPLE" else a for a in args]

@@ -45,7 +45,7 @@ INPUTS: tuple[Input, ...] = (
     Input("self_check", "--no-self-check", "self_check", "flag", "check the fast physics against the reference"),
     Input("deadline_s", "--deadline", "deadline_s", "s", "anytime sampling: stop drawing samples by then"),
     Input("budget_s", "--budget", "budget_s", "s", "the most wall seconds one prediction may take"),
-    Input("verify_samples", "--verify-samples", "verify_samples", "count", "samples rerun at the reference"),
+    Input("self_check.verify_samples", "--verify-samples", "verify_samples", "count", "samples rerun at the reference"),
     Input("perception", "--perception", "perception", "name", "where the noisy scenes come from"),
     Input("ground_truth", "--ground-truth", "ground_truth", "flag", "the scene exactly as given: no noise, one rollout"),
     Input("max_objects", None, "max_objects", "count", "scenes with more objects are refused"),

@@ -52,13 +52,7 @@ class QuerySpec:
     rest_spin_rad_s: float = 0.05
 
     def __post_init__(self) -> None:
-        if not isinstance(self.queries, frozenset) or not all(isinstance(q, str) for q in self.queries):
-            raise ConfigError("queries", f"must be a set of query names from {', '.join(QUERIES)}")
-        unknown = sorted(set(self.queries) - set(QUERIES))
-        if unknown:
-            raise ConfigError("queries", f"unknown query {shown(unknown[0])}; choose from {', '.join(QUERIES)}")
-        if not self.queries:
-            raise ConfigError("queries", f"ask for at least one of {', '.join(QUERIES)}")
+        check_names(self.queries)
         positive(self.fall_threshold_fraction, "fall_threshold_fraction")
         positive(self.rest_speed_sizes_per_s, "rest_speed_sizes_per_s")
         positive(self.rest_spin_rad_s, "rest_spin_rad_s")
@@ -82,9 +76,21 @@ class QuerySpec:
         return name in self.queries
 
 
+def check_names(queries) -> None:
+    """A non-empty set of registered query names; ConfigError naming ``queries`` otherwise."""
+    if not isinstance(queries, frozenset) or not all(isinstance(q, str) for q in queries):
+        raise ConfigError("queries", f"must be a set of query names from {', '.join(QUERIES)}")
+    unknown = sorted(set(queries) - set(QUERIES))
+    if unknown:
+        raise ConfigError("queries", f"unknown query {shown(unknown[0])}; choose from {', '.join(QUERIES)}")
+    if not queries:
+        raise ConfigError("queries", f"ask for at least one of {', '.join(QUERIES)}")
+
+
 def parse_queries(text: str) -> frozenset[str]:
-    """``"fall,direction"`` -> frozenset; raises ConfigError for unknown names."""
+    """``"fall,direction"`` -> frozenset; raises ConfigError for unknown names (what else a
+    QuerySpec needs, such as the contact query's pairs, is checked where the spec is made)."""
     names = frozenset(part.strip() for part in text.split(",") if part.strip())
-    QuerySpec(queries=names)  # validates
+    check_names(names)
     return names
 

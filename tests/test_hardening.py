@@ -172,8 +172,34 @@ def test_a_prediction_stops_at_its_budget_and_answers_with_what_it_has():
     assert took < 1.5 + 1.0
     assert p.stopped_by == "budget" and p.budget_skipped_samples > 0 and p.failed_samples == 0
     assert p.samples + p.budget_skipped_samples == 200 and p.request["budget_s"] == 1.5
-    if p.samples:
-        assert 0 <= p.fall_fraction <= 1
+    assert p.samples > 0 and 0 <= p.fall_fraction <= 1  # with none, predict says so (the test below)
+
+
+@pytest.mark.parametrize("asked", ["prediction", "question"])
+def test_a_budget_that_no_sample_finished_in_is_an_error_never_an_empty_answer(asked, monkeypatch):
+    """Every sample cut off (here: the budget ran out before the first step) used to give an answer
+    with k = 0 and every probability null, published like any other."""
+    import importlib
+
+    from ipe_ros.engine import actions
+
+    sampler_module = importlib.import_module("ipe_ros.engine.sampler")
+    ask_module = importlib.import_module("ipe_ros.engine.actions.ask")  # the module, not its function
+
+    scene = scenes_from_json(json.dumps(TOWER))[0]
+    real_time = time.time
+    for module in (sampler_module, ask_module):  # deadlines set an hour ago: every rollout is past its budget
+        monkeypatch.setattr(module, "time", type("Clock", (), {"time": staticmethod(lambda: real_time() - 3600),
+                                                               "perf_counter": time.perf_counter}))
+    model = ModelConfig(sigma_m=0.04, samples=4)
+    with pytest.raises(ConfigError) as info:
+        if asked == "prediction":
+            predict(scene, model, preset("default"), QuerySpec(), budget_s=2.0)
+        else:
+            actions.remove(scene, ["block9"], model, preset("default"), budget_s=2.0)
+    cut = 4 if asked == "prediction" else 8
+    assert str(info.value) == (f"budget_s: no sample finished within the budget of 2 s ({cut} cut off); raise the "
+                               "budget, or ask for fewer samples, objects or contact pairs")
 
 
 # -- 5. the tower CSV -----------------------------------------------------------------------------------------

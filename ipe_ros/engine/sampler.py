@@ -147,6 +147,18 @@ def check_request(scene: Scene, query: QuerySpec, max_objects: int = DEFAULT_MAX
                                           "raise the budget, shorten horizon_s, or simplify the scene")
 
 
+def check_some_sample_finished(outcomes: Sequence[SampleOutcome], budget_s: float | None) -> None:
+    """An answer needs samples: when the budget cut off every sample (none finished), that is an
+    error saying so (ConfigError naming budget_s), never an answer whose every probability is null."""
+    if any(o.ok for o in outcomes) or not any(o.budget_stopped for o in outcomes):
+        return
+    cut = sum(o.budget_stopped for o in outcomes)
+    failed = sum(not o.ok and not o.budget_stopped for o in outcomes)
+    raise ConfigError("budget_s", f"no sample finished within the budget of {budget_s:g} s ({cut} cut off"
+                                  + (f", {failed} failed" if failed else "") + "); raise the budget, or ask for fewer "
+                                  "samples, objects or contact pairs")
+
+
 def check_ci_width(ci_width: float | None, query: QuerySpec) -> None:
     """A target interval width needs an interval to watch: the fall or the any_fall query's."""
     if ci_width is not None and not (query.wants("fall") or query.wants("any_fall")):
@@ -247,6 +259,7 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
                 if hi - lo <= stop.ci_width:
                     stopped_by = "ci_width"
                     break
+    check_some_sample_finished(outcomes, budget_s)
     if at_reference:
         report = FidelityReport("reference", settings=(("samples", settings.name),))
     else:

@@ -17,7 +17,7 @@ from ..errors import ConfigError
 from ..perturb import is_deterministic, position_sigmas_m
 from ..fidelity import FidelityReport, SelfCheck, is_reference, reference_settings
 from ..fidelity import check_request as check_fidelity_request
-from ..sampler import MapFn, check_budget, checking, rollout_cost, self_check_many
+from ..sampler import MapFn, check_budget, check_some_sample_finished, checking, rollout_cost, self_check_many
 from ..scene import Scene, Table, validate_scene
 from ..query.contact import check_pairs
 from ..outcome import SampleOutcome
@@ -72,6 +72,7 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     else:
         per_sample, decisions = _run_sequentially(tasks, simulated_actions, as_is, k, sequential, map_fn, scene,
                                                   on_progress)
+    check_some_sample_finished([r for s in per_sample for r in s], budget_s)
     reports = _check_variants(per_sample, simulated_actions, tasks, settings, check, map_fn)
     if sequential is not None and any(r.verdict == "escalated" or r.refined_samples for r in reports.values()):
         decisions = _decide_again(decisions, per_sample, simulated_actions, as_is, sequential)

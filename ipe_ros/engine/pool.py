@@ -55,7 +55,8 @@ def _exit_when_gone(pid: int, period_s: float = 1.0) -> None:
             pass  # it exists (owned by someone else after a pid reuse): keep going
 
 
-def _worker_pid() -> int:
+def _worker_pid(hold_s: float = 0.0) -> int:
+    time.sleep(hold_s)
     return os.getpid()
 
 
@@ -111,11 +112,17 @@ class WorkerPool:
         """Start every worker now (imports, pybullet client) and return their process ids.
 
         Submitting ``workers`` items back to back makes the executor start ``workers`` processes
-        (it starts one per submission while none is idle), each running the initializer.
+        (it starts one per submission while none is idle), each running the initializer. A worker
+        left idle by earlier work (a map rerun after a worker died) takes such an item instead of a
+        new process starting, so the items are submitted again, each holding its worker a moment,
+        until every worker runs.
         """
         executor = self._get_executor()
-        for future in [executor.submit(_worker_pid) for _ in range(self.workers)]:
-            future.result()
+        for hold_s in (0.0, 0.05, 0.2, 0.5):
+            for future in [executor.submit(_worker_pid, hold_s) for _ in range(self.workers)]:
+                future.result()
+            if len(self.worker_pids()) >= self.workers:
+                break
         return self.worker_pids()
 
     def worker_pids(self) -> list[int]:

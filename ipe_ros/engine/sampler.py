@@ -147,6 +147,44 @@ def check_request(scene: Scene, query: QuerySpec, max_objects: int = DEFAULT_MAX
                                           "raise the budget, shorten horizon_s, or simplify the scene")
 
 
+def _from_perception(tasks: list[SampleTask], scene: Scene, model: ModelConfig, seed: int, map_fn: MapFn | None,
+                     perceived) -> tuple[list[SampleTask], object]:
+    """With vision or depth perception, each sample's scene is a state of the posterior (and the
+    model's sigma 0: the posterior is the noise); the tasks and the perceived scenes used."""
+    if model.perception == "depth" and perceived is None:
+        raise ConfigError("perception", "depth perception needs the depth images: run vision.depth.perceive_depth "
+                                        "and pass its scenes as perceived (the CLI's --depth, the node's depth topics)")
+    if model.perception not in ("vision", "depth"):
+        return tasks, perceived
+    perceived = perceived or perceive_for(scene, model, seed, map_fn)
+    if len(perceived.scenes) < len(tasks):
+        raise ConfigError("samples", f"{len(perceived.scenes)} perceived scenes for {len(tasks)} samples")
+    sampled = dataclasses.replace(model, sigma_m=0.0)
+    return [dataclasses.replace(t, scene=perceived.scenes[t.index], model=sampled) for t in tasks], perceived
+
+
+def _anytime(tasks: list[SampleTask], stop: AdaptiveStop, run_first, run, per_sample_answer,
+             start: float) -> tuple[list[SampleOutcome], str]:
+    """Anytime sampling: batch after batch until every sample ran, the deadline would pass during the
+    next batch, or the answer's interval is narrow enough; the outcomes and what stopped it."""
+    outcomes: list[SampleOutcome] = []
+    for first in range(0, len(tasks), stop.batch_size):
+        batch_start = time.perf_counter()
+        outcomes += (run_first if first == 0 else run)(tasks[first:first + stop.batch_size])
+        if len(outcomes) == len(tasks):
+            break
+        now = time.perf_counter()
+        if stop.deadline_s is not None and (now - start) + (now - batch_start) > stop.deadline_s:
+            return outcomes, "deadline"
+        ok = [o for o in outcomes if o.ok]
+        if stop.ci_width is not None and len(ok) >= stop.min_samples:
+            fall = float(np.mean([per_sample_answer(o) for o in ok]))
+            lo, hi = wilson_interval(fall, len(ok))
+            if hi - lo <= stop.ci_width:
+                return outcomes, "ci_width"
+    return outcomes, "samples"
+
+
 def check_some_sample_finished(outcomes: Sequence[SampleOutcome], budget_s: float | None) -> None:
     """An answer needs samples: when the budget cut off every sample (none finished), that is an
     error saying so (ConfigError naming budget_s), never an answer whose every probability is null."""
@@ -200,17 +238,8 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
     check_fidelity_request(check)
     check_request(scene, query, max_objects, model=model, settings=settings, budget_s=budget_s)
     check_ci_width(None if stop is None else stop.ci_width, query)
-    per_sample_answer = sample_fall_fraction if query.wants("fall") else sample_any_fall
     tasks = make_tasks(scene, model, settings, query, seed, record_every, record_samples)
-    if model.perception == "depth" and perceived is None:
-        raise ConfigError("perception", "depth perception needs the depth images: run vision.depth.perceive_depth "
-                                        "and pass its scenes as perceived (the CLI's --depth, the node's depth topics)")
-    if model.perception in ("vision", "depth"):
-        perceived = perceived or perceive_for(scene, model, seed, map_fn)
-        if len(perceived.scenes) < len(tasks):
-            raise ConfigError("samples", f"{len(perceived.scenes)} perceived scenes for {len(tasks)} samples")
-        sampled = dataclasses.replace(model, sigma_m=0.0)  # the posterior is the noise
-        tasks = [dataclasses.replace(t, scene=perceived.scenes[t.index], model=sampled) for t in tasks]
+    tasks, perceived = _from_perception(tasks, scene, model, seed, map_fn, perceived)
     if budget_s is not None:
         deadline = time.time() + budget_s
         tasks = [dataclasses.replace(t, deadline_unix_s=deadline) for t in tasks]
@@ -242,23 +271,8 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
         if split < len(tasks):
             outcomes += run_verifying(coverage_ahead(outcomes, verified, check, len(tasks)), tasks[split:])
     else:
-        outcomes = []
-        for first in range(0, len(tasks), stop.batch_size):
-            batch_start = time.perf_counter()
-            outcomes += (run_first if first == 0 else run)(tasks[first:first + stop.batch_size])
-            if len(outcomes) == len(tasks):
-                break
-            now = time.perf_counter()
-            if stop.deadline_s is not None and (now - start) + (now - batch_start) > stop.deadline_s:
-                stopped_by = "deadline"
-                break
-            ok = [o for o in outcomes if o.ok]
-            if stop.ci_width is not None and len(ok) >= stop.min_samples:
-                fall = float(np.mean([per_sample_answer(o) for o in ok]))
-                lo, hi = wilson_interval(fall, len(ok))
-                if hi - lo <= stop.ci_width:
-                    stopped_by = "ci_width"
-                    break
+        per_sample_answer = sample_fall_fraction if query.wants("fall") else sample_any_fall
+        outcomes, stopped_by = _anytime(tasks, stop, run_first, run, per_sample_answer, start)
     check_some_sample_finished(outcomes, budget_s)
     if at_reference:
         report = FidelityReport("reference", settings=(("samples", settings.name),))

@@ -126,7 +126,7 @@ class ResumableMap:
     def _open_shard(self, key: str, create: bool) -> int | None:
         """A descriptor of the entry's shard folder, opened without following a link (so that every
         file operation below stays inside the store, whatever is planted there meanwhile); None when
-        it does not exist (and ``create`` is false). OSError when it is not a real folder."""
+        it does not exist (and ``create`` is false). StoreEntryError when it is not a real folder."""
         shard = self.folder / key[:2]
         if create:
             try:

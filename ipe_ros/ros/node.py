@@ -431,8 +431,9 @@ class IpeLifecycleNode(_IpeInterface, LifecycleNode):
             transitions = list_transitions(GetAvailableTransitions.Request(),
                                            GetAvailableTransitions.Response()).available_transitions
             allowed = {t.transition.id: t.transition.label for t in transitions}
-            asked = request.transition.label or request.transition.id
-            if asked not in allowed and asked not in allowed.values():
+            label = request.transition.label  # asked by label (as rclpy reads it) or else by id
+            asked = label or request.transition.id
+            if asked not in (set(allowed.values()) if label else allowed):
                 state = transitions[0].start_state.label if transitions else "finalized"
                 self.get_logger().warning(
                     f"transition {asked} refused: not allowed from state '{state}' (allowed: "

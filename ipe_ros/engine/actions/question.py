@@ -85,7 +85,6 @@ class Question:
         return {}
 
 
-
 @dataclass(frozen=True, kw_only=True)
 class _ContactAndWhatFalls(Question):
     """Questions whose variants may also report P(A touches B) (``contact``) and which objects fall
@@ -170,7 +169,6 @@ class SupportQuestion(Question):
         return {"threshold": self.threshold, "safe_below": self.safe_below}
 
 
-
 @dataclass(frozen=True, kw_only=True)
 class ClearQuestion(Question):
     """An order to take the scene apart (down to ``target``, None: everything), each step's risk."""
@@ -193,7 +191,6 @@ class ClearQuestion(Question):
         return {} if self.target is None else {"target": self.target}
 
 
-
 @dataclass(frozen=True, kw_only=True)
 class PlaceQuestion(_ContactAndWhatFalls):
     """Where to put ``body``: at each of ``spots`` ((x, y, yaw_rad), lowered onto what is below), or
@@ -209,11 +206,8 @@ class PlaceQuestion(_ContactAndWhatFalls):
     yaws: int = 1
 
     def __post_init__(self) -> None:
-        if bool(self.spots) == (self.region is not None):
-            raise ConfigError("at", "give candidate spots in \"at\" or a \"region\" to search (one of them)")
-        if len(self.spots) > limits.MAX_QUESTION_VARIANTS:
-            raise ConfigError("at", f"{len(self.spots)} spots are more than the {limits.MAX_QUESTION_VARIANTS} one "
-                                    "question may ask about; split them into several questions")
+        _check_spots_or_region(bool(self.spots), self.region is not None)
+        _check_spot_count(len(self.spots))
         if not all(isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 400
                    for v in (self.candidates, self.yaws)):
             raise ConfigError("region.candidates", "candidates and yaws must be integers in [1, 400]")
@@ -227,12 +221,10 @@ class PlaceQuestion(_ContactAndWhatFalls):
     def from_dict(cls, data: dict, common: dict) -> PlaceQuestion:
         body = new_object_from_dict(data.get("object"), "object")
         at, region = data.get("at"), data.get("region")
-        if (at is None) == (region is None):
-            raise ConfigError("at", "give candidate spots in \"at\" or a \"region\" to search (one of them)")
+        _check_spots_or_region(at is not None, region is not None)  # before reading either: one of them, not both
         if at is not None:
-            if isinstance(at, list) and len(at) > limits.MAX_QUESTION_VARIANTS:
-                raise ConfigError("at", f"{len(at)} spots are more than the {limits.MAX_QUESTION_VARIANTS} one "
-                                        "question may ask about; split them into several questions")
+            if isinstance(at, list):
+                _check_spot_count(len(at))  # before reading each spot
             if not isinstance(at, list) or not at or not all(
                     isinstance(s, list) and len(s) in (2, 3) and all(
                         isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in s)
@@ -260,7 +252,6 @@ class PlaceQuestion(_ContactAndWhatFalls):
         else:
             data["at"] = [[x, y, math.degrees(yaw)] for x, y, yaw in self.spots]
         return {**data, **super()._own_dict()}
-
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -382,6 +373,17 @@ def _field(data: dict, key: str, kind, default=None, *, path: str = ""):
     if not isinstance(value, kind) or isinstance(value, bool) and kind is not bool:
         raise ConfigError(f"{path}{key}", f"must be {kind.__name__ if kind is not float else 'a number'}")
     return value
+
+
+def _check_spots_or_region(spots: bool, region: bool) -> None:
+    if spots == region:
+        raise ConfigError("at", "give candidate spots in \"at\" or a \"region\" to search (one of them)")
+
+
+def _check_spot_count(spots: int) -> None:
+    if spots > limits.MAX_QUESTION_VARIANTS:
+        raise ConfigError("at", f"{spots} spots are more than the {limits.MAX_QUESTION_VARIANTS} one question may "
+                                "ask about; split them into several questions")
 
 
 def _region_from_dict(region) -> dict:

@@ -9,7 +9,7 @@ any_fall, direction/far and bump queries, phi > 0, mu, the ground truth and reco
 and robot questions (remove, support, place, push; each with and without the self-check) on a
 generated tower. A prediction's digest hashes every sample's initial and final poses, simulated time
 and trajectory, and the answer's fields; a question's hashes its JSON answer without wall-clock times
-and the trajectories of its recorded samples. Equal digests mean bit-identical answers. Exit status 1
+and the trajectories of its recorded samples; and predictions from vision and from depth perception. Equal digests mean bit-identical answers. Exit status 1
 when any digest differs.
 """
 
@@ -126,6 +126,23 @@ def question_cases():
     yield "question/remove_apart", dataclasses.replace(tower, objects=tower.objects + (lone,)), apart, model
 
 
+def perception_cases():
+    """Predictions from vision and from depth perception (small chains): their posterior scenes and
+    the perception's own report (acceptance, ESS, spreads) are hashed with the answer."""
+    from ipe_ros.engine.vision import VisionSettings
+    from ipe_ros.engine.vision import depth as D
+
+    tower = generate_towers(2013, 1)[0]
+    small = dataclasses.replace(tower, objects=tower.objects[:3])
+    vision = VisionSettings(resolution_px=64, chain_samples=300, burn_in=60)
+    yield "vision/tower3", small, ModelConfig(perception="vision", vision=vision, samples=4), None
+    camera = D.look_at((1.0, -0.7, 0.6), (0.0, 0.0, 0.1), width_px=160, height_px=120)
+    observation = D.DepthObservation(camera, D.render_depth_m(small, camera))
+    perceived = D.perceive_depth_for(small, 4, (observation,), seed=7,
+                                     settings=D.DepthSettings(updates_per_object=150))
+    yield "depth/tower3", small, ModelConfig(perception="depth", samples=4), perceived
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("out")
@@ -137,6 +154,13 @@ def main() -> int:
         p = predict(scene, model, preset(preset_name), QuerySpec(queries=frozenset(queries)), seed=7,
                     record_every=record_every, check=None)
         result[key] = digest(p)
+        print(key, result[key], flush=True)
+    for key, scene, model, perceived in perception_cases():
+        p = predict(scene, model, preset("default"), QuerySpec(queries=frozenset({"fall", "any_fall"})), seed=7,
+                    perceived=perceived, check=None)
+        h = hashlib.sha256(digest(p).encode())
+        h.update(json.dumps(p.request.get("perception"), sort_keys=True, default=list).encode())
+        result[key] = h.hexdigest()[:16]
         print(key, result[key], flush=True)
     for key, scene, question, model in question_cases():
         reply = question.answer(scene, model, preset("default"), seed=7, check=DEFAULT_CHECK, record_every=8,

@@ -131,12 +131,13 @@ def perception_cases():
     the perception's own report (acceptance, ESS, spreads) are hashed with the answer."""
     from ipe_ros.engine.vision import VisionSettings
     from ipe_ros.engine.vision import depth as D
+    from ipe_ros.engine.vision.camera import look_at
 
     tower = generate_towers(2013, 1)[0]
     small = dataclasses.replace(tower, objects=tower.objects[:3])
     vision = VisionSettings(resolution_px=64, chain_samples=300, burn_in=60)
     yield "vision/tower3", small, ModelConfig(perception="vision", vision=vision, samples=4), None
-    camera = D.look_at((1.0, -0.7, 0.6), (0.0, 0.0, 0.1), width_px=160, height_px=120)
+    camera = look_at((1.0, -0.7, 0.6), (0.0, 0.0, 0.1), width_px=160, height_px=120)
     observation = D.DepthObservation(camera, D.render_depth_m(small, camera))
     perceived = D.perceive_depth_for(small, 4, (observation,), seed=7,
                                      settings=D.DepthSettings(updates_per_object=150))

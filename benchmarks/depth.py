@@ -28,6 +28,8 @@ import numpy as np  # noqa: E402
 
 from ipe_ros.engine import Box, Floor, ModelConfig, Scene, preset  # noqa: E402
 from ipe_ros.engine.vision import depth as D  # noqa: E402
+from ipe_ros.engine.vision.camera import PinholeCamera, look_at  # noqa: E402
+from ipe_ros.engine.vision.tinyrenderer import depth_with_pybullet  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 NOISE = dict(sd_m=0.002, sd_per_m2=0.0025, missing=0.05)
@@ -56,14 +58,14 @@ def tower(rng: np.random.Generator, blocks: int) -> Scene:
                  gravity_m_s2=(0.0, 0.0, -9.81))
 
 
-def camera_for(scene: Scene, rng: np.random.Generator) -> D.DepthCamera:
+def camera_for(scene: Scene, rng: np.random.Generator) -> PinholeCamera:
     top = max(b.position_m[2] for b in scene.objects)
     azimuth, elevation = rng.uniform(0, 2 * math.pi), math.radians(rng.uniform(20, 45))
     distance = rng.uniform(1.0, 1.6)
     target = np.array([0.0, 0.0, top / 2])
     eye = target + distance * np.array([math.cos(elevation) * math.cos(azimuth),
                                         math.cos(elevation) * math.sin(azimuth), math.sin(elevation)])
-    return D.look_at(eye, target)
+    return look_at(eye, target)
 
 
 def detected(scene: Scene, rng: np.random.Generator, sd_m: float = 0.01, yaw_sd_rad: float = 0.05) -> Scene:
@@ -87,7 +89,7 @@ def coverage(n_scenes: int, settings: D.DepthSettings, seed: int = 0) -> dict:
     for s in range(n_scenes):
         truth = tower(rng, int(rng.integers(2, 6)))
         camera = camera_for(truth, rng)
-        observation = D.DepthObservation(camera, noisy(D.depth_with_pybullet(truth, camera), rng))
+        observation = D.DepthObservation(camera, noisy(depth_with_pybullet(truth, camera), rng))
         guess = detected(truth, rng)
         start = time.perf_counter()
         posterior = D.run_depth_chain(guess, (observation,), settings, np.random.default_rng(seed + s))
@@ -110,7 +112,7 @@ def coverage(n_scenes: int, settings: D.DepthSettings, seed: int = 0) -> dict:
             "hidden_blocks": len(hidden_sd), "chain_s_median": float(np.median(walls))}
 
 
-def _hidden_fraction(scene: Scene, camera: D.DepthCamera, i: int) -> float:
+def _hidden_fraction(scene: Scene, camera: PinholeCamera, i: int) -> float:
     """Share of block i's pixels that another block covers in front of it."""
     from ipe_ros.engine.vision.render import body_patch, scene_mesh
 

@@ -25,7 +25,8 @@ from ipe_ros.analysis.paper_data import shared_data_dir  # noqa: E402
 from ipe_ros.analysis.runs import load_tower_stimuli  # noqa: E402
 from ipe_ros.engine.vision import VisionSettings, default_cameras  # noqa: E402
 from ipe_ros.engine.vision.mcmc import ImageModel  # noqa: E402
-from ipe_ros.engine.vision.render import BACKGROUND_GREY, render, render_views, render_with_pybullet, scene_mesh  # noqa: E402
+from ipe_ros.engine.vision.render import BACKGROUND_GREY, render, render_views, scene_mesh  # noqa: E402
+from ipe_ros.engine.vision.tinyrenderer import grey_with_pybullet  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -44,9 +45,9 @@ def measure(scenes, resolution: int, steps: int, rng: np.random.Generator) -> di
         mesh = scene_mesh(scene)
         camera = cameras[0]
         ours_rate.append(_per_second(lambda: render(mesh, camera), 20))
-        theirs_rate.append(_per_second(lambda: render_with_pybullet(scene, camera), 5))
+        theirs_rate.append(_per_second(lambda: grey_with_pybullet(scene, camera), 5))
         for cam in cameras:
-            _, mask = render_with_pybullet(scene, cam)
+            _, mask = grey_with_pybullet(scene, cam)
             mine = render(mesh, cam) != BACKGROUND_GREY
             ious.append(float((mine & mask).sum() / max((mine | mask).sum(), 1)))
         model = ImageModel(mesh, cameras, render_views(mesh, cameras), VisionSettings(resolution_px=resolution))

@@ -25,6 +25,7 @@ import argparse
 import dataclasses
 import json
 import math
+import re
 import sys
 from pathlib import Path
 
@@ -540,8 +541,25 @@ def cmd_experiment(args) -> int:
     return 0
 
 
+#: a comma-separated list of numbers whose first is negative ("-0.85,0.1,0.6,...")
+_NEGATIVE_VECTOR = re.compile(r"^-\.?\d[^,]*,")
+
+
+def glue_negative_vectors(argv: list[str]) -> list[str]:
+    """argparse takes "-0.85,0.1,..." for an unknown option (only a lone negative number passes), so
+    ``--camera-pose -0.85,...`` and ``--velocity -0.4,0`` failed; no option starts with a digit, so such
+    a list is glued to the option before it (``--camera-pose=-0.85,...``)."""
+    glued: list[str] = []
+    for token in argv:
+        if glued and _NEGATIVE_VECTOR.match(token) and glued[-1].startswith("--") and "=" not in glued[-1]:
+            glued[-1] = f"{glued[-1]}={token}"
+        else:
+            glued.append(token)
+    return glued
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    args = build_parser().parse_args(glue_negative_vectors(sys.argv[1:] if argv is None else list(argv)))
     try:
         if args.command == "predict":
             return cmd_predict(args)

@@ -47,8 +47,14 @@ def depth_m_to_image(depth_m: np.ndarray, stamp_ns: int, frame_id: str, encoding
 
 
 def camera_info_to_dict(msg: CameraInfo) -> dict:
-    """The fields ``vision.depth.camera_from_info`` reads."""
-    return {"width": int(msg.width), "height": int(msg.height), "k": [float(v) for v in msg.k]}
+    """The fields ``vision.camera.camera_from_info`` reads (it takes P for a rectified image, applies
+    binning and the region of interest as image_geometry does)."""
+    roi = msg.roi
+    return {"width": int(msg.width), "height": int(msg.height), "k": [float(v) for v in msg.k],
+            "p": [float(v) for v in msg.p], "d": [float(v) for v in msg.d],
+            "binning_x": int(msg.binning_x), "binning_y": int(msg.binning_y),
+            "roi": {"x_offset": int(roi.x_offset), "y_offset": int(roi.y_offset), "width": int(roi.width),
+                    "height": int(roi.height)}}
 
 
 def pose_to_tuples(msg: PoseStamped) -> tuple[tuple[float, float, float], tuple[float, float, float, float], str, int]:

@@ -247,3 +247,17 @@ def test_the_parsers_experiment_names_and_scales_are_the_analyses_own():
     from ipe_ros.analysis.human import SCALES
 
     assert cli.EXPERIMENT_NAMES == tuple(EXPERIMENTS) and cli.HUMAN_SCALES == SCALES
+
+
+def test_vector_options_take_negative_numbers():
+    """A camera at negative x (README's ``--camera-pose "$(cat camera_pose.txt)"``) and a push towards -x."""
+    from ipe_ros.cli import build_parser, glue_negative_vectors
+
+    pose = "-0.85,0.1,0.6,0,0,0,1"
+    argv = ["predict", "scene.json", "--camera-pose", pose, "--force-direction", "-30"]
+    args = build_parser().parse_args(glue_negative_vectors(argv))
+    assert args.camera_pose == pose and args.force_direction == -30.0
+    args = build_parser().parse_args(glue_negative_vectors(["ask", "push", "scene.json", "--object", "top",
+                                                            "--velocity", "-0.4,0"]))
+    assert args.velocity == (-0.4, 0.0)
+    assert glue_negative_vectors(["--x", "-1,2", "--y=-3,4", "-v", "-5,6"]) == ["--x=-1,2", "--y=-3,4", "-v", "-5,6"]

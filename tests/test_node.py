@@ -490,13 +490,14 @@ def test_depth_perception_predicts_from_the_newest_depth_image(ros):
     from geometry_msgs.msg import PoseStamped
     from sensor_msgs.msg import CameraInfo, Image
 
-    from ipe_ros.engine.vision import depth as D
+    from ipe_ros.engine.vision.camera import look_at
+    from ipe_ros.engine.vision.tinyrenderer import depth_with_pybullet
     from msg_bridge.depth import depth_m_to_image
     from msg_bridge.stamps import stamp_ns_to_header
     from tests.test_depth import cube, floor
 
     scene = floor(cube("bottom", 0, 0, 0.05), cube("top", 0.01, 0, 0.15), name="seen")
-    camera = D.look_at((1.0, -0.7, 0.6), (0, 0, 0.1))
+    camera = look_at((1.0, -0.7, 0.6), (0, 0, 0.1))
     node = ros.start_ipe_node(samples=4, perception="depth", self_check=False, workers=0)
     got = answers(ros)
     scenes = ros.publisher(String, "/ipe/scene_json")
@@ -515,7 +516,7 @@ def test_depth_perception_predicts_from_the_newest_depth_image(ros):
     images = ros.publisher(Image, "/ipe/depth/image", qos_profile_sensor_data)
     images.publish(Image(encoding="rgb8", width=2, height=1, step=6, data=bytes(6)))  # not a depth image: refused
     wait_until(lambda: node.depth_images_refused == 1, TIMEOUT_S, "the refusal of an rgb8 image")
-    images.publish(depth_m_to_image(D.depth_with_pybullet(scene, camera), time.time_ns(), "camera", "16UC1"))
+    images.publish(depth_m_to_image(depth_with_pybullet(scene, camera), time.time_ns(), "camera", "16UC1"))
     wait_until(lambda: node.service.latest_depth_stamp_ns() is not None, TIMEOUT_S, "the depth image")
     scenes.publish(String(data=scene_to_json(scene)))
     wait_until(lambda: len(got) >= 2, TIMEOUT_S * 2, "the prediction with depth perception")

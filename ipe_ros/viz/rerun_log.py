@@ -484,8 +484,10 @@ def write_depth_rrd(path: str | Path, scene: Scene, perceived, observations) -> 
             rec.log(f"world/cameras/{i}", rr.Transform3D(translation=camera.position_m,
                                                          quaternion=rr.Quaternion(xyzw=camera.orientation_xyzw)),
                     static=True)
+            # rerun's image space puts pixel corners at integers (its default principal point is
+            # resolution / 2); CameraInfo puts pixel centres there
             rec.log(f"world/cameras/{i}", rr.Pinhole(focal_length=[camera.fx, camera.fy],
-                                                     principal_point=[camera.cx, camera.cy],
+                                                     principal_point=[camera.cx + 0.5, camera.cy + 0.5],
                                                      width=camera.width_px, height=camera.height_px), static=True)
         cloud = posterior.positions_m[:: max(1, len(posterior.positions_m) // 1000)]
         for b, body in enumerate(scene.dynamic_objects):

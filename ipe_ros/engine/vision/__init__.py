@@ -1,7 +1,9 @@
 """The SI's Bayesian vision system: scene samples inferred from images (Fig. S8).
 
-- camera.py: pinhole cameras around a scene (the SI's three viewpoints 45 degrees apart);
-- render.py: a z-buffered numpy rasteriser of the bodies' hulls into grey images;
+- camera.py: the one pinhole camera model (CameraInfo's conventions), the SI's three viewpoints 45
+  degrees apart, and a robot camera from its camera_info;
+- render.py: a z-buffered numpy rasteriser of the bodies' hulls into grey images and depth;
+- tinyrenderer.py: the same views from pybullet's renderer, evidence independent of ours;
 - likelihood.py: the Gaussian blur and the per-pixel normal likelihood;
 - mcmc.py: Metropolis-Hastings over the blocks' horizontal positions (an injected Generator);
 - perception.py: the IPE's k scene samples drawn from that posterior (``perception="vision"``);
@@ -11,11 +13,11 @@
 ROS-free, like the rest of the engine.
 """
 
-from .camera import Camera, default_cameras
+from .camera import PinholeCamera, camera_from_info, default_cameras, look_at
 from .likelihood import VisionSettings, blur, log_likelihood
 from .mcmc import Chain, effective_sample_size, run_chain
 from .perception import PerceivedScenes, perceive
 from .render import render, render_views
 
-__all__ = ["Camera", "Chain", "PerceivedScenes", "VisionSettings", "blur", "default_cameras",
+__all__ = ["Chain", "PerceivedScenes", "PinholeCamera", "VisionSettings", "blur", "camera_from_info", "default_cameras", "look_at",
            "effective_sample_size", "log_likelihood", "perceive", "render", "render_views", "run_chain"]

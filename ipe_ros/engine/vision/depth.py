@@ -36,63 +36,11 @@ import numpy as np
 from ..checks import integer, positive
 from ..errors import ConfigError
 from ..scene import Floor, Scene
-from ..shapes import quaternion_product, rotation_matrix
-from .camera import look_at_axes
+from ..shapes import quaternion_product
+from .camera import PinholeCamera, camera_from_info, look_at
 from .mcmc import effective_sample_size
 from .render import EMPTY, Patch, SceneMesh, body_patch, scene_mesh
-
-
-@dataclass(frozen=True)
-class DepthCamera:
-    """A depth camera as sensor_msgs/CameraInfo describes it (pinhole K; distortion ignored: pass a
-    rectified image) at a pose in the scene frame: ``position_m`` and ``orientation_xyzw`` of its
-    optical frame (REP 103: z forward along the view, x right, y down in the image)."""
-
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    width_px: int
-    height_px: int
-    position_m: tuple[float, float, float]
-    orientation_xyzw: tuple[float, float, float, float]
-
-    def __post_init__(self) -> None:
-        for name in ("fx", "fy"):
-            positive(getattr(self, name), f"camera_info.{name}")
-        for name in ("cx", "cy"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise ConfigError(f"camera_info.{name}", f"must be a finite number, got {value!r}")
-        for name in ("width_px", "height_px"):
-            integer(getattr(self, name), f"camera_info.{name}", 8, 4096)
-        position = np.asarray(self.position_m, float)
-        q = np.asarray(self.orientation_xyzw, float)
-        if position.shape != (3,) or not np.all(np.isfinite(position)):
-            raise ConfigError("camera_pose.position_m", f"must be 3 finite numbers, got {list(self.position_m)!r}")
-        if q.shape != (4,) or not np.all(np.isfinite(q)) or abs(np.linalg.norm(q) - 1) > 1e-3:
-            raise ConfigError("camera_pose.orientation_xyzw", f"must be a unit quaternion, got {list(self.orientation_xyzw)!r}")
-
-    @property
-    def axes(self) -> np.ndarray:
-        """Rows: the optical frame's x (right), y (down), z (forward) in the scene frame."""
-        return rotation_matrix(self.orientation_xyzw).T
-
-    def project(self, points_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(n, 3) scene points -> ((n, 2) pixel coordinates (u, v), (n,) depths along the optical axis)."""
-        local = (np.asarray(points_m, float) - np.asarray(self.position_m, float)) @ self.axes.T
-        depth = local[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            pixels = np.stack([self.fx * local[:, 0] / depth + self.cx, self.fy * local[:, 1] / depth + self.cy], axis=1)
-        return pixels, depth
-
-    def rays(self) -> np.ndarray:
-        """(height, width, 3) scene-frame direction of every pixel centre's ray, scaled so that its
-        optical-axis component is 1 (a point at depth d along it is position + d * ray)."""
-        u = (np.arange(self.width_px) + 0.5 - self.cx) / self.fx
-        v = (np.arange(self.height_px) + 0.5 - self.cy) / self.fy
-        local = np.stack(np.broadcast_arrays(u[None, :], v[:, None], np.ones((self.height_px, self.width_px))), axis=-1)
-        return local @ self.axes
+from .tinyrenderer import depth_with_pybullet
 
 
 @dataclass(frozen=True)
@@ -100,7 +48,7 @@ class DepthObservation:
     """One measured depth image (metres along the optical axis; 0, NaN or inf: no reading) and the
     camera that took it."""
 
-    camera: DepthCamera
+    camera: PinholeCamera
     depth_m: np.ndarray
 
     def __post_init__(self) -> None:
@@ -150,7 +98,7 @@ class DepthSettings:
         return int(self.burn_in_fraction * self.chain_samples(objects))
 
 
-def support_depth_m(scene: Scene, camera: DepthCamera) -> np.ndarray:
+def support_depth_m(scene: Scene, camera: PinholeCamera) -> np.ndarray:
     """(height, width) depth of the support under every pixel's ray (the floor, the table top within
     its edges, the floor under a table); NaN where the ray meets none."""
     rays = camera.rays()
@@ -170,7 +118,7 @@ def support_depth_m(scene: Scene, camera: DepthCamera) -> np.ndarray:
     return np.where(support.covers_xy(hit[..., 0], hit[..., 1]), t_top, below)
 
 
-def _reach_mask(scene: Scene, camera: DepthCamera, reach_m: float) -> np.ndarray:
+def _reach_mask(scene: Scene, camera: PinholeCamera, reach_m: float) -> np.ndarray:
     """Pixels that see the published objects' bounding boxes grown by ``reach_m``."""
     from ..shapes import BoxShape
     from ..scene import Body
@@ -424,96 +372,7 @@ def perceive_depth_for(scene: Scene, k: int, observations: tuple[DepthObservatio
     return perceive_depth(scene, k, observations, settings or DepthSettings(), rng)
 
 
-def depth_with_pybullet(scene: Scene, camera: DepthCamera, near_m: float = 0.3, far_m: float = 8.0) -> np.ndarray:
-    """The depth image pybullet's software renderer (TinyRenderer) makes of ``scene`` - its bodies as
-    their hulls' meshes and its support (the floor as a large slab, a table as its top) - for
-    synthetic evidence independent of our rasteriser. Metres along the optical axis; NaN where the
-    ray meets nothing."""
-    from .. import shapes
-    from ..simulation.world import pybullet
-    from .render import outward_faces
-
-    p = pybullet()
-    client = p.connect(p.DIRECT)
-    try:
-        def mesh_body(vertices, faces, position, orientation):
-            faces = outward_faces(vertices, faces)
-            visual = p.createVisualShape(p.GEOM_MESH, vertices=np.asarray(vertices).tolist(),
-                                         indices=faces.ravel().tolist(), physicsClientId=client)
-            p.createMultiBody(baseMass=0, baseVisualShapeIndex=visual, basePosition=list(position),
-                              baseOrientation=list(orientation), physicsClientId=client)
-
-        for body in scene.objects:
-            vertices, faces = shapes.hull_faces(body.shape)
-            mesh_body(vertices, faces, body.position_m, body.orientation_xyzw)
-        support = scene.support
-        slabs = []
-        if isinstance(support, Floor):
-            slabs.append(((0.0, 0.0, support.height_m - 0.05), (100.0, 100.0, 0.1)))
-        else:
-            slabs.append(((*support.center_xy_m, support.top_height_m - support.thickness_m / 2),
-                          (*support.size_m, support.thickness_m)))
-            if support.floor_z_m is not None:
-                slabs.append(((0.0, 0.0, support.floor_z_m - 0.05), (100.0, 100.0, 0.1)))
-        for centre, size in slabs:
-            corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * np.asarray(size) / 2
-            vertices, faces = shapes.hull_faces(shapes.ConvexHull(tuple(map(tuple, corners))))
-            mesh_body(vertices, faces, centre, (0.0, 0.0, 0.0, 1.0))
-        axes = camera.axes
-        eye = np.asarray(camera.position_m, float)
-        view = p.computeViewMatrix(eye.tolist(), (eye + axes[2]).tolist(), (-axes[1]).tolist(), physicsClientId=client)
-        w, h = camera.width_px, camera.height_px
-        # TinyRenderer samples half a pixel off CameraInfo's pixel centres, in both directions
-        # (measured: after these shifts its depth equals the analytic floor to 3 um and our
-        # rasteriser's blocks to a median of 0; before, 7 mm and 1.7 mm apart)
-        cx, cy = camera.cx - 0.5, camera.cy + 0.5
-        projection = p.computeProjectionMatrix(-cx * near_m / camera.fx, (w - cx) * near_m / camera.fx,
-                                               -(h - cy) * near_m / camera.fy, cy * near_m / camera.fy,
-                                               near_m, far_m, physicsClientId=client)
-        _, _, _, buffer, _ = p.getCameraImage(w, h, view, projection, renderer=p.ER_TINY_RENDERER,
-                                              physicsClientId=client)
-    finally:
-        p.disconnect(client)
-    buffer = np.reshape(np.asarray(buffer, float), (h, w))
-    depth = far_m * near_m / (far_m - (far_m - near_m) * buffer)
-    return np.where(buffer >= 1.0 - 1e-7, np.nan, depth)
-
-
-def look_at(position_m, target_m, width_px: int = 320, height_px: int = 240,
-            horizontal_fov_rad: float = math.radians(58)) -> DepthCamera:
-    """A depth camera at ``position_m`` looking at ``target_m`` (image up towards +z), with a
-    Kinect-like field of view: for examples and tests."""
-    from scipy.spatial.transform import Rotation
-
-    # the optical axes (x right, y down, z forward) are the look-at camera's, as columns
-    q = Rotation.from_matrix(look_at_axes(position_m, target_m).T).as_quat()
-    f = width_px / 2 / math.tan(horizontal_fov_rad / 2)
-    return DepthCamera(fx=f, fy=f, cx=width_px / 2, cy=height_px / 2, width_px=width_px, height_px=height_px,
-                       position_m=tuple(float(v) for v in position_m), orientation_xyzw=tuple(float(v) for v in q))
-
-
 # -- inputs as a robot has them -------------------------------------------------------------------------
-def camera_from_info(info: dict, position_m, orientation_xyzw) -> DepthCamera:
-    """A DepthCamera from camera info as ROS writes it: a camera_info YAML (``image_width``,
-    ``image_height``, ``camera_matrix: {data: [9 numbers]}``) or sensor_msgs/CameraInfo's own field
-    names (``width``, ``height``, ``k``), and the camera's optical-frame pose in the scene frame."""
-    if not isinstance(info, dict):
-        raise ConfigError("camera_info", "must be a mapping with image_width, image_height and camera_matrix")
-    width = info.get("image_width", info.get("width"))
-    height = info.get("image_height", info.get("height"))
-    matrix = info.get("camera_matrix", {})
-    k = matrix.get("data") if isinstance(matrix, dict) else None
-    k = info.get("k", info.get("K")) if k is None else k
-    try:
-        k = [float(v) for v in k]
-    except (TypeError, ValueError):
-        k = []
-    if len(k) != 9:
-        raise ConfigError("camera_info.camera_matrix", "must hold the 9 numbers of K (fx 0 cx, 0 fy cy, 0 0 1)")
-    return DepthCamera(fx=k[0], fy=k[4], cx=k[2], cy=k[5], width_px=width, height_px=height,
-                       position_m=tuple(position_m), orientation_xyzw=tuple(orientation_xyzw))
-
-
 def load_camera_info(path: str | Path) -> dict:
     """A camera_info YAML (or JSON) file as a mapping."""
     import yaml
@@ -613,13 +472,15 @@ def write_depth_example(directory: str | Path, truth: Scene, seed: int = 0) -> d
         "image_width": camera.width_px, "image_height": camera.height_px, "camera_name": "ipe_example_depth",
         "camera_matrix": {"rows": 3, "cols": 3, "data": [camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy,
                                                          0.0, 0.0, 1.0]},
-        "distortion_model": "plumb_bob", "distortion_coefficients": {"rows": 1, "cols": 5, "data": [0.0] * 5}},
+        "distortion_model": "plumb_bob", "distortion_coefficients": {"rows": 1, "cols": 5, "data": [0.0] * 5},
+        "projection_matrix": {"rows": 3, "cols": 4, "data": [camera.fx, 0.0, camera.cx, 0.0, 0.0, camera.fy, camera.cy,
+                                                             0.0, 0.0, 0.0, 1.0, 0.0]}},
         sort_keys=False))
     paths["camera_pose"].write_text(",".join(f"{v:.6f}" for v in (*camera.position_m, *camera.orientation_xyzw)) + "\n")
     return paths
 
 
-def render_depth_m(scene: Scene, camera: DepthCamera, positions_m: np.ndarray | None = None,
+def render_depth_m(scene: Scene, camera: PinholeCamera, positions_m: np.ndarray | None = None,
                    yaws_rad: np.ndarray | None = None) -> np.ndarray:
     """(height, width) depth the camera would measure of the scene with its dynamic objects at
     ``positions_m`` turned by ``yaws_rad`` (default: as published): objects over the support; NaN

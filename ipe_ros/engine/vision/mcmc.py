@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .camera import Camera
+from .camera import PinholeCamera
 from .likelihood import VisionSettings, blur_matrices, blur, log_likelihood
 from .render import BACKGROUND_GREY, EMPTY, Patch, SceneMesh, body_patch, render
 
@@ -80,7 +80,7 @@ class ImageModel:
     covers now, and, the blur being linear, adds the blurred change to the blurred image. The result
     equals a full render and blur of the proposed state (``tests/test_vision.py``)."""
 
-    def __init__(self, mesh: SceneMesh, cameras: tuple[Camera, ...], observed: np.ndarray, settings: VisionSettings):
+    def __init__(self, mesh: SceneMesh, cameras: tuple[PinholeCamera, ...], observed: np.ndarray, settings: VisionSettings):
         self.mesh, self.cameras, self.settings = mesh, cameras, settings
         self.blur_px = settings.blur_at_resolution_px
         self.sd = settings.sd_at_resolution_grey

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..scene import Scene
-from .camera import Camera, cameras_for
+from .camera import PinholeCamera, cameras_for
 from .likelihood import VisionSettings
 from .mcmc import Chain, ImageModel, run_chain
 from .render import render_views, scene_mesh
@@ -51,7 +51,7 @@ def scene_at(scene: Scene, positions_m: np.ndarray) -> Scene:
 
 
 def perceive(scene: Scene, k: int, settings: VisionSettings, rng: np.random.Generator,
-             cameras: tuple[Camera, ...] | None = None, observed: np.ndarray | None = None,
+             cameras: tuple[PinholeCamera, ...] | None = None, observed: np.ndarray | None = None,
              check_ess: bool = True) -> PerceivedScenes:
     """Run the chain on the scene's images and return k scenes spread over it.
 

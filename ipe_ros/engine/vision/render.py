@@ -4,7 +4,8 @@ Each face is flat-shaded by its angle to a fixed light (ambient + Lambert), over
 background (the floor). The SI rendered its stimuli with OpenGL; what the likelihood needs is the
 silhouettes and the shading boundaries of the blocks, which this gives at a fraction of pybullet's
 software-renderer cost (``benchmarks/vision.py`` measures both on the same scenes, and
-``tests/test_vision.py`` checks that their silhouettes agree).
+``tests/test_vision.py`` checks that their silhouettes agree with ``tinyrenderer.grey_with_pybullet``).
+Pixels are sampled at their centres as CameraInfo places them (``camera.py``).
 
 A :class:`SceneMesh` is built once per scene: the bodies' hull triangles in the scene frame's
 orientation, relative to each body's position, so a state that only moves bodies is rendered by
@@ -19,7 +20,7 @@ import numpy as np
 
 from .. import shapes
 from ..scene import Scene
-from .camera import Camera
+from .camera import PinholeCamera
 
 BACKGROUND_GREY = 90.0
 AMBIENT_GREY = 40.0
@@ -81,7 +82,7 @@ class Patch:
 EMPTY = Patch(0, 0, 0, 0, np.zeros((0, 0)), np.zeros((0, 0)))
 
 
-def body_patch(mesh: SceneMesh, camera: Camera, body: int, position_m, yaw_rad: float = 0.0) -> Patch:
+def body_patch(mesh: SceneMesh, camera: PinholeCamera, body: int, position_m, yaw_rad: float = 0.0) -> Patch:
     """Rasterise one body at ``position_m``, turned by ``yaw_rad`` about the vertical through it from
     its orientation in the scene: its front faces together, vectorised over its triangles (a convex
     hull's front faces do not overlap, so each pixel takes the one covering it). ``camera``: anything
@@ -102,8 +103,9 @@ def body_patch(mesh: SceneMesh, camera: Camera, body: int, position_m, yaw_rad: 
     v0, v1 = max(int(np.floor(p[..., 1].min())), 0), min(int(np.ceil(p[..., 1].max())) + 1, camera.height_px)
     if u0 >= u1 or v0 >= v1:
         return EMPTY
-    u = (np.arange(u0, u1) + 0.5)[None, None, :]
-    v = (np.arange(v0, v1) + 0.5)[None, :, None]
+    # pixel centres at integer image coordinates (CameraInfo's convention, vision/camera.py)
+    u = np.arange(u0, u1, dtype=float)[None, None, :]
+    v = np.arange(v0, v1, dtype=float)[None, :, None]
     a, b, c = (p[:, i, :, None, None] for i in range(3))  # (T, 2, 1, 1)
     area = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
     area = np.where(np.abs(area) < 1e-12, np.nan, area)
@@ -120,13 +122,12 @@ def body_patch(mesh: SceneMesh, camera: Camera, body: int, position_m, yaw_rad: 
     return Patch(v0, v1, u0, u1, nearest, shade[which])
 
 
-def render(mesh: SceneMesh, camera: Camera, positions_m: np.ndarray | None = None) -> np.ndarray:
+def render(mesh: SceneMesh, camera: PinholeCamera, positions_m: np.ndarray | None = None) -> np.ndarray:
     """One grey image (float, 0..255) of the bodies at ``positions_m`` (default: the scene's),
     nearest body in front."""
     positions = mesh.positions_m if positions_m is None else np.asarray(positions_m, float)
-    size = camera.resolution_px
-    image = np.full((size, size), BACKGROUND_GREY)
-    nearest = np.full((size, size), np.inf)
+    image = np.full((camera.height_px, camera.width_px), BACKGROUND_GREY)
+    nearest = np.full((camera.height_px, camera.width_px), np.inf)
     for body in range(len(positions)):
         patch = body_patch(mesh, camera, body, positions[body])
         window = nearest[patch.v0:patch.v1, patch.u0:patch.u1]
@@ -137,34 +138,5 @@ def render(mesh: SceneMesh, camera: Camera, positions_m: np.ndarray | None = Non
 
 
 def render_views(mesh: SceneMesh, cameras, positions_m: np.ndarray | None = None) -> np.ndarray:
-    """(views, size, size) grey images."""
+    """(views, height, width) grey images."""
     return np.stack([render(mesh, camera, positions_m) for camera in cameras])
-
-
-def render_with_pybullet(scene: Scene, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
-    """The same view from pybullet's software renderer (TinyRenderer), for comparison and benchmarks:
-    (grey image 0..255, mask of the pixels the scene's bodies cover). Bodies are drawn as their
-    hulls' meshes; nothing else is in the world."""
-    from ..simulation.world import pybullet
-
-    p = pybullet()
-    client = p.connect(p.DIRECT)
-    try:
-        for body in [*scene.dynamic_objects, *(b for b in scene.objects if b.static)]:
-            vertices, faces = shapes.hull_faces(body.shape)
-            faces = outward_faces(vertices, faces)
-            visual = p.createVisualShape(p.GEOM_MESH, vertices=vertices.tolist(), indices=faces.ravel().tolist(),
-                                         physicsClientId=client)
-            p.createMultiBody(baseMass=0, baseVisualShapeIndex=visual, basePosition=list(body.position_m),
-                              baseOrientation=list(body.orientation_xyzw), physicsClientId=client)
-        distance = float(np.linalg.norm(np.subtract(camera.target_m, camera.position_m)))
-        view = p.computeViewMatrix(list(camera.position_m), list(camera.target_m), [0, 0, 1], physicsClientId=client)
-        projection = p.computeProjectionMatrixFOV(np.degrees(camera.fov_rad), 1.0, distance / 100, distance * 10,
-                                                  physicsClientId=client)
-        size = camera.resolution_px
-        _, _, rgba, _, segmentation = p.getCameraImage(size, size, view, projection, renderer=p.ER_TINY_RENDERER,
-                                                       physicsClientId=client)
-    finally:
-        p.disconnect(client)
-    rgba = np.reshape(rgba, (size, size, 4)).astype(float)
-    return rgba[..., :3].mean(axis=2), np.reshape(segmentation, (size, size)) >= 0

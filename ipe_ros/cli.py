@@ -27,6 +27,7 @@ import json
 import math
 import re
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -317,7 +318,11 @@ def _perceive_depth(args, scenes, model):
     if len(scenes) != 1:
         raise ConfigError("--depth", f"one depth image describes one scene, but {args.path} holds {len(scenes)}")
     observation = depth.load_observation(args.depth, args.camera_info, args.camera_pose)
-    perceived = depth.perceive_depth_for(scenes[0], model.samples, (observation,), args.seed)
+    started = time.perf_counter()
+    perceived = depth.perceive_depth_for(scenes[0], model.samples, (observation,), args.seed, budget_s=None if
+                                         args.budget is None else args.budget * depth.CHAIN_BUDGET_SHARE)
+    if args.budget is not None:  # the samples get what the chain left of the budget
+        args.budget = max(args.budget - (time.perf_counter() - started), 1e-3)
     if args.depth_rrd is not None:
         from .viz.rerun_log import write_depth_rrd
 
@@ -415,9 +420,12 @@ def cmd_predict(args) -> int:
             for p in collected:
                 v = p.request["perception"]
                 print(f"{p.scene}: depth chain acceptance {v['acceptance_rate']:.2f}, effective sample size "
-                      f"{v['effective_sample_size']:.0f}; posterior SD per object (x, y mm; yaw deg): "
-                      + ", ".join(f"{n} {s['x_sd_m'] * 1000:.1f}/{s['y_sd_m'] * 1000:.1f}/"
-                                  f"{math.degrees(s['yaw_sd_rad']):.1f}" for n, s in v["object_spread"].items()))
+                      f"{v['effective_sample_size']:.0f}; camera range offset "
+                      + ", ".join(f"{o['mean_m'] * 1000:+.1f} mm" for o in v["camera_offsets"])
+                      + "; posterior mean x, y (m) and SD x/y (mm), yaw (deg) per object: "
+                      + ", ".join(f"{n} {s['position_m'][0]:.4f},{s['position_m'][1]:.4f} "
+                                  f"{s['x_sd_m'] * 1000:.1f}/{s['y_sd_m'] * 1000:.1f}/"
+                                  f"{math.degrees(s['yaw_sd_rad']):.1f}" for n, s in v["objects"].items()))
     if args.vision_rrd is not None:
         from .viz.rerun_log import write_vision_rrd
 

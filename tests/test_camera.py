@@ -1,7 +1,7 @@
 """The camera model follows ROS's camera_info convention (image_geometry, OpenCV): pixel (u, v)'s centre
 at image coordinates (u, v), its ray ((u - cx) / fx, (v - cy) / fy, 1). Checked against depth written
-here from that formula alone (no code shared with the engine's renderer, rays or rasteriser), and
-against pybullet's renderer. Tolerances stated per test."""
+from that formula alone (tests/analytic_camera.py: no code shared with the engine's renderer, rays or
+rasteriser), and against pybullet's renderer. Tolerances stated per test."""
 
 from __future__ import annotations
 
@@ -14,53 +14,9 @@ from ipe_ros.engine import Box, ConfigError, Floor, Scene
 from ipe_ros.engine.vision import depth as D
 from ipe_ros.engine.vision.camera import PinholeCamera, camera_from_info
 from ipe_ros.engine.vision.tinyrenderer import depth_with_pybullet
+from tests.analytic_camera import analytic_depth, optical_orientation, pixel_rays
 
 I = (0.0, 0.0, 0.0, 1.0)
-
-
-def optical_orientation(eye, target, roll_rad=0.0) -> tuple[float, float, float, float]:
-    """xyzw of an optical frame (z forward, x right, y down) at ``eye`` looking at ``target``, turned
-    ``roll_rad`` about its view axis: written out here, not taken from the engine."""
-    z = np.subtract(target, eye) / np.linalg.norm(np.subtract(target, eye))
-    x = np.cross(z, (0.0, 0.0, 1.0))
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    c, s = math.cos(roll_rad), math.sin(roll_rad)
-    x, y = c * x + s * y, -s * x + c * y
-    m = np.stack([x, y, z], axis=1)  # columns: the optical axes in the scene frame
-    w = math.sqrt(max(0.0, 1 + m[0, 0] + m[1, 1] + m[2, 2])) / 2
-    q = np.array([(m[2, 1] - m[1, 2]) / (4 * w), (m[0, 2] - m[2, 0]) / (4 * w), (m[1, 0] - m[0, 1]) / (4 * w), w])
-    return tuple(float(v) for v in q / np.linalg.norm(q))
-
-
-def pixel_rays(fx, fy, cx, cy, width, height, orientation_xyzw) -> np.ndarray:
-    """(height, width, 3) scene-frame rays ((u - cx) / fx, (v - cy) / fy, 1) of every pixel."""
-    x, y, z, w = orientation_xyzw
-    rotation = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                         [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-    u, v = np.meshgrid(np.arange(width), np.arange(height))
-    local = np.stack([(u - cx) / fx, (v - cy) / fy, np.ones_like(u, float)], axis=-1)
-    return local @ rotation.T
-
-
-def analytic_depth(rays, eye, boxes) -> np.ndarray:
-    """Depth along the optical axis of the floor z = 0 and of upright boxes (centre, yaw, half sizes)
-    by ray casting (slab test); NaN where a ray meets nothing."""
-    eye = np.asarray(eye, float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        floor_t = -eye[2] / rays[..., 2]
-    depth = np.where(floor_t > 0, floor_t, np.inf)
-    for centre, yaw, half in boxes:
-        c, s = math.cos(yaw), math.sin(yaw)
-        to_box = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # scene -> box frame
-        origin, direction = to_box @ (eye - np.asarray(centre)), rays @ to_box.T
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t1, t2 = (-np.asarray(half) - origin) / direction, (np.asarray(half) - origin) / direction
-        near, far = np.minimum(t1, t2).max(axis=-1), np.maximum(t1, t2).min(axis=-1)
-        hit = (near <= far) & (near > 0)
-        depth = np.where(hit & (near < depth), near, depth)
-    return np.where(np.isfinite(depth), depth, np.nan)
 
 
 def box(name, centre, yaw, size):

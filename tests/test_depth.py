@@ -6,12 +6,13 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 
 import numpy as np
 import pytest
 
 from ipe_ros.cli import main
-from ipe_ros.engine import Body, Box, ConfigError, Floor, ModelConfig, QuerySpec, Scene, preset, predict
+from ipe_ros.engine import Body, Box, ConfigError, Floor, ModelConfig, QuerySpec, Scene, load_scenes, preset, predict
 from ipe_ros.engine.shapes import BoxShape
 from ipe_ros.engine.vision import depth as D
 from ipe_ros.engine.vision.camera import camera_from_info, look_at
@@ -126,7 +127,18 @@ def test_the_cli_predicts_from_the_built_in_depth_example(tmp_path, capsys):
     record = json.loads(capsys.readouterr().out)
     perception = record["request"]["perception"]
     assert perception["kind"] == "depth" and record["samples"] == 4
-    assert set(perception["object_spread"]) == {f"block{i}" for i in range(10)}
+    assert set(perception["objects"]) == {f"block{i}" for i in range(10)}
+    truth = {b.name: b for b in load_scenes(tmp_path / "truth.json")[0].objects}
+    guess = {b.name: b for b in load_scenes(tmp_path / "scene.json")[0].objects}
+    errors, guess_errors = [], []
+    for name, estimate in perception["objects"].items():
+        errors.append(np.hypot(*np.subtract(estimate["position_m"][:2], truth[name].position_m[:2])))
+        guess_errors.append(np.hypot(*np.subtract(guess[name].position_m[:2], truth[name].position_m[:2])))
+        assert np.allclose(np.sqrt(np.diag(estimate["covariance_x_y_yaw"])),
+                           [estimate["x_sd_m"], estimate["y_sd_m"], estimate["yaw_sd_rad"]])
+    # the refined poses are nearer the truth than the guess (the camera is 5 m away: each object's
+    # posterior SD is 2-12 mm, the guess 2-27 mm off; here 4.7 mm against 14 mm on average)
+    assert np.mean(errors) < 0.5 * np.mean(guess_errors)
     assert main(args[:2] + ["--perception", "depth", "--samples", "4"]) == 2
     assert capsys.readouterr().err.strip() == ("ipe: error: --perception: depth perception needs --depth IMAGE, "
                                                "--camera-info YAML and --camera-pose")
@@ -149,3 +161,102 @@ def test_a_depth_recording_holds_the_measured_and_rendered_depth_and_the_posteri
     rendered, theirs = D.render_depth_m(scene, camera), depth_with_pybullet(scene, camera)
     both = np.isfinite(rendered) & np.isfinite(theirs)  # pybullet's far plane is 8 m
     assert both.mean() > 0.8 and np.mean(np.abs(rendered - theirs)[both] < 0.001) > 0.99
+
+
+@pytest.mark.parametrize("dead", ["zero", "nan", "inf", "negative", "far"])
+def test_a_dead_camera_is_refused_not_answered_as_evidence(dead):
+    """What a dead or misconfigured driver sends: the answer would be the prior alone, said nowhere."""
+    scene = floor(cube("a", 0, 0, 0.05))
+    camera = look_at((1.0, -0.7, 0.6), (0, 0, 0.1))
+    image = {"zero": 0.0, "nan": np.nan, "inf": np.inf, "negative": -1.0, "far": 1e300}[dead]
+    observation = D.DepthObservation(camera, np.full((camera.height_px, camera.width_px), image))
+    with pytest.raises(ConfigError, match=r"^depth: no usable depth where the objects are: every pixel that sees "
+                                          r"them .* is 0, NaN, inf, negative or beyond 10 m"):
+        D.run_depth_chain(scene, (observation,), D.DepthSettings(), np.random.default_rng(0))
+
+
+def test_a_camera_far_away_or_with_an_impossible_focal_length_is_refused():
+    scene = floor(cube("a", 0, 0, 0.05))
+    with pytest.raises(ConfigError, match=r"^camera_pose.position_m: must be 3 numbers within 10000 m of the "
+                                          r"scene's origin, got \[1e\+300, 0.0, 0.6\]$"):
+        camera_from_info({"width": 320, "height": 240, "k": [300, 0, 159.5, 0, 300, 119.5, 0, 0, 1]}, (1e300, 0.0, 0.6), I)
+    far = camera_from_info({"width": 320, "height": 240, "k": [300, 0, 159.5, 0, 300, 119.5, 0, 0, 1]}, (9e3, 0, 1), I)
+    with pytest.raises(ConfigError, match=r"^depth: no usable depth where the objects are"):  # looking up, 9 km off
+        D.run_depth_chain(scene, (D.DepthObservation(far, np.ones((240, 320))),), D.DepthSettings(),
+                          np.random.default_rng(0))
+    for fx, fov in ((1e-300, "180"), (1e300, "1.83e-296")):
+        with pytest.raises(ConfigError, match=rf"^camera_info.fx: {re.escape(f'{fx:.6g}')} px gives a {fov} degree "
+                                              r"field of view across 320 px; a camera's is 0.5-170 \(is K in pixels\?\)$"):
+            camera_from_info({"width": 320, "height": 240, "k": [fx, 0, 159.5, 0, 300, 119.5, 0, 0, 1]}, (0, 0, 1), I)
+
+
+def test_only_16_bit_pngs_and_bounded_files_are_read_as_depth(tmp_path):
+    from PIL import Image
+
+    depth = np.full((20, 30), 1234, np.uint16)
+    Image.fromarray(depth).save(tmp_path / "good.png")
+    assert np.allclose(D.load_depth_image(tmp_path / "good.png"), 1.234)
+    Image.fromarray((depth // 10).astype(np.uint8)).save(tmp_path / "gray8.png")
+    Image.fromarray((depth // 10).astype(np.uint8)).convert("P").save(tmp_path / "palette.png")
+    Image.fromarray((depth // 10).astype(np.uint8)).save(tmp_path / "photo.png", format="JPEG")
+    Image.fromarray(depth).save(tmp_path / "scan.png", format="TIFF")
+    for name, problem in (("gray8", "is a PNG of mode L"), ("palette", "is a PNG of mode P"),
+                          ("photo", "is a JPEG file, not a PNG"), ("scan", "is a TIFF file, not a PNG")):
+        with pytest.raises(ConfigError, match=rf"^--depth: {name}.png {problem}"):
+            D.load_depth_image(tmp_path / f"{name}.png")
+    # headers that claim huge images: refused before any pixel is read
+    with open(tmp_path / "huge.npy", "wb") as handle:
+        np.lib.format.write_array_header_1_0(handle, {"descr": "<f4", "fortran_order": False,
+                                                      "shape": (200000, 200000)})
+    with pytest.raises(ConfigError, match=r"^--depth: huge.npy: 200000 x 200000 pixels; each side must be 1-4096$"):
+        D.load_depth_image(tmp_path / "huge.npy")
+    png = (tmp_path / "good.png").read_bytes()
+    ihdr = png.index(b"IHDR")  # width and height follow the chunk's type; PIL reads them before the pixels
+    (tmp_path / "claims.png").write_bytes(png[:ihdr + 4] + (20000).to_bytes(4, "big") * 2 + png[ihdr + 12:])
+    with pytest.raises(ConfigError, match=r"^--depth: (claims.png: 20000 x 20000 pixels|cannot read)"):
+        D.load_depth_image(tmp_path / "claims.png")
+
+
+def test_camera_info_files_are_bounded_before_parsing(tmp_path):
+    bomb = "a: &a [x, x, x, x, x, x, x, x, x]\n" + "".join(
+        f"{chr(98 + i)}: &{chr(98 + i)} [*{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}]\n"
+        for i in range(20))
+    (tmp_path / "bomb.yaml").write_text(bomb)
+    with pytest.raises(ConfigError, match=r"^--camera-info: cannot read .*bomb.yaml: YAML aliases \(\*name\) are not "
+                                          r"allowed in camera info$"):
+        D.load_camera_info(tmp_path / "bomb.yaml")
+    (tmp_path / "big.yaml").write_text("k: [" + "1.0, " * 400_000 + "1.0]\n")
+    with pytest.raises(ConfigError, match=r"^--camera-info: big.yaml is \d+ bytes; a camera_info YAML is a few "
+                                          r"hundred \(at most 1048576\)$"):
+        D.load_camera_info(tmp_path / "big.yaml")
+
+
+def test_the_answer_says_how_many_pixels_showed_each_object():
+    scene = floor(cube("hidden", 0, 0, 0.05), cube("seen", 0.0, 0.7, 0.05), wall())
+    perceived = D.perceive_depth(scene, 4, (observe(scene, SIDE),), D.DepthSettings(), np.random.default_rng(1))
+    objects = perceived.to_dict()["objects"]
+    assert objects["hidden"]["pixels"] == 0 and objects["seen"]["pixels"] > 20
+
+
+def test_the_chain_stays_within_its_budget_and_memory():
+    """50 boxes in view with a 0.3 s budget: refused with the projected cost as soon as the first scans
+    show it (not after the chain); 60 boxes before a 4096 px camera: refused before any layer is made."""
+    import time
+
+    boxes = tuple(cube(f"b{i}", 0.12 * (i % 10) - 0.55, 0.12 * (i // 10) - 0.3, 0.05) for i in range(50))
+    scene = floor(*boxes)
+    camera = look_at((1.5, -1.2, 1.2), (0, 0, 0.05))
+    observation = D.DepthObservation(camera, D.render_depth_m(scene, camera))
+    start = time.monotonic()
+    with pytest.raises(ConfigError, match=r"^budget_s: the depth chain over 50 objects needs ~[\d.e+]+ s \(50000 "
+                                          r"updates; \d+ took [\d.e+-]+ s\), more than the 0.3 s the budget leaves it; raise "
+                                          r"the budget or send fewer objects$"):
+        D.perceive_depth_for(scene, 4, (observation,), seed=0, budget_s=0.3)
+    assert time.monotonic() - start < 3.0  # the reading, the first ten scans and the refusal
+    big = camera_from_info({"width": 4096, "height": 4096, "k": [3000, 0, 2047.5, 0, 3000, 2047.5, 0, 0, 1]},
+                           camera.position_m, camera.orientation_xyzw)
+    huge = D.DepthObservation(big, np.broadcast_to(np.float32(1.0), (4096, 4096)))
+    with pytest.raises(ConfigError, match=r"^depth: 60 bodies x 16777216 pixels need 8.1 GB of depth layers \(at most "
+                                          r"1.1 GB\); bin or crop the image"):
+        more = tuple(cube(f"c{i}", 0.12 * i - 0.55, 0.5, 0.05) for i in range(10))
+        D.run_depth_chain(floor(*boxes, *more), (huge,), D.DepthSettings(), np.random.default_rng(0))

@@ -8,6 +8,7 @@ import math
 import os
 import signal
 
+import numpy as np
 import pytest
 
 from tests.ros_harness import RosHarness, wait_until
@@ -24,7 +25,7 @@ from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, predict, preset  # noqa: E402
 from ipe_ros.engine.scene_io import scene_to_json  # noqa: E402
 from ipe_ros.ros.node import INPUT_QOS as RELIABLE_QOS, LATCHED_QOS  # noqa: E402
-from msg_bridge.markers import scene_to_markers  # noqa: E402
+from msg_bridge.markers import markers_to_scene, scene_to_markers  # noqa: E402
 
 #: starts rclpy (a Context of its own, DDS on loopback)
 pytestmark = pytest.mark.ros
@@ -500,6 +501,7 @@ def test_depth_perception_predicts_from_the_newest_depth_image(ros):
     camera = look_at((1.0, -0.7, 0.6), (0, 0, 0.1))
     node = ros.start_ipe_node(samples=4, perception="depth", self_check=False, workers=0)
     got = answers(ros)
+    perceived = ros.collect(MarkerArray, "/ipe/perceived_scene", LATCHED_QOS)
     scenes = ros.publisher(String, "/ipe/scene_json")
     scenes.publish(String(data=scene_to_json(scene)))  # no depth image yet: answered with the reason
     wait_until(lambda: len(got) >= 1, TIMEOUT_S, "the refusal of a scene without a depth image")
@@ -521,8 +523,13 @@ def test_depth_perception_predicts_from_the_newest_depth_image(ros):
     scenes.publish(String(data=scene_to_json(scene)))
     wait_until(lambda: len(got) >= 2, TIMEOUT_S * 2, "the prediction with depth perception")
     perception = got[1]["request"]["perception"]
-    assert perception["kind"] == "depth" and set(perception["object_spread"]) == {"bottom", "top"}
-    assert perception["object_spread"]["top"]["x_sd_m"] < 0.01 and got[1]["samples"] == 4
+    assert perception["kind"] == "depth" and set(perception["objects"]) == {"bottom", "top"}
+    assert perception["objects"]["top"]["x_sd_m"] < 0.01 and got[1]["samples"] == 4
+    # the refined scene, in ~/scene's own format, its objects where the posterior puts them
+    wait_until(lambda: perceived, TIMEOUT_S, "the perceived scene")
+    refined = {b.name: b for b in markers_to_scene(perceived[-1]).scene.objects}
+    for name, estimate in perception["objects"].items():
+        assert np.allclose(refined[name].position_m, estimate["position_m"], atol=1e-6)
     # questions draw from sigma, and say so
     replies = ros.collect(String, "/ipe/answer", LATCHED_QOS)
     ros.publisher(String, "/ipe/ask").publish(String(data=json.dumps({"id": "q", "question": "push", "samples": 2,

@@ -33,7 +33,7 @@ from visualization_msgs.msg import MarkerArray
 from msg_bridge.ask_json import request_id_of, string_to_question, support_graph_markers
 from msg_bridge.depth import camera_info_to_dict, image_to_depth_m, pose_to_tuples
 from msg_bridge.json_text import answer_to_string, scene_name_of, string_to_scene
-from msg_bridge.markers import markers_to_scene, prediction_to_markers
+from msg_bridge.markers import markers_to_scene, prediction_to_markers, scene_to_markers
 from msg_bridge.outputs import fall_direction_msg, fall_fraction_msg, fall_probability_msg
 from msg_bridge.stamps import header_to_stamp_ns
 
@@ -100,9 +100,10 @@ class _IpeInterface:
             self.create_publisher(DiagnosticArray, "/diagnostics", 10),
             self.create_publisher(String, "~/answer", ANSWER_QOS),
             self.create_publisher(MarkerArray, "~/support_graph", LATCHED_QOS),
+            self.create_publisher(MarkerArray, "~/perceived_scene", LATCHED_QOS),
         ]
         (self._pub_prediction, self._pub_fraction, self._pub_probability, self._pub_direction, self._pub_markers,
-         self._pub_diagnostics, self._pub_answer, self._pub_support_graph) = self._publishers
+         self._pub_diagnostics, self._pub_answer, self._pub_support_graph, self._pub_perceived) = self._publishers
         pool = None
         if str(values["dask_scheduler"]).strip():
             from ..engine.cluster import DaskMap  # only a node that offloads to a cluster needs dask
@@ -348,6 +349,8 @@ class _IpeInterface:
         if "direction" in prediction.request.get("queries", ()):  # a zero vector means "nothing falls"
             self._pub_direction.publish(fall_direction_msg(prediction, source.frame_id, source.stamp_ns))
         self._pub_markers.publish(prediction_to_markers(source.scene, prediction, source.frame_id, source.stamp_ns))
+        if answer.perceived_scene is not None:  # in ~/scene's own format: a robot can re-publish it
+            self._pub_perceived.publish(scene_to_markers(answer.perceived_scene, source.frame_id, source.stamp_ns))
         outcome = ", ".join(f"{label} {value:.3f}" for label, value in (
             ("fall fraction", prediction.fall_fraction), ("P(anything falls)", prediction.any_fall_probability))
             if value is not None) or "answered"

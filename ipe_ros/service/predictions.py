@@ -336,7 +336,9 @@ class PredictionService:
         if age > config.depth_max_age_s:
             raise ConfigError("perception", f"depth: the newest depth image is {age:.3g} s from the scene's stamp, more "
                                             f"than depth.max_age_s = {config.depth_max_age_s:g} s")
-        return depth.perceive_depth_for(item.scene, config.request.model.samples, (observation,), config.request.seed)
+        budget_s = config.request.budget_s
+        return depth.perceive_depth_for(item.scene, config.request.model.samples, (observation,), config.request.seed,
+                                        budget_s=None if budget_s is None else budget_s * depth.CHAIN_BUDGET_SHARE)
 
     def _predict(self, item: StampedScene, config: ServiceConfig, version: int) -> tuple[Answer | None, str | None]:
         start = time.perf_counter()
@@ -346,10 +348,13 @@ class PredictionService:
             record_every = max(1, round(config.rerun_frame_period_s / request.settings.time_step_s))
         try:
             perceived = self._perceived(item, config) if request.model.perception == "depth" else None
+            budget_s = request.budget_s  # what the depth chain left of it
+            if budget_s is not None and perceived is not None:
+                budget_s = max(budget_s - (time.perf_counter() - start), 1e-3)
             prediction = predict(item.scene, request.model, request.settings, request.query, seed=request.seed,
                                  map_fn=self._pool.map if self._pool is not None else None,
                                  record_every=record_every, record_samples=config.rerun_rollouts_logged,
-                                 max_objects=config.max_objects, stop=request.stop, budget_s=request.budget_s,
+                                 max_objects=config.max_objects, stop=request.stop, budget_s=budget_s,
                                  check=request.check, perceived=perceived)
         except ValueError as exc:  # SceneError / ConfigError: the scene no longer fits a new config
             return None, str(exc)
@@ -358,7 +363,8 @@ class PredictionService:
         if self._closing:
             return None, "the node is shutting down"
         answer = Answer(source=item, prediction=prediction, compute_s=time.perf_counter() - start,
-                        latency_s=0.0, config_version=version)
+                        latency_s=0.0, config_version=version,
+                        perceived_scene=perceived.refined if perceived is not None else None)
         if record_every:
             with self._cond:
                 self._recordings += 1  # one file per prediction, also when a scene is predicted again

@@ -71,6 +71,9 @@ class Answer:
     rrd_path: str | None = None
     rollouts_logged: int = 0
     rrd_error: str | None = None  # why the recording could not be written, if it could not
+    #: under depth perception: the scene with every object at its posterior mean pose (for the robot to
+    #: use or re-publish; ``prediction.request["perception"]["objects"]`` holds the covariances)
+    perceived_scene: Scene | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The published JSON: ``ipe predict --json``'s fields plus stamp, frame, ids and timing."""

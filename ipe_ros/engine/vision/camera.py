@@ -20,9 +20,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..checks import integer, positive
-from ..errors import ConfigError
+from ..errors import ConfigError, clip
+from ..limits import MAX_COORDINATE_M
 from ..scene import Scene
 from ..shapes import rotation_matrix
+
+#: fields of view a rectified pinhole image can have (a telephoto lens, a wide-angle one)
+MIN_FOV_DEG, MAX_FOV_DEG = 0.5, 170.0
 
 #: the largest image side read or rendered (a 4096 px camera is 16.8 Mpx; each view keeps a few
 #: float layers of it per object in view)
@@ -54,10 +58,17 @@ class PinholeCamera:
                 raise ConfigError(f"camera_info.{name}", f"must be a finite number, got {value!r}")
         for name in ("width_px", "height_px"):
             integer(getattr(self, name), f"camera_info.{name}", 8, MAX_SIDE_PX)
+        for name, side in (("fx", self.width_px), ("fy", self.height_px)):
+            fov_deg = math.degrees(2 * math.atan(side / 2 / getattr(self, name)))
+            if not MIN_FOV_DEG <= fov_deg <= MAX_FOV_DEG:
+                raise ConfigError(f"camera_info.{name}", f"{getattr(self, name):.6g} px gives a {fov_deg:.3g} degree "
+                                                         f"field of view across {side} px; a camera's is "
+                                                         f"{MIN_FOV_DEG:g}-{MAX_FOV_DEG:g} (is K in pixels?)")
         position = np.asarray(self.position_m, float)
         q = np.asarray(self.orientation_xyzw, float)
-        if position.shape != (3,) or not np.all(np.isfinite(position)):
-            raise ConfigError("camera_pose.position_m", f"must be 3 finite numbers, got {list(self.position_m)!r}")
+        if position.shape != (3,) or not np.all(np.abs(position) <= MAX_COORDINATE_M):
+            raise ConfigError("camera_pose.position_m", f"must be 3 numbers within {MAX_COORDINATE_M:g} m of the "
+                                                        f"scene's origin, got {clip(repr(list(self.position_m)), 120)}")
         if q.shape != (4,) or not np.all(np.isfinite(q)) or abs(np.linalg.norm(q) - 1) > 1e-3:
             raise ConfigError("camera_pose.orientation_xyzw", f"must be a unit quaternion, got {list(self.orientation_xyzw)!r}")
 
@@ -173,7 +184,8 @@ def camera_from_info(info: dict, position_m, orientation_xyzw) -> PinholeCamera:
                                                  "publish the rectified full image")
         width, height = int(roi["width"]), int(roi["height"])
     if not all(isinstance(v, int) and not isinstance(v, bool) for v in (width, height)):
-        raise ConfigError("camera_info.width", f"image width and height must be integers, got {width!r} x {height!r}")
+        raise ConfigError("camera_info.width", f"image width and height must be integers, got "
+                                               f"{clip(repr(width), 40)} x {clip(repr(height), 40)}")
     for name, value in (("fx", fx), ("fy", fy)):
         if not value > 0:
             raise ConfigError(f"camera_info.{source}", f"{name} must be > 0, got {value!r}")

@@ -17,6 +17,11 @@ independent (edges, smoothing), so the log-likelihood is divided by ``temperatur
 intervals then cover 96% of true poses in ``benchmarks/depth.py``) and only every
 ``pixel_stride``-th pixel in each direction is read.
 
+A real camera's range is biased by millimetres (a scale error, a calibration offset), which would
+move every object along the view and make the posterior confidently wrong: each camera's range
+offset is a nuisance parameter of the chain (prior N(0, ``offset_prior_sd_m``), one move per four
+scans of the objects), pinned down by the support around the objects, whose place is known.
+
 The prior is the detector's: each object's published pose, x and y with SD ``prior_sd_m`` and yaw
 with ``prior_yaw_sd_rad``. A block in plain view is pinned down by its pixels; one hidden behind
 another keeps the prior's spread. Metropolis-Hastings with single-object moves (x, y, yaw together)
@@ -27,6 +32,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -34,10 +40,10 @@ from typing import Any
 import numpy as np
 
 from ..checks import integer, positive
-from ..errors import ConfigError
+from ..errors import ConfigError, clip
 from ..scene import Floor, Scene
 from ..shapes import quaternion_product
-from .camera import PinholeCamera, camera_from_info, look_at
+from .camera import MAX_SIDE_PX, PinholeCamera, camera_from_info, look_at
 from .mcmc import effective_sample_size
 from .render import EMPTY, Patch, SceneMesh, body_patch, scene_mesh
 from .tinyrenderer import depth_with_pybullet
@@ -76,11 +82,16 @@ class DepthSettings:
     proposal_yaw_sd_rad: float = 0.03
     updates_per_object: int = 1000
     burn_in_fraction: float = 0.2
+    offset_prior_sd_m: float = 0.01
+    offset_proposal_sd_m: float = 0.0005
 
     def __post_init__(self) -> None:
         for name in ("sd_m", "max_range_m", "reach_m", "temperature", "prior_sd_m", "prior_yaw_sd_rad",
-                     "proposal_sd_m", "proposal_yaw_sd_rad"):
+                     "proposal_sd_m", "proposal_yaw_sd_rad", "offset_proposal_sd_m"):
             positive(getattr(self, name), f"depth.{name}")
+        if not isinstance(self.offset_prior_sd_m, (int, float)) or not 0 <= self.offset_prior_sd_m <= 0.1:
+            raise ConfigError("depth.offset_prior_sd_m", f"must be in [0, 0.1] (0: the camera's range taken as "
+                                                         f"exact), got {self.offset_prior_sd_m!r}")
         if not isinstance(self.sd_per_m2, (int, float)) or not 0 <= self.sd_per_m2 < 1:
             raise ConfigError("depth.sd_per_m2", f"must be in [0, 1), got {self.sd_per_m2!r}")
         if not isinstance(self.outlier, (int, float)) or not 0 < self.outlier < 1:
@@ -149,12 +160,20 @@ class DepthModel:
         self.read, self.measured, self.support = [], [], []
         for obs in observations:
             measured = np.asarray(obs.depth_m, float)
-            valid = np.isfinite(measured) & (measured > 0)
+            with np.errstate(invalid="ignore"):  # 0, NaN, inf, negative or beyond the range: no reading
+                valid = np.isfinite(measured) & (measured > 0) & (measured < settings.max_range_m)
             grid = np.zeros_like(valid)
             grid[::stride, ::stride] = True
             self.read.append(valid & grid & _reach_mask(scene, obs.camera, settings.reach_m))
             self.measured.append(np.where(valid, measured, np.nan))
             self.support.append(support_depth_m(scene, obs.camera))
+        self.read_pixels = [np.nonzero(read) for read in self.read]
+        if not any(len(rows) for rows, _ in self.read_pixels):
+            raise ConfigError("depth", "no usable depth where the objects are: every pixel that sees them (or the "
+                                       f"support within {settings.reach_m:g} m) is 0, NaN, inf, negative or beyond "
+                                       f"{settings.max_range_m:g} m, or the objects are out of view; check the camera "
+                                       "driver, the camera info and the camera pose")
+        self.offsets_m = np.zeros(len(observations))
         self.log_outlier = math.log(settings.outlier / settings.max_range_m)
 
     def _pixel_ll(self, measured: np.ndarray, predicted: np.ndarray) -> np.ndarray:
@@ -174,7 +193,37 @@ class DepthModel:
         support = self.support[v][v0:v1, u0:u1]
         predicted = np.where(np.isfinite(nearest), nearest, support)  # NaN: nothing there, outlier density only
         predicted = np.where(np.isnan(predicted), np.inf, predicted)
-        return float(self._pixel_ll(self.measured[v][v0:v1, u0:u1][read], predicted[read]).sum())
+        return float(self._pixel_ll(self.measured[v][v0:v1, u0:u1][read] - self.offsets_m[v], predicted[read]).sum())
+
+    def pixels_seen(self, objects: int) -> np.ndarray:
+        """(objects,) pixels read where each of the first ``objects`` bodies is the nearest surface now."""
+        counts = np.zeros(objects, int)
+        for v, (rows, columns) in enumerate(self.read_pixels):
+            if len(rows):
+                depth = self.layers[v][:, rows, columns]
+                nearest = depth.argmin(axis=0)[np.isfinite(depth.min(axis=0))]
+                counts += np.bincount(nearest[nearest < objects], minlength=objects)
+        return counts
+
+    def propose_offset(self, v: int, offset_m: float) -> float:
+        """The (tempered) log-likelihood with camera v's range offset moved; pending until ``accept_offset``.
+        Only the offset changes, so the hypothesis' depth at the pixels read is composed once."""
+        rows, columns = self.read_pixels[v]
+        change = 0.0
+        if len(rows):
+            nearest = self.layers[v][:, rows, columns].min(axis=0)
+            predicted = np.where(np.isfinite(nearest), nearest, self.support[v][rows, columns])
+            predicted = np.where(np.isnan(predicted), np.inf, predicted)
+            measured = self.measured[v][rows, columns]
+            change = float(self._pixel_ll(measured - offset_m, predicted).sum()
+                           - self._pixel_ll(measured - self.offsets_m[v], predicted).sum())
+        self._proposed_offset = (v, offset_m, self.current + change / self.settings.temperature)
+        return self._proposed_offset[2]
+
+    def accept_offset(self) -> None:
+        v, offset_m, proposed = self._proposed_offset
+        self.offsets_m[v] = offset_m
+        self.current = proposed
 
     def start(self, positions_m: np.ndarray, yaws_rad: np.ndarray) -> float:
         bodies = len(positions_m)
@@ -225,9 +274,22 @@ class DepthModel:
 #: the depth chain's random stream, apart from the samples' (SeedSequence(seed).spawn(k))
 DEPTH_STREAM = 0xDE9
 
+#: the share of a prediction's budget the depth chain may take; the samples get what it leaves
+CHAIN_BUDGET_SHARE = 0.5
+
 
 #: the acceptance rate each object's proposal scale is tuned towards during burn-in
 TARGET_ACCEPTANCE = 0.3
+
+#: the most memory the chain's depth layers (bodies x pixels x cameras, float64) may take
+MAX_LAYER_BYTES = 1 << 30
+
+#: scans of the objects between checks of the chain's projected end against its deadline
+BUDGET_CHECK_SCANS = 10
+
+#: scans of the objects per move of the cameras' range offsets: an offset move reads every pixel in
+#: reach (an object's, its own patch), and the support pins the offset within a few moves
+OFFSET_MOVE_SCANS = 4
 
 
 @dataclass(frozen=True)
@@ -238,6 +300,15 @@ class DepthPosterior:
     positions_m: np.ndarray  # (samples, objects, 3)
     yaws_rad: np.ndarray     # (samples, objects): turn from the published orientation
     acceptance_rate: float
+    offsets_m: np.ndarray | None = None  # (samples, cameras): each camera's range offset (measured - true)
+    pixels: np.ndarray | None = None  # (objects,) pixels read where the object is in front at the mean pose
+
+    def camera_offsets(self) -> list[dict[str, float]]:
+        """Per camera: posterior mean and SD of its range offset (how much longer it measures than the
+        scene is), in metres."""
+        if self.offsets_m is None or not self.offsets_m.size:
+            return []
+        return [{"mean_m": float(o.mean()), "sd_m": float(o.std())} for o in self.offsets_m.T]
 
     @property
     def effective_sample_size(self) -> float:
@@ -251,6 +322,16 @@ class DepthPosterior:
         return {n: {"x_sd_m": float(sx), "y_sd_m": float(sy), "yaw_sd_rad": float(syaw)}
                 for n, (sx, sy), syaw in zip(self.names, sd_xy, sd_yaw)}
 
+    def mean(self) -> tuple[np.ndarray, np.ndarray]:
+        """(objects, 3) posterior mean positions and (objects,) mean turns from the published yaw."""
+        return self.positions_m.mean(axis=0), self.yaws_rad.mean(axis=0)
+
+    def covariance(self) -> np.ndarray:
+        """(objects, 3, 3) posterior covariance of each object's (x, y, yaw) in m and rad."""
+        values = np.concatenate([self.positions_m[:, :, :2], self.yaws_rad[:, :, None]], axis=2)
+        centred = values - values.mean(axis=0)
+        return np.einsum("sai,saj->aij", centred, centred) / max(1, len(values) - 1)
+
     def interval95(self) -> tuple[np.ndarray, np.ndarray]:
         """(objects, 3) low and high ends of the central 95% intervals of x, y and yaw."""
         values = np.concatenate([self.positions_m[:, :, :2], self.yaws_rad[:, :, None]], axis=2)
@@ -261,11 +342,27 @@ class DepthPosterior:
         return self.positions_m[index], self.yaws_rad[index]
 
 
+def check_layer_memory(scene: Scene, observations: tuple[DepthObservation, ...]) -> None:
+    """The chain keeps one depth layer per body and camera: refused up front when that is too big."""
+    bodies = len(scene.objects)
+    pixels = sum(o.camera.width_px * o.camera.height_px for o in observations)
+    needed = bodies * pixels * 8
+    if needed > MAX_LAYER_BYTES:
+        raise ConfigError("depth", f"{bodies} bodies x {pixels} pixels need {needed / 1e9:.2g} GB of depth layers (at "
+                                   f"most {MAX_LAYER_BYTES / 1e9:.2g} GB); bin or crop the image (camera_info "
+                                   "binning_x/y, roi) or send fewer objects")
+
+
 def run_depth_chain(scene: Scene, observations: tuple[DepthObservation, ...], settings: DepthSettings,
-                    rng: np.random.Generator) -> DepthPosterior:
-    """Metropolis-Hastings over the dynamic objects' (x, y, yaw), from the published scene."""
+                    rng: np.random.Generator, deadline_s: float | None = None) -> DepthPosterior:
+    """Metropolis-Hastings over the dynamic objects' (x, y, yaw), from the published scene.
+
+    ``deadline_s`` (``time.monotonic()``): the chain is refused (ConfigError naming ``budget_s``) as
+    soon as its first scans show it cannot finish by then, and stopped if it runs past it."""
     if not observations:
         raise ConfigError("depth", "depth perception needs at least one depth image")
+    check_layer_memory(scene, observations)
+    started = time.monotonic()
     mesh = scene_mesh(scene)
     dynamic = len(scene.dynamic_objects)
     prior_centre = mesh.positions_m[:dynamic, :2].copy()
@@ -273,6 +370,10 @@ def run_depth_chain(scene: Scene, observations: tuple[DepthObservation, ...], se
     yaws = np.zeros(len(positions))
     model = DepthModel(scene, mesh, observations, settings)
     current = model.start(positions, yaws)
+    if deadline_s is not None and time.monotonic() > deadline_s:
+        raise ConfigError("budget_s", f"reading the depth image for {dynamic} objects took "
+                                      f"{time.monotonic() - started:.3g} s, all the budget leaves the depth chain; "
+                                      "raise the budget, bin or crop the image, or send fewer objects")
 
     def log_prior(b: int, xy: np.ndarray, yaw: float) -> float:
         return (-0.5 * float(np.sum((xy - prior_centre[b]) ** 2)) / settings.prior_sd_m ** 2
@@ -281,9 +382,34 @@ def run_depth_chain(scene: Scene, observations: tuple[DepthObservation, ...], se
     # per object, a proposal scale tuned during burn-in towards TARGET_ACCEPTANCE (a block in plain
     # view is pinned to a fraction of a millimetre, a hidden one wanders over its prior), then frozen
     scale = np.ones(dynamic)
-    kept_xyz, kept_yaw, taken = [], [], 0
+    offset_scale = np.ones(len(observations))
+    kept_xyz, kept_yaw, kept_offsets, taken = [], [], [], 0
     total, burn_in = settings.chain_samples(dynamic), settings.burn_in(dynamic)
+
+    def adapted(value: float, accepted: bool, sample: int) -> float:
+        value *= math.exp(0.5 * ((1.0 if accepted else 0.0) - TARGET_ACCEPTANCE) / math.sqrt(1 + sample / dynamic))
+        return min(max(value, 1e-3), 10.0)
+
+    def move_offsets(sample: int) -> None:
+        """One move of each camera's range offset: a real camera's depth is biased by millimetres (range
+        error, calibration), which would otherwise move every object along the view; the support
+        around the objects, whose place is known, pins it down."""
+        nonlocal current
+        for v in range(len(observations)):
+            old = model.offsets_m[v]
+            new = old + offset_scale[v] * settings.offset_proposal_sd_m * rng.standard_normal()
+            candidate = model.propose_offset(v, new)
+            ratio = candidate - current - 0.5 * (new * new - old * old) / settings.offset_prior_sd_m ** 2
+            accepted = bool(np.log(rng.random()) < ratio)
+            if accepted:
+                model.accept_offset()
+                current = candidate
+            if sample < burn_in:
+                offset_scale[v] = adapted(offset_scale[v], accepted, sample)
+
     for sample in range(total):
+        if deadline_s is not None and sample % (BUDGET_CHECK_SCANS * dynamic) == 0 and sample:
+            _check_deadline(started, deadline_s, sample, total, dynamic)
         b = int(rng.integers(0, dynamic))
         moved = positions[b].copy()
         moved[:2] += scale[b] * settings.proposal_sd_m * rng.standard_normal(2)
@@ -296,13 +422,28 @@ def run_depth_chain(scene: Scene, observations: tuple[DepthObservation, ...], se
             positions[b], yaws[b], current = moved, yaw, candidate
             taken += 1
         if sample < burn_in:
-            scale[b] *= math.exp(0.5 * ((1.0 if accepted else 0.0) - TARGET_ACCEPTANCE) / math.sqrt(1 + sample / dynamic))
-            scale[b] = min(max(scale[b], 1e-3), 10.0)
+            scale[b] = adapted(scale[b], accepted, sample)
+        if settings.offset_prior_sd_m > 0 and sample % (OFFSET_MOVE_SCANS * dynamic) == dynamic - 1:
+            move_offsets(sample)
         if sample >= burn_in:
             kept_xyz.append(positions[:dynamic].copy())
             kept_yaw.append(yaws[:dynamic].copy())
+            kept_offsets.append(model.offsets_m.copy())
+    model.start(np.concatenate([np.mean(kept_xyz, axis=0), positions[dynamic:]]),
+                np.concatenate([np.mean(kept_yaw, axis=0), yaws[dynamic:]]))
     return DepthPosterior(names=tuple(b.name for b in scene.dynamic_objects), positions_m=np.array(kept_xyz),
-                          yaws_rad=np.array(kept_yaw), acceptance_rate=taken / total)
+                          yaws_rad=np.array(kept_yaw), acceptance_rate=taken / total,
+                          offsets_m=np.array(kept_offsets), pixels=model.pixels_seen(dynamic))
+
+
+def _check_deadline(started: float, deadline_s: float, done: int, total: int, objects: int) -> None:
+    now = time.monotonic()
+    projected = started + (now - started) * total / done
+    if projected > deadline_s:
+        raise ConfigError("budget_s", f"the depth chain over {objects} objects needs ~{projected - started:.3g} s "
+                                      f"({total} updates; {done} took {now - started:.3g} s), more than the "
+                                      f"{deadline_s - started:.3g} s the budget leaves it; raise the "
+                                      "budget or send fewer objects")
 
 
 def scene_at_pose(scene: Scene, positions_m: np.ndarray, yaws_rad: np.ndarray) -> Scene:
@@ -325,12 +466,14 @@ def scene_at_pose(scene: Scene, positions_m: np.ndarray, yaws_rad: np.ndarray) -
 
 @dataclass(frozen=True)
 class DepthPerceivedScenes:
-    """k scenes from the depth posterior, with how well the chain mixed and each object's spread."""
+    """k scenes from the depth posterior, with how well the chain mixed, and the scene refined: every
+    dynamic object at its posterior mean pose (``refined``), with its covariance in ``to_dict``."""
 
     scenes: tuple[Scene, ...]
     posterior: DepthPosterior
     chain_samples: int
     burn_in: int
+    refined: Scene
 
     @property
     def acceptance_rate(self) -> float:
@@ -347,13 +490,29 @@ class DepthPerceivedScenes:
                 "effective_sample_size": self.effective_sample_size, "chain_samples": self.chain_samples,
                 "burn_in": self.burn_in, "samples": len(self.scenes),
                 "roughly_independent": self.effective_sample_size >= 0.5 * len(self.scenes),
-                "object_spread": self.posterior.spread()}
+                "objects": self.objects(), "camera_offsets": self.posterior.camera_offsets()}
+
+    def objects(self) -> dict[str, dict[str, Any]]:
+        """Per dynamic object: the refined pose (posterior mean; height and tilt as published), how many
+        pixels read show it there (0: the image says nothing of it, its pose is the detector's prior),
+        the posterior covariance of (x, y, yaw) and the SDs on its diagonal."""
+        covariance = self.posterior.covariance()
+        refined = {b.name: b for b in self.refined.dynamic_objects}
+        out = {}
+        pixels = self.posterior.pixels if self.posterior.pixels is not None else [None] * len(covariance)
+        for name, c, seen in zip(self.posterior.names, covariance, pixels):
+            body = refined[name]
+            out[name] = {"position_m": list(body.position_m), "orientation_xyzw": list(body.orientation_xyzw),
+                         "pixels": None if seen is None else int(seen),
+                         "covariance_x_y_yaw": c.tolist(), "x_sd_m": float(math.sqrt(c[0, 0])),
+                         "y_sd_m": float(math.sqrt(c[1, 1])), "yaw_sd_rad": float(math.sqrt(c[2, 2]))}
+        return out
 
 
 def perceive_depth(scene: Scene, k: int, observations: tuple[DepthObservation, ...], settings: DepthSettings,
-                   rng: np.random.Generator) -> DepthPerceivedScenes:
+                   rng: np.random.Generator, deadline_s: float | None = None) -> DepthPerceivedScenes:
     """k scenes spread over the depth posterior of ``scene`` (the detector's guess) given the images."""
-    posterior = run_depth_chain(scene, observations, settings, rng)
+    posterior = run_depth_chain(scene, observations, settings, rng, deadline_s)
     if k > len(posterior.positions_m):
         raise ConfigError("depth.updates_per_object", f"the chain keeps {len(posterior.positions_m)} states after "
                                                       f"burn-in, fewer than the {k} samples asked; lengthen it")
@@ -361,53 +520,105 @@ def perceive_depth(scene: Scene, k: int, observations: tuple[DepthObservation, .
     scenes = tuple(scene_at_pose(scene, p, y) for p, y in zip(positions, yaws))
     objects = len(scene.dynamic_objects)
     return DepthPerceivedScenes(scenes=scenes, posterior=posterior, chain_samples=settings.chain_samples(objects),
-                                burn_in=settings.burn_in(objects))
+                                burn_in=settings.burn_in(objects), refined=scene_at_pose(scene, *posterior.mean()))
 
 
 def perceive_depth_for(scene: Scene, k: int, observations: tuple[DepthObservation, ...], seed: int,
-                       settings: DepthSettings | None = None) -> DepthPerceivedScenes:
+                       settings: DepthSettings | None = None, budget_s: float | None = None) -> DepthPerceivedScenes:
     """``perceive_depth`` as a prediction with this ``seed`` runs it (the CLI, the node): its chain on a
-    random stream of its own, apart from the samples'."""
+    random stream of its own, apart from the samples', within ``budget_s`` seconds when given."""
     rng = np.random.default_rng(np.random.SeedSequence([seed, DEPTH_STREAM]))
-    return perceive_depth(scene, k, observations, settings or DepthSettings(), rng)
+    deadline = None if budget_s is None else time.monotonic() + budget_s
+    return perceive_depth(scene, k, observations, settings or DepthSettings(), rng, deadline)
 
 
 # -- inputs as a robot has them -------------------------------------------------------------------------
+#: a camera_info file is a few hundred bytes; anything far larger is not one
+MAX_CAMERA_INFO_BYTES = 1 << 20
+
+#: a depth file's size limit: a 4096 x 4096 image of float64 metres
+MAX_DEPTH_FILE_BYTES = MAX_SIDE_PX * MAX_SIDE_PX * 8 + (1 << 16)
+
+
 def load_camera_info(path: str | Path) -> dict:
-    """A camera_info YAML (or JSON) file as a mapping."""
+    """A camera_info YAML (or JSON) file as a mapping: at most MAX_CAMERA_INFO_BYTES, and no YAML
+    aliases (camera_info files have none; nested aliases expand exponentially)."""
     import yaml
 
+    class NoAliases(yaml.SafeLoader):
+        def compose_node(self, parent, index):
+            if self.check_event(yaml.AliasEvent):
+                raise yaml.YAMLError("YAML aliases (*name) are not allowed in camera info")
+            return super().compose_node(parent, index)
+
+    path = Path(path)
     try:
-        data = yaml.safe_load(Path(path).read_text())
+        size = path.stat().st_size
+        if size > MAX_CAMERA_INFO_BYTES:
+            raise ConfigError("--camera-info", f"{path.name} is {size} bytes; a camera_info YAML is a few hundred "
+                                               f"(at most {MAX_CAMERA_INFO_BYTES})")
+        data = yaml.load(path.read_bytes(), Loader=NoAliases)
     except (OSError, yaml.YAMLError) as exc:
-        raise ConfigError("--camera-info", f"cannot read {path}: {exc}") from None
+        raise ConfigError("--camera-info", f"cannot read {path}: {clip(str(exc), 300)}") from None
+    if not isinstance(data, dict):
+        raise ConfigError("--camera-info", f"{path.name}: must be a mapping with image_width, image_height and "
+                                           "camera_matrix")
     return data
 
 
 def load_depth_image(path: str | Path) -> np.ndarray:
     """Metres, as float: a .npy of float metres (or integer millimetres) or a 16-bit PNG of
-    millimetres (0: no reading), as depth cameras write them."""
+    millimetres (0: no reading), as depth cameras write them. The size is checked before the pixels
+    are read; an 8-bit, palette or colour PNG (or another format named .png) is refused, not read as
+    millimetres."""
     path = Path(path)
     try:
+        size = path.stat().st_size
+        if size > MAX_DEPTH_FILE_BYTES:
+            raise ConfigError("--depth", f"{path.name} is {size} bytes, more than a {MAX_SIDE_PX} x {MAX_SIDE_PX} "
+                                         "depth image can be")
         if path.suffix.lower() == ".npy":
+            with open(path, "rb") as handle:  # the header first: its shape is checked before any pixel is read
+                version = np.lib.format.read_magic(handle)
+                read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else \
+                    np.lib.format.read_array_header_2_0
+                shape, _, _ = read_header(handle)
+            _check_image_size(path, shape)
             data = np.load(path, allow_pickle=False)
         elif path.suffix.lower() == ".png":
-            from PIL import Image
-
-            with Image.open(path) as image:
-                data = np.asarray(image)
+            data = _read_depth_png(path)
         else:
             raise ConfigError("--depth", f"{path.name}: give a .npy (metres, or integer millimetres) or a 16-bit .png "
                                          "(millimetres)")
     except (OSError, ValueError) as exc:
-        raise ConfigError("--depth", f"cannot read {path}: {exc}") from None
-    if data.ndim != 2:
-        raise ConfigError("--depth", f"{path.name}: a depth image has one channel; got shape {list(data.shape)}")
+        if isinstance(exc, ConfigError):
+            raise
+        raise ConfigError("--depth", f"cannot read {path}: {clip(str(exc), 300)}") from None
     if np.issubdtype(data.dtype, np.integer):
         return data.astype(float) / 1000.0
     if not np.issubdtype(data.dtype, np.floating):
         raise ConfigError("--depth", f"{path.name}: depth must be numbers, got {data.dtype}")
     return data.astype(float)
+
+
+def _check_image_size(path: Path, shape: tuple) -> None:
+    if len(shape) != 2:
+        raise ConfigError("--depth", f"{path.name}: a depth image has one channel; got shape {list(shape)}")
+    if not all(1 <= side <= MAX_SIDE_PX for side in shape):
+        raise ConfigError("--depth", f"{path.name}: {shape[1]} x {shape[0]} pixels; each side must be 1-{MAX_SIDE_PX}")
+
+
+def _read_depth_png(path: Path) -> np.ndarray:
+    from PIL import Image
+
+    with Image.open(path) as image:
+        if image.format != "PNG":
+            raise ConfigError("--depth", f"{path.name} is a {image.format} file, not a PNG")
+        _check_image_size(path, (image.height, image.width))
+        if image.mode not in ("I;16", "I;16B", "I;16L", "I"):
+            raise ConfigError("--depth", f"{path.name} is a PNG of mode {image.mode} (8-bit, palette or colour); a "
+                                         "depth PNG holds 16-bit millimetres (mode I;16), as depth cameras save them")
+        return np.asarray(image)
 
 
 def load_observation(depth_path: str | Path, camera_info_path: str | Path, camera_pose: str) -> DepthObservation:

@@ -1,0 +1,83 @@
+"""Depth images written from the OpenCV / ROS camera_info pinhole model alone, by ray casting: the
+evidence that tests and benchmarks hold the engine's camera against. Shares no code with the engine
+(its quaternions, rays and box intersections are written out here), so a convention the engine gets
+wrong shows up as a disagreement instead of cancelling out.
+
+Convention (image_geometry's PinholeCameraModel): pixel (u, v) - column u, row v - has its centre at
+image coordinates (u, v); its ray in the optical frame (x right, y down, z forward) is
+((u - cx) / fx, (v - cy) / fy, 1).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+#: what a ray hit: the floor, or nothing (box i is i >= 0)
+FLOOR, NOTHING = -1, -2
+
+
+def optical_orientation(eye, target, roll_rad: float = 0.0) -> tuple[float, float, float, float]:
+    """xyzw of an optical frame at ``eye`` looking at ``target`` (image up towards +z), turned
+    ``roll_rad`` about its view axis."""
+    z = np.subtract(target, eye) / np.linalg.norm(np.subtract(target, eye))
+    x = np.cross(z, (0.0, 0.0, 1.0))
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    c, s = math.cos(roll_rad), math.sin(roll_rad)
+    x, y = c * x + s * y, -s * x + c * y
+    m = np.stack([x, y, z], axis=1)  # columns: the optical axes in the scene frame
+    w = math.sqrt(max(0.0, 1 + m[0, 0] + m[1, 1] + m[2, 2])) / 2
+    if w < 1e-3:
+        raise ValueError("choose another roll: this orientation's quaternion needs another branch")
+    q = np.array([(m[2, 1] - m[1, 2]) / (4 * w), (m[0, 2] - m[2, 0]) / (4 * w), (m[1, 0] - m[0, 1]) / (4 * w), w])
+    return tuple(float(v) for v in q / np.linalg.norm(q))
+
+
+def pixel_rays(fx, fy, cx, cy, width, height, orientation_xyzw) -> np.ndarray:
+    """(height, width, 3) scene-frame rays ((u - cx) / fx, (v - cy) / fy, 1) of every pixel."""
+    x, y, z, w = orientation_xyzw
+    rotation = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                         [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    u, v = np.meshgrid(np.arange(width), np.arange(height))
+    local = np.stack([(u - cx) / fx, (v - cy) / fy, np.ones_like(u, float)], axis=-1)
+    return local @ rotation.T
+
+
+def cast(rays, eye, boxes) -> tuple[np.ndarray, np.ndarray]:
+    """Depth along the optical axis of the floor z = 0 and of upright boxes ``(centre, yaw, half
+    sizes)`` by ray casting (slab test), and which was hit (box index, FLOOR or NOTHING); depth NaN
+    where a ray meets nothing."""
+    eye = np.asarray(eye, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        floor_t = -eye[2] / rays[..., 2]
+    depth = np.where(floor_t > 0, floor_t, np.inf)
+    hit_by = np.where(np.isfinite(depth), FLOOR, NOTHING)
+    for i, (centre, yaw, half) in enumerate(boxes):
+        near = box_entry(rays, eye, centre, yaw, half)
+        closer = near < depth
+        depth, hit_by = np.where(closer, near, depth), np.where(closer, i, hit_by)
+    return np.where(np.isfinite(depth), depth, np.nan), hit_by
+
+
+def box_entry(rays, eye, centre, yaw, half) -> np.ndarray:
+    """Where each ray enters one upright box (depth along the optical axis; inf: it misses)."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    to_box = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # scene -> box frame
+    origin, direction = to_box @ (np.asarray(eye, float) - np.asarray(centre, float)), rays @ to_box.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1, t2 = (-np.asarray(half) - origin) / direction, (np.asarray(half) - origin) / direction
+    near, far = np.minimum(t1, t2).max(axis=-1), np.maximum(t1, t2).min(axis=-1)
+    return np.where((near <= far) & (near > 0), near, np.inf)
+
+
+def analytic_depth(rays, eye, boxes) -> np.ndarray:
+    return cast(rays, eye, boxes)[0]
+
+
+def visible_fraction(rays, eye, boxes, hit_by, i: int) -> float:
+    """Share of box i's pixels (its own silhouette) where it is the nearest thing."""
+    own = np.isfinite(box_entry(rays, eye, *boxes[i]))
+    return float((hit_by[own] == i).mean()) if own.any() else 0.0

@@ -28,6 +28,7 @@ import numpy as np  # noqa: E402
 
 from ipe_ros.engine import Box, Floor, ModelConfig, Scene, preset  # noqa: E402
 from ipe_ros.engine.vision import depth as D  # noqa: E402
+from ipe_ros.engine.vision import depth_io  # noqa: E402
 from ipe_ros.engine.vision.camera import PinholeCamera, look_at  # noqa: E402
 from ipe_ros.engine.vision.tinyrenderer import depth_with_pybullet  # noqa: E402
 
@@ -144,8 +145,8 @@ def tower_cost(workers: int = 2, k: int = 48) -> dict:
     from ipe_ros.engine.examples import example_scene_path
 
     with tempfile.TemporaryDirectory() as folder:
-        paths = D.write_depth_example(folder, load_scenes(example_scene_path())[0])
-        observation = D.load_observation(paths["depth"], paths["camera_info"], paths["camera_pose"].read_text().strip())
+        paths = depth_io.write_depth_example(folder, load_scenes(example_scene_path())[0])
+        observation = depth_io.load_observation(paths["depth"], paths["camera_info"], paths["camera_pose"].read_text().strip())
         guess = load_scenes(paths["scene"])[0]
     with WorkerPool(workers) as pool:
         pool.warm()

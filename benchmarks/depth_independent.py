@@ -37,6 +37,7 @@ import numpy as np  # noqa: E402
 from ipe_ros.engine import Body, Box, Floor, Scene  # noqa: E402
 from ipe_ros.engine.shapes import BoxShape  # noqa: E402
 from ipe_ros.engine.vision import depth as D  # noqa: E402
+from ipe_ros.engine.vision.camera import camera_from_info  # noqa: E402
 from tests.analytic_camera import cast, optical_orientation, pixel_rays, visible_fraction  # noqa: E402
 
 WIDTH, HEIGHT = 640, 480
@@ -122,7 +123,7 @@ def one_scene(rng: np.random.Generator, chain_seed: int, settings: D.DepthSettin
     everything = boxes + ([board] if board else [])
     rays = pixel_rays(info["k"][0], info["k"][4], info["k"][2], info["k"][5], WIDTH, HEIGHT, orientation)
     clean, hit_by = cast(rays, eye, everything)
-    observation = D.DepthObservation(D.camera_from_info(info, eye, orientation), sensor(clean, rng, without))
+    observation = D.DepthObservation(camera_from_info(info, eye, orientation), sensor(clean, rng, without))
     guess_boxes = [((c[0] + 0.02 * rng.standard_normal(), c[1] + 0.02 * rng.standard_normal(), c[2]),
                     yaw + 0.05 * rng.standard_normal(), half) for c, yaw, half in boxes]
     start = time.perf_counter()

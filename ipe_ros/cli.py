@@ -313,11 +313,11 @@ def _run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: in
 
 def _perceive_depth(args, scenes, model):
     """The depth posterior's k scenes for the one scene asked about (the detector's guess)."""
-    from .engine.vision import depth
+    from .engine.vision import depth, depth_io
 
     if len(scenes) != 1:
         raise ConfigError("--depth", f"one depth image describes one scene, but {args.path} holds {len(scenes)}")
-    observation = depth.load_observation(args.depth, args.camera_info, args.camera_pose)
+    observation = depth_io.load_observation(args.depth, args.camera_info, args.camera_pose)
     started = time.perf_counter()
     perceived = depth.perceive_depth_for(scenes[0], model.samples, (observation,), args.seed, budget_s=None if
                                          args.budget is None else args.budget * depth.CHAIN_BUDGET_SHARE)
@@ -441,7 +441,7 @@ def cmd_predict(args) -> int:
 
 def cmd_generate(args) -> int:
     if args.kind == "depth-example":
-        from .engine.vision.depth import write_depth_example
+        from .engine.vision.depth_io import write_depth_example
 
         paths = write_depth_example(args.output, load_scenes(example_scene_path())[0], args.seed)
         print("wrote " + ", ".join(str(p) for p in paths.values()), file=sys.stderr)

@@ -15,6 +15,7 @@ from ipe_ros.cli import main
 from ipe_ros.engine import Body, Box, ConfigError, Floor, ModelConfig, QuerySpec, Scene, load_scenes, preset, predict
 from ipe_ros.engine.shapes import BoxShape
 from ipe_ros.engine.vision import depth as D
+from ipe_ros.engine.vision import depth_io
 from ipe_ros.engine.vision.camera import camera_from_info, look_at
 from ipe_ros.engine.vision.tinyrenderer import depth_with_pybullet
 
@@ -112,7 +113,7 @@ def test_depth_perception_needs_its_images_and_names_what_is_wrong():
     with pytest.raises(ConfigError, match="^camera_pose.orientation_xyzw: must be a unit quaternion"):
         dataclasses.replace(camera, orientation_xyzw=(0.0, 0.0, 0.0, 2.0))
     with pytest.raises(ConfigError, match="^--camera-pose: must be x,y,z,qx,qy,qz,qw"):
-        D.parse_pose("1,2,3")
+        depth_io.parse_pose("1,2,3")
 
 
 @pytest.mark.slow
@@ -195,7 +196,7 @@ def test_only_16_bit_pngs_and_bounded_files_are_read_as_depth(tmp_path):
 
     depth = np.full((20, 30), 1234, np.uint16)
     Image.fromarray(depth).save(tmp_path / "good.png")
-    assert np.allclose(D.load_depth_image(tmp_path / "good.png"), 1.234)
+    assert np.allclose(depth_io.load_depth_image(tmp_path / "good.png"), 1.234)
     Image.fromarray((depth // 10).astype(np.uint8)).save(tmp_path / "gray8.png")
     Image.fromarray((depth // 10).astype(np.uint8)).convert("P").save(tmp_path / "palette.png")
     Image.fromarray((depth // 10).astype(np.uint8)).save(tmp_path / "photo.png", format="JPEG")
@@ -203,18 +204,18 @@ def test_only_16_bit_pngs_and_bounded_files_are_read_as_depth(tmp_path):
     for name, problem in (("gray8", "is a PNG of mode L"), ("palette", "is a PNG of mode P"),
                           ("photo", "is a JPEG file, not a PNG"), ("scan", "is a TIFF file, not a PNG")):
         with pytest.raises(ConfigError, match=rf"^--depth: {name}.png {problem}"):
-            D.load_depth_image(tmp_path / f"{name}.png")
+            depth_io.load_depth_image(tmp_path / f"{name}.png")
     # headers that claim huge images: refused before any pixel is read
     with open(tmp_path / "huge.npy", "wb") as handle:
         np.lib.format.write_array_header_1_0(handle, {"descr": "<f4", "fortran_order": False,
                                                       "shape": (200000, 200000)})
     with pytest.raises(ConfigError, match=r"^--depth: huge.npy: 200000 x 200000 pixels; each side must be 1-4096$"):
-        D.load_depth_image(tmp_path / "huge.npy")
+        depth_io.load_depth_image(tmp_path / "huge.npy")
     png = (tmp_path / "good.png").read_bytes()
     ihdr = png.index(b"IHDR")  # width and height follow the chunk's type; PIL reads them before the pixels
     (tmp_path / "claims.png").write_bytes(png[:ihdr + 4] + (20000).to_bytes(4, "big") * 2 + png[ihdr + 12:])
     with pytest.raises(ConfigError, match=r"^--depth: (claims.png: 20000 x 20000 pixels|cannot read)"):
-        D.load_depth_image(tmp_path / "claims.png")
+        depth_io.load_depth_image(tmp_path / "claims.png")
 
 
 def test_camera_info_files_are_bounded_before_parsing(tmp_path):
@@ -224,11 +225,11 @@ def test_camera_info_files_are_bounded_before_parsing(tmp_path):
     (tmp_path / "bomb.yaml").write_text(bomb)
     with pytest.raises(ConfigError, match=r"^--camera-info: cannot read .*bomb.yaml: YAML aliases \(\*name\) are not "
                                           r"allowed in camera info$"):
-        D.load_camera_info(tmp_path / "bomb.yaml")
+        depth_io.load_camera_info(tmp_path / "bomb.yaml")
     (tmp_path / "big.yaml").write_text("k: [" + "1.0, " * 400_000 + "1.0]\n")
     with pytest.raises(ConfigError, match=r"^--camera-info: big.yaml is \d+ bytes; a camera_info YAML is a few "
                                           r"hundred \(at most 1048576\)$"):
-        D.load_camera_info(tmp_path / "big.yaml")
+        depth_io.load_camera_info(tmp_path / "big.yaml")
 
 
 def test_the_answer_says_how_many_pixels_showed_each_object():

@@ -257,7 +257,8 @@ class _IpeInterface:
 
     def _on_depth_image(self, msg: Image) -> None:
         """A depth image for depth perception: kept (the newest) with its camera, for the next scene."""
-        from ..engine.vision.depth import DepthObservation, camera_from_info
+        from ..engine.vision.camera import camera_from_info
+        from ..engine.vision.depth import DepthObservation
 
         topic = self.resolve_topic_name("~/depth/image")
         fixed = params.camera_pose(self._values)

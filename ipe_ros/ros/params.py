@@ -195,7 +195,7 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
 
 def camera_pose(values: Mapping[str, Any]) -> tuple[tuple, tuple] | None:
     """The fixed camera pose of ``depth.camera_pose`` as (position, xyzw), or None (from the topic)."""
-    from ..engine.vision.depth import parse_pose
+    from ..engine.vision.depth_io import parse_pose
 
     text = str(values["depth.camera_pose"]).strip()
     if not text:

@@ -7,8 +7,9 @@
 - likelihood.py: the Gaussian blur and the per-pixel normal likelihood;
 - mcmc.py: Metropolis-Hastings over the blocks' horizontal positions (an injected Generator);
 - perception.py: the IPE's k scene samples drawn from that posterior (``perception="vision"``);
-- depth.py: the same idea for a robot's depth camera: the posterior over objects' x, y, yaw given
-  depth images (``perception="depth"``).
+- depth.py: the same idea for a robot's depth camera: the posterior over objects' x, y, yaw (and
+  each camera's range offset) given depth images (``perception="depth"``); its likelihood in
+  depth_model.py, a robot's files (image, camera_info, pose) read in depth_io.py.
 
 ROS-free, like the rest of the engine.
 """

@@ -42,6 +42,7 @@ from .engine.examples import example_scene_path
 from .engine.catalogue import capped_tower, scene_catalogue
 from .engine.fidelity import DEFAULT_CHECK, SelfCheck
 from .engine.generators import generate_tables, generate_towers, state_pair
+from .engine.perceptions import perception_names, perception_source
 from .engine.perturb import is_deterministic
 from .engine.inputs import as_spelled, spelled
 from .engine.request import build_request
@@ -114,10 +115,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force-direction", type=_finite, default=None, metavar="DEG",
                    help="cued push direction in degrees (push drawn within +-45 deg); default: any direction")
     p.add_argument("--mu", type=_finite, default=None, help="heavy/light density ratio (default: scene's own masses)")
-    p.add_argument("--perception", choices=("gaussian", "vision", "depth"), default="gaussian",
-                   help="where the k noisy scenes come from: gaussian (sigma, the paper's IPE), vision (samples of "
-                        "the SI's Bayesian vision posterior given three rendered views) or depth (samples of the "
-                        "posterior given the robot's depth image: --depth, --camera-info, --camera-pose); sigma unused")
+    p.add_argument("--perception", choices=perception_names(), default="gaussian",
+                   help="where the k noisy scenes come from: " + "; ".join(
+                       f"{n}: {perception_source(n).summary}" for n in perception_names())
+                   + " (depth: --depth, --camera-info, --camera-pose); sigma unused but by gaussian")
     p.add_argument("--depth", default=None, metavar="IMAGE",
                    help="depth: the depth image, .npy (metres) or 16-bit .png (millimetres; 0: no reading)")
     p.add_argument("--camera-info", default=None, metavar="YAML",
@@ -391,9 +392,9 @@ def cmd_predict(args) -> int:
         raise SceneError(args.path, f"none of its {len(refused)} scenes can be answered (each refusal is reported)")
     perceived = None
     if args.vision_rrd is not None:  # the chain the prediction would run, kept for the recording
-        from .engine.sampler import perceive_for
+        from .engine.perceptions import perceive_vision
 
-        perceived = perceive_for(scenes[0], model, args.seed)
+        perceived = perceive_vision(scenes[0], model, args.seed)
     if args.perception == "depth":
         perceived = _perceive_depth(args, scenes, model)
     collected: list[Prediction] = []
@@ -407,7 +408,8 @@ def cmd_predict(args) -> int:
               f"k = {k}, preset = {sim.name}, seed = {args.seed}"
               + (f", perception = vision ({vision.chain_samples} MH samples, {vision.resolution_px} px)"
                  if vision is not None else "")
-              + (", perception = depth (sigma unused)" if args.perception == "depth" else ""))
+              + (f", perception = {args.perception} (sigma unused)"
+                 if perception_source(args.perception).posterior and vision is None else ""))
         _run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append, stop, args.budget,
                          perceived, args.scheduler, check)
         print(format_table(collected))

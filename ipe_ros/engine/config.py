@@ -27,6 +27,7 @@ from typing import Any
 from . import limits
 from .checks import at_most, boolean, integer, non_negative, positive
 from .errors import ConfigError, shown
+from .perceptions import perception_source
 
 #: The paper's IPE, as the CLI, the node and the service answer by default: sigma = 0.2 block short
 #: sides (0.04 m for 0.2 m blocks), k = 48 samples, the fall fraction, the probability that anything
@@ -68,9 +69,10 @@ class ModelConfig:
     push_duration_s: float = 0.2
     mu: float | None = None
     samples: int = DEFAULT_SAMPLES
-    #: where the k noisy scenes come from: "gaussian" (sigma, the paper's IPE), "vision" (the SI's
-    #: Bayesian vision system: samples of an image posterior, ``vision`` its settings; sigma unused)
-    #: or "depth" (samples of the posterior given depth images, passed to ``predict`` as ``perceived``)
+    #: where the k noisy scenes come from: a registered source (``perceptions.py``): "gaussian" (sigma,
+    #: the paper's IPE), "vision" (the SI's Bayesian vision system: samples of an image posterior,
+    #: ``vision`` its settings; sigma unused), "depth" (samples of the posterior given depth images,
+    #: passed to ``predict`` as ``perceived``), or one registered since
     perception: str = "gaussian"
     vision: Any = None  # engine.vision.VisionSettings, or None for its defaults
     #: draw each body's own noise (``position_sigma_m``, ``yaw_sigma_rad``) where the scene gives it;
@@ -96,8 +98,7 @@ class ModelConfig:
             at_most(self.mu, "mu", limits.MAX_MASS_RATIO, "(the solver's mass-ratio limit)")
         integer(self.samples, "samples", 1, 100_000)
         boolean(self.object_noise, "object_noise")
-        if self.perception not in PERCEPTIONS:
-            raise ConfigError("perception", f"must be one of {', '.join(PERCEPTIONS)}, got {shown(self.perception)}")
+        perception_source(self.perception)  # a ConfigError naming the choices
 
     @property
     def pushes(self) -> bool:
@@ -105,15 +106,10 @@ class ModelConfig:
 
     @property
     def is_deterministic(self) -> bool:
-        """sigma = phi = 0 (and no vision): no noise of the model's own. Whether a prediction is
-        deterministic also depends on the scene's per-body noise: ``perturb.is_deterministic``."""
-        return self.sigma_m == 0 and not self.pushes and self.perception == "gaussian"
-
-
-#: Input models: Gaussian position noise (the paper's IPE), samples of the SI's vision posterior, or
-#: samples of the posterior given the robot's depth images (``vision.depth``; the images come with
-#: the request, not the model).
-PERCEPTIONS = ("gaussian", "vision", "depth")
+        """sigma = phi = 0 and no posterior to draw from: no noise of the model's own. Whether a
+        prediction is deterministic also depends on the scene's per-body noise:
+        ``perturb.is_deterministic``."""
+        return self.sigma_m == 0 and not self.pushes and not perception_source(self.perception).posterior
 
 #: The paper's IPE with the default sigma and k (phi = 0, the scene's own masses).
 DEFAULT_MODEL = ModelConfig(sigma_m=DEFAULT_SIGMA_M, samples=DEFAULT_SAMPLES)

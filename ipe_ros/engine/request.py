@@ -15,6 +15,7 @@ from typing import Iterable
 from .config import (DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M,
                      ModelConfig, SimSettings, preset)
 from .errors import ConfigError, shown
+from .perceptions import perception_source
 from .fidelity import DEFAULT_CHECK, SelfCheck
 from .query import QuerySpec
 from .sampler import AdaptiveStop, check_budget, check_ci_width
@@ -49,9 +50,9 @@ def build_request(*, samples: int = DEFAULT_SAMPLES, sigma_m: float = DEFAULT_SI
     ``contact``: (A, B) pairs; giving any adds the contact query. ``horizon_s`` None and
     ``force_direction_deg`` None: the preset's horizon, any push direction.
     """
-    if ground_truth and perception != "gaussian":
+    if ground_truth and perception_source(perception).posterior:
         raise ConfigError("ground_truth", f"takes the scene exactly as given, but perception {perception} draws it from "
-                                          "a posterior of images; ask the ground truth with perception gaussian")
+                                          "a posterior; ask the ground truth with perception gaussian")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ConfigError("seed", f"must be an integer >= 0, got {shown(seed)}")
     if force_direction_deg is not None and not math.isfinite(force_direction_deg):

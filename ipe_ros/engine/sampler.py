@@ -23,6 +23,7 @@ from .fidelity import check_request as check_fidelity_request
 from .fidelity import (DEFAULT_CHECK, NO_CHECK, FidelityReport, SelfCheck, confirmation_samples, contradicts,
                        coverage_ahead, coverage_samples, difference, is_reference, look_ahead_split, merge,
                        outcome_flags, reference_settings, scale_of, suspect, unhealthy, verification_count)
+from .perceptions import perception_source
 from .perturb import is_deterministic
 from .rollout import SampleOutcome, SampleTask, failed, run_sample
 from .query import QUERIES, QuerySpec
@@ -58,18 +59,6 @@ class AdaptiveStop:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ConfigError(name, f"must be an integer >= 1, got {shown(value)}")
-
-
-#: The vision chain's random stream, apart from the samples' (SeedSequence(seed).spawn(k)).
-VISION_STREAM = 0x5EE
-
-
-def perceive_for(scene: Scene, model: ModelConfig, seed: int, map_fn: MapFn | None = None):
-    """The vision chain ``predict`` runs for this scene, model and seed (``vision.PerceivedScenes``)."""
-    from .vision.perception import PerceptionTask, perceive_task
-
-    task = PerceptionTask(scene=scene, k=model.samples, settings=model.vision, seed=(seed, VISION_STREAM))
-    return map_fn(perceive_task, [task])[0] if map_fn is not None else perceive_task(task)
 
 
 def _check_seed(seed) -> None:
@@ -149,14 +138,12 @@ def check_request(scene: Scene, query: QuerySpec, max_objects: int = DEFAULT_MAX
 
 def _from_perception(tasks: list[SampleTask], scene: Scene, model: ModelConfig, seed: int, map_fn: MapFn | None,
                      perceived) -> tuple[list[SampleTask], object]:
-    """With vision or depth perception, each sample's scene is a state of the posterior (and the
-    model's sigma 0: the posterior is the noise); the tasks and the perceived scenes used."""
-    if model.perception == "depth" and perceived is None:
-        raise ConfigError("perception", "depth perception needs the depth images: run vision.depth.perceive_depth "
-                                        "and pass its scenes as perceived (the CLI's --depth, the node's depth topics)")
-    if model.perception not in ("vision", "depth"):
+    """With a perception that draws from a posterior (vision, depth), each sample's scene is a state
+    of it (and the model's sigma 0: the posterior is the noise); the tasks and the perceived scenes used."""
+    source = perception_source(model.perception)
+    if not source.posterior:
         return tasks, perceived
-    perceived = perceived or perceive_for(scene, model, seed, map_fn)
+    perceived = perceived or source.perceive(scene, model, seed, map_fn)
     if len(perceived.scenes) < len(tasks):
         raise ConfigError("samples", f"{len(perceived.scenes)} perceived scenes for {len(tasks)} samples")
     sampled = dataclasses.replace(model, sigma_m=0.0)
@@ -443,7 +430,7 @@ def _aggregate(scene: Scene, model: ModelConfig, settings: SimSettings, query: Q
         request.update(ci_width=stop.ci_width, deadline_s=stop.deadline_s)
     if budget_s is not None:
         request.update(budget_s=budget_s)
-    if model.perception in ("vision", "depth"):
+    if perception_source(model.perception).posterior:
         request.update(perception=perceived.to_dict())
     prediction = aggregate(scene, outcomes, query=query,
                            deterministic=is_deterministic(scene, model), samples_requested=len(tasks),
@@ -463,7 +450,8 @@ def predict_many(requests: Sequence[tuple[Scene, ModelConfig, int]], settings: S
     own seeds), but no worker waits for a prediction's last sample before the next one starts, and a
     cluster's round trip is paid once instead of per prediction. For batch work (the paper's
     analyses); ``wall_s`` of each answer is the whole map's time shared out by its samples.
-    Requests with vision perception run one by one (each needs its chain first). Batch answers are
+    Requests whose perception draws from a posterior run one by one (each needs its chain first;
+    depth perception, whose images only the caller has, is refused). Batch answers are
     not self-checked (``fidelity: "unverified"``): the paper's analyses reproduce fixed settings,
     and the check's extra samples would change what a resumable run stores.
     """
@@ -473,9 +461,7 @@ def predict_many(requests: Sequence[tuple[Scene, ModelConfig, int]], settings: S
     answers: list[Prediction | None] = [None] * len(requests)
     batched: list[tuple[int, list[SampleTask]]] = []
     for i, (scene, model, seed) in enumerate(requests):
-        if model.perception == "depth":
-            raise ConfigError("perception", "depth perception needs its images: call predict with perceived")
-        if model.perception == "vision":
+        if perception_source(model.perception).posterior:  # its chain first, then its samples
             answers[i] = predict(scene, model, settings, query, seed, map_fn, max_objects=max_objects, check=None)
             continue
         _check_seed(seed)

@@ -20,6 +20,7 @@ from ..engine.config import (DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_QUERIES, 
                              default_workers)
 from ..engine.fidelity import DEFAULT_CHECK
 from ..engine.inputs import as_spelled
+from ..engine.perceptions import perception_names, perception_source
 from ..engine.request import build_request
 from ..engine.query.contact import parse_pair
 from ..engine.scene import DEFAULT_MAX_OBJECTS
@@ -109,9 +110,10 @@ PARAMETERS: tuple[ParamSpec, ...] = (
                                          "tcp://10.0.0.1:8786, see docs/cluster.md) instead of `workers` local "
                                          "processes; empty: local; fixed at start", read_only=True),
     ParamSpec("perception", "gaussian", _STRING,
-              "where the k noisy scenes come from: gaussian (sigma) or depth (the posterior given the newest depth "
-              "image on ~/depth/image, its ~/depth/camera_info and the camera pose; sigma unused)",
-              constraints="gaussian or depth"),
+              "where the k noisy scenes come from: gaussian (sigma), depth (the posterior given the newest depth "
+              "image on ~/depth/image, its ~/depth/camera_info and the camera pose; sigma unused), or another "
+              "registered perception the node can feed (engine.perceptions)",
+              constraints="a registered perception the node can feed: gaussian, depth, ..."),
     ParamSpec("depth.max_age_s", 0.5, _DOUBLE, "depth perception: the depth image may be at most this many seconds "
                                                "from the scene's stamp", (0.001, 3600.0)),
     ParamSpec("depth.camera_pose", "", _STRING,
@@ -160,8 +162,9 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
     direction = float(values["force_direction_deg"])
     if math.isinf(direction):
         raise ConfigError("force_direction_deg", f"must be finite degrees or NaN (any direction), got {direction}")
-    if values["perception"] not in ("gaussian", "depth"):
-        raise ConfigError("perception", f"must be gaussian or depth, got {values['perception']!r}")
+    if not perception_source(values["perception"]).on_node:
+        fed = ", ".join(n for n in perception_names() if perception_source(n).on_node)
+        raise ConfigError("perception", f"must be a perception the node can feed ({fed}), got {values['perception']!r}")
     camera_pose(values)  # checked now, used by the node
     text = str(values["contact_pairs"]).strip()
     pairs = tuple(parse_pair(part, "contact_pairs") for part in text.split(",")) if text else ()

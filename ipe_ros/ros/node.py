@@ -81,8 +81,9 @@ class _IpeInterface:
         self._inputs: list = []  # subscriptions, service and timer of the answering state
         self._camera_info: dict | None = None  # the newest CameraInfo (depth perception)
         self._camera_pose: tuple | None = None  # (position, xyzw, frame) from ~/depth/camera_pose
-        self.depth_images_refused = 0
-        self._recently_seen: collections.deque = collections.deque(maxlen=DUPLICATE_WINDOW)
+        # per input (handler name): the samples delivered lately, so that the other reliability's copy is skipped
+        self._recently_seen: dict[str, collections.deque] = collections.defaultdict(
+            lambda: collections.deque(maxlen=DUPLICATE_WINDOW))
         self._refusal_log_window_s, self._refusal_log_lines, self._refusals_not_logged = -1.0, 0, 0
         self.add_on_set_parameters_callback(self._on_set_parameters)
         return self._values
@@ -137,12 +138,18 @@ class _IpeInterface:
             self._inputs.append(self.create_subscription(String, "~/scene_json", self._once(self._on_scene_json),
                                                          qos, callback_group=inputs, event_callbacks=quiet))
         self._inputs.append(self.create_subscription(String, "~/ask", self._on_ask, ASK_QOS, callback_group=inputs))
-        # camera streams: best effort takes reliable and best-effort publishers alike
-        for msg_type, topic, handler in ((Image, "~/depth/image", self._on_depth_image),
-                                         (CameraInfo, "~/depth/camera_info", self._on_camera_info),
-                                         (PoseStamped, "~/depth/camera_pose", self._on_camera_pose)):
-            self._inputs.append(self.create_subscription(msg_type, topic, handler, qos_profile_sensor_data,
-                                                         callback_group=inputs))
+        # camera streams: a best-effort subscription turns a reliable publisher's images best effort,
+        # and Fast DDS loses most best-effort messages over ~500 KB (a 640 x 480 depth image) in their
+        # fragments: with "both" a reliable publisher's images come whole through the reliable one
+        for reliability in SCENE_QOS[str(self._values["depth.reliability"])]:
+            qos = QoSProfile(depth=qos_profile_sensor_data.depth, history=HistoryPolicy.KEEP_LAST,
+                             reliability=reliability)
+            quiet = SubscriptionEventCallbacks(incompatible_qos=lambda _event: None)
+            for msg_type, topic, handler in ((Image, "~/depth/image", self._on_depth_image),
+                                             (CameraInfo, "~/depth/camera_info", self._on_camera_info),
+                                             (PoseStamped, "~/depth/camera_pose", self._on_camera_pose)):
+                self._inputs.append(self.create_subscription(msg_type, topic, self._once(handler), qos,
+                                                             callback_group=inputs, event_callbacks=quiet))
         self._inputs.append(self.create_service(Trigger, "~/predict", self._on_predict,
                                                 callback_group=MutuallyExclusiveCallbackGroup()))
         config = self.service.config
@@ -233,14 +240,15 @@ class _IpeInterface:
             self.get_logger().debug("a waiting scene was replaced by a newer one (keep-latest)")
 
     def _once(self, handler: Callable[[Any], None]) -> Callable[[Any, dict], None]:
-        """``handler`` for a scene subscription, skipping a message the other reliability's
+        """``handler`` for a scene or camera subscription, skipping a message the other reliability's
         subscription already delivered (a reliable publisher reaches both). A sample is identified
         by its writer's timestamp and sequence number; the inputs group runs one callback at a time."""
         def deliver(msg: Any, info: dict) -> None:
             key = (info.get("source_timestamp"), info.get("publication_sequence_number"), type(msg).__name__)
-            if key[0] is not None and key in self._recently_seen:
+            seen = self._recently_seen[handler.__name__]
+            if key[0] is not None and key in seen:
                 return
-            self._recently_seen.append(key)
+            seen.append(key)
             handler(msg)
         return deliver
 
@@ -272,7 +280,7 @@ class _IpeInterface:
             camera = camera_from_info(self._camera_info, pose[0], pose[1])
             observation = DepthObservation(camera, image_to_depth_m(msg))
         except ValueError as exc:
-            self.depth_images_refused += 1
+            self.service.refuse_depth()
             self._log_refusal(f"refused depth image on {topic}: {exc}")
             return
         self.service.set_depth(observation, header_to_stamp_ns(msg.header), pose[2])

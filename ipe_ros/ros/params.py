@@ -116,6 +116,11 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               constraints="a registered perception the node can feed: gaussian, depth, ..."),
     ParamSpec("depth.max_age_s", 0.5, _DOUBLE, "depth perception: the depth image may be at most this many seconds "
                                                "from the scene's stamp", (0.001, 3600.0)),
+    ParamSpec("depth.reliability", "both", _STRING,
+              "QoS reliability of the ~/depth/* subscriptions: both (a reliable and a best-effort subscription, "
+              "each message used once: a reliable publisher's images arrive whole; best-effort images over ~500 KB "
+              "mostly get lost in Fast DDS's fragments), reliable, or best_effort; fixed at start", read_only=True,
+              constraints="one of " + ", ".join(SCENE_RELIABILITY)),
     ParamSpec("depth.camera_pose", "", _STRING,
               "depth perception: the camera's optical frame (z forward, y down) in frame_id as "
               "'x,y,z,qx,qy,qz,qw' for a fixed camera; empty (default): from ~/depth/camera_pose",
@@ -156,9 +161,9 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
     if frames and frame not in frames:
         raise ConfigError("frame_id", f"{frame!r} is not in gravity_aligned_frames {list(frames)!r}; add it there "
                                       "if its -z axis is gravity, or publish scenes in one of those frames")
-    if values["scene_reliability"] not in SCENE_RELIABILITY:
-        raise ConfigError("scene_reliability", f"must be one of {', '.join(SCENE_RELIABILITY)}, got "
-                                               f"{values['scene_reliability']!r}")
+    for name in ("scene_reliability", "depth.reliability"):
+        if values[name] not in SCENE_RELIABILITY:
+            raise ConfigError(name, f"must be one of {', '.join(SCENE_RELIABILITY)}, got {values[name]!r}")
     direction = float(values["force_direction_deg"])
     if math.isinf(direction):
         raise ConfigError("force_direction_deg", f"must be finite degrees or NaN (any direction), got {direction}")

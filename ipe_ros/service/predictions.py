@@ -63,7 +63,7 @@ class PredictionService:
         self._seq = 0
         self._counts = dict(received=0, predicted=0, predictions=0, dropped=0, rejected=0, failed_predictions=0,
                             failed_samples=0, budget_stops=0, rrd_failures=0, refined_samples=0, escalated=0,
-                            contradicted=0)
+                            contradicted=0, depth_images=0, depth_images_refused=0, depth_images_stale=0)
         self._recent: collections.deque[str] = collections.deque(maxlen=RECENT_EVENTS)
         self._last_predicted_seq = 0
         self._in_flight_since: float | None = None
@@ -313,6 +313,12 @@ class PredictionService:
         its camera pose is in (scenes in another frame cannot use it)."""
         with self._cond:
             self._depth = (observation, int(stamp_ns), frame_id)
+            self._counts["depth_images"] += 1
+
+    def refuse_depth(self) -> None:
+        """Count a depth image that could not be used (the node logs why)."""
+        with self._cond:
+            self._counts["depth_images_refused"] += 1
 
     def latest_depth_stamp_ns(self) -> int | None:
         with self._cond:
@@ -334,6 +340,8 @@ class PredictionService:
                                             f"{item.frame_id!r}; give both in one frame")
         age = abs(stamp_ns - item.stamp_ns) / 1e9
         if age > config.depth_max_age_s:
+            with self._cond:
+                self._counts["depth_images_stale"] += 1
             raise ConfigError("perception", f"depth: the newest depth image is {age:.3g} s from the scene's stamp, more "
                                             f"than depth.max_age_s = {config.depth_max_age_s:g} s")
         budget_s = config.request.budget_s

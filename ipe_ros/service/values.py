@@ -120,6 +120,7 @@ class ServiceStats:
     recent: the last RECENT_EVENTS inputs and predictions, oldest first: "ok", "rejected",
     "failed", "partial" (some samples failed or were cut by the budget), "contradicted" or "rrd_failed".
     in_flight_s: how long the prediction in flight has run (None: none in flight).
+    depth_images, depth_images_refused, depth_images_stale: depth perception's input (the fields' comments).
     """
 
     received: int
@@ -145,6 +146,9 @@ class ServiceStats:
     refined_samples: int = 0
     escalated: int = 0
     contradicted: int = 0
+    depth_images: int = 0  # depth images kept (the newest replaces the one before)
+    depth_images_refused: int = 0  # unreadable, or no camera info or pose yet
+    depth_images_stale: int = 0  # scenes refused because the newest image was too far from their stamp
 
 
 class NoSceneError(RuntimeError):

@@ -105,7 +105,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"comma-separated queries from {','.join(ALL_QUERIES)} (default {default_queries})")
     p.add_argument("--contact", type=contact_pair, action="append", default=None, metavar="A:B",
                    help="the contact query: will A touch B within the horizon? (repeatable; B may be 'support'; "
-                        "adds contact to --query)")
+                        "names holding ':' as JSON: '[\"cup:1\", \"glass\"]'; adds contact to --query)")
     p.add_argument("--samples", type=int, default=DEFAULT_SAMPLES,
                    help=f"Monte Carlo samples k (default {DEFAULT_SAMPLES}, as the paper)")
     p.add_argument("--sigma", type=_finite, default=DEFAULT_SIGMA_M,

@@ -198,7 +198,7 @@ def cmd_ask(args) -> int:
     try:
         return _answer(args, scene, model, settings, kw)
     except ConfigError as exc:  # named as the command line spells it
-        raise as_spelled(exc, "cli") from None
+        raise as_spelled(question_flag(exc), "cli") from None
     finally:
         if pool is not None:
             pool.close()
@@ -218,6 +218,26 @@ def _answer(args, scene, model, settings, kw) -> int:
 
         rerun_log.write_question_rrd(args.rrd, scene, reply.answers)
     return 0
+
+
+#: a question's JSON fields (engine.actions.question) as ``ipe ask`` spells them
+QUESTION_FLAGS = {"objects": "--object", "object": "--object", "safe_below": "--safe-below",
+                  "threshold": "--threshold", "target": "--target", "what_falls": "--what-falls",
+                  "fell_off": "--fell-off", "at": "--at", "region": "--region", "region.candidates": "--candidates",
+                  "region.yaws": "--yaws", "candidates": "--candidates", "yaws": "--yaws", "yaw_deg": "--yaw",
+                  "velocity_m_s": "--velocity", "point_m": "--point", "direction_sigma_deg": "--direction-sigma-deg",
+                  "speed_sigma": "--speed-sigma", "contact": "--contact"}
+
+
+def question_flag(exc: ConfigError) -> ConfigError:
+    """The error naming the ``ipe ask`` option for a question field it names (``actions[0].``-prefixed
+    fields too: the CLI's question has one action)."""
+    if exc.field.startswith("actions[") and "]." in exc.field:
+        field = exc.field.split("].", 1)[1]
+        field = "object" if field == "name" else field  # the pushed object's name
+    else:
+        field = exc.field
+    return ConfigError(QUESTION_FLAGS[field], exc.problem) if field in QUESTION_FLAGS else exc
 
 
 def question_from_args(args) -> A.Question:

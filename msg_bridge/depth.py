@@ -24,7 +24,10 @@ def image_to_depth_m(msg: Image) -> np.ndarray:
                                             f"{msg.encoding!r}")
     dtype, scale = DEPTH_ENCODINGS[msg.encoding]
     itemsize = np.dtype(dtype).itemsize
-    if msg.height < 1 or msg.width < 1 or msg.step < msg.width * itemsize:
+    for name in ("height", "width"):
+        if getattr(msg, name) < 1:
+            raise ConfigError(f"image.{name}", f"must be >= 1 pixel, got {getattr(msg, name)}: an empty image")
+    if msg.step < msg.width * itemsize:
         raise ConfigError("image.step", f"{msg.step} bytes per row cannot hold {msg.width} pixels of {msg.encoding}")
     data = bytes(msg.data)
     if len(data) < msg.step * msg.height:

@@ -261,3 +261,16 @@ def test_vector_options_take_negative_numbers():
                                                             "--velocity", "-0.4,0"]))
     assert args.velocity == (-0.4, 0.0)
     assert glue_negative_vectors(["--x", "-1,2", "--y=-3,4", "-v", "-5,6"]) == ["--x=-1,2", "--y=-3,4", "-v", "-5,6"]
+
+
+def test_errors_name_the_file_and_the_option_as_typed(tmp_path, capsys):
+    path = str(example_scene_path())
+    assert main(["ask", "remove", path, "--safe-below", "2", "--workers", "0"]) == 2
+    assert capsys.readouterr().err.strip() == "ipe: error: --safe-below: must be in (0, 1], got 2.0"
+    assert main(["ask", "push", path, "--object", "nothere", "--velocity", "1,0", "--workers", "0"]) == 2
+    assert capsys.readouterr().err.strip().startswith("ipe: error: --object: no dynamic object named 'nothere'")
+    latin = tmp_path / "latin1.json"
+    latin.write_bytes('{"name": "caf\xe9"}'.encode("latin-1"))
+    assert main(["predict", str(latin)]) == 2
+    assert capsys.readouterr().err.strip() == (f"ipe: error: {latin}: not UTF-8 text (byte 0xe9 at offset 13); "
+                                               "save the file as UTF-8")

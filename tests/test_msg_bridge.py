@@ -296,3 +296,5 @@ def test_depth_images_convert_both_ways_and_name_what_is_wrong():
         image_to_depth_m(Image(encoding="rgb8", width=1, height=1, step=3, data=bytes(3)))
     with pytest.raises(ValueError, match=r"^image.data: holds 2 bytes, 4 x 1 expected$"):
         image_to_depth_m(Image(encoding="32FC1", width=1, height=1, step=4, data=bytes(2)))
+    with pytest.raises(ValueError, match=r"^image.height: must be >= 1 pixel, got 0: an empty image$"):
+        image_to_depth_m(Image(encoding="16UC1", width=4, height=0, step=8, data=b""))

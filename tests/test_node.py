@@ -201,7 +201,8 @@ def test_parameter_updates_accepted_and_rejected(ros, tower):
     assert bad_query.reason == ("queries: unknown query 'nope'; choose from fall, any_fall, direction, far, bump, "
                                 "contact, rest, final_pose")
     [bad_pair] = set_params(ros, contact_pairs="ball")
-    assert bad_pair.reason == "contact_pairs: a pair is written A:B (B may be support), got 'ball'"
+    assert bad_pair.reason == ('contact_pairs: a pair is written A:B (B may be support; names holding ":" as JSON: '
+                               '["A", "B"]), got \'ball\'')
     [bad_preset] = set_params(ros, preset="fastest")
     assert bad_preset.reason == "preset: unknown preset 'fastest'; choose one of paper, accurate, fine, default"
     [bad_direction] = set_params(ros, force_direction_deg=math.inf)

@@ -330,3 +330,17 @@ def test_bump_counts_only_what_started_on_the_table_as_fallen_off():
     answer = predict(scene, GROUND_TRUTH, preset("default"), QuerySpec(queries=frozenset({"bump"})), check=None)
     assert answer.fell_off_fraction_by_group == {"red": 0.0, "yellow": 0.0}
     assert answer.bump_rollouts == 0  # nothing fell off: no share to report
+
+
+def test_names_holding_colons_commas_or_edge_spaces_can_be_named_in_a_pair():
+    from ipe_ros.engine.query.contact import parse_pair, parse_pairs
+
+    assert parse_pair('["cup:1", " glass"]', "--contact") == ("cup:1", " glass")
+    assert parse_pairs('[["cup:1", "glass"], ["a,b", "support"]]', "contact_pairs") == (("cup:1", "glass"),
+                                                                                     ("a,b", "support"))
+    assert parse_pairs("cup:glass, ball:support", "contact_pairs") == (("cup", "glass"), ("ball", "support"))
+    with pytest.raises(ConfigError, match=r'^--contact: a pair in JSON is \["A", "B"\] \(two non-empty names\), '
+                                          r'got \'\["cup"\]\'$'):
+        parse_pair('["cup"]', "--contact")
+    with pytest.raises(ConfigError, match=r'^contact_pairs: a pair in JSON is \["A", "B"\]: Expecting value at column 3$'):
+        parse_pairs("[[", "contact_pairs")

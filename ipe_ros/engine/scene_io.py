@@ -399,7 +399,7 @@ def scenes_from_tower_csv(path: str | Path, towers: Iterable[str] | None = None,
     """
     path = Path(path)
     grouped: "OrderedDict[tuple[str, str], list[dict[str, str]]]" = OrderedDict()
-    with path.open(newline="") as handle:
+    with path.open(newline="", encoding="utf-8") as handle:
         reader = csv.DictReader(handle, strict=True)
         try:
             columns = reader.fieldnames or []
@@ -492,10 +492,15 @@ def load_scenes(path: str | Path, towers: Iterable[str] | None = None,
     path = Path(path)
     if not path.exists():
         raise SceneError(str(path), "no such file")
-    if path.suffix.lower() == ".csv":
-        return scenes_from_tower_csv(path, towers, max_objects, on_refused)
+    try:
+        if path.suffix.lower() == ".csv":
+            return scenes_from_tower_csv(path, towers, max_objects, on_refused)
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise SceneError(str(path), f"not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start}); "
+                                    "save the file as UTF-8") from None
     refusals: list[RefusedScene] = []
-    scenes = scenes_from_json(path.read_text(), max_objects, refusals.append if on_refused is not None else None)
+    scenes = scenes_from_json(text, max_objects, refusals.append if on_refused is not None else None)
     wanted = None if towers is None else set(towers)
     if wanted is not None:
         refusals = [r for r in refusals if r.name in wanted]

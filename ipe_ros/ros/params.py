@@ -22,7 +22,7 @@ from ..engine.fidelity import DEFAULT_CHECK
 from ..engine.inputs import as_spelled
 from ..engine.perceptions import perception_names, perception_source
 from ..engine.request import build_request
-from ..engine.query.contact import parse_pair
+from ..engine.query.contact import parse_pairs
 from ..engine.scene import DEFAULT_MAX_OBJECTS
 from ..service import ServiceConfig
 
@@ -172,7 +172,7 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
         raise ConfigError("perception", f"must be a perception the node can feed ({fed}), got {values['perception']!r}")
     camera_pose(values)  # checked now, used by the node
     text = str(values["contact_pairs"]).strip()
-    pairs = tuple(parse_pair(part, "contact_pairs") for part in text.split(",")) if text else ()
+    pairs = parse_pairs(text, "contact_pairs")
     mu, horizon = float(values["mu"]), float(values["horizon_s"])
     width, deadline = float(values["target_ci_width"]), float(values["deadline_s"])
     try:  # one request from the parameters (engine.request), its errors named as the parameters

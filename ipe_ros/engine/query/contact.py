@@ -30,13 +30,46 @@ def pair_key(a: str, b: str) -> str:
 
 
 def parse_pair(text: str, field: str = "contact") -> tuple[str, str]:
-    """``"cup:glass"`` -> ("cup", "glass"); ConfigError naming ``field`` otherwise."""
+    """``"cup:glass"`` -> ("cup", "glass"); names that hold ":" or edge spaces as JSON,
+    ``'["cup:1", " glass"]'``; ConfigError naming ``field`` otherwise."""
+    if isinstance(text, str) and text.lstrip().startswith("["):
+        return _json_pair(_json(text, field), text, field)
     if not isinstance(text, str) or text.count(":") != 1:
-        raise ConfigError(field, f"a pair is written A:B (B may be {SUPPORT}), got {shown(text)}")
+        raise ConfigError(field, f"a pair is written A:B (B may be {SUPPORT}; names holding \":\" as JSON: "
+                                 f"[\"A\", \"B\"]), got {shown(text)}")
     a, b = (part.strip() for part in text.split(":"))
     if not a or not b:
         raise ConfigError(field, f"a pair is written A:B with both names given, got {shown(text)}")
     return a, b
+
+
+def parse_pairs(text: str, field: str) -> tuple[tuple[str, str], ...]:
+    """Comma-separated A:B pairs (``"cup:glass,ball:support"``), or a JSON list of pairs for names that
+    hold ":", "," or edge spaces (``'[["cup:1", "glass"]]'``); empty: none."""
+    text = text.strip()
+    if not text:
+        return ()
+    if text.startswith("[["):
+        value = _json(text, field)
+        if not isinstance(value, list):
+            raise ConfigError(field, f'a JSON list of pairs is [["A", "B"], ...], got {shown(text)}')
+        return tuple(_json_pair(pair, text, field) for pair in value)
+    return tuple(parse_pair(part, field) for part in text.split(","))
+
+
+def _json(text: str, field: str) -> Any:
+    import json
+
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ConfigError(field, f'a pair in JSON is ["A", "B"]: {exc.msg} at column {exc.colno}') from None
+
+
+def _json_pair(value: Any, text: str, field: str) -> tuple[str, str]:
+    if not (isinstance(value, list) and len(value) == 2 and all(isinstance(v, str) and v for v in value)):
+        raise ConfigError(field, f'a pair in JSON is ["A", "B"] (two non-empty names), got {shown(text)}')
+    return value[0], value[1]
 
 
 def check_pairs(pairs, scene, added: tuple[str, ...] = ()) -> None:

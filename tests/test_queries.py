@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from ipe_ros.engine import PRESETS, Body, ConfigError, ModelConfig, QuerySpec, Scene, Sphere, preset
+from ipe_ros.engine import PRESETS, Body, Box, ConfigError, Floor, ModelConfig, QuerySpec, Scene, Sphere, preset
 from ipe_ros.engine.estimate import Prediction
 from ipe_ros.engine.query import ALL_QUERIES, ANSWER_FIELDS, QUERIES
 from ipe_ros.engine.query.contact import parse_pair
@@ -344,3 +344,31 @@ def test_names_holding_colons_commas_or_edge_spaces_can_be_named_in_a_pair():
         parse_pair('["cup"]', "--contact")
     with pytest.raises(ConfigError, match=r'^contact_pairs: a pair in JSON is \["A", "B"\]: Expecting value at column 3$'):
         parse_pairs("[[", "contact_pairs")
+
+
+def test_many_contact_pairs_are_watched_per_contact_and_priced_up_front():
+    """Every pair of 60 boxes on a floor (1830 pairs): the rollout's estimate counts them, and a budget
+    between the estimates with and without them refuses the question before any simulation."""
+    import itertools
+
+    from ipe_ros.engine.sampler import SECONDS_PER_WATCHED_PAIR, check_request, rollout_cost
+
+    boxes = tuple(Box(name=f"b{i}", extents_m=(0.1, 0.1, 0.1), position_m=(0.15 * (i % 10), 0.15 * (i // 10), 0.05),
+                      orientation_xyzw=(0, 0, 0, 1), friction=0.6, restitution=0.0, mass_kg=1.0) for i in range(60))
+    scene = Scene(name="grid", objects=boxes, support=Floor(friction=0.6, restitution=0.0),
+                  gravity_m_s2=(0.0, 0.0, -9.81))
+    names = [b.name for b in boxes]
+    pairs = tuple(itertools.combinations(names, 2)) + tuple((n, "support") for n in names)
+    model, settings = ModelConfig(sigma_m=0.01, samples=2), preset("default")
+    bare, watched = rollout_cost(scene, model, settings), rollout_cost(scene, model, settings, len(pairs))
+    assert watched.seconds == pytest.approx(bare.seconds + len(pairs) * SECONDS_PER_WATCHED_PAIR)
+    budget = (bare.seconds + watched.seconds) / 2
+    check_request(scene, QuerySpec(queries=frozenset({"fall"})), model=model, settings=settings, budget_s=budget)
+    with pytest.raises(ConfigError, match=r"^budget_s: one rollout of this scene takes up to \d+ steps x 60 bodies "
+                                          r"and 1830 contact pairs .* or ask fewer pairs$"):
+        check_request(scene, QuerySpec(queries=frozenset({"contact"}), contact_pairs=pairs), model=model,
+                      settings=settings, budget_s=budget)
+    answer = predict(scene, model, settings, QuerySpec(queries=frozenset({"contact"}), contact_pairs=pairs), seed=1,
+                     check=None)
+    probability = answer.to_dict()["contact_probability"]
+    assert probability["b0:support"] == 1.0 and probability["b0:b1"] == 0.0  # resting on the floor, 5 cm apart

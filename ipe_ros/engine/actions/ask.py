@@ -135,7 +135,7 @@ def _plan(scene: Scene, actions: list[Action], model: ModelConfig, settings: Sim
     if any(trivial) and None not in simulated_actions:
         simulated_actions.append(None)
     if budget_s is not None:
-        cost = rollout_cost(scene, model, settings)
+        cost = rollout_cost(scene, model, settings, len(contact))
         if cost.seconds * max(1, len(simulated_actions)) > budget_s:
             raise ConfigError("budget_s", f"one sample of these {len(simulated_actions)} variants takes up to "
                                           f"~{cost.seconds * len(simulated_actions):.3g} s, more than the budget of "

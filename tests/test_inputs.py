@@ -68,8 +68,8 @@ def test_the_ground_truth_refuses_a_perception_that_draws_the_scene():
     for perception in ("vision", "depth"):
         with pytest.raises(ConfigError) as caught:
             build_request(ground_truth=True, perception=perception)
-        problem = (f"takes the scene exactly as given, but perception {perception} draws it from a posterior of "
-                   "images; ask the ground truth with perception gaussian")
+        problem = (f"takes the scene exactly as given, but perception {perception} draws it from a posterior; "
+                   "ask the ground truth with perception gaussian")
         assert str(as_spelled(caught.value, "cli")) == f"--ground-truth: {problem}"
         assert str(as_spelled(caught.value, "ros")) == f"ground_truth: {problem}"
 

@@ -531,6 +531,13 @@ def test_depth_perception_predicts_from_the_newest_depth_image(ros):
     refined = {b.name: b for b in markers_to_scene(perceived[-1]).scene.objects}
     for name, estimate in perception["objects"].items():
         assert np.allclose(refined[name].position_m, estimate["position_m"], atol=1e-6)
+    # the same view predicted again (a parameter changed, ~/predict called) reuses its posterior
+    assert all(r.successful for r in set_params(ros, preset="fine"))
+    response = ros.call(Trigger, "/ipe/predict", Trigger.Request())
+    assert response.success, response.message
+    again = json.loads(response.message)
+    assert again["request"]["preset"] == "fine" and again["request"]["perception"]["objects"] == perception["objects"]
+    assert node.service.stats().depth_posteriors == 1
     # questions draw from sigma, and say so
     replies = ros.collect(String, "/ipe/answer", LATCHED_QOS)
     ros.publisher(String, "/ipe/ask").publish(String(data=json.dumps({"id": "q", "question": "push", "samples": 2,

@@ -58,6 +58,7 @@ def diagnostics_msg(stats: ServiceStats, name: str, stamp_ns: int, hardware_id: 
         "samples_refined": stats.refined_samples, "predictions_escalated": stats.escalated,
         "predictions_contradicted": stats.contradicted, "depth_images": stats.depth_images,
         "depth_images_refused": stats.depth_images_refused, "depth_images_stale": stats.depth_images_stale,
+        "depth_posteriors": stats.depth_posteriors,
         "last_compute_s": stats.last_compute_s, "last_error": stats.last_error,
     }
     status = DiagnosticStatus(level=level, name=name, message=clip(message, 1000), hardware_id=hardware_id,

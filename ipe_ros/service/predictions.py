@@ -51,7 +51,8 @@ class PredictionService:
         self._pool = pool if pool is not None else WorkerPool(workers, start_method=start_method) if workers > 0 else None
         self.workers = len(pool.worker_pids()) if pool is not None else workers
         self._cond = threading.Condition()
-        self._depth = None  # (vision.depth.DepthObservation, stamp ns, frame): the newest depth image
+        self._depth = None  # (vision.depth.DepthObservation, stamp ns, frame, its number): the newest depth image
+        self._posterior = None  # (key, vision.depth.DepthPerceivedScenes): the latest view's posterior
         self._pending: StampedScene | None = None
         self._latest: StampedScene | None = None
         self._latest_rejected: str | None = None  # why the newest input was refused, if it was
@@ -63,7 +64,8 @@ class PredictionService:
         self._seq = 0
         self._counts = dict(received=0, predicted=0, predictions=0, dropped=0, rejected=0, failed_predictions=0,
                             failed_samples=0, budget_stops=0, rrd_failures=0, refined_samples=0, escalated=0,
-                            contradicted=0, depth_images=0, depth_images_refused=0, depth_images_stale=0)
+                            contradicted=0, depth_images=0, depth_images_refused=0, depth_images_stale=0,
+                            depth_posteriors=0)
         self._recent: collections.deque[str] = collections.deque(maxlen=RECENT_EVENTS)
         self._last_predicted_seq = 0
         self._in_flight_since: float | None = None
@@ -312,8 +314,8 @@ class PredictionService:
         """The newest depth image (``vision.depth.DepthObservation``), when it was taken, and the frame
         its camera pose is in (scenes in another frame cannot use it)."""
         with self._cond:
-            self._depth = (observation, int(stamp_ns), frame_id)
             self._counts["depth_images"] += 1
+            self._depth = (observation, int(stamp_ns), frame_id, self._counts["depth_images"])
 
     def refuse_depth(self) -> None:
         """Count a depth image that could not be used (the node logs why)."""
@@ -334,7 +336,7 @@ class PredictionService:
             raise ConfigError("perception", "depth: no depth image received yet; publish ~/depth/image with "
                                             "~/depth/camera_info and the camera pose (~/depth/camera_pose or the "
                                             "depth.camera_pose parameter)")
-        observation, stamp_ns, frame_id = latest
+        observation, stamp_ns, frame_id, number = latest
         if frame_id != item.frame_id:
             raise ConfigError("perception", f"depth: the camera pose is in {frame_id!r} but the scene in "
                                             f"{item.frame_id!r}; give both in one frame")
@@ -344,9 +346,21 @@ class PredictionService:
                 self._counts["depth_images_stale"] += 1
             raise ConfigError("perception", f"depth: the newest depth image is {age:.3g} s from the scene's stamp, more "
                                             f"than depth.max_age_s = {config.depth_max_age_s:g} s")
+        # one posterior per view: the same image and scene predicted again (a parameter changed, ~/predict
+        # called) reuse it, as long as the chain would be the same (its samples, seed and settings)
+        key = (number, item.scene, config.request.model.samples, config.request.seed)
+        with self._cond:
+            cached = self._posterior if self._posterior is not None and self._posterior[0] == key else None
+        if cached is not None:
+            return cached[1]
         budget_s = config.request.budget_s
-        return depth.perceive_depth_for(item.scene, config.request.model.samples, (observation,), config.request.seed,
-                                        budget_s=None if budget_s is None else budget_s * depth.CHAIN_BUDGET_SHARE)
+        perceived = depth.perceive_depth_for(item.scene, config.request.model.samples, (observation,),
+                                             config.request.seed,
+                                             budget_s=None if budget_s is None else budget_s * depth.CHAIN_BUDGET_SHARE)
+        with self._cond:
+            self._posterior = (key, perceived)
+            self._counts["depth_posteriors"] += 1
+        return perceived
 
     def _predict(self, item: StampedScene, config: ServiceConfig, version: int) -> tuple[Answer | None, str | None]:
         start = time.perf_counter()

@@ -149,6 +149,7 @@ class ServiceStats:
     depth_images: int = 0  # depth images kept (the newest replaces the one before)
     depth_images_refused: int = 0  # unreadable, or no camera info or pose yet
     depth_images_stale: int = 0  # scenes refused because the newest image was too far from their stamp
+    depth_posteriors: int = 0  # depth chains run (a view predicted again reuses its posterior)
 
 
 class NoSceneError(RuntimeError):

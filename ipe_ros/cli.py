@@ -22,42 +22,32 @@ Bad input ends with exit status 2 and one line on stderr naming the problem.
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import json
 import math
 import re
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
-from .engine import (ALL_QUERIES, PRESETS, AdaptiveStop, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError,
-                     WorkerPool, load_scenes, parse_queries, predict, preset)
-from .progress import steps
-from .engine.config import (DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M,
-                            anytime_batch_size, default_workers)
-from .cli_ask import add_ask_parser, cmd_ask, contact_pair, verify_samples
-from .engine.examples import example_scene_path
+from .cli_ask import add_ask_parser, cmd_ask, contact_pair
+from .cli_predict import EXIT_BAD_INPUT, cmd_predict, format_table, run_predictions, sample_map
+from .engine import (ALL_QUERIES, PRESETS, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError, load_scenes,
+                     parse_queries, preset)
 from .engine.catalogue import capped_tower, scene_catalogue
-from .engine.fidelity import DEFAULT_CHECK, SelfCheck
+from .engine.config import (DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M,
+                            default_workers)
+from .engine.examples import example_scene_path
+from .engine.fidelity import DEFAULT_CHECK
 from .engine.generators import generate_tables, generate_towers, state_pair
+from .engine.inputs import as_spelled
 from .engine.perceptions import perception_names, perception_source
-from .engine.perturb import is_deterministic
-from .engine.inputs import as_spelled, spelled
-from .engine.request import build_request
-from .engine.query import QUERIES
-from .engine.sampler import check_request
-from .engine.scene_io import RefusedScene, write_scenes
+from .engine.scene_io import write_scenes
 from .engine.zoo import FAMILIES, scene_zoo
 
-EXIT_BAD_INPUT = 2
 #: ``analysis.experiments.EXPERIMENTS`` and ``analysis.human.SCALES`` by name (tests keep them equal):
 #: importing the analyses loads scipy.stats, ~1 s that every other command would pay at start.
 EXPERIMENT_NAMES = ("fall", "direction", "mass", "far", "bump", "samples", "features", "vision")
 HUMAN_SCALES = ("1-7", "unit", "degrees", "radians", "metres")
-#: End penetrations above this (of a body's smallest extent) are shown in the table.
-NOTABLE_PENETRATION = 0.01
 
 
 class _OneLineParser(argparse.ArgumentParser):
@@ -227,220 +217,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _number_or_dash(value, spec: str = ".3f", none: str = "-") -> str:
-    return none if value is None else format(value, spec)
-
-
-def format_table(predictions: list[Prediction]) -> str:
-    """A readable fixed-width table of predictions."""
-    header = (f"{'scene':<34} {'k':>4} {'P(fall)':>7} {'95% CI':>15} {'dir(deg)':>8} {'decisive':>8} "
-              f"{'far(m)':>7} {'fail':>4} {'wall(s)':>7}")
-    lines = [header, "-" * len(header)]
-    for p in predictions:
-        ci = "-" if p.fall_fraction_ci95 is None else f"[{p.fall_fraction_ci95[0]:.2f}, {p.fall_fraction_ci95[1]:.2f}]"
-        direction = None if p.direction_rad is None else math.degrees(p.direction_rad)
-        lines.append(f"{p.scene[:34]:<34} {p.samples:>4} {_number_or_dash(p.fall_fraction):>7} {ci:>15} "
-                     f"{_number_or_dash(direction, '.0f'):>8} {_number_or_dash(p.direction_decisiveness, '.2f'):>8} "
-                     f"{_number_or_dash(p.far_m, '.2f'):>7} {p.failed_samples:>4} {p.wall_s:>7.2f}")
-        if p.any_fall_probability is not None:
-            lo, hi = p.any_fall_probability_ci95
-            lines.append(f"{'':<34} P(anything falls): {p.any_fall_probability:.3f} [{lo:.2f}, {hi:.2f}]")
-        if p.fell_off_fraction_by_group is not None:
-            groups = ", ".join(f"{g}: {v:.2f}" for g, v in p.fell_off_fraction_by_group.items())
-            lines.append(f"{'':<34} fell off by group: {groups}; {p.bump_group} share: {_number_or_dash(p.bump_ratio, '.2f')}")
-        for name in p.request.get("queries", ()):
-            if name in QUERIES and p.samples:
-                lines.extend(f"{'':<34} {line}" for line in QUERIES[name].describe(p))
-        if p.failure_reasons:
-            lines.append(f"{'':<34} failures: {'; '.join(p.failure_reasons)}")
-        if p.fidelity is not None and p.fidelity != "verified" or p.refined_samples:
-            lines.append(f"{'':<34} fidelity: {describe_fidelity(p)}")
-        if (p.max_penetration_fraction or 0) > NOTABLE_PENETRATION or (p.max_energy_gain_j or 0) > 0:
-            lines.append(f"{'':<34} numerical health: a body ended {p.max_penetration_fraction:.1%} of its size inside "
-                         f"another; a rollout gained {p.max_energy_gain_j:.3g} J")
-    return "\n".join(lines)
-
-
-def describe_fidelity(p: Prediction) -> str:
-    """One line on what the self-check did (engine.fidelity)."""
-    text = {"verified": "verified against the reference physics",
-            "escalated": "the reference physics disagreed with the fast one: every sample rerun at the reference",
-            "contradicted": "the reference physics disagreed and the budget ran out before it could answer: "
-                            "do not act on this answer",
-            "unverified": "not checked against the reference physics",
-            "reference": "computed at the reference settings"}.get(p.fidelity or "", str(p.fidelity))
-    if p.refined_samples:
-        text += f"; {p.refined_samples} unhealthy rollout(s) rerun at the reference"
-    return text
-
-
-def prediction_json(prediction: Prediction) -> str:
-    return json.dumps(prediction.to_dict(), allow_nan=False, sort_keys=True)
-
-
-def _sample_map(scheduler: str | None, workers: int):
-    """Where samples run: a Dask cluster (``--scheduler`` or $IPE_DASK_SCHEDULER), worker processes
-    here, or (0 workers) this process. Returns the pool-like object (with ``map`` and ``close``) or None."""
-    from .engine.cluster import DaskMap, scheduler_address
-
-    address = scheduler_address(scheduler)
-    if address is not None:
-        try:
-            return DaskMap(address)
-        except ConfigError as exc:
-            raise ConfigError("--scheduler", exc.problem) from None
-    if workers < 0:
-        raise ConfigError("--workers", f"must be >= 0, got {workers}")
-    return WorkerPool(workers) if workers > 0 else None
-
-
-def _run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: int, workers: int, emit,
-                     stop: AdaptiveStop | None = None, budget_s: float | None = None, perceived=None,
-                     scheduler: str | None = None, check: SelfCheck = DEFAULT_CHECK) -> None:
-    pool = _sample_map(scheduler, min(workers, max(1, model.samples)) if workers > 0 else workers)
-    if stop is not None:
-        from .engine.cluster import DaskMap
-
-        parallel = pool.workers if isinstance(pool, DaskMap) else workers
-        stop = dataclasses.replace(stop, batch_size=anytime_batch_size(parallel))
-    try:
-        for scene in steps(scenes, "predict") if len(scenes) > 1 else scenes:
-            emit(predict(scene, model, sim, query, seed=seed, map_fn=pool.map if pool else None, stop=stop,
-                         budget_s=budget_s, perceived=perceived, check=check))
-    finally:
-        if pool is not None:
-            pool.close()
-
-
-def _perceive_depth(args, scenes, model):
-    """The depth posterior's k scenes for the one scene asked about (the detector's guess)."""
-    from .engine.vision import depth, depth_io
-
-    if len(scenes) != 1:
-        raise ConfigError("--depth", f"one depth image describes one scene, but {args.path} holds {len(scenes)}")
-    observation = depth_io.load_observation(args.depth, args.camera_info, args.camera_pose)
-    started = time.perf_counter()
-    perceived = depth.perceive_depth_for(scenes[0], model.samples, (observation,), args.seed, budget_s=None if
-                                         args.budget is None else args.budget * depth.CHAIN_BUDGET_SHARE)
-    if args.budget is not None:  # the samples get what the chain left of the budget
-        args.budget = max(args.budget - (time.perf_counter() - started), 1e-3)
-    if args.depth_rrd is not None:
-        from .viz.rerun_log import write_depth_rrd
-
-        write_depth_rrd(args.depth_rrd, scenes[0], perceived, (observation,))
-        print(f"wrote {args.depth_rrd}", file=sys.stderr)
-    return perceived
-
-
-def cmd_predict(args) -> int:
-    refused: list[RefusedScene] = []  # scenes of the file that cannot be answered: reported, the rest answered
-    scenes = load_scenes(args.path, towers=args.tower, on_refused=refused.append)
-    vision = None
-    if args.perception == "vision":
-        from .engine.vision import VisionSettings
-
-        changes = {}
-        if args.chain_samples is not None:
-            changes.update(chain_samples=args.chain_samples, burn_in=args.chain_samples // 5)
-        if args.vision_resolution is not None:
-            changes.update(resolution_px=args.vision_resolution)
-        try:
-            vision = VisionSettings(**changes)
-        except ConfigError as exc:
-            option = {"vision.chain_samples": "--chain-samples", "vision.burn_in": "--chain-samples",
-                      "vision.resolution_px": "--vision-resolution"}.get(exc.field, exc.field)
-            raise ConfigError(option, exc.problem) from None
-    elif args.chain_samples is not None or args.vision_resolution is not None or args.vision_rrd is not None:
-        raise ConfigError("--perception", "--chain-samples, --vision-resolution and --vision-rrd need --perception vision")
-    depth_inputs = (args.depth, args.camera_info, args.camera_pose, args.depth_rrd)
-    if args.perception == "depth" and None in depth_inputs[:3]:
-        raise ConfigError("--perception", "depth perception needs --depth IMAGE, --camera-info YAML and --camera-pose")
-    if args.perception != "depth" and any(v is not None for v in depth_inputs):
-        raise ConfigError("--perception", "--depth, --camera-info, --camera-pose and --depth-rrd need --perception depth")
-    # one request from the options (engine.request); its errors read as the options (main: as_spelled)
-    request = build_request(samples=args.samples, sigma_m=args.sigma, phi_m_s2=args.phi,
-                            force_direction_deg=args.force_direction, mu=args.mu, ground_truth=args.ground_truth,
-                            perception=args.perception, vision=vision, queries=args.query, contact=args.contact or (),
-                            preset_name=args.preset, horizon_s=args.horizon, until_rest=args.until_rest,
-                            seed=args.seed, ci_width=args.ci_width, deadline_s=args.deadline, budget_s=args.budget,
-                            self_check=not args.no_self_check,
-                            verify_samples=verify_samples(args, checked=not args.no_self_check, off="--no-self-check"))
-    model, sim, query, stop, check = request.model, request.settings, request.query, request.stop, request.check
-    if args.vision_rrd is not None and len(scenes) != 1:
-        raise ConfigError("--vision-rrd", f"records one scene, but {args.path} holds {len(scenes)}; choose one with --tower")
-    if args.png is not None and len(scenes) != 1:
-        raise ConfigError("--png", f"draws one scene, but {args.path} holds {len(scenes)}; choose one with --tower")
-    unread = {r.index for r in refused}  # a scene's position in the file counts the unreadable ones too
-    positions = {id(scene): i for scene, i in zip(scenes, (i for i in range(len(scenes) + len(unread))
-                                                           if i not in unread))}
-    answerable = []
-    for scene in scenes:  # refuse what cannot be answered before predicting anything
-        try:
-            check_request(scene, query, model=model, settings=sim, budget_s=args.budget)
-            answerable.append(scene)
-        except ConfigError as exc:
-            field = spelled(exc.field, "cli") + (f" ({scene.name})" if exc.field == "budget_s" else "")
-            refused.append(RefusedScene(positions[id(scene)], scene.name, ConfigError(field, exc.problem)))
-    if len(scenes) == 1 and not answerable and len(refused) == 1:  # one scene: its refusal is the command's error
-        raise refused[-1].error
-    scenes = answerable
-    for refusal in refused:  # at once, before the predictions' minutes
-        report = {"scene": refusal.name, "index": refusal.index, "error": str(refusal.error)}
-        print(json.dumps(report) if args.json else f"ipe: refused scene {refusal.index} "
-              f"({refusal.name or 'unnamed'}): {refusal.error}", file=sys.stdout if args.json else sys.stderr, flush=True)
-    if not scenes:
-        raise SceneError(args.path, f"none of its {len(refused)} scenes can be answered (each refusal is reported)")
-    perceived = None
-    if args.vision_rrd is not None:  # the chain the prediction would run, kept for the recording
-        from .engine.perceptions import perceive_vision
-
-        perceived = perceive_vision(scenes[0], model, args.seed)
-    if args.perception == "depth":
-        perceived = _perceive_depth(args, scenes, model)
-    collected: list[Prediction] = []
-    if args.json:
-        _run_predictions(scenes, model, sim, query, args.seed, args.workers,
-                         lambda p: (collected.append(p), print(prediction_json(p), flush=True)), stop, args.budget,
-                         perceived, args.scheduler, check)
-    else:
-        k = 1 if all(is_deterministic(s, model) for s in scenes) else args.samples
-        print(f"sigma = {model.sigma_m:g} m, phi = {','.join(f'{v:g}' for v in model.phi_m_s2)} m/s^2, mu = {args.mu}, "
-              f"k = {k}, preset = {sim.name}, seed = {args.seed}"
-              + (f", perception = vision ({vision.chain_samples} MH samples, {vision.resolution_px} px)"
-                 if vision is not None else "")
-              + (f", perception = {args.perception} (sigma unused)"
-                 if perception_source(args.perception).posterior and vision is None else ""))
-        _run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append, stop, args.budget,
-                         perceived, args.scheduler, check)
-        print(format_table(collected))
-        if vision is not None:
-            for p in collected:
-                v = p.request["perception"]
-                print(f"{p.scene}: vision chain acceptance {v['acceptance_rate']:.2f}, effective sample size "
-                      f"{v['effective_sample_size']:.0f} ({v['chain_samples']} samples, {v['burn_in']} burn-in)")
-        if args.perception == "depth":
-            for p in collected:
-                v = p.request["perception"]
-                print(f"{p.scene}: depth chain acceptance {v['acceptance_rate']:.2f}, effective sample size "
-                      f"{v['effective_sample_size']:.0f}; camera range offset "
-                      + ", ".join(f"{o['mean_m'] * 1000:+.1f} mm" for o in v["camera_offsets"])
-                      + "; posterior mean x, y (m) and SD x/y (mm), yaw (deg) per object: "
-                      + ", ".join(f"{n} {s['position_m'][0]:.4f},{s['position_m'][1]:.4f} "
-                                  f"{s['x_sd_m'] * 1000:.1f}/{s['y_sd_m'] * 1000:.1f}/"
-                                  f"{math.degrees(s['yaw_sd_rad']):.1f}" for n, s in v["objects"].items()))
-    if args.vision_rrd is not None:
-        from .viz.rerun_log import write_vision_rrd
-
-        write_vision_rrd(args.vision_rrd, scenes[0], perceived, vision)
-        print(f"wrote {args.vision_rrd}", file=sys.stderr)
-    if args.png is not None:
-        from .viz.figure import draw_prediction
-
-        draw_prediction(args.png, scenes[0], collected[0])
-        print(f"wrote {args.png}", file=sys.stderr)
-    return EXIT_BAD_INPUT if refused else 0  # the others answered; the status says not all could be
-
-
 def cmd_generate(args) -> int:
     if args.kind == "depth-example":
         from .engine.vision.depth_io import write_depth_example
@@ -489,7 +265,7 @@ def cmd_demo(_args) -> int:
     for title, model in (("Ground truth (sigma = phi = 0, one deterministic rollout):", ModelConfig(object_noise=False)),
                          (ipe_title, DEFAULT_MODEL)):
         rows: list[Prediction] = []
-        _run_predictions(scenes, model, preset(DEFAULT_PRESET), query, 0, workers, rows.append)
+        run_predictions(scenes, model, preset(DEFAULT_PRESET), query, 0, workers, rows.append)
         print(title)
         print(format_table(rows))
         p = rows[0]
@@ -528,7 +304,7 @@ def cmd_experiment(args) -> int:
                    preset=args.preset, resamples=args.resamples, grid_samples=args.grid_samples, human=human,
                    human_path=args.human, vision_resolution=args.vision_resolution)
     names = list(EXPERIMENTS) if args.name == "all" else [args.name]
-    pool = _sample_map(args.scheduler, args.workers)
+    pool = sample_map(args.scheduler, args.workers)
     map_fn = pool.map if pool else None
     store = None
     if args.resume is not None:

@@ -30,7 +30,7 @@ setup(
         "console_scripts": [
             "ipe = ipe_ros.cli:main",
             "ipe_node = ipe_ros.ros.node:main",
-            "ipe_lifecycle_node = ipe_ros.ros.node:lifecycle_main",
+            "ipe_lifecycle_node = ipe_ros.ros.lifecycle:lifecycle_main",
             "ipe_ros_demo = ipe_ros.ros.demo:main",
             "ipe_send_scene = ipe_ros.ros.send_scene:main",
         ],

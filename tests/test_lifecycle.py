@@ -14,7 +14,8 @@ from std_msgs.msg import String
 
 from ipe_ros.engine import load_scenes
 from ipe_ros.engine.scene_io import scene_to_json
-from ipe_ros.ros.node import LATCHED_QOS, IpeLifecycleNode
+from ipe_ros.ros.lifecycle import IpeLifecycleNode
+from ipe_ros.ros.node import LATCHED_QOS
 from tests.ros_harness import RosHarness, wait_until
 
 #: starts rclpy (a Context of its own, DDS on loopback)

@@ -19,14 +19,12 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException
-from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.node import Node
 from rclpy.service import Service as RclpyService
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
-from lifecycle_msgs.srv import ChangeState, GetAvailableTransitions
 from sensor_msgs.msg import CameraInfo, Image
 from visualization_msgs.msg import MarkerArray
 
@@ -66,10 +64,10 @@ DIAGNOSTICS_PERIOD_S = 1.0
 REFUSAL_LOG_LINES_PER_S = 5
 
 
-class _IpeInterface:
+class IpeInterface:
     """The node's topics, service and prediction service, shared by :class:`IpeNode` (starts
     answering at once) and :class:`IpeLifecycleNode` (configure starts the workers, activate starts
-    answering). Mixed into an rclpy ``Node``."""
+    answering; ros/lifecycle.py). Mixed into an rclpy ``Node``."""
 
     service: PredictionService | None = None
     questions: QuestionService | None = None
@@ -379,7 +377,7 @@ class _IpeInterface:
 
 
 
-class IpeNode(_IpeInterface, Node):
+class IpeNode(IpeInterface, Node):
     """Subscribes to scenes, predicts in worker processes, publishes answers: from construction on."""
 
     def __init__(self, node_name: str = "ipe", *, start_method: str = "forkserver", **node_kwargs: Any):
@@ -390,74 +388,6 @@ class IpeNode(_IpeInterface, Node):
 
     def destroy_node(self) -> None:
         self._close_services()  # the node's own teardown destroys every entity
-        super().destroy_node()
-
-
-class IpeLifecycleNode(_IpeInterface, LifecycleNode):
-    """The managed variant (``ipe_lifecycle_node``): unconfigured it only holds its parameters;
-    configure starts the worker processes and publishers, activate starts answering (subscriptions
-    and ``~/predict``), deactivate stops answering (workers stay warm), cleanup ends the workers."""
-
-    def __init__(self, node_name: str = "ipe", *, start_method: str = "forkserver", **node_kwargs: Any):
-        super().__init__(node_name, **node_kwargs)
-        self._start_method = start_method
-        self._declare()
-        self._guard_transitions()
-
-    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
-        try:
-            self._open(self._start_method)
-        except ConfigError as exc:
-            self.get_logger().error(f"configure failed: {exc}")
-            return TransitionCallbackReturn.FAILURE
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self._listen()
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self._unlisten()
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self._close("the node was cleaned up (lifecycle cleanup)")
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self._close("the node is shutting down (lifecycle shutdown)")
-        return TransitionCallbackReturn.SUCCESS
-
-    def _guard_transitions(self) -> None:
-        """rclpy (7.1) lets the state machine raise on a transition not allowed from the current state,
-        which ends the node without a reply. Wrap the ~/change_state service's callback (found
-        through the public ``services`` and ``Service.callback``) so that such a request is refused
-        instead (success false), the state kept; ~/get_available_transitions says what is allowed."""
-        by_name = {service.srv_name.rpartition("/")[2]: service for service in self.services}
-        change, available = by_name.get("change_state"), by_name.get("get_available_transitions")
-        if change is None or available is None:  # the communication interface is off: nothing to guard
-            return
-        serve_change, list_transitions = change.callback, available.callback
-
-        def guarded_change_state(request: ChangeState.Request, response: ChangeState.Response):
-            transitions = list_transitions(GetAvailableTransitions.Request(),
-                                           GetAvailableTransitions.Response()).available_transitions
-            allowed = {t.transition.id: t.transition.label for t in transitions}
-            label = request.transition.label  # asked by label (as rclpy reads it) or else by id
-            asked = label or request.transition.id
-            if asked not in (set(allowed.values()) if label else allowed):
-                state = transitions[0].start_state.label if transitions else "finalized"
-                self.get_logger().warning(
-                    f"transition {asked} refused: not allowed from state '{state}' (allowed: "
-                    + (", ".join(f"{label} ({tid})" for tid, label in sorted(allowed.items())) or "none") + ")")
-                response.success = False
-                return response
-            return serve_change(request, response)
-
-        change.callback = guarded_change_state
-
-    def destroy_node(self) -> None:
-        self._close_services()
         super().destroy_node()
 
 
@@ -486,11 +416,6 @@ def main(args: list[str] | None = None, node_class: type = IpeNode) -> int:
             node.destroy_node()
         rclpy.try_shutdown()
     return code
-
-
-def lifecycle_main(args: list[str] | None = None) -> int:
-    """Entry point of ``ipe_lifecycle_node``: the managed node, waiting to be configured."""
-    return main(args, IpeLifecycleNode)
 
 
 if __name__ == "__main__":

@@ -86,7 +86,7 @@ def yaw_of(q) -> float:
 def coverage(n_scenes: int, settings: D.DepthSettings, seed: int = 0) -> dict:
     rng = np.random.default_rng(seed)
     covered, total, visible_sd, hidden_sd, walls = 0, 0, [], [], []
-    per_coordinate = np.zeros(3)
+    per_coordinate = np.zeros(4)
     for s in range(n_scenes):
         truth = tower(rng, int(rng.integers(2, 6)))
         camera = camera_for(truth, rng)
@@ -97,17 +97,17 @@ def coverage(n_scenes: int, settings: D.DepthSettings, seed: int = 0) -> dict:
         walls.append(time.perf_counter() - start)
         low, high = posterior.interval95()
         for i, (true_body, guessed) in enumerate(zip(truth.objects, guess.objects)):
-            true_values = [true_body.position_m[0], true_body.position_m[1],
+            true_values = [*true_body.position_m,
                            math.remainder(yaw_of(true_body.orientation_xyzw) - yaw_of(guessed.orientation_xyzw),
                                           2 * math.pi)]
-            hit = [(low[i, j] <= true_values[j] <= high[i, j]) for j in range(3)]
+            hit = [(low[i, j] <= true_values[j] <= high[i, j]) for j in range(4)]
             per_coordinate += hit
             covered += sum(hit)
-            total += 3
+            total += 4
             sd = float(np.mean(posterior.positions_m[:, i, :2].std(axis=0)))
             (hidden_sd if _hidden_fraction(truth, camera, i) > 0.8 else visible_sd).append(sd)
     return {"scenes": n_scenes, "coordinates": total, "coverage": covered / total,
-            "coverage_x_y_yaw": (per_coordinate / (total / 3)).tolist(),
+            "coverage_x_y_z_yaw": (per_coordinate / (total / 4)).tolist(),
             "visible_sd_m_median": float(np.median(visible_sd)) if visible_sd else None,
             "hidden_sd_m_median": float(np.median(hidden_sd)) if hidden_sd else None,
             "hidden_blocks": len(hidden_sd), "chain_s_median": float(np.median(walls))}
@@ -181,8 +181,8 @@ def main() -> int:
     c, t = report["calibration"], report["tower"]
     lines = [f"# Depth perception ({report['date']})", "", "`.venv/bin/python benchmarks/depth.py`", "",
              f"- 95% intervals cover the truth in {c['coverage']:.1%} of {c['coordinates']} coordinates over "
-             f"{c['scenes']} synthetic scenes (x {c['coverage_x_y_yaw'][0]:.1%}, y {c['coverage_x_y_yaw'][1]:.1%}, "
-             f"yaw {c['coverage_x_y_yaw'][2]:.1%}; goal 90-98%)",
+             f"{c['scenes']} synthetic scenes (x {c['coverage_x_y_z_yaw'][0]:.1%}, y {c['coverage_x_y_z_yaw'][1]:.1%}, "
+             f"z {c['coverage_x_y_z_yaw'][2]:.1%}, yaw {c['coverage_x_y_z_yaw'][3]:.1%}; goal 90-98%)",
              f"- posterior SD, median: blocks in view {c['visible_sd_m_median'] * 1000:.2f} mm"
              + ("" if c["hidden_sd_m_median"] is None else
                 f", hidden blocks ({c['hidden_blocks']}) {c['hidden_sd_m_median'] * 1000:.1f} mm"),

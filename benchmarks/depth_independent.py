@@ -13,7 +13,8 @@ can disagree with the code it measures:
   noise (2-pixel blur, 1 mm), a bias of +0.5 mm and +0.1% of the range, 1 mm quantisation (16UC1),
   70% dropout at depth edges (> 3 cm between neighbours) and 2% of pixels missing;
 - **scenes**: towers of 2-6 boxes, in half of them a published static board (0.1-0.4 m high) in
-  front hiding part or all of the tower; the detector's guess 2 cm (x, y; SD) and 0.05 rad off.
+  front hiding part or all of the tower; the detector's guess 2 cm (x, y; SD), 5 mm (height) and
+  0.05 rad off.
 Objects are "visible" when >= 80% of their silhouette is the nearest surface, "hidden" when <= 20%.
 """
 
@@ -124,8 +125,9 @@ def one_scene(rng: np.random.Generator, chain_seed: int, settings: D.DepthSettin
     rays = pixel_rays(info["k"][0], info["k"][4], info["k"][2], info["k"][5], WIDTH, HEIGHT, orientation)
     clean, hit_by = cast(rays, eye, everything)
     observation = D.DepthObservation(camera_from_info(info, eye, orientation), sensor(clean, rng, without))
-    guess_boxes = [((c[0] + 0.02 * rng.standard_normal(), c[1] + 0.02 * rng.standard_normal(), c[2]),
-                    yaw + 0.05 * rng.standard_normal(), half) for c, yaw, half in boxes]
+    guess_boxes = [((c[0] + 0.02 * rng.standard_normal(), c[1] + 0.02 * rng.standard_normal(),
+                     c[2] + 0.005 * rng.standard_normal()), yaw + 0.05 * rng.standard_normal(), half)
+                   for c, yaw, half in boxes]
     start = time.perf_counter()
     posterior = D.run_depth_chain(scene_of(guess_boxes, board), (observation,), settings,
                                   np.random.default_rng(chain_seed))
@@ -133,12 +135,14 @@ def one_scene(rng: np.random.Generator, chain_seed: int, settings: D.DepthSettin
     low, high = posterior.interval95()
     rows = []
     for i, ((centre, yaw, _), (guessed, guessed_yaw, _)) in enumerate(zip(boxes, guess_boxes)):
-        truth = np.array([centre[0], centre[1], math.remainder(yaw - guessed_yaw, 2 * math.pi)])
+        truth = np.array([*centre, math.remainder(yaw - guessed_yaw, 2 * math.pi)])
         mean_xy = posterior.positions_m[:, i, :2].mean(axis=0)
         rows.append({"visible": visible_fraction(rays, eye, everything, hit_by, i),
-                     "covered": [bool(low[i, j] <= truth[j] <= high[i, j]) for j in range(3)],
+                     "covered": [bool(low[i, j] <= truth[j] <= high[i, j]) for j in range(4)],
                      "error_m": float(np.hypot(*(mean_xy - truth[:2]))),
                      "guess_error_m": float(np.hypot(guessed[0] - centre[0], guessed[1] - centre[1])),
+                     "height_error_m": float(abs(posterior.positions_m[:, i, 2].mean() - centre[2])),
+                     "guess_height_error_m": float(abs(guessed[2] - centre[2])),
                      "sd_m": float(posterior.positions_m[:, i, :2].std(axis=0).mean()), "wall_s": wall_s,
                      "boxes": len(boxes), "board": board is not None, "first": i == 0})
     return rows
@@ -150,9 +154,11 @@ def summary(rows: list[dict], scenes: int) -> dict:
             return None
         covered = np.array([r["covered"] for r in selected])
         return {"objects": len(selected), "coordinates": covered.size, "coverage": float(covered.mean()),
-                "coverage_x_y_yaw": covered.mean(axis=0).tolist(),
+                "coverage_x_y_z_yaw": covered.mean(axis=0).tolist(),
                 "error_mm_median": 1000 * float(np.median([r["error_m"] for r in selected])),
                 "guess_error_mm_median": 1000 * float(np.median([r["guess_error_m"] for r in selected])),
+                "height_error_mm_median": 1000 * float(np.median([r["height_error_m"] for r in selected])),
+                "guess_height_error_mm_median": 1000 * float(np.median([r["guess_height_error_m"] for r in selected])),
                 "sd_mm_median": 1000 * float(np.median([r["sd_m"] for r in selected]))}
 
     per_scene = [r["wall_s"] for r in rows if r["first"]]
@@ -191,15 +197,16 @@ def main() -> int:
                         *(f"--without {x}" for x in args.without)])
     lines = [f"# Depth perception on independent images ({result['date']}{', ' + args.label if args.label else ''})",
              "", f"`.venv/bin/python benchmarks/depth_independent.py {command}`", "",
-             "| objects | n | 95% coverage (x / y / yaw) | posterior mean error, median | guess error, median | "
-             "posterior SD, median |", "|---|---|---|---|---|---|"]
+             "| objects | n | 95% coverage (x / y / z / yaw) | posterior mean error, median | guess error, median | "
+             "posterior SD, median | height error: posterior / guess, median |", "|---|---|---|---|---|---|---|"]
     for name in ("visible", "partly_hidden", "hidden", "all"):
         g = s[name]
         if g is not None:
-            x, y, yaw = g["coverage_x_y_yaw"]
+            x, y, z, yaw = g["coverage_x_y_z_yaw"]
             lines.append(f"| {name.replace('_', ' ')} | {g['objects']} | {g['coverage']:.1%} ({x:.0%} / {y:.0%} / "
-                         f"{yaw:.0%}) | {g['error_mm_median']:.2f} mm | {g['guess_error_mm_median']:.1f} mm | "
-                         f"{g['sd_mm_median']:.2f} mm |")
+                         f"{z:.0%} / {yaw:.0%}) | {g['error_mm_median']:.2f} mm | {g['guess_error_mm_median']:.1f} mm | "
+                         f"{g['sd_mm_median']:.2f} mm | {g['height_error_mm_median']:.2f} / "
+                         f"{g['guess_height_error_mm_median']:.1f} mm |")
     lines += ["", f"Chain per scene, median {s['chain_s_median']:.1f} s (one process)."]
     (out / "depth_independent.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))

@@ -159,7 +159,7 @@ def test_independent_depth_benchmark_reports_coverage_for_objects_in_view_and_hi
     assert result.returncode == 0, result.stderr[-3000:]
     report = json.loads((tmp_path / "depth_independent.json").read_text())
     assert report["summary"]["scenes"] == 2 and 0 <= report["summary"]["all"]["coverage"] <= 1
-    assert all(0 <= o["visible"] <= 1 and len(o["covered"]) == 3 for o in report["objects"])
+    assert all(0 <= o["visible"] <= 1 and len(o["covered"]) == 4 for o in report["objects"])
     assert "--set updates_per_object=100 --without bias" in (tmp_path / "depth_independent.md").read_text()
 
 

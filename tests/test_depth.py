@@ -135,8 +135,8 @@ def test_the_cli_predicts_from_the_built_in_depth_example(tmp_path, capsys):
     for name, estimate in perception["objects"].items():
         errors.append(np.hypot(*np.subtract(estimate["position_m"][:2], truth[name].position_m[:2])))
         guess_errors.append(np.hypot(*np.subtract(guess[name].position_m[:2], truth[name].position_m[:2])))
-        assert np.allclose(np.sqrt(np.diag(estimate["covariance_x_y_yaw"])),
-                           [estimate["x_sd_m"], estimate["y_sd_m"], estimate["yaw_sd_rad"]])
+        assert np.allclose(np.sqrt(np.diag(estimate["covariance_x_y_z_yaw"])),
+                           [estimate["x_sd_m"], estimate["y_sd_m"], estimate["z_sd_m"], estimate["yaw_sd_rad"]])
     # the refined poses are nearer the truth than the guess (the camera is 5 m away: each object's
     # posterior SD is 2-12 mm, the guess 2-27 mm off; here 4.7 mm against 14 mm on average)
     assert np.mean(errors) < 0.5 * np.mean(guess_errors)

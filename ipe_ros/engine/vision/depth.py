@@ -2,9 +2,10 @@
 
 The likelihood is ``depth_model.DepthModel``'s. The prior is the detector's: each object's published
 pose, x and y with SD ``prior_sd_m`` and yaw with ``prior_yaw_sd_rad``. A block in plain view is
-pinned down by its pixels; one hidden behind another keeps the prior's spread. Metropolis-Hastings
-with single-object moves (x, y, yaw together) and an injected Generator; several cameras multiply
-their likelihoods.
+pinned down by its pixels; one hidden behind another keeps the prior's spread. Heights are
+estimated too (prior N(published, ``prior_height_sd_m``)), tilts taken as published.
+Metropolis-Hastings with single-object moves (x, y, height and yaw together, one scale per object
+tuned in burn-in) and an injected Generator; several cameras multiply their likelihoods.
 
 A real camera's range is biased by millimetres (a scale error, a calibration offset), which would
 move every object along the view and make the posterior confidently wrong: each camera's range
@@ -76,29 +77,35 @@ class DepthPosterior:
 
     @property
     def effective_sample_size(self) -> float:
-        values = np.concatenate([self.positions_m[:, :, :2].reshape(len(self.positions_m), -1), self.yaws_rad], axis=1)
-        return float(np.median([effective_sample_size(values[:, j]) for j in range(values.shape[1])]))
+        """The median ESS over every object's x, y and yaw (and z, when heights are estimated)."""
+        values = self.pose_values()
+        values = values.reshape(len(values), -1)
+        varying = [j for j in range(values.shape[1]) if np.ptp(values[:, j]) > 0]
+        return float(np.median([effective_sample_size(values[:, j]) for j in varying or range(values.shape[1])]))
+
+    def pose_values(self) -> np.ndarray:
+        """(samples, objects, 4): each object's x, y, z (m) and yaw (rad, a turn from the published)."""
+        return np.concatenate([self.positions_m[:, :, :3], self.yaws_rad[:, :, None]], axis=2)
 
     def spread(self) -> dict[str, dict[str, float]]:
-        """Per object: posterior SD of x, y (metres) and yaw (radians)."""
-        sd_xy = self.positions_m[:, :, :2].std(axis=0)
-        sd_yaw = self.yaws_rad.std(axis=0)
-        return {n: {"x_sd_m": float(sx), "y_sd_m": float(sy), "yaw_sd_rad": float(syaw)}
-                for n, (sx, sy), syaw in zip(self.names, sd_xy, sd_yaw)}
+        """Per object: posterior SD of x, y, z (metres) and yaw (radians)."""
+        sd = self.pose_values().std(axis=0)
+        return {n: {"x_sd_m": float(s[0]), "y_sd_m": float(s[1]), "z_sd_m": float(s[2]), "yaw_sd_rad": float(s[3])}
+                for n, s in zip(self.names, sd)}
 
     def mean(self) -> tuple[np.ndarray, np.ndarray]:
         """(objects, 3) posterior mean positions and (objects,) mean turns from the published yaw."""
         return self.positions_m.mean(axis=0), self.yaws_rad.mean(axis=0)
 
     def covariance(self) -> np.ndarray:
-        """(objects, 3, 3) posterior covariance of each object's (x, y, yaw) in m and rad."""
-        values = np.concatenate([self.positions_m[:, :, :2], self.yaws_rad[:, :, None]], axis=2)
+        """(objects, 4, 4) posterior covariance of each object's (x, y, z, yaw) in m and rad."""
+        values = self.pose_values()
         centred = values - values.mean(axis=0)
         return np.einsum("sai,saj->aij", centred, centred) / max(1, len(values) - 1)
 
     def interval95(self) -> tuple[np.ndarray, np.ndarray]:
-        """(objects, 3) low and high ends of the central 95% intervals of x, y and yaw."""
-        values = np.concatenate([self.positions_m[:, :, :2], self.yaws_rad[:, :, None]], axis=2)
+        """(objects, 4) low and high ends of the central 95% intervals of x, y, z and yaw."""
+        values = self.pose_values()
         return np.quantile(values, 0.025, axis=0), np.quantile(values, 0.975, axis=0)
 
     def thinned(self, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -108,7 +115,8 @@ class DepthPosterior:
 
 def run_depth_chain(scene: Scene, observations: tuple[DepthObservation, ...], settings: DepthSettings,
                     rng: np.random.Generator, deadline_s: float | None = None) -> DepthPosterior:
-    """Metropolis-Hastings over the dynamic objects' (x, y, yaw), from the published scene.
+    """Metropolis-Hastings over the dynamic objects' (x, y, height, yaw) and each camera's range offset,
+    from the published scene.
 
     ``deadline_s`` (``time.monotonic()``): the chain is refused (ConfigError naming ``budget_s``) as
     soon as its first scans show it cannot finish by then, and stopped if it runs past it."""
@@ -118,7 +126,8 @@ def run_depth_chain(scene: Scene, observations: tuple[DepthObservation, ...], se
     started = time.monotonic()
     mesh = scene_mesh(scene)
     dynamic = len(scene.dynamic_objects)
-    prior_centre = mesh.positions_m[:dynamic, :2].copy()
+    prior_centre = mesh.positions_m[:dynamic, :3].copy()
+    heights = settings.prior_height_sd_m > 0  # estimated, or taken as published
     positions = mesh.positions_m.copy()
     yaws = np.zeros(len(positions))
     model = DepthModel(scene, mesh, observations, settings)
@@ -128,9 +137,10 @@ def run_depth_chain(scene: Scene, observations: tuple[DepthObservation, ...], se
                                       f"{time.monotonic() - started:.3g} s, all the budget leaves the depth chain; "
                                       "raise the budget, bin or crop the image, or send fewer objects")
 
-    def log_prior(b: int, xy: np.ndarray, yaw: float) -> float:
-        return (-0.5 * float(np.sum((xy - prior_centre[b]) ** 2)) / settings.prior_sd_m ** 2
-                - 0.5 * yaw * yaw / settings.prior_yaw_sd_rad ** 2)
+    def log_prior(b: int, xyz: np.ndarray, yaw: float) -> float:
+        prior = (-0.5 * float(np.sum((xyz[:2] - prior_centre[b, :2]) ** 2)) / settings.prior_sd_m ** 2
+                 - 0.5 * yaw * yaw / settings.prior_yaw_sd_rad ** 2)
+        return prior - 0.5 * (xyz[2] - prior_centre[b, 2]) ** 2 / settings.prior_height_sd_m ** 2 if heights else prior
 
     # per object, a proposal scale tuned during burn-in towards TARGET_ACCEPTANCE (a block in plain
     # view is pinned to a fraction of a millimetre, a hidden one wanders over its prior), then frozen
@@ -166,9 +176,11 @@ def run_depth_chain(scene: Scene, observations: tuple[DepthObservation, ...], se
         b = int(rng.integers(0, dynamic))
         moved = positions[b].copy()
         moved[:2] += scale[b] * settings.proposal_sd_m * rng.standard_normal(2)
+        if heights:
+            moved[2] += scale[b] * settings.proposal_height_sd_m * rng.standard_normal()
         yaw = yaws[b] + scale[b] * settings.proposal_yaw_sd_rad * rng.standard_normal()
         candidate = model.propose(b, moved, yaw)
-        ratio = candidate - current + log_prior(b, moved[:2], yaw) - log_prior(b, positions[b, :2], yaws[b])
+        ratio = candidate - current + log_prior(b, moved, yaw) - log_prior(b, positions[b], yaws[b])
         accepted = bool(np.log(rng.random()) < ratio)
         if accepted:
             model.accept()
@@ -246,9 +258,9 @@ class DepthPerceivedScenes:
                 "objects": self.objects(), "camera_offsets": self.posterior.camera_offsets()}
 
     def objects(self) -> dict[str, dict[str, Any]]:
-        """Per dynamic object: the refined pose (posterior mean; height and tilt as published), how many
-        pixels read show it there (0: the image says nothing of it, its pose is the detector's prior),
-        the posterior covariance of (x, y, yaw) and the SDs on its diagonal."""
+        """Per dynamic object: the refined pose (posterior mean; the tilt as published), how many pixels
+        read show it there (0: the image says nothing of it, its pose is the detector's prior), the
+        posterior covariance of (x, y, z, yaw) and the SDs on its diagonal."""
         covariance = self.posterior.covariance()
         refined = {b.name: b for b in self.refined.dynamic_objects}
         out = {}
@@ -257,8 +269,9 @@ class DepthPerceivedScenes:
             body = refined[name]
             out[name] = {"position_m": list(body.position_m), "orientation_xyzw": list(body.orientation_xyzw),
                          "pixels": None if seen is None else int(seen),
-                         "covariance_x_y_yaw": c.tolist(), "x_sd_m": float(math.sqrt(c[0, 0])),
-                         "y_sd_m": float(math.sqrt(c[1, 1])), "yaw_sd_rad": float(math.sqrt(c[2, 2]))}
+                         "covariance_x_y_z_yaw": c.tolist(), "x_sd_m": float(math.sqrt(c[0, 0])),
+                         "y_sd_m": float(math.sqrt(c[1, 1])), "z_sd_m": float(math.sqrt(c[2, 2])),
+                         "yaw_sd_rad": float(math.sqrt(c[3, 3]))}
         return out
 
 

@@ -59,7 +59,7 @@ class DepthSettings:
     max_range_m: float = 10.0
     reach_m: float = 0.1
     pixel_stride: int = 2
-    temperature: float = 3.0
+    temperature: float = 4.0
     prior_sd_m: float = 0.03
     prior_yaw_sd_rad: float = 0.2
     proposal_sd_m: float = 0.005
@@ -68,14 +68,18 @@ class DepthSettings:
     burn_in_fraction: float = 0.2
     offset_prior_sd_m: float = 0.01
     offset_proposal_sd_m: float = 0.0005
+    prior_height_sd_m: float = 0.01
+    proposal_height_sd_m: float = 0.002
 
     def __post_init__(self) -> None:
         for name in ("sd_m", "max_range_m", "reach_m", "temperature", "prior_sd_m", "prior_yaw_sd_rad",
-                     "proposal_sd_m", "proposal_yaw_sd_rad", "offset_proposal_sd_m"):
+                     "proposal_sd_m", "proposal_yaw_sd_rad", "offset_proposal_sd_m", "proposal_height_sd_m"):
             positive(getattr(self, name), f"depth.{name}")
-        if not isinstance(self.offset_prior_sd_m, (int, float)) or not 0 <= self.offset_prior_sd_m <= 0.1:
-            raise ConfigError("depth.offset_prior_sd_m", f"must be in [0, 0.1] (0: the camera's range taken as "
-                                                         f"exact), got {self.offset_prior_sd_m!r}")
+        for name, meaning in (("offset_prior_sd_m", "the camera's range taken as exact"),
+                              ("prior_height_sd_m", "the detector's heights taken as exact")):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 0.1:
+                raise ConfigError(f"depth.{name}", f"must be in [0, 0.1] (0: {meaning}), got {value!r}")
         if not isinstance(self.sd_per_m2, (int, float)) or not 0 <= self.sd_per_m2 < 1:
             raise ConfigError("depth.sd_per_m2", f"must be in [0, 1), got {self.sd_per_m2!r}")
         if not isinstance(self.outlier, (int, float)) or not 0 < self.outlier < 1:

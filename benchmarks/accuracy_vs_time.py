@@ -33,7 +33,7 @@ import numpy as np  # noqa: E402
 from ipe_ros.engine import PRESETS, ModelConfig, QuerySpec, SimSettings, WorkerPool, predict  # noqa: E402
 from ipe_ros.engine.fidelity import DEFAULT_CHECK  # noqa: E402
 from ipe_ros.engine.generators import generate_towers  # noqa: E402
-from ipe_ros.engine.scene_io import scenes_from_tower_csv  # noqa: E402
+from ipe_ros.engine.scene_files import scenes_from_tower_csv  # noqa: E402
 from ipe_ros.analysis.paper_data import EXP1_DATASET, authors_outcomes, shared_data_dir  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]

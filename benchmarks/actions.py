@@ -46,7 +46,7 @@ I = (0.0, 0.0, 0.0, 1.0)
 
 def stable_tower() -> Scene:
     from ipe_ros.analysis.paper_data import EXP1_DATASET, authors_outcomes, shared_data_dir
-    from ipe_ros.engine.scene_io import scenes_from_tower_csv
+    from ipe_ros.engine.scene_files import scenes_from_tower_csv
 
     csv = shared_data_dir() / "willitfall.csv"
     if csv.exists():

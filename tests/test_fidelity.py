@@ -21,7 +21,7 @@ from ipe_ros.engine.errors import ConfigError
 from ipe_ros.engine.fidelity import (DEFAULT_CHECK, VERDICTS, SelfCheck, confirmation_samples, coverage_samples,
                                      look_ahead_split, reference_settings)
 from ipe_ros.engine.rollout import SampleOutcome, run_sample
-from ipe_ros.engine.scene_io import load_scenes
+from ipe_ros.engine.scene_files import load_scenes
 from ipe_ros.engine.examples import example_scene_path
 from ipe_ros.engine.zoo import zoo_scene, zoo_sigma_m
 

@@ -22,7 +22,8 @@ from ipe_ros.cli import main
 from ipe_ros.engine import ConfigError, ModelConfig, QuerySpec, SceneError, predict, preset
 from ipe_ros.engine.estimate import mean_interval
 from ipe_ros.engine.examples import example_scene_path
-from ipe_ros.engine.scene_io import scene_to_dict, scenes_from_json, scenes_from_tower_csv
+from ipe_ros.engine.scene_files import scenes_from_tower_csv
+from ipe_ros.engine.scene_io import scene_to_dict, scenes_from_json
 from ipe_ros.engine.request import Request
 from ipe_ros.service import PredictionService, ServiceConfig, StampedScene
 from tests.helpers import block, floor_scene

@@ -32,7 +32,7 @@ from ..engine.estimate import sample_fall_fraction, sample_far_m
 from ..engine.generators import generate_towers
 from ..engine.perturb import is_deterministic
 from ..engine.outcome import SampleOutcome
-from ..engine.scene_io import scenes_from_tower_csv
+from ..engine.scene_files import scenes_from_tower_csv
 from ..engine.store import ResumableMap
 from .reporting import steps
 

@@ -11,7 +11,8 @@ from .pool import WorkerPool
 from .sampler import AdaptiveStop, predict, predict_many
 from .scene import Body, Box, Floor, Scene, Table, validate_scene
 from .shapes import BoxShape, Capsule, Compound, CompoundPart, ConvexHull, Cylinder, Sphere
-from .scene_io import load_scenes, scene_from_dict, scene_to_dict, scenes_from_json, scenes_from_tower_csv
+from .scene_files import load_scenes, scenes_from_tower_csv
+from .scene_io import scene_from_dict, scene_to_dict, scenes_from_json
 
 __all__ = [
     "ALL_QUERIES", "PRESETS", "AdaptiveStop", "Body", "Box", "BoxShape", "Capsule", "Compound", "CompoundPart",

@@ -126,7 +126,7 @@ def _perceive_depth(args, scenes, model):
     if args.budget is not None:  # the samples get what the chain left of the budget
         args.budget = max(args.budget - (time.perf_counter() - started), 1e-3)
     if args.depth_rrd is not None:
-        from .viz.rerun_log import write_depth_rrd
+        from .viz.perception_log import write_depth_rrd
 
         write_depth_rrd(args.depth_rrd, scenes[0], perceived, (observation,))
         print(f"wrote {args.depth_rrd}", file=sys.stderr)
@@ -230,7 +230,7 @@ def cmd_predict(args) -> int:
                                   f"{s['x_sd_m'] * 1000:.1f}/{s['y_sd_m'] * 1000:.1f}/"
                                   f"{math.degrees(s['yaw_sd_rad']):.1f}" for n, s in v["objects"].items()))
     if args.vision_rrd is not None:
-        from .viz.rerun_log import write_vision_rrd
+        from .viz.perception_log import write_vision_rrd
 
         write_vision_rrd(args.vision_rrd, scenes[0], perceived, vision)
         print(f"wrote {args.vision_rrd}", file=sys.stderr)

@@ -147,7 +147,7 @@ def test_the_cli_predicts_from_the_built_in_depth_example(tmp_path, capsys):
 
 def test_a_depth_recording_holds_the_measured_and_rendered_depth_and_the_posterior_cloud(tmp_path):
     from tests.test_rerun_log import RrdReader
-    from ipe_ros.viz.rerun_log import write_depth_rrd
+    from ipe_ros.viz.perception_log import write_depth_rrd
 
     scene = floor(cube("a", 0, 0, 0.05), cube("b", 0.01, 0, 0.15))
     camera = look_at((1.0, -0.7, 0.6), (0, 0, 0.1))

@@ -49,7 +49,7 @@ FELL_RGB = (0.9, 0.1, 0.1)
 APPLICATION_ID = "ipe_ros"
 
 
-def _part(name: str) -> str:
+def entity_part(name: str) -> str:
     return rr.escape_entity_path_part(name)
 
 
@@ -78,7 +78,7 @@ def shape_archetype(body: Body, rgb, *, about_centre_of_mass: bool = False):
 def _log_bodies(rec: rr.RecordingStream, base: str, bodies, colors) -> None:
     """Each body at ``base/<name>``: its shape under a transform to its pose (static)."""
     for body, rgb in zip(bodies, colors):
-        path = f"{base}/{_part(body.name)}"
+        path = f"{base}/{entity_part(body.name)}"
         rec.log(path, rr.Transform3D(translation=body.position_m, quaternion=rr.Quaternion(xyzw=body.orientation_xyzw)),
                 static=True)
         rec.log(path, shape_archetype(body, rgb), static=True)
@@ -123,7 +123,7 @@ def _log_trajectory(rec: rr.RecordingStream, base: str, bodies, trajectory: list
     for b, body in enumerate(bodies):
         if body is None:
             continue
-        path = f"{base}/{_part(body.name)}"
+        path = f"{base}/{entity_part(body.name)}"
         fell = fallen is not None and bool(fallen[b])
         # trajectories hold centres of mass: the shape is drawn about it, moved by a transform
         rec.log(path, shape_archetype(body, FELL_RGB if fell else group_rgb(body.group),
@@ -163,7 +163,7 @@ def _log_contacts(rec: rr.RecordingStream, base: str, rollout) -> None:
         where = events["where_m"].get(key)
         if t is None or where is None:
             continue
-        rec.send_columns(f"{base}/contacts/{_part(key)}", indexes=[rr.TimeColumn("sim_time", duration=[t])],
+        rec.send_columns(f"{base}/contacts/{entity_part(key)}", indexes=[rr.TimeColumn("sim_time", duration=[t])],
                          columns=rr.Points3D.columns(positions=[where], radii=[0.01], colors=[to_rgb8(CONTACT_RGB)],
                                                      labels=[f"{key} touch"]))
 
@@ -289,7 +289,7 @@ def _query_columns(prediction: Prediction, ok: list) -> dict[str, list[float]]:
             continue
         for outcome in ok:
             for key, value in QUERIES[name].sample_columns(outcome).items():
-                columns.setdefault(_part(key), []).append(value)
+                columns.setdefault(entity_part(key), []).append(value)
     return columns
 
 
@@ -377,7 +377,7 @@ def write_question_rrd(path: str | Path, scene: Scene, answers, *, stamp_ns: int
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     def entity(label: str) -> str:
-        return "/".join(_part(part) for part in label.split("/"))
+        return "/".join(entity_part(part) for part in label.split("/"))
 
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{scene.name}@{stamp_ns}/{uuid.uuid4().hex[:12]}")
     rec.save(str(path), default_blueprint=question_blueprint([entity(label) for label in answers.recorded]))
@@ -399,100 +399,3 @@ def write_question_rrd(path: str | Path, scene: Scene, answers, *, stamp_ns: int
     finally:
         rec.disconnect()
     return logged
-
-
-def write_vision_rrd(path: str | Path, scene: Scene, perceived, settings) -> None:
-    """The vision system's view of a scene (``engine.vision``): the observed images (rendered and
-    blurred) under ``vision/views``, the posterior sample cloud of every body's position under
-    ``world/vision/<object>`` beside the scene, and the chain's acceptance (running mean) and
-    log-likelihood over the ``mh_sample`` timeline under ``vision/``."""
-    from ..engine.vision import blur
-    from ..engine.vision.camera import cameras_for
-    from ..engine.vision.render import render_views, scene_mesh
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    cameras = cameras_for(scene, settings)
-    observed = render_views(scene_mesh(scene), cameras)
-    blurred = blur(observed, settings.blur_at_resolution_px)
-    blueprint = rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Spatial3DView(name="posterior samples of each body's position", origin="world"),
-            rrb.Vertical(rrb.Grid(*[rrb.Spatial2DView(name=f"view {i}", origin=f"vision/views/{i}")
-                                    for i in range(len(cameras))], name="the evidence (blurred views)"),
-                         rrb.TimeSeriesView(name="acceptance and log-likelihood", origin="vision/chain")),
-            column_shares=[3, 2]),
-        rrb.TimePanel(timeline="mh_sample"), collapse_panels=True)
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{scene.name}@vision/{uuid.uuid4().hex[:12]}")
-    rec.save(str(path), default_blueprint=blueprint)
-    try:
-        log_scene(rec, scene)
-        for i, (image, soft) in enumerate(zip(observed, blurred)):
-            rec.log(f"vision/views/{i}", rr.Image(np.clip(soft, 0, 255).astype(np.uint8)), static=True)
-            rec.log(f"vision/rendered/{i}", rr.Image(np.clip(image, 0, 255).astype(np.uint8)), static=True)
-        chain = perceived.chain
-        cloud = chain.positions_m[:: max(1, len(chain.positions_m) // 1000)]
-        for b, body in enumerate(scene.dynamic_objects):
-            rec.log(f"world/vision/{_part(body.name)}", rr.Points3D(cloud[:, b], radii=0.004,
-                                                                   colors=[to_rgb8(group_rgb(body.group))]), static=True)
-        if chain.accepted is not None:
-            trace = np.cumsum(chain.accepted) / np.arange(1, len(chain.accepted) + 1)
-            index = [rr.TimeColumn("mh_sample", sequence=np.arange(len(trace)))]
-            rec.send_columns("vision/chain/acceptance", indexes=index, columns=rr.Scalars.columns(scalars=trace))
-        kept = np.arange(perceived.burn_in, perceived.burn_in + len(chain.log_likelihood))
-        rec.send_columns("vision/chain/log_likelihood", indexes=[rr.TimeColumn("mh_sample", sequence=kept)],
-                         columns=rr.Scalars.columns(scalars=chain.log_likelihood))
-        rec.flush()
-    finally:
-        rec.disconnect()
-
-
-def write_depth_rrd(path: str | Path, scene: Scene, perceived, observations) -> None:
-    """Depth perception's view of a scene (``engine.vision.depth``): each measured depth image under
-    ``depth/<i>/measured``, the depth rendered from the posterior mean under ``depth/<i>/rendered``
-    and their difference under ``depth/<i>/residual``, the camera's pose and intrinsics in the
-    world (``world/cameras/<i>``), and the posterior sample cloud of every object's position under
-    ``world/depth/<object>`` beside the scene as published."""
-    from ..engine.vision.depth import render_depth_m
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    posterior = perceived.posterior
-    mean_positions = posterior.positions_m.mean(axis=0)
-    mean_yaws = posterior.yaws_rad.mean(axis=0)
-    blueprint = rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Spatial3DView(name="posterior samples of each object's position", origin="world"),
-            rrb.Grid(*[rrb.Spatial2DView(name=f"camera {i}: {part}", origin=f"depth/{i}/{part}")
-                       for i in range(len(observations)) for part in ("measured", "rendered", "residual")],
-                     name="depth: measured, rendered at the posterior mean, residual"),
-            column_shares=[3, 2]), collapse_panels=True)
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{scene.name}@depth/{uuid.uuid4().hex[:12]}")
-    rec.save(str(path), default_blueprint=blueprint)
-    try:
-        log_scene(rec, scene)
-        for i, observation in enumerate(observations):
-            camera = observation.camera
-            measured = np.where(np.isfinite(observation.depth_m), observation.depth_m, 0.0).astype(np.float32)
-            rendered = render_depth_m(scene, camera, mean_positions, mean_yaws).astype(np.float32)
-            residual = np.where((measured > 0) & np.isfinite(rendered), measured - rendered, 0.0).astype(np.float32)
-            rec.log(f"depth/{i}/measured", rr.DepthImage(measured, meter=1.0), static=True)
-            rec.log(f"depth/{i}/rendered", rr.DepthImage(np.nan_to_num(rendered, nan=0.0, posinf=0.0), meter=1.0),
-                    static=True)
-            rec.log(f"depth/{i}/residual", rr.Image(np.clip(128 + residual * 2000, 0, 255).astype(np.uint8)),
-                    static=True)
-            rec.log(f"world/cameras/{i}", rr.Transform3D(translation=camera.position_m,
-                                                         quaternion=rr.Quaternion(xyzw=camera.orientation_xyzw)),
-                    static=True)
-            # rerun's image space puts pixel corners at integers (its default principal point is
-            # resolution / 2); CameraInfo puts pixel centres there
-            rec.log(f"world/cameras/{i}", rr.Pinhole(focal_length=[camera.fx, camera.fy],
-                                                     principal_point=[camera.cx + 0.5, camera.cy + 0.5],
-                                                     width=camera.width_px, height=camera.height_px), static=True)
-        cloud = posterior.positions_m[:: max(1, len(posterior.positions_m) // 1000)]
-        for b, body in enumerate(scene.dynamic_objects):
-            rec.log(f"world/depth/{_part(body.name)}", rr.Points3D(cloud[:, b], radii=0.004,
-                                                                  colors=[to_rgb8(group_rgb(body.group))]), static=True)
-        rec.flush()
-    finally:
-        rec.disconnect()

@@ -362,6 +362,9 @@ def test_many_contact_pairs_are_watched_per_contact_and_priced_up_front():
     model, settings = ModelConfig(sigma_m=0.01, samples=2), preset("default")
     bare, watched = rollout_cost(scene, model, settings), rollout_cost(scene, model, settings, len(pairs))
     assert watched.seconds == pytest.approx(bare.seconds + len(pairs) * SECONDS_PER_WATCHED_PAIR)
+    pushed = ModelConfig(sigma_m=0.01, phi_m_s2=(1.0, 2.0), samples=2)  # two runs a sample, each watching every pair
+    assert rollout_cost(scene, pushed, settings, len(pairs)).seconds == pytest.approx(
+        rollout_cost(scene, pushed, settings).seconds + 2 * len(pairs) * SECONDS_PER_WATCHED_PAIR)
     budget = (bare.seconds + watched.seconds) / 2
     check_request(scene, QuerySpec(queries=frozenset({"fall"})), model=model, settings=settings, budget_s=budget)
     with pytest.raises(ConfigError, match=r"^budget_s: one rollout of this scene takes up to \d+ steps x 60 bodies "

@@ -123,8 +123,8 @@ def rollout_cost(scene: Scene, model: ModelConfig, settings: SimSettings, pairs:
     settle_ticks = math.ceil(settings.settling.duration_s / dt)
     steps = (ticks + settle_ticks * (settings.settling.substeps - 1)) * len(model.phi_m_s2)
     bodies = len(scene.dynamic_objects)
-    seconds = (steps * bodies * SECONDS_PER_BODY_STEP + pairs * SECONDS_PER_WATCHED_PAIR) * len(model.phi_m_s2) \
-        if pairs else steps * bodies * SECONDS_PER_BODY_STEP
+    # steps counts every phi value's run already; each run watches the pairs once more
+    seconds = steps * bodies * SECONDS_PER_BODY_STEP + pairs * SECONDS_PER_WATCHED_PAIR * len(model.phi_m_s2)
     return RolloutCost(steps=steps, bodies=bodies, seconds=seconds, pairs=pairs)
 
 

@@ -127,27 +127,15 @@ class IpeInterface:
         # Inputs and the service in separate groups: a service call waiting for its answer never
         # holds up scene intake or the 1 Hz health report (with a multi-threaded executor).
         inputs = MutuallyExclusiveCallbackGroup()
-        for reliability in SCENE_QOS[str(self._values["scene_reliability"])]:
-            qos = QoSProfile(depth=INPUT_QOS.depth, history=HistoryPolicy.KEEP_LAST, reliability=reliability)
-            # Our reliable subscription does not match best-effort publishers: expected, not worth a warning.
-            quiet = SubscriptionEventCallbacks(incompatible_qos=lambda _event: None)
-            self._inputs.append(self.create_subscription(MarkerArray, "~/scene", self._once(self._on_markers), qos,
-                                                         callback_group=inputs, event_callbacks=quiet))
-            self._inputs.append(self.create_subscription(String, "~/scene_json", self._once(self._on_scene_json),
-                                                         qos, callback_group=inputs, event_callbacks=quiet))
+        self._subscribe_per_reliability("scene_reliability", INPUT_QOS.depth, inputs, (
+            (MarkerArray, "~/scene", self._on_markers), (String, "~/scene_json", self._on_scene_json)))
         self._inputs.append(self.create_subscription(String, "~/ask", self._on_ask, ASK_QOS, callback_group=inputs))
         # camera streams: a best-effort subscription turns a reliable publisher's images best effort,
         # and Fast DDS loses most best-effort messages over ~500 KB (a 640 x 480 depth image) in their
         # fragments: with "both" a reliable publisher's images come whole through the reliable one
-        for reliability in SCENE_QOS[str(self._values["depth.reliability"])]:
-            qos = QoSProfile(depth=qos_profile_sensor_data.depth, history=HistoryPolicy.KEEP_LAST,
-                             reliability=reliability)
-            quiet = SubscriptionEventCallbacks(incompatible_qos=lambda _event: None)
-            for msg_type, topic, handler in ((Image, "~/depth/image", self._on_depth_image),
-                                             (CameraInfo, "~/depth/camera_info", self._on_camera_info),
-                                             (PoseStamped, "~/depth/camera_pose", self._on_camera_pose)):
-                self._inputs.append(self.create_subscription(msg_type, topic, self._once(handler), qos,
-                                                             callback_group=inputs, event_callbacks=quiet))
+        self._subscribe_per_reliability("depth.reliability", qos_profile_sensor_data.depth, inputs, (
+            (Image, "~/depth/image", self._on_depth_image), (CameraInfo, "~/depth/camera_info", self._on_camera_info),
+            (PoseStamped, "~/depth/camera_pose", self._on_camera_pose)))
         self._inputs.append(self.create_service(Trigger, "~/predict", self._on_predict,
                                                 callback_group=MutuallyExclusiveCallbackGroup()))
         config = self.service.config
@@ -156,6 +144,17 @@ class IpeInterface:
             f"phi = {config.request.model.phi_m_s2[0]:g} m/s^2, preset {config.request.settings.name}, "
             f"{self._values['workers']} worker(s); scenes on {self.resolve_topic_name('~/scene')} and "
             f"{self.resolve_topic_name('~/scene_json')}")
+
+    def _subscribe_per_reliability(self, setting: str, depth: int, group, streams) -> None:
+        """One subscription per reliability the parameter ``setting`` names (``SCENE_QOS``), for each
+        (message type, topic, handler) of ``streams``; a message both deliver is handled once."""
+        for reliability in SCENE_QOS[str(self._values[setting])]:
+            qos = QoSProfile(depth=depth, history=HistoryPolicy.KEEP_LAST, reliability=reliability)
+            # a reliable subscription does not match best-effort publishers: expected, not worth a warning
+            quiet = SubscriptionEventCallbacks(incompatible_qos=lambda _event: None)
+            for msg_type, topic, handler in streams:
+                self._inputs.append(self.create_subscription(msg_type, topic, self._once(handler), qos,
+                                                             callback_group=group, event_callbacks=quiet))
 
     def _unlisten(self) -> None:
         for entity in self._inputs:

@@ -88,8 +88,8 @@ class DepthPosterior:
         return np.concatenate([self.positions_m[:, :, :3], self.yaws_rad[:, :, None]], axis=2)
 
     def spread(self) -> dict[str, dict[str, float]]:
-        """Per object: posterior SD of x, y, z (metres) and yaw (radians)."""
-        sd = self.pose_values().std(axis=0)
+        """Per object: posterior SD of x, y, z (metres) and yaw (radians): the covariance's diagonal."""
+        sd = np.sqrt(np.diagonal(self.covariance(), axis1=1, axis2=2))
         return {n: {"x_sd_m": float(s[0]), "y_sd_m": float(s[1]), "z_sd_m": float(s[2]), "yaw_sd_rad": float(s[3])}
                 for n, s in zip(self.names, sd)}
 
@@ -261,7 +261,7 @@ class DepthPerceivedScenes:
         """Per dynamic object: the refined pose (posterior mean; the tilt as published), how many pixels
         read show it there (0: the image says nothing of it, its pose is the detector's prior), the
         posterior covariance of (x, y, z, yaw) and the SDs on its diagonal."""
-        covariance = self.posterior.covariance()
+        covariance, spread = self.posterior.covariance(), self.posterior.spread()
         refined = {b.name: b for b in self.refined.dynamic_objects}
         out = {}
         pixels = self.posterior.pixels if self.posterior.pixels is not None else [None] * len(covariance)
@@ -269,9 +269,7 @@ class DepthPerceivedScenes:
             body = refined[name]
             out[name] = {"position_m": list(body.position_m), "orientation_xyzw": list(body.orientation_xyzw),
                          "pixels": None if seen is None else int(seen),
-                         "covariance_x_y_z_yaw": c.tolist(), "x_sd_m": float(math.sqrt(c[0, 0])),
-                         "y_sd_m": float(math.sqrt(c[1, 1])), "z_sd_m": float(math.sqrt(c[2, 2])),
-                         "yaw_sd_rad": float(math.sqrt(c[3, 3]))}
+                         "covariance_x_y_z_yaw": c.tolist(), **spread[name]}
         return out
 
 

@@ -75,9 +75,9 @@ def load_depth_image(path: str | Path) -> np.ndarray:
         else:
             raise ConfigError("--depth", f"{path.name}: give a .npy (metres, or integer millimetres) or a 16-bit .png "
                                          "(millimetres)")
+    except ConfigError:
+        raise
     except (OSError, ValueError) as exc:
-        if isinstance(exc, ConfigError):
-            raise
         raise ConfigError("--depth", f"cannot read {path}: {clip(str(exc), 300)}") from None
     if np.issubdtype(data.dtype, np.integer):
         return data.astype(float) / 1000.0

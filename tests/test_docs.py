@@ -99,6 +99,8 @@ def test_the_node_reference_documents_every_parameter_and_topic():
     assert not undocumented, f"docs/node.md lacks parameters {undocumented}"
     source = (REPO / "ipe_ros" / "ros" / "node.py").read_text()
     topics = set(re.findall(r'create_(?:publisher|subscription|service)\(\s*\w+,\s*"([^"]+)"', source))
+    # inputs subscribed once per reliability are listed as (message type, topic, handler)
+    topics |= set(re.findall(r'\(\w+, "([^"]+)", self\._on_\w+\)', source))
     assert {"~/scene", "~/fall_probability", "~/fall_fraction", "/diagnostics", "~/predict"} <= topics
     assert not [t for t in topics if f"| `{t}` |" not in reference], topics
 

@@ -6,8 +6,9 @@
 Each case is one prediction (paper towers from ../shared/data/battaglia2013/stability_all_towers.csv,
 or generated towers without it; generated Exp. 5 tables): presets default, fine and paper, the fall,
 any_fall, direction/far and bump queries, phi > 0, mu, the ground truth and recorded trajectories;
-and robot questions (remove, support, place, push; each with and without the self-check) on a
-generated tower. A prediction's digest hashes every sample's initial and final poses, simulated time
+self-checked and anytime predictions (their reports hashed), several predictions in one map
+(``predict_many``), and robot questions (remove, support, place, push, sequential decisions; each
+with and without the self-check) on a generated tower. A prediction's digest hashes every sample's initial and final poses, simulated time
 and trajectory, and the answer's fields; a question's hashes its JSON answer without wall-clock times
 and the trajectories of its recorded samples; and predictions from vision and from depth perception. Equal digests mean bit-identical answers. Exit status 1
 when any digest differs.
@@ -25,7 +26,8 @@ import sys
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 from ipe_ros.analysis.paper_data import shared_data_dir  # noqa: E402
-from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes, predict, preset  # noqa: E402
+from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes, predict, predict_many, preset  # noqa: E402
+from ipe_ros.engine.sampler import AdaptiveStop  # noqa: E402
 from ipe_ros.engine.fidelity import DEFAULT_CHECK  # noqa: E402
 from ipe_ros.engine.generators import generate_tables, generate_towers  # noqa: E402
 
@@ -86,6 +88,8 @@ QUESTIONS = {
     "place": {"question": "place", "object": {"name": "new", "shape": {"type": "box", "extents_m": [0.1, 0.1, 0.1]},
                                               "mass_kg": 1.0, "friction": 0.5, "restitution": 0.0},
               "at": [[0.0, 0.0, 30.0], [0.3, 0.1, 0.0]], "samples": 8, "what_falls": True},
+    "remove_sequential": {"question": "remove", "safe_below": 0.3, "samples": 24, "sequential": True},
+    "support_sequential": {"question": "support", "samples": 24, "sequential": True},
     "push": {"question": "push", "object": "block2", "velocity_m_s": [0.4, 0.0], "direction_sigma_deg": 5.0,
              "speed_sigma": 0.1, "samples": 8},
 }
@@ -126,6 +130,18 @@ def question_cases():
     yield "question/remove_apart", dataclasses.replace(tower, objects=tower.objects + (lone,)), apart, model
 
 
+def checked_cases():
+    """Predictions that check themselves (verification, coverage, confirmation, escalation) and
+    anytime ones (batches until a target interval width), checked too: the report is hashed."""
+    path = shared_data_dir() / "stability_all_towers.csv"
+    towers = load_scenes(path)[:4] if path.exists() else generate_towers(2013, 4)
+    model = ModelConfig(sigma_m=0.04, samples=12)
+    for tower in towers:
+        yield f"checked/{tower.name}", tower, model, None
+        yield (f"anytime/{tower.name}", tower, dataclasses.replace(model, samples=24),
+               AdaptiveStop(ci_width=0.45, batch_size=4))
+
+
 def perception_cases():
     """Predictions from vision and from depth perception (small chains): their posterior scenes and
     the perception's own report (acceptance, ESS, spreads) are hashed with the answer."""
@@ -156,6 +172,18 @@ def main() -> int:
                     record_every=record_every, check=None)
         result[key] = digest(p)
         print(key, result[key], flush=True)
+    for key, scene, model, stop in checked_cases():
+        p = predict(scene, model, preset("default"), QuerySpec(queries=frozenset({"fall", "any_fall"})), seed=7,
+                    stop=stop, check=DEFAULT_CHECK)
+        h = hashlib.sha256(digest(p).encode())
+        h.update(json.dumps([p.self_check, p.stopped_by, p.samples_requested], sort_keys=True, default=list).encode())
+        result[key] = h.hexdigest()[:16]
+        print(key, result[key], flush=True)
+    # several predictions' samples in one map (what ipe experiment runs)
+    batch = [(scene, model, i) for i, (key, scene, model, *_) in enumerate(cases()) if key.startswith("default/")][:8]
+    for i, p in enumerate(predict_many(batch, preset("default"), QuerySpec(queries=frozenset({"fall", "direction"})))):
+        result[f"many/{i}"] = digest(p)
+        print(f"many/{i}", result[f"many/{i}"], flush=True)
     for key, scene, model, perceived in perception_cases():
         p = predict(scene, model, preset("default"), QuerySpec(queries=frozenset({"fall", "any_fall"})), seed=7,
                     perceived=perceived, check=None)

@@ -4,7 +4,7 @@
 
 Every sample of every scene is simulated once at the fast settings (`default`, unchecked) and once at
 the reference (`paper`'s physics, ending at rest by the strict reading), same seeds, 2 workers; then
-``sampler.self_check`` is replayed for each policy with a ``run`` that hands back the stored
+``self_check.checking`` is replayed for each policy with a ``run`` that hands back the stored
 reference outcomes, so each policy's verdicts, reference samples and answers are exactly what
 ``predict`` would have produced, at no new simulation. Per policy and scene set: reference samples
 per prediction, the estimated speed-up against `paper` (fast time + reference samples x their
@@ -33,7 +33,10 @@ from ipe_ros.engine.config import DEFAULT_QUERIES  # noqa: E402
 from ipe_ros.engine.fidelity import (DEFAULT_CHECK, SelfCheck, coverage_ahead, look_ahead_split,  # noqa: E402
                                      reference_settings, verification_count)
 from ipe_ros.engine.generators import generate_towers  # noqa: E402
-from ipe_ros.engine.sampler import _run_tasks, at_settings, make_tasks, self_check  # noqa: E402
+from ipe_ros.engine.montecarlo import MonteCarlo, drive  # noqa: E402
+from ipe_ros.engine.rollout import lost, run_sample  # noqa: E402
+from ipe_ros.engine.sampler import make_tasks  # noqa: E402
+from ipe_ros.engine.self_check import checking  # noqa: E402
 from ipe_ros.engine.zoo import FAMILIES, scene_zoo, zoo_sigma_m  # noqa: E402
 
 POLICIES = {
@@ -108,13 +111,14 @@ def _simulate(args, fast_settings, reference, query) -> list:
     stored = []
     earlier = pickle.loads(args.reference_from.read_bytes()) if args.reference_from else None
     with WorkerPool(2) as pool:
+        run_tasks = MonteCarlo(run_sample, lost, pool.map).run
         scenes = _scenes(args)
         group, scene, model = scenes[0]  # workers started and imports done before any timing
-        _run_tasks(make_tasks(scene, dataclasses.replace(model, samples=2), fast_settings, query, seed=0), pool.map)
+        run_tasks(make_tasks(scene, dataclasses.replace(model, samples=2), fast_settings, query, seed=0))
         for n, (group, scene, model) in enumerate(scenes):
             tasks = make_tasks(scene, model, fast_settings, query, seed=11)
             start = time.perf_counter()
-            fast = _run_tasks(tasks, pool.map)
+            fast = run_tasks(tasks)
             fast_s = time.perf_counter() - start
             if earlier is not None:
                 if earlier[n][1] != scene.name or len(earlier[n][4]) != len(tasks):
@@ -122,7 +126,7 @@ def _simulate(args, fast_settings, reference, query) -> list:
                 ref, ref_s = earlier[n][4], earlier[n][6]
             else:
                 start = time.perf_counter()
-                ref = _run_tasks([at_settings(t, reference) for t in tasks], pool.map)
+                ref = run_tasks([t.at(reference) for t in tasks])
                 ref_s = time.perf_counter() - start
             stored.append((group, scene.name, tasks, fast, ref, fast_s, ref_s))
             print(f"{group} {scene.name}: fast {fast_s:.2f} s, reference {ref_s:.2f} s", flush=True)
@@ -147,7 +151,7 @@ def _replay(stored: list, reference) -> list[dict]:
             if split < len(tasks):
                 verified.update({i: ref[i] for i in coverage_ahead(fast[:split], verified, check, len(tasks))})
             used.extend(verified)
-            answer, report = self_check(tasks, list(fast), verified, check, reference, run, "default")
+            answer, report = drive(checking(tasks, list(fast), verified, check, reference, "default"), run)
             dp = np.abs(_object_p(answer) - _object_p(ref))
             g = per_group.setdefault(group, {"scenes": 0, "reference_samples": 0, "fast_s": 0.0, "ref_s": 0.0,
                                              "paper_s": 0.0, "escalated": 0, "dp": [], "worst": 0.0})

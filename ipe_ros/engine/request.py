@@ -18,7 +18,8 @@ from .errors import ConfigError, shown
 from .perceptions import perception_source
 from .fidelity import DEFAULT_CHECK, SelfCheck
 from .query import QuerySpec
-from .sampler import AdaptiveStop, check_budget, check_ci_width
+from .montecarlo import check_budget
+from .sampler import AdaptiveStop, check_ci_width
 
 
 @dataclass(frozen=True)

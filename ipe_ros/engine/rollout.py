@@ -41,6 +41,14 @@ class SampleTask:
     #: share it; None: no budget.
     deadline_unix_s: float | None = None
 
+    def at(self, settings: SimSettings) -> "SampleTask":
+        """The same sample (same seed, hence the same noisy scene) at other settings; a recorded
+        sample keeps its frames the same simulated time apart."""
+        every = self.record_every
+        if every:
+            every = max(1, round(every * self.settings.time_step_s / settings.time_step_s))
+        return dataclasses.replace(self, settings=settings, record_every=every)
+
 
 def read_rollout(scene: Scene, spec: QuerySpec, initial: np.ndarray, end: simulation.RolloutEnd) -> dict:
     """Every asked query's values for one rollout (built-in ones under their field names)."""
@@ -171,6 +179,11 @@ def simulate_pushes(scene: Scene, model: ModelConfig, settings: SimSettings, spe
                                               deadline_unix_s=deadline_unix_s, watches=watches,
                                               end_when_watched=end_when_watched)))
     return ends
+
+
+def lost(task: SampleTask, reason: str) -> SampleOutcome:
+    """A sample whose worker was lost twice (``MonteCarlo``'s ``on_lost``)."""
+    return failed(task, f"WorkerLost: {reason}", worker_lost=True)
 
 
 def failed(task: SampleTask, error: str, *, budget_stopped: bool = False, worker_lost: bool = False,

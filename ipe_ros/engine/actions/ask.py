@@ -4,11 +4,8 @@ until decided (``decide``)."""
 from __future__ import annotations
 
 import dataclasses
-import time
 from dataclasses import dataclass
 from typing import Callable
-
-import numpy as np
 
 from ..config import ModelConfig, SimSettings
 from ..query import QuerySpec
@@ -17,7 +14,9 @@ from ..errors import ConfigError
 from ..perturb import is_deterministic, position_sigmas_m
 from ..fidelity import FidelityReport, SelfCheck, is_reference, reference_settings
 from ..fidelity import check_request as check_fidelity_request
-from ..sampler import MapFn, check_budget, check_some_sample_finished, checking, rollout_cost, self_check_many
+from ..montecarlo import MapFn, MonteCarlo, Plan, check_budget, check_some_sample_finished, child_seeds, mapped, together
+from ..sampler import rollout_cost
+from ..self_check import checking
 from ..scene import Scene, Table, validate_scene
 from ..query.contact import check_pairs
 from ..outcome import SampleOutcome
@@ -25,7 +24,7 @@ from .answers import Alone, Answers, aggregate_variant, aggregate_given, draws_n
 from .checks import check_action
 from .geometry import affected_regions, groups, reached
 from .kinds import DEFAULT_SAFE_BELOW, Action, Place, Push, Remove, label_of
-from .variants import VariantTask, failed, run_variants, skipped
+from .variants import VariantTask, lost, run_variants, skipped
 
 
 def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSettings, seed: int = 0,
@@ -54,33 +53,42 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     _check_question(scene, actions, model, budget_s, check, fell_off, contact)
     plan = _plan(scene, actions, model, settings, budget_s, fall_threshold_fraction, directions, fell_off, contact,
                  what_falls)
-    k, simulated_actions, as_is = plan.samples, plan.simulated_actions, plan.as_is
-    deadline = None if budget_s is None else time.time() + budget_s
-    seeds = np.random.SeedSequence(seed).spawn(k)
+    loop = MonteCarlo(run_variants, lost, map_fn, budget_s)  # the budget counts from here
+    seeds = child_seeds(seed, plan.samples)
 
     def tasks(indices, variants: list[int]) -> list[VariantTask]:
         return [VariantTask(scene=scene, model=model, settings=settings, query=plan.query, index=i, seed=seeds[i],
-                            actions=tuple(simulated_actions[j] for j in variants), deadline_unix_s=deadline,
+                            actions=tuple(plan.simulated_actions[j] for j in variants),
                             regions=tuple(plan.regions[j] for j in variants),
                             record_every=record_every if i < record_samples else 0)
                 for i in indices]
 
-    start = time.perf_counter()
-    decisions: dict[str, tuple[str | None, str, int]] = {}
-    if sequential is None or plan.deterministic or as_is is None:
-        per_sample = _run(tasks(range(k), list(range(len(simulated_actions)))), map_fn)
-    else:
-        per_sample, decisions = _run_sequentially(tasks, simulated_actions, as_is, k, sequential, map_fn, scene,
-                                                  on_progress)
-    check_some_sample_finished([r for s in per_sample for r in s], budget_s)
-    reports = _check_variants(per_sample, simulated_actions, tasks, settings, check, map_fn)
-    if sequential is not None and any(r.verdict == "escalated" or r.refined_samples for r in reports.values()):
-        decisions = _decide_again(decisions, per_sample, simulated_actions, as_is, sequential)
+    per_sample, decisions, reports = loop.drive(_question(plan, tasks, settings, sequential, check, budget_s, scene,
+                                                          on_progress))
     answers, scene_alone = _answers(scene, actions, plan, per_sample, decisions, reports)
     stopped = "budget" if any(r.budget_stopped for s in per_sample for r in s) else "samples"
     recorded = {label_of(a): [(i, s[j]) for i, s in enumerate(per_sample) if s[j].ok and ran(s[j]).trajectory is not None]
-                for j, a in enumerate(simulated_actions)} if record_every else {}
-    return Answers(scene.name, tuple(answers), k, time.perf_counter() - start, stopped, recorded, scene_alone)
+                for j, a in enumerate(plan.simulated_actions)} if record_every else {}
+    return Answers(scene.name, tuple(answers), plan.samples, loop.elapsed_s(), stopped, recorded, scene_alone)
+
+
+def _question(plan: "_Plan", tasks, settings: SimSettings, sequential: Sequential | None, check: SelfCheck | None,
+              budget_s: float | None, scene: Scene, on_progress) -> Plan:
+    """A question's samples, then every simulated variant's self-check, as a plan (``montecarlo``):
+    returns per sample every variant's outcome, the sequential decisions (label -> (decision, why it
+    stopped, samples drawn)) and each variant's check report."""
+    k, simulated_actions, as_is = plan.samples, plan.simulated_actions, plan.as_is
+    decisions: dict[str, tuple[str | None, str, int]] = {}
+    if sequential is None or plan.deterministic or as_is is None:
+        per_sample = yield tasks(range(k), list(range(len(simulated_actions))))
+    else:
+        per_sample, decisions = yield from _sequentially(tasks, simulated_actions, as_is, k, sequential, scene,
+                                                         on_progress)
+    check_some_sample_finished([r for s in per_sample for r in s], budget_s)
+    reports = yield from _check_variants(per_sample, simulated_actions, tasks, settings, check)
+    if sequential is not None and any(r.verdict == "escalated" or r.refined_samples for r in reports.values()):
+        decisions = _decide_again(decisions, per_sample, simulated_actions, as_is, sequential)
+    return per_sample, decisions, reports
 
 
 def _check_question(scene: Scene, actions: list[Action], model: ModelConfig, budget_s: float | None,
@@ -202,27 +210,32 @@ def _check_contact(scene: Scene, actions: list[Action], pairs) -> None:
 
 
 def _check_variants(per_sample: list[list[SampleOutcome]], actions: list[Action], tasks, settings: SimSettings,
-                    check: SelfCheck | None, map_fn: MapFn | None) -> dict[int, FidelityReport]:
-    """Each simulated variant's self-check (``sampler.checking``), all driven together; the checked
-    outcomes replace the fast ones in ``per_sample``. Variant index -> what its check did."""
+                    check: SelfCheck | None) -> Plan:
+    """Each simulated variant's self-check (``self_check.checking``), all in the same rounds; the
+    checked outcomes replace the fast ones in ``per_sample``. Returns variant index -> what its
+    check did."""
     if is_reference(settings):
         return {j: FidelityReport("reference", settings=(("samples", settings.name),)) for j in range(len(actions))}
     if check is None or not check.enabled or not per_sample:
         return {j: FidelityReport("unverified", settings=(("samples", settings.name),)) for j in range(len(actions))}
+        yield  # a plan even when it needs nothing run
     reference = reference_settings(settings.horizon_s)
     samples = range(len(per_sample))
-    checks = [checking(tasks(samples, [j]), [row[j] for row in per_sample], {}, check, reference, settings.name)
+    checks = [mapped(checking(tasks(samples, [j]), [row[j] for row in per_sample], {}, check, reference,
+                              settings.name), _only)
               for j in range(len(actions))]
-
-    def rerun(batch: list[VariantTask]) -> list[SampleOutcome]:
-        return [only for (only,) in _run(batch, map_fn)]
-
     reports = {}
-    for j, (outcomes, report) in enumerate(self_check_many(checks, reference, rerun)):
+    for j, (outcomes, report) in enumerate((yield from together(checks))):
         for row, outcome in zip(per_sample, outcomes):
             row[j] = outcome
         reports[j] = report
     return reports
+
+
+def _only(outcomes: list[SampleOutcome]) -> SampleOutcome:
+    """The outcome of a variant task that ran one variant (as the self-check's reruns do)."""
+    (only,) = outcomes
+    return only
 
 
 def _fidelity(report: FidelityReport | None) -> dict:
@@ -263,23 +276,14 @@ def _without(outcome: SampleOutcome, kept: list[int]) -> SampleOutcome:
     return dataclasses.replace(outcome, rollouts=(rollout,), names=tuple(outcome.names[j] for j in kept))
 
 
-def _run(tasks: list[VariantTask], map_fn: MapFn | None) -> list[list[SampleOutcome]]:
-    if map_fn is None:
-        return [run_variants(t) for t in tasks]
-    lost = lambda task, reason: [  # noqa: E731
-        failed(task, f"WorkerLost: {reason}", worker_lost=True) for _ in task.actions]
-    return map_fn(run_variants, tasks, on_lost=lost)
-
-
 #: variants per task in a sequential batch: enough to amortise the shared draw and separation each
 #: task redoes, few enough that standing samples' variants spread over the workers
 VARIANTS_PER_TASK = 4
 
 
-def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequential: Sequential, map_fn: MapFn | None,
-                      scene: Scene, on_progress: Callable[[dict], None] | None = None
-                      ) -> tuple[list[list[SampleOutcome]], dict[str, tuple[str | None, str, int]]]:
-    """Batches of samples until the rule has decided every variant or k samples are drawn. Each
+def _sequentially(tasks, actions: list[Action], as_is: int, k: int, sequential: Sequential, scene: Scene,
+                  on_progress: Callable[[dict], None] | None = None) -> Plan:
+    """A plan (``montecarlo``): batches of samples until the rule has decided every variant or k samples are drawn. Each
     batch runs the scene as it is first, then the undecided variants of the samples in which it
     stood, a few variants per task (the work of one sample varies too much - one rollout or all of
     them - to spread by samples); a variant not run in a sample is a skipped result. Returns every
@@ -307,7 +311,7 @@ def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequenti
     alone: dict[int, SampleOutcome] = {}  # this batch's scene-as-it-is samples
     while len(per_sample) < k and active:
         if not alone:  # not run ahead beside the last batch's variants
-            alone = as_is_of(batch, _run(tasks(batch, [as_is]), map_fn))
+            alone = as_is_of(batch, (yield tasks(batch, [as_is])))
         rows = {}
         for i in batch:
             rows[i] = [skipped(i, "the scene fell as it is" if j in active else "decided") for j in range(len(actions))]
@@ -318,7 +322,7 @@ def _run_sequentially(tasks, actions: list[Action], as_is: int, k: int, sequenti
         jobs = [(i, chunk) for i in standing for chunk in chunks]
         work = [task for i, chunk in jobs for task in tasks([i], chunk)]
         ahead = batch_from(batch.stop) if len(active) > 1 else range(0)
-        results = _run(work + tasks(ahead, [as_is]), map_fn) if work or ahead else []
+        results = (yield work + tasks(ahead, [as_is])) if work or ahead else []
         for (i, chunk), variant_results in zip(jobs, results[:len(jobs)]):
             for j, result in zip(chunk, variant_results):
                 rows[i][j] = result

@@ -16,7 +16,8 @@ from .. import limits
 from ..config import ModelConfig, SimSettings
 from ..decide import Ranking, SafeBelow, Sequential, Supports
 from ..errors import ConfigError
-from ..sampler import check_budget, rollout_cost
+from ..montecarlo import check_budget
+from ..sampler import rollout_cost
 from ..scene import Body, Scene, validate_body
 from .answers import Answers, VariantAnswer
 from .ask import ask

@@ -32,6 +32,11 @@ class VariantTask(SampleTask):
     regions: tuple[frozenset[str] | None, ...] | None = None
 
 
+def lost(task: VariantTask, reason: str) -> list[SampleOutcome]:
+    """Every variant of a sample whose worker was lost twice (``MonteCarlo``'s ``on_lost``)."""
+    return [failed(task, f"WorkerLost: {reason}", worker_lost=True) for _ in task.actions]
+
+
 def skipped(index: int, why: str) -> SampleOutcome:
     """A variant not run in sample ``index`` (``why``: "the scene fell as it is", "decided")."""
     return SampleOutcome(index=index, ok=False, error=f"skipped: {why}", push_direction_rad=float("nan"),

@@ -162,7 +162,7 @@ def answer(p) -> float:
 
 
 def _anything_fell(rollout) -> bool:
-    return bool(rollout.fallen.any()) if rollout.fallen is not None else bool(rollout.any_fell)
+    return bool(rollout.fallen.any()) if rollout.fallen is not None else bool(rollout.value("any_fell"))
 
 
 def compare(result: dict, reference: dict) -> dict:

@@ -90,6 +90,8 @@ QUESTIONS = {
               "at": [[0.0, 0.0, 30.0], [0.3, 0.1, 0.0]], "samples": 8, "what_falls": True},
     "remove_sequential": {"question": "remove", "safe_below": 0.3, "samples": 24, "sequential": True},
     "support_sequential": {"question": "support", "samples": 24, "sequential": True},
+    "remove_contact": {"question": "remove", "objects": ["block3"], "contact": ["block0:support", "block8:support", "block7:block6"],
+                       "samples": 8, "sequential": False},
     "push": {"question": "push", "object": "block2", "velocity_m_s": [0.4, 0.0], "direction_sigma_deg": 5.0,
              "speed_sigma": 0.1, "samples": 8},
 }

@@ -81,7 +81,7 @@ def measure(scenes, settings_name: str, samples: int, queries: frozenset[str]) -
         if not outcome.ok:
             raise RuntimeError(f"sample {task.index} failed: {outcome.error}")
         result = outcome.rollouts[0]
-        fell = bool(result.fallen.any()) if result.fallen is not None else bool(result.any_fell)
+        fell = bool(result.fallen.any()) if result.fallen is not None else bool(result.value("any_fell"))
         outcomes.append((fell, result.simulated_s, wall))
     total = time.perf_counter() - start_all
     spent = timed.parts

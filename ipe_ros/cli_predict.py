@@ -8,6 +8,7 @@ import json
 import math
 import sys
 import time
+from typing import Any
 
 from .cli_ask import verify_samples
 from .engine import AdaptiveStop, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError, WorkerPool, load_scenes, predict
@@ -17,6 +18,7 @@ from .engine.inputs import spelled
 from .engine.perceptions import perception_source
 from .engine.perturb import is_deterministic
 from .engine.query import QUERIES
+from .engine.query.parameters import QueryParameter, parse_cli_value, query_parameters
 from .engine.request import build_request
 from .engine.sampler import check_request
 from .engine.scene_io import RefusedScene
@@ -133,6 +135,17 @@ def _perceive_depth(args, scenes, model):
     return perceived
 
 
+def query_parameter_dest(row: QueryParameter) -> str:
+    """Where argparse keeps a query parameter's option (``query.parameters``)."""
+    return f"query_parameter__{row.query}__{row.field}"
+
+
+def given_query_parameters(args) -> dict[str, Any]:
+    """The queries' own parameters given on the command line, by name, as their types."""
+    return {row.name: parse_cli_value(row, getattr(args, query_parameter_dest(row)))
+            for row in query_parameters() if getattr(args, query_parameter_dest(row), None) is not None}
+
+
 def cmd_predict(args) -> int:
     refused: list[RefusedScene] = []  # scenes of the file that cannot be answered: reported, the rest answered
     scenes = load_scenes(args.path, towers=args.tower, on_refused=refused.append)
@@ -165,7 +178,8 @@ def cmd_predict(args) -> int:
                             preset_name=args.preset, horizon_s=args.horizon, until_rest=args.until_rest,
                             seed=args.seed, ci_width=args.ci_width, deadline_s=args.deadline, budget_s=args.budget,
                             self_check=not args.no_self_check,
-                            verify_samples=verify_samples(args, checked=not args.no_self_check, off="--no-self-check"))
+                            verify_samples=verify_samples(args, checked=not args.no_self_check, off="--no-self-check"),
+                            query_parameters=given_query_parameters(args))
     model, sim, query, stop, check = request.model, request.settings, request.query, request.stop, request.check
     if args.vision_rrd is not None and len(scenes) != 1:
         raise ConfigError("--vision-rrd", f"records one scene, but {args.path} holds {len(scenes)}; choose one with --tower")

@@ -149,7 +149,8 @@ def test_one_disagreement_that_more_samples_do_not_confirm_is_chaos_not_a_verdic
     def flip_first_verification(task, outcome: SampleOutcome):
         if task.settings.name == REFERENCE and task.index == 0 and len(spy.calls) == 1:
             rollout = outcome.rollouts[0]
-            flipped = dataclasses.replace(rollout, fallen=~rollout.fallen, any_fell=not rollout.any_fell)
+            flipped = dataclasses.replace(rollout, values={**rollout.values, "fallen": ~rollout.fallen,
+                                                            "any_fell": not rollout.value("any_fell")})
             return dataclasses.replace(outcome, rollouts=(flipped,))
         return outcome
 
@@ -436,8 +437,10 @@ def test_a_sequential_decision_is_read_again_from_the_checked_samples():
         if task.settings.name != "default" or task.actions != (take_top,):
             return outcomes
         # "is it safe?" asks only whether anything falls (its rollouts end at the first fall)
-        return [dataclasses.replace(o, rollouts=(dataclasses.replace(o.rollouts[-1], any_fell=True),))
-                if o.ok else o for o in outcomes]
+        return [dataclasses.replace(o, rollouts=(fell_anyway(o.rollouts[-1]),)) if o.ok else o for o in outcomes]
+
+    def fell_anyway(rollout):
+        return dataclasses.replace(rollout, values={**rollout.values, "any_fell": True})
 
     model = ModelConfig(sigma_m=0.005, samples=8)
     ask = dict(seed=0, safe_below=0.3)

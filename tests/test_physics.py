@@ -189,9 +189,9 @@ def test_what_falls_off_is_decided_once_below_the_table_top_and_agrees_with_wait
     ended_sooner = 0
     for quick, slow in zip(alone.outcomes, waiting.outcomes):
         for a, b in zip(quick.rollouts, slow.rollouts):
-            assert np.array_equal(a.fell_off, b.fell_off)
+            assert np.array_equal(a.value("fell_off"), b.value("fell_off"))
             ended_sooner += a.simulated_s < b.simulated_s
-    assert any(r.fell_off.any() for o in alone.outcomes for r in o.rollouts)
+    assert any(r.value("fell_off").any() for o in alone.outcomes for r in o.rollouts)
     assert ended_sooner >= len(alone.outcomes)  # most rollouts stop before everything is at rest
     assert alone.fell_off_fraction_by_group == waiting.fell_off_fraction_by_group
 
@@ -201,7 +201,7 @@ def test_will_anything_fall_stops_at_the_first_fall_and_agrees_with_the_full_rol
     model = ModelConfig(sigma_m=0.02, samples=12)
     yes_no = predict(scene, model, preset("default"), QuerySpec(queries=frozenset({"any_fall"})), seed=3)
     full = predict(scene, model, preset("default"), QuerySpec(queries=frozenset({"fall", "any_fall"})), seed=3)
-    fell_any = [o.rollouts[0].any_fell for o in yes_no.outcomes]
+    fell_any = [o.rollouts[0].value("any_fell") for o in yes_no.outcomes]
     assert fell_any == [bool(o.rollouts[0].fallen.any()) for o in full.outcomes]  # same noisy scenes, same answers
     assert 0 < sum(fell_any) < len(fell_any), "the scene should be uncertain under this seed"
     assert yes_no.any_fall_probability == full.any_fall_probability == sum(fell_any) / len(fell_any)

@@ -3,6 +3,7 @@ what is missing and answers as an uninterrupted run does."""
 
 from __future__ import annotations
 
+import base64
 import json
 import os
 import pickle
@@ -13,7 +14,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes, predict, preset
-from ipe_ros.engine.store import ResumableMap, result_key
+from ipe_ros.engine.store import STORE_VERSION, ResumableMap, result_key
 from tests.conftest import REPO
 
 TOWER = load_scenes("ipe_ros/data/example_tower.json")[0]
@@ -106,6 +107,10 @@ def _damage_cases(tmp_path):
     wrong_field["result"]["fields"]["index"] = "zero"
     bad_array = json.loads(json.dumps(valid))
     bad_array["result"]["fields"]["initial_positions_m"]["shape"] = [99, 3]
+    short_fallen = json.loads(json.dumps(valid))  # well-formed, but one body's outcome missing
+    values = short_fallen["result"]["fields"]["rollouts"]["tuple"][0]["fields"]["values"]["dict"]
+    fallen = next(value for name, value in values if name == "fallen")
+    fallen.update(shape=[fallen["shape"][0] - 1], data=base64.b64encode(b"\0" * (fallen["shape"][0] - 1)).decode())
     object_array = json.loads(json.dumps(valid))
     object_array["result"]["fields"]["initial_positions_m"]["array"] = "object"
     return {
@@ -113,13 +118,16 @@ def _damage_cases(tmp_path):
         "empty": (b"", "not a JSON document"),
         "truncated": (json.dumps(valid).encode()[:200], "not a JSON document"),
         "list": (b"[1, 2, 3]", "not an ipe_ros.result entry"),
-        "old version": (json.dumps(dict(valid, version=2)).encode(), "version 2, this engine writes 3"),
+        "old version": (json.dumps(dict(valid, version=STORE_VERSION - 1)).encode(),
+                        f"version {STORE_VERSION - 1}, this engine writes {STORE_VERSION}"),
         "another key": (json.dumps(dict(valid, key="0" * 64)).encode(), "stored under another result's name"),
         "another type": (json.dumps(other_type).encode(), "result: 'Popen' is not a result type"),
         "a field of the wrong type": (json.dumps(wrong_field).encode(),
                                       "result.index: a str where a <class 'int'> belongs"),
         "an array that does not fill its shape": (json.dumps(bad_array).encode(), "do not fill a float64 array"),
         "an object array": (json.dumps(object_array).encode(), "arrays of 'object' are not allowed"),
+        "a value for fewer bodies": (json.dumps(short_fallen).encode(),
+                                     "result.rollouts[0].values.fallen: shape (9,), the sample has 10 bodies so (10,)"),
         "deep nesting": (b"[" * 100_000 + b"]" * 100_000, "nested deeper than any result"),
     }
 
@@ -172,8 +180,8 @@ def test_every_stored_result_type_reads_back_equal():
     assert type(back) is type(outcome) and back.index == outcome.index and back.ok is outcome.ok
     np.testing.assert_array_equal(back.initial_positions_m, outcome.initial_positions_m)
     for a, b in zip(back.rollouts, outcome.rollouts, strict=True):
-        assert (a.direction_rad, a.far_m, a.simulated_s, a.any_fell) == (b.direction_rad, b.far_m, b.simulated_s,
-                                                                         b.any_fell)
+        assert (a.get("direction_rad"), a.get("far_m"), a.simulated_s, a.get("any_fell")) == (
+            b.get("direction_rad"), b.get("far_m"), b.simulated_s, b.get("any_fell"))
         np.testing.assert_array_equal(a.final_orientations_xyzw, b.final_orientations_xyzw)
         np.testing.assert_array_equal(a.fallen, b.fallen)
         assert a.fallen.dtype == b.fallen.dtype

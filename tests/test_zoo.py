@@ -19,7 +19,7 @@ import pytest
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
 from ipe_ros.engine.config import DEFAULT_QUERIES
 from ipe_ros.engine.scene_io import scene_from_dict, scene_to_dict
-from ipe_ros.engine.shapes import BoxShape, Capsule, Compound, ConvexHull, Cylinder, Sphere
+from ipe_ros.engine.shapes import Capsule, Compound, ConvexHull, Cylinder
 from ipe_ros.engine.perturb import draw_sample_inputs
 from ipe_ros.engine.rollout import run_sample
 from ipe_ros.engine.sampler import make_tasks

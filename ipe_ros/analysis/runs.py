@@ -108,14 +108,14 @@ def stimulus_seed(seed: int, name: str) -> int:
 
 
 def _sample_direction(outcome: SampleOutcome) -> float:
-    angles = [r.direction_rad for r in outcome.rollouts if r.direction_rad is not None]
+    angles = [r.get("direction_rad") for r in outcome.rollouts if r.get("direction_rad") is not None]
     if not angles:
         return math.nan
     return float(circmean(angles, high=math.pi, low=-math.pi))
 
 
 def _sample_bump(outcome: SampleOutcome) -> float:
-    ratios = [r.bump_ratio for r in outcome.rollouts if r.bump_ratio is not None]
+    ratios = [r.get("bump_ratio") for r in outcome.rollouts if r.get("bump_ratio") is not None]
     return float(np.mean(ratios)) if ratios else math.nan
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
-from .query import ANSWER_FIELDS, QUERIES, QuerySpec, Samples
+from .query import QUERIES, QuerySpec, Samples
 from .query.any_fall import sample_any_fall  # noqa: F401 - re-exported
 from .query.fall import sample_fall_fraction  # noqa: F401 - re-exported
 from .query.far import sample_far_m  # noqa: F401 - re-exported
@@ -70,13 +70,13 @@ class Prediction:
     outcomes: tuple[SampleOutcome, ...] = field(default=(), repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        unknown = sorted(set(self.answers) - _ANSWER_FIELD_SET)
+        unknown = sorted(set(self.answers) - answer_fields())
         if unknown:
             raise TypeError(f"{unknown[0]}: not a field of any query (engine/query)")
 
     def __getattr__(self, name: str) -> Any:
         # only for query fields: everything else is a real attribute (or a real AttributeError)
-        if name in _ANSWER_FIELD_SET:
+        if name in answer_fields():
             return self.__dict__.get("answers", {}).get(name)
         raise AttributeError(f"'Prediction' object has no attribute '{name}'")
 
@@ -86,7 +86,7 @@ class Prediction:
         out: dict[str, Any] = {}
         for name in self.__dataclass_fields__:
             if name == "answers":
-                for key in ANSWER_FIELDS:
+                for key in (f for q in QUERIES.values() for f in q.fields):
                     value = self.answers.get(key)
                     out[key] = list(value) if isinstance(value, tuple) else value
             elif name != "outcomes":
@@ -95,7 +95,9 @@ class Prediction:
         return out
 
 
-_ANSWER_FIELD_SET = frozenset(ANSWER_FIELDS)
+def answer_fields() -> frozenset[str]:
+    """Every registered query's answer fields (queries registered at run time included)."""
+    return frozenset(f for q in QUERIES.values() for f in q.fields)
 
 
 def aggregate(scene: Scene, outcomes: Sequence[SampleOutcome], *, query: QuerySpec, deterministic: bool,

@@ -154,18 +154,15 @@ def unhealthy(outcome: SampleOutcome, energy_scale_j: float, check: SelfCheck) -
 
 def outcome_flags(outcome: SampleOutcome) -> np.ndarray:
     """What a sample's answer is made of: its rollouts' yes/no outcomes (which objects fell, which
-    fell off, whether anything fell, which pairs touched, whether all came to rest), as one 0/1 vector."""
+    fell off, whether anything fell, which pairs touched, whether all came to rest: every query's
+    ``flags``, in the registry's order, each value once), as one 0/1 vector."""
     flags = []
     for r in outcome.rollouts:
-        for value in (r.fallen, r.fell_off):
-            if value is not None:
-                flags.append(np.asarray(value, float))
-        if r.any_fell is not None:
-            flags.append(np.array([float(r.any_fell)]))
-        for name, _ in r.extra:  # the other queries' yes/no outcomes (contact, rest)
-            own = QUERIES[name].flags(r) if name in QUERIES else None
-            if own is not None:
-                flags.append(np.asarray(own, float))
+        values: dict = {}
+        for query in QUERIES.values():
+            for name, value in query.flags(r).items():
+                values.setdefault(name, value)
+        flags += [np.asarray(value, float).reshape(-1) for value in values.values()]
     return np.concatenate(flags) if flags else np.zeros(0)
 
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from .errors import ConfigError
+from .query.parameters import query_parameters
 
 Caller = Literal["cli", "ros"]
 
@@ -61,6 +62,8 @@ def spelled(field: str, by: Caller) -> str:
     fields (a scene's paths, a setting with no spelling of its own) unchanged."""
     row = _BY_FIELD.get(field)
     name = None if row is None else (row.flag if by == "cli" else row.parameter)
+    if row is None and by == "cli":  # a query's own parameter (query.parameters): --<query>-<field>
+        name = next((p.flag for p in query_parameters() if p.name == field), None)
     return field if name is None else name
 
 

@@ -4,49 +4,45 @@ the queries, the estimate, the self-check and the store; made by ``rollout``."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any, Mapping
 
 import numpy as np
 
 
 @dataclass(frozen=True)
 class RolloutResult:
-    """One simulated push magnitude of one sample. Arrays follow ``scene.dynamic_objects``.
-
-    The built-in queries' values have fields of their own (None when not asked): ``fallen`` (fall,
-    direction, far), ``any_fell``, ``direction_rad``, ``far_m``, ``fell_off`` and ``bump_ratio``
-    (bump); every other query's are in ``extra`` (name, value) pairs, read with ``value(name)``.
-    """
+    """One simulated push magnitude of one sample: the common fields every rollout has, and every
+    asked query's values in one mapping (``values``: value name -> plain value, in the query
+    registry's order; arrays follow ``scene.dynamic_objects``, or a question variant's ``names``).
+    Read a value with ``value(name)`` (KeyError when its query was not asked) or ``get(name)``."""
 
     phi_m_s2: float
     final_positions_m: np.ndarray
     final_orientations_xyzw: np.ndarray
-    fallen: np.ndarray | None
-    direction_rad: float | None
-    far_m: float | None
-    fell_off: np.ndarray | None
-    bump_ratio: float | None
+    values: Mapping[str, Any] = field(default_factory=dict)
     trajectory: list | None = None
     simulated_s: float = 0.0  # simulated time; below the horizon when the rollout ended early
-    any_fell: bool | None = None  # the any_fall query: did at least one body fall?
     energy_gain_j: float = 0.0  # the most energy gained beyond what the push and initial velocities put in
     penetration_fraction: float = 0.0  # the deepest any body ends inside another, / its smallest extent
     #: its collapse steps made energy and were undone (config.CollapseSettings.max_created_energy_fraction)
     collapse_undone: bool = False
-    extra: tuple[tuple[str, object], ...] = ()
 
-    def value(self, name: str):
+    def value(self, name: str) -> Any:
         """A query's value in this rollout (KeyError naming it when it was not asked)."""
-        for key, value in self.extra:
-            if key == name:
-                return value
-        if name in OWN_FIELDS:
-            return getattr(self, name)
-        raise KeyError(f"{name}: not a value of this rollout (was its query asked?)")
+        try:
+            return self.values[name]
+        except KeyError:
+            raise KeyError(f"{name}: not a value of this rollout (was its query asked?)") from None
 
+    def get(self, name: str, default: Any = None) -> Any:
+        return self.values.get(name, default)
 
-#: the query values a RolloutResult keeps as fields of its own; every other query's go to ``extra``
-OWN_FIELDS = frozenset({"fallen", "any_fell", "direction_rad", "far_m", "fell_off", "bump_ratio"})
+    @property
+    def fallen(self) -> np.ndarray | None:
+        """Which bodies fell (bool per body): the paper's predicate, which the fall, direction and far
+        queries and every robot question read; None when none of them was asked."""
+        return self.values.get("fallen")
 
 
 @dataclass(frozen=True)

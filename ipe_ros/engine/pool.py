@@ -9,6 +9,7 @@ items lost twice are answered by ``on_lost`` instead of being dropped.
 
 from __future__ import annotations
 
+import importlib
 import multiprocessing
 import os
 import signal
@@ -17,6 +18,8 @@ import time
 from concurrent.futures import CancelledError, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Callable, Iterable, TypeVar
+
+from .query.spec import plugin_modules
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -34,9 +37,11 @@ DEFAULT_MAX_TASKS_PER_WORKER = 1000
 BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 
-def _init_worker(owner_pid: int) -> None:
+def _init_worker(owner_pid: int, plugins: tuple[str, ...] = ()) -> None:
     # Ctrl-C goes to the whole process group: let the parent decide how to shut down.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for module in plugins:  # queries registered at run time register again when their module loads
+        importlib.import_module(module)
     # A worker's parent is the fork server, not the process that owns the pool. When the owner dies
     # without closing the pool (SIGKILL, a crash), end this worker too instead of leaving it behind.
     threading.Thread(target=_exit_when_gone, args=(owner_pid,), name="owner-watch", daemon=True).start()
@@ -97,7 +102,8 @@ class WorkerPool:
                 raise RuntimeError("the worker pool is closed")
             if self._executor is None:
                 self._executor = ProcessPoolExecutor(max_workers=self.workers, mp_context=self._context,
-                                                     initializer=_init_worker, initargs=(os.getpid(),))
+                                                     initializer=_init_worker,
+                                                     initargs=(os.getpid(), plugin_modules()))
                 self._items_run = 0
             return self._executor
 

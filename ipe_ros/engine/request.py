@@ -10,14 +10,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Iterable
+from typing import Any, Iterable, Mapping
 
 from .config import (DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M,
                      ModelConfig, SimSettings, preset)
 from .errors import ConfigError, shown
 from .perceptions import perception_source
 from .fidelity import DEFAULT_CHECK, SelfCheck
-from .query import QuerySpec
+from .query import QUERIES, QuerySpec
+from .query.parameters import spec_parameters
 from .montecarlo import check_budget
 from .sampler import AdaptiveStop, check_ci_width
 
@@ -44,12 +45,15 @@ def build_request(*, samples: int = DEFAULT_SAMPLES, sigma_m: float = DEFAULT_SI
                   preset_name: str = DEFAULT_PRESET, horizon_s: float | None = None, until_rest: bool = False,
                   seed: int = 0, ci_width: float | None = None, deadline_s: float | None = None, batch_size: int = 4,
                   budget_s: float | None = DEFAULT_BUDGET_S, self_check: bool = True,
-                  verify_samples: int = DEFAULT_CHECK.verify_samples) -> Request:
+                  verify_samples: int = DEFAULT_CHECK.verify_samples,
+                  query_parameters: Mapping[str, Any] | None = None) -> Request:
     """The request these inputs ask for, or a ConfigError naming the engine's field.
 
     ``ground_truth``: sigma = phi = 0 and no body's own noise (the scene as given, one rollout).
     ``contact``: (A, B) pairs; giving any adds the contact query. ``horizon_s`` None and
-    ``force_direction_deg`` None: the preset's horizon, any push direction.
+    ``force_direction_deg`` None: the preset's horizon, any push direction. ``query_parameters``:
+    queries' own parameters by name (``"<query>.<field>"``, ``query.parameters``); those of queries
+    not asked are left out.
     """
     if ground_truth and perception_source(perception).posterior:
         raise ConfigError("ground_truth", f"takes the scene exactly as given, but perception {perception} draws it from "
@@ -64,7 +68,10 @@ def build_request(*, samples: int = DEFAULT_SAMPLES, sigma_m: float = DEFAULT_SI
                         force_direction_rad=None if force_direction_deg is None else math.radians(force_direction_deg),
                         mu=mu, samples=samples, perception=perception, vision=vision, object_noise=not ground_truth)
     contact = tuple(contact)
-    query = QuerySpec(queries=frozenset(queries) | ({"contact"} if contact else set()), contact_pairs=contact)
+    asked = frozenset(queries) | ({"contact"} if contact else set())
+    query = QuerySpec(queries=asked, contact_pairs=contact,
+                      parameters=spec_parameters(asked, query_parameters or {}) if isinstance(asked, frozenset)
+                      and asked <= set(QUERIES) else ())
     settings = preset(preset_name)
     if horizon_s is not None:
         settings = settings.changed(horizon_s=horizon_s)

@@ -19,7 +19,7 @@ from .query import QUERIES, QuerySpec, Reading
 from .query.base import smallest_extents_m
 from .config import ModelConfig, SimSettings
 from .errors import BudgetExceeded, PhysicsError
-from .outcome import OWN_FIELDS, RolloutResult, SampleOutcome
+from .outcome import RolloutResult, SampleOutcome
 from .perturb import draw_sample_inputs
 from .scene import Floor, Scene
 from .simulation import NO_PROBE, DecidedHeights, Probe
@@ -50,33 +50,30 @@ class SampleTask:
         return dataclasses.replace(self, settings=settings, record_every=every)
 
 
-def read_rollout(scene: Scene, spec: QuerySpec, initial: np.ndarray, end: simulation.RolloutEnd) -> dict:
-    """Every asked query's values for one rollout (built-in ones under their field names)."""
+def read_rollout(scene: Scene, spec: QuerySpec, initial: np.ndarray, end: simulation.RolloutEnd,
+                 initial_orientations_xyzw: np.ndarray | None = None) -> dict:
+    """Every asked query's values for one rollout, in the registry's order (the same in every
+    process: ``spec.queries`` is a set)."""
     reading = Reading(scene=scene, spec=spec, initial_m=initial, final_m=end.positions_m,
                       final_orientations_xyzw=end.orientations_xyzw, final_speeds_m_s=end.speeds_m_s,
-                      final_spins_rad_s=end.spins_rad_s, events=end.events or {}, ended_s=end.simulated_s)
+                      final_spins_rad_s=end.spins_rad_s, events=end.events or {}, ended_s=end.simulated_s,
+                      initial_orientations_xyzw=initial_orientations_xyzw)
     values: dict = {}
-    for name in spec.queries:
-        values.update(QUERIES[name].read(reading))
+    for name, query in QUERIES.items():
+        if name in spec.queries:
+            values.update(query.read(reading))
     return values
 
 
-def _query(task: SampleTask, initial: np.ndarray, phi: float, end: simulation.RolloutEnd) -> RolloutResult:
-    return rollout_result(task.scene, task.query, initial, phi, end)
-
-
-def rollout_result(scene: Scene, spec: QuerySpec, initial: np.ndarray, phi: float,
-                   end: simulation.RolloutEnd) -> RolloutResult:
+def rollout_result(scene: Scene, spec: QuerySpec, initial: np.ndarray, initial_orientations_xyzw: np.ndarray,
+                   phi: float, end: simulation.RolloutEnd) -> RolloutResult:
     """One rollout's result: every asked query's values, the end state and its health."""
-    values = read_rollout(scene, spec, initial, end)
-    own = {k: v for k, v in values.items() if k in OWN_FIELDS}
-    extra = tuple(sorted((k, v) for k, v in values.items() if k not in OWN_FIELDS))
     return RolloutResult(phi_m_s2=phi, final_positions_m=end.positions_m, final_orientations_xyzw=end.orientations_xyzw,
-                         fallen=own.get("fallen"), direction_rad=own.get("direction_rad"), far_m=own.get("far_m"),
-                         fell_off=own.get("fell_off"), bump_ratio=own.get("bump_ratio"),
-                         trajectory=end.trajectory, simulated_s=end.simulated_s, any_fell=own.get("any_fell"),
-                         energy_gain_j=end.energy_gain_j, penetration_fraction=end.penetration_fraction,
-                         collapse_undone=end.collapse_undone_s is not None, extra=extra)
+                         values=read_rollout(scene, spec, initial, end, initial_orientations_xyzw),
+                         trajectory=end.trajectory,
+                         simulated_s=end.simulated_s, energy_gain_j=end.energy_gain_j,
+                         penetration_fraction=end.penetration_fraction,
+                         collapse_undone=end.collapse_undone_s is not None)
 
 
 def decided_heights(scene: Scene, settings: SimSettings, spec: QuerySpec, initial: np.ndarray) -> DecidedHeights | None:
@@ -222,7 +219,7 @@ def simulate_sample(task: SampleTask, inputs, world: simulation.World, probe: Pr
                            inputs.masses_kg, inputs.push_direction_rad,
                            fresh_first=not task.settings.solver.maximal_coordinates,
                            record_every=task.record_every, deadline_unix_s=task.deadline_unix_s, probe=probe)
-    results = [_query(task, initial, phi, end) for phi, end in ends]
+    results = [rollout_result(task.scene, task.query, initial, initial_orn, phi, end) for phi, end in ends]
     return SampleOutcome(index=task.index, ok=True, error=None, push_direction_rad=inputs.push_direction_rad,
                          initial_positions_m=initial, initial_orientations_xyzw=initial_orn,
                          rollouts=tuple(results))

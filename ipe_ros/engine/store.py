@@ -20,6 +20,7 @@ else can waste time but cannot run anything (a pickle could).
 from __future__ import annotations
 
 import base64
+import collections.abc
 import dataclasses
 import functools
 import hashlib
@@ -42,7 +43,7 @@ T = TypeVar("T")
 R = TypeVar("R")
 
 #: Bump when what a stored result means changes (the engine's physics or outcome format).
-STORE_VERSION = 3  # 3: JSON entries (2: bump-only rollouts end once what fell off is decided)
+STORE_VERSION = 4  # 4: a rollout's query values in one mapping (3: JSON entries)
 #: An entry's ``format`` field: what tells a result of ours from any other JSON file.
 ENTRY_FORMAT = "ipe_ros.result"
 #: Larger entries are refused unread (a k-sample vision chain is ~100 kB; a recorded trajectory more).
@@ -398,6 +399,10 @@ def _fits(value, hint) -> bool:
         return isinstance(value, (bool, np.bool_))
     if hint is np.ndarray:
         return isinstance(value, np.ndarray)
+    if hint is typing.Any:
+        return True
+    if origin is dict or origin is collections.abc.Mapping:
+        return isinstance(value, dict) and all(isinstance(k, str) for k in value)
     if origin is tuple:
         args = typing.get_args(hint)
         if len(args) == 2 and args[1] is Ellipsis:
@@ -424,9 +429,9 @@ def _check_shapes(result) -> None:
         arrays |= {f"rollouts[{i}].final_positions_m": rollout.final_positions_m,
                    f"rollouts[{i}].final_orientations_xyzw": rollout.final_orientations_xyzw}
         for name in ("fallen", "fell_off"):
-            if getattr(rollout, name) is not None:
-                expected[f"rollouts[{i}].{name}"] = (n,)
-                arrays[f"rollouts[{i}].{name}"] = getattr(rollout, name)
+            if rollout.get(name) is not None:
+                expected[f"rollouts[{i}].values.{name}"] = (n,)
+                arrays[f"rollouts[{i}].values.{name}"] = rollout.get(name)
     for name, shape in expected.items():
         if arrays[name] is not None and arrays[name].shape != shape:
             raise StoreEntryError(f"result.{name}: shape {arrays[name].shape}, the sample has {n} bodies so {shape}")

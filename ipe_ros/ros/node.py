@@ -73,9 +73,10 @@ class IpeInterface:
     questions: QuestionService | None = None
 
     def _declare(self) -> dict[str, Any]:
-        for spec in params.PARAMETERS:
+        declared = params.all_parameters()
+        for spec in declared:
             self.declare_parameter(spec.name, spec.default, spec.descriptor())
-        self._values = {spec.name: self.get_parameter(spec.name).value for spec in params.PARAMETERS}
+        self._values = {spec.name: self.get_parameter(spec.name).value for spec in declared}
         self._inputs: list = []  # subscriptions, service and timer of the answering state
         self._camera_info: dict | None = None  # the newest CameraInfo (depth perception)
         self._camera_pose: tuple | None = None  # (position, xyzw, frame) from ~/depth/camera_pose

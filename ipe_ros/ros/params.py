@@ -23,6 +23,7 @@ from ..engine.inputs import as_spelled
 from ..engine.perceptions import perception_names, perception_source
 from ..engine.request import build_request
 from ..engine.query.contact import parse_pairs
+from ..engine.query.parameters import query_parameters
 from ..engine.scene import DEFAULT_MAX_OBJECTS
 from ..service import ServiceConfig
 
@@ -146,6 +147,21 @@ PARAMETERS: tuple[ParamSpec, ...] = (
                                                 "contact or spawn a viewer"),
 )
 
+_ROS_TYPES = {float: _DOUBLE, int: _INT, bool: ParameterType.PARAMETER_BOOL, str: _STRING}
+
+
+def query_parameter_specs() -> tuple[ParamSpec, ...]:
+    """The registered queries' own parameters (``<query>.<field>``, engine/query/parameters.py),
+    declared beside ``PARAMETERS``; a query registered before the node starts is settable too."""
+    return tuple(ParamSpec(row.name, row.default, _ROS_TYPES[row.type], f"the {row.query} query: {row.meaning}")
+                 for row in query_parameters())
+
+
+def all_parameters() -> tuple[ParamSpec, ...]:
+    """What the node declares: ``PARAMETERS`` and the queries' own."""
+    return PARAMETERS + query_parameter_specs()
+
+
 def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
     """Build the service config from parameter values; ConfigError names the parameter at fault."""
     frame = values["frame_id"]
@@ -185,7 +201,8 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
             until_rest=bool(values["until_rest"]), seed=int(values["seed"]), ci_width=width or None,
             deadline_s=deadline or None, batch_size=anytime_batch_size(int(values["workers"])),
             budget_s=float(values["budget_s"]), self_check=bool(values["self_check"]),
-            verify_samples=int(values["verify_samples"]))
+            verify_samples=int(values["verify_samples"]),
+            query_parameters={row.name: values[row.name] for row in query_parameters() if row.name in values})
     except ConfigError as exc:
         raise as_spelled(exc, "ros") from None
     save_dir = str(values["rerun.save_dir"]).strip()

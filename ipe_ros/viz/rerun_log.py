@@ -156,7 +156,7 @@ CONTACT_RGB = (1.0, 0.85, 0.1)
 
 def _log_contacts(rec: rr.RecordingStream, base: str, rollout) -> None:
     """Where and when each asked pair first touched in this rollout: a point that appears then."""
-    if "contact" not in dict(rollout.extra):
+    if rollout.get("contact") is None:
         return
     events = rollout.value("contact")
     for key, t in events["first_s"].items():
@@ -178,15 +178,15 @@ def log_outcomes(rec: rr.RecordingStream, prediction: Prediction) -> None:
     first = ok[0].rollouts[0]
     if first.fallen is not None:
         columns["fall_fraction"] = [sample_fall_fraction(o) for o in ok]
-    if first.any_fell is not None:
+    if first.get("any_fell") is not None:
         columns["any_fall"] = [sample_any_fall(o) for o in ok]
-    if first.far_m is not None:
+    if first.get("far_m") is not None:
         columns["far_m"] = [sample_far_m(o) for o in ok]
     if "direction" in prediction.request.get("queries", ()):
-        columns["direction_deg"] = [math.degrees(o.rollouts[0].direction_rad)
-                                    if o.rollouts[0].direction_rad is not None else math.nan for o in ok]
-    if first.fell_off is not None:
-        columns["fell_off_count"] = [float(np.mean([r.fell_off.sum() for r in o.rollouts])) for o in ok]
+        columns["direction_deg"] = [math.degrees(o.rollouts[0].get("direction_rad"))
+                                    if o.rollouts[0].get("direction_rad") is not None else math.nan for o in ok]
+    if first.get("fell_off") is not None:
+        columns["fell_off_count"] = [float(np.mean([r.value("fell_off").sum() for r in o.rollouts])) for o in ok]
     columns.update(_query_columns(prediction, ok))
     for name, values in columns.items():
         rec.send_columns(f"outcomes/{name}", indexes=index, columns=rr.Scalars.columns(scalars=values))
@@ -276,8 +276,8 @@ def _outcome_names(prediction: Prediction) -> list[str]:
         return []
     first = ok[0].rollouts[0]
     return [name for name, present in (("fall_fraction", first.fallen is not None),
-                                        ("any_fall", first.any_fell is not None), ("far_m", first.far_m is not None),
-                                        ("fell_off_count", first.fell_off is not None)) if present] \
+                                        ("any_fall", first.get("any_fell") is not None), ("far_m", first.get("far_m") is not None),
+                                        ("fell_off_count", first.get("fell_off") is not None)) if present] \
         + list(_query_columns(prediction, ok[:1]))
 
 

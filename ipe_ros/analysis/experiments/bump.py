@@ -68,10 +68,10 @@ def bump_grid(scenes, directions, phis, k: int, opts: Options, map_fn, label: st
                 pred = next(answers)
                 for m in range(len(phis)):
                     rollouts = [o.rollouts[m] for o in pred.outcomes if o.ok]
-                    values = [r.bump_ratio for r in rollouts if r.bump_ratio is not None]
+                    values = [r.get("bump_ratio") for r in rollouts if r.get("bump_ratio") is not None]
                     ratio_sum[s, d, m], ratio_count[s, d, m] = sum(values), len(values)
                     ratio[s, d, m] = np.mean(values) if values else np.nan
-                    fell[s, d, m] = np.mean([r.fell_off.mean() for r in rollouts]) if rollouts else np.nan
+                    fell[s, d, m] = np.mean([r.value("fell_off").mean() for r in rollouts]) if rollouts else np.nan
     return BumpGrid(directions_rad=np.asarray(directions), phis_paper=np.asarray(phis), ratio=ratio, fell_off=fell,
                     ratio_sum=ratio_sum, ratio_count=ratio_count)
 

@@ -5,12 +5,14 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from ..config import ModelConfig
 from ..estimate import circular_mean, wilson_interval
 from ..perturb import is_deterministic
+from ..query import QUERIES, QuerySpec, Samples
 from ..scene import Scene
 from .kinds import Action, Place, Push
 from ..outcome import RolloutResult, SampleOutcome
@@ -64,6 +66,9 @@ class VariantAnswer:
     contact_probability: dict[str, float] | None = None
     contact_probability_ci95: dict[str, list[float]] | None = None
     contact_time_s: dict[str, float | None] | None = None
+    #: asked with other queries (``ask(queries=...)``): their answer fields, as a prediction's
+    #: (``Query.aggregate`` over the variant's samples); written flat into the variant's JSON
+    query_answers: dict[str, Any] | None = None
     #: the self-check of the variant's samples (``engine.fidelity``): "verified", "escalated" (the
     #: answer is the reference physics'), "contradicted", "unverified" (not checked: the default for
     #: questions), "reference" (the settings are the reference's own); None: not simulated.
@@ -85,6 +90,7 @@ class VariantAnswer:
                 **({} if self.contact_probability is None else {
                     "contact_probability": self.contact_probability,
                     "contact_probability_ci95": self.contact_probability_ci95, "contact_time_s": self.contact_time_s}),
+                **{k: list(v) if isinstance(v, tuple) else v for k, v in (self.query_answers or {}).items()},
                 **({} if self.fidelity is None else {"fidelity": self.fidelity, "self_check": self.self_check})}
 
 
@@ -111,6 +117,11 @@ def _listed(interval: tuple[float, float] | None) -> list[float] | None:
     return None if interval is None else list(interval)
 
 
+#: the queries every question answers in fields of its own (what falls, where, what fell off, what
+#: touched); any other registered query asked of a question answers in ``query_answers``
+QUESTION_QUERIES = frozenset({"fall", "any_fall", "direction", "bump", "contact"})
+
+
 def draws_noise(scene: Scene, action: Action, model: ModelConfig) -> bool:
     """The action has randomness of its own: a push's uncertainty, a placed object's noise."""
     if isinstance(action, Push):
@@ -128,12 +139,15 @@ def ran(outcome: SampleOutcome) -> RolloutResult:
 def fell(result: RolloutResult) -> bool:
     """Anything fell in this rollout: from the per-object flags, or from the yes/no answer where
     only that was asked (the rollout then ended at the first fall)."""
-    return bool(np.any(result.fallen)) if result.fallen is not None else bool(result.any_fell)
+    return bool(np.any(result.fallen)) if result.fallen is not None else bool(result.value("any_fell"))
 
 
 def aggregate_variant(label: str, action: Action, results: list[SampleOutcome], simulated: bool = True, *,
-                      deterministic: bool = False) -> VariantAnswer:
-    """``deterministic``: nothing was drawn, so the one sample's answer is exact (a point, not an interval)."""
+                      deterministic: bool = False, scene: Scene | None = None,
+                      query: QuerySpec | None = None) -> VariantAnswer:
+    """``deterministic``: nothing was drawn, so the one sample's answer is exact (a point, not an
+    interval). ``scene``, ``query``: the question's, for the answers its queries aggregate themselves
+    (contact)."""
     ok = [r for r in results if r.ok]
     failed = [r for r in results if not r.ok and not r.budget_stopped and not r.skipped]
     if not ok:
@@ -144,30 +158,25 @@ def aggregate_variant(label: str, action: Action, results: list[SampleOutcome], 
     if ran(ok[0]).fallen is not None:
         fallen = np.array([ran(r).fallen for r in ok], bool)
         objects = {n: float(p) for n, p in zip(names, fallen.mean(axis=0))}
-    directions = np.array([ran(r).direction_rad for r in ok if ran(r).direction_rad is not None])
+    directions = np.array([ran(r).get("direction_rad") for r in ok if ran(r).get("direction_rad") is not None])
     interval = (anything, anything) if deterministic else wilson_interval(anything, len(ok))
     off = {}
-    if ran(ok[0]).fell_off is not None:
-        fell_off = np.array([ran(r).fell_off for r in ok], bool)
+    if ran(ok[0]).get("fell_off") is not None:
+        fell_off = np.array([ran(r).get("fell_off") for r in ok], bool)
         off = dict(fell_off_probability={n: float(p) for n, p in zip(names, fell_off.mean(axis=0))},
                    any_fell_off_probability=float(fell_off.any(axis=1).mean()))
-    if any(name == "contact" for name, _ in ran(ok[0]).extra):
-        off.update(_contact_answer(ok, deterministic))
+    if query is not None and "contact" in query.queries:
+        contact = QUERIES["contact"].aggregate(Samples(scene, query, ok, deterministic, names))
+        off.update({name: contact[name] for name in ("contact_probability", "contact_probability_ci95",
+                                                     "contact_time_s")})
+    others = {} if query is None else {
+        name: q for name, q in QUERIES.items() if name in query.queries and name not in QUESTION_QUERIES}
+    if others:  # every other asked query answers as it does in a prediction
+        off["query_answers"] = {}
+        for q in others.values():
+            off["query_answers"].update(q.aggregate(Samples(scene, query, ok, deterministic, names)))
     return VariantAnswer(label, action, anything, interval, objects, circular_mean(directions), len(ok), len(failed),
                          simulated, **off)
-
-
-def _contact_answer(ok: list[SampleOutcome], deterministic: bool) -> dict:
-    probability, interval, time_s = {}, {}, {}
-    firsts = [ran(r).value("contact")["first_s"] for r in ok]
-    for key in firsts[0]:
-        times = [first[key] for first in firsts]
-        touched = [t for t in times if t is not None]
-        p = len(touched) / len(ok)
-        probability[key] = p
-        interval[key] = [p, p] if deterministic else list(wilson_interval(p, len(ok)))
-        time_s[key] = float(np.median(touched)) if touched else None
-    return dict(contact_probability=probability, contact_probability_ci95=interval, contact_time_s=time_s)
 
 
 def stood(alone: SampleOutcome) -> bool:

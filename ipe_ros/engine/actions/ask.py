@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Callable
+from typing import Any, Callable, Mapping
 
 from ..config import ModelConfig, SimSettings
-from ..query import QuerySpec
+from ..query import QUERIES, QuerySpec
+from ..query.parameters import spec_parameters
+from ..query.spec import check_names
 from ..decide import Sequential, Tally
 from ..errors import ConfigError
 from ..perturb import is_deterministic, position_sigmas_m
@@ -20,7 +22,7 @@ from ..self_check import checking
 from ..scene import Scene, Table, validate_scene
 from ..query.contact import check_pairs
 from ..outcome import SampleOutcome
-from .answers import Alone, Answers, aggregate_variant, aggregate_given, draws_noise, stood, fell, ran
+from .answers import QUESTION_QUERIES, Alone, Answers, aggregate_variant, aggregate_given, draws_noise, stood, fell, ran
 from .checks import check_action
 from .geometry import affected_regions, groups, reached
 from .kinds import DEFAULT_SAFE_BELOW, Action, Place, Push, Remove, label_of
@@ -32,7 +34,8 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
         fall_threshold_fraction: float = 0.125, record_every: int = 0, record_samples: int = 0,
         directions: bool = False, fell_off: bool = False, sequential: Sequential | None = None,
         on_progress: Callable[[dict], None] | None = None, contact: tuple[tuple[str, str], ...] = (),
-        check: SelfCheck | None = None, what_falls: bool = True) -> Answers:
+        check: SelfCheck | None = None, what_falls: bool = True, queries: tuple[str, ...] = (),
+        query_parameters: Mapping[str, Any] | None = None) -> Answers:
     """Answer every variant with common random numbers (see the module docstring). Removals that
     cannot change anything are answered from the scene's own samples (a variant "as is" is added
     for them when it is not asked). ``record_every`` / ``record_samples``: keep the trajectories of
@@ -49,10 +52,13 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     each simulated variant's samples check themselves against the reference physics as a
     prediction's do (``engine.fidelity``; the checks of all variants share each round's map call),
     and a contradicted variant is answered at the reference. Off by default: it costs 1.5-6x a
-    question's time (benchmarks/README.md); each variant's ``fidelity`` then says "unverified"."""
-    _check_question(scene, actions, model, budget_s, check, fell_off, contact)
+    question's time (benchmarks/README.md); each variant's ``fidelity`` then says "unverified".
+    ``queries``: other registered queries each variant also answers (``VariantAnswer.query_answers``;
+    every variant is then simulated), their parameters by name in ``query_parameters``
+    (``"<query>.<field>"``, engine/query/parameters.py)."""
+    _check_question(scene, actions, model, budget_s, check, fell_off, contact, queries)
     plan = _plan(scene, actions, model, settings, budget_s, fall_threshold_fraction, directions, fell_off, contact,
-                 what_falls)
+                 what_falls, queries, query_parameters or {})
     loop = MonteCarlo(run_variants, lost, map_fn, budget_s)  # the budget counts from here
     seeds = child_seeds(seed, plan.samples)
 
@@ -92,9 +98,16 @@ def _question(plan: "_Plan", tasks, settings: SimSettings, sequential: Sequentia
 
 
 def _check_question(scene: Scene, actions: list[Action], model: ModelConfig, budget_s: float | None,
-                    check: SelfCheck | None, fell_off: bool, contact) -> None:
+                    check: SelfCheck | None, fell_off: bool, contact, queries: tuple[str, ...]) -> None:
     """Everything a question asks, checked before anything is simulated."""
     validate_scene(scene)
+    for name in queries:
+        if name in QUESTION_QUERIES:
+            raise ConfigError("queries", f"{name} is answered by the question itself (fell_off, contact, what_falls "
+                                         "ask for it); list other queries: "
+                              + ", ".join(q for q in QUERIES if q not in QUESTION_QUERIES))
+    if queries:
+        check_names(frozenset(queries))
     check_budget(budget_s)
     check_fidelity_request(check)
     for i, action in enumerate(actions):
@@ -129,7 +142,8 @@ class _Plan:
 
 
 def _plan(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSettings, budget_s: float | None,
-          fall_threshold_fraction: float, directions: bool, fell_off: bool, contact, what_falls: bool) -> _Plan:
+          fall_threshold_fraction: float, directions: bool, fell_off: bool, contact, what_falls: bool,
+          queries: tuple[str, ...], query_parameters: Mapping[str, Any]) -> _Plan:
     margin = 3 * float(position_sigmas_m(scene, model).max(initial=0.0))  # noise can close gaps this wide
     everything = frozenset(b.name for b in scene.dynamic_objects)
     # a pushed support can slide every group into every other
@@ -138,7 +152,7 @@ def _plan(scene: Scene, actions: list[Action], model: ModelConfig, settings: Sim
     # what it does anyway (read from "as is"). Touching is not enough to be left out: a counterweight
     # with nothing on it still holds down what it rests on, and a gap closes when the object above drops.
     trivial = [isinstance(a, Remove) and reached(scene_groups, a.names) <= set(a.names) and not contact
-               for a in actions]
+               and not queries for a in actions]
     simulated_actions = [a for a, t in zip(actions, trivial) if not t]
     if any(trivial) and None not in simulated_actions:
         simulated_actions.append(None)
@@ -152,9 +166,11 @@ def _plan(scene: Scene, actions: list[Action], model: ModelConfig, settings: Sim
     # a removal read from "as is" needs each other object's outcome there; a direction, what fell
     what_falls = what_falls or any(trivial) or directions
     asked = {"fall" if what_falls else "any_fall"} | ({"direction"} if directions else set()) \
-        | ({"bump"} if fell_off else set()) | ({"contact"} if contact else set())
+        | ({"bump"} if fell_off else set()) | ({"contact"} if contact else set()) | set(queries)
     query = QuerySpec(queries=frozenset(asked), fall_threshold_fraction=fall_threshold_fraction,
-                      contact_pairs=tuple(contact))
+                      contact_pairs=tuple(contact), parameters=spec_parameters(frozenset(asked), query_parameters))
+    for name in queries:
+        QUERIES[name].check(scene, query)
     # no noise anywhere (scene, model, nor an action's own): one rollout per variant says everything
     deterministic = is_deterministic(scene, model) and not any(draws_noise(scene, a, model)
                                                                for a in simulated_actions)
@@ -167,7 +183,8 @@ def _answers(scene: Scene, actions: list[Action], plan: _Plan, per_sample, decis
     """Each asked variant's answer, in the order asked, and the scene left alone."""
     deterministic, as_is = plan.deterministic, plan.as_is
     by_variant = {label_of(a): dataclasses.replace(
-        aggregate_variant(label_of(a), a, [s[j] for s in per_sample], deterministic=deterministic),
+        aggregate_variant(label_of(a), a, [s[j] for s in per_sample], deterministic=deterministic, scene=scene,
+                          query=plan.query),
         not_simulated=() if plan.regions[j] is None else tuple(sorted(plan.everything - plan.regions[j])),
         **_fidelity(reports.get(j)))
         for j, a in enumerate(plan.simulated_actions)}
@@ -269,10 +286,11 @@ def _without(outcome: SampleOutcome, kept: list[int]) -> SampleOutcome:
     if not outcome.ok:
         return outcome
     r = ran(outcome)
+    # the per-object values a question reads from "as is" (``_plan``: what falls, what fell off)
+    values = {name: value[kept] if name in ("fallen", "fell_off") else value for name, value in r.values.items()}
     rollout = dataclasses.replace(r, final_positions_m=r.final_positions_m[kept],
-                                  final_orientations_xyzw=r.final_orientations_xyzw[kept],
-                                  fallen=None if r.fallen is None else r.fallen[kept],
-                                  fell_off=None if r.fell_off is None else r.fell_off[kept], trajectory=None)
+                                  final_orientations_xyzw=r.final_orientations_xyzw[kept], values=values,
+                                  trajectory=None)
     return dataclasses.replace(outcome, rollouts=(rollout,), names=tuple(outcome.names[j] for j in kept))
 
 

@@ -18,6 +18,8 @@ from .. import limits
 from ..config import ModelConfig, SimSettings
 from ..errors import ConfigError, shown
 from ..query.contact import parse_pair
+from ..query.parameters import spec_parameters
+from ..query.spec import check_names
 from ..scene import Body, Scene, validate_body
 from ..scene_io import object_from_dict, object_to_dict
 from .answers import Answers
@@ -92,16 +94,24 @@ class _ContactAndWhatFalls(Question):
 
     contact: tuple[tuple[str, str], ...] = ()
     what_falls: bool | None = None
+    #: other registered queries every variant answers (``ask(queries=...)``), and their parameters
+    #: by name ("<query>.<field>")
+    queries: tuple[str, ...] = ()
+    query_parameters: tuple[tuple[str, Any], ...] = ()
 
     def _extra(self, kw: dict) -> dict:
         if self.contact:
             kw["contact"] = self.contact
         if self.what_falls is not None:
             kw["what_falls"] = self.what_falls
+        if self.queries:
+            kw.update(queries=self.queries, query_parameters=dict(self.query_parameters))
         return kw
 
     def _own_dict(self) -> dict:
         data = {"contact": [f"{a}:{b}" for a, b in self.contact]} if self.contact else {}
+        if self.queries:
+            data.update(queries=list(self.queries), query_parameters=dict(self.query_parameters))
         return data if self.what_falls is None else {**data, "what_falls": self.what_falls}
 
 
@@ -111,7 +121,8 @@ class RemoveQuestion(_ContactAndWhatFalls):
     each removal safe or unsafe at this level."""
 
     kind: ClassVar[str] = "remove"
-    fields: ClassVar[frozenset[str]] = frozenset({"objects", "safe_below", "contact", "what_falls"})
+    fields: ClassVar[frozenset[str]] = frozenset({"objects", "safe_below", "contact", "what_falls", "queries",
+                                                  "query_parameters"})
 
     objects: tuple[str, ...] | None = None
     safe_below: float | None = None
@@ -197,7 +208,8 @@ class PlaceQuestion(_ContactAndWhatFalls):
     the best of ``candidates`` x ``yaws`` poses searched in ``region`` (one of the two)."""
 
     kind: ClassVar[str] = "place"
-    fields: ClassVar[frozenset[str]] = frozenset({"object", "at", "region", "contact", "what_falls"})
+    fields: ClassVar[frozenset[str]] = frozenset({"object", "at", "region", "contact", "what_falls", "queries",
+                                                  "query_parameters"})
 
     body: Body
     spots: tuple[tuple[float, float, float], ...] = ()
@@ -260,7 +272,7 @@ class PushQuestion(_ContactAndWhatFalls):
 
     kind: ClassVar[str] = "push"
     fields: ClassVar[frozenset[str]] = frozenset({"object", "velocity_m_s", "point_m", "direction_sigma_deg",
-                                                  "speed_sigma", "contact"})
+                                                  "speed_sigma", "contact", "queries", "query_parameters"})
 
     push: Push
 
@@ -361,6 +373,27 @@ def _common_from_dict(data: dict, cls: type[Question]) -> dict:
         common["contact"] = tuple(parse_pair(pair, "contact") for pair in pairs)
         if len(set(common["contact"])) != len(common["contact"]):
             raise ConfigError("contact", "a pair is asked twice; ask each once")
+    if "queries" in data:
+        names = data["queries"]
+        if not isinstance(names, list) or not names or len(names) > 16 or not all(isinstance(n, str) for n in names):
+            raise ConfigError("queries", "must be a list of 1-16 query names (each variant also answers them)")
+        if len(set(names)) != len(names):
+            raise ConfigError("queries", "a query is asked twice; ask each once")
+        check_names(frozenset(names))
+        common["queries"] = tuple(names)
+    if "query_parameters" in data:
+        given = data["query_parameters"]
+        if not isinstance(given, dict) or len(given) > 64:
+            raise ConfigError("query_parameters", "must be an object of at most 64 \"<query>.<field>\": value entries")
+        if "queries" not in common:
+            raise ConfigError("query_parameters", "were given but no queries; list the queries they are for in "
+                                                  "\"queries\"")
+        spec_parameters(frozenset(common["queries"]), given)  # refused now, naming the parameter
+        for key in given:
+            if key.split(".")[0] not in common["queries"]:
+                raise ConfigError(f"query_parameters.{key}", "is for a query this question does not ask; add it to "
+                                                             "\"queries\" or drop the parameter")
+        common["query_parameters"] = tuple(given.items())
     return common
 
 

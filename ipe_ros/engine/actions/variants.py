@@ -152,7 +152,7 @@ def _one_variant(task: VariantTask, action: Action, shared, shared_orn, inputs,
                                                          for b in scene.objects))
     initial, initial_orn, phi, end = _simulate_variant(task, scene, positions, orientations, masses,
                                                        inputs.push_direction_rad, separate)
-    result = rollout_result(scene, task.query, initial, phi, end)  # the same queries a prediction reads
+    result = rollout_result(scene, task.query, initial, initial_orn, phi, end)  # the queries a prediction reads
     return SampleOutcome(index=task.index, ok=True, error=None, push_direction_rad=inputs.push_direction_rad,
                          initial_positions_m=initial, initial_orientations_xyzw=initial_orn, rollouts=(result,),
                          names=tuple(b.name for b in scene.dynamic_objects))

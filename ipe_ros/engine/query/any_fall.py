@@ -13,7 +13,7 @@ from .fall import fallen_below_z_m
 
 def sample_any_fall(outcome) -> float:
     """One sample's "did anything fall?" (1 or 0), averaged over its push magnitudes."""
-    return float(np.mean([float(r.any_fell) for r in outcome.rollouts]))
+    return float(np.mean([float(r.value("any_fell")) for r in outcome.rollouts]))
 
 
 class AnyFall(Query):
@@ -31,6 +31,9 @@ class AnyFall(Query):
     def aggregate(self, samples: Samples) -> dict[str, Any]:
         anything = float(np.mean([sample_any_fall(o) for o in samples.outcomes]))
         return {"any_fall_probability": anything, "any_fall_probability_ci95": samples.fraction_interval(anything)}
+
+    def flags(self, rollout) -> dict[str, Any]:
+        return {} if rollout.get("any_fell") is None else {"any_fell": [float(rollout.value("any_fell"))]}
 
 
 QUERY = AnyFall()

@@ -13,6 +13,10 @@ A query never steps the physics. The rollout asks every query of the request for
 - ``read``: the rollout's values (a dict of plain values), from its :class:`Reading`.
 - ``aggregate``: the answer's fields from the good samples (:class:`Samples`).
 - ``describe`` / ``sample_columns``: lines for the CLI, per-sample values for the recordings.
+- ``Parameters``: its own parameters, a frozen dataclass (fields with defaults, units in their
+  names, ``metadata={"meaning": ...}``; its ``__post_init__`` refuses bad values naming
+  ``"<query>.<field>"``). Read in ``read``/``aggregate`` as ``spec.parameters_of(name)``; the CLI
+  (``--<query>-<field>``) and the node (parameter ``<query>.<field>``) set them (``query.parameters``).
 
 Modules register one instance each (``query.register``); the name is what requests, the CLI and
 the node's parameters spell.
@@ -47,7 +51,8 @@ class Reading:
     """One rollout as a query reads it. Arrays follow ``scene.dynamic_objects``.
 
     initial_m / final_m: (n, 3) centres of mass at t = 0 (after separation) and at the end, metres;
-    final_orientations_xyzw: (n, 4); final_speeds_m_s / final_spins_rad_s: (n,) at the end;
+    initial_orientations_xyzw / final_orientations_xyzw: (n, 4) (the initial ones None where a
+    caller has none); final_speeds_m_s / final_spins_rad_s: (n,) at the end;
     events: what each query's watch recorded, by query name; ended_s: simulated seconds (below the
     horizon when early termination ended the rollout).
     """
@@ -61,6 +66,7 @@ class Reading:
     final_spins_rad_s: np.ndarray | None
     events: dict[str, Any] = field(default_factory=dict)
     ended_s: float = 0.0
+    initial_orientations_xyzw: np.ndarray | None = None
 
     @cached_property
     def smallest_extents_m(self) -> np.ndarray:
@@ -81,6 +87,8 @@ class Samples:
     spec: "QuerySpec"
     outcomes: Sequence["SampleOutcome"]
     deterministic: bool  # one rollout says everything: intervals are points
+    #: the objects the rollouts' arrays follow, when not the scene's (a question's variant)
+    object_names: tuple[str, ...] | None = None
 
     @property
     def rollouts(self) -> list["RolloutResult"]:
@@ -88,6 +96,8 @@ class Samples:
 
     @property
     def names(self) -> list[str]:
+        if self.object_names is not None:
+            return list(self.object_names)
         return [b.name for b in self.scene.dynamic_objects]
 
     def per_sample(self, value) -> np.ndarray:
@@ -129,6 +139,8 @@ class Query:
     summary: ClassVar[str] = ""
     #: the whole rollout's answer is decided once any body has fallen (any_fall)
     decided_by_first_fall: ClassVar[bool] = False
+    #: the query's own parameters: a frozen dataclass whose every field has a default (None: none)
+    Parameters: ClassVar[type | None] = None
 
     def check(self, scene: Scene, spec: "QuerySpec") -> None:
         """Refuse, with a ConfigError naming the field, what this scene cannot answer."""
@@ -150,10 +162,12 @@ class Query:
     def aggregate(self, samples: Samples) -> dict[str, Any]:
         raise NotImplementedError
 
-    def flags(self, rollout) -> list[float] | None:
+    def flags(self, rollout: "RolloutResult") -> dict[str, Sequence[float]]:
         """This query's yes/no outcomes in one rollout (1/0), which the self-check compares between
-        the fast and the reference physics; None: nothing of its own to compare."""
-        return None
+        the fast and the reference physics, by the value they come from (queries reading the same
+        value, as fall, direction and far read ``fallen``, give it under the same name and it is
+        compared once); {} when the query was not asked or has no yes/no outcome."""
+        return {}
 
     def describe(self, prediction) -> list[str]:
         """Lines for a human reading the answer (the CLI's table lists the paper's queries itself)."""

@@ -41,7 +41,7 @@ class Bump(Query):
         return {"fell_off": fell_off, "bump_ratio": predicates.bump_ratio(fell_off, groups, reading.spec.bump_group)}
 
     def aggregate(self, samples: Samples) -> dict[str, Any]:
-        fell_off = np.array([r.fell_off for r in samples.rollouts if r.fell_off is not None])
+        fell_off = np.array([r.get("fell_off") for r in samples.rollouts if r.get("fell_off") is not None])
         if not len(fell_off):
             return {}
         groups = [b.group for b in samples.scene.dynamic_objects]
@@ -49,9 +49,12 @@ class Bump(Query):
         for group in dict.fromkeys(groups):
             members = np.array([g == group for g in groups])
             by_group[group] = float(fell_off[:, members].mean())
-        ratios = [r.bump_ratio for r in samples.rollouts if r.bump_ratio is not None]
+        ratios = [r.get("bump_ratio") for r in samples.rollouts if r.get("bump_ratio") is not None]
         return {"fell_off_fraction_by_group": by_group, "bump_ratio": float(np.mean(ratios)) if ratios else None,
                 "bump_rollouts": len(ratios), "bump_group": samples.spec.bump_group}
+
+    def flags(self, rollout) -> dict[str, Any]:
+        return {} if rollout.get("fell_off") is None else {"fell_off": rollout.value("fell_off")}
 
 
 QUERY = Bump()

@@ -196,8 +196,10 @@ class Contact(Query):
         return {"contact_probability": probability, "contact_probability_ci95": interval,
                 "contact_time_s": time_s, "contact_at_start": at_start}
 
-    def flags(self, rollout) -> list[float]:
-        return [float(t is not None) for t in rollout.value("contact")["first_s"].values()]
+    def flags(self, rollout) -> dict[str, list[float]]:
+        if rollout.get("contact") is None:
+            return {}
+        return {"contact": [float(t is not None) for t in rollout.value("contact")["first_s"].values()]}
 
     def describe(self, prediction) -> list[str]:
         lines = []

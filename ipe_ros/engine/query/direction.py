@@ -11,6 +11,7 @@ import numpy as np
 from .. import queries as predicates
 from ..stats import circular_mean, half_circle_decisiveness
 from .base import Query, Reading, Samples
+from .fall import fallen_flags
 
 
 class Direction(Query):
@@ -24,9 +25,12 @@ class Direction(Query):
                 "direction_rad": predicates.fall_direction_rad(reading.initial_m, reading.final_m, fallen)}
 
     def aggregate(self, samples: Samples) -> dict[str, Any]:
-        angles = np.array([r.direction_rad for r in samples.rollouts if r.direction_rad is not None])
+        angles = np.array([r.get("direction_rad") for r in samples.rollouts if r.get("direction_rad") is not None])
         return {"direction_rad": circular_mean(angles), "direction_decisiveness": half_circle_decisiveness(angles),
                 "direction_rollouts": int(len(angles))}
+
+    def flags(self, rollout) -> dict[str, Any]:
+        return fallen_flags(rollout)
 
 
 QUERY = Direction()

@@ -16,6 +16,11 @@ def fallen_below_z_m(scene, spec, initial_m: np.ndarray) -> np.ndarray:
     return initial_m[:, 2] - spec.fall_threshold_fraction * smallest_extents_m(scene)
 
 
+def fallen_flags(rollout) -> dict[str, Any]:
+    """Which bodies fell, as the self-check compares it (fall, direction and far all read it)."""
+    return {} if rollout.fallen is None else {"fallen": rollout.fallen}
+
+
 def sample_fall_fraction(outcome) -> float:
     """One sample's fraction of fallen boxes, averaged over its push magnitudes (samples are the units)."""
     return float(np.mean([r.fallen.mean() for r in outcome.rollouts]))
@@ -31,6 +36,9 @@ class Fall(Query):
 
     def read(self, reading: Reading) -> dict[str, Any]:
         return {"fallen": reading.fallen}
+
+    def flags(self, rollout) -> dict[str, Any]:
+        return fallen_flags(rollout)
 
     def aggregate(self, samples: Samples) -> dict[str, Any]:
         fall = float(np.array([sample_fall_fraction(o) for o in samples.outcomes]).mean())

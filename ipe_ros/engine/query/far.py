@@ -10,11 +10,12 @@ import numpy as np
 from .. import queries as predicates
 from ..stats import mean_interval
 from .base import Query, Reading, Samples
+from .fall import fallen_flags
 
 
 def sample_far_m(outcome) -> float:
     """One sample's far distance, averaged over its push magnitudes."""
-    return float(np.mean([r.far_m for r in outcome.rollouts]))
+    return float(np.mean([r.value("far_m") for r in outcome.rollouts]))
 
 
 class Far(Query):
@@ -31,6 +32,9 @@ class Far(Query):
         per_sample = np.array([sample_far_m(o) for o in samples.outcomes])
         far = float(per_sample.mean())
         return {"far_m": far, "far_m_ci95": (far, far) if samples.deterministic else mean_interval(per_sample)}
+
+    def flags(self, rollout) -> dict[str, Any]:
+        return fallen_flags(rollout)
 
 
 QUERY = Far()

@@ -35,9 +35,11 @@ class FinalPose(Query):
         return {"final_pose": {"position_m": reading.final_m.copy(),
                                "yaw_rad": yaw_rad(reading.final_orientations_xyzw), "moved": moved}}
 
-    def flags(self, rollout) -> list[float]:
+    def flags(self, rollout) -> dict[str, list[float]]:
         # what the self-check compares: which objects ended far from where they started
-        return [float(v) for v in rollout.value("final_pose")["moved"]]
+        if rollout.get("final_pose") is None:
+            return {}
+        return {"final_pose": [float(v) for v in rollout.value("final_pose")["moved"]]}
 
     def aggregate(self, samples: Samples) -> dict[str, Any]:
         positions = np.array([r.value("final_pose")["position_m"] for r in samples.rollouts])  # (rollouts, n, 3)

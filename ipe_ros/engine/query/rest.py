@@ -40,8 +40,8 @@ class Rest(Query):
         return {"rest_probability": p, "rest_probability_ci95": samples.fraction_interval(p),
                 "max_final_speed_m_s": float(fastest)}
 
-    def flags(self, rollout) -> list[float]:
-        return [float(rollout.value("rest")["at_rest"])]
+    def flags(self, rollout) -> dict[str, list[float]]:
+        return {} if rollout.get("rest") is None else {"rest": [float(rollout.value("rest")["at_rest"])]}
 
     def describe(self, prediction) -> list[str]:
         lo, hi = prediction.rest_probability_ci95

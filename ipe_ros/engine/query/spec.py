@@ -30,6 +30,26 @@ def register(query: Any) -> Any:
     return query
 
 
+def unregister(name: str) -> None:
+    """Remove a query registered at run time (a test's, a plugin's); the built-in ones stay."""
+    query = QUERIES.get(name)
+    if query is not None and type(query).__module__.startswith(BUILT_IN_PACKAGE):
+        raise ConfigError("query.name", f"{name!r} is built in; it cannot be unregistered")
+    QUERIES.pop(name, None)
+
+
+#: where the built-in queries live; a query of any other module was registered as a plugin
+BUILT_IN_PACKAGE = __name__.rsplit(".", 1)[0] + "."
+
+
+def plugin_modules() -> tuple[str, ...]:
+    """The modules of the queries registered at run time, which worker processes import so that
+    they know those queries too (a module registers its query when imported); ``__main__`` is
+    left out (a worker cannot import it: define queries in an importable module)."""
+    modules = {type(q).__module__ for q in QUERIES.values()}
+    return tuple(sorted(m for m in modules if not m.startswith(BUILT_IN_PACKAGE) and m != "__main__"))
+
+
 @dataclass(frozen=True)
 class QuerySpec:
     """Which queries to compute and their thresholds.
@@ -50,9 +70,13 @@ class QuerySpec:
     #: second and ``rest_spin_rad_s`` (the strict reading the self-check's reference uses)
     rest_speed_sizes_per_s: float = 0.05
     rest_spin_rad_s: float = 0.05
+    #: (query name, its ``Parameters`` instance) for asked queries that declare parameters and were
+    #: given some; a query not listed reads its defaults (``parameters_of``)
+    parameters: tuple[tuple[str, Any], ...] = ()
 
     def __post_init__(self) -> None:
         check_names(self.queries)
+        check_parameters(self.parameters, self.queries)
         positive(self.fall_threshold_fraction, "fall_threshold_fraction")
         positive(self.rest_speed_sizes_per_s, "rest_speed_sizes_per_s")
         positive(self.rest_spin_rad_s, "rest_spin_rad_s")
@@ -74,6 +98,32 @@ class QuerySpec:
 
     def wants(self, name: str) -> bool:
         return name in self.queries
+
+    def parameters_of(self, name: str) -> Any:
+        """Query ``name``'s parameters: as given, or its ``Parameters`` defaults."""
+        for query, given in self.parameters:
+            if query == name:
+                return given
+        cls = getattr(QUERIES.get(name), "Parameters", None)
+        if cls is None:
+            raise ConfigError("queries", f"the {name} query has no parameters")
+        return cls()
+
+
+def check_parameters(parameters, queries: frozenset[str]) -> None:
+    """Each entry names an asked query once, with an instance of that query's ``Parameters``."""
+    if not isinstance(parameters, tuple) or not all(isinstance(p, tuple) and len(p) == 2 for p in parameters):
+        raise ConfigError("parameters", "must be a tuple of (query name, its Parameters) pairs")
+    names = [name for name, _ in parameters]
+    if len(set(names)) != len(names):
+        raise ConfigError("parameters", "a query's parameters are given twice; give them once")
+    for name, given in parameters:
+        if name not in queries:
+            raise ConfigError("parameters", f"parameters for {shown(name)}, which is not asked; ask it or drop them")
+        cls = getattr(QUERIES[name], "Parameters", None)
+        if cls is None or type(given) is not cls:
+            raise ConfigError("parameters", f"the {name} query's parameters must be its Parameters, got "
+                                            f"{type(given).__name__}")
 
 
 def check_names(queries) -> None:

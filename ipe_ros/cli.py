@@ -30,7 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from .cli_ask import add_ask_parser, cmd_ask, contact_pair
-from .cli_predict import EXIT_BAD_INPUT, cmd_predict, format_table, query_parameter_dest, run_predictions, sample_map
+from .cli_predict import EXIT_BAD_INPUT, cmd_predict, format_table, run_predictions, sample_map
+from .cli_queries import add_query_parameter_options
 from .engine import (PRESETS, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError, load_scenes,
                      parse_queries, preset)
 from .engine.catalogue import capped_tower, scene_catalogue
@@ -41,7 +42,6 @@ from .engine.fidelity import DEFAULT_CHECK
 from .engine.generators import generate_tables, generate_towers, state_pair
 from .engine.inputs import as_spelled
 from .engine.query import QUERIES
-from .engine.query.parameters import query_parameters
 from .engine.perceptions import perception_names, perception_source
 from .engine.scene_io import write_scenes
 from .engine.zoo import FAMILIES, scene_zoo
@@ -98,9 +98,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--contact", type=contact_pair, action="append", default=None, metavar="A:B",
                    help="the contact query: will A touch B within the horizon? (repeatable; B may be 'support'; "
                         "names holding ':' as JSON: '[\"cup:1\", \"glass\"]'; adds contact to --query)")
-    for row in query_parameters():  # each query's own parameters (engine/query/parameters.py)
-        p.add_argument(row.flag, dest=query_parameter_dest(row), default=None, metavar=row.type.__name__.upper(),
-                       help=f"the {row.query} query: {row.meaning} (default {row.default})")
+    add_query_parameter_options(p)
     p.add_argument("--samples", type=int, default=DEFAULT_SAMPLES,
                    help=f"Monte Carlo samples k (default {DEFAULT_SAMPLES}, as the paper)")
     p.add_argument("--sigma", type=_finite, default=DEFAULT_SIGMA_M,

@@ -25,6 +25,9 @@ from .engine.config import DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_SIGMA_M, PR
 from .engine.fidelity import DEFAULT_CHECK
 from .engine.inputs import as_spelled
 from .engine.request import build_request
+from .cli_queries import add_query_parameter_options, given_query_parameters
+from .engine.actions.answers import QUESTION_QUERIES
+from .engine.query import QUERIES, parse_queries
 from .engine.query.contact import parse_pair
 
 #: Samples per variant: a question has many variants, and common random numbers make k = 16 enough
@@ -51,6 +54,16 @@ def contact_pair(text: str) -> tuple[str, str]:
         return parse_pair(text, "--contact")
     except ConfigError as exc:
         raise argparse.ArgumentTypeError(exc.problem) from None
+
+
+def _query_names(text: str) -> tuple[str, ...]:
+    """argparse type of ipe ask's --query: registered query names, in the order given."""
+    names = tuple(dict.fromkeys(part.strip() for part in text.split(",") if part.strip()))
+    try:
+        parse_queries(",".join(names))
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(exc.problem) from None
+    return names
 
 
 def add_ask_parser(sub, finite, one_line_parser) -> None:
@@ -89,6 +102,11 @@ def add_ask_parser(sub, finite, one_line_parser) -> None:
     def contact(q):
         q.add_argument("--contact", type=contact_pair, action="append", default=None, metavar="A:B",
                        help="also P(A touches B) per variant (repeatable; B may be 'support')")
+        q.add_argument("--query", type=_query_names, default=(), metavar="NAMES",
+                       help="also these queries per variant, comma-separated (registered ones beyond what the "
+                            "question answers itself: " + ", ".join(n for n in QUERIES if n not in QUESTION_QUERIES)
+                            + "; docs/model.md)")
+        add_query_parameter_options(q)
 
     r = questions.add_parser("remove", help="P(anything else falls) if an object is taken away")
     common(r)
@@ -244,6 +262,8 @@ def question_from_args(args) -> A.Question:
     """The question the options ask, as the node would read it from JSON (engine.actions.question)."""
     common = dict(fell_off=args.fell_off, sequential=not args.fixed_k, self_check=args.self_check)
     contact = tuple(getattr(args, "contact", None) or ())
+    if getattr(args, "query", ()):
+        common.update(queries=tuple(args.query), query_parameters=tuple(given_query_parameters(args).items()))
     if args.question == "remove":
         return A.RemoveQuestion(objects=None if args.object is None else tuple(args.object), safe_below=args.safe_below,
                                 what_falls=args.what_falls or None, contact=contact, **common)  # None: remove's default

@@ -8,9 +8,9 @@ import json
 import math
 import sys
 import time
-from typing import Any
 
 from .cli_ask import verify_samples
+from .cli_queries import given_query_parameters
 from .engine import AdaptiveStop, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError, WorkerPool, load_scenes, predict
 from .engine.config import anytime_batch_size
 from .engine.fidelity import DEFAULT_CHECK, SelfCheck
@@ -18,7 +18,6 @@ from .engine.inputs import spelled
 from .engine.perceptions import perception_source
 from .engine.perturb import is_deterministic
 from .engine.query import QUERIES
-from .engine.query.parameters import QueryParameter, parse_cli_value, query_parameters
 from .engine.request import build_request
 from .engine.sampler import check_request
 from .engine.scene_io import RefusedScene
@@ -133,17 +132,6 @@ def _perceive_depth(args, scenes, model):
         write_depth_rrd(args.depth_rrd, scenes[0], perceived, (observation,))
         print(f"wrote {args.depth_rrd}", file=sys.stderr)
     return perceived
-
-
-def query_parameter_dest(row: QueryParameter) -> str:
-    """Where argparse keeps a query parameter's option (``query.parameters``)."""
-    return f"query_parameter__{row.query}__{row.field}"
-
-
-def given_query_parameters(args) -> dict[str, Any]:
-    """The queries' own parameters given on the command line, by name, as their types."""
-    return {row.name: parse_cli_value(row, getattr(args, query_parameter_dest(row)))
-            for row in query_parameters() if getattr(args, query_parameter_dest(row), None) is not None}
 
 
 def cmd_predict(args) -> int:

@@ -120,3 +120,19 @@ def test_the_node_declares_a_registered_querys_parameter_and_publishes_its_answe
         assert refused.reason == "tilt.threshold_deg: must be in (0, 180) degrees, got 0.0"
     finally:
         ros.close()
+
+
+def test_ipe_ask_asks_a_registered_query_of_every_variant(tilt, capsys):
+    path = str(Path(example_scene_path()))
+    assert main(["ask", "remove", path, "--object", "block4", "--query", "tilt", "--tilt-threshold-deg", "5",
+                 "--sigma", "0.005", "--samples", "8", "--seed", "3", "--workers", "0", "--fixed-k", "--json"]) == 0
+    reply = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    expected = question_from_dict({"question": "remove", "objects": ["block4"], "queries": ["tilt"],
+                                   "query_parameters": {"tilt.threshold_deg": 5.0}, "samples": 8,
+                                   "sequential": False}).answer(TOWER, ModelConfig(sigma_m=0.005, samples=8),
+                                                                preset("default"), seed=3)
+    assert [v["tilt_probability"] for v in reply["variants"]] == \
+        [v["tilt_probability"] for v in expected.data["variants"]]
+    assert main(["ask", "remove", path, "--query", "fall"]) == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1].startswith(
+        "ipe: error: --query: fall is answered by the question itself")

@@ -92,10 +92,10 @@ def test_local_links_resolve(document):
 
 
 def test_the_node_reference_documents_every_parameter_and_topic():
-    from ipe_ros.ros.params import PARAMETERS
+    from ipe_ros.ros.params import all_parameters
 
     reference = (REPO / "docs" / "node.md").read_text()
-    undocumented = [s.name for s in PARAMETERS if f"| `{s.name}` |" not in reference]
+    undocumented = [s.name for s in all_parameters() if f"| `{s.name}` |" not in reference]
     assert not undocumented, f"docs/node.md lacks parameters {undocumented}"
     source = (REPO / "ipe_ros" / "ros" / "node.py").read_text()
     topics = set(re.findall(r'create_(?:publisher|subscription|service)\(\s*\w+,\s*"([^"]+)"', source))

@@ -183,6 +183,20 @@ def test_rest_makes_early_termination_read_rest_strictly():
     assert query_settings(default, QuerySpec(queries=frozenset({"fall"}))) is default
 
 
+def test_rests_own_parameters_set_its_reading_of_rest_and_the_rollouts_end():
+    from ipe_ros.engine.query.rest import RestParameters
+    from ipe_ros.engine.rollout import query_settings
+
+    rolling = _rolled(0.5)  # still rolling at 5/7 of 0.5 m/s at the horizon: at rest only by a loose reading
+    loose = QuerySpec(queries=frozenset({"rest"}), parameters=(("rest", RestParameters(100.0, 100.0)),))
+    assert predict(rolling, GROUND_TRUTH, preset("default"), loose, check=None).rest_probability == 1.0
+    strict = QuerySpec(queries=frozenset({"rest"}), parameters=(("rest", RestParameters(spin_rad_s=0.01)),))
+    assert query_settings(preset("default"), strict).early_stop.angular_rad_s == 0.01
+    with pytest.raises(ConfigError) as info:
+        RestParameters(speed_sizes_per_s=0.0)
+    assert str(info.value).startswith("rest.speed_sizes_per_s: ")
+
+
 def test_final_pose_reports_where_things_end_up():
     answer = _ask(_slid(2.0), queries=("final_pose",))
     slider = answer.final_pose["slider"]

@@ -88,7 +88,7 @@ def test_a_questions_variants_answer_a_registered_query(tilt):
             ({"queries": ["tilt"], "query_parameters": {"tilt.threshold_deg": 0}},
              "tilt.threshold_deg: must be in (0, 180) degrees, got 0.0"),
             ({"queries": ["tilt"], "query_parameters": {"tilt.steepness": 1}},
-             "tilt.steepness: not a parameter of any query; choose from tilt.threshold_deg"),
+             "tilt.steepness: not a parameter of the tilt query; choose from tilt.threshold_deg"),
             ({"query_parameters": {"tilt.threshold_deg": 5.0}},
              "query_parameters: were given but no queries; list the queries they are for in \"queries\"")):
         with pytest.raises(ConfigError) as info:

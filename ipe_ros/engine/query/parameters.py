@@ -70,6 +70,10 @@ def spec_parameters(queries: frozenset[str], given: Mapping[str, Any]) -> tuple[
     for key, value in given.items():
         row = rows.get(key)
         if row is None:
+            query = str(key).split(".", 1)[0]
+            own = [name for name, r in rows.items() if r.query == query]
+            if own:
+                raise ConfigError(key, f"not a parameter of the {query} query; choose from {', '.join(own)}")
             raise ConfigError(key, f"not a parameter of any query; choose from {', '.join(rows) or 'none'}")
         if row.query in queries:
             by_query.setdefault(row.query, {})[row.field] = typed(row, value)

@@ -57,19 +57,14 @@ class QuerySpec:
     fall_threshold_fraction: an object has fallen when its centre's z dropped by more than this
         fraction of its own smallest extent. The default 0.125 is the paper's "0.025 unit" read in
         the stimulus files' units (0.025 m on 0.2 m blocks).
-    bump_group: the group whose share of fallen-off objects the ``bump`` query reports (paper:
-        red / (red + yellow)).
+    A query's own parameters (the bump query's group, the rest query's reading of rest, a plugin's)
+    are its ``Parameters`` (``parameters``, ``parameters_of``).
     """
 
     queries: frozenset[str] = frozenset({"fall"})
     fall_threshold_fraction: float = 0.125
-    bump_group: str = "red"
     #: the contact query's pairs (A, B): B may be "support"
     contact_pairs: tuple[tuple[str, str], ...] = ()
-    #: the rest query: at rest when slower than this many of the scene's smallest extents per
-    #: second and ``rest_spin_rad_s`` (the strict reading the self-check's reference uses)
-    rest_speed_sizes_per_s: float = 0.05
-    rest_spin_rad_s: float = 0.05
     #: (query name, its ``Parameters`` instance) for asked queries that declare parameters and were
     #: given some; a query not listed reads its defaults (``parameters_of``)
     parameters: tuple[tuple[str, Any], ...] = ()
@@ -78,8 +73,6 @@ class QuerySpec:
         check_names(self.queries)
         check_parameters(self.parameters, self.queries)
         positive(self.fall_threshold_fraction, "fall_threshold_fraction")
-        positive(self.rest_speed_sizes_per_s, "rest_speed_sizes_per_s")
-        positive(self.rest_spin_rad_s, "rest_spin_rad_s")
         if not isinstance(self.contact_pairs, tuple) or not all(
                 isinstance(pair, tuple) and len(pair) == 2 and all(isinstance(n, str) and n for n in pair)
                 for pair in self.contact_pairs):

@@ -32,6 +32,7 @@ from ..shapes import quaternion_product
 from .depth_model import (DepthModel, DepthObservation, DepthSettings, check_layer_memory, render_depth_m,
                           support_depth_m)
 from .mcmc import effective_sample_size
+from .metropolis import run_metropolis, thinned_index
 from .render import scene_mesh
 
 __all__ = ["CHAIN_BUDGET_SHARE", "DEPTH_STREAM", "DepthObservation", "DepthPerceivedScenes", "DepthPosterior",
@@ -109,7 +110,8 @@ class DepthPosterior:
         return np.quantile(values, 0.025, axis=0), np.quantile(values, 0.975, axis=0)
 
     def thinned(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        index = np.linspace(0, len(self.positions_m) - 1, k).round().astype(int)
+        """k states spread evenly over the chain: positions and turns."""
+        index = thinned_index(len(self.positions_m), k)
         return self.positions_m[index], self.yaws_rad[index]
 
 
@@ -126,8 +128,6 @@ def run_depth_chain(scene: Scene, observations: tuple[DepthObservation, ...], se
     started = time.monotonic()
     mesh = scene_mesh(scene)
     dynamic = len(scene.dynamic_objects)
-    prior_centre = mesh.positions_m[:dynamic, :3].copy()
-    heights = settings.prior_height_sd_m > 0  # estimated, or taken as published
     positions = mesh.positions_m.copy()
     yaws = np.zeros(len(positions))
     model = DepthModel(scene, mesh, observations, settings)
@@ -137,68 +137,91 @@ def run_depth_chain(scene: Scene, observations: tuple[DepthObservation, ...], se
                                       f"{time.monotonic() - started:.3g} s, all the budget leaves the depth chain; "
                                       "raise the budget, bin or crop the image, or send fewer objects")
 
-    def log_prior(b: int, xyz: np.ndarray, yaw: float) -> float:
-        prior = (-0.5 * float(np.sum((xyz[:2] - prior_centre[b, :2]) ** 2)) / settings.prior_sd_m ** 2
-                 - 0.5 * yaw * yaw / settings.prior_yaw_sd_rad ** 2)
-        return prior - 0.5 * (xyz[2] - prior_centre[b, 2]) ** 2 / settings.prior_height_sd_m ** 2 if heights else prior
-
-    # per object, a proposal scale tuned during burn-in towards TARGET_ACCEPTANCE (a block in plain
-    # view is pinned to a fraction of a millimetre, a hidden one wanders over its prior), then frozen
-    scale = np.ones(dynamic)
-    offset_scale = np.ones(len(observations))
-    kept_xyz, kept_yaw, kept_offsets, taken = [], [], [], 0
     total, burn_in = settings.chain_samples(dynamic), settings.burn_in(dynamic)
+    kernel = _PoseMoves(model, positions, yaws, current, dynamic, len(observations), settings, burn_in)
 
-    def adapted(value: float, accepted: bool, sample: int) -> float:
-        value *= math.exp(0.5 * ((1.0 if accepted else 0.0) - TARGET_ACCEPTANCE) / math.sqrt(1 + sample / dynamic))
-        return min(max(value, 1e-3), 10.0)
-
-    def move_offsets(sample: int) -> None:
-        """One move of each camera's range offset: a real camera's depth is biased by millimetres (range
-        error, calibration), which would otherwise move every object along the view; the support
-        around the objects, whose place is known, pins it down."""
-        nonlocal current
-        for v in range(len(observations)):
-            old = model.offsets_m[v]
-            new = old + offset_scale[v] * settings.offset_proposal_sd_m * rng.standard_normal()
-            candidate = model.propose_offset(v, new)
-            ratio = candidate - current - 0.5 * (new * new - old * old) / settings.offset_prior_sd_m ** 2
-            accepted = bool(np.log(rng.random()) < ratio)
-            if accepted:
-                model.accept_offset()
-                current = candidate
-            if sample < burn_in:
-                offset_scale[v] = adapted(offset_scale[v], accepted, sample)
-
-    for sample in range(total):
+    def check(sample: int) -> None:
         if deadline_s is not None and sample % (BUDGET_CHECK_SCANS * dynamic) == 0 and sample:
             _check_deadline(started, deadline_s, sample, total, dynamic)
-        b = int(rng.integers(0, dynamic))
-        moved = positions[b].copy()
-        moved[:2] += scale[b] * settings.proposal_sd_m * rng.standard_normal(2)
-        if heights:
-            moved[2] += scale[b] * settings.proposal_height_sd_m * rng.standard_normal()
-        yaw = yaws[b] + scale[b] * settings.proposal_yaw_sd_rad * rng.standard_normal()
-        candidate = model.propose(b, moved, yaw)
-        ratio = candidate - current + log_prior(b, moved, yaw) - log_prior(b, positions[b], yaws[b])
-        accepted = bool(np.log(rng.random()) < ratio)
-        if accepted:
-            model.accept()
-            positions[b], yaws[b], current = moved, yaw, candidate
-            taken += 1
-        if sample < burn_in:
-            scale[b] = adapted(scale[b], accepted, sample)
-        if settings.offset_prior_sd_m > 0 and sample % (OFFSET_MOVE_SCANS * dynamic) == dynamic - 1:
-            move_offsets(sample)
-        if sample >= burn_in:
-            kept_xyz.append(positions[:dynamic].copy())
-            kept_yaw.append(yaws[:dynamic].copy())
-            kept_offsets.append(model.offsets_m.copy())
+
+    run = run_metropolis(kernel, total, burn_in, rng, kernel.keep, check)
+    kept_xyz = [xyz for xyz, _, _ in run.kept]
+    kept_yaw = [yaw for _, yaw, _ in run.kept]
     model.start(np.concatenate([np.mean(kept_xyz, axis=0), positions[dynamic:]]),
                 np.concatenate([np.mean(kept_yaw, axis=0), yaws[dynamic:]]))
     return DepthPosterior(names=tuple(b.name for b in scene.dynamic_objects), positions_m=np.array(kept_xyz),
-                          yaws_rad=np.array(kept_yaw), acceptance_rate=taken / total,
-                          offsets_m=np.array(kept_offsets), pixels=model.pixels_seen(dynamic))
+                          yaws_rad=np.array(kept_yaw), acceptance_rate=run.acceptance_rate,
+                          offsets_m=np.array([offsets for _, _, offsets in run.kept]),
+                          pixels=model.pixels_seen(dynamic))
+
+
+class _PoseMoves:
+    """The depth chain's kernel: a Gaussian move of one object's x, y (height) and yaw under its
+    prior around the published pose, its scale tuned during burn-in towards TARGET_ACCEPTANCE (a
+    block in plain view is pinned to a fraction of a millimetre, a hidden one wanders over its prior)
+    then frozen; every ``OFFSET_MOVE_SCANS`` scans, a move of each camera's range offset."""
+
+    def __init__(self, model: DepthModel, positions: np.ndarray, yaws: np.ndarray, current: float, dynamic: int,
+                 cameras: int, settings: DepthSettings, burn_in: int):
+        self.model, self.positions, self.yaws, self.dynamic, self.settings = model, positions, yaws, dynamic, settings
+        self.current, self.burn_in = current, burn_in  # the state's log-likelihood; updates that adapt
+        self.prior_centre = positions[:dynamic, :3].copy()
+        self.heights = settings.prior_height_sd_m > 0  # estimated, or taken as published
+        self.scale = np.ones(dynamic)
+        self.offset_scale = np.ones(cameras)
+
+    def log_prior(self, b: int, xyz: np.ndarray, yaw: float) -> float:
+        s, centre = self.settings, self.prior_centre[b]
+        prior = (-0.5 * float(np.sum((xyz[:2] - centre[:2]) ** 2)) / s.prior_sd_m ** 2
+                 - 0.5 * yaw * yaw / s.prior_yaw_sd_rad ** 2)
+        return prior - 0.5 * (xyz[2] - centre[2]) ** 2 / s.prior_height_sd_m ** 2 if self.heights else prior
+
+    def propose(self, sample: int, rng: np.random.Generator) -> float:
+        s, b = self.settings, int(rng.integers(0, self.dynamic))
+        self.body = b
+        self.moved = self.positions[b].copy()
+        self.moved[:2] += self.scale[b] * s.proposal_sd_m * rng.standard_normal(2)
+        if self.heights:
+            self.moved[2] += self.scale[b] * s.proposal_height_sd_m * rng.standard_normal()
+        self.yaw = self.yaws[b] + self.scale[b] * s.proposal_yaw_sd_rad * rng.standard_normal()
+        self.candidate = self.model.propose(b, self.moved, self.yaw)
+        return (self.candidate - self.current + self.log_prior(b, self.moved, self.yaw)
+                - self.log_prior(b, self.positions[b], self.yaws[b]))
+
+    def accept(self) -> None:
+        self.model.accept()
+        b = self.body
+        self.positions[b], self.yaws[b], self.current = self.moved, self.yaw, self.candidate
+
+    def after(self, sample: int, accepted: bool, rng: np.random.Generator) -> None:
+        if sample < self.burn_in:
+            self.scale[self.body] = self._adapted(self.scale[self.body], accepted, sample)
+        if self.settings.offset_prior_sd_m > 0 and sample % (OFFSET_MOVE_SCANS * self.dynamic) == self.dynamic - 1:
+            self._move_offsets(sample, rng)
+
+    def keep(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self.positions[:self.dynamic].copy(), self.yaws[:self.dynamic].copy(), self.model.offsets_m.copy()
+
+    def _adapted(self, value: float, accepted: bool, sample: int) -> float:
+        value *= math.exp(0.5 * ((1.0 if accepted else 0.0) - TARGET_ACCEPTANCE) / math.sqrt(1 + sample / self.dynamic))
+        return min(max(value, 1e-3), 10.0)
+
+    def _move_offsets(self, sample: int, rng: np.random.Generator) -> None:
+        """One move of each camera's range offset: a real camera's depth is biased by millimetres (range
+        error, calibration), which would otherwise move every object along the view; the support
+        around the objects, whose place is known, pins it down."""
+        s = self.settings
+        for v in range(len(self.offset_scale)):
+            old = self.model.offsets_m[v]
+            new = old + self.offset_scale[v] * s.offset_proposal_sd_m * rng.standard_normal()
+            candidate = self.model.propose_offset(v, new)
+            ratio = candidate - self.current - 0.5 * (new * new - old * old) / s.offset_prior_sd_m ** 2
+            accepted = bool(np.log(rng.random()) < ratio)
+            if accepted:
+                self.model.accept_offset()
+                self.current = candidate
+            if sample < self.burn_in:
+                self.offset_scale[v] = self._adapted(self.offset_scale[v], accepted, sample)
 
 
 def _check_deadline(started: float, deadline_s: float, done: int, total: int, objects: int) -> None:

@@ -15,6 +15,7 @@ import numpy as np
 
 from .camera import PinholeCamera
 from .likelihood import VisionSettings, blur_matrices, blur, log_likelihood
+from .metropolis import run_metropolis, thinned_index
 from .render import BACKGROUND_GREY, EMPTY, Patch, SceneMesh, body_patch, render
 
 
@@ -47,8 +48,7 @@ class Chain:
 
     def thinned(self, k: int) -> np.ndarray:
         """k states spread evenly over the chain (k <= samples)."""
-        index = np.linspace(0, len(self.positions_m) - 1, k).round().astype(int)
-        return self.positions_m[index]
+        return self.positions_m[thinned_index(len(self.positions_m), k)]
 
 
 def effective_sample_size(x: np.ndarray) -> float:
@@ -169,26 +169,40 @@ class ImageModel:
             if self._accepts % 500 == 0 else proposed
 
 
+class _SingleBodyMoves:
+    """The SI's kernel: a Gaussian move of one body's x, y, the bodies of a scan drawn uniformly with
+    replacement; a uniform prior, so the likelihood ratio decides."""
+
+    def __init__(self, model: ImageModel, start_m: np.ndarray, dynamic: int, settings: VisionSettings):
+        self.model, self.dynamic, self.settings = model, dynamic, settings
+        self.state = np.array(start_m, float)
+        self.current = model.start(self.state)
+
+    def propose(self, sample: int, rng: np.random.Generator) -> float:
+        if sample % self.dynamic == 0:
+            self.order = rng.integers(0, self.dynamic, size=self.dynamic)
+        self.body = self.order[sample % self.dynamic]
+        self.moved = self.state[self.body].copy()
+        self.moved[:2] += self.settings.proposal_sd_m * rng.standard_normal(2)
+        self.candidate = self.model.propose(self.body, self.moved)
+        return self.candidate - self.current
+
+    def accept(self) -> None:
+        self.model.accept()
+        self.state[self.body], self.current = self.moved, self.candidate
+
+    def after(self, sample: int, accepted: bool, rng: np.random.Generator) -> None:
+        pass
+
+    def keep(self) -> tuple[np.ndarray, float]:
+        return self.state[:self.dynamic].copy(), self.current
+
+
 def run_chain(model: ImageModel, start_m: np.ndarray, dynamic: int, settings: VisionSettings,
               rng: np.random.Generator) -> Chain:
     """``settings.chain_samples`` single-body updates of the first ``dynamic`` bodies' x, y."""
-    state = np.array(start_m, float)
-    current = model.start(state)
-    kept, kept_ll = [], []
-    taken = np.zeros(settings.chain_samples, bool)
-    for sample in range(settings.chain_samples):
-        if sample % dynamic == 0:
-            order = rng.integers(0, dynamic, size=dynamic)
-        body = order[sample % dynamic]
-        moved = state[body].copy()
-        moved[:2] += settings.proposal_sd_m * rng.standard_normal(2)
-        candidate = model.propose(body, moved)
-        if np.log(rng.random()) < candidate - current:  # uniform prior: the likelihood ratio decides
-            model.accept()
-            state[body], current = moved, candidate
-            taken[sample] = True
-        if sample >= settings.burn_in:
-            kept.append(state[:dynamic].copy())
-            kept_ll.append(current)
-    return Chain(positions_m=np.array(kept), log_likelihood=np.array(kept_ll),
-                 acceptance_rate=float(taken.mean()), proposals=settings.chain_samples, accepted=taken)
+    kernel = _SingleBodyMoves(model, start_m, dynamic, settings)
+    run = run_metropolis(kernel, settings.chain_samples, settings.burn_in, rng, kernel.keep)
+    return Chain(positions_m=np.array([state for state, _ in run.kept]),
+                 log_likelihood=np.array([ll for _, ll in run.kept]), acceptance_rate=run.acceptance_rate,
+                 proposals=settings.chain_samples, accepted=run.accepted)

@@ -101,6 +101,30 @@ def test_a_tower_with_a_hidden_block_gets_a_less_certain_answer():
     assert answers["hidden"].request["perception"]["kind"] == "depth"
 
 
+def test_a_robot_question_draws_its_samples_from_the_depth_posterior():
+    """The question's scene as it is is the prediction's sample (the same posterior scene i, seed i):
+    a seen top block stands in both, a hidden one falls in the same samples in both; sigma, 20 cm here,
+    is not drawn (it would topple the seen top block in most samples)."""
+    from ipe_ros.engine.actions import remove
+
+    stack = (cube("bottom", 0, 0, 0.05), cube("top", 0.0, -0.03, 0.15))
+    model = ModelConfig(sigma_m=0.2, samples=16)
+    for view, scene in (("seen", floor(*stack)), ("hidden", floor(*stack, wall()))):
+        perceived = D.perceive_depth(scene, 24, (observe(scene, SIDE),), D.DepthSettings(), np.random.default_rng(2))
+        fewer = perceived.with_samples(16)  # the question's k from the same chain
+        prediction = predict(scene, dataclasses.replace(model, perception="depth"), preset("default"),
+                             QuerySpec(queries=frozenset({"any_fall", "fall"})), perceived=fewer, seed=5, check=None)
+        answers = remove(scene, ["top"], model, preset("default"), seed=5, sequential=False, perceived=fewer)
+        as_is = answers.variants[0]
+        assert as_is.label == "as_is" and as_is.any_fall_probability == prediction.any_fall_probability
+        assert as_is.object_fall_probability == prediction.object_fall_probability
+        if view == "seen":
+            assert as_is.any_fall_probability == 0.0
+    with pytest.raises(ConfigError) as info:
+        perceived.with_samples(10 ** 6)
+    assert str(info.value).startswith("samples: the depth chain keeps ")
+
+
 def test_depth_perception_needs_its_images_and_names_what_is_wrong():
     scene = floor(cube("a", 0, 0, 0.05))
     with pytest.raises(ConfigError, match="^perception: depth perception needs the depth images"):

@@ -538,14 +538,15 @@ def test_depth_perception_predicts_from_the_newest_depth_image(ros):
     again = json.loads(response.message)
     assert again["request"]["preset"] == "fine" and again["request"]["perception"]["objects"] == perception["objects"]
     assert node.service.stats().depth_posteriors == 1
-    # questions draw from sigma, and say so
+    # questions about the view draw from the same chain (thinned to their k), and say so
     replies = ros.collect(String, "/ipe/answer", LATCHED_QOS)
     ros.publisher(String, "/ipe/ask").publish(String(data=json.dumps({"id": "q", "question": "push", "samples": 2,
                                                                       "object": "top", "velocity_m_s": [1, 0]})))
     wait_until(lambda: any(json.loads(m.data)["final"] for m in replies), TIMEOUT_S, "the answer to the question")
     final = next(json.loads(m.data) for m in replies if json.loads(m.data)["final"])
-    assert final["perception"] == "gaussian (sigma = 0.04 m): questions do not use depth perception"
-    assert "answer" in final
+    assert final["perception"]["kind"] == "depth" and final["perception"]["samples"] == 2, final
+    assert final["perception"]["objects"] == perception["objects"]  # the view's posterior, not a chain of its own
+    assert "answer" in final and node.service.stats().depth_posteriors == 1
 
 
 def test_a_640_x_480_depth_stream_at_10_hz_arrives_whole(ros):

@@ -326,8 +326,9 @@ class PredictionService:
         with self._cond:
             return None if self._depth is None else self._depth[1]
 
-    def _perceived(self, item: StampedScene, config: ServiceConfig):
-        """The depth posterior's scenes for this scene, from the depth image nearest its stamp."""
+    def perceived(self, item: StampedScene, config: ServiceConfig):
+        """The depth posterior's scenes for this scene, from the newest depth image (one chain per view:
+        predictions and robot questions about it share it)."""
         from ..engine.vision import depth
 
         with self._cond:
@@ -369,7 +370,7 @@ class PredictionService:
         if config.rerun_save_dir and config.rerun_rollouts_logged > 0:
             record_every = max(1, round(config.rerun_frame_period_s / request.settings.time_step_s))
         try:
-            perceived = self._perceived(item, config) if request.model.perception == "depth" else None
+            perceived = self.perceived(item, config) if request.model.perception == "depth" else None
             budget_s = request.budget_s  # what the depth chain left of it
             if budget_s is not None and perceived is not None:
                 budget_s = max(budget_s - (time.perf_counter() - start), 1e-3)

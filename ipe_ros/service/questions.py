@@ -136,9 +136,13 @@ class QuestionService:
                                "compute_s": time.perf_counter() - start}, source, question)
 
             try:
-                # questions draw their noise from sigma: depth perception serves predictions only, and
-                # the reply says so rather than answering as if it had been used
+                # with depth perception, every variant's sample i starts from the posterior's scene i: the
+                # chain the view's predictions use, thinned to the question's k (no chain of its own)
                 model = dataclasses.replace(request.model, samples=DEFAULT_QUESTION_SAMPLES, perception="gaussian")
+                perceived = None
+                if request.model.perception == "depth":
+                    k = question.samples if question.samples is not None else DEFAULT_QUESTION_SAMPLES
+                    perceived = self._predictions.perceived(source, config).with_samples(k)
                 pool = self._predictions.pool
                 record = {}
                 if config.rerun_save_dir and config.rerun_rollouts_logged > 0:
@@ -146,11 +150,10 @@ class QuestionService:
                                   record_samples=config.rerun_rollouts_logged)
                 reply = question.answer(source.scene, model, request.settings, seed=request.seed,
                                         map_fn=pool.map if pool is not None else None, budget_s=request.budget_s,
-                                        on_progress=progress, check=request.check, **record)
+                                        on_progress=progress, check=request.check, perceived=perceived, **record)
                 message = {**head, "final": True, "answer": reply.data, "compute_s": time.perf_counter() - start}
-                if request.model.perception != "gaussian":
-                    message["perception"] = (f"gaussian (sigma = {request.model.sigma_m:g} m): questions do not use "
-                                             f"{request.model.perception} perception")
+                if perceived is not None:
+                    message["perception"] = perceived.to_dict()
                 if record and reply.answers is not None:
                     self._recordings += 1
                     message["rrd_path"] = record_question(config, question, source, reply.answers, self._recordings,

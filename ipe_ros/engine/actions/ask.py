@@ -4,6 +4,7 @@ until decided (``decide``)."""
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping
 
@@ -35,7 +36,7 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
         directions: bool = False, fell_off: bool = False, sequential: Sequential | None = None,
         on_progress: Callable[[dict], None] | None = None, contact: tuple[tuple[str, str], ...] = (),
         check: SelfCheck | None = None, what_falls: bool = True, queries: tuple[str, ...] = (),
-        query_parameters: Mapping[str, Any] | None = None) -> Answers:
+        query_parameters: Mapping[str, Any] | None = None, perceived=None) -> Answers:
     """Answer every variant with common random numbers (see the module docstring). Removals that
     cannot change anything are answered from the scene's own samples (a variant "as is" is added
     for them when it is not asked). ``record_every`` / ``record_samples``: keep the trajectories of
@@ -55,15 +56,21 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     question's time (benchmarks/README.md); each variant's ``fidelity`` then says "unverified".
     ``queries``: other registered queries each variant also answers (``VariantAnswer.query_answers``;
     every variant is then simulated), their parameters by name in ``query_parameters``
-    (``"<query>.<field>"``, engine/query/parameters.py)."""
+    (``"<query>.<field>"``, engine/query/parameters.py). ``perceived``: scenes drawn from a perception's
+    posterior (e.g. ``vision.depth.DepthPerceivedScenes``): sample i of every variant starts from
+    ``perceived.scenes[i]`` and the model's sigma is not drawn (the posterior is the noise), as in a
+    prediction from that perception."""
     _check_question(scene, actions, model, budget_s, check, fell_off, contact, queries)
+    if perceived is not None:
+        model = dataclasses.replace(model, sigma_m=0.0)
     plan = _plan(scene, actions, model, settings, budget_s, fall_threshold_fraction, directions, fell_off, contact,
-                 what_falls, queries, query_parameters or {})
+                 what_falls, queries, query_parameters or {}, perceived)
     loop = MonteCarlo(run_variants, lost, map_fn, budget_s)  # the budget counts from here
     seeds = child_seeds(seed, plan.samples)
 
     def tasks(indices, variants: list[int]) -> list[VariantTask]:
-        return [VariantTask(scene=scene, model=model, settings=settings, query=plan.query, index=i, seed=seeds[i],
+        return [VariantTask(scene=scene if perceived is None else perceived.scenes[i], model=model, settings=settings,
+                            query=plan.query, index=i, seed=seeds[i],
                             actions=tuple(plan.simulated_actions[j] for j in variants),
                             regions=tuple(plan.regions[j] for j in variants),
                             record_every=record_every if i < record_samples else 0)
@@ -143,8 +150,10 @@ class _Plan:
 
 def _plan(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSettings, budget_s: float | None,
           fall_threshold_fraction: float, directions: bool, fell_off: bool, contact, what_falls: bool,
-          queries: tuple[str, ...], query_parameters: Mapping[str, Any]) -> _Plan:
+          queries: tuple[str, ...], query_parameters: Mapping[str, Any], perceived=None) -> _Plan:
     margin = 3 * float(position_sigmas_m(scene, model).max(initial=0.0))  # noise can close gaps this wide
+    if perceived is not None:  # and the posterior's samples by how far they moved two objects apart
+        margin += 2 * _farthest_moved_m(scene, perceived.scenes)
     everything = frozenset(b.name for b in scene.dynamic_objects)
     # a pushed support can slide every group into every other
     scene_groups = [everything] if model.pushes else groups(scene, margin)
@@ -173,9 +182,18 @@ def _plan(scene: Scene, actions: list[Action], model: ModelConfig, settings: Sim
         QUERIES[name].check(scene, query)
     # no noise anywhere (scene, model, nor an action's own): one rollout per variant says everything
     deterministic = is_deterministic(scene, model) and not any(draws_noise(scene, a, model)
-                                                               for a in simulated_actions)
-    return _Plan(simulated_actions, trivial, regions, everything, query, deterministic,
-                 1 if deterministic else model.samples)
+                                                               for a in simulated_actions) and perceived is None
+    samples = 1 if deterministic else model.samples
+    if perceived is not None and len(perceived.scenes) < samples:
+        raise ConfigError("samples", f"{len(perceived.scenes)} perceived scenes for {samples} samples")
+    return _Plan(simulated_actions, trivial, regions, everything, query, deterministic, samples)
+
+
+def _farthest_moved_m(scene: Scene, scenes) -> float:
+    """The farthest any dynamic object of ``scenes`` is from where ``scene`` has it."""
+    given = {b.name: b.position_m for b in scene.dynamic_objects}
+    return max((math.dist(b.position_m, given[b.name]) for s in scenes for b in s.dynamic_objects
+                if b.name in given), default=0.0)
 
 
 def _answers(scene: Scene, actions: list[Action], plan: _Plan, per_sample, decisions,

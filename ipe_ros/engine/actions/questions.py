@@ -199,11 +199,24 @@ def clear_order(scene: Scene, model: ModelConfig, settings: SimSettings, target:
         best = min(answers.variants[1:], key=lambda v: (_rank_key(v), -heights[v.action.names[0]]))
         (name,) = best.action.names
         steps.append(ClearStep(name, best.any_fall_probability or 0.0, best.any_fall_probability_ci95 or (0.0, 1.0)))
-        current = dataclasses.replace(current, objects=tuple(b for b in current.objects if b.name != name))
+        current = _without(current, name)
+        if kw.get("perceived") is not None:  # the posterior's scenes lose it too
+            kw["perceived"] = PerceivedAfter(tuple(_without(s, name) for s in kw["perceived"].scenes))
         if name == target or not current.dynamic_objects:
             break
     total = 1 - float(np.prod([1 - s.p_anything_falls for s in steps]))
     return ClearOrder(scene.name, tuple(steps), total, target, stopped_by)
+
+
+def _without(scene: Scene, name: str) -> Scene:
+    return dataclasses.replace(scene, objects=tuple(b for b in scene.objects if b.name != name))
+
+
+@dataclass(frozen=True)
+class PerceivedAfter:
+    """A posterior's scenes after the steps taken so far (``clear_order``: objects taken away)."""
+
+    scenes: tuple[Scene, ...]
 
 
 def place(scene: Scene, bodies: list[Body], model: ModelConfig, settings: SimSettings, sequential: bool = True,

@@ -262,6 +262,16 @@ class DepthPerceivedScenes:
     chain_samples: int
     burn_in: int
     refined: Scene
+    given: Scene | None = None  # the scene as the detector published it (the prior's centre)
+
+    def with_samples(self, k: int) -> "DepthPerceivedScenes":
+        """k scenes spread over the same chain (a robot question asks for another k than the
+        prediction the chain was run for): no new chain."""
+        if self.given is None or k > len(self.posterior.positions_m):
+            raise ConfigError("samples", f"the depth chain keeps {len(self.posterior.positions_m)} states, fewer than "
+                                         f"the {k} samples asked; ask for fewer")
+        positions, yaws = self.posterior.thinned(k)
+        return dataclasses.replace(self, scenes=tuple(scene_at_pose(self.given, p, y) for p, y in zip(positions, yaws)))
 
     @property
     def acceptance_rate(self) -> float:
@@ -307,7 +317,8 @@ def perceive_depth(scene: Scene, k: int, observations: tuple[DepthObservation, .
     scenes = tuple(scene_at_pose(scene, p, y) for p, y in zip(positions, yaws))
     objects = len(scene.dynamic_objects)
     return DepthPerceivedScenes(scenes=scenes, posterior=posterior, chain_samples=settings.chain_samples(objects),
-                                burn_in=settings.burn_in(objects), refined=scene_at_pose(scene, *posterior.mean()))
+                                burn_in=settings.burn_in(objects), refined=scene_at_pose(scene, *posterior.mean()),
+                                given=scene)
 
 
 def perceive_depth_for(scene: Scene, k: int, observations: tuple[DepthObservation, ...], seed: int,

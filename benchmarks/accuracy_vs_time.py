@@ -31,9 +31,9 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 import numpy as np  # noqa: E402
 
 from ipe_ros.engine import PRESETS, ModelConfig, QuerySpec, SimSettings, WorkerPool, predict  # noqa: E402
-from ipe_ros.engine.fidelity import DEFAULT_CHECK  # noqa: E402
-from ipe_ros.engine.generators import generate_towers  # noqa: E402
-from ipe_ros.engine.scene_files import scenes_from_tower_csv  # noqa: E402
+from ipe_ros.engine.checking.fidelity import DEFAULT_CHECK  # noqa: E402
+from ipe_ros.engine.scene.generators import generate_towers  # noqa: E402
+from ipe_ros.engine.scene.files import scenes_from_tower_csv  # noqa: E402
 from ipe_ros.analysis.paper_data import EXP1_DATASET, authors_outcomes, shared_data_dir  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -49,7 +49,7 @@ def candidates() -> list[SimSettings]:
     # coarser than that back into 1/233 s: the swept settings lift it so each runs the step it names.
     base = paper.changed('', max_step_fraction_of_time_scale=0.1,
                          solver={"iterations": 100, "residual_threshold": 1e-05, "warm_start_factor": 1.0})
-    # "-unchecked": the same settings without the self-check (engine.fidelity), to show what it costs
+    # "-unchecked": the same settings without the self-check (engine.checking.fidelity), to show what it costs
     out = [paper, PRESETS["default"], PRESETS["default"].changed("default" + UNCHECKED)]
     for name in sorted(PRESETS):
         if name not in ("paper", "default"):

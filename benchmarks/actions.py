@@ -37,8 +37,8 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 from ipe_ros.engine import Box, Floor, ModelConfig, Scene, WorkerPool, preset  # noqa: E402
 from ipe_ros.engine import actions as A  # noqa: E402
 from ipe_ros.engine.config import DEFAULT_SIGMA_M  # noqa: E402
-from ipe_ros.engine.decide import Ranking, SafeBelow, Supports, Tally  # noqa: E402
-from ipe_ros.engine.fidelity import DEFAULT_CHECK  # noqa: E402
+from ipe_ros.engine.sampling.decide import Ranking, SafeBelow, Supports, Tally  # noqa: E402
+from ipe_ros.engine.checking.fidelity import DEFAULT_CHECK  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 I = (0.0, 0.0, 0.0, 1.0)
@@ -46,7 +46,7 @@ I = (0.0, 0.0, 0.0, 1.0)
 
 def stable_tower() -> Scene:
     from ipe_ros.analysis.paper_data import EXP1_DATASET, authors_outcomes, shared_data_dir
-    from ipe_ros.engine.scene_files import scenes_from_tower_csv
+    from ipe_ros.engine.scene.files import scenes_from_tower_csv
 
     csv = shared_data_dir() / "willitfall.csv"
     if csv.exists():
@@ -54,7 +54,7 @@ def stable_tower() -> Scene:
         for scene in scenes_from_tower_csv(csv):
             if outcomes.get(scene.name) is not None and outcomes[scene.name].stable:
                 return scene
-    from ipe_ros.engine.generators import generate_towers
+    from ipe_ros.engine.scene.generators import generate_towers
 
     return generate_towers(2013, 1)[0]
 

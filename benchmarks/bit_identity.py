@@ -27,9 +27,9 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 from ipe_ros.analysis.paper_data import shared_data_dir  # noqa: E402
 from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes, predict, predict_many, preset  # noqa: E402
-from ipe_ros.engine.sampler import AdaptiveStop  # noqa: E402
-from ipe_ros.engine.fidelity import DEFAULT_CHECK  # noqa: E402
-from ipe_ros.engine.generators import generate_tables, generate_towers  # noqa: E402
+from ipe_ros.engine.sampling.sampler import AdaptiveStop  # noqa: E402
+from ipe_ros.engine.checking.fidelity import DEFAULT_CHECK  # noqa: E402
+from ipe_ros.engine.scene.generators import generate_tables, generate_towers  # noqa: E402
 
 ANSWER_FIELDS = ("fall_fraction", "fall_fraction_ci95", "object_fall_probability", "any_fall_probability",
                  "direction_rad", "direction_decisiveness", "far_m", "far_m_ci95", "fell_off_fraction_by_group",
@@ -169,7 +169,7 @@ def main() -> int:
     args = parser.parse_args()
     result = {}
     for key, scene, model, preset_name, queries, record_every in cases():
-        # the physics itself: the self-check would rerun unhealthy rollouts at `paper` (engine.fidelity)
+        # the physics itself: the self-check would rerun unhealthy rollouts at `paper` (engine.checking.fidelity)
         p = predict(scene, model, preset(preset_name), QuerySpec(queries=frozenset(queries)), seed=7,
                     record_every=record_every, check=None)
         result[key] = digest(p)

@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/catalogue.py [--scenes 40] [--samples 8] [--seed 2026] [--workers 2]
                                              [--out benchmarks/results/catalogue]
 
-The catalogue (ipe_ros.engine.catalogue: mixed shapes, 5 mm to 1 m, mass ratios up to 1000:1,
+The catalogue (ipe_ros.engine.scene.catalogue: mixed shapes, 5 mm to 1 m, mass ratios up to 1000:1,
 restitution to 0.9, friction 0-2, bodies thrown at up to 10 m/s) under every preset, with the
 queries fall + direction (rollouts run until every body is at rest, not only until it is decided).
 Each scene's sigma is 5% of its smallest body. `paper` is the reference, timed in the same run; the
@@ -26,7 +26,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 from accuracy_vs_time import REPO, compare, run_config  # noqa: E402 - the same comparison as the towers'
 from ipe_ros.engine import PRESETS, ModelConfig, QuerySpec, WorkerPool  # noqa: E402
-from ipe_ros.engine.catalogue import scene_catalogue  # noqa: E402
+from ipe_ros.engine.scene.catalogue import scene_catalogue  # noqa: E402
 from ipe_ros.engine.simulation.health import energy_scale_j  # noqa: E402
 
 QUERY = QuerySpec(queries=frozenset({"fall", "direction"}))

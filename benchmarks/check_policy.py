@@ -30,14 +30,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, parse_queries, preset  # noqa: E402
 from ipe_ros.engine.config import DEFAULT_QUERIES  # noqa: E402
-from ipe_ros.engine.fidelity import (DEFAULT_CHECK, SelfCheck, coverage_ahead, look_ahead_split,  # noqa: E402
+from ipe_ros.engine.checking.fidelity import (DEFAULT_CHECK, SelfCheck, coverage_ahead, look_ahead_split,  # noqa: E402
                                      reference_settings, verification_count)
-from ipe_ros.engine.generators import generate_towers  # noqa: E402
-from ipe_ros.engine.montecarlo import MonteCarlo, drive  # noqa: E402
-from ipe_ros.engine.rollout import lost, run_sample  # noqa: E402
-from ipe_ros.engine.sampler import make_tasks  # noqa: E402
-from ipe_ros.engine.self_check import checking  # noqa: E402
-from ipe_ros.engine.zoo import FAMILIES, scene_zoo, zoo_sigma_m  # noqa: E402
+from ipe_ros.engine.scene.generators import generate_towers  # noqa: E402
+from ipe_ros.engine.sampling.montecarlo import MonteCarlo, drive  # noqa: E402
+from ipe_ros.engine.sampling.rollout import lost, run_sample  # noqa: E402
+from ipe_ros.engine.sampling.sampler import make_tasks  # noqa: E402
+from ipe_ros.engine.checking.self_check import checking  # noqa: E402
+from ipe_ros.engine.scene.zoo import FAMILIES, scene_zoo, zoo_sigma_m  # noqa: E402
 
 POLICIES = {
     "current": DEFAULT_CHECK,

@@ -21,7 +21,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 from ipe_ros.analysis.paper_data import shared_data_dir  # noqa: E402
 from ipe_ros.analysis.runs import load_tower_stimuli  # noqa: E402
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, predict, predict_many, preset  # noqa: E402
-from ipe_ros.engine.cluster import DaskMap, local_cluster  # noqa: E402
+from ipe_ros.engine.compute.cluster import DaskMap, local_cluster  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 QUERY = QuerySpec(queries=frozenset({"fall"}))

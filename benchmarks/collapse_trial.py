@@ -35,7 +35,7 @@ import numpy as np  # noqa: E402
 from actions import column  # noqa: E402 - the robot-question benchmark's column of 10 cm cubes
 from ipe_ros.engine import ModelConfig, QuerySpec, Scene, WorkerPool, predict, preset, scenes_from_tower_csv  # noqa: E402
 from ipe_ros.engine.config import DEFAULT_QUERIES, DEFAULT_SIGMA_M  # noqa: E402
-from ipe_ros.engine.zoo import zoo_scene, zoo_sigma_m  # noqa: E402
+from ipe_ros.engine.scene.zoo import zoo_scene, zoo_sigma_m  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 NEVER = {"max_created_energy_fraction": 1e9, "quiet_sizes_per_s": 1e-9}

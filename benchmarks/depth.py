@@ -142,7 +142,7 @@ def tower_cost(workers: int = 2, k: int = 48) -> dict:
 
     from ipe_ros.engine import QuerySpec, WorkerPool, load_scenes, predict
     from ipe_ros.engine.config import DEFAULT_QUERIES
-    from ipe_ros.engine.examples import example_scene_path
+    from ipe_ros.engine.scene.examples import example_scene_path
 
     with tempfile.TemporaryDirectory() as folder:
         paths = depth_io.write_depth_example(folder, load_scenes(example_scene_path())[0])

@@ -36,7 +36,7 @@ sys.path.insert(0, str(REPO))
 import numpy as np  # noqa: E402
 
 from ipe_ros.engine import Body, Box, Floor, Scene  # noqa: E402
-from ipe_ros.engine.shapes import BoxShape  # noqa: E402
+from ipe_ros.engine.scene.shapes import BoxShape  # noqa: E402
 from ipe_ros.engine.vision import depth as D  # noqa: E402
 from ipe_ros.engine.vision.camera import camera_from_info  # noqa: E402
 from tests.analytic_camera import cast, optical_orientation, pixel_rays, visible_fraction  # noqa: E402

@@ -53,7 +53,7 @@ def main() -> int:
     faulthandler.register(signal.SIGUSR1, all_threads=True)  # `kill -USR1 PID`: where every thread is, on stderr
 
     from ipe_ros import cli
-    from ipe_ros.engine.cluster import local_cluster
+    from ipe_ros.engine.compute.cluster import local_cluster
 
     before = stored_samples(resume)
     with local_cluster(args.workers) as client:

@@ -1,4 +1,4 @@
-"""Where the validity ranges of ipe_ros/engine/limits.py come from: the engine measured past them.
+"""Where the validity ranges of ipe_ros/engine/scene/limits.py come from: the engine measured past them.
 
     .venv/bin/python benchmarks/limits.py [--out benchmarks/results/limits]
 
@@ -27,7 +27,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 import numpy as np  # noqa: E402
 
 from ipe_ros.engine import Box, Floor, ModelConfig, QuerySpec, Scene, preset  # noqa: E402
-from ipe_ros.engine.rollout import SampleTask, run_sample  # noqa: E402
+from ipe_ros.engine.sampling.rollout import SampleTask, run_sample  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 IDENTITY = (0.0, 0.0, 0.0, 1.0)

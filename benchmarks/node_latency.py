@@ -27,7 +27,7 @@ from rclpy.parameter import Parameter  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
-from ipe_ros.engine.examples import example_scene_path  # noqa: E402
+from ipe_ros.engine.scene.examples import example_scene_path  # noqa: E402
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, predict, preset  # noqa: E402
 from ipe_ros.ros.node import LATCHED_QOS, IpeNode  # noqa: E402
 from msg_bridge.markers import scene_to_markers  # noqa: E402

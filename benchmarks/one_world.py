@@ -29,8 +29,8 @@ import numpy as np  # noqa: E402
 
 from actions import stable_tower  # noqa: E402
 from ipe_ros.engine import ModelConfig, preset, simulation  # noqa: E402
-from ipe_ros.engine.perturb import draw_sample_inputs  # noqa: E402
-from ipe_ros.engine.rollout import separated_world  # noqa: E402
+from ipe_ros.engine.sampling.perturb import draw_sample_inputs  # noqa: E402
+from ipe_ros.engine.sampling.rollout import separated_world  # noqa: E402
 
 SPACING_M = 10.0
 

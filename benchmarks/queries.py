@@ -26,7 +26,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, predict, preset  # noqa: E402
-from ipe_ros.engine.zoo import scene_zoo, zoo_sigma_m  # noqa: E402
+from ipe_ros.engine.scene.zoo import scene_zoo, zoo_sigma_m  # noqa: E402
 
 #: the pair asked of each family's scenes
 PAIRS = {

@@ -40,9 +40,9 @@ from std_msgs.msg import String  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from ipe_ros.engine import load_scenes  # noqa: E402
-from ipe_ros.engine.catalogue import capped_tower, scene_catalogue  # noqa: E402
-from ipe_ros.engine.examples import example_scene_path  # noqa: E402
-from ipe_ros.engine.scene_io import scene_to_dict, scene_to_json  # noqa: E402
+from ipe_ros.engine.scene.catalogue import capped_tower, scene_catalogue  # noqa: E402
+from ipe_ros.engine.scene.examples import example_scene_path  # noqa: E402
+from ipe_ros.engine.scene.format import scene_to_dict, scene_to_json  # noqa: E402
 from ipe_ros.ros.node import ASK_QOS, LATCHED_QOS  # noqa: E402
 from msg_bridge.markers import scene_to_markers  # noqa: E402
 

@@ -4,7 +4,7 @@
                                        [--families launch,dominoes] [--only default,default-unchecked]
                                        [--out benchmarks/results/zoo]
 
-Every zoo family (ipe_ros.engine.zoo) under `paper` (the converged reference), `paper-half-step`
+Every zoo family (ipe_ros.engine.scene.zoo) under `paper` (the converged reference), `paper-half-step`
 (the yardstick: `paper` at 0.5 ms on the same noisy scenes; how much a family's outcomes depend on
 the integrator at all) and the candidates (by default `default`, which checks itself, and
 `default-unchecked`, the same physics without the checks). Each scene's sigma is 5% of its smallest
@@ -37,7 +37,7 @@ from accuracy_vs_time import _anything_fell  # noqa: E402 - the towers' "did any
 from ipe_ros.engine import PRESETS, ModelConfig, QuerySpec, WorkerPool, predict  # noqa: E402
 from ipe_ros.engine.config import DEFAULT_QUERIES  # noqa: E402
 from ipe_ros.engine.simulation.health import energy_scale_j  # noqa: E402
-from ipe_ros.engine.zoo import FAMILIES, family_of, scene_zoo, zoo_sigma_m  # noqa: E402
+from ipe_ros.engine.scene.zoo import FAMILIES, family_of, scene_zoo, zoo_sigma_m  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 QUERY = QuerySpec(queries=DEFAULT_QUERIES)
@@ -46,7 +46,7 @@ PAPER = PRESETS["paper"]
 
 def configurations() -> dict[str, tuple]:
     """name -> (settings, self_check). `paper` first: it is the reference."""
-    from ipe_ros.engine.fidelity import SelfCheck
+    from ipe_ros.engine.checking.fidelity import SelfCheck
 
     default = PRESETS["default"]
     return {

@@ -34,17 +34,17 @@ from .cli_predict import EXIT_BAD_INPUT, cmd_predict, format_table, run_predicti
 from .cli_queries import add_query_parameter_options
 from .engine import (PRESETS, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError, load_scenes,
                      parse_queries, preset)
-from .engine.catalogue import capped_tower, scene_catalogue
+from .engine.scene.catalogue import capped_tower, scene_catalogue
 from .engine.config import (DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M,
                             default_workers)
-from .engine.examples import example_scene_path
-from .engine.fidelity import DEFAULT_CHECK
-from .engine.generators import generate_tables, generate_towers, state_pair
+from .engine.scene.examples import example_scene_path
+from .engine.checking.fidelity import DEFAULT_CHECK
+from .engine.scene.generators import generate_tables, generate_towers, state_pair
 from .engine.inputs import as_spelled
 from .engine.query import QUERIES
 from .engine.perceptions import perception_names, perception_source
-from .engine.scene_io import write_scenes
-from .engine.zoo import FAMILIES, scene_zoo
+from .engine.scene.format import write_scenes
+from .engine.scene.zoo import FAMILIES, scene_zoo
 
 #: ``analysis.experiments.EXPERIMENTS`` and ``analysis.human.SCALES`` by name (tests keep them equal):
 #: importing the analyses loads scipy.stats, ~1 s that every other command would pay at start.
@@ -311,7 +311,7 @@ def cmd_experiment(args) -> int:
     map_fn = pool.map if pool else None
     store = None
     if args.resume is not None:
-        from .engine.store import ResumableMap
+        from .engine.compute.store import ResumableMap
 
         store = ResumableMap(args.resume, map_fn)
         map_fn = store.map

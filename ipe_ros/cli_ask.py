@@ -22,7 +22,7 @@ import math
 from .engine import ConfigError, WorkerPool, load_scenes
 from .engine import actions as A
 from .engine.config import DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_SIGMA_M, PRESETS, default_workers
-from .engine.fidelity import DEFAULT_CHECK
+from .engine.checking.fidelity import DEFAULT_CHECK
 from .engine.inputs import as_spelled
 from .engine.request import build_request
 from .cli_queries import add_query_parameter_options, given_query_parameters
@@ -338,7 +338,7 @@ def draw_support_graph(scene, graph: A.SupportGraph, path: str) -> None:
     import matplotlib.pyplot as plt
     from matplotlib.patches import Rectangle
 
-    from .engine.scene import lowest_z_m
+    from .engine.scene.bodies import lowest_z_m
 
     fig, ax = plt.subplots(figsize=(6, 5))
     centres = {}

@@ -13,14 +13,14 @@ from .cli_ask import verify_samples
 from .cli_queries import given_query_parameters
 from .engine import AdaptiveStop, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError, WorkerPool, load_scenes, predict
 from .engine.config import anytime_batch_size
-from .engine.fidelity import DEFAULT_CHECK, SelfCheck
+from .engine.checking.fidelity import DEFAULT_CHECK, SelfCheck
 from .engine.inputs import spelled
 from .engine.perceptions import perception_source
-from .engine.perturb import is_deterministic
+from .engine.sampling.perturb import is_deterministic
 from .engine.query import QUERIES
 from .engine.request import build_request
-from .engine.sampler import check_request
-from .engine.scene_io import RefusedScene
+from .engine.sampling.sampler import check_request
+from .engine.scene.format import RefusedScene
 from .progress import steps
 
 #: the exit status of a command refused for its input (argparse's own)
@@ -64,7 +64,7 @@ def format_table(predictions: list[Prediction]) -> str:
 
 
 def describe_fidelity(p: Prediction) -> str:
-    """One line on what the self-check did (engine.fidelity)."""
+    """One line on what the self-check did (engine.checking.fidelity)."""
     text = {"verified": "verified against the reference physics",
             "escalated": "the reference physics disagreed with the fast one: every sample rerun at the reference",
             "contradicted": "the reference physics disagreed and the budget ran out before it could answer: "
@@ -83,7 +83,7 @@ def prediction_json(prediction: Prediction) -> str:
 def sample_map(scheduler: str | None, workers: int):
     """Where samples run: a Dask cluster (``--scheduler`` or $IPE_DASK_SCHEDULER), worker processes
     here, or (0 workers) this process. Returns the pool-like object (with ``map`` and ``close``) or None."""
-    from .engine.cluster import DaskMap, scheduler_address
+    from .engine.compute.cluster import DaskMap, scheduler_address
 
     address = scheduler_address(scheduler)
     if address is not None:
@@ -101,7 +101,7 @@ def run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: int
                      scheduler: str | None = None, check: SelfCheck = DEFAULT_CHECK) -> None:
     pool = sample_map(scheduler, min(workers, max(1, model.samples)) if workers > 0 else workers)
     if stop is not None:
-        from .engine.cluster import DaskMap
+        from .engine.compute.cluster import DaskMap
 
         parallel = pool.workers if isinstance(pool, DaskMap) else workers
         stop = dataclasses.replace(stop, batch_size=anytime_batch_size(parallel))

@@ -16,9 +16,9 @@ from visualization_msgs.msg import Marker, MarkerArray
 from ipe_ros.engine import ConfigError, Scene, SceneError
 from ipe_ros.engine.actions.question import Question, question_from_dict
 from ipe_ros.engine.errors import json_type
-from ipe_ros.engine.limits import MAX_JSON_CHARS
-from ipe_ros.engine.scene import DEFAULT_MAX_OBJECTS
-from ipe_ros.engine.scene_io import scene_from_dict
+from ipe_ros.engine.scene.limits import MAX_JSON_CHARS
+from ipe_ros.engine.scene.bodies import DEFAULT_MAX_OBJECTS
+from ipe_ros.engine.scene.format import scene_from_dict
 from ipe_ros.viz.palette import risk_rgb
 
 from .stamps import stamp_ns_to_header

@@ -9,8 +9,8 @@ from std_msgs.msg import String
 
 from ipe_ros.engine import Scene, SceneError
 from ipe_ros.engine.errors import json_type
-from ipe_ros.engine.scene import DEFAULT_MAX_OBJECTS
-from ipe_ros.engine.scene_io import scene_to_json, scenes_from_json
+from ipe_ros.engine.scene.bodies import DEFAULT_MAX_OBJECTS
+from ipe_ros.engine.scene.format import scene_to_json, scenes_from_json
 
 
 def string_to_scene(msg: String, *, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scene:

@@ -48,11 +48,11 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from ipe_ros.engine import (Body, Box, BoxShape, ConvexHull, Cylinder, Floor, Prediction, Scene, SceneError, Sphere, Table,
                             validate_scene)
-from ipe_ros.engine import shapes
+from ipe_ros.engine.scene import shapes
 from ipe_ros.engine.config import MODEL_LIGHT_DENSITY_KG_M3
 from ipe_ros.viz.palette import SUPPORT_RGB, group_rgb, nearest_group_name, risk_rgb
 from ipe_ros.engine.errors import shown
-from ipe_ros.engine.scene import DEFAULT_MAX_OBJECTS
+from ipe_ros.engine.scene.bodies import DEFAULT_MAX_OBJECTS
 
 from .stamps import header_to_stamp_ns, stamp_ns_to_header
 

@@ -14,9 +14,9 @@ import pytest
 from ipe_ros.engine import Box, ConfigError, Floor, ModelConfig, Scene, Sphere, preset
 from ipe_ros.engine import actions as A
 from ipe_ros.engine.actions.answers import fell, ran
-from ipe_ros.engine.decide import Ranking, SafeBelow, Tally
+from ipe_ros.engine.sampling.decide import Ranking, SafeBelow, Tally
 from ipe_ros.engine.actions.question import question_from_dict
-from ipe_ros.engine.scene import Body
+from ipe_ros.engine.scene.bodies import Body
 
 I = (0.0, 0.0, 0.0, 1.0)
 MODEL = ModelConfig(sigma_m=0.005, samples=8)
@@ -153,7 +153,7 @@ def test_the_scene_as_it_is_is_exactly_a_prediction(settings):
     """A question's "as is" variant is a prediction's sample, bit for bit (the same task, the same
     separated world simulated on): its answer is the prediction's, whatever else is asked beside it."""
     from ipe_ros.engine import QuerySpec, predict
-    from ipe_ros.engine.rollout import SampleTask, run_sample
+    from ipe_ros.engine.sampling.rollout import SampleTask, run_sample
 
     model = ModelConfig(sigma_m=0.03, samples=6)
     query = QuerySpec(queries=frozenset({"fall"}))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from ipe_ros.engine import AdaptiveStop, ConfigError, ModelConfig, QuerySpec, load_scenes, predict, preset
-from ipe_ros.engine.estimate import wilson_interval
+from ipe_ros.engine.sampling.estimate import wilson_interval
 from tests.helpers import block, floor_scene, without_timing
 
 FALL = QuerySpec(queries=frozenset({"fall"}))

@@ -14,7 +14,7 @@ from ipe_ros.analysis.features import critical_angle, subtowers, table_features,
 from ipe_ros.analysis.human import load_human_responses
 from ipe_ros.analysis.ridge import cross_validated_ridge
 from ipe_ros.engine import Box, Floor, Scene
-from ipe_ros.engine.generators import make_table
+from ipe_ros.engine.scene.generators import make_table
 
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
 

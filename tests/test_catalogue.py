@@ -2,7 +2,7 @@
 
 Stacks and piles of mixed shapes from 5 mm to 1 m, mass ratios up to 1000:1 either way, restitution
 up to 0.9, friction 0-2, bodies thrown at up to 10 m/s, bodies resting tilted on others
-(ipe_ros.engine.catalogue). For every preset: no failed sample, finite states, every rollout ending
+(ipe_ros.engine.scene.catalogue). For every preset: no failed sample, finite states, every rollout ending
 with no body more than 5% of its size inside another or the support, and `default` agreeing with
 `paper` on "did anything fall?" in >= 97% of samples (the same figure as on the paper's towers; the
 noisy initial scenes are the same for every preset, so differences are the simulator's alone).
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
-from ipe_ros.engine.catalogue import scene_catalogue
+from ipe_ros.engine.scene.catalogue import scene_catalogue
 from ipe_ros.engine.simulation.health import energy_scale_j
 
 SCENES = 40
@@ -106,8 +106,8 @@ def test_a_heavy_bouncy_hull_ends_out_of_the_floor_under_a_heavier_one():
     # 183 kg under 861 kg, all bouncy (direct solver): the direct solver held it 6.0% of its size in
     # the floor at the horizon, its normal force swinging 0.1-16.5 kN from step to step; the last
     # 0.1 s on the sequential-impulse solver pushes it out (paper: 0.1%)
-    from ipe_ros.engine.rollout import run_sample
-    from ipe_ros.engine.sampler import make_tasks
+    from ipe_ros.engine.sampling.rollout import run_sample
+    from ipe_ros.engine.sampling.sampler import make_tasks
 
     scene = scene_catalogue(2026, SCENES)[27]
     model = ModelConfig(sigma_m=0.05 * min(b.smallest_extent_m for b in scene.objects), samples=16)

@@ -7,7 +7,7 @@ import sys
 import pytest
 
 from ipe_ros.cli import main
-from ipe_ros.engine.examples import example_scene_path
+from ipe_ros.engine.scene.examples import example_scene_path
 from ipe_ros.engine import load_scenes
 
 REQUIRED = {"scene", "samples", "fall_fraction", "fall_fraction_ci95", "object_fall_probability",
@@ -50,7 +50,7 @@ def _uncertain_tower(tmp_path, sigma_m: float):
     """The example tower with every block's own position noise set, written to a file."""
     from dataclasses import replace
 
-    from ipe_ros.engine.scene_io import write_scenes
+    from ipe_ros.engine.scene.format import write_scenes
 
     tower = load_scenes(example_scene_path())[0]
     noisy = replace(tower, objects=tuple(replace(b, position_sigma_m=sigma_m) for b in tower.objects))
@@ -134,7 +134,7 @@ def test_bad_json_file_is_one_line(tmp_path):
 
 
 def test_ask_support_clear_place_push_on_the_command_line(tmp_path, capsys):
-    from ipe_ros.engine.scene_io import write_scenes
+    from ipe_ros.engine.scene.format import write_scenes
     from tests.test_actions import STACK
 
     path = tmp_path / "stack.json"
@@ -164,7 +164,7 @@ def test_ask_support_clear_place_push_on_the_command_line(tmp_path, capsys):
 def test_ask_takes_the_ground_truth_too(tmp_path, capsys):
     """`ipe ask --ground-truth`: no noise at all, so one rollout per variant and exact answers (a
     point, not an interval), as `ipe predict --ground-truth` gives."""
-    from ipe_ros.engine.scene_io import write_scenes
+    from ipe_ros.engine.scene.format import write_scenes
     from tests.test_actions import STACK
 
     path = tmp_path / "stack.json"
@@ -216,7 +216,7 @@ def test_predict_draws_the_answer_as_a_png(tmp_path):
 
 
 def test_a_file_with_bad_scenes_answers_every_good_one_and_reports_each_refused_one(tmp_path):
-    from ipe_ros.engine.scene_io import scene_to_dict
+    from ipe_ros.engine.scene.format import scene_to_dict
 
     good = scene_to_dict(load_scenes(example_scene_path())[0])
     unreadable = dict(good, name="broken", objects=[dict(good["objects"][0], mass_kg=-1.0)])

@@ -10,7 +10,7 @@ import pytest
 distributed = pytest.importorskip("distributed", reason="dask/distributed are pinned in requirements.txt")
 
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, predict, preset  # noqa: E402
-from ipe_ros.engine.cluster import DaskMap, local_cluster, scheduler_address  # noqa: E402
+from ipe_ros.engine.compute.cluster import DaskMap, local_cluster, scheduler_address  # noqa: E402
 
 #: a Dask LocalCluster per test
 pytestmark = pytest.mark.slow
@@ -83,7 +83,7 @@ def test_a_node_offloads_its_samples_to_the_cluster(cluster):
 
     from std_msgs.msg import String
 
-    from ipe_ros.engine.scene_io import scene_to_json
+    from ipe_ros.engine.scene.format import scene_to_json
     from ipe_ros.ros.node import LATCHED_QOS
     from tests.ros_harness import RosHarness, wait_until
 

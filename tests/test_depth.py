@@ -13,7 +13,7 @@ import pytest
 
 from ipe_ros.cli import main
 from ipe_ros.engine import Body, Box, ConfigError, Floor, ModelConfig, QuerySpec, Scene, load_scenes, preset, predict
-from ipe_ros.engine.shapes import BoxShape
+from ipe_ros.engine.scene.shapes import BoxShape
 from ipe_ros.engine.vision import depth as D
 from ipe_ros.engine.vision import depth_io
 from ipe_ros.engine.vision.camera import camera_from_info, look_at

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, predict, preset
-from ipe_ros.engine.examples import example_scene_path
+from ipe_ros.engine.scene.examples import example_scene_path
 
 from .helpers import without_timing
 
@@ -29,8 +29,8 @@ def test_same_seed_same_json_whatever_the_worker_count(pool):
 
 def test_sample_order_does_not_matter():
     # running sample 5 first (a world that saw no other sample) gives what it gave after samples 0..4
-    from ipe_ros.engine.rollout import run_sample
-    from ipe_ros.engine.sampler import make_tasks
+    from ipe_ros.engine.sampling.rollout import run_sample
+    from ipe_ros.engine.sampling.sampler import make_tasks
 
     scene = load_scenes(example_scene_path())[0]
     tasks = make_tasks(scene, MODEL, preset("default"), QUERY, seed=5)
@@ -55,7 +55,7 @@ def test_noisy_initial_scenes_are_the_same_whatever_the_preset_and_phi():
 def test_predict_many_answers_as_predict_does(pool):
     # several predictions in one map: each keeps its own seeds and outcomes
     from ipe_ros.engine import predict_many
-    from ipe_ros.engine.generators import generate_towers
+    from ipe_ros.engine.scene.generators import generate_towers
 
     towers = generate_towers(7, 2)
     requests = [(towers[0], MODEL, 3), (towers[1], MODEL, 4), (towers[0], ModelConfig(), 0),
@@ -80,9 +80,9 @@ def test_predict_many_refuses_a_bad_seed_by_name():
 def test_blocks_created_together_simulate_as_blocks_created_one_by_one(monkeypatch):
     # identical consecutive blocks are created by one pybullet call: the world must be the one that
     # creating them one at a time gives, bit for bit, also with blocks turned 90 degrees in between
-    from ipe_ros.engine.generators import generate_towers
-    from ipe_ros.engine.rollout import run_sample
-    from ipe_ros.engine.sampler import make_tasks
+    from ipe_ros.engine.scene.generators import generate_towers
+    from ipe_ros.engine.sampling.rollout import run_sample
+    from ipe_ros.engine.sampling.sampler import make_tasks
     from ipe_ros.engine.simulation import world
 
     def one_by_one(p, cid, bodies, positions, masses, orientations, maximal):

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from ipe_ros.engine.estimate import circular_mean, half_circle_decisiveness, mean_interval, wilson_interval
+from ipe_ros.engine.sampling.estimate import circular_mean, half_circle_decisiveness, mean_interval, wilson_interval
 
 
 def test_wilson_interval_known_values():
@@ -48,7 +48,7 @@ def test_half_circle_decisiveness():
 def test_the_wilson_interval_is_scipys_for_counts():
     from scipy.stats import binomtest
 
-    from ipe_ros.engine.estimate import wilson_interval
+    from ipe_ros.engine.sampling.estimate import wilson_interval
 
     for n in (1, 5, 48):
         for count in range(n + 1):

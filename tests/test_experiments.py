@@ -93,7 +93,7 @@ def test_bump_grid_does_not_depend_on_how_tables_are_grouped_into_maps(monkeypat
     from ipe_ros.analysis import runs
     from ipe_ros.analysis.experiments import bump
     from ipe_ros.analysis.experiments.common import Options
-    from ipe_ros.engine.generators import generate_tables
+    from ipe_ros.engine.scene.generators import generate_tables
 
     scenes = generate_tables(seed=3, configurations=2, tables=("T0", "T1"))[:3]
     directions, phis = np.array([0.0, np.pi]), (22.0, 76.0)

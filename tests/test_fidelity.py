@@ -1,4 +1,4 @@
-"""Self-checking answers (ipe_ros.engine.fidelity): refinement, verification, escalation, verdicts.
+"""Self-checking answers (ipe_ros.engine.checking.fidelity): refinement, verification, escalation, verdicts.
 
 Each path is forced deterministically: a real scene on which `default` and the reference disagree
 (zoo ramp 2026/4, seed 0: the stack at the ramp's foot topples in 7 of 8 samples of `default` as it
@@ -18,12 +18,12 @@ from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
 from ipe_ros.engine import actions as A
 from ipe_ros.engine.config import DEFAULT_QUERIES
 from ipe_ros.engine.errors import ConfigError
-from ipe_ros.engine.fidelity import (DEFAULT_CHECK, VERDICTS, SelfCheck, confirmation_samples, coverage_samples,
+from ipe_ros.engine.checking.fidelity import (DEFAULT_CHECK, VERDICTS, SelfCheck, confirmation_samples, coverage_samples,
                                      look_ahead_split, reference_settings)
-from ipe_ros.engine.rollout import SampleOutcome, run_sample
-from ipe_ros.engine.scene_files import load_scenes
-from ipe_ros.engine.examples import example_scene_path
-from ipe_ros.engine.zoo import zoo_scene, zoo_sigma_m
+from ipe_ros.engine.sampling.rollout import SampleOutcome, run_sample
+from ipe_ros.engine.scene.files import load_scenes
+from ipe_ros.engine.scene.examples import example_scene_path
+from ipe_ros.engine.scene.zoo import zoo_scene, zoo_sigma_m
 
 QUERY = QuerySpec(queries=DEFAULT_QUERIES)
 REFERENCE = reference_settings().name
@@ -385,7 +385,7 @@ def test_the_node_parameters_set_the_check():
 
 
 def test_anytime_sampling_is_checked_on_the_samples_it_drew(tower):
-    from ipe_ros.engine.sampler import AdaptiveStop
+    from ipe_ros.engine.sampling.sampler import AdaptiveStop
 
     stop = AdaptiveStop(deadline_s=1e-6, batch_size=2)  # stops after the first batch
     p = predict(tower, ModelConfig(sigma_m=0.01, samples=8), preset("default"), QUERY, seed=4, stop=stop,

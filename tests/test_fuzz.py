@@ -25,9 +25,9 @@ from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ipe_ros.engine import ModelConfig, QuerySpec, SceneError, ConfigError, predict, preset
-from ipe_ros.engine.catalogue import capped_tower
+from ipe_ros.engine.scene.catalogue import capped_tower
 from ipe_ros.engine.errors import MAX_PROBLEM_CHARS, MAX_SHOWN_CHARS
-from ipe_ros.engine.scene_io import scene_to_dict
+from ipe_ros.engine.scene.format import scene_to_dict
 from ipe_ros.engine.request import Request
 from ipe_ros.service import ServiceConfig
 from msg_bridge.json_text import string_to_scene
@@ -56,7 +56,7 @@ def _check_error(exc: ValueError) -> None:
 
 def _through_the_node(read):
     """Read, check, predict: the invariant above. Returns the prediction, or None for a refusal."""
-    from ipe_ros.engine.sampler import check_request
+    from ipe_ros.engine.sampling.sampler import check_request
 
     try:
         scene = read()
@@ -253,9 +253,9 @@ def test_mutated_questions_are_answered_within_budget_or_refused_by_name(questio
 
 # -- the result store --------------------------------------------------------------------------------------
 def _store_entry() -> tuple[str, dict]:
-    from ipe_ros.engine.rollout import run_sample
-    from ipe_ros.engine.sampler import make_tasks
-    from ipe_ros.engine.store import encode_entry
+    from ipe_ros.engine.sampling.rollout import run_sample
+    from ipe_ros.engine.sampling.sampler import make_tasks
+    from ipe_ros.engine.compute.store import encode_entry
 
     # the contact and final_pose values ride in the entry too (mappings of arrays and numbers)
     [task] = make_tasks(capped_tower(3.0), ModelConfig(sigma_m=0.02, samples=1), preset("default"),
@@ -275,8 +275,8 @@ def mutated_entries(draw):
 @settings(suppress_health_check=[HealthCheck.too_slow])
 @given(mutated_entries() | st.binary(max_size=200))
 def test_any_store_entry_reads_back_as_a_result_or_is_refused_in_one_line(data):
-    from ipe_ros.engine.rollout import SampleOutcome
-    from ipe_ros.engine.store import StoreEntryError, decode_entry
+    from ipe_ros.engine.sampling.rollout import SampleOutcome
+    from ipe_ros.engine.compute.store import StoreEntryError, decode_entry
 
     try:
         result = decode_entry(data, STORE_KEY)

@@ -5,7 +5,7 @@ import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
 from ipe_ros.engine import simulation
-from ipe_ros.engine.generators import generate_tables, generate_towers, state_pair
+from ipe_ros.engine.scene.generators import generate_tables, generate_towers, state_pair
 
 
 def test_towers_are_seeded_inside_the_column_and_free_of_overlaps():

@@ -22,8 +22,8 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import Box, Floor, ModelConfig, QuerySpec, Scene, Table, load_scenes, predict, preset
-from ipe_ros.engine.generators import generate_tables
-from ipe_ros.engine.scene import half_heights_m
+from ipe_ros.engine.scene.generators import generate_tables
+from ipe_ros.engine.scene.bodies import half_heights_m
 from tests.helpers import IDENTITY
 
 G = 9.81
@@ -153,7 +153,7 @@ def check_trajectory(case: Case, settings, outcome, phi: float, trajectory: list
 def outcome_masses(scene: Scene, model: ModelConfig) -> np.ndarray:
     if model.mu is None:
         return _masses(scene)
-    from ipe_ros.engine.perturb import MODEL_LIGHT_DENSITY_KG_M3
+    from ipe_ros.engine.sampling.perturb import MODEL_LIGHT_DENSITY_KG_M3
     return np.array([MODEL_LIGHT_DENSITY_KG_M3 * (model.mu if b.is_heavy else 1.0) * b.volume_m3
                      for b in scene.dynamic_objects])
 

@@ -20,10 +20,10 @@ import pytest
 
 from ipe_ros.cli import main
 from ipe_ros.engine import ConfigError, ModelConfig, QuerySpec, SceneError, predict, preset
-from ipe_ros.engine.estimate import mean_interval
-from ipe_ros.engine.examples import example_scene_path
-from ipe_ros.engine.scene_files import scenes_from_tower_csv
-from ipe_ros.engine.scene_io import scene_to_dict, scenes_from_json
+from ipe_ros.engine.sampling.estimate import mean_interval
+from ipe_ros.engine.scene.examples import example_scene_path
+from ipe_ros.engine.scene.files import scenes_from_tower_csv
+from ipe_ros.engine.scene.format import scene_to_dict, scenes_from_json
 from ipe_ros.engine.request import Request
 from ipe_ros.service import PredictionService, ServiceConfig, StampedScene
 from tests.helpers import block, floor_scene
@@ -180,7 +180,8 @@ def test_a_prediction_stops_at_its_budget_and_answers_with_what_it_has():
 def test_a_budget_that_no_sample_finished_in_is_an_error_never_an_empty_answer(asked, monkeypatch):
     """Every sample cut off (here: the budget ran out before the first step) used to give an answer
     with k = 0 and every probability null, published like any other."""
-    from ipe_ros.engine import actions, montecarlo
+    from ipe_ros.engine import actions
+    from ipe_ros.engine.sampling import montecarlo
 
     scene = scenes_from_json(json.dumps(TOWER))[0]
     real_time = time.time

@@ -107,7 +107,7 @@ def test_the_rule_reader_sees_relative_and_nested_imports():
 RUNTIME_CHECK = r"""
 import json, sys
 from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes, predict, preset
-from ipe_ros.engine.examples import example_scene_path
+from ipe_ros.engine.scene.examples import example_scene_path
 import ipe_ros.analysis.experiments, ipe_ros.cli, ipe_ros.service, ipe_ros.viz.palette
 scene = load_scenes(example_scene_path())[0]
 p = predict(scene, ModelConfig(sigma_m=0.04, samples=2), preset("default"), QuerySpec())

@@ -13,7 +13,7 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
 from ipe_ros.engine import load_scenes
-from ipe_ros.engine.scene_io import scene_to_json
+from ipe_ros.engine.scene.format import scene_to_json
 from ipe_ros.ros.lifecycle import IpeLifecycleNode
 from ipe_ros.ros.node import LATCHED_QOS
 from tests.ros_harness import RosHarness, wait_until

@@ -1,4 +1,4 @@
-"""The one Monte Carlo loop (ipe_ros.engine.montecarlo): plans, the driver, shared rounds, and the
+"""The one Monte Carlo loop (ipe_ros.engine.sampling.montecarlo): plans, the driver, shared rounds, and the
 things every answer gets from it (seeds, the map with its lost workers, the budget's deadline)."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import pytest
 
 from ipe_ros.engine import ConfigError, ModelConfig, QuerySpec, predict, predict_many, preset
 from ipe_ros.engine.actions import remove
-from ipe_ros.engine.generators import generate_towers
-from ipe_ros.engine.montecarlo import MonteCarlo, child_seeds, drive, mapped, together
+from ipe_ros.engine.scene.generators import generate_towers
+from ipe_ros.engine.sampling.montecarlo import MonteCarlo, child_seeds, drive, mapped, together
 
 QUERY = QuerySpec(queries=frozenset({"fall"}))
 

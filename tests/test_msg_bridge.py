@@ -11,7 +11,7 @@ from std_msgs.msg import ColorRGBA, String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ipe_ros.engine import Body, Floor, Prediction, Scene, SceneError, Table, load_scenes
-from ipe_ros.engine.generators import generate_tables
+from ipe_ros.engine.scene.generators import generate_tables
 from ipe_ros.engine.query import ANSWER_FIELDS
 from msg_bridge.json_text import answer_to_string, scene_to_string, string_to_answer, string_to_scene
 from msg_bridge.markers import (DEFAULT_DENSITY_KG_M3, markers_to_scene, prediction_to_markers,
@@ -230,7 +230,7 @@ def test_msg_bridge_never_imports_rclpy():
 
 def test_spheres_cylinders_and_triangle_lists_are_bodies_of_their_shape():
     from ipe_ros.engine import Cylinder, Sphere
-    from ipe_ros.engine.catalogue import cone
+    from ipe_ros.engine.scene.catalogue import cone
 
     ball = Body(name="ball", shape=Sphere(0.1), position_m=(1.0, 0.0, 0.1), orientation_xyzw=IDENTITY, friction=0.5,
                 restitution=0.4, mass_kg=2.0, linear_velocity_m_s=(3.0, 0.0, 0.0), position_sigma_m=0.0, group="red")
@@ -260,7 +260,7 @@ def test_an_ellipsoid_and_an_elliptic_cylinder_are_refused_with_the_fix():
 
 def test_prediction_markers_draw_capsules_and_compounds_as_triangles():
     from ipe_ros.engine import Capsule, ModelConfig, QuerySpec, predict, preset
-    from ipe_ros.engine.catalogue import l_bracket
+    from ipe_ros.engine.scene.catalogue import l_bracket
 
     pill = Body(name="pill", shape=Capsule(0.03, 0.1), position_m=(0.0, 0.0, 0.03),
                 orientation_xyzw=(0.0, 0.7071067811865476, 0.0, 0.7071067811865476), friction=0.5, restitution=0.0,

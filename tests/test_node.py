@@ -23,7 +23,7 @@ from std_srvs.srv import Trigger  # noqa: E402
 from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, predict, preset  # noqa: E402
-from ipe_ros.engine.scene_io import scene_to_json  # noqa: E402
+from ipe_ros.engine.scene.format import scene_to_json  # noqa: E402
 from ipe_ros.ros.node import INPUT_QOS as RELIABLE_QOS, LATCHED_QOS  # noqa: E402
 from msg_bridge.markers import markers_to_scene, scene_to_markers  # noqa: E402
 

@@ -126,7 +126,7 @@ def test_send_scene_helper_gets_the_answer_from_a_running_node(tmp_path):
                              "-p", "samples:=3", "-p", "max_objects:=12"], env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)
     from ipe_ros.engine import load_scenes
-    from ipe_ros.engine.scene_io import write_scenes
+    from ipe_ros.engine.scene.format import write_scenes
     tower = load_scenes("ipe_ros/data/example_tower.json")[0]
     too_big = dataclasses.replace(tower, name="too_big", objects=tower.objects + tuple(
         dataclasses.replace(b, name=f"{b.name}_again", position_m=(b.position_m[0] + 2.0, *b.position_m[1:]))

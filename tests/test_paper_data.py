@@ -112,7 +112,7 @@ def test_the_self_checks_reference_waits_out_a_slow_tip_as_paper_does(tower):
     sizes/s), `paper`'s physics was called at rest on these two towers before a block tipped over,
     and the checked ground truth, escalated to that reference, said they stand (the authors: a block
     falls)."""
-    from ipe_ros.engine.fidelity import reference_settings
+    from ipe_ros.engine.checking.fidelity import reference_settings
 
     (scene,) = load_scenes(shared_file("willitfall.csv"), towers=[tower])
     assert authors_outcomes("stability_original_fall")[scene.name][1] == 0  # the authors': falls

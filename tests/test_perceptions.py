@@ -14,7 +14,7 @@ import pytest
 
 from ipe_ros.cli import main
 from ipe_ros.engine import ConfigError, ModelConfig, QuerySpec, load_scenes, predict, preset
-from ipe_ros.engine.examples import example_scene_path
+from ipe_ros.engine.scene.examples import example_scene_path
 from ipe_ros.engine.perceptions import (PerceptionSource, perception_names, perception_source, register_perception,
                                         unregister_perception)
 
@@ -94,7 +94,7 @@ def test_an_unknown_or_removed_perception_is_refused(jitter):
 def test_the_node_predicts_from_a_registered_perception(jitter):
     from std_msgs.msg import String
 
-    from ipe_ros.engine.scene_io import scene_to_json
+    from ipe_ros.engine.scene.format import scene_to_json
     from ipe_ros.ros.node import LATCHED_QOS
     from tests.ros_harness import RosHarness, wait_until
 

@@ -8,9 +8,9 @@ import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
 from ipe_ros.engine import simulation
-from ipe_ros.engine.generators import make_table
-from ipe_ros.engine.perturb import draw_sample_inputs
-from ipe_ros.engine.scene import Scene
+from ipe_ros.engine.scene.generators import make_table
+from ipe_ros.engine.sampling.perturb import draw_sample_inputs
+from ipe_ros.engine.scene.bodies import Scene
 
 from .helpers import block, floor_scene
 
@@ -137,7 +137,7 @@ def test_failed_rollouts_are_counted_not_raised():
 
 
 def test_mu_sets_the_models_own_densities():
-    from ipe_ros.engine.perturb import MODEL_LIGHT_DENSITY_KG_M3, dynamic_masses
+    from ipe_ros.engine.sampling.perturb import MODEL_LIGHT_DENSITY_KG_M3, dynamic_masses
 
     scene = floor_scene(block("a", 0, 0, 0.1, mass_kg=4.0799, group="light"),
                         block("b", 0, 0, 0.3, mass_kg=40.8, group="Heavy"))
@@ -274,7 +274,7 @@ def test_settling_runs_the_first_ticks_in_substeps_on_the_same_time_grid():
 
 def physics_rollout(scene, settings):
     """The ground-truth rollout of ``scene`` with a trajectory every 12 fine steps (0.05 s)."""
-    from ipe_ros.engine.rollout import SampleTask, run_sample
+    from ipe_ros.engine.sampling.rollout import SampleTask, run_sample
 
     task = SampleTask(scene=scene, model=ModelConfig(), settings=settings, query=QuerySpec(), index=0,
                       seed=np.random.SeedSequence(0), record_every=12)
@@ -318,7 +318,7 @@ def test_a_sliding_box_stops_where_coulomb_friction_says_under_every_preset(name
     """No drag but friction: pybullet's default damping of multibodies (`paper`'s representation)
     stopped a box sliding at 3 m/s 11% short, while `default`'s rigid bodies slid the full distance."""
     from ipe_ros.engine import Body, Floor, Scene
-    from ipe_ros.engine.shapes import BoxShape
+    from ipe_ros.engine.scene.shapes import BoxShape
 
     speed, friction = 3.0, 0.2  # the floor's 1.0 times the box's 0.2
     box = Body("box", BoxShape((0.2, 0.2, 0.2)), (0.0, 0.0, 0.1), (0.0, 0.0, 0.0, 1.0), friction=friction,
@@ -333,7 +333,7 @@ def test_end_substeps_read_a_collapse_at_the_horizon_at_a_finer_step():
     """A tower collapsing at the horizon: with half steps for the last 0.1 s nothing ends inside
     another by more than the default's own end (and the setting changes only that last part)."""
     from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes
-    from ipe_ros.engine.sampler import predict
+    from ipe_ros.engine.sampling.sampler import predict
 
     tower = load_scenes("ipe_ros/data/example_tower.json")[0]
     query = QuerySpec(queries=frozenset({"fall", "direction"}))  # run to the horizon, every pose read

@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import PRESETS, Body, Box, ConfigError, Floor, ModelConfig, QuerySpec, Scene, Sphere, preset
-from ipe_ros.engine.estimate import Prediction
+from ipe_ros.engine.sampling.estimate import Prediction
 from ipe_ros.engine.query import ALL_QUERIES, ANSWER_FIELDS, QUERIES
 from ipe_ros.engine.query.contact import parse_pair
-from ipe_ros.engine.sampler import predict
+from ipe_ros.engine.sampling.sampler import predict
 from tests.helpers import IDENTITY, block, floor_scene
 
 GROUND_TRUTH = ModelConfig(sigma_m=0.0, samples=1)
@@ -175,7 +175,7 @@ def test_rest_tells_a_settled_scene_from_one_still_moving():
 
 
 def test_rest_makes_early_termination_read_rest_strictly():
-    from ipe_ros.engine.rollout import query_settings
+    from ipe_ros.engine.sampling.rollout import query_settings
 
     default = preset("default")
     strict = query_settings(default, QuerySpec(queries=frozenset({"rest", "fall"})))
@@ -185,7 +185,7 @@ def test_rest_makes_early_termination_read_rest_strictly():
 
 def test_rests_own_parameters_set_its_reading_of_rest_and_the_rollouts_end():
     from ipe_ros.engine.query.rest import RestParameters
-    from ipe_ros.engine.rollout import query_settings
+    from ipe_ros.engine.sampling.rollout import query_settings
 
     rolling = _rolled(0.5)  # still rolling at 5/7 of 0.5 m/s at the horizon: at rest only by a loose reading
     loose = QuerySpec(queries=frozenset({"rest"}), parameters=(("rest", RestParameters(100.0, 100.0)),))
@@ -315,9 +315,9 @@ def test_contact_on_robot_questions_through_the_question_json():
 def test_event_values_survive_the_result_store():
     """Resumable runs store each sample's outcome: the new queries' values (mappings of times,
     flags and arrays) come back equal."""
-    from ipe_ros.engine.rollout import run_sample
-    from ipe_ros.engine.sampler import make_tasks
-    from ipe_ros.engine.store import decode_entry, encode_entry
+    from ipe_ros.engine.sampling.rollout import run_sample
+    from ipe_ros.engine.sampling.sampler import make_tasks
+    from ipe_ros.engine.compute.store import decode_entry, encode_entry
 
     spec = QuerySpec(queries=frozenset({"contact", "rest", "final_pose"}), contact_pairs=(("drop", "target"),))
     [task] = make_tasks(_dropped(0.0), ModelConfig(sigma_m=0.01, samples=1), preset("default"), spec, 0)
@@ -365,7 +365,7 @@ def test_many_contact_pairs_are_watched_per_contact_and_priced_up_front():
     between the estimates with and without them refuses the question before any simulation."""
     import itertools
 
-    from ipe_ros.engine.sampler import SECONDS_PER_WATCHED_PAIR, check_request, rollout_cost
+    from ipe_ros.engine.sampling.sampler import SECONDS_PER_WATCHED_PAIR, check_request, rollout_cost
 
     boxes = tuple(Box(name=f"b{i}", extents_m=(0.1, 0.1, 0.1), position_m=(0.15 * (i % 10), 0.15 * (i // 10), 0.05),
                       orientation_xyzw=(0, 0, 0, 1), friction=0.6, restitution=0.0, mass_kg=1.0) for i in range(60))

@@ -13,7 +13,7 @@ import pytest
 from ipe_ros.cli import main
 from ipe_ros.engine import ConfigError, ModelConfig, QuerySpec, WorkerPool, load_scenes, predict, preset
 from ipe_ros.engine.actions.question import question_from_dict
-from ipe_ros.engine.examples import example_scene_path
+from ipe_ros.engine.scene.examples import example_scene_path
 from ipe_ros.engine.query import QUERIES, register
 from ipe_ros.engine.query.spec import plugin_modules, unregister
 
@@ -101,7 +101,7 @@ def test_the_node_declares_a_registered_querys_parameter_and_publishes_its_answe
     from rclpy.parameter import Parameter
     from std_msgs.msg import String
 
-    from ipe_ros.engine.scene_io import scene_to_json
+    from ipe_ros.engine.scene.format import scene_to_json
     from ipe_ros.ros.node import LATCHED_QOS
     from tests.ros_harness import RosHarness, wait_until
 

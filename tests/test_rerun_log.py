@@ -59,7 +59,7 @@ def test_will_anything_fall_is_recorded_per_sample(tmp_path):
 
 
 def test_recordings_draw_every_body_in_its_own_shape(tmp_path):
-    from ipe_ros.engine.catalogue import capped_tower
+    from ipe_ros.engine.scene.catalogue import capped_tower
 
     scene = capped_tower()
     prediction = predict(scene, ModelConfig(sigma_m=0.02, samples=2), preset("default"), QUERY, seed=1,

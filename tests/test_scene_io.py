@@ -5,8 +5,8 @@ import json
 import pytest
 
 from ipe_ros.engine import SceneError, load_scenes, scene_from_dict, scene_to_dict, scenes_from_tower_csv
-from ipe_ros.engine.generators import generate_tables, generate_towers, state_pair
-from ipe_ros.engine.scene_io import write_scenes
+from ipe_ros.engine.scene.generators import generate_tables, generate_towers, state_pair
+from ipe_ros.engine.scene.format import write_scenes
 
 from .conftest import shared_file
 
@@ -29,7 +29,7 @@ def test_json_round_trip_is_exact_for_towers_pairs_and_tables(tmp_path):
 
 
 def test_example_file_loads():
-    from ipe_ros.engine.examples import example_scene_path
+    from ipe_ros.engine.scene.examples import example_scene_path
 
     (scene,) = load_scenes(example_scene_path())
     assert scene.name == "example_tower" and len(scene.objects) == 10

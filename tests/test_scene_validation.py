@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import SceneError, scene_from_dict, scene_to_dict, scenes_from_json
-from ipe_ros.engine.generators import generate_towers
+from ipe_ros.engine.scene.generators import generate_towers
 
 from .helpers import block, floor_scene
 
@@ -119,7 +119,7 @@ def test_malformed_json_and_nan_literals():
 
 
 def test_obstacles_must_be_static():
-    from ipe_ros.engine.generators import generate_tables
+    from ipe_ros.engine.scene.generators import generate_tables
 
     scene = generate_tables(1, configurations=1, tables=("T1",))[0]
     data = scene_to_dict(scene)
@@ -180,7 +180,7 @@ def test_a_scene_is_checked_in_full_once_and_its_count_every_time(monkeypatch):
     applies at each later check."""
     import dataclasses
 
-    from ipe_ros.engine import scene as scene_module
+    from ipe_ros.engine.scene import bodies as scene_module
 
     tower = dataclasses.replace(generate_towers(5, 1)[0])  # a fresh value, never checked
     calls = []

@@ -10,10 +10,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 
 from ipe_ros.engine import SceneError, scenes_from_json
-from ipe_ros.engine import scene_io as io
-from ipe_ros.engine.catalogue import capped_tower, scene_catalogue
-from ipe_ros.engine.schema import SCHEMA_PATH, scene_schema, schema_text
-from ipe_ros.engine.scene_io import scene_to_dict
+from ipe_ros.engine.scene import format as io
+from ipe_ros.engine.scene.catalogue import capped_tower, scene_catalogue
+from ipe_ros.engine.scene.schema import SCHEMA_PATH, scene_schema, schema_text
+from ipe_ros.engine.scene.format import scene_to_dict
 from tests.conftest import REPO
 from tests.test_fuzz import mutated_scenes
 
@@ -21,7 +21,7 @@ VALIDATOR = jsonschema.Draft202012Validator(json.loads(SCHEMA_PATH.read_text()))
 
 
 def test_the_committed_schema_is_the_generated_one_and_a_valid_schema():
-    assert SCHEMA_PATH.read_text() == schema_text(), "regenerate it: python -m ipe_ros.engine.schema"
+    assert SCHEMA_PATH.read_text() == schema_text(), "regenerate it: python -m ipe_ros.engine.scene.schema"
     jsonschema.Draft202012Validator.check_schema(scene_schema())
 
 

@@ -116,8 +116,8 @@ def test_the_self_check_is_counted_and_can_be_turned_off():
     """The zoo ramp of tests/test_fidelity.py, under the fast physics that topples its stack
     (``WRONG_HERE``): its answer is escalated to the reference, and the service counts it; with the
     check off the same scene is answered unverified."""
-    from ipe_ros.engine.fidelity import SelfCheck
-    from ipe_ros.engine.zoo import zoo_scene, zoo_sigma_m
+    from ipe_ros.engine.checking.fidelity import SelfCheck
+    from ipe_ros.engine.scene.zoo import zoo_scene, zoo_sigma_m
     from tests.test_fidelity import WRONG_HERE
 
     ramp = zoo_scene("ramp", 2026, 4)

@@ -12,10 +12,10 @@ import pytest
 from ipe_ros.engine import (Body, BoxShape, Capsule, ConvexHull, Cylinder, Floor, ModelConfig,
                             QuerySpec, Scene, SceneError, Sphere, load_scenes, predict, preset, scene_from_dict,
                             scene_to_dict)
-from ipe_ros.engine import shapes
-from ipe_ros.engine.catalogue import capped_tower, cone, l_bracket, wedge
-from ipe_ros.engine.examples import example_scene_path
-from ipe_ros.engine.perturb import draw_sample_inputs
+from ipe_ros.engine.scene import shapes
+from ipe_ros.engine.scene.catalogue import capped_tower, cone, l_bracket, wedge
+from ipe_ros.engine.scene.examples import example_scene_path
+from ipe_ros.engine.sampling.perturb import draw_sample_inputs
 
 IDENTITY = (0.0, 0.0, 0.0, 1.0)
 FALL = QuerySpec(queries=frozenset({"fall", "direction"}))

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes, predict, preset
-from ipe_ros.engine.store import STORE_VERSION, ResumableMap, result_key
+from ipe_ros.engine.compute.store import STORE_VERSION, ResumableMap, result_key
 from tests.conftest import REPO
 
 TOWER = load_scenes("ipe_ros/data/example_tower.json")[0]
@@ -52,8 +52,8 @@ def test_samples_lost_with_their_worker_are_not_kept_and_come_out_in_the_next_ru
 
 
 def test_keys_follow_what_a_result_depends_on_and_not_when_it_ran():
-    from ipe_ros.engine.rollout import run_sample
-    from ipe_ros.engine.sampler import make_tasks
+    from ipe_ros.engine.sampling.rollout import run_sample
+    from ipe_ros.engine.sampling.sampler import make_tasks
 
     [a, b] = make_tasks(TOWER, ModelConfig(sigma_m=0.04, samples=2), preset("default"), QUERY, 0)
     [c, _] = make_tasks(TOWER, ModelConfig(sigma_m=0.05, samples=2), preset("default"), QUERY, 0)
@@ -159,17 +159,17 @@ def test_links_and_oversized_entries_are_refused_unread(tmp_path, monkeypatch):
     store, _ = _one_sample_run(tmp_path / "store", report=lines.append)
     assert store.rejected == 1 and lines[0].endswith("not a regular file (a link or a folder)")
     assert not entry.is_symlink()  # replaced by the recomputed entry; the link's target untouched
-    import ipe_ros.engine.store as store_module
+    import ipe_ros.engine.compute.store as store_module
     monkeypatch.setattr(store_module, "MAX_ENTRY_BYTES", 100)
     store, _ = _one_sample_run(tmp_path / "store", report=lines.append)
     assert store.rejected == 1 and lines[-1].endswith("bytes, more than the 100 an entry may have")
 
 
 def test_every_stored_result_type_reads_back_equal():
-    from ipe_ros.engine.rollout import run_sample
-    from ipe_ros.engine.sampler import make_tasks
-    from ipe_ros.engine.scene_io import scene_to_dict
-    from ipe_ros.engine.store import decode_entry, encode_entry
+    from ipe_ros.engine.sampling.rollout import run_sample
+    from ipe_ros.engine.sampling.sampler import make_tasks
+    from ipe_ros.engine.scene.format import scene_to_dict
+    from ipe_ros.engine.compute.store import decode_entry, encode_entry
     from ipe_ros.engine.vision.likelihood import VisionSettings
     from ipe_ros.engine.vision.perception import perceive
 
@@ -228,7 +228,7 @@ def test_the_store_writes_only_inside_itself_whatever_links_are_planted_in_it(tm
 
 
 def test_a_link_planted_at_the_temporary_file_s_name_is_never_written_through(tmp_path, monkeypatch):
-    import ipe_ros.engine.store as store_module
+    import ipe_ros.engine.compute.store as store_module
 
     _one_sample_run(tmp_path / "store")
     entry = _only_entry(tmp_path / "store")

@@ -1,4 +1,4 @@
-"""The scene zoo (ipe_ros.engine.zoo): each family is what its name promises, starts clean, and the
+"""The scene zoo (ipe_ros.engine.scene.zoo): each family is what its name promises, starts clean, and the
 self-checking default answers it within the zoo's bar against the converged reference.
 
 One test per family on a fixed seed: the scene's defining numbers are in their documented ranges,
@@ -18,14 +18,14 @@ import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
 from ipe_ros.engine.config import DEFAULT_QUERIES
-from ipe_ros.engine.scene_io import scene_from_dict, scene_to_dict
-from ipe_ros.engine.shapes import Capsule, Compound, ConvexHull, Cylinder
-from ipe_ros.engine.perturb import draw_sample_inputs
-from ipe_ros.engine.rollout import run_sample
-from ipe_ros.engine.sampler import make_tasks
+from ipe_ros.engine.scene.format import scene_from_dict, scene_to_dict
+from ipe_ros.engine.scene.shapes import Capsule, Compound, ConvexHull, Cylinder
+from ipe_ros.engine.sampling.perturb import draw_sample_inputs
+from ipe_ros.engine.sampling.rollout import run_sample
+from ipe_ros.engine.sampling.sampler import make_tasks
 from ipe_ros.engine.simulation import build_world
 from ipe_ros.engine.simulation.health import deepest_penetration_fraction, energy_scale_j
-from ipe_ros.engine.zoo import FAMILIES, family_of, scene_zoo, zoo_scene, zoo_sigma_m
+from ipe_ros.engine.scene.zoo import FAMILIES, family_of, scene_zoo, zoo_scene, zoo_sigma_m
 
 SEED = 7
 SAMPLES = 4
@@ -114,7 +114,7 @@ def test_zoo_family_self_checking_default_against_paper(family, zoo_answers):
 
 
 def fast_reference():
-    from ipe_ros.engine.fidelity import reference_settings
+    from ipe_ros.engine.checking.fidelity import reference_settings
 
     return reference_settings()
 

@@ -27,10 +27,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..engine.disjoint import DisjointSets
-from ..engine.generators import convex_hull
-from ..engine.perturb import dynamic_masses
-from ..engine.scene import Body, Scene, Table, box_corners, quaternion_to_matrix, support_top_below
+from ..engine.scene.disjoint import DisjointSets
+from ..engine.scene.generators import convex_hull
+from ..engine.sampling.perturb import dynamic_masses
+from ..engine.scene.bodies import Body, Scene, Table, box_corners, quaternion_to_matrix, support_top_below
 
 #: Boxes closer than this fraction of the smallest box extent count as touching.
 CONTACT_TOLERANCE_FRACTION = 0.02

@@ -28,12 +28,12 @@ import numpy as np
 from scipy.stats import circmean
 
 from ..engine import ModelConfig, Prediction, QuerySpec, Scene, SimSettings, predict_many
-from ..engine.estimate import sample_fall_fraction, sample_far_m
-from ..engine.generators import generate_towers
-from ..engine.perturb import is_deterministic
-from ..engine.outcome import SampleOutcome
-from ..engine.scene_files import scenes_from_tower_csv
-from ..engine.store import ResumableMap
+from ..engine.sampling.estimate import sample_fall_fraction, sample_far_m
+from ..engine.scene.generators import generate_towers
+from ..engine.sampling.perturb import is_deterministic
+from ..engine.sampling.outcome import SampleOutcome
+from ..engine.scene.files import scenes_from_tower_csv
+from ..engine.compute.store import ResumableMap
 from .reporting import steps
 
 #: Tower blocks' short side in the stimulus files (metres here): the paper's unit for sigma.

@@ -24,7 +24,7 @@ import os
 from dataclasses import dataclass
 from typing import Any
 
-from . import limits
+from .scene import limits
 from .checks import at_most, boolean, integer, non_negative, positive
 from .errors import ConfigError, shown
 from .perceptions import perception_source

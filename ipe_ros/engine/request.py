@@ -16,11 +16,11 @@ from .config import (DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QU
                      ModelConfig, SimSettings, preset)
 from .errors import ConfigError, shown
 from .perceptions import perception_source
-from .fidelity import DEFAULT_CHECK, SelfCheck
+from .checking.fidelity import DEFAULT_CHECK, SelfCheck
 from .query import QUERIES, QuerySpec
 from .query.parameters import spec_parameters
-from .montecarlo import check_budget
-from .sampler import AdaptiveStop, check_ci_width
+from .sampling.montecarlo import check_budget
+from .sampling.sampler import AdaptiveStop, check_ci_width
 
 
 @dataclass(frozen=True)

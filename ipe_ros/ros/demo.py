@@ -31,7 +31,7 @@ from msg_bridge.markers import scene_to_markers  # noqa: E402
 
 from ..engine import load_scenes  # noqa: E402
 from ..engine.config import DEFAULT_SAMPLES, DEFAULT_SIGMA_M, default_workers  # noqa: E402
-from ..engine.examples import example_scene_path  # noqa: E402
+from ..engine.scene.examples import example_scene_path  # noqa: E402
 from .executor import SubmitOnceExecutor  # noqa: E402
 from .node import LATCHED_QOS, IpeNode  # noqa: E402
 

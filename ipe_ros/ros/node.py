@@ -106,7 +106,7 @@ class IpeInterface:
          self._pub_diagnostics, self._pub_answer, self._pub_support_graph, self._pub_perceived) = self._publishers
         pool = None
         if str(values["dask_scheduler"]).strip():
-            from ..engine.cluster import DaskMap  # only a node that offloads to a cluster needs dask
+            from ..engine.compute.cluster import DaskMap  # only a node that offloads to a cluster needs dask
 
             try:
                 pool = DaskMap(str(values["dask_scheduler"]).strip())

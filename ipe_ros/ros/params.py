@@ -18,13 +18,13 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from ..engine import ALL_QUERIES, PRESETS, ConfigError
 from ..engine.config import (DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M, anytime_batch_size,
                              default_workers)
-from ..engine.fidelity import DEFAULT_CHECK
+from ..engine.checking.fidelity import DEFAULT_CHECK
 from ..engine.inputs import as_spelled
 from ..engine.perceptions import perception_names, perception_source
 from ..engine.request import build_request
 from ..engine.query.contact import parse_pairs
 from ..engine.query.parameters import query_parameters
-from ..engine.scene import DEFAULT_MAX_OBJECTS
+from ..engine.scene.bodies import DEFAULT_MAX_OBJECTS
 from ..service import ServiceConfig
 
 #: Frames conventionally gravity-aligned in ROS (REP 105: map, odom; world is common in simulation).

@@ -14,7 +14,7 @@ from typing import Callable
 from ..engine import ConfigError, Scene, WorkerPool, predict
 from ..engine.errors import SceneError, clip, shown
 from ..engine.inputs import as_spelled
-from ..engine.sampler import check_request
+from ..engine.sampling.sampler import check_request
 from .recording import load_rerun_if_recording, record_prediction
 from .values import RECENT_EVENTS, Answer, NoSceneError, PredictionFailed, ServiceConfig, ServiceStats, StampedScene
 
@@ -38,7 +38,7 @@ class PredictionService:
                  publish_error: Callable[[StampedScene, str], None] = lambda _source, _error: None,
                  pool=None):
         """``pool``: where samples run instead of ``workers`` local processes (e.g. an
-        ``engine.cluster.DaskMap``); anything with WorkerPool's ``map``, ``warm``, ``worker_pids``,
+        ``engine.compute.cluster.DaskMap``); anything with WorkerPool's ``map``, ``warm``, ``worker_pids``,
         ``replacements`` and ``close``."""
         if isinstance(workers, bool) or not isinstance(workers, int) or workers < 0:
             raise ValueError(f"workers: must be an integer >= 0 (0 runs samples in the prediction thread), got {workers!r}")

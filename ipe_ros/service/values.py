@@ -9,7 +9,7 @@ from typing import Any
 
 from ..engine import Prediction, Scene
 from ..engine.request import Request
-from ..engine.scene import DEFAULT_MAX_OBJECTS
+from ..engine.scene.bodies import DEFAULT_MAX_OBJECTS
 
 
 
@@ -116,7 +116,7 @@ class ServiceStats:
     scenes replaced while waiting (keep-latest); budget_stops: answers cut short by the budget.
     refined_samples: rollouts the self-check reran at the reference because they ended unhealthy;
     escalated / contradicted: answers whose fast physics the reference contradicted, recomputed at
-    the reference / left as they were because the budget ran out (engine.fidelity).
+    the reference / left as they were because the budget ran out (engine.checking.fidelity).
     recent: the last RECENT_EVENTS inputs and predictions, oldest first: "ok", "rejected",
     "failed", "partial" (some samples failed or were cut by the budget), "contradicted" or "rrd_failed".
     in_flight_s: how long the prediction in flight has run (None: none in flight).

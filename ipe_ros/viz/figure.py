@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..engine import shapes
-from ..engine.estimate import Prediction
-from ..engine.scene import Scene
+from ..engine.scene import shapes
+from ..engine.sampling.estimate import Prediction
+from ..engine.scene.bodies import Scene
 from .palette import SUPPORT_RGB, group_rgb, risk_rgb
 
 FELL_RGB = (0.85, 0.1, 0.1)

@@ -10,7 +10,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from ..engine.scene import Scene
+from ..engine.scene.bodies import Scene
 from .palette import group_rgb, to_rgb8
 from .rerun_log import APPLICATION_ID, entity_part, log_scene
 

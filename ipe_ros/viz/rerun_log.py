@@ -39,11 +39,11 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from ..engine.estimate import Prediction, sample_any_fall, sample_fall_fraction, sample_far_m
+from ..engine.sampling.estimate import Prediction, sample_any_fall, sample_fall_fraction, sample_far_m
 from ..engine.query import QUERIES
 from .palette import SUPPORT_RGB, group_rgb, risk_rgb, to_rgb8
-from ..engine import shapes
-from ..engine.scene import Body, Floor, Scene
+from ..engine.scene import shapes
+from ..engine.scene.bodies import Body, Floor, Scene
 
 FELL_RGB = (0.9, 0.1, 0.1)
 APPLICATION_ID = "ipe_ros"

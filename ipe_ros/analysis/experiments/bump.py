@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...engine import ModelConfig, predict_many, preset
-from ...engine.generators import generate_tables
+from ...engine.scene.generators import generate_tables
 from .. import stats
 from ..report import Report, pyplot
 from ..reporting import steps

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...engine import ModelConfig, preset
-from ...engine.generators import generate_tables
+from ...engine.scene.generators import generate_tables
 from .. import stats
 from ..features import (DIRECTION_FEATURES, TABLE_FEATURES, TOWER_FEATURES, feature_matrix, table_features,
                         tower_features)

@@ -10,12 +10,12 @@ from typing import Any
 import numpy as np
 
 from ..config import ModelConfig
-from ..estimate import circular_mean, wilson_interval
-from ..perturb import is_deterministic
+from ..sampling.estimate import circular_mean, wilson_interval
+from ..sampling.perturb import is_deterministic
 from ..query import QUERIES, QuerySpec, Samples
-from ..scene import Scene
+from ..scene.bodies import Scene
 from .kinds import Action, Place, Push
-from ..outcome import RolloutResult, SampleOutcome
+from ..sampling.outcome import RolloutResult, SampleOutcome
 
 
 # -- the answers ----------------------------------------------------------------------------------------
@@ -69,7 +69,7 @@ class VariantAnswer:
     #: asked with other queries (``ask(queries=...)``): their answer fields, as a prediction's
     #: (``Query.aggregate`` over the variant's samples); written flat into the variant's JSON
     query_answers: dict[str, Any] | None = None
-    #: the self-check of the variant's samples (``engine.fidelity``): "verified", "escalated" (the
+    #: the self-check of the variant's samples (``engine.checking.fidelity``): "verified", "escalated" (the
     #: answer is the reference physics'), "contradicted", "unverified" (not checked: the default for
     #: questions), "reference" (the settings are the reference's own); None: not simulated.
     #: ``self_check``: what it did (FidelityReport.to_dict)

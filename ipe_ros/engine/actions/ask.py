@@ -12,17 +12,17 @@ from ..config import ModelConfig, SimSettings
 from ..query import QUERIES, QuerySpec
 from ..query.parameters import spec_parameters
 from ..query.spec import check_names
-from ..decide import Sequential, Tally
+from ..sampling.decide import Sequential, Tally
 from ..errors import ConfigError
-from ..perturb import is_deterministic, position_sigmas_m
-from ..fidelity import FidelityReport, SelfCheck, is_reference, reference_settings
-from ..fidelity import check_request as check_fidelity_request
-from ..montecarlo import MapFn, MonteCarlo, Plan, check_budget, check_some_sample_finished, child_seeds, mapped, together
-from ..sampler import rollout_cost
-from ..self_check import checking
-from ..scene import Scene, Table, validate_scene
+from ..sampling.perturb import is_deterministic, position_sigmas_m
+from ..checking.fidelity import FidelityReport, SelfCheck, is_reference, reference_settings
+from ..checking.fidelity import check_request as check_fidelity_request
+from ..sampling.montecarlo import MapFn, MonteCarlo, Plan, check_budget, check_some_sample_finished, child_seeds, mapped, together
+from ..sampling.sampler import rollout_cost
+from ..checking.self_check import checking
+from ..scene.bodies import Scene, Table, validate_scene
 from ..query.contact import check_pairs
-from ..outcome import SampleOutcome
+from ..sampling.outcome import SampleOutcome
 from .answers import QUESTION_QUERIES, Alone, Answers, aggregate_variant, aggregate_given, draws_noise, stood, fell, ran
 from .checks import check_action
 from .geometry import affected_regions, groups, reached
@@ -51,7 +51,7 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     also, per variant, P(A touches B) for these (A, B) pairs (B may be "support"); every variant is
     then simulated (none is read from the scene as it is). ``check`` (e.g. ``fidelity.DEFAULT_CHECK``):
     each simulated variant's samples check themselves against the reference physics as a
-    prediction's do (``engine.fidelity``; the checks of all variants share each round's map call),
+    prediction's do (``engine.checking.fidelity``; the checks of all variants share each round's map call),
     and a contradicted variant is answered at the reference. Off by default: it costs 1.5-6x a
     question's time (benchmarks/README.md); each variant's ``fidelity`` then says "unverified".
     ``queries``: other registered queries each variant also answers (``VariantAnswer.query_answers``;

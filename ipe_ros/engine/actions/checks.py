@@ -9,9 +9,9 @@ import math
 
 import numpy as np
 
-from .. import limits
+from ..scene import limits
 from ..errors import ConfigError
-from ..scene import Scene, validate_scene
+from ..scene.bodies import Scene, validate_scene
 from .geometry import geometry_world
 from .kinds import Action, Place, Push, Remove
 from .variants import push_velocities

@@ -12,9 +12,9 @@ import numpy as np
 
 from .. import simulation
 from ..config import SimSettings, SolverSettings
-from ..disjoint import DisjointSets
-from ..scene import Body, Scene, Table, lowest_z_m
-from ..shapes import BoxShape
+from ..scene.disjoint import DisjointSets
+from ..scene.bodies import Body, Scene, Table, lowest_z_m
+from ..scene.shapes import BoxShape
 from .kinds import Action, Place, Remove
 
 

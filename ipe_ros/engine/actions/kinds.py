@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import Union
 
 from ..errors import ConfigError
-from ..scene import Body
+from ..scene.bodies import Body
 
 
 #: P(anything else falls) below this makes an object safe to remove now.

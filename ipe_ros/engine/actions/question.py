@@ -14,14 +14,14 @@ import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from .. import limits
+from ..scene import limits
 from ..config import ModelConfig, SimSettings
 from ..errors import ConfigError, shown
 from ..query.contact import parse_pair
 from ..query.parameters import spec_parameters
 from ..query.spec import check_names
-from ..scene import Body, Scene, validate_body
-from ..scene_io import object_from_dict, object_to_dict
+from ..scene.bodies import Body, Scene, validate_body
+from ..scene.format import object_from_dict, object_to_dict
 from .answers import Answers
 from .kinds import DEFAULT_SAFE_BELOW, DEFAULT_SUPPORT_THRESHOLD, NO_OBJECTS, Push, Region, check_level
 from .questions import best_place, clear_order, place_at, placements_to_dict, push, remove, support_graph
@@ -47,7 +47,7 @@ class Question:
     """What every question carries. ``samples``: k (None: the asker's default); ``fell_off``: also
     which objects end off the table; ``sequential``: decision questions sample until decided (False:
     the full k); ``cancel_older``: the node drops older questions about the same scene for this one;
-    ``self_check``: each variant checked against the reference physics (engine.fidelity)."""
+    ``self_check``: each variant checked against the reference physics (engine.checking.fidelity)."""
 
     kind: ClassVar[str] = ""
     #: the JSON fields of this kind, besides COMMON_FIELDS
@@ -331,7 +331,7 @@ def question_from_dict(data) -> Question:
         first fall)
         any of them: "samples": k, "fell_off": true (also which objects end off the table),
         "sequential": false (the full k for every variant), "self_check": true (each variant checked
-        against the reference physics, engine.fidelity), "cancel_older": true (the node drops the
+        against the reference physics, engine.checking.fidelity), "cancel_older": true (the node drops the
         older questions about the same scene, waiting or running)
     """
     if not isinstance(data, dict):

@@ -12,13 +12,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import limits
+from ..scene import limits
 from ..config import ModelConfig, SimSettings
-from ..decide import Ranking, SafeBelow, Sequential, Supports
+from ..sampling.decide import Ranking, SafeBelow, Sequential, Supports
 from ..errors import ConfigError
-from ..montecarlo import check_budget
-from ..sampler import rollout_cost
-from ..scene import Body, Scene, validate_body
+from ..sampling.montecarlo import check_budget
+from ..sampling.sampler import rollout_cost
+from ..scene.bodies import Body, Scene, validate_body
 from .answers import Answers, VariantAnswer
 from .ask import ask
 from .geometry import geometry_world, dependents, resting_on

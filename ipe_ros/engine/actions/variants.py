@@ -13,11 +13,11 @@ import numpy as np
 
 from .. import simulation
 from ..errors import PhysicsError
-from ..perturb import draw_sample_inputs
-from ..rollout import (SampleOutcome, SampleTask, failed, guarded, rollout_result, separated_world, simulate_pushes,
+from ..sampling.perturb import draw_sample_inputs
+from ..sampling.rollout import (SampleOutcome, SampleTask, failed, guarded, rollout_result, separated_world, simulate_pushes,
                        simulate_sample)
-from ..scene import Scene
-from ..shapes import rotation_matrix
+from ..scene.bodies import Scene
+from ..scene.shapes import rotation_matrix
 from .kinds import Action, Place, Push, Remove, label_of
 
 

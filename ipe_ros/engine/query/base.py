@@ -30,15 +30,15 @@ from typing import TYPE_CHECKING, Any, ClassVar, Sequence
 
 import numpy as np
 
-from .. import queries as predicates
-from ..scene import Scene
-from ..stats import wilson_interval
+from . import predicates
+from ..scene.bodies import Scene
+from ..sampling.stats import wilson_interval
 
 from .spec import QuerySpec
 
 if TYPE_CHECKING:
     from ..config import EarlyStopSettings
-    from ..outcome import RolloutResult, SampleOutcome
+    from ..sampling.outcome import RolloutResult, SampleOutcome
 
 
 def smallest_extents_m(scene: Scene) -> np.ndarray:

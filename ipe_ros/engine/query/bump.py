@@ -8,9 +8,9 @@ from typing import Any
 
 import numpy as np
 
-from .. import queries as predicates
+from . import predicates
 from ..errors import ConfigError
-from ..scene import Table
+from ..scene.bodies import Table
 from .base import Query, Reading, Samples
 
 

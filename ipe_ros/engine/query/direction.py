@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 
-from .. import queries as predicates
-from ..stats import circular_mean, half_circle_decisiveness
+from . import predicates
+from ..sampling.stats import circular_mean, half_circle_decisiveness
 from .base import Query, Reading, Samples
 from .fall import fallen_flags
 

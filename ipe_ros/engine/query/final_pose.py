@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from ..stats import circular_mean
+from ..sampling.stats import circular_mean
 from .base import Query, Reading, Samples
 
 

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..config import SimSettings
 from ..errors import BudgetExceeded
-from ..scene import Scene
+from ..scene.bodies import Scene
 from . import health
 from .collapse import CollapseTrial, CollapseWatch
 from .probe import NO_PROBE, Probe

@@ -19,9 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import SimSettings
-from .. import shapes as shapes_module
-from ..scene import Body, Box, Floor, Scene
-from ..shapes import BoxShape, Capsule, ConvexHull, Cylinder, Sphere
+from ..scene import shapes as shapes_module
+from ..scene.bodies import Body, Box, Floor, Scene
+from ..scene.shapes import BoxShape, Capsule, ConvexHull, Cylinder, Sphere
 
 _PYBULLET = None
 _CLIENT: int | None = None

@@ -21,9 +21,9 @@ import numpy as np
 
 from ..checks import integer, positive
 from ..errors import ConfigError, clip
-from ..limits import MAX_COORDINATE_M
-from ..scene import Scene
-from ..shapes import rotation_matrix
+from ..scene.limits import MAX_COORDINATE_M
+from ..scene.bodies import Scene
+from ..scene.shapes import rotation_matrix
 
 #: fields of view a rectified pinhole image can have (a telephoto lens, a wide-angle one)
 MIN_FOV_DEG, MAX_FOV_DEG = 0.5, 170.0

@@ -27,8 +27,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError
-from ..scene import Scene
-from ..shapes import quaternion_product
+from ..scene.bodies import Scene
+from ..scene.shapes import quaternion_product
 from .depth_model import (DepthModel, DepthObservation, DepthSettings, check_layer_memory, render_depth_m,
                           support_depth_m)
 from .mcmc import effective_sample_size

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigError, clip
-from ..scene import Scene
+from ..scene.bodies import Scene
 from .camera import MAX_SIDE_PX, camera_from_info, look_at
 from .depth_model import DepthObservation
 from .tinyrenderer import depth_with_pybullet
@@ -138,7 +138,7 @@ def write_depth_example(directory: str | Path, truth: Scene, seed: int = 0) -> d
     import yaml
     from PIL import Image
 
-    from ..scene_io import scene_to_dict
+    from ..scene.format import scene_to_dict
 
     rng = np.random.default_rng(seed)
     directory = Path(directory)

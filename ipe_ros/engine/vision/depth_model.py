@@ -28,7 +28,7 @@ import numpy as np
 
 from ..checks import integer, positive
 from ..errors import ConfigError
-from ..scene import Floor, Scene
+from ..scene.bodies import Floor, Scene
 from .camera import PinholeCamera
 from .render import EMPTY, Patch, SceneMesh, body_patch, scene_mesh
 
@@ -119,8 +119,8 @@ def support_depth_m(scene: Scene, camera: PinholeCamera) -> np.ndarray:
 
 def _reach_mask(scene: Scene, camera: PinholeCamera, reach_m: float) -> np.ndarray:
     """Pixels that see the published objects' bounding boxes grown by ``reach_m``."""
-    from ..shapes import BoxShape
-    from ..scene import Body
+    from ..scene.shapes import BoxShape
+    from ..scene.bodies import Body
 
     boxes = []
     for body in scene.dynamic_objects:

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError
-from ..scene import Scene
+from ..scene.bodies import Scene
 from .camera import PinholeCamera, cameras_for
 from .likelihood import VisionSettings
 from .mcmc import Chain, ImageModel, run_chain

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import shapes
-from ..scene import Scene
+from ..scene import shapes
+from ..scene.bodies import Scene
 from .camera import PinholeCamera
 
 BACKGROUND_GREY = 90.0

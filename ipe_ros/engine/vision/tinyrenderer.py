@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import shapes
-from ..scene import Floor, Scene
+from ..scene import shapes
+from ..scene.bodies import Floor, Scene
 from .camera import PinholeCamera
 from .render import outward_faces
 

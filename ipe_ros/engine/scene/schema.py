@@ -2,7 +2,7 @@
 
 Built from what the reader itself uses: the field names of ``scene_io`` and the ranges of ``limits``,
 so the schema cannot drift from the validation. The committed copy, ``ipe_ros/schema/scene-2.json``,
-is checked against this by the tests; regenerate it with ``python -m ipe_ros.engine.schema``.
+is checked against this by the tests; regenerate it with ``python -m ipe_ros.engine.scene.schema``.
 
 The schema says what it can: fields, types, required keys, per-number ranges. What spans several
 values stays with the engine, which also names the field and the fix: unit quaternions, |gravity|,
@@ -19,10 +19,10 @@ from pathlib import Path
 from typing import Any
 
 from . import limits
-from . import scene_io as io
-from .scene import DEFAULT_MAX_OBJECTS, MAX_HORIZON_S, QUATERNION_NORM_TOLERANCE
+from . import format as io
+from .bodies import DEFAULT_MAX_OBJECTS, MAX_HORIZON_S, QUATERNION_NORM_TOLERANCE
 
-SCHEMA_PATH = Path(__file__).resolve().parents[1] / "schema" / "scene-2.json"
+SCHEMA_PATH = Path(__file__).resolve().parents[2] / "schema" / "scene-2.json"
 SCHEMA_ID = "urn:ipe-ros:schema:scene-2"
 
 

@@ -19,7 +19,7 @@ import contextlib
 import os
 from typing import Any, Callable, Iterable, Iterator, TypeVar
 
-from .errors import ConfigError
+from ..errors import ConfigError
 
 T = TypeVar("T")
 R = TypeVar("R")

@@ -22,7 +22,7 @@ from typing import Any, Callable, Generator, Sequence, TypeVar
 
 import numpy as np
 
-from .errors import ConfigError, shown
+from ..errors import ConfigError, shown
 
 T = TypeVar("T")
 R = TypeVar("R")

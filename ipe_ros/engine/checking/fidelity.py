@@ -47,12 +47,12 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .checks import boolean, integer, positive
-from .config import PRESETS, SimSettings
-from .errors import ConfigError, shown
-from .query import QUERIES
-from .outcome import SampleOutcome
-from .scene import Scene
+from ..checks import boolean, integer, positive
+from ..config import PRESETS, SimSettings
+from ..errors import ConfigError, shown
+from ..query import QUERIES
+from ..sampling.outcome import SampleOutcome
+from ..scene.bodies import Scene
 
 #: The verdicts, from best to worst for a robot about to act.
 VERDICTS = ("reference", "verified", "escalated", "unverified", "contradicted")
@@ -329,6 +329,6 @@ def merge(outcomes: Sequence[SampleOutcome], replacements: dict[int, SampleOutco
 
 
 def scale_of(scene: Scene) -> float:
-    from .simulation.health import energy_scale_j
+    from ..simulation.health import energy_scale_j
 
     return max(energy_scale_j(scene), math.ulp(1.0))

@@ -8,9 +8,9 @@ from collections import OrderedDict
 from pathlib import Path
 from typing import Iterable
 
-from .errors import SceneError, shown
-from .scene import DEFAULT_MAX_OBJECTS, Box, Floor, Scene, validate_scene
-from .scene_io import OnRefused, RefusedScene, scenes_from_json
+from ..errors import SceneError, shown
+from .bodies import DEFAULT_MAX_OBJECTS, Box, Floor, Scene, validate_scene
+from .format import OnRefused, RefusedScene, scenes_from_json
 
 _CSV_COLUMNS = ("name", "object", "friction", "mass", "pos_x", "pos_y", "pos_z", "quat_w", "quat_x",
                 "quat_y", "quat_z", "restitution", "scale_x", "scale_y", "scale_z")

@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from .config import SimSettings
+from ..config import SimSettings
 from .fidelity import (FidelityReport, SelfCheck, confirmation_samples, contradicts, coverage_samples, difference,
                        merge, outcome_flags, scale_of, suspect, unhealthy, verification_count)
-from .montecarlo import Plan
-from .outcome import SampleOutcome
-from .rollout import SampleTask
+from ..sampling.montecarlo import Plan
+from ..sampling.outcome import SampleOutcome
+from ..sampling.rollout import SampleTask
 
 
 def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: dict[int, SampleOutcome],

@@ -17,20 +17,20 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .config import ModelConfig, SimSettings
-from .errors import ConfigError, shown
+from ..config import ModelConfig, SimSettings
+from ..errors import ConfigError, shown
 from .estimate import Prediction, aggregate, sample_any_fall, sample_fall_fraction, wilson_interval
-from .fidelity import check_request as check_fidelity_request
-from .fidelity import (DEFAULT_CHECK, NO_CHECK, FidelityReport, SelfCheck, coverage_ahead, is_reference,
+from ..checking.fidelity import check_request as check_fidelity_request
+from ..checking.fidelity import (DEFAULT_CHECK, NO_CHECK, FidelityReport, SelfCheck, coverage_ahead, is_reference,
                        look_ahead_split, reference_settings, verification_count)
 from .montecarlo import (MapFn, MonteCarlo, Plan, check_budget, check_seed, check_some_sample_finished, child_seeds,
                          together)
-from .perceptions import perception_source
+from ..perceptions import perception_source
 from .perturb import is_deterministic
 from .rollout import SampleOutcome, SampleTask, lost, run_sample
-from .self_check import checking
-from .query import QUERIES, QuerySpec
-from .scene import DEFAULT_MAX_OBJECTS, Scene, validate_scene
+from ..checking.self_check import checking
+from ..query import QUERIES, QuerySpec
+from ..scene.bodies import DEFAULT_MAX_OBJECTS, Scene, validate_scene
 
 @dataclass(frozen=True)
 class AdaptiveStop:
@@ -98,7 +98,7 @@ class RolloutCost:
 def rollout_cost(scene: Scene, model: ModelConfig, settings: SimSettings, pairs: int = 0) -> RolloutCost:
     """Steps x bodies of one sample (every phi value) at the step the scene gets, and ``pairs`` watched
     contact pairs, and its estimated time."""
-    from .simulation.world import fastest_initial_speed_m_s
+    from ..simulation.world import fastest_initial_speed_m_s
 
     g = math.sqrt(sum(v * v for v in scene.gravity_m_s2))
     scale = min(b.smallest_extent_m for b in scene.dynamic_objects)
@@ -169,7 +169,7 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
     (``engine.vision``), from a chain run here (in a worker when ``map_fn`` is given, seeded from
     ``seed`` on a stream of its own) or taken from ``perceived`` (``vision.PerceivedScenes``).
 
-    ``check``: how the answer checks its fast physics against the reference (``engine.fidelity``):
+    ``check``: how the answer checks its fast physics against the reference (``engine.checking.fidelity``):
     unhealthy rollouts refined, ``check.verify_samples`` samples verified in the same map as the
     fast ones, everything rerun at the reference on disagreement; ``Prediction.fidelity`` says what
     happened. None or ``SelfCheck(enabled=False)``: the fast physics alone.

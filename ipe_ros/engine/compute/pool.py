@@ -19,7 +19,7 @@ from concurrent.futures import CancelledError, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Callable, Iterable, TypeVar
 
-from .query.spec import plugin_modules
+from ..query.spec import plugin_modules
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -45,7 +45,7 @@ def _init_worker(owner_pid: int, plugins: tuple[str, ...] = ()) -> None:
     # A worker's parent is the fork server, not the process that owns the pool. When the owner dies
     # without closing the pool (SIGKILL, a crash), end this worker too instead of leaving it behind.
     threading.Thread(target=_exit_when_gone, args=(owner_pid,), name="owner-watch", daemon=True).start()
-    from .simulation import world
+    from ..simulation import world
     world.client()  # connect pybullet now, not in the first sample
 
 
@@ -86,7 +86,7 @@ class WorkerPool:
         self._context = multiprocessing.get_context(start_method)
         if start_method == "forkserver":
             # Import numpy and pybullet once in the fork server rather than in every worker.
-            self._context.set_forkserver_preload(["ipe_ros.engine.rollout"])
+            self._context.set_forkserver_preload(["ipe_ros.engine.sampling.rollout"])
         self._lock = threading.Lock()
         self._executor: ProcessPoolExecutor | None = None
         self.replacements = 0  # how many times dead workers forced a new executor

@@ -37,7 +37,7 @@ from typing import Any, Callable, Iterable, TypeVar
 
 import numpy as np
 
-from .errors import clip, shown
+from ..errors import clip, shown
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -235,9 +235,9 @@ class ResumableMap:
 @functools.cache
 def _result_types() -> dict[str, type]:
     """The dataclasses an entry may hold, by name (imported here: the vision package imports the engine)."""
-    from .outcome import RolloutResult, SampleOutcome
-    from .vision.mcmc import Chain
-    from .vision.perception import PerceivedScenes
+    from ..sampling.outcome import RolloutResult, SampleOutcome
+    from ..vision.mcmc import Chain
+    from ..vision.perception import PerceivedScenes
 
     return {t.__name__: t for t in (SampleOutcome, RolloutResult, PerceivedScenes, Chain)}
 
@@ -299,10 +299,10 @@ def _encode(value, types: dict[str, type]):
         return {"dict": [[k, _encode(v, types)] for k, v in value.items()]}
     if isinstance(value, list):
         return [_encode(v, types) for v in value]
-    from .scene import Scene
+    from ..scene.bodies import Scene
 
     if isinstance(value, Scene):
-        from .scene_io import scene_to_dict
+        from ..scene.format import scene_to_dict
 
         return {"scene": scene_to_dict(value)}
     if dataclasses.is_dataclass(value) and types.get(type(value).__name__) is type(value):
@@ -328,8 +328,8 @@ def _decode(value, types: dict[str, type], where: str):
     if set(value) == {"array", "shape", "scalar", "data"}:
         return _decode_array(value, where)
     if set(value) == {"scene"}:
-        from .errors import ConfigError
-        from .scene_io import scene_from_dict
+        from ..errors import ConfigError
+        from ..scene.format import scene_from_dict
 
         try:
             return scene_from_dict(value["scene"])
@@ -417,7 +417,7 @@ def _fits(value, hint) -> bool:
 
 def _check_shapes(result) -> None:
     """The arrays of a sample's outcome agree with each other (code reading it indexes them together)."""
-    from .outcome import SampleOutcome
+    from ..sampling.outcome import SampleOutcome
 
     if not isinstance(result, SampleOutcome) or result.initial_positions_m is None:
         return

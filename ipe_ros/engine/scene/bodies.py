@@ -18,7 +18,7 @@ from typing import Union
 import numpy as np
 
 from . import limits, shapes
-from .errors import SceneError, shown
+from ..errors import SceneError, shown
 from .shapes import BoxShape, Shape
 
 Vec3 = tuple[float, float, float]

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .errors import ConfigError
+from ..errors import ConfigError
 from .estimate import wilson_interval
 
 #: samples drawn per variant between two looks at the rules

@@ -9,12 +9,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
-from .query import QUERIES, QuerySpec, Samples
-from .query.any_fall import sample_any_fall  # noqa: F401 - re-exported
-from .query.fall import sample_fall_fraction  # noqa: F401 - re-exported
-from .query.far import sample_far_m  # noqa: F401 - re-exported
+from ..query import QUERIES, QuerySpec, Samples
+from ..query.any_fall import sample_any_fall  # noqa: F401 - re-exported
+from ..query.fall import sample_fall_fraction  # noqa: F401 - re-exported
+from ..query.far import sample_far_m  # noqa: F401 - re-exported
 from .outcome import SampleOutcome
-from .scene import Scene
+from ..scene.bodies import Scene
 from .stats import Z95, circular_mean, half_circle_decisiveness, mean_interval, wilson_interval  # noqa: F401
 
 # kept importable from here: the per-sample values and the statistics the answers are made of
@@ -60,7 +60,7 @@ class Prediction:
     max_energy_gain_j: float | None = None
     #: rollouts whose collapse steps made energy and were undone (run on at the fine step instead)
     collapse_undone_rollouts: int = 0
-    #: the self-check's verdict (engine.fidelity.VERDICTS): "verified", "escalated", "contradicted",
+    #: the self-check's verdict (engine.checking.fidelity.VERDICTS): "verified", "escalated", "contradicted",
     #: "unverified" or "reference"; ``refined_samples``: rollouts rerun at the reference because they
     #: ended unhealthy; ``self_check``: what ran at which settings (FidelityReport.to_dict()).
     fidelity: str | None = None

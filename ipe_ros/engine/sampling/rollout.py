@@ -14,15 +14,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import shapes, simulation
-from .query import QUERIES, QuerySpec, Reading
-from .query.base import smallest_extents_m
-from .config import ModelConfig, SimSettings
-from .errors import BudgetExceeded, PhysicsError
+from ..scene import shapes
+from .. import simulation
+from ..query import QUERIES, QuerySpec, Reading
+from ..query.base import smallest_extents_m
+from ..config import ModelConfig, SimSettings
+from ..errors import BudgetExceeded, PhysicsError
 from .outcome import RolloutResult, SampleOutcome
 from .perturb import draw_sample_inputs
-from .scene import Floor, Scene
-from .simulation import NO_PROBE, DecidedHeights, Probe
+from ..scene.bodies import Floor, Scene
+from ..simulation import NO_PROBE, DecidedHeights, Probe
 
 
 @dataclass(frozen=True)

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .config import MODEL_LIGHT_DENSITY_KG_M3, ModelConfig
-from .scene import Scene
-from .shapes import quaternion_product
+from ..config import MODEL_LIGHT_DENSITY_KG_M3, ModelConfig
+from ..scene.bodies import Scene
+from ..scene.shapes import quaternion_product
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from . import limits
-from .errors import SceneError, shown
+from ..errors import SceneError, shown
 
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]

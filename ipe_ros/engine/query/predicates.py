@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from .scene import Scene, Table, half_heights_m
+from ..scene.bodies import Scene, Table, half_heights_m
 
 
 def fallen_mask(initial_m: np.ndarray, final_m: np.ndarray, min_extents_m: np.ndarray,

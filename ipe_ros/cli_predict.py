@@ -137,6 +137,62 @@ def _perceive_depth(args, scenes, model):
 def cmd_predict(args) -> int:
     refused: list[RefusedScene] = []  # scenes of the file that cannot be answered: reported, the rest answered
     scenes = load_scenes(args.path, towers=args.tower, on_refused=refused.append)
+    vision = _vision_settings(args)
+    # one request from the options (engine.request); its errors read as the options (main: as_spelled)
+    request = build_request(samples=args.samples, sigma_m=args.sigma, phi_m_s2=args.phi,
+                            force_direction_deg=args.force_direction, mu=args.mu, ground_truth=args.ground_truth,
+                            perception=args.perception, vision=vision, queries=args.query, contact=args.contact or (),
+                            preset_name=args.preset, horizon_s=args.horizon, until_rest=args.until_rest,
+                            seed=args.seed, ci_width=args.ci_width, deadline_s=args.deadline, budget_s=args.budget,
+                            self_check=not args.no_self_check,
+                            verify_samples=verify_samples(args, checked=not args.no_self_check, off="--no-self-check"),
+                            query_parameters=given_query_parameters(args))
+    model, sim, query, stop, check = request.model, request.settings, request.query, request.stop, request.check
+    for option, value, what in (("--vision-rrd", args.vision_rrd, "records"), ("--png", args.png, "draws")):
+        if value is not None and len(scenes) != 1:
+            raise ConfigError(option, f"{what} one scene, but {args.path} holds {len(scenes)}; choose one with --tower")
+    scenes = _answerable(args, scenes, refused, request)
+    perceived = None
+    if args.vision_rrd is not None:  # the chain the prediction would run, kept for the recording
+        from .engine.perceptions import perceive_vision
+
+        perceived = perceive_vision(scenes[0], model, args.seed)
+    if args.perception == "depth":
+        perceived = _perceive_depth(args, scenes, model)
+    collected: list[Prediction] = []
+    if args.json:
+        run_predictions(scenes, model, sim, query, args.seed, args.workers,
+                        lambda p: (collected.append(p), print(prediction_json(p), flush=True)), stop, args.budget,
+                        perceived, args.scheduler, check)
+    else:
+        k = 1 if all(is_deterministic(s, model) for s in scenes) else args.samples
+        print(f"sigma = {model.sigma_m:g} m, phi = {','.join(f'{v:g}' for v in model.phi_m_s2)} m/s^2, mu = {args.mu}, "
+              f"k = {k}, preset = {sim.name}, seed = {args.seed}"
+              + (f", perception = vision ({vision.chain_samples} MH samples, {vision.resolution_px} px)"
+                 if vision is not None else "")
+              + (f", perception = {args.perception} (sigma unused)"
+                 if perception_source(args.perception).posterior and vision is None else ""))
+        run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append, stop, args.budget,
+                        perceived, args.scheduler, check)
+        print(format_table(collected))
+        for line in _perception_lines(collected, args.perception, vision is not None):
+            print(line)
+    if args.vision_rrd is not None:
+        from .viz.perception_log import write_vision_rrd
+
+        write_vision_rrd(args.vision_rrd, scenes[0], perceived, vision)
+        print(f"wrote {args.vision_rrd}", file=sys.stderr)
+    if args.png is not None:
+        from .viz.figure import draw_prediction
+
+        draw_prediction(args.png, scenes[0], collected[0])
+        print(f"wrote {args.png}", file=sys.stderr)
+    return EXIT_BAD_INPUT if refused else 0  # the others answered; the status says not all could be
+
+
+def _vision_settings(args):
+    """The vision chain's settings from its options (None without vision perception), and the
+    perception options that belong to another perception refused."""
     vision = None
     if args.perception == "vision":
         from .engine.vision import VisionSettings
@@ -159,86 +215,48 @@ def cmd_predict(args) -> int:
         raise ConfigError("--perception", "depth perception needs --depth IMAGE, --camera-info YAML and --camera-pose")
     if args.perception != "depth" and any(v is not None for v in depth_inputs):
         raise ConfigError("--perception", "--depth, --camera-info, --camera-pose and --depth-rrd need --perception depth")
-    # one request from the options (engine.request); its errors read as the options (main: as_spelled)
-    request = build_request(samples=args.samples, sigma_m=args.sigma, phi_m_s2=args.phi,
-                            force_direction_deg=args.force_direction, mu=args.mu, ground_truth=args.ground_truth,
-                            perception=args.perception, vision=vision, queries=args.query, contact=args.contact or (),
-                            preset_name=args.preset, horizon_s=args.horizon, until_rest=args.until_rest,
-                            seed=args.seed, ci_width=args.ci_width, deadline_s=args.deadline, budget_s=args.budget,
-                            self_check=not args.no_self_check,
-                            verify_samples=verify_samples(args, checked=not args.no_self_check, off="--no-self-check"),
-                            query_parameters=given_query_parameters(args))
-    model, sim, query, stop, check = request.model, request.settings, request.query, request.stop, request.check
-    if args.vision_rrd is not None and len(scenes) != 1:
-        raise ConfigError("--vision-rrd", f"records one scene, but {args.path} holds {len(scenes)}; choose one with --tower")
-    if args.png is not None and len(scenes) != 1:
-        raise ConfigError("--png", f"draws one scene, but {args.path} holds {len(scenes)}; choose one with --tower")
+    return vision
+
+
+def _answerable(args, scenes: list, refused: list[RefusedScene], request) -> list:
+    """The scenes that can be answered; the others refused (reported at once, before the predictions'
+    minutes). A file's one scene refused is the command's error; none answerable, a SceneError."""
     unread = {r.index for r in refused}  # a scene's position in the file counts the unreadable ones too
     positions = {id(scene): i for scene, i in zip(scenes, (i for i in range(len(scenes) + len(unread))
                                                            if i not in unread))}
     answerable = []
-    for scene in scenes:  # refuse what cannot be answered before predicting anything
+    for scene in scenes:
         try:
-            check_request(scene, query, model=model, settings=sim, budget_s=args.budget)
+            check_request(scene, request.query, model=request.model, settings=request.settings, budget_s=args.budget)
             answerable.append(scene)
         except ConfigError as exc:
             field = spelled(exc.field, "cli") + (f" ({scene.name})" if exc.field == "budget_s" else "")
             refused.append(RefusedScene(positions[id(scene)], scene.name, ConfigError(field, exc.problem)))
-    if len(scenes) == 1 and not answerable and len(refused) == 1:  # one scene: its refusal is the command's error
+    if len(scenes) == 1 and not answerable and len(refused) == 1:
         raise refused[-1].error
-    scenes = answerable
-    for refusal in refused:  # at once, before the predictions' minutes
+    for refusal in refused:
         report = {"scene": refusal.name, "index": refusal.index, "error": str(refusal.error)}
         print(json.dumps(report) if args.json else f"ipe: refused scene {refusal.index} "
               f"({refusal.name or 'unnamed'}): {refusal.error}", file=sys.stdout if args.json else sys.stderr, flush=True)
-    if not scenes:
+    if not answerable:
         raise SceneError(args.path, f"none of its {len(refused)} scenes can be answered (each refusal is reported)")
-    perceived = None
-    if args.vision_rrd is not None:  # the chain the prediction would run, kept for the recording
-        from .engine.perceptions import perceive_vision
+    return answerable
 
-        perceived = perceive_vision(scenes[0], model, args.seed)
-    if args.perception == "depth":
-        perceived = _perceive_depth(args, scenes, model)
-    collected: list[Prediction] = []
-    if args.json:
-        run_predictions(scenes, model, sim, query, args.seed, args.workers,
-                         lambda p: (collected.append(p), print(prediction_json(p), flush=True)), stop, args.budget,
-                         perceived, args.scheduler, check)
-    else:
-        k = 1 if all(is_deterministic(s, model) for s in scenes) else args.samples
-        print(f"sigma = {model.sigma_m:g} m, phi = {','.join(f'{v:g}' for v in model.phi_m_s2)} m/s^2, mu = {args.mu}, "
-              f"k = {k}, preset = {sim.name}, seed = {args.seed}"
-              + (f", perception = vision ({vision.chain_samples} MH samples, {vision.resolution_px} px)"
-                 if vision is not None else "")
-              + (f", perception = {args.perception} (sigma unused)"
-                 if perception_source(args.perception).posterior and vision is None else ""))
-        run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append, stop, args.budget,
-                         perceived, args.scheduler, check)
-        print(format_table(collected))
-        if vision is not None:
-            for p in collected:
-                v = p.request["perception"]
-                print(f"{p.scene}: vision chain acceptance {v['acceptance_rate']:.2f}, effective sample size "
-                      f"{v['effective_sample_size']:.0f} ({v['chain_samples']} samples, {v['burn_in']} burn-in)")
-        if args.perception == "depth":
-            for p in collected:
-                v = p.request["perception"]
-                print(f"{p.scene}: depth chain acceptance {v['acceptance_rate']:.2f}, effective sample size "
-                      f"{v['effective_sample_size']:.0f}; camera range offset "
-                      + ", ".join(f"{o['mean_m'] * 1000:+.1f} mm" for o in v["camera_offsets"])
-                      + "; posterior mean x, y (m) and SD x/y (mm), yaw (deg) per object: "
-                      + ", ".join(f"{n} {s['position_m'][0]:.4f},{s['position_m'][1]:.4f} "
-                                  f"{s['x_sd_m'] * 1000:.1f}/{s['y_sd_m'] * 1000:.1f}/"
-                                  f"{math.degrees(s['yaw_sd_rad']):.1f}" for n, s in v["objects"].items()))
-    if args.vision_rrd is not None:
-        from .viz.perception_log import write_vision_rrd
 
-        write_vision_rrd(args.vision_rrd, scenes[0], perceived, vision)
-        print(f"wrote {args.vision_rrd}", file=sys.stderr)
-    if args.png is not None:
-        from .viz.figure import draw_prediction
-
-        draw_prediction(args.png, scenes[0], collected[0])
-        print(f"wrote {args.png}", file=sys.stderr)
-    return EXIT_BAD_INPUT if refused else 0  # the others answered; the status says not all could be
+def _perception_lines(collected: list[Prediction], perception: str, vision: bool) -> list[str]:
+    """What the vision or depth chain did, per scene, for the text report."""
+    lines = []
+    for p in collected:
+        v = p.request.get("perception")
+        if vision:
+            lines.append(f"{p.scene}: vision chain acceptance {v['acceptance_rate']:.2f}, effective sample size "
+                         f"{v['effective_sample_size']:.0f} ({v['chain_samples']} samples, {v['burn_in']} burn-in)")
+        elif perception == "depth":
+            lines.append(f"{p.scene}: depth chain acceptance {v['acceptance_rate']:.2f}, effective sample size "
+                         f"{v['effective_sample_size']:.0f}; camera range offset "
+                         + ", ".join(f"{o['mean_m'] * 1000:+.1f} mm" for o in v["camera_offsets"])
+                         + "; posterior mean x, y (m) and SD x/y (mm), yaw (deg) per object: "
+                         + ", ".join(f"{n} {s['position_m'][0]:.4f},{s['position_m'][1]:.4f} "
+                                     f"{s['x_sd_m'] * 1000:.1f}/{s['y_sd_m'] * 1000:.1f}/"
+                                     f"{math.degrees(s['yaw_sd_rad']):.1f}" for n, s in v["objects"].items()))
+    return lines

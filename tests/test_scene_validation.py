@@ -180,7 +180,7 @@ def test_a_scene_is_checked_in_full_once_and_its_count_every_time(monkeypatch):
     applies at each later check."""
     import dataclasses
 
-    from ipe_ros.engine.scene import bodies as scene_module
+    from ipe_ros.engine.scene import validation as scene_module
 
     tower = dataclasses.replace(generate_towers(5, 1)[0])  # a fresh value, never checked
     calls = []

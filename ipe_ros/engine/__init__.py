@@ -15,7 +15,8 @@ from .errors import ConfigError, PhysicsError, SceneError
 from .sampling.estimate import Prediction
 from .compute.pool import WorkerPool
 from .sampling.sampler import AdaptiveStop, predict, predict_many
-from .scene.bodies import Body, Box, Floor, Scene, Table, validate_scene
+from .scene.bodies import Body, Box, Floor, Scene, Table
+from .scene.validation import validate_scene
 from .scene.shapes import BoxShape, Capsule, Compound, CompoundPart, ConvexHull, Cylinder, Sphere
 from .scene.files import load_scenes, scenes_from_tower_csv
 from .scene.format import scene_from_dict, scene_to_dict, scenes_from_json

@@ -20,7 +20,8 @@ from ..checking.fidelity import check_request as check_fidelity_request
 from ..sampling.montecarlo import MapFn, MonteCarlo, Plan, check_budget, check_some_sample_finished, child_seeds, mapped, together
 from ..sampling.sampler import rollout_cost
 from ..checking.self_check import checking
-from ..scene.bodies import Scene, Table, validate_scene
+from ..scene.bodies import Scene, Table
+from ..scene.validation import validate_scene
 from ..query.contact import check_pairs
 from ..sampling.outcome import SampleOutcome
 from .answers import QUESTION_QUERIES, Alone, Answers, aggregate_variant, aggregate_given, draws_noise, stood, fell, ran

@@ -11,7 +11,8 @@ import numpy as np
 
 from ..scene import limits
 from ..errors import ConfigError
-from ..scene.bodies import Scene, validate_scene
+from ..scene.bodies import Scene
+from ..scene.validation import validate_scene
 from .geometry import geometry_world
 from .kinds import Action, Place, Push, Remove
 from .variants import push_velocities

@@ -20,7 +20,8 @@ from ..errors import ConfigError, shown
 from ..query.contact import parse_pair
 from ..query.parameters import spec_parameters
 from ..query.spec import check_names
-from ..scene.bodies import Body, Scene, validate_body
+from ..scene.bodies import Body, Scene
+from ..scene.validation import validate_body
 from ..scene.format import object_from_dict, object_to_dict
 from .answers import Answers
 from .kinds import DEFAULT_SAFE_BELOW, DEFAULT_SUPPORT_THRESHOLD, NO_OBJECTS, Push, Region, check_level

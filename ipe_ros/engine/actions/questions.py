@@ -18,7 +18,8 @@ from ..sampling.decide import Ranking, SafeBelow, Sequential, Supports
 from ..errors import ConfigError
 from ..sampling.montecarlo import check_budget
 from ..sampling.sampler import rollout_cost
-from ..scene.bodies import Body, Scene, validate_body
+from ..scene.bodies import Body, Scene
+from ..scene.validation import validate_body
 from .answers import Answers, VariantAnswer
 from .ask import ask
 from .geometry import geometry_world, dependents, resting_on

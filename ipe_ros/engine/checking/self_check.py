@@ -13,6 +13,27 @@ from ..sampling.outcome import SampleOutcome
 from ..sampling.rollout import SampleTask
 
 
+class _Comparison:
+    """One answer's samples and the reference reruns gathered so far (``checked``: sample -> rerun)."""
+
+    def __init__(self, tasks: list[SampleTask], outcomes: list[SampleOutcome], checked: dict[int, SampleOutcome],
+                 check: SelfCheck, reference: SimSettings):
+        self.tasks, self.outcomes, self.checked, self.check, self.reference = tasks, outcomes, checked, check, reference
+        self.at_least = min(check.escalate_min_samples, len(tasks))
+
+    def rerun(self, samples: list[int]) -> Plan:
+        """These samples rerun at the reference (a round only when there are any)."""
+        if samples:
+            self.checked.update(zip(samples, (yield [self.tasks[i].at(self.reference) for i in samples])))
+
+    def differences(self) -> dict[int, np.ndarray]:
+        return {i: difference(self.outcomes[i], ref) for i, ref in self.checked.items()
+                if ref.ok and self.outcomes[i].ok}
+
+    def contradicted(self, compared: dict[int, np.ndarray]) -> bool:
+        return contradicts(list(compared.values()), self.check.escalate_share, self.at_least)
+
+
 def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: dict[int, SampleOutcome],
              check: SelfCheck, reference: SimSettings, fast_name: str) -> Plan:
     """The self-check of one answer's samples, as a plan (``montecarlo``): it yields the samples it
@@ -23,84 +44,72 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: d
     if not check.enabled:
         return outcomes, FidelityReport("unverified", settings=tuple(parts))
         yield  # a generator even when it returns at once
-
-    def rerun_at(samples: list[int]) -> list[SampleTask]:
-        return [tasks[i].at(reference) for i in samples]
-
-    def differences() -> dict[int, np.ndarray]:
-        return {i: difference(outcomes[i], ref) for i, ref in checked.items() if ref.ok and outcomes[i].ok}
-
-    at_least = min(check.escalate_min_samples, len(tasks))
-
-    def contradicted(compared: dict[int, np.ndarray]) -> bool:
-        return contradicts(list(compared.values()), check.escalate_share, at_least)
-
+    state = _Comparison(tasks, outcomes, {i: ref for i, ref in verified.items() if i < len(outcomes)}, check,
+                        reference)
     # 1. verification: the first samples with a fast outcome (a prediction's ran beside the fast
     # samples, in the first map; anytime sampling may have stopped before them)
-    checked = {i: ref for i, ref in verified.items() if i < len(outcomes)}
     first = [i for i, o in enumerate(outcomes) if o.ok][:verification_count(check, len(outcomes))]
-    missing = [i for i in first if i not in checked]
-    if missing:
-        checked.update(zip(missing, (yield rerun_at(missing))))
-    if checked:
+    yield from state.rerun([i for i in first if i not in state.checked])
+    if state.checked:
         parts.append(("verification", reference.name))
     # 2. refinement: the rollouts that ended unhealthy are rerun (a verified sample's rerun is at hand)
     reasons = {i: why for i, (task, outcome) in enumerate(zip(tasks, outcomes))
                if (why := unhealthy(outcome, scale_of(task.scene), check)) is not None}
-    rerun = [i for i in reasons if i not in checked]
-    if rerun:
-        checked.update(zip(rerun, (yield rerun_at(rerun))))
-    refined = {i: checked[i] for i in reasons if checked[i].ok}
+    yield from state.rerun([i for i in reasons if i not in state.checked])
+    refined = {i: state.checked[i] for i in reasons if state.checked[i].ok}
     if refined:
         parts.append(("refined", reference.name))
     # the refined reruns alone moving some outcome by escalate_min_samples samples: that repair is
     # not small, and (chosen by how the fast rollouts ended) not unbiased; the reference answers
-    repair = suspect([d for i, d in differences().items() if i in refined])
-    # 3. confirmation: every sample rerun so far is a paired comparison, refined ones included (a
-    # fast physics whose unhealthy rollouts topple what the reference's keep standing is wrong on
-    # this scene, and replacing only those would bias the answer), and a suspect difference is
-    # looked for again where it can show before it is believed; while nothing differs, one round
-    # looks where a bias could hide from the samples compared so far (coverage)
+    repair = suspect([d for i, d in state.differences().items() if i in refined])
     # samples verified beyond the first ones (``fidelity.coverage_ahead``) were coverage's picks
     cover = check.cover_samples - len([i for i in verified if i >= verification_count(check, len(tasks))])
+    yield from _confirm(state, repair, cover)
+    compared = state.differences()
+    disagreeing = [i for i, d in compared.items() if d.any()]
+    common = dict(verified_samples=len(compared), disagreeing_samples=len(disagreeing),
+                  refined_samples=len(refined), refined_reasons=tuple((i, reasons[i]) for i in sorted(refined)))
+    # every sample already has its reference rerun and some differ: the reference's answer is at hand
+    known = bool(disagreeing) and len(compared) == len(outcomes)
+    if not state.contradicted(compared) and repair < state.at_least and not known:
+        # a confirmation or a coverage rerun the budget cut off neither confirmed nor dismissed a bias
+        unconfirmed = any(o.budget_stopped for o in state.checked.values())
+        verdict = "verified" if first and all(i in compared for i in first) and not unconfirmed else "unverified"
+        return merge(outcomes, refined), FidelityReport(verdict, settings=tuple(parts), **common)
+    # 4. escalation: contradicted on this scene, so every sample at the reference
+    yield from state.rerun([i for i in range(len(outcomes)) if i not in state.checked and not outcomes[i].skipped])
+    parts.append(("escalation", reference.name))
+    done = state.checked
+    if any(o.budget_stopped for o in done.values()):
+        return merge(outcomes, refined), FidelityReport("contradicted", settings=tuple(parts), **common)
+    return merge(outcomes, done), FidelityReport("escalated", escalated_samples=len(done), settings=tuple(parts),
+                                                 **common)
+
+
+def _confirm(state: _Comparison, repair: int, cover: int) -> Plan:
+    """3. confirmation: every sample rerun so far is a paired comparison, refined ones included (a
+    fast physics whose unhealthy rollouts topple what the reference's keep standing is wrong on this
+    scene, and replacing only those would bias the answer), and a suspect difference is looked for
+    again where it can show before it is believed; while nothing differs, one round looks where a bias
+    could hide from the samples compared so far (coverage)."""
+    check, outcomes = state.check, state.outcomes
     confirmations = 0
     while True:
-        compared = differences()
+        compared = state.differences()
         found = suspect(list(compared.values()))
-        if repair >= at_least or contradicted(compared):
-            break  # decided
-        fast = {i: outcome_flags(o) for i, o in enumerate(outcomes) if i not in checked and o.ok}
+        if repair >= state.at_least or state.contradicted(compared):
+            return  # decided
+        fast = {i: outcome_flags(o) for i, o in enumerate(outcomes) if i not in state.checked and o.ok}
         # a second confirmation round only while something is suspicious
         if found and confirmations < check.confirm_rounds and not (confirmations and found < 2):
             picked = confirmation_samples(fast, compared, check.confirm_samples)
             confirmations += 1
         elif not found and cover > 0:
             looked = [outcome_flags(outcomes[i]) for i in compared]
-            picked = coverage_samples(fast, looked, at_least, cover)
+            picked = coverage_samples(fast, looked, state.at_least, cover)
             cover = 0
         else:
-            break
+            return
         if not picked:
-            break
-        checked.update(zip(picked, (yield rerun_at(picked))))
-    compared = differences()
-    disagreeing = [i for i, d in compared.items() if d.any()]
-    common = dict(verified_samples=len(compared), disagreeing_samples=len(disagreeing),
-                  refined_samples=len(refined), refined_reasons=tuple((i, reasons[i]) for i in sorted(refined)))
-    # every sample already has its reference rerun and some differ: the reference's answer is at hand
-    known = bool(disagreeing) and len(compared) == len(outcomes)
-    if not contradicted(compared) and repair < at_least and not known:
-        # a confirmation or a coverage rerun the budget cut off neither confirmed nor dismissed a bias
-        unconfirmed = any(o.budget_stopped for o in checked.values())
-        verdict = "verified" if first and all(i in compared for i in first) and not unconfirmed else "unverified"
-        return merge(outcomes, refined), FidelityReport(verdict, settings=tuple(parts), **common)
-    # 4. escalation: contradicted on this scene, so every sample at the reference
-    done = dict(checked)
-    rest = [i for i in range(len(outcomes)) if i not in done and not outcomes[i].skipped]
-    if rest:
-        done.update(zip(rest, (yield rerun_at(rest))))
-    parts.append(("escalation", reference.name))
-    if any(o.budget_stopped for o in done.values()):
-        return merge(outcomes, refined), FidelityReport("contradicted", settings=tuple(parts), **common)
-    return merge(outcomes, done), FidelityReport("escalated", escalated_samples=len(done), settings=tuple(parts),
-                                                 **common)
+            return
+        yield from state.rerun(picked)

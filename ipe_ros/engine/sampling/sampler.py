@@ -30,7 +30,8 @@ from .perturb import is_deterministic
 from .rollout import SampleOutcome, SampleTask, lost, run_sample
 from ..checking.self_check import checking
 from ..query import QUERIES, QuerySpec
-from ..scene.bodies import DEFAULT_MAX_OBJECTS, Scene, validate_scene
+from ..scene.bodies import DEFAULT_MAX_OBJECTS, Scene
+from ..scene.validation import validate_scene
 
 @dataclass(frozen=True)
 class AdaptiveStop:

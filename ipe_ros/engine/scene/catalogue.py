@@ -14,7 +14,9 @@ import math
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .bodies import Body, Floor, Scene, validate_scene
+from .bodies import Body, Floor, Scene
+
+from .validation import validate_scene
 from .shapes import (BoxShape, Capsule, Compound, CompoundPart, ConvexHull, Cylinder, Sphere,
                      rotation_matrix, surface_points)
 

@@ -9,7 +9,8 @@ from pathlib import Path
 from typing import Iterable
 
 from ..errors import SceneError, shown
-from .bodies import DEFAULT_MAX_OBJECTS, Box, Floor, Scene, validate_scene
+from .bodies import DEFAULT_MAX_OBJECTS, Box, Floor, Scene
+from .validation import validate_scene
 from .format import OnRefused, RefusedScene, scenes_from_json
 
 _CSV_COLUMNS = ("name", "object", "friction", "mass", "pos_x", "pos_y", "pos_z", "quat_w", "quat_x",

@@ -47,7 +47,8 @@ from typing import Any, Callable, Iterable
 
 from ..errors import SceneError, json_type as _json_type, shown
 from .limits import MAX_JSON_CHARS
-from .bodies import DEFAULT_MAX_OBJECTS, Body, Box, Floor, Scene, Table, validate_scene
+from .bodies import DEFAULT_MAX_OBJECTS, Body, Box, Floor, Scene, Table
+from .validation import validate_scene
 from .shapes import SHAPE_TYPES, BoxShape, Capsule, Compound, CompoundPart, ConvexHull, Cylinder, Sphere
 
 SCENE_FORMAT = "ipe_ros.scene/2"

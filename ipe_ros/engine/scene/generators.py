@@ -17,7 +17,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from .bodies import Body, Box, Floor, Scene, Table, validate_scene
+from .bodies import Body, Box, Floor, Scene, Table
+
+from .validation import validate_scene
 
 _IDENTITY = (0.0, 0.0, 0.0, 1.0)
 _HALF = math.sqrt(0.5)

@@ -28,7 +28,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .catalogue import cone, wedge
-from .bodies import Body, Floor, Scene, validate_scene
+from .bodies import Body, Floor, Scene
+from .validation import validate_scene
 from .shapes import BoxShape, Capsule, Compound, CompoundPart, Cylinder, Sphere
 
 _IDENTITY = (0.0, 0.0, 0.0, 1.0)

@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import time
 
 from .engine import ConfigError, WorkerPool, load_scenes
 from .engine import actions as A
@@ -95,6 +96,13 @@ def add_ask_parser(sub, finite, one_line_parser) -> None:
                             f"{DEFAULT_CHECK.verify_samples})")
         q.add_argument("--fixed-k", action="store_true",
                        help="every variant runs all --samples (default: decision questions sample until decided)")
+        q.add_argument("--depth", default=None, metavar="IMAGE",
+                       help="take the scene's uncertainty from this depth image instead of --sigma (with "
+                            "--camera-info and --camera-pose; as ipe predict --perception depth): every variant's "
+                            "sample i starts from the depth posterior's scene i")
+        q.add_argument("--camera-info", default=None, metavar="YAML", help="with --depth: the camera's calibration")
+        q.add_argument("--camera-pose", default=None, metavar="X,Y,Z,QX,QY,QZ,QW",
+                       help="with --depth: the camera's optical frame (z forward, y down) in the scene frame")
         q.add_argument("--json", action="store_true", help="one JSON object per line")
         q.add_argument("--rrd", default=None, metavar="FILE",
                        help="record 4 rollouts of every variant to this rerun file (not for clear)")
@@ -211,6 +219,9 @@ def cmd_ask(args) -> int:
         raise ConfigError("--workers", f"must be >= 0, got {args.workers}")
     pool = WorkerPool(min(args.workers, args.samples)) if args.workers > 0 else None
     kw = dict(seed=args.seed, map_fn=pool.map if pool else None, budget_s=args.budget, check=request.check)
+    perceived = _perceived(args, scene)
+    if perceived is not None:
+        kw.update(perceived=perceived, budget_s=args.budget)  # the budget the chain left
     if args.rrd:
         kw.update(record_every=max(1, round(0.02 / settings.time_step_s)), record_samples=4)
     try:
@@ -222,13 +233,40 @@ def cmd_ask(args) -> int:
             pool.close()
 
 
+def _perceived(args, scene):
+    """With --depth: the depth posterior's --samples scenes for the scene asked about (one chain, in
+    this process, within the chain's share of the budget), else None."""
+    given = (args.depth, args.camera_info, args.camera_pose)
+    if all(v is None for v in given):
+        return None
+    if None in given:
+        raise ConfigError("--depth", "depth perception needs --depth IMAGE, --camera-info YAML and --camera-pose")
+    if args.ground_truth:
+        raise ConfigError("--ground-truth", "takes the scene exactly as given, but --depth draws it from the depth "
+                                            "posterior; drop one of them")
+    from .engine.vision import depth, depth_io
+
+    observation = depth_io.load_observation(args.depth, args.camera_info, args.camera_pose)
+    started = time.perf_counter()
+    perceived = depth.perceive_depth_for(scene, args.samples, (observation,), args.seed, budget_s=None
+                                         if args.budget is None else args.budget * depth.CHAIN_BUDGET_SHARE)
+    if args.budget is not None:
+        args.budget = max(args.budget - (time.perf_counter() - started), 1e-3)
+    return perceived
+
+
 def _answer(args, scene, model, settings, kw) -> int:
     question = question_from_args(args)
     reply = question.answer(scene, model, settings, **kw)
+    perceived = kw.get("perceived")
     if args.json:
-        print(json.dumps(reply.data, allow_nan=False, sort_keys=True), flush=True)
+        data = reply.data if perceived is None else {**reply.data, "perception": perceived.to_dict()}
+        print(json.dumps(data, allow_nan=False, sort_keys=True), flush=True)
     else:
         print(TEXT[question.kind](reply))
+        if perceived is not None:
+            print(f"depth chain: acceptance {perceived.acceptance_rate:.2f}, effective sample size "
+                  f"{perceived.effective_sample_size:.0f} for {len(perceived.scenes)} samples (sigma unused)")
     if question.kind == "support" and args.png:
         draw_support_graph(scene, reply.result, args.png)
     if args.rrd and reply.answers is not None:

@@ -169,6 +169,33 @@ def test_the_cli_predicts_from_the_built_in_depth_example(tmp_path, capsys):
                                                "--camera-info YAML and --camera-pose")
 
 
+def test_ipe_ask_answers_from_the_depth_camera(tmp_path, capsys):
+    assert main(["generate", "depth-example", "-o", str(tmp_path)]) == 0
+    pose = (tmp_path / "camera_pose.txt").read_text().strip()
+    camera = ["--depth", str(tmp_path / "depth.png"), "--camera-info", str(tmp_path / "camera_info.yaml"),
+              "--camera-pose", pose]
+    args = ["ask", "remove", str(tmp_path / "scene.json"), "--object", "block9", "--samples", "4", "--workers", "0",
+            "--fixed-k", "--json"]
+    capsys.readouterr()
+    assert main(args + camera) == 0
+    reply = json.loads(capsys.readouterr().out)
+    assert reply["perception"]["kind"] == "depth" and reply["perception"]["samples"] == 4
+    assert [v["samples"] for v in reply["variants"]] == [4, 4]
+    # the same question through the engine, from the same chain (seed 0's depth stream)
+    from ipe_ros.engine.actions import remove
+    from ipe_ros.engine.vision import depth_io
+
+    scene = load_scenes(tmp_path / "scene.json")[0]
+    observation = depth_io.load_observation(tmp_path / "depth.png", tmp_path / "camera_info.yaml", pose)
+    perceived = D.perceive_depth_for(scene, 4, (observation,), 0)
+    expected = remove(scene, ["block9"], ModelConfig(samples=4), preset("default"), seed=0, sequential=False,
+                      perceived=perceived)
+    assert [v["any_fall_probability"] for v in reply["variants"]] == [v.any_fall_probability for v in expected.variants]
+    assert main(args + camera[:2]) == 2
+    assert capsys.readouterr().err.strip() == ("ipe: error: --depth: depth perception needs --depth IMAGE, "
+                                               "--camera-info YAML and --camera-pose")
+
+
 def test_a_depth_recording_holds_the_measured_and_rendered_depth_and_the_posterior_cloud(tmp_path):
     from tests.test_rerun_log import RrdReader
     from ipe_ros.viz.perception_log import write_depth_rrd

@@ -236,3 +236,14 @@ def test_check_cost_sorts_the_checked_predictions_map_calls_into_its_parts(tmp_p
     assert math.isclose(sum(tower["parts_s"].values()), sum(wall for _, _, wall in tower["maps"]))
     assert report["summary"]["verdicts"] == {tower["verdict"]: 1}
     assert "| fast + verification |" in (tmp_path / "check_cost.md").read_text()
+
+
+def test_reference_tier_benchmark_compares_each_tier_with_the_reference_and_the_bar(tmp_path):
+    result = subprocess.run(
+        [sys.executable, str(REPO / "benchmarks" / "reference_tier.py"), "--towers", "1", "--per-family", "0",
+         "--samples", "2", "--out", str(tmp_path)], capture_output=True, text=True, timeout=600, env=ENV)
+    assert result.returncode == 0, result.stderr[-3000:]
+    [row] = json.loads((tmp_path / "reference_tier.json").read_text())["rows"]
+    assert row["paper+rest"] == {"agreement": 1.0, "mean_dp": 0.0, "max_dp": 0.0, "failed": 0}
+    assert {"paper-half", "accurate+rest", "paper-30it+rest", "fine"} <= set(row["seconds_per_sample"])
+    assert "| towers | 1 |" in (tmp_path / "reference_tier.md").read_text()

@@ -14,6 +14,7 @@ the former built by ``look_at``, the latter from its ``camera_info`` (``camera_f
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -72,10 +73,13 @@ class PinholeCamera:
         if q.shape != (4,) or not np.all(np.isfinite(q)) or abs(np.linalg.norm(q) - 1) > 1e-3:
             raise ConfigError("camera_pose.orientation_xyzw", f"must be a unit quaternion, got {list(self.orientation_xyzw)!r}")
 
-    @property
+    @functools.cached_property
     def axes(self) -> np.ndarray:
-        """Rows: the optical frame's x (right), y (down), z (forward) in the scene frame."""
-        return rotation_matrix(self.orientation_xyzw).T
+        """Rows: the optical frame's x (right), y (down), z (forward) in the scene frame (computed
+        once: a chain projects every proposal through it)."""
+        axes = rotation_matrix(self.orientation_xyzw).T
+        axes.flags.writeable = False
+        return axes
 
     def project(self, points_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(n, 3) scene points -> ((n, 2) image coordinates (u, v), (n,) depths along the optical axis)."""

@@ -14,6 +14,7 @@ adding positions.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,6 +39,13 @@ class SceneMesh:
     grey: np.ndarray         # (T,)
     normals: np.ndarray      # (T, 3) outward
     positions_m: np.ndarray  # (bodies, 3): the bodies' positions in the scene
+
+    @functools.cached_property
+    def parts(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Per body: its triangles, normals and shades (sliced once: a chain rasterises one body per
+        proposal)."""
+        return [(self.triangles_m[mine], self.normals[mine], self.grey[mine])
+                for mine in (self.owner == b for b in range(len(self.positions_m)))]
 
 
 def outward_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -87,8 +95,7 @@ def body_patch(mesh: SceneMesh, camera: PinholeCamera, body: int, position_m, ya
     its orientation in the scene: its front faces together, vectorised over its triangles (a convex
     hull's front faces do not overlap, so each pixel takes the one covering it). ``camera``: anything
     with ``project``, ``position_m``, ``width_px`` and ``height_px``."""
-    mine = mesh.owner == body
-    tris, normals = mesh.triangles_m[mine], mesh.normals[mine]
+    tris, normals, grey = mesh.parts[body]
     if yaw_rad:
         c, s = np.cos(yaw_rad), np.sin(yaw_rad)
         turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
@@ -96,7 +103,7 @@ def body_patch(mesh: SceneMesh, camera: PinholeCamera, body: int, position_m, ya
     tris = tris + np.asarray(position_m, float)
     front = np.einsum("ij,ij->i", normals, tris.mean(axis=1) - np.asarray(camera.position_m, float)) < 0
     pixels, depth = camera.project(tris[front].reshape(-1, 3))
-    p, z, shade = pixels.reshape(-1, 3, 2), depth.reshape(-1, 3), mesh.grey[mine][front]
+    p, z, shade = pixels.reshape(-1, 3, 2), depth.reshape(-1, 3), grey[front]
     if len(p) == 0 or (z <= 1e-6).any():
         return EMPTY
     u0, u1 = max(int(np.floor(p[..., 0].min())), 0), min(int(np.ceil(p[..., 0].max())) + 1, camera.width_px)

@@ -47,6 +47,17 @@ def test_a_registered_query_answers_with_its_own_parameter_here_and_in_workers(t
     with WorkerPool(2, start_method="spawn") as pool:  # workers import the plugin to know the query
         there = predict(TOWER, MODEL, preset("default"), _spec(tilt, 5.0), seed=3, map_fn=pool.map, check=None)
     assert there.tilted_object_probability == strict.tilted_object_probability and there.failed_samples == 0
+    # a worker that does not know the query says so in every sample, never answers without it
+    def unaware_map(fn, tasks, on_lost=None):
+        unregister("tilt")
+        try:
+            return [fn(t) for t in tasks]
+        finally:
+            register(tilt.QUERY)
+
+    unaware = predict(TOWER, MODEL, preset("default"), _spec(tilt, 5.0), seed=3, map_fn=unaware_map, check=None)
+    assert unaware.samples == 0 and unaware.failed_samples == 8
+    assert "ConfigError: queries: query 'tilt' is not registered in this process" in unaware.failure_reasons[0]
     # the default when no parameters are given, and the query's own check of its values
     assert QuerySpec(queries=frozenset({"tilt"})).parameters_of("tilt") == tilt.TiltParameters(threshold_deg=30.0)
     with pytest.raises(ConfigError) as info:

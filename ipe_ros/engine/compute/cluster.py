@@ -16,10 +16,12 @@ Dask is imported only here and only when a cluster is used: without ``--schedule
 from __future__ import annotations
 
 import contextlib
+import importlib
 import os
 from typing import Any, Callable, Iterable, Iterator, TypeVar
 
 from ..errors import ConfigError
+from ..query.spec import plugin_modules
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -31,8 +33,12 @@ SCHEDULER_ENV = "IPE_DASK_SCHEDULER"
 DEFAULT_BATCH = 4
 
 
-def run_batch(fn: Callable[[T], R], batch: list[T]) -> list[R]:
-    """What a Dask worker runs: ``fn`` on each task of a batch, in order."""
+def run_batch(fn: Callable[[T], R], batch: list[T], plugins: tuple[str, ...] = ()) -> list[R]:
+    """What a Dask worker runs: ``fn`` on each task of a batch, in order, after importing the modules of
+    the queries registered at run time (``query.spec.plugin_modules``; a module registers its query
+    when imported, once per worker)."""
+    for module in plugins:
+        importlib.import_module(module)
     return [fn(item) for item in batch]
 
 
@@ -94,7 +100,8 @@ class DaskMap:
 
         items = list(items)
         batches = [items[i:i + self.batch_size] for i in range(0, len(items), self.batch_size)]
-        futures = self.client.map(run_batch, [fn] * len(batches), batches, pure=False)
+        futures = self.client.map(run_batch, [fn] * len(batches), batches, [plugin_modules()] * len(batches),
+                                  pure=False)
         results: list[R] = []
         for future, batch in zip(futures, batches):
             try:

@@ -8,6 +8,7 @@ with ``ok=False`` and the reason, and the sampler counts it.
 from __future__ import annotations
 
 import dataclasses
+import os
 import time
 import traceback
 from dataclasses import dataclass
@@ -19,7 +20,7 @@ from .. import simulation
 from ..query import QUERIES, QuerySpec, Reading
 from ..query.base import smallest_extents_m
 from ..config import ModelConfig, SimSettings
-from ..errors import BudgetExceeded, PhysicsError
+from ..errors import BudgetExceeded, ConfigError, PhysicsError
 from .outcome import RolloutResult, SampleOutcome
 from .perturb import draw_sample_inputs
 from ..scene.bodies import Floor, Scene
@@ -226,10 +227,21 @@ def simulate_sample(task: SampleTask, inputs, world: simulation.World, probe: Pr
                          rollouts=tuple(results))
 
 
+def _check_registered(spec: QuerySpec) -> None:
+    """Every asked query is known here: one asked in the parent but never registered in this worker
+    would otherwise be missing from the answer, or fail somewhere less clear."""
+    unknown = sorted(spec.queries - set(QUERIES))
+    if unknown:
+        raise ConfigError("queries", f"query {unknown[0]!r} is not registered in this process ({os.getpid()}); "
+                                     "register it in a module that worker processes import (the pool and Dask "
+                                     "import every registered query's module: not one defined in __main__)")
+
+
 def guarded(task: SampleTask, push_direction_rad: float, simulate) -> SampleOutcome:
     """``simulate()``'s outcome, or the sample's failure as an outcome: the budget (cut off), a
     physics error, or any other exception (one sample's bug must not end the prediction)."""
     try:
+        _check_registered(task.query)
         return simulate()
     except BudgetExceeded as exc:
         return _cut_off(task, push_direction_rad, str(exc))

@@ -3,8 +3,8 @@
     .venv/bin/python benchmarks/actions.py [--workers 2] [--out benchmarks/results/actions]
 
 Each decision question is answered three times on the same seeds, interleaved: sequentially with the
-self-check (the default: variants sampled in batches until decided, ``engine/decide.py``, then each
-variant checked against the reference physics, ``engine/fidelity.py``), sequentially without it, and
+self-check (the default: variants sampled in batches until decided, ``engine/sampling/decide.py``, then each
+variant checked against the reference physics, ``engine/checking/fidelity.py``), sequentially without it, and
 at fixed k without it (``sequential=False``); the decisions of the two unchecked runs are compared,
 and the checked run's cost and escalations reported:
 - the support graph of a 10-block paper tower at k = 16 per variant (target <= 1 s);

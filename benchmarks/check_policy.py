@@ -62,7 +62,8 @@ def _scenes(args) -> list[tuple[str, object, ModelConfig]]:
     return out
 
 
-def _object_p(outcomes) -> np.ndarray:
+def object_p(outcomes) -> np.ndarray:
+    """Per object: the share of the good samples' rollouts in which it fell."""
     ok = [o for o in outcomes if o.ok]
     return np.mean([np.mean([r.fallen for r in o.rollouts], axis=0) for o in ok], axis=0)
 
@@ -152,7 +153,7 @@ def _replay(stored: list, reference) -> list[dict]:
                 verified.update({i: ref[i] for i in coverage_ahead(fast[:split], verified, check, len(tasks))})
             used.extend(verified)
             answer, report = drive(checking(tasks, list(fast), verified, check, reference, "default"), run)
-            dp = np.abs(_object_p(answer) - _object_p(ref))
+            dp = np.abs(object_p(answer) - object_p(ref))
             g = per_group.setdefault(group, {"scenes": 0, "reference_samples": 0, "fast_s": 0.0, "ref_s": 0.0,
                                              "paper_s": 0.0, "escalated": 0, "dp": [], "worst": 0.0})
             per_sample_ref = ref_s / len(tasks)

@@ -28,6 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np  # noqa: E402
 
+from check_policy import object_p  # noqa: E402 - per object, the share of rollouts in which it fell
 from ipe_ros.analysis.paper_data import shared_data_dir  # noqa: E402
 from ipe_ros.engine import PRESETS, ModelConfig, QuerySpec, WorkerPool, load_scenes  # noqa: E402
 from ipe_ros.engine.checking.fidelity import outcome_flags, reference_settings  # noqa: E402
@@ -60,11 +61,6 @@ def scenes(args) -> list[tuple[str, object, float]]:
     return out
 
 
-def object_p(outcomes) -> np.ndarray:
-    ok = [o for o in outcomes if o.ok]
-    return np.mean([np.mean([r.fallen for r in o.rollouts], axis=0) for o in ok], axis=0) if ok else np.zeros(0)
-
-
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--towers", type=int, default=20)
@@ -75,10 +71,11 @@ def main() -> int:
     args = parser.parse_args()
     settings = tiers()
     rows = []
+    chosen = scenes(args)
     with WorkerPool(2) as pool:
         run = MonteCarlo(run_sample, lost, pool.map).run
-        run(make_tasks(scenes(args)[0][1], ModelConfig(sigma_m=0.04, samples=2), PRESETS["default"], QUERY, 0))
-        for group, scene, sigma in scenes(args):
+        run(make_tasks(chosen[0][1], ModelConfig(sigma_m=0.04, samples=2), PRESETS["default"], QUERY, 0))
+        for group, scene, sigma in chosen:
             tasks = make_tasks(scene, ModelConfig(sigma_m=sigma, samples=args.samples), PRESETS["default"], QUERY, 11)
             runs, seconds = {}, {}
             for name, tier in settings.items():

@@ -244,15 +244,22 @@ def _perceived(args, scene):
     if args.ground_truth:
         raise ConfigError("--ground-truth", "takes the scene exactly as given, but --depth draws it from the depth "
                                             "posterior; drop one of them")
+    return depth_posterior(args, scene, args.samples)[0]
+
+
+def depth_posterior(args, scene, k: int):
+    """The depth posterior's k scenes for ``scene`` from --depth, --camera-info and --camera-pose (one
+    chain, in this process, within its share of --budget; --budget then keeps what the chain left for
+    the samples), and the depth observation (ipe predict and ipe ask)."""
     from .engine.vision import depth, depth_io
 
     observation = depth_io.load_observation(args.depth, args.camera_info, args.camera_pose)
     started = time.perf_counter()
-    perceived = depth.perceive_depth_for(scene, args.samples, (observation,), args.seed, budget_s=None
+    perceived = depth.perceive_depth_for(scene, k, (observation,), args.seed, budget_s=None
                                          if args.budget is None else args.budget * depth.CHAIN_BUDGET_SHARE)
     if args.budget is not None:
         args.budget = max(args.budget - (time.perf_counter() - started), 1e-3)
-    return perceived
+    return perceived, observation
 
 
 def _answer(args, scene, model, settings, kw) -> int:

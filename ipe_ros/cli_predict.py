@@ -7,9 +7,8 @@ import dataclasses
 import json
 import math
 import sys
-import time
 
-from .cli_ask import verify_samples
+from .cli_ask import depth_posterior, verify_samples
 from .cli_queries import given_query_parameters
 from .engine import AdaptiveStop, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError, WorkerPool, load_scenes, predict
 from .engine.config import anytime_batch_size
@@ -116,16 +115,9 @@ def run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: int
 
 def _perceive_depth(args, scenes, model):
     """The depth posterior's k scenes for the one scene asked about (the detector's guess)."""
-    from .engine.vision import depth, depth_io
-
     if len(scenes) != 1:
         raise ConfigError("--depth", f"one depth image describes one scene, but {args.path} holds {len(scenes)}")
-    observation = depth_io.load_observation(args.depth, args.camera_info, args.camera_pose)
-    started = time.perf_counter()
-    perceived = depth.perceive_depth_for(scenes[0], model.samples, (observation,), args.seed, budget_s=None if
-                                         args.budget is None else args.budget * depth.CHAIN_BUDGET_SHARE)
-    if args.budget is not None:  # the samples get what the chain left of the budget
-        args.budget = max(args.budget - (time.perf_counter() - started), 1e-3)
+    perceived, observation = depth_posterior(args, scenes[0], model.samples)
     if args.depth_rrd is not None:
         from .viz.perception_log import write_depth_rrd
 

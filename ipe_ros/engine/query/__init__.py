@@ -19,8 +19,16 @@ for _module in _MODULES:
 
 #: the built-in queries' names, in the order answers list them
 ALL_QUERIES: tuple[str, ...] = tuple(QUERIES)
-#: every answer field a built-in query fills, in order
-ANSWER_FIELDS: tuple[str, ...] = tuple(f for q in QUERIES.values() for f in q.fields)
 
-__all__ = ["ALL_QUERIES", "ANSWER_FIELDS", "QUERIES", "Query", "QuerySpec", "Reading", "Samples", "StepWatch",
+
+def answer_fields() -> tuple[str, ...]:
+    """Every registered query's answer fields, in the registry's order (queries registered at run
+    time included)."""
+    return tuple(f for q in QUERIES.values() for f in q.fields)
+
+
+#: every answer field a built-in query fills, in order
+ANSWER_FIELDS: tuple[str, ...] = answer_fields()
+
+__all__ = ["ALL_QUERIES", "ANSWER_FIELDS", "QUERIES", "answer_fields", "Query", "QuerySpec", "Reading", "Samples", "StepWatch",
            "parse_queries", "register"]

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
-from ..query import QUERIES, QuerySpec, Samples
+from ..query import QUERIES, QuerySpec, Samples, answer_fields
 from ..query.any_fall import sample_any_fall  # noqa: F401 - re-exported
 from ..query.fall import sample_fall_fraction  # noqa: F401 - re-exported
 from ..query.far import sample_far_m  # noqa: F401 - re-exported
@@ -70,7 +70,7 @@ class Prediction:
     outcomes: tuple[SampleOutcome, ...] = field(default=(), repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        unknown = sorted(set(self.answers) - answer_fields())
+        unknown = sorted(set(self.answers) - set(answer_fields()))
         if unknown:
             raise TypeError(f"{unknown[0]}: not a field of any query (engine/query)")
 
@@ -86,18 +86,13 @@ class Prediction:
         out: dict[str, Any] = {}
         for name in self.__dataclass_fields__:
             if name == "answers":
-                for key in (f for q in QUERIES.values() for f in q.fields):
+                for key in answer_fields():
                     value = self.answers.get(key)
                     out[key] = list(value) if isinstance(value, tuple) else value
             elif name != "outcomes":
                 out[name] = getattr(self, name)
         out["failure_reasons"] = list(out["failure_reasons"])
         return out
-
-
-def answer_fields() -> frozenset[str]:
-    """Every registered query's answer fields (queries registered at run time included)."""
-    return frozenset(f for q in QUERIES.values() for f in q.fields)
 
 
 def aggregate(scene: Scene, outcomes: Sequence[SampleOutcome], *, query: QuerySpec, deterministic: bool,

@@ -270,8 +270,7 @@ class DepthPerceivedScenes:
         if self.given is None or k > len(self.posterior.positions_m):
             raise ConfigError("samples", f"the depth chain keeps {len(self.posterior.positions_m)} states, fewer than "
                                          f"the {k} samples asked; ask for fewer")
-        positions, yaws = self.posterior.thinned(k)
-        return dataclasses.replace(self, scenes=tuple(scene_at_pose(self.given, p, y) for p, y in zip(positions, yaws)))
+        return dataclasses.replace(self, scenes=_thinned_scenes(self.given, self.posterior, k))
 
     @property
     def acceptance_rate(self) -> float:
@@ -306,6 +305,12 @@ class DepthPerceivedScenes:
         return out
 
 
+def _thinned_scenes(given: Scene, posterior: DepthPosterior, k: int) -> tuple[Scene, ...]:
+    """k scenes spread evenly over the chain: ``given`` with its objects at each kept pose."""
+    positions, yaws = posterior.thinned(k)
+    return tuple(scene_at_pose(given, p, y) for p, y in zip(positions, yaws))
+
+
 def perceive_depth(scene: Scene, k: int, observations: tuple[DepthObservation, ...], settings: DepthSettings,
                    rng: np.random.Generator, deadline_s: float | None = None) -> DepthPerceivedScenes:
     """k scenes spread over the depth posterior of ``scene`` (the detector's guess) given the images."""
@@ -313,10 +318,8 @@ def perceive_depth(scene: Scene, k: int, observations: tuple[DepthObservation, .
     if k > len(posterior.positions_m):
         raise ConfigError("depth.updates_per_object", f"the chain keeps {len(posterior.positions_m)} states after "
                                                       f"burn-in, fewer than the {k} samples asked; lengthen it")
-    positions, yaws = posterior.thinned(k)
-    scenes = tuple(scene_at_pose(scene, p, y) for p, y in zip(positions, yaws))
     objects = len(scene.dynamic_objects)
-    return DepthPerceivedScenes(scenes=scenes, posterior=posterior, chain_samples=settings.chain_samples(objects),
+    return DepthPerceivedScenes(scenes=_thinned_scenes(scene, posterior, k), posterior=posterior, chain_samples=settings.chain_samples(objects),
                                 burn_in=settings.burn_in(objects), refined=scene_at_pose(scene, *posterior.mean()),
                                 given=scene)
 

@@ -22,26 +22,22 @@ Bad input ends with exit status 2 and one line on stderr naming the problem.
 from __future__ import annotations
 
 import argparse
-import math
 import re
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from .cli_ask import add_ask_parser, cmd_ask, contact_pair
+from .cli_ask import add_ask_parser, cmd_ask
+from .cli_inputs import add_input_options, finite
 from .cli_predict import EXIT_BAD_INPUT, cmd_predict, format_table, run_predictions, sample_map
 from .cli_queries import add_query_parameter_options
-from .engine import (PRESETS, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError, load_scenes,
-                     parse_queries, preset)
+from .engine import PRESETS, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError, load_scenes, preset
 from .engine.scene.catalogue import capped_tower, scene_catalogue
-from .engine.config import (DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M,
-                            default_workers)
+from .engine.config import DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES, default_workers
 from .engine.scene.examples import example_scene_path
-from .engine.checking.fidelity import DEFAULT_CHECK
 from .engine.scene.generators import generate_tables, generate_towers, state_pair
 from .engine.inputs import as_spelled
-from .engine.query import QUERIES
 from .engine.perceptions import perception_names, perception_source
 from .engine.scene.format import write_scenes
 from .engine.scene.zoo import FAMILIES, scene_zoo
@@ -57,33 +53,6 @@ class _OneLineParser(argparse.ArgumentParser):
         self.exit(EXIT_BAD_INPUT, f"ipe: error: {message}\n")
 
 
-def _queries(text: str) -> frozenset[str]:
-    try:
-        return parse_queries(text)
-    except ConfigError as exc:
-        raise argparse.ArgumentTypeError(exc.problem) from None
-
-
-def _float_list(text: str) -> tuple[float, ...]:
-    try:
-        values = tuple(float(v) for v in text.split(",") if v.strip())
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected numbers separated by commas, got {text!r}") from None
-    if not values or not all(math.isfinite(v) for v in values):
-        raise argparse.ArgumentTypeError(f"expected finite numbers, got {text!r}")
-    return values
-
-
-def _finite(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
-    return value
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = _OneLineParser(prog="ipe", description="Intuitive physics engine (Battaglia et al. 2013).")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_OneLineParser)
@@ -92,26 +61,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("path", help="a JSON scene file or a paper-format tower CSV")
     p.add_argument("--tower", action="append", default=None, metavar="NAME",
                    help="only this scene/tower (repeatable; default: all in the file)")
-    default_queries = ",".join(q for q in QUERIES if q in DEFAULT_QUERIES)
-    p.add_argument("--query", type=_queries, default=DEFAULT_QUERIES,
-                   help=f"comma-separated queries from {','.join(QUERIES)} (default {default_queries})")
-    p.add_argument("--contact", type=contact_pair, action="append", default=None, metavar="A:B",
-                   help="the contact query: will A touch B within the horizon? (repeatable; B may be 'support'; "
-                        "names holding ':' as JSON: '[\"cup:1\", \"glass\"]'; adds contact to --query)")
+    add_input_options(p, ("queries", "contact"))
     add_query_parameter_options(p)
-    p.add_argument("--samples", type=int, default=DEFAULT_SAMPLES,
-                   help=f"Monte Carlo samples k (default {DEFAULT_SAMPLES}, as the paper)")
-    p.add_argument("--sigma", type=_finite, default=DEFAULT_SIGMA_M,
-                   help=f"position noise SD in metres (default {DEFAULT_SIGMA_M:g} = 0.2 short sides of 0.2 m blocks)")
-    p.add_argument("--phi", type=_float_list, default=(0.0,),
-                   help="push as support acceleration in m/s^2; several comma-separated values are averaged")
-    p.add_argument("--force-direction", type=_finite, default=None, metavar="DEG",
-                   help="cued push direction in degrees (push drawn within +-45 deg); default: any direction")
-    p.add_argument("--mu", type=_finite, default=None, help="heavy/light density ratio (default: scene's own masses)")
-    p.add_argument("--perception", choices=perception_names(), default="gaussian",
-                   help="where the k noisy scenes come from: " + "; ".join(
-                       f"{n}: {perception_source(n).summary}" for n in perception_names())
-                   + " (depth: --depth, --camera-info, --camera-pose); sigma unused but by gaussian")
+    add_input_options(p, ("samples", "sigma_m", "phi_m_s2", "force_direction_deg", "mu", "perception"), notes={
+        "perception": "where the k noisy scenes come from: " + "; ".join(
+            f"{n}: {perception_source(n).summary}" for n in perception_names())
+        + " (depth: --depth, --camera-info, --camera-pose); sigma unused but by gaussian"})
     p.add_argument("--depth", default=None, metavar="IMAGE",
                    help="depth: the depth image, .npy (metres) or 16-bit .png (millimetres; 0: no reading)")
     p.add_argument("--camera-info", default=None, metavar="YAML",
@@ -128,30 +83,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--vision-rrd", default=None, metavar="FILE",
                    help="vision: write the observed images, the posterior sample cloud and the acceptance trace "
                         "to a rerun recording (one scene only)")
-    p.add_argument("--preset", default=DEFAULT_PRESET, choices=sorted(PRESETS), help="simulation settings")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--workers", type=int, default=default_workers(),
-                   help="worker processes (default: CPU count; 0 runs in this process)")
-    p.add_argument("--ground-truth", action="store_true",
-                   help="sigma = phi = 0 and no body's own noise: the scene as given, one deterministic rollout")
-    p.add_argument("--ci-width", type=_finite, default=None, metavar="W",
-                   help="anytime sampling: stop once the 95%% interval of P(fall) is at most W wide")
-    p.add_argument("--deadline", type=_finite, default=None, metavar="S",
-                   help="anytime sampling: stop drawing samples before S seconds have passed")
-    p.add_argument("--horizon", type=_finite, default=None, metavar="S",
-                   help="simulate S seconds (scenes that give their own horizon_s keep it); default: the preset's")
-    p.add_argument("--until-rest", action="store_true",
-                   help="end each rollout once everything is at rest (early termination, also for presets "
-                        "without it); with --horizon S: until at rest, at most S seconds")
-    p.add_argument("--budget", type=_finite, default=DEFAULT_BUDGET_S, metavar="S",
-                   help=f"compute budget per prediction in seconds (default {DEFAULT_BUDGET_S:g}): samples still "
-                        "running then are cut off (stopped_by: budget); scenes whose one rollout cannot fit are refused")
-    p.add_argument("--no-self-check", action="store_true",
-                   help="answer with the fast physics alone (fidelity: unverified) instead of checking it against "
-                        "the converged reference on the same noisy scenes (docs/model.md, 'Self-checking answers')")
-    p.add_argument("--verify-samples", type=int, default=None, metavar="N",
-                   help=f"samples rerun at the reference settings to verify the answer (default "
-                        f"{DEFAULT_CHECK.verify_samples})")
+    add_input_options(p, ("preset_name", "seed", "workers", "ground_truth", "ci_width", "deadline_s", "horizon_s",
+                          "until_rest", "budget_s", "self_check", "verify_samples"))
     p.add_argument("--json", action="store_true", help="one JSON object per scene per line")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run the samples on a Dask cluster (e.g. tcp://10.0.0.2:8786; default: $IPE_DASK_SCHEDULER, "
@@ -160,14 +93,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also draw the answer: the scene coloured by fall probability and three sampled rollouts "
                         "(one scene only)")
 
-    add_ask_parser(sub, _finite, _OneLineParser)
+    add_ask_parser(sub, _OneLineParser)
 
     g = sub.add_parser("generate", help="write generated scenes (JSON)")
     gsub = g.add_subparsers(dest="kind", required=True, parser_class=_OneLineParser)
     t = gsub.add_parser("tower", help="paper-style 10-block towers")
     t.add_argument("--count", type=int, default=1)
     t.add_argument("--blocks", type=int, default=10)
-    t.add_argument("--pairs", type=_finite, default=None, metavar="RATIO",
+    t.add_argument("--pairs", type=finite, default=None, metavar="RATIO",
                    help="also write a heavy/light state pair per tower with this mass ratio")
     t.add_argument("--seed", type=int, required=True)
     t.add_argument("-o", "--output", required=True)
@@ -180,7 +113,7 @@ def build_parser() -> argparse.ArgumentParser:
     cat.add_argument("--seed", type=int, required=True)
     cat.add_argument("-o", "--output", required=True)
     cap = gsub.add_parser("capped-tower", help="three boxes, a cone on top, a ball rolled at the base (the guide's example)")
-    cap.add_argument("--ball-speed", type=_finite, default=5.0, metavar="M_S", help="the ball's speed (default 5 m/s)")
+    cap.add_argument("--ball-speed", type=finite, default=5.0, metavar="M_S", help="the ball's speed (default 5 m/s)")
     cap.add_argument("-o", "--output", required=True)
     dx = gsub.add_parser("depth-example", help="the example tower seen by a depth camera: a depth PNG, camera_info "
                                                "YAML, the camera's pose and the detector's guess (for --perception depth)")

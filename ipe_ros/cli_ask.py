@@ -22,14 +22,12 @@ import time
 
 from .engine import ConfigError, WorkerPool, load_scenes
 from .engine import actions as A
-from .engine.config import DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_SIGMA_M, PRESETS, default_workers
-from .engine.checking.fidelity import DEFAULT_CHECK
 from .engine.inputs import as_spelled
 from .engine.request import build_request
+from .cli_inputs import add_input_options, finite, given_request_arguments
 from .cli_queries import add_query_parameter_options, given_query_parameters
 from .engine.actions.answers import QUESTION_QUERIES
 from .engine.query import QUERIES, parse_queries
-from .engine.query.contact import parse_pair
 
 #: Samples per variant: a question has many variants, and common random numbers make k = 16 enough
 #: to rank them (the paper's k = 48 is for one judgment).
@@ -49,14 +47,6 @@ def _numbers(count: tuple[int, ...], name: str):
     return parse
 
 
-def contact_pair(text: str) -> tuple[str, str]:
-    """argparse type of --contact (ipe predict and ipe ask)."""
-    try:
-        return parse_pair(text, "--contact")
-    except ConfigError as exc:
-        raise argparse.ArgumentTypeError(exc.problem) from None
-
-
 def _query_names(text: str) -> tuple[str, ...]:
     """argparse type of ipe ask's --query: registered query names, in the order given."""
     names = tuple(dict.fromkeys(part.strip() for part in text.split(",") if part.strip()))
@@ -67,33 +57,26 @@ def _query_names(text: str) -> tuple[str, ...]:
     return names
 
 
-def add_ask_parser(sub, finite, one_line_parser) -> None:
+def add_ask_parser(sub, one_line_parser) -> None:
     ask = sub.add_parser("ask", help="questions about an action: remove, support, clear, place, push")
     questions = ask.add_subparsers(dest="question", required=True, parser_class=one_line_parser)
 
     def common(q):
         q.add_argument("path", help="a JSON scene file (or a paper-format tower CSV)")
         q.add_argument("--scene", default=None, metavar="NAME", help="which scene of the file (default: the only one)")
-        q.add_argument("--samples", type=int, default=DEFAULT_ASK_SAMPLES,
-                       help=f"samples per variant (default {DEFAULT_ASK_SAMPLES})")
-        q.add_argument("--sigma", type=finite, default=DEFAULT_SIGMA_M, help="position noise SD, metres")
-        q.add_argument("--ground-truth", action="store_true",
-                       help="no noise at all (sigma = 0, no body's own noise; a push with noise of its own is "
-                            "refused): one rollout per variant")
-        q.add_argument("--preset", default=DEFAULT_PRESET, choices=sorted(PRESETS))
-        q.add_argument("--seed", type=int, default=0)
-        q.add_argument("--workers", type=int, default=default_workers())
-        q.add_argument("--budget", type=finite, default=DEFAULT_BUDGET_S, metavar="S",
-                       help="compute budget per batch of variants, seconds")
-        q.add_argument("--fell-off", action="store_true",
-                       help="also which objects end off the table (a scene on a table)")
-        q.add_argument("--self-check", action="store_true",
-                       help="check every variant's fast physics against the converged reference and answer a "
-                            "contradicted one at the reference (docs/model.md, 'Self-checking answers'); costs "
-                            "1.5-6x the question's time; without it each variant says fidelity: unverified")
-        q.add_argument("--verify-samples", type=int, default=None, metavar="N",
-                       help=f"with --self-check: samples of each variant rerun at the reference to verify it (default "
-                            f"{DEFAULT_CHECK.verify_samples})")
+        add_input_options(q, ("samples", "sigma_m", "ground_truth", "preset_name", "seed", "workers", "budget_s",
+                              "fell_off", "self_check", "verify_samples"),
+                          defaults={"samples": DEFAULT_ASK_SAMPLES, "self_check": False},
+                          notes={"samples": "samples per variant",
+                                 "ground_truth": "no noise at all (sigma = 0, no body's own noise; a push with noise "
+                                                 "of its own is refused): one rollout per variant",
+                                 "budget_s": "compute budget per batch of variants, seconds",
+                                 "fell_off": "also which objects end off the table (a scene on a table)",
+                                 "self_check": "check every variant's fast physics against the converged reference "
+                                               "and answer a contradicted one at the reference (docs/model.md, "
+                                               "'Self-checking answers'); costs 1.5-6x the question's time; without "
+                                               "it each variant says fidelity: unverified",
+                                 "verify_samples": "samples of each variant rerun at the reference to verify it"})
         q.add_argument("--fixed-k", action="store_true",
                        help="every variant runs all --samples (default: decision questions sample until decided)")
         q.add_argument("--depth", default=None, metavar="IMAGE",
@@ -108,8 +91,8 @@ def add_ask_parser(sub, finite, one_line_parser) -> None:
                        help="record 4 rollouts of every variant to this rerun file (not for clear)")
 
     def contact(q):
-        q.add_argument("--contact", type=contact_pair, action="append", default=None, metavar="A:B",
-                       help="also P(A touches B) per variant (repeatable; B may be 'support')")
+        add_input_options(q, ("contact",), notes={"contact": "also P(A touches B) per variant (repeatable; B may "
+                                                             "be 'support')"})
         q.add_argument("--query", type=_query_names, default=(), metavar="NAMES",
                        help="also these queries per variant, comma-separated (registered ones beyond what the "
                             "question answers itself: " + ", ".join(n for n in QUERIES if n not in QUESTION_QUERIES)
@@ -196,32 +179,20 @@ def _table(answers: A.Answers) -> str:
     return "\n".join(lines)
 
 
-def verify_samples(args, *, checked: bool, off: str) -> int:
-    """``--verify-samples``, refused where the self-check it sets is off (it would be ignored)."""
-    if args.verify_samples is None:
-        return DEFAULT_CHECK.verify_samples
-    if not checked:
-        raise ConfigError("--verify-samples", f"sets the self-check, which is off ({off}); drop one of them")
-    return args.verify_samples
-
-
 def cmd_ask(args) -> int:
     scene = _scene(args)
     if args.samples < 1:
         raise ConfigError("--samples", f"must be >= 1, got {args.samples}")
     # the model and settings as ipe predict builds them (engine.request)
-    request = build_request(samples=args.samples, sigma_m=args.sigma, ground_truth=args.ground_truth,
-                            preset_name=args.preset, seed=args.seed, budget_s=args.budget,
-                            self_check=args.self_check,
-                            verify_samples=verify_samples(args, checked=args.self_check, off="no --self-check"))
+    request = build_request(**given_request_arguments(args))
     model, settings = request.model, request.settings
     if args.workers < 0:
         raise ConfigError("--workers", f"must be >= 0, got {args.workers}")
     pool = WorkerPool(min(args.workers, args.samples)) if args.workers > 0 else None
-    kw = dict(seed=args.seed, map_fn=pool.map if pool else None, budget_s=args.budget, check=request.check)
+    kw = dict(seed=args.seed, map_fn=pool.map if pool else None, budget_s=args.budget_s, check=request.check)
     perceived = _perceived(args, scene)
     if perceived is not None:
-        kw.update(perceived=perceived, budget_s=args.budget)  # the budget the chain left
+        kw.update(perceived=perceived, budget_s=args.budget_s)  # the budget the chain left
     if args.rrd:
         kw.update(record_every=max(1, round(0.02 / settings.time_step_s)), record_samples=4)
     try:
@@ -256,9 +227,9 @@ def depth_posterior(args, scene, k: int):
     observation = depth_io.load_observation(args.depth, args.camera_info, args.camera_pose)
     started = time.perf_counter()
     perceived = depth.perceive_depth_for(scene, k, (observation,), args.seed, budget_s=None
-                                         if args.budget is None else args.budget * depth.CHAIN_BUDGET_SHARE)
-    if args.budget is not None:
-        args.budget = max(args.budget - (time.perf_counter() - started), 1e-3)
+                                         if args.budget_s is None else args.budget_s * depth.CHAIN_BUDGET_SHARE)
+    if args.budget_s is not None:
+        args.budget_s = max(args.budget_s - (time.perf_counter() - started), 1e-3)
     return perceived, observation
 
 

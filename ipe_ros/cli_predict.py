@@ -8,7 +8,8 @@ import json
 import math
 import sys
 
-from .cli_ask import depth_posterior, verify_samples
+from .cli_ask import depth_posterior
+from .cli_inputs import given_request_arguments
 from .cli_queries import given_query_parameters
 from .engine import AdaptiveStop, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError, WorkerPool, load_scenes, predict
 from .engine.config import anytime_batch_size
@@ -131,14 +132,7 @@ def cmd_predict(args) -> int:
     scenes = load_scenes(args.path, towers=args.tower, on_refused=refused.append)
     vision = _vision_settings(args)
     # one request from the options (engine.request); its errors read as the options (main: as_spelled)
-    request = build_request(samples=args.samples, sigma_m=args.sigma, phi_m_s2=args.phi,
-                            force_direction_deg=args.force_direction, mu=args.mu, ground_truth=args.ground_truth,
-                            perception=args.perception, vision=vision, queries=args.query, contact=args.contact or (),
-                            preset_name=args.preset, horizon_s=args.horizon, until_rest=args.until_rest,
-                            seed=args.seed, ci_width=args.ci_width, deadline_s=args.deadline, budget_s=args.budget,
-                            self_check=not args.no_self_check,
-                            verify_samples=verify_samples(args, checked=not args.no_self_check, off="--no-self-check"),
-                            query_parameters=given_query_parameters(args))
+    request = build_request(vision=vision, query_parameters=given_query_parameters(args), **given_request_arguments(args))
     model, sim, query, stop, check = request.model, request.settings, request.query, request.stop, request.check
     for option, value, what in (("--vision-rrd", args.vision_rrd, "records"), ("--png", args.png, "draws")):
         if value is not None and len(scenes) != 1:
@@ -154,7 +148,7 @@ def cmd_predict(args) -> int:
     collected: list[Prediction] = []
     if args.json:
         run_predictions(scenes, model, sim, query, args.seed, args.workers,
-                        lambda p: (collected.append(p), print(prediction_json(p), flush=True)), stop, args.budget,
+                        lambda p: (collected.append(p), print(prediction_json(p), flush=True)), stop, args.budget_s,
                         perceived, args.scheduler, check)
     else:
         k = 1 if all(is_deterministic(s, model) for s in scenes) else args.samples
@@ -164,7 +158,7 @@ def cmd_predict(args) -> int:
                  if vision is not None else "")
               + (f", perception = {args.perception} (sigma unused)"
                  if perception_source(args.perception).posterior and vision is None else ""))
-        run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append, stop, args.budget,
+        run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append, stop, args.budget_s,
                         perceived, args.scheduler, check)
         print(format_table(collected))
         for line in _perception_lines(collected, args.perception, vision is not None):
@@ -219,7 +213,7 @@ def _answerable(args, scenes: list, refused: list[RefusedScene], request) -> lis
     answerable = []
     for scene in scenes:
         try:
-            check_request(scene, request.query, model=request.model, settings=request.settings, budget_s=args.budget)
+            check_request(scene, request.query, model=request.model, settings=request.settings, budget_s=args.budget_s)
             answerable.append(scene)
         except ConfigError as exc:
             field = spelled(exc.field, "cli") + (f" ({scene.name})" if exc.field == "budget_s" else "")

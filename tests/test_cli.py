@@ -110,9 +110,9 @@ def test_generate_tower_and_table_write_loadable_scenes(tmp_path):
     (["predict", "EXAMPLE", "--verify-samples", "5000"], "ipe: error: --verify-samples: must be an integer in "
                                                          "[0, 1000], got 5000"),
     (["predict", "EXAMPLE", "--no-self-check", "--verify-samples", "3"],
-     "ipe: error: --verify-samples: sets the self-check, which is off (--no-self-check); drop one of them"),
+     "ipe: error: --verify-samples: needs --self-check, which is off; drop one of them"),
     (["ask", "remove", "EXAMPLE", "--verify-samples", "3"],
-     "ipe: error: --verify-samples: sets the self-check, which is off (no --self-check); drop one of them"),
+     "ipe: error: --verify-samples: needs --self-check, which is off; drop one of them"),
     (["predict", "EXAMPLE", "--query", "fall,contact"], "ipe: error: --contact: the contact query needs pairs to "
                                                         "watch: give A:B (B may be support), or drop contact from "
                                                         "the queries"),
@@ -256,7 +256,7 @@ def test_vector_options_take_negative_numbers():
     pose = "-0.85,0.1,0.6,0,0,0,1"
     argv = ["predict", "scene.json", "--camera-pose", pose, "--force-direction", "-30"]
     args = build_parser().parse_args(glue_negative_vectors(argv))
-    assert args.camera_pose == pose and args.force_direction == -30.0
+    assert args.camera_pose == pose and args.force_direction_deg == -30.0
     args = build_parser().parse_args(glue_negative_vectors(["ask", "push", "scene.json", "--object", "top",
                                                             "--velocity", "-0.4,0"]))
     assert args.velocity == (-0.4, 0.0)

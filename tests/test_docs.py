@@ -92,11 +92,15 @@ def test_local_links_resolve(document):
 
 
 def test_the_node_reference_documents_every_parameter_and_topic():
-    from ipe_ros.ros.params import all_parameters
+    from ipe_ros.ros.params import all_parameters, reference_columns
 
     reference = (REPO / "docs" / "node.md").read_text()
     undocumented = [s.name for s in all_parameters() if f"| `{s.name}` |" not in reference]
     assert not undocumented, f"docs/node.md lacks parameters {undocumented}"
+    rows = {cells[0]: tuple(cells[:4]) for line in reference.splitlines() if line.startswith("| `")
+            for cells in [[c.strip() for c in line.strip().strip("|").split("|")]]}
+    stale = [(rows[cols[0]], cols) for cols in map(reference_columns, all_parameters()) if rows[cols[0]] != cols]
+    assert not stale, f"docs/node.md's type, default or range differ from the declared ones: {stale}"
     source = (REPO / "ipe_ros" / "ros" / "node.py").read_text()
     topics = set(re.findall(r'create_(?:publisher|subscription|service)\(\s*\w+,\s*"([^"]+)"', source))
     # inputs subscribed once per reliability are listed as (message type, topic, handler)

@@ -7,24 +7,77 @@ import pytest
 
 from ipe_ros.cli import build_parser
 from ipe_ros.engine import ConfigError, ModelConfig
-from ipe_ros.engine.inputs import INPUTS, as_spelled, spelled
+from ipe_ros.engine.inputs import INPUTS, Input, as_spelled, node_default, spelled
 
 
-def _options(command: str, question: str | None = None) -> set[str]:
-    sub = build_parser()._subparsers._group_actions[0].choices[command]  # noqa: SLF001 - argparse has no API
-    if question is not None:
-        sub = sub._subparsers._group_actions[0].choices[question]  # noqa: SLF001
-    return {o for action in sub._actions for o in action.option_strings}  # noqa: SLF001
+def _option(parser, flag: str):
+    return next(a for a in parser._actions if flag in a.option_strings)  # noqa: SLF001 - argparse has no API
 
 
-def test_every_flag_is_an_option_and_every_parameter_a_node_parameter():
+def test_every_option_and_node_parameter_is_made_from_its_row():
     from ipe_ros.ros.params import PARAMETERS
 
-    flags = _options("predict") | _options("ask", "remove")
-    parameters = {p.name for p in PARAMETERS}
-    assert [i.flag for i in INPUTS if i.flag is not None and i.flag not in flags] == []
-    assert [i.parameter for i in INPUTS if i.parameter is not None and i.parameter not in parameters] == []
+    predict = build_parser()._subparsers._group_actions[0].choices["predict"]  # noqa: SLF001
+    ask = build_parser()._subparsers._group_actions[0].choices["ask"]  # noqa: SLF001
+    remove = ask._subparsers._group_actions[0].choices["remove"]  # noqa: SLF001
+    declared = {p.name: p for p in PARAMETERS}
+    for row in INPUTS:
+        if row.flag is not None:
+            parser = remove if row.field == "fell_off" else predict
+            action = _option(parser, row.flag)
+            assert action.dest == row.field
+            assert action.default == (None if row.requires or row.kind == "pairs" else row.default), row.field
+        if row.parameter is not None:
+            assert [declared[row.parameter].default] == [node_default(row)], row.field  # NaN is itself
     assert len({i.field for i in INPUTS}) == len(INPUTS)
+
+
+def test_a_new_row_is_an_option_and_a_node_parameter_with_its_range():
+    """A new input is one row: the generators make the CLI's option and the node's descriptor from it."""
+    import argparse
+
+    from ipe_ros.cli_inputs import add_input_options
+    from ipe_ros.engine import inputs
+    from ipe_ros.ros.params import ParamSpec
+
+    row = Input("tries", "int", 3, "count", "how often to try", "--tries", "tries", range=(1, 9), in_request=False)
+    parser = argparse.ArgumentParser()
+    original = inputs._BY_FIELD.copy()
+    inputs._BY_FIELD["tries"] = row
+    try:
+        add_input_options(parser, ("tries",))
+    finally:
+        inputs._BY_FIELD.clear()
+        inputs._BY_FIELD.update(original)
+    assert parser.parse_args([]).tries == 3 and parser.parse_args(["--tries", "5"]).tries == 5
+    assert "how often to try (default 3)" in parser.format_help().replace("\n", " ").replace("  ", " ")
+    descriptor = ParamSpec.of(row).descriptor()
+    assert (descriptor.name, descriptor.integer_range[0].from_value, descriptor.integer_range[0].to_value) == \
+        ("tries", 1, 9)
+
+
+def test_the_cli_and_the_node_build_the_same_request_from_the_same_intent():
+    """Each door's spelling of "not set" (an option left out; 0 or NaN on the node), several phi values
+    and contact pairs reach the engine as one request."""
+    import dataclasses
+
+    from ipe_ros.cli_inputs import given_request_arguments
+    from ipe_ros.engine.request import build_request
+    from ipe_ros.ros.params import PARAMETERS, config_from_values
+
+    defaults = {spec.name: spec.default for spec in PARAMETERS}
+    parse = build_parser().parse_args
+    cases = [([], {}),
+             (["--phi", "0,2", "--mu", "3", "--horizon", "1.5", "--force-direction", "30", "--ci-width", "0.2",
+               "--contact", "a:b", "--contact", "c:support", "--no-self-check", "--until-rest", "--seed", "7"],
+              {"phi": [0.0, 2.0], "mu": 3.0, "horizon_s": 1.5, "force_direction_deg": 30.0, "target_ci_width": 0.2,
+               "contact_pairs": "a:b,c:support", "self_check": False, "until_rest": True, "seed": 7})]
+    for argv, values in cases:
+        cli = build_request(**given_request_arguments(parse(["predict", "scene.json", *argv])))
+        node = config_from_values(defaults | values).request
+        if cli.stop is not None:  # the anytime batch follows each door's worker count
+            cli = dataclasses.replace(cli, stop=dataclasses.replace(cli.stop, batch_size=node.stop.batch_size))
+        assert cli == node, argv
 
 
 def test_an_engine_error_reads_as_each_user_spelled_the_input():
@@ -89,3 +142,20 @@ def test_node_settings_no_scene_could_answer_are_refused_when_set_naming_the_par
     with pytest.raises(ConfigError) as info:
         config_from_values(values)
     assert str(info.value) == reason
+
+
+def test_the_node_takes_phi_as_one_value_or_several_and_names_it_otherwise():
+    """Params files written when phi was one number keep working; several are averaged as --phi 0,2."""
+    import array
+
+    from ipe_ros.engine.inputs import from_node, row
+
+    phi = row("phi_m_s2")
+    assert from_node(phi, 2.0) == (2.0,) and from_node(phi, array.array("d", [0.0, 2.0])) == (0.0, 2.0)
+    for bad in ("2", [], [True], None):
+        with pytest.raises(ConfigError) as caught:
+            from_node(phi, bad)
+        assert str(caught.value) == f"phi: must be a number or a non-empty list of numbers, got {bad!r}"
+    with pytest.raises(ConfigError) as caught:
+        from_node(row("force_direction_deg"), float("inf"))
+    assert str(caught.value) == "force_direction_deg: must be finite degrees or NaN (any direction), got inf"

@@ -167,7 +167,7 @@ def test_ground_truth_takes_the_scene_exactly_as_given_even_where_its_bodies_car
     reply = next(json.loads(m.data) for m in replies if json.loads(m.data)["final"])
     assert reply["answer"]["samples_requested"] == 1, reply
     # the ground truth with a push is no ground truth: phi is read as 0 while it is on
-    (result,) = set_params(ros, phi=2.0)
+    (result,) = set_params(ros, phi=[2.0])
     assert result.successful, result.reason
     assert node.service.config.request.model.phi_m_s2 == (0.0,)
 

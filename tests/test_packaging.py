@@ -76,6 +76,14 @@ def _yaml_parameters() -> dict:
     return document["/**"]["ros__parameters"]
 
 
+def test_config_yaml_is_written_from_the_table_of_inputs():
+    """config/ipe.yaml is what ``python -m ipe_ros.ros.params`` writes from the declared parameters."""
+    from ipe_ros.ros.params import config_yaml
+
+    assert (REPO / "config" / "ipe.yaml").read_text() == config_yaml(), \
+        "config/ipe.yaml is stale: python -m ipe_ros.ros.params > config/ipe.yaml"
+
+
 def test_config_yaml_lists_every_parameter_with_its_default():
     from ipe_ros.ros.params import all_parameters
 

@@ -1,30 +1,30 @@
-"""The node's ROS parameters: declarations with descriptors and ranges, and their mapping to the engine.
+"""The node's ROS parameters: descriptors made from the table of inputs, and their mapping to the engine.
 
-``PARAMETERS`` is the single table the node declares, the README documents and the tests check; its
-defaults come from the engine's config. ``config_from_values`` is pure (no rclpy): it turns a
-{name: value} mapping into :class:`~ipe_ros.service.ServiceConfig` or raises ``ConfigError`` naming the
-parameter. The engine's own types do the checking; only ROS-specific fields are checked here.
+The prediction's inputs are rows of ``engine.inputs.INPUTS`` (the CLI's options are made from the
+same rows); the node's own settings (frames, QoS, recordings, the camera) are rows of the same kind in
+``NODE_SETTINGS``; the queries' own parameters come from the query registry. ``all_parameters`` is what
+the node declares, ``config/ipe.yaml`` is written from it (``python -m ipe_ros.ros.params``; a test
+keeps the file equal) and docs/node.md documents it. ``config_from_values`` is pure (no rclpy): it
+turns a {name: value} mapping into :class:`~ipe_ros.service.ServiceConfig` or raises ``ConfigError``
+naming the parameter. The engine's own types do the checking; only ROS-specific fields are checked here.
 """
 
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 from dataclasses import dataclass
 from typing import Any, Mapping
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 
-from ..engine import ALL_QUERIES, PRESETS, ConfigError
-from ..engine.config import (DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M, anytime_batch_size,
-                             default_workers)
-from ..engine.checking.fidelity import DEFAULT_CHECK
-from ..engine.inputs import as_spelled
+from ..engine import ConfigError
+from ..engine.config import anytime_batch_size
+from ..engine.inputs import INPUTS, Input, as_spelled, from_node, node_default
 from ..engine.perceptions import perception_names, perception_source
 from ..engine.request import build_request
-from ..engine.query.contact import parse_pairs
 from ..engine.query.parameters import query_parameters
-from ..engine.scene.bodies import DEFAULT_MAX_OBJECTS
 from ..service import ServiceConfig
 
 #: Frames conventionally gravity-aligned in ROS (REP 105: map, odom; world is common in simulation).
@@ -33,8 +33,75 @@ DEFAULT_GRAVITY_ALIGNED_FRAMES = ("world", "map", "odom")
 SCENE_RELIABILITY = ("both", "reliable", "best_effort")
 
 
+def _reliability() -> tuple[str, ...]:
+    return SCENE_RELIABILITY
+
+
+def _fed_perceptions() -> tuple[str, ...]:
+    return tuple(n for n in perception_names() if perception_source(n).on_node)
+
+
+def _node(name: str, kind, default, unit: str, text: str, **kw) -> Input:
+    return Input(name, kind, default, unit, text, parameter=name, in_request=False, **kw)
+
+
+#: The node's own settings, as rows of the inputs table (no CLI spelling: the CLI has no topics).
+NODE_SETTINGS: tuple[Input, ...] = (
+    _node("dask_scheduler", "name", "", "address", "run the samples on a Dask cluster at this address (e.g. "
+          "tcp://10.0.0.1:8786, see docs/cluster.md) instead of `workers` local processes; empty: local",
+          fixed_at_start=True),
+    _node("depth.max_age_s", "float", 0.5, "s", "depth perception: the depth image may be at most this many seconds "
+          "from the scene's stamp", range=(0.001, 3600.0)),
+    _node("depth.reliability", "name", "both", "name",
+          "QoS reliability of the ~/depth/* subscriptions: both (a reliable and a best-effort subscription, each "
+          "message used once: a reliable publisher's images arrive whole; best-effort images over ~500 KB mostly "
+          "get lost in Fast DDS's fragments), reliable, or best_effort", fixed_at_start=True, choices=_reliability),
+    _node("depth.camera_pose", "name", "", "x,y,z,qx,qy,qz,qw",
+          "depth perception: the camera's optical frame (z forward, y down) in frame_id as 'x,y,z,qx,qy,qz,qw' for "
+          "a fixed camera; empty (default): from ~/depth/camera_pose",
+          constraints="empty, or 7 comma-separated numbers with a unit quaternion"),
+    _node("frame_id", "name", "world", "frame", "frame of scenes received on ~/scene_json and ~/ask (JSON carries no "
+          "header); must be one of gravity_aligned_frames", constraints="a non-empty frame name"),
+    _node("gravity_aligned_frames", "names", DEFAULT_GRAVITY_ALIGNED_FRAMES, "frames",
+          "frames whose -z axis is gravity: the physics assumes it, so scenes in any other frame are refused "
+          "(transform them first); [''] accepts every frame", constraints="frame names, or ['']"),
+    _node("scene_reliability", "name", "both", "name",
+          "QoS reliability of the ~/scene and ~/scene_json subscriptions: both (a reliable and a best-effort "
+          "subscription, each message used once: accepts every publisher), reliable, or best_effort",
+          fixed_at_start=True, choices=_reliability),
+    _node("service_timeout_s", "float", 60.0, "s", "how long ~/predict waits for an answer, seconds",
+          range=(0.1, 3600.0)),
+    _node("rerun.save_dir", "name", "", "folder", "folder for one .rrd recording per prediction; empty: no rerun "
+          "logging"),
+    _node("rerun.rollouts_logged", "int", 8, "count", "sampled rollouts shown in each .rrd", range=(0, 1000)),
+    _node("rerun.frame_period_s", "float", 0.02, "s", "simulated seconds between logged frames of a rollout",
+          range=(0.001, 1.0)),
+    _node("rerun.connect_url", "name", "", "URL", "also stream recordings to a viewer already running at this gRPC "
+          "URL (e.g. rerun+http://127.0.0.1:9876/proxy); empty: never contact or spawn a viewer"),
+)
+
+#: where the node's parameter means more than the CLI's option
+_NODE_NOTES = {
+    "perception": "where the k noisy scenes come from: gaussian (sigma), depth (the posterior given the newest "
+                  "depth image on ~/depth/image, its ~/depth/camera_info and the camera pose; sigma unused), or "
+                  "another registered perception the node can feed (engine.perceptions)",
+    "ground_truth": "the ground-truth model: the scene exactly as given, one deterministic rollout (sigma and phi "
+                    "read as 0 while on, and no body's own position or yaw noise); questions on ~/ask too",
+    "contact": "the contact query's pairs as 'A:B,C:support' (will A touch B within the horizon? B may be "
+               "'support'; names holding ':' as a JSON list of pairs); adds contact to queries; empty: none",
+}
+
+_ROS_TYPES = {"int": ParameterType.PARAMETER_INTEGER, "float": ParameterType.PARAMETER_DOUBLE,
+              "floats": ParameterType.PARAMETER_DOUBLE_ARRAY, "bool": ParameterType.PARAMETER_BOOL,
+              "name": ParameterType.PARAMETER_STRING, "names": ParameterType.PARAMETER_STRING_ARRAY,
+              "pairs": ParameterType.PARAMETER_STRING}
+_KINDS = {float: "float", int: "int", bool: "bool", str: "name"}
+
+
 @dataclass(frozen=True)
 class ParamSpec:
+    """One declared parameter, made from a row (``of``)."""
+
     name: str
     default: Any
     type: int
@@ -42,10 +109,26 @@ class ParamSpec:
     range: tuple[float, float] | None = None
     read_only: bool = False
     constraints: str = ""
+    #: a list parameter that also takes one value (``phi: 2.0`` as well as ``phi: [0.0, 2.0]``)
+    dynamic_typing: bool = False
+
+    @classmethod
+    def of(cls, row: Input) -> "ParamSpec":
+        text = _NODE_NOTES.get(row.field, row.help)
+        if row.default is None:
+            text += f"; {_shown(row.unset)}: {row.unset_means}"
+        constraints = row.constraints
+        if not constraints and row.choices is not None:
+            choices = _fed_perceptions() if row.field == "perception" else row.choices()
+            constraints = ("non-empty subset of " if row.kind == "names" else "one of ") + ", ".join(choices)
+        return cls(row.parameter, node_default(row), _ROS_TYPES[row.kind], text,
+                   row.range if row.kind in ("int", "float") else None, row.fixed_at_start, constraints,
+                   dynamic_typing=row.kind == "floats")
 
     def descriptor(self) -> ParameterDescriptor:
         d = ParameterDescriptor(name=self.name, type=self.type, description=self.description,
-                                read_only=self.read_only, additional_constraints=self.constraints)
+                                read_only=self.read_only, additional_constraints=self.constraints,
+                                dynamic_typing=self.dynamic_typing)
         if self.range is not None and self.type == ParameterType.PARAMETER_INTEGER:
             d.integer_range = [IntegerRange(from_value=int(self.range[0]), to_value=int(self.range[1]), step=1)]
         elif self.range is not None and self.type == ParameterType.PARAMETER_DOUBLE:
@@ -54,106 +137,20 @@ class ParamSpec:
         return d
 
 
-_INT, _DOUBLE = ParameterType.PARAMETER_INTEGER, ParameterType.PARAMETER_DOUBLE
-_STRING, _STRINGS = ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_STRING_ARRAY
+def _shown(value: Any) -> str:
+    return "NaN" if isinstance(value, float) and math.isnan(value) else f"{value:g}" if isinstance(value, float) \
+        else str(value)
 
-PARAMETERS: tuple[ParamSpec, ...] = (
-    ParamSpec("samples", DEFAULT_SAMPLES, _INT, "Monte Carlo samples k per prediction (paper: 48)", (1, 10000)),
-    ParamSpec("sigma", DEFAULT_SIGMA_M, _DOUBLE, "position noise SD, metres (paper: 0.2 block short sides = 0.04 m "
-                                      "for 0.2 m blocks; 0 drops the model's own noise, not the noise a scene "
-                                      "gives its bodies: ground_truth drops both)", (0.0, 10.0)),
-    ParamSpec("phi", 0.0, _DOUBLE, "latent push: horizontal acceleration of the support for 0.2 s, m/s^2 "
-                                   "(0: no push)", (0.0, 100.0)),
-    ParamSpec("ground_truth", False, ParameterType.PARAMETER_BOOL,
-              "the ground-truth model: the scene exactly as given, one deterministic rollout (sigma and phi "
-              "read as 0 while on, and no body's own position or yaw noise); questions on ~/ask too"),
-    ParamSpec("force_direction_deg", math.nan, _DOUBLE,
-              "cued push direction in degrees in the scene frame (0 = +x, counter-clockwise), pushes drawn "
-              "within +-45 deg of it; NaN (default) draws the direction uniformly",
-              constraints="finite degrees, or NaN for any direction"),
-    ParamSpec("mu", 0.0, _DOUBLE, "heavy/light density ratio for bodies in group 'heavy'; 0 keeps the scene's "
-                                  "own masses", (0.0, 1000.0)),
-    ParamSpec("queries", [q for q in ALL_QUERIES if q in DEFAULT_QUERIES], _STRINGS,
-              "queries to answer: any of " + ", ".join(ALL_QUERIES) + " (bump needs a table, contact its "
-              "contact_pairs)",
-              constraints="non-empty subset of " + ", ".join(ALL_QUERIES)),
-    ParamSpec("contact_pairs", "", _STRING,
-              "the contact query's pairs as 'A:B,C:support' (will A touch B within the horizon? B may be 'support'); "
-              "adds contact to queries; empty: none",
-              constraints="empty, or comma-separated A:B object name pairs"),
-    ParamSpec("preset", DEFAULT_PRESET, _STRING, "simulation settings: " + ", ".join(
-        f"{name} ({s.time_step_s * 1000:g} ms steps, {s.horizon_s:g} s, {s.solver.iterations} solver iterations)"
-        for name, s in PRESETS.items()), constraints="one of " + ", ".join(PRESETS)),
-    ParamSpec("horizon_s", 0.0, _DOUBLE, "simulated seconds per rollout for scenes that give no horizon_s of their "
-                                         "own; 0: the preset's (2 s)", (0.0, 60.0)),
-    ParamSpec("until_rest", False, ParameterType.PARAMETER_BOOL,
-              "end each rollout once everything is at rest (early termination, also for presets without it); "
-              "with horizon_s: until at rest, at most that long"),
-    ParamSpec("seed", 0, _INT, "random seed; a prediction is a function of (scene, parameters, seed)", (0, 2**31 - 1)),
-    ParamSpec("workers", default_workers(), _INT, "simulation worker processes (0: run samples in the node's "
-                                                 "prediction thread); fixed at start", (0, 64), read_only=True),
-    ParamSpec("target_ci_width", 0.0, _DOUBLE, "anytime sampling: stop once the 95% interval of the fall "
-                                               "fraction is at most this wide (needs the fall query); 0: off",
-              (0.0, 1.0)),
-    ParamSpec("deadline_s", 0.0, _DOUBLE, "anytime sampling: stop drawing samples before this many seconds; "
-                                          "0: off (all k samples)", (0.0, 3600.0)),
-    ParamSpec("budget_s", DEFAULT_BUDGET_S, _DOUBLE, "compute budget: the most wall seconds one prediction may "
-                                                   "take; samples still running then are cut off (stopped_by: "
-                                                   "budget) and scenes whose one rollout cannot fit are rejected",
-              (0.1, 3600.0)),
-    ParamSpec("self_check", True, ParameterType.PARAMETER_BOOL,
-              "check each prediction's fast physics against the converged reference on the same noisy scenes "
-              "(refine unhealthy rollouts, verify samples, rerun everything on disagreement; the answer's "
-              "fidelity says what happened); false: the fast physics alone, answers 'unverified'"),
-    ParamSpec("verify_samples", DEFAULT_CHECK.verify_samples, _INT,
-              "samples rerun at the reference settings to verify each prediction", (0, 100)),
-    ParamSpec("dask_scheduler", "", _STRING, "run the samples on a Dask cluster at this address (e.g. "
-                                         "tcp://10.0.0.1:8786, see docs/cluster.md) instead of `workers` local "
-                                         "processes; empty: local; fixed at start", read_only=True),
-    ParamSpec("perception", "gaussian", _STRING,
-              "where the k noisy scenes come from: gaussian (sigma), depth (the posterior given the newest depth "
-              "image on ~/depth/image, its ~/depth/camera_info and the camera pose; sigma unused), or another "
-              "registered perception the node can feed (engine.perceptions)",
-              constraints="a registered perception the node can feed: gaussian, depth, ..."),
-    ParamSpec("depth.max_age_s", 0.5, _DOUBLE, "depth perception: the depth image may be at most this many seconds "
-                                               "from the scene's stamp", (0.001, 3600.0)),
-    ParamSpec("depth.reliability", "both", _STRING,
-              "QoS reliability of the ~/depth/* subscriptions: both (a reliable and a best-effort subscription, "
-              "each message used once: a reliable publisher's images arrive whole; best-effort images over ~500 KB "
-              "mostly get lost in Fast DDS's fragments), reliable, or best_effort; fixed at start", read_only=True,
-              constraints="one of " + ", ".join(SCENE_RELIABILITY)),
-    ParamSpec("depth.camera_pose", "", _STRING,
-              "depth perception: the camera's optical frame (z forward, y down) in frame_id as "
-              "'x,y,z,qx,qy,qz,qw' for a fixed camera; empty (default): from ~/depth/camera_pose",
-              constraints="empty, or 7 comma-separated numbers with a unit quaternion"),
-    ParamSpec("max_objects", DEFAULT_MAX_OBJECTS, _INT, "scenes with more objects are rejected", (1, 10000)),
-    ParamSpec("frame_id", "world", _STRING, "frame of scenes received on ~/scene_json and ~/ask (JSON carries no "
-                                            "header); must be one of gravity_aligned_frames",
-              constraints="a non-empty frame name"),
-    ParamSpec("gravity_aligned_frames", list(DEFAULT_GRAVITY_ALIGNED_FRAMES), _STRINGS,
-              "frames whose -z axis is gravity: the physics assumes it, so scenes in any other frame are "
-              "refused (transform them first); [''] accepts every frame", constraints="frame names, or ['']"),
-    ParamSpec("scene_reliability", "both", _STRING,
-              "QoS reliability of the ~/scene and ~/scene_json subscriptions: both (a reliable and a best-effort "
-              "subscription, each message used once: accepts every publisher), reliable, or best_effort; "
-              "fixed at start", read_only=True, constraints="one of " + ", ".join(SCENE_RELIABILITY)),
-    ParamSpec("service_timeout_s", 60.0, _DOUBLE, "how long ~/predict waits for an answer, seconds", (0.1, 3600.0)),
-    ParamSpec("rerun.save_dir", "", _STRING, "folder for one .rrd recording per prediction; empty: no rerun logging"),
-    ParamSpec("rerun.rollouts_logged", 8, _INT, "sampled rollouts shown in each .rrd", (0, 1000)),
-    ParamSpec("rerun.frame_period_s", 0.02, _DOUBLE, "simulated seconds between logged frames of a rollout",
-              (0.001, 1.0)),
-    ParamSpec("rerun.connect_url", "", _STRING, "also stream recordings to a viewer already running at this "
-                                                "gRPC URL (e.g. rerun+http://127.0.0.1:9876/proxy); empty: never "
-                                                "contact or spawn a viewer"),
-)
 
-_ROS_TYPES = {float: _DOUBLE, int: _INT, bool: ParameterType.PARAMETER_BOOL, str: _STRING}
+#: The prediction's inputs the node takes and its own settings.
+PARAMETERS: tuple[ParamSpec, ...] = tuple(ParamSpec.of(r) for r in INPUTS + NODE_SETTINGS if r.parameter is not None)
 
 
 def query_parameter_specs() -> tuple[ParamSpec, ...]:
     """The registered queries' own parameters (``<query>.<field>``, engine/query/parameters.py),
     declared beside ``PARAMETERS``; a query registered before the node starts is settable too."""
-    return tuple(ParamSpec(row.name, row.default, _ROS_TYPES[row.type], f"the {row.query} query: {row.meaning}")
+    return tuple(ParamSpec.of(Input(row.name, _KINDS[row.type], row.default, "", f"the {row.query} query: "
+                                    f"{row.meaning}", parameter=row.name, in_request=False))
                  for row in query_parameters())
 
 
@@ -180,29 +177,16 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
     for name in ("scene_reliability", "depth.reliability"):
         if values[name] not in SCENE_RELIABILITY:
             raise ConfigError(name, f"must be one of {', '.join(SCENE_RELIABILITY)}, got {values[name]!r}")
-    direction = float(values["force_direction_deg"])
-    if math.isinf(direction):
-        raise ConfigError("force_direction_deg", f"must be finite degrees or NaN (any direction), got {direction}")
     if not perception_source(values["perception"]).on_node:
-        fed = ", ".join(n for n in perception_names() if perception_source(n).on_node)
+        fed = ", ".join(_fed_perceptions())
         raise ConfigError("perception", f"must be a perception the node can feed ({fed}), got {values['perception']!r}")
     camera_pose(values)  # checked now, used by the node
-    text = str(values["contact_pairs"]).strip()
-    pairs = parse_pairs(text, "contact_pairs")
-    mu, horizon = float(values["mu"]), float(values["horizon_s"])
-    width, deadline = float(values["target_ci_width"]), float(values["deadline_s"])
     try:  # one request from the parameters (engine.request), its errors named as the parameters
-        request = build_request(
-            samples=int(values["samples"]), sigma_m=float(values["sigma"]), phi_m_s2=(float(values["phi"]),),
-            ground_truth=bool(values["ground_truth"]),
-            force_direction_deg=None if math.isnan(direction) else direction, mu=None if mu == 0 else mu,
-            perception=str(values["perception"]), queries=values["queries"], contact=pairs,
-            preset_name=values["preset"], horizon_s=horizon if horizon > 0 else None,
-            until_rest=bool(values["until_rest"]), seed=int(values["seed"]), ci_width=width or None,
-            deadline_s=deadline or None, batch_size=anytime_batch_size(int(values["workers"])),
-            budget_s=float(values["budget_s"]), self_check=bool(values["self_check"]),
-            verify_samples=int(values["verify_samples"]),
-            query_parameters={row.name: values[row.name] for row in query_parameters() if row.name in values})
+        given = {row.field: from_node(row, values[row.parameter]) for row in INPUTS
+                 if row.in_request and row.parameter is not None}
+        request = build_request(**given, batch_size=anytime_batch_size(int(values["workers"])),
+                                query_parameters={row.name: values[row.name] for row in query_parameters()
+                                                  if row.name in values})
     except ConfigError as exc:
         raise as_spelled(exc, "ros") from None
     save_dir = str(values["rerun.save_dir"]).strip()
@@ -229,3 +213,70 @@ def camera_pose(values: Mapping[str, Any]) -> tuple[tuple, tuple] | None:
         return parse_pose(text)
     except ConfigError as exc:
         raise ConfigError("depth.camera_pose", exc.problem) from None
+
+
+_YAML_HEAD = """# Parameters of ipe_node with their defaults. Use: ros2 run ipe_ros ipe_node --ros-args --params-file config/ipe.yaml
+# (or launch/ipe.launch.py). '/**' matches the node under any name or namespace.
+# Every parameter can be changed at run time with `ros2 param set` except those marked read-only.
+# Written from the table of inputs by `python -m ipe_ros.ros.params > config/ipe.yaml` (a test keeps it equal).
+/**:
+  ros__parameters:
+"""
+
+
+def _yaml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return ".nan" if math.isnan(value) else repr(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_yaml_value(v) for v in value) + "]"
+    return f'"{value}"' if isinstance(value, str) else str(value)
+
+
+def config_yaml() -> str:
+    """config/ipe.yaml: every declared parameter with its description, range and default (``workers``,
+    whose default is the machine's, commented out)."""
+    import textwrap
+
+    lines = [_YAML_HEAD]
+    for spec in all_parameters():
+        note = spec.description + (f" [{_shown(spec.range[0])} .. {_shown(spec.range[1])}]" if spec.range else "") \
+            + (" (read-only)" if spec.read_only else "")
+        if spec.name == "workers":
+            note += ". Default: one per core, at most 8; uncomment to fix it."
+        lines += [f"    # {line}\n" for line in textwrap.wrap(note, 106)]
+        if spec.name == "workers":  # the machine's default: an example, commented out
+            lines.append("    # workers: 2\n")
+        else:
+            lines.append(f"    {spec.name}: {_yaml_value(spec.default)}\n")
+    return "".join(lines)
+
+
+if __name__ == "__main__":
+    sys.stdout.write(config_yaml())
+
+
+_TYPE_NAMES = {ParameterType.PARAMETER_INTEGER: "int", ParameterType.PARAMETER_DOUBLE: "double",
+               ParameterType.PARAMETER_BOOL: "bool", ParameterType.PARAMETER_STRING: "string",
+               ParameterType.PARAMETER_STRING_ARRAY: "string[]", ParameterType.PARAMETER_DOUBLE_ARRAY: "double[]"}
+
+
+def reference_columns(spec: ParamSpec) -> tuple[str, str, str, str]:
+    """docs/node.md's name, type, default and range columns of a parameter, as the node declares it
+    (the meaning column is written by hand; a test keeps these four equal)."""
+    kind = _TYPE_NAMES[spec.type] + (", read-only" if spec.read_only else "")
+    if spec.name == "workers":
+        default = "cores (≤ 8)"
+    elif isinstance(spec.default, bool):
+        default = "true" if spec.default else "false"
+    elif isinstance(spec.default, float):
+        default = _shown(spec.default) if math.isnan(spec.default) else repr(spec.default)
+    elif isinstance(spec.default, (list, tuple)):
+        default = "`[" + ", ".join(_shown(v) for v in spec.default) + "]`"
+    elif isinstance(spec.default, str):
+        default = f"`{spec.default}`" if spec.default else "`''`"
+    else:
+        default = str(spec.default)
+    bounds = "" if spec.range is None else f"{_shown(spec.range[0])}..{_shown(spec.range[1])}"
+    return f"`{spec.name}`", kind, default, bounds

@@ -160,6 +160,9 @@ def main() -> int:
     parser.add_argument("--question-kinds", default=None,
                         help="ask only these kinds of good question (comma-separated, of support,remove,push,place)")
     parser.add_argument("--settle-s", type=float, default=15.0, help="wait for the last answers before SIGINT")
+    parser.add_argument("--memray", default=None, metavar="FILE",
+                        help="run the node under memray (native stacks) into FILE: what holds the memory it gains "
+                             "(`python -m memray flamegraph --leaks FILE`; pip install memray)")
     args = parser.parse_args()
     good_questions, hostile_questions = _questions()
     if args.question_kinds:
@@ -170,7 +173,8 @@ def main() -> int:
     rng = random.Random(args.seed)
     domain = 150 + os.getpid() % 80
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(domain))
-    node = subprocess.Popen([sys.executable, "-m", "ipe_ros.ros.node", "--ros-args", "-p", "workers:=2",
+    traced = [] if args.memray is None else ["-m", "memray", "run", "--native", "--force", "-o", args.memray]
+    node = subprocess.Popen([sys.executable, *traced, "-m", "ipe_ros.ros.node", "--ros-args", "-p", "workers:=2",
                              "-p", "samples:=8", "-p", "budget_s:=10.0", "--log-level", "warn"],
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     with _ended_on_error(node):  # the node must not outlive a driver that fails

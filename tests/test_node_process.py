@@ -177,7 +177,7 @@ def test_the_demo_runs_end_to_end_and_writes_recordings(tmp_path):
 
 @pytest.mark.parametrize("override, message", [
     ("samples:=0", "ipe_node: error: Invalid parameter value (0) for parameter. Reason: Parameter samples out of "
-                   "range. Min: 1, Max: 10000, value: 0: samples"),
+                   "range. Min: 1, Max: 100000, value: 0: samples"),
     ("queries:=[nope]", "ipe_node: error: queries: unknown query 'nope'; choose from fall, any_fall, direction, far, bump, "
                         "contact, rest, final_pose"),
 ])

@@ -58,6 +58,10 @@ def default_workers() -> int:
     return max(1, min(os.cpu_count() or 1, 8))
 
 
+#: the most samples one prediction may ask for (the CLI's and the node's range too: engine.inputs)
+MAX_SAMPLES = 100_000
+
+
 @dataclass(frozen=True)
 class ModelConfig:
     """The IPE's inputs (paper SI, "Inputs") and its sample count k."""
@@ -96,7 +100,7 @@ class ModelConfig:
         if self.mu is not None:
             positive(self.mu, "mu")
             at_most(self.mu, "mu", limits.MAX_MASS_RATIO, "(the solver's mass-ratio limit)")
-        integer(self.samples, "samples", 1, 100_000)
+        integer(self.samples, "samples", 1, MAX_SAMPLES)
         boolean(self.object_noise, "object_noise")
         perception_source(self.perception)  # a ConfigError naming the choices
 

@@ -25,7 +25,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Callable, Literal, Mapping, Sequence
 
-from .config import (DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M, PRESETS,
+from .config import (MAX_SAMPLES, DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M, PRESETS,
                      default_workers)
 from .errors import ConfigError
 from .checking.fidelity import DEFAULT_CHECK
@@ -40,9 +40,6 @@ Caller = Literal["cli", "ros"]
 #: int, float, bool; ``floats``: one or more numbers; ``name``: one of ``choices`` (or any text
 #: without them); ``names``: several; ``pairs``: (A, B) object-name pairs
 Kind = Literal["int", "float", "floats", "bool", "name", "names", "pairs"]
-
-#: the most samples one prediction may ask for (ModelConfig checks the same bound)
-MAX_SAMPLES = 100_000
 
 
 @dataclass(frozen=True)

@@ -18,9 +18,11 @@ from ..scene.shapes import BoxShape
 from .kinds import Action, Place, Remove
 
 
-#: A world built only to look at the scene's geometry (contacts, rays, bounds): never stepped.
+#: A world built only to look at the scene's geometry (contacts, rays, bounds): never stepped, so
+#: it needs no solver for bounces (each switch to pybullet's direct solver allocates ~0.6 KB that
+#: pybullet 3.2.7 never frees, and the node builds such a world for every question).
 _GEOMETRY_SETTINGS = SimSettings(name="geometry", time_step_s=1 / 240, horizon_s=1.0,
-                                 solver=SolverSettings(iterations=10))
+                                 solver=SolverSettings(iterations=10, direct_solver_for_restitution=False))
 
 
 def geometry_world(scene: Scene):

@@ -128,6 +128,29 @@ def _hull_folder() -> str:
 _HULL_FOLDER: str | None = None
 
 
+def without_leaked_references(call, arguments: tuple):
+    """``call()``, then give back the references it kept to ``arguments`` and never released.
+
+    pybullet 3.2.7 reads a mesh's ``vertices`` through ``PySequence_Fast`` without releasing what
+    that returns: every sequence passed (the list and each vertex) is kept alive for ever, ~1.8 KB
+    per hull per world built. The node builds a world for every question's geometry, and that alone
+    grew it without bound (benchmarks/README, the soak). pybullet keeps no Python object after the
+    call (it copies the numbers), so the excess references are released here; a pybullet that
+    releases them itself leaves no excess and nothing is done."""
+    before = _references(arguments)
+    result = call()
+    for i, excess in enumerate(after - was for after, was in zip(_references(arguments), before)):
+        for _ in range(excess):
+            ctypes.pythonapi.Py_DecRef(ctypes.py_object(arguments[i]))
+    return result
+
+
+def _references(objects: tuple) -> list[int]:
+    """Each object's reference count, counted the same way every time (no loop variable or
+    iterator holding one of them: ``zip`` keeps its last items)."""
+    return [sys.getrefcount(objects[i]) for i in range(len(objects))]
+
+
 def _collision_shape(p, cid: int, shape, offset_m: np.ndarray) -> int:
     """A pybullet collision shape for ``shape``, its frame moved by ``offset_m`` (the body's frame in
     pybullet is its centre of mass, so a shape whose centre of mass is off its origin shifts by -com)."""
@@ -145,8 +168,9 @@ def _collision_shape(p, cid: int, shape, offset_m: np.ndarray) -> int:
         return p.createCollisionShape(p.GEOM_CAPSULE, radius=shape.radius_m, height=shape.length_m, **moved,
                                       physicsClientId=cid)
     if isinstance(shape, ConvexHull):
-        return p.createCollisionShape(p.GEOM_MESH, vertices=[list(map(float, v)) for v in shape.vertices_m],
-                                      **moved, physicsClientId=cid)
+        vertices = tuple(tuple(map(float, v)) for v in shape.vertices_m)
+        return without_leaked_references(lambda: p.createCollisionShape(p.GEOM_MESH, vertices=vertices, **moved,
+                                                                         physicsClientId=cid), (vertices, *vertices))
     # a compound: each part a child shape at its pose
     types, half_extents, radii, lengths, files, positions, orientations = [], [], [], [], [], [], []
     for part in shape.parts:

@@ -148,6 +148,28 @@ def test_a_crafted_or_damaged_entry_is_reported_in_one_line_and_recomputed_never
     assert not (tmp_path / "marker").exists()
 
 
+def test_a_well_formed_entry_of_another_scene_is_refused_naming_both_counts(tmp_path):
+    """Poisoned but well-formed: every array consistent, for a scene of 9 bodies stored under the
+    10-body tower's name; it was aggregated as the tower's (numpy's All-NaN slice, naming nothing)."""
+    import dataclasses
+
+    _, fresh = _one_sample_run(tmp_path / "store")
+    entry = _only_entry(tmp_path / "store")
+    shorter = dataclasses.replace(TOWER, objects=TOWER.objects[:-1])
+    other = ResumableMap(tmp_path / "other")
+    predict(shorter, ModelConfig(sigma_m=0.04, samples=1), preset("default"), QUERY, seed=1, map_fn=other.map,
+            **UNCHECKED)
+    poisoned = json.loads(_only_entry(tmp_path / "other").read_text())
+    poisoned["key"] = json.loads(entry.read_text())["key"]
+    entry.write_text(json.dumps(poisoned))
+    lines = []
+    store, answer = _one_sample_run(tmp_path / "store", report=lines.append)
+    assert (store.hits, store.computed, store.rejected) == (0, 1, 1)
+    assert lines == [f"ipe: ignoring store entry {entry} and computing it again: result: 9 bodies, but the scene it "
+                     f"is read for ({TOWER.name}) has 10"]
+    assert answer.to_dict()["object_fall_probability"] == fresh.to_dict()["object_fall_probability"]
+
+
 def test_links_and_oversized_entries_are_refused_unread(tmp_path, monkeypatch):
     _one_sample_run(tmp_path / "store")
     entry = _only_entry(tmp_path / "store")

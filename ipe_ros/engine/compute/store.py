@@ -143,8 +143,9 @@ class ResumableMap:
         except OSError:  # a link (ELOOP) or a file (ENOTDIR) where the shard folder belongs
             raise StoreEntryError(f"its folder {shard} is not a folder of the store (a link or a file)") from None
 
-    def _read(self, key: str):
-        """The stored result for ``key``; None when there is none or it is refused (reported)."""
+    def _read(self, key: str, item):
+        """The stored result for ``key`` (computed for ``item``); None when there is none or it is
+        refused (reported)."""
         path = self._path(key)
         shard = None
         try:
@@ -166,7 +167,9 @@ class ResumableMap:
                 data = handle.read(MAX_ENTRY_BYTES + 1)  # bounded even if it grows meanwhile
             if len(data) > MAX_ENTRY_BYTES:
                 raise StoreEntryError(f"more than the {MAX_ENTRY_BYTES} bytes an entry may have")
-            return decode_entry(data, key)
+            result = decode_entry(data, key)
+            _check_against_task(result, item)
+            return result
         except (StoreEntryError, OSError) as exc:
             self.rejected += 1
             self.report(f"ipe: ignoring store entry {path} and computing it again: {exc}")
@@ -181,7 +184,7 @@ class ResumableMap:
         results: list = [None] * len(items)
         missing = []
         for i, key in enumerate(keys):
-            results[i] = self._read(key)
+            results[i] = self._read(key, items[i])
             if results[i] is None:
                 missing.append(i)
         self.hits += len(items) - len(missing)
@@ -413,6 +416,22 @@ def _fits(value, hint) -> bool:
     if isinstance(hint, type):
         return isinstance(value, hint)
     return False
+
+
+def _check_against_task(result, task) -> None:
+    """A sample's stored outcome answers the task it is read for: its index, and a value per body
+    of the task's scene (a well-formed entry for another scene would be aggregated as this one's)."""
+    from ..sampling.outcome import SampleOutcome
+
+    scene = getattr(task, "scene", None)
+    if not isinstance(result, SampleOutcome) or scene is None:
+        return
+    if result.index != getattr(task, "index", result.index):
+        raise StoreEntryError(f"result.index: {result.index}, but it is read for sample {task.index}")
+    bodies = len(scene.dynamic_objects)
+    if result.initial_positions_m is not None and len(result.initial_positions_m) != bodies:
+        raise StoreEntryError(f"result: {len(result.initial_positions_m)} bodies, but the scene it is read for "
+                              f"({scene.name or 'unnamed'}) has {bodies}")
 
 
 def _check_shapes(result) -> None:

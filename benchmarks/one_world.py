@@ -44,7 +44,7 @@ def main() -> int:
     args = parser.parse_args()
     tower, settings = stable_tower(), preset("default")
     model = ModelConfig(sigma_m=0.04, samples=1)
-    p = simulation.world.pybullet()
+    p = simulation.bullet.pybullet()
     rows = []
     for n in map(int, args.copies.split(",")):
         samples = []

@@ -102,7 +102,8 @@ def test_health_names_divergence_and_watches_energy_after_the_inputs():
 
 def test_a_collapse_trial_puts_the_world_and_the_loop_back_as_they_were():
     from ipe_ros.engine.simulation.collapse import CollapseTrial
-    from ipe_ros.engine.simulation.world import build_world, pybullet, read_state
+    from ipe_ros.engine.simulation.bullet import pybullet
+    from ipe_ros.engine.simulation.world import build_world, read_state
 
     from .helpers import block, floor_scene
 

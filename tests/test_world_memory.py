@@ -13,13 +13,13 @@ import numpy as np
 from ipe_ros.engine.actions.geometry import contacts, geometry_world
 from ipe_ros.engine.config import preset
 from ipe_ros.engine.scene.catalogue import capped_tower
-from ipe_ros.engine.simulation import world
+from ipe_ros.engine.simulation import bullet, world
 
 
 def test_references_a_call_keeps_are_given_back_and_others_left():
     leaked, kept = (1.5, 2.5), (3.5, 4.5)  # fresh tuples, referenced only here
     before = sys.getrefcount(leaked), sys.getrefcount(kept)
-    result = world.without_leaked_references(lambda: ctypes.pythonapi.Py_IncRef(ctypes.py_object(leaked)) or 7,
+    result = bullet.without_leaked_references(lambda: ctypes.pythonapi.Py_IncRef(ctypes.py_object(leaked)) or 7,
                                              (leaked, kept))
     assert result == 7 and (sys.getrefcount(leaked), sys.getrefcount(kept)) == before
 

@@ -45,7 +45,7 @@ class Contacts:
 def contacts(scene: Scene, margin_m: float = 0.0) -> Contacts:
     bodies = scene.dynamic_objects
     world = geometry_world(scene)
-    p = simulation.world.pybullet()
+    p = simulation.bullet.pybullet()
     reach = margin_m + 0.01 * world.scale_m
     pairs = tuple((i, j) for (i, a), (j, b) in itertools.combinations(enumerate(world.dynamic_ids), 2)
                   if p.getClosestPoints(a, b, reach, physicsClientId=world.client))

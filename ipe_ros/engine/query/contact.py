@@ -120,7 +120,7 @@ class ContactWatch(StepWatch):
         self._client = world.client
 
     def start(self, world) -> None:
-        from ..simulation.world import pybullet
+        from ..simulation.bullet import pybullet
 
         p = pybullet()
         for key, first, second, tolerance in self._pairs:
@@ -133,7 +133,7 @@ class ContactWatch(StepWatch):
                         self._undecided -= 1
 
     def after_step(self, world, t_s: float) -> None:
-        from ..simulation.world import pybullet
+        from ..simulation.bullet import pybullet
 
         if not self._undecided:
             return

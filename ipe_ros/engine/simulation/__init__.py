@@ -9,7 +9,8 @@ from .depenetration import depenetrate
 from .probe import NO_PROBE, PHASES, Probe
 from .stepper import Push, RolloutEnd, simulate
 from .termination import DecidedHeights
-from .world import World, build_world, client, pybullet, read_poses, read_velocities
+from .bullet import client, pybullet
+from .world import World, build_world, read_poses, read_velocities
 
 __all__ = ["NO_PROBE", "PHASES", "DecidedHeights", "Probe", "Push", "RolloutEnd", "World", "build_world", "client",
            "depenetrate", "pybullet", "read_poses", "read_velocities", "simulate"]

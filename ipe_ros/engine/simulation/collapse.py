@@ -7,7 +7,7 @@ import copy
 import numpy as np
 
 from ..config import SimSettings
-from .world import pybullet
+from .bullet import pybullet
 
 
 class CollapseWatch:

@@ -6,7 +6,8 @@ import numpy as np
 
 from ..config import SimSettings
 from ..errors import PhysicsError
-from .world import World, pybullet
+from .bullet import pybullet
+from .world import World
 
 
 def depenetrate(world: World, settings: SimSettings) -> int:

@@ -121,7 +121,7 @@ def deeper_than(world, smallest_extents_m: np.ndarray, fraction: float, among: n
 
 
 def _contacts(world, detect: bool) -> tuple:
-    from .world import pybullet
+    from .bullet import pybullet
 
     p = pybullet()
     if detect:

@@ -35,7 +35,8 @@ from .probe import NO_PROBE, Probe
 from .settling import Settling
 from .steps import StepControl, substeps_for, ticks_allowed
 from .termination import DecidedHeights, RestWatch
-from .world import (World, mass_ratio, pybullet, read_poses, read_state, set_initial_velocities, speeds_of,
+from .bullet import pybullet
+from .world import (World, mass_ratio, read_poses, read_state, set_initial_velocities, speeds_of,
                     use_sequential_solver)
 
 #: Seconds between health checks (divergence, non-finite speeds), and between looks for rest and collapse.

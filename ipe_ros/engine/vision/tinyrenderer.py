@@ -29,7 +29,7 @@ def tiny_render(bodies, camera: PinholeCamera, near_m: float = 0.3,
     """``bodies``: (vertices, faces, position, orientation xyzw) meshes. Returns the (height, width, 4)
     RGBA image, the depth in metres along the optical axis (NaN where the ray meets nothing) and the
     segmentation (the body's index in ``bodies``, -1 for none)."""
-    from ..simulation.world import pybullet
+    from ..simulation.bullet import pybullet
 
     p = pybullet()
     client = p.connect(p.DIRECT)

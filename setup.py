@@ -20,7 +20,7 @@ setup(
         (f"share/{PACKAGE}/launch", ["launch/ipe.launch.py"]),
     ],
     python_requires=">=3.11",
-    install_requires=["setuptools", "numpy", "pybullet", "scipy", "tqdm"],
+    install_requires=["setuptools", "numpy", "pybullet", "scipy", "tqdm", "trimesh", "coacd"],
     zip_safe=True,
     maintainer="ipe_ros maintainers",
     maintainer_email="ipe-ros@example.com",

@@ -22,6 +22,8 @@ PYTHON_ROSDEP_KEYS = {
     "scipy": "python3-scipy",
     "matplotlib": "python3-matplotlib",
     "pybullet": "python3-pybullet-pip",
+    "trimesh": "python3-trimesh",
+    "coacd": None,
     "tqdm": "python3-tqdm",
     "PIL": "python3-pil",
     "yaml": "python3-yaml",

@@ -33,7 +33,7 @@ def test_schema_and_reader_name_the_same_fields():
     assert set(defs["floor"]["properties"]) == set(io.FLOOR_FIELDS)
     assert set(defs["table"]["properties"]) == set(io.TABLE_FIELDS)
     for kind, fields in io._SHAPE_FIELDS.items():
-        assert set(defs[kind]["properties"]) == {"type", *fields}, kind
+        assert set(defs[kind]["properties"]) == {"type", *fields, *io._SHAPE_OPTIONAL.get(kind, ())}, kind
 
 
 def test_every_example_scene_is_valid_under_the_schema():

@@ -103,7 +103,7 @@ def test_version_1_files_load_unchanged():
     ({"type": "compound", "parts": []}, "shape.parts", "a compound needs at least one part"),
     ({"type": "cylinder", "radius_m": 0.1}, "shape.length_m", "required field is missing"),
     ({"type": "cone", "radius_m": 0.1}, "shape.type",
-     "must be one of box, sphere, cylinder, capsule, convex, compound, got 'cone'"),
+     "must be one of box, sphere, cylinder, capsule, convex, compound, mesh, got 'cone'"),
 ])
 def test_bad_shapes_name_the_field(shape, field, message):
     data = scene_to_dict(on_floor(resting(Sphere(0.1), "ball")))

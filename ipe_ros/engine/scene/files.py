@@ -4,6 +4,7 @@ Files are read as UTF-8; a file that is not is named with its first bad byte."""
 from __future__ import annotations
 
 import csv
+import os
 from collections import OrderedDict
 from pathlib import Path
 from typing import Iterable
@@ -12,6 +13,7 @@ from ..errors import SceneError, shown
 from .bodies import DEFAULT_MAX_OBJECTS, Box, Floor, Scene
 from .validation import validate_scene
 from .format import OnRefused, RefusedScene, scenes_from_json
+from .meshes import MeshAccess
 
 _CSV_COLUMNS = ("name", "object", "friction", "mass", "pos_x", "pos_y", "pos_z", "quat_w", "quat_x",
                 "quat_y", "quat_z", "restitution", "scale_x", "scale_y", "scale_z")
@@ -136,7 +138,11 @@ def load_scenes(path: str | Path, towers: Iterable[str] | None = None,
         raise SceneError(str(path), f"not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start}); "
                                     "save the file as UTF-8") from None
     refusals: list[RefusedScene] = []
-    scenes = scenes_from_json(text, max_objects, refusals.append if on_refused is not None else None)
+    # a file's meshes are read beside it and under the folders $IPE_MESH_PATH names (os.pathsep-separated)
+    roots = (path.resolve().parent, *(Path(p).resolve() for p in os.environ.get("IPE_MESH_PATH", "").split(os.pathsep)
+                                      if p))
+    scenes = scenes_from_json(text, max_objects, refusals.append if on_refused is not None else None,
+                              MeshAccess(roots=roots, base=path.resolve().parent))
     wanted = None if towers is None else set(towers)
     if wanted is not None:
         refusals = [r for r in refusals if r.name in wanted]

@@ -40,6 +40,7 @@ precision by the json module).
 
 from __future__ import annotations
 
+import functools
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,6 +49,7 @@ from typing import Any, Callable, Iterable
 from ..errors import SceneError, json_type as _json_type, shown
 from .limits import MAX_JSON_CHARS
 from .bodies import DEFAULT_MAX_OBJECTS, Body, Box, Floor, Scene, Table
+from .meshes import MeshAccess, mesh_shape
 from .validation import validate_scene
 from .shapes import SHAPE_TYPES, BoxShape, Capsule, Compound, CompoundPart, ConvexHull, Cylinder, Sphere
 
@@ -60,7 +62,10 @@ OBJECT_REQUIRED = ("name", "shape", "position_m", "orientation_xyzw", "friction"
 _OBJECT_OPTIONAL = ("mass_kg", "density_kg_m3", "group", "static", "linear_velocity_m_s", "angular_velocity_rad_s",
                     "position_sigma_m", "yaw_sigma_rad")
 _SHAPE_FIELDS = {"box": ("extents_m",), "sphere": ("radius_m",), "cylinder": ("radius_m", "length_m"),
-                 "capsule": ("radius_m", "length_m"), "convex": ("vertices_m",), "compound": ("parts",)}
+                 "capsule": ("radius_m", "length_m"), "convex": ("vertices_m",), "compound": ("parts",),
+                 "mesh": ("uri",)}
+#: fields a shape may leave out
+_SHAPE_OPTIONAL = {"mesh": ("scale",)}
 FLOOR_FIELDS = ("type", "height_m", "friction", "restitution")
 TABLE_FIELDS = ("type", "top_height_m", "size_m", "center_xy_m", "thickness_m", "friction",
                  "restitution", "floor_z_m", "obstacles")
@@ -172,13 +177,16 @@ def _num(value: Any, path: str) -> float:
     return float(value)
 
 
-def shape_from_dict(data: Any, path: str, *, nested: bool = False):
+def shape_from_dict(data: Any, path: str, *, nested: bool = False, meshes: MeshAccess | None = None):
+    """A shape; a mesh shape is read through ``meshes`` (None: refused) and becomes its convex parts."""
     data = _require_mapping(data, path)
     kind = data.get("type")
-    if not isinstance(kind, str) or kind not in _SHAPE_FIELDS or (nested and kind == "compound"):
-        allowed = [t for t in SHAPE_TYPES if not (nested and t == "compound")]
+    if not isinstance(kind, str) or kind not in _SHAPE_FIELDS or (nested and kind in ("compound", "mesh")):
+        allowed = [t for t in (*SHAPE_TYPES, "mesh") if not (nested and t in ("compound", "mesh"))]
         raise SceneError(f"{path}.type", f"must be one of {', '.join(allowed)}, got {shown(kind)}")
-    _check_keys(data, ("type", *_SHAPE_FIELDS[kind]), (), path)
+    _check_keys(data, ("type", *_SHAPE_FIELDS[kind]), _SHAPE_OPTIONAL.get(kind, ()), path)
+    if kind == "mesh":
+        return mesh_shape(data, path, meshes)
     if kind == "box":
         return BoxShape(_vec(data["extents_m"], 3, f"{path}.extents_m"))  # type: ignore[arg-type]
     if kind == "sphere":
@@ -235,8 +243,8 @@ def box_from_dict(data: Any, path: str) -> Body:
     return Box(extents_m=_vec(data["extents_m"], 3, f"{path}.extents_m"), **_common_fields(data, path))
 
 
-def object_from_dict(data: Any, path: str) -> Body:
-    """A ``/2`` object."""
+def object_from_dict(data: Any, path: str, meshes: MeshAccess | None = None) -> Body:
+    """A ``/2`` object (its mesh shape read through ``meshes``)."""
     data = _require_mapping(data, path)
     _check_keys(data, OBJECT_REQUIRED, _OBJECT_OPTIONAL, path)
     fields = _common_fields(data, path)
@@ -246,7 +254,7 @@ def object_from_dict(data: Any, path: str) -> Body:
     elif sigma is not None:
         sigma = _vec(sigma, 3, f"{path}.position_sigma_m")
     yaw = data.get("yaw_sigma_rad")
-    return Body(shape=shape_from_dict(data["shape"], f"{path}.shape"),
+    return Body(shape=shape_from_dict(data["shape"], f"{path}.shape", meshes=meshes),
                 linear_velocity_m_s=_vec(data.get("linear_velocity_m_s", [0.0, 0.0, 0.0]), 3,
                                          f"{path}.linear_velocity_m_s"),  # type: ignore[arg-type]
                 angular_velocity_rad_s=_vec(data.get("angular_velocity_rad_s", [0.0, 0.0, 0.0]), 3,
@@ -282,8 +290,9 @@ def _support_from_dict(data: Any, read_object) -> Floor | Table:
     raise SceneError("support.type", f"must be \"floor\" or \"table\", got {shown(kind)}")
 
 
-def scene_from_dict(data: Any, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scene:
-    """Build and validate a scene from parsed JSON (``/2``, or ``/1``); raises SceneError naming the bad field."""
+def scene_from_dict(data: Any, max_objects: int = DEFAULT_MAX_OBJECTS, meshes: MeshAccess | None = None) -> Scene:
+    """Build and validate a scene from parsed JSON (``/2``, or ``/1``); raises SceneError naming the bad field.
+    ``meshes``: where mesh shapes may be read from (None: a mesh shape is refused)."""
     data = _require_mapping(data, "")
     # without a "format", a scene with "boxes" and no "objects" is a /1 scene
     fmt = data.get("format", SCENE_FORMAT_V1 if "boxes" in data and "objects" not in data else SCENE_FORMAT)
@@ -292,7 +301,7 @@ def scene_from_dict(data: Any, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scene:
         key, read_object = "boxes", box_from_dict
     elif fmt == SCENE_FORMAT:
         _check_keys(data, SCENE_REQUIRED, ("format", "horizon_s"), "")
-        key, read_object = "objects", object_from_dict
+        key, read_object = "objects", functools.partial(object_from_dict, meshes=meshes)
     else:
         raise SceneError("format", f"unsupported format {shown(fmt)}; this version reads {shown(SCENE_FORMAT)} and "
                                    f"{shown(SCENE_FORMAT_V1)}")
@@ -341,7 +350,8 @@ def _reject_constant(token: str) -> None:
     raise SceneError("json", f"{token} is not a valid number; use finite numbers only")
 
 
-def scenes_from_json(text: str, max_objects: int = DEFAULT_MAX_OBJECTS, on_refused: OnRefused | None = None) -> list[Scene]:
+def scenes_from_json(text: str, max_objects: int = DEFAULT_MAX_OBJECTS, on_refused: OnRefused | None = None,
+                     meshes: MeshAccess | None = None) -> list[Scene]:
     """Parse JSON text holding one scene object or a list of them. With ``on_refused``, a scene of
     the list that cannot be read is handed to it and the others are returned (the text itself must
     still be JSON holding scenes)."""
@@ -360,7 +370,7 @@ def scenes_from_json(text: str, max_objects: int = DEFAULT_MAX_OBJECTS, on_refus
         scenes = []
         for i, item in enumerate(data):
             try:
-                scenes.append(scene_from_dict(item, max_objects))
+                scenes.append(scene_from_dict(item, max_objects, meshes))
             except SceneError as exc:
                 error = SceneError(f"scenes[{i}].{exc.field}", exc.problem)
                 if on_refused is None:
@@ -370,4 +380,4 @@ def scenes_from_json(text: str, max_objects: int = DEFAULT_MAX_OBJECTS, on_refus
         if not scenes and on_refused is not None:
             raise SceneError("json", f"none of the {len(data)} scenes can be read (each refusal is reported)")
         return scenes
-    return [scene_from_dict(data, max_objects)]
+    return [scene_from_dict(data, max_objects, meshes)]

@@ -74,8 +74,17 @@ def _shapes() -> dict[str, Any]:
                                   "items": _vector(3, "a point in the object frame, m")}},
         "compound": {"parts": {"type": "array", "minItems": 1, "items": {"$ref": "#/$defs/part"},
                                "description": "convex parts in the object frame (not overlapping)"}},
+        "mesh": {"uri": {"type": "string", "minLength": 1,
+                         "description": "a closed mesh (OBJ, STL, PLY, GLB) in the object frame, +z up (GLB: its "
+                                        "+y): a path beside the scene file, file:// or package://; read as convex "
+                                        "parts (docs/scene-format.md)"},
+                 "scale": {"description": "metres per file unit (0.001 for millimetres): one number or [sx, sy, sz]",
+                           "oneOf": [_number("m per unit", 0.0, exclusive_minimum=True),
+                                     _vector(3, "m per unit along x, y, z", None, 0.0)]}},
     }
-    return {kind: _closed({"type": {"const": kind}, **props}, ("type", *props), f"a {kind}")
+    optional = {"mesh": ("scale",)}
+    return {kind: _closed({"type": {"const": kind}, **props},
+                          ("type", *(p for p in props if p not in optional.get(kind, ()))), f"a {kind}")
             for kind, props in fields.items()}
 
 
@@ -143,7 +152,7 @@ def scene_schema() -> dict[str, Any]:
                     "description": f"at most max_objects ({DEFAULT_MAX_OBJECTS} by default), one dynamic at least"},
     }, io.SCENE_REQUIRED, f"a scene in the {io.SCENE_FORMAT} format")
     shapes = _shapes()
-    part = _closed({"shape": _by_type([k for k in shapes if k != "compound"]),
+    part = _closed({"shape": _by_type([k for k in shapes if k not in ("compound", "mesh")]),
                     "position_m": _vector(3, "the part's origin in the object frame, m"),
                     "orientation_xyzw": _vector(4, "the part's unit quaternion in the object frame")},
                    ("shape",), "one convex part of a compound")

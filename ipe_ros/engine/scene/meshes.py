@@ -1,0 +1,233 @@
+"""Objects from mesh files: read with trimesh, decomposed into convex parts with CoACD, cached on disk.
+
+A scene names a mesh as a shape ``{"type": "mesh", "uri": ..., "scale": ...}``; reading the scene
+turns it into a compound of convex parts in the mesh's own frame (metres, +z up), so everything
+downstream (validation, the physics, markers, recordings) sees a shape it already knows. The
+decomposition is the slow part (seconds for a mug): it is cached under ``cache_dir`` by the file's
+content, the scale and the decomposition's settings, so a mesh is decomposed once per machine.
+
+Where meshes may come from is the caller's to say (``MeshAccess``): the command line reads them
+beside the scene file and under folders it is given; the node only under the folders its operator
+configured (a scene arrives over the network, and must not make the node read arbitrary files).
+Files are sized before they are read, vertices and parts are bounded, and a mesh that does not
+enclose a volume is refused with the fix.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import stat
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import SceneError, shown
+from . import limits
+from .shapes import Compound, CompoundPart, ConvexHull
+
+#: what trimesh reads without extra libraries (DAE needs pycollada; glTF with external buffers reads
+#: other files): name a GLB instead
+MESH_FORMATS = ("obj", "stl", "ply", "glb")
+MAX_MESH_BYTES = 32 * 2**20
+MAX_MESH_VERTICES = 200_000
+#: every part's hull is kept to this many vertices (CoACD's max_ch_vertex), so that a mesh's parts
+#: stay within the compound limits (limits.MAX_COMPOUND_VERTICES)
+MAX_PART_VERTICES = 64
+#: bump when the cached decomposition's meaning changes
+_CACHE_VERSION = 1
+
+
+@dataclass(frozen=True)
+class Decomposition:
+    """CoACD's settings: ``threshold`` the concavity a part may keep (a fraction of the mesh's size;
+    smaller: more, tighter parts), ``max_parts`` the most parts (-1: as many as the threshold needs,
+    within limits.MAX_COMPOUND_PARTS)."""
+
+    threshold: float = 0.05
+    max_parts: int = 32
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class MeshAccess:
+    """Where a scene's meshes may be read from: files under one of ``roots`` (after following
+    links); relative paths from ``base``; ``package://NAME/...`` through the ROS package index when
+    it is there, else ``roots/NAME/...``. Decompositions are cached in ``cache_dir`` (default:
+    $IPE_CACHE_DIR, else ~/.cache/ipe_ros)."""
+
+    roots: tuple[Path, ...]
+    base: Path | None = None
+    cache_dir: Path | None = None
+    decomposition: Decomposition = field(default_factory=Decomposition)
+
+    def cache(self) -> Path:
+        if self.cache_dir is not None:
+            return Path(self.cache_dir)
+        return Path(os.environ.get("IPE_CACHE_DIR") or Path.home() / ".cache" / "ipe_ros") / "convex_parts"
+
+
+def mesh_shape(data: dict, path: str, access: MeshAccess | None) -> Compound:
+    """The compound of convex parts of the mesh shape ``data`` (``uri``, ``scale``), or a SceneError
+    naming ``path`` and the fix."""
+    if access is None:
+        raise SceneError(f"{path}.uri", "mesh shapes are read from files, which this input may not reach; give "
+                                        "the object as convex parts (type compound), or send the scene where meshes "
+                                        "are allowed (ipe predict reads them beside the scene file; the node under "
+                                        "its mesh_roots)")
+    uri = data["uri"]
+    if not isinstance(uri, str) or not uri.strip():
+        raise SceneError(f"{path}.uri", f"must be a file path, file:// or package:// URI, got {shown(uri)}")
+    scale = _scale(data.get("scale", 1.0), f"{path}.scale")
+    file = _resolve(uri, f"{path}.uri", access)
+    content = _read_bounded(file, f"{path}.uri")
+    key = hashlib.sha256(b"%d|%s|%r|%r" % (_CACHE_VERSION, file.suffix.lower().encode(), scale,
+                                           access.decomposition) + content).hexdigest()
+    parts = _cached_parts(access.cache(), key)
+    if parts is None:
+        vertices, faces = _load(content, file, scale, f"{path}.uri")
+        parts = _decompose(vertices, faces, access.decomposition, f"{path}.uri")
+        _store_parts(access.cache(), key, parts)
+    return Compound(tuple(CompoundPart(ConvexHull(tuple(tuple(map(float, v)) for v in part))) for part in parts))
+
+
+def _scale(value: Any, path: str) -> tuple[float, float, float]:
+    values = [value] * 3 if isinstance(value, (int, float)) and not isinstance(value, bool) else value
+    if not (isinstance(values, list | tuple) and len(values) == 3
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0
+                    for v in values)):
+        raise SceneError(path, f"must be a positive number or three ([sx, sy, sz]; metres per file unit), got "
+                               f"{shown(value)}")
+    return tuple(float(v) for v in values)  # type: ignore[return-value]
+
+
+def _resolve(uri: str, path: str, access: MeshAccess) -> Path:
+    if uri.startswith("package://"):
+        package, _, rest = uri[len("package://"):].partition("/")
+        candidate = _package_file(package, rest, access)
+        if candidate is None:
+            raise SceneError(path, f"package {shown(package)} is not in the ROS package index nor under "
+                                   f"{', '.join(map(str, access.roots)) or 'any mesh root'}; source its workspace or "
+                                   "add its parent folder to the mesh roots")
+    elif uri.startswith("file://"):
+        candidate = Path(uri[len("file://"):])
+    elif "://" in uri:
+        raise SceneError(path, f"{shown(uri)}: only file paths, file:// and package:// URIs are read")
+    else:
+        candidate = Path(uri) if Path(uri).is_absolute() or access.base is None else access.base / uri
+    real = Path(os.path.realpath(candidate))
+    if not any(real.is_relative_to(os.path.realpath(root)) for root in access.roots):
+        raise SceneError(path, f"{shown(uri)} is outside the folders meshes may be read from "
+                               f"({', '.join(map(str, access.roots)) or 'none configured'})")
+    suffix = real.suffix.lower().lstrip(".")
+    if suffix not in MESH_FORMATS:
+        raise SceneError(path, f"{shown(uri)}: unknown mesh format {shown(suffix)}; give one of "
+                               f"{', '.join(MESH_FORMATS)} (export DAE or glTF as GLB)")
+    return real
+
+
+def _package_file(package: str, rest: str, access: MeshAccess) -> Path | None:
+    if not package or ".." in Path(rest).parts:
+        return None
+    try:
+        from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
+
+        try:
+            return Path(get_package_share_directory(package)) / rest
+        except PackageNotFoundError:
+            pass
+    except ImportError:  # no ROS here: the roots are the search path
+        pass
+    return next((Path(root) / package / rest for root in access.roots if (Path(root) / package).is_dir()), None)
+
+
+def _read_bounded(file: Path, path: str) -> bytes:
+    try:
+        fd = os.open(file, os.O_RDONLY | os.O_NONBLOCK)
+    except FileNotFoundError:
+        raise SceneError(path, f"{file}: no such file") from None
+    except OSError as exc:
+        raise SceneError(path, f"{file}: cannot be read ({exc.strerror})") from None
+    info = os.fstat(fd)
+    if not stat.S_ISREG(info.st_mode):
+        os.close(fd)
+        raise SceneError(path, f"{file} is not a regular file (a folder or a device)")
+    with os.fdopen(fd, "rb") as handle:
+        if info.st_size > MAX_MESH_BYTES:
+            raise SceneError(path, f"{file}: {info.st_size} bytes, more than the {MAX_MESH_BYTES} a mesh may have; "
+                                   "simplify it (fewer triangles)")
+        content = handle.read(MAX_MESH_BYTES + 1)
+    if len(content) > MAX_MESH_BYTES:
+        raise SceneError(path, f"{file} grew past {MAX_MESH_BYTES} bytes while read")
+    return content
+
+
+def _load(content: bytes, file: Path, scale: tuple[float, float, float], path: str) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (metres, +z up) and triangles of the file's one closed mesh."""
+    import io
+
+    import trimesh
+
+    kind = file.suffix.lower().lstrip(".")
+    try:
+        mesh = trimesh.load(io.BytesIO(content), file_type=kind, force="mesh", process=True)
+    except Exception as exc:  # trimesh raises what its parsers raise
+        raise SceneError(path, f"{file}: not a readable {kind.upper()} mesh ({type(exc).__name__}: "
+                               f"{str(exc)[:120]})") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise SceneError(path, f"{file}: holds no triangles")
+    if len(mesh.vertices) > MAX_MESH_VERTICES:
+        raise SceneError(path, f"{file}: {len(mesh.vertices)} vertices, more than the {MAX_MESH_VERTICES} read; "
+                               "simplify it")
+    vertices = np.asarray(mesh.vertices, float)
+    if kind == "glb":  # glTF's up is +y: turn it to +z (x stays)
+        vertices = vertices[:, [0, 2, 1]] * np.array([1.0, -1.0, 1.0])
+    if not np.all(np.isfinite(vertices)):
+        raise SceneError(path, f"{file}: has vertices that are not finite numbers")
+    if not mesh.is_watertight:
+        raise SceneError(path, f"{file}: is not closed (it has holes or loose edges), so it encloses no volume "
+                               "to give a mass; close it (fill its holes) or give the object as convex parts")
+    return vertices * np.asarray(scale), np.asarray(mesh.faces, np.int64)
+
+
+def _decompose(vertices: np.ndarray, faces: np.ndarray, settings: Decomposition, path: str) -> list[np.ndarray]:
+    import coacd
+
+    coacd.set_log_level("error")
+    most = limits.MAX_COMPOUND_PARTS if settings.max_parts < 0 else min(settings.max_parts, limits.MAX_COMPOUND_PARTS)
+    parts = coacd.run_coacd(coacd.Mesh(vertices, faces), threshold=settings.threshold, max_convex_hull=most,
+                            max_ch_vertex=MAX_PART_VERTICES, seed=settings.seed)
+    hulls = [np.asarray(v, float) for v, _ in parts if len(v) >= 4]
+    if not hulls:
+        raise SceneError(path, "its convex decomposition is empty (a flat or degenerate mesh)")
+    if sum(len(h) for h in hulls) > limits.MAX_COMPOUND_VERTICES:
+        raise SceneError(path, f"its {len(hulls)} convex parts have more than {limits.MAX_COMPOUND_VERTICES} vertices "
+                               "together; raise the threshold or lower max_parts")
+    return hulls
+
+
+def _cached_parts(folder: Path, key: str) -> list[np.ndarray] | None:
+    """The parts stored under ``key`` (JSON, never code), or None when there are none usable."""
+    try:
+        data = json.loads((folder / f"{key}.json").read_text())
+        parts = [np.asarray(p, float) for p in data["parts"]]
+        if data.get("key") != key or not parts or any(p.ndim != 2 or p.shape[1] != 3 or len(p) < 4 for p in parts):
+            return None
+        return parts
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def _store_parts(folder: Path, key: str, parts: list[np.ndarray]) -> None:
+    """Written to a temporary file and renamed: a reader never sees half an entry."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        partial = folder / f"{key}.{os.getpid()}.part"
+        partial.write_text(json.dumps({"key": key, "parts": [p.tolist() for p in parts]}))
+        os.replace(partial, folder / f"{key}.json")
+    except OSError:  # a read-only home: decomposed again next time, answered all the same
+        pass

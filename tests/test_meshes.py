@@ -1,0 +1,155 @@
+"""Objects from mesh files (engine/scene/meshes.py): a mug read from OBJ or GLB holds a ball that its
+convex hull would not; decompositions are cached; bad meshes and meshes out of reach are refused in
+one line naming the object."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+import pytest
+
+from ipe_ros.engine import ModelConfig, QuerySpec, SceneError, load_scenes, predict, preset
+from ipe_ros.engine.scene import meshes
+from ipe_ros.engine.scene.format import scenes_from_json
+from ipe_ros.engine.scene.shapes import Compound, ConvexHull
+
+trimesh = pytest.importorskip("trimesh")
+
+R_OUT, R_IN, HEIGHT, BOTTOM = 0.04, 0.035, 0.1, 0.006
+
+
+def mug_mesh(closed: bool = True, n: int = 32):
+    """A cup without a handle: outer wall, rim, inner wall, inner floor and base, closed."""
+    angles = np.linspace(0, 2 * np.pi, n, endpoint=False)
+
+    def ring(r, z):
+        return np.c_[r * np.cos(angles), r * np.sin(angles), np.full(n, z)]
+
+    vertices = np.vstack([ring(R_OUT, 0), ring(R_OUT, HEIGHT), ring(R_IN, HEIGHT), ring(R_IN, BOTTOM),
+                          [[0, 0, 0], [0, 0, BOTTOM]]])
+    faces = []
+    for lower, upper in ((0, n), (n, 2 * n), (2 * n, 3 * n)):
+        for k in range(n):
+            a0, a1, b0, b1 = lower + k, lower + (k + 1) % n, upper + k, upper + (k + 1) % n
+            faces += [(a0, a1, b1), (a0, b1, b0)]
+    for k in range(n if closed else 0):
+        faces += [(4 * n, (k + 1) % n, k), (4 * n + 1, 3 * n + k, 3 * n + (k + 1) % n)]
+    mesh = trimesh.Trimesh(vertices, faces, process=True)
+    trimesh.repair.fix_normals(mesh)
+    return mesh
+
+
+def scene_with(shape: dict, ball: bool = True) -> dict:
+    objects = [{"name": "mug", "shape": shape, "position_m": [0, 0, 0], "orientation_xyzw": [0, 0, 0, 1],
+                "friction": 0.6, "restitution": 0.0, "density_kg_m3": 2000}]
+    if ball:
+        objects.append({"name": "ball", "shape": {"type": "sphere", "radius_m": 0.015},
+                        "position_m": [0, 0, BOTTOM + 0.0155], "orientation_xyzw": [0, 0, 0, 1], "friction": 0.6,
+                        "restitution": 0.0, "mass_kg": 0.02})
+    return {"format": "ipe_ros.scene/2", "name": "mug_and_ball", "gravity_m_s2": [0, 0, -9.81],
+            "support": {"type": "floor", "height_m": 0.0, "friction": 0.6, "restitution": 0.0}, "objects": objects}
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    """The mug as OBJ and as GLB (glTF's +y up), one decomposition cache for the module."""
+    path = tmp_path_factory.mktemp("meshes")
+    mug_mesh().export(path / "mug.obj")
+    y_up = mug_mesh()
+    y_up.apply_transform(trimesh.transformations.rotation_matrix(-np.pi / 2, [1, 0, 0]))
+    y_up.export(path / "mug.glb")
+    os.environ["IPE_CACHE_DIR"] = str(path / "cache")
+    yield path
+    os.environ.pop("IPE_CACHE_DIR", None)
+
+
+def _write(folder, data: dict, name: str = "scene.json"):
+    (folder / name).write_text(json.dumps(data))
+    return folder / name
+
+
+def _finals(scene) -> dict[str, np.ndarray]:
+    """Where each object ends, the scene as given, converged physics."""
+    answer = predict(scene, ModelConfig(sigma_m=0.0, samples=1, object_noise=False), preset("paper"),
+                     QuerySpec(queries=frozenset({"final_pose"})), check=None)
+    return {name: np.array(pose["position_m"]) for name, pose in answer.to_dict()["final_pose"].items()}
+
+
+@pytest.mark.parametrize("file", ["mug.obj", "mug.glb"])
+def test_a_mug_from_a_mesh_holds_a_ball_that_its_convex_hull_would_not(folder, file):
+    [scene] = load_scenes(_write(folder, scene_with({"type": "mesh", "uri": file})))
+    mug = scene.objects[0].shape
+    assert isinstance(mug, Compound) and 2 <= len(mug.parts) <= meshes.Decomposition().max_parts
+    points = np.concatenate([p.shape.vertices_m for p in mug.parts])
+    assert np.allclose(points.min(axis=0), [-R_OUT, -R_OUT, 0], atol=2e-3)  # upright (GLB turned to +z)
+    assert np.allclose(points.max(axis=0), [R_OUT, R_OUT, HEIGHT], atol=2e-3)
+    final = _finals(scene)
+    assert np.hypot(*(final["ball"] - final["mug"])[:2]) < R_IN - 0.015  # still in the cup
+    assert final["ball"][2] < BOTTOM + 0.015 + 0.004 and final["mug"][2] < 0.05, final  # on its floor, mug upright
+    hull = {"type": "convex", "vertices_m": mug_mesh().vertices.tolist()}
+    [as_hull] = load_scenes(_write(folder, scene_with(hull), "hull.json"))
+    assert _finals(as_hull)["mug"][2] > 0.07  # a solid lump: it ends resting on the ball instead
+
+
+def test_a_mesh_is_decomposed_once_and_read_back_from_the_cache(folder, monkeypatch):
+    path = _write(folder, scene_with({"type": "mesh", "uri": "mug.obj", "scale": 1.0}))
+    [first] = load_scenes(path)  # decomposed here or by an earlier test: cached either way
+    import coacd
+
+    monkeypatch.setattr(coacd, "run_coacd", lambda *a, **k: pytest.fail("decomposed again"))
+    [again] = load_scenes(path)
+    assert again.objects[0].shape == first.objects[0].shape
+    assert sum(len(p.shape.vertices_m) for p in first.objects[0].shape.parts) <= 4096
+    assert len(list((folder / "cache" / "convex_parts").glob("*.json"))) >= 1
+
+
+def test_bad_meshes_and_meshes_out_of_reach_are_refused_in_one_line_naming_the_object(folder, tmp_path):
+    mug_mesh(closed=False).export(folder / "open.obj")
+    (folder / "notes.xyz").write_text("1 2 3\n")
+    (folder / "folder.obj").mkdir(exist_ok=True)
+    if not (folder / "zero.obj").exists():
+        (folder / "zero.obj").symlink_to("/dev/zero")
+    outside = tmp_path / "elsewhere.obj"
+    mug_mesh().export(outside)
+    where = "objects[0].shape"
+    cases = {
+        "missing.obj": f"{where}.uri: {folder / 'missing.obj'}: no such file",
+        "notes.xyz": f"{where}.uri: 'notes.xyz': unknown mesh format 'xyz'; give one of obj, stl, ply, glb "
+                     "(export DAE or glTF as GLB)",
+        "open.obj": f"{where}.uri: {folder / 'open.obj'}: is not closed (it has holes or loose edges), so it "
+                    "encloses no volume to give a mass; close it (fill its holes) or give the object as convex parts",
+        "folder.obj": f"{where}.uri: {folder / 'folder.obj'} is not a regular file (a folder or a device)",
+        "zero.obj": f"{where}.uri: 'zero.obj' is outside the folders meshes may be read from ({folder})",
+        str(outside): f"{where}.uri: '{outside}' is outside the folders meshes may be read from ({folder})",
+        "https://example.com/mug.obj": f"{where}.uri: 'https://example.com/mug.obj': only file paths, file:// and "
+                                       "package:// URIs are read",
+    }
+    for uri, message in cases.items():
+        with pytest.raises(SceneError) as caught:
+            load_scenes(_write(folder, scene_with({"type": "mesh", "uri": uri}, ball=False), "bad.json"))
+        assert str(caught.value) == message, uri
+    with pytest.raises(SceneError) as caught:
+        load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "mug.obj", "scale": -1}, ball=False), "bad.json"))
+    assert str(caught.value) == ("objects[0].shape.scale: must be a positive number or three ([sx, sy, sz]; metres per "
+                                 "file unit), got -1")
+
+
+def test_a_scene_from_the_network_cannot_make_the_reader_open_files(folder):
+    """A scene parsed without mesh access (the node's ~/scene_json, a question's scene) refuses mesh shapes."""
+    with pytest.raises(SceneError) as caught:
+        scenes_from_json(json.dumps(scene_with({"type": "mesh", "uri": str(folder / "mug.obj")})))
+    assert str(caught.value).startswith("objects[0].shape.uri: mesh shapes are read from files, which this input may "
+                                        "not reach")
+
+
+def test_a_mesh_too_large_is_refused_before_it_is_read(folder, monkeypatch):
+    monkeypatch.setattr(meshes, "MAX_MESH_BYTES", 1000)
+    with pytest.raises(SceneError, match=r"bytes, more than the 1000 a mesh may have; simplify it"):
+        load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "mug.obj"}, ball=False), "big.json"))
+
+
+def test_a_part_of_a_mesh_is_a_convex_hull_in_the_mesh_frame(folder):
+    [scene] = load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "mug.obj"}, ball=False)))
+    assert all(isinstance(p.shape, ConvexHull) and p.position_m == (0.0, 0.0, 0.0) for p in scene.objects[0].shape.parts)

@@ -14,6 +14,7 @@ from geometry_msgs.msg import Point
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ipe_ros.engine import ConfigError, Scene, SceneError
+from ipe_ros.engine.scene.meshes import MeshAccess
 from ipe_ros.engine.actions.question import Question, question_from_dict
 from ipe_ros.engine.errors import json_type
 from ipe_ros.engine.scene.limits import MAX_JSON_CHARS
@@ -34,8 +35,10 @@ def request_id_of(msg: String) -> str:
     return value[:128] if isinstance(value, str) else ""
 
 
-def string_to_question(msg: String, *, max_objects: int = DEFAULT_MAX_OBJECTS) -> tuple[Question, Scene | None]:
-    """A question and the scene it brings (None: ask about the node's newest scene)."""
+def string_to_question(msg: String, *, max_objects: int = DEFAULT_MAX_OBJECTS,
+                       meshes: MeshAccess | None = None) -> tuple[Question, Scene | None]:
+    """A question and the scene it brings (None: ask about the node's newest scene; its mesh shapes
+    read through ``meshes``, None: refused)."""
     if len(msg.data) > MAX_JSON_CHARS:  # before reading it: the reply must not wait on 100 MB of JSON
         raise ConfigError("data", f"{len(msg.data)} characters exceed the maximum of {MAX_JSON_CHARS} for a question; "
                                   "send the scene on ~/scene_json and ask about it without \"scene\"")
@@ -50,7 +53,7 @@ def string_to_question(msg: String, *, max_objects: int = DEFAULT_MAX_OBJECTS) -
     scene = None
     if "scene" in data:
         try:
-            scene = scene_from_dict(data.pop("scene"), max_objects)
+            scene = scene_from_dict(data.pop("scene"), max_objects, meshes)
         except SceneError as exc:
             raise SceneError(f"scene.{exc.field}", exc.problem) from None
     return question_from_dict(data), scene

@@ -11,13 +11,15 @@ from ipe_ros.engine import Scene, SceneError
 from ipe_ros.engine.errors import json_type
 from ipe_ros.engine.scene.bodies import DEFAULT_MAX_OBJECTS
 from ipe_ros.engine.scene.format import scene_to_json, scenes_from_json
+from ipe_ros.engine.scene.meshes import MeshAccess
 
 
-def string_to_scene(msg: String, *, max_objects: int = DEFAULT_MAX_OBJECTS) -> Scene:
-    """Exactly one validated scene from a JSON text (a scene object, or a list holding one)."""
+def string_to_scene(msg: String, *, max_objects: int = DEFAULT_MAX_OBJECTS, meshes: MeshAccess | None = None) -> Scene:
+    """Exactly one validated scene from a JSON text (a scene object, or a list holding one); its mesh
+    shapes read through ``meshes`` (None: refused)."""
     if not msg.data.strip():
         raise SceneError("data", "is empty; publish one scene in the ipe_ros.scene/2 JSON format")
-    scenes = scenes_from_json(msg.data, max_objects=max_objects)
+    scenes = scenes_from_json(msg.data, max_objects=max_objects, meshes=meshes)
     if len(scenes) != 1:
         raise SceneError("data", f"holds {len(scenes)} scenes; publish one scene per message")
     return scenes[0]

@@ -8,8 +8,11 @@ The mapping (MarkerArray has no notion of mass, friction or support, so some of 
   ``CUBE``: a box, ``scale`` its FULL extents in metres; ``SPHERE``: a sphere of diameter ``scale``
   (all three equal: an ellipsoid is refused); ``CYLINDER``: a cylinder along its z, diameter
   ``scale.x`` (= ``scale.y``), length ``scale.z``; ``TRIANGLE_LIST``: the convex hull of its
-  ``points`` (each multiplied by ``scale``, as RViz draws them): cones, pyramids, wedges. Capsules
-  and non-convex compounds have no marker: publish them on ``~/scene_json``.
+  ``points`` (each multiplied by ``scale``, as RViz draws them): cones, pyramids, wedges;
+  ``MESH_RESOURCE``: the closed mesh at ``mesh_resource`` (``package://`` or ``file://``, under the
+  node's ``mesh_roots``), scaled by ``scale`` per axis, read as its convex parts
+  (``engine.scene.meshes``; ``mesh_use_embedded_materials`` is a colour and is ignored). Capsules
+  and compounds given as parts have no marker: publish them on ``~/scene_json``.
 * Markers in namespace ``support`` are static. ``text`` ``role=floor`` makes an infinite floor whose
   top is the cube's top face; ``role=table`` makes a table top (axis-aligned; the cube is the slab);
   ``role=obstacle`` (the default) a static box (a wall on the table, a fixture on the floor). At most
@@ -53,6 +56,7 @@ from ipe_ros.engine.config import MODEL_LIGHT_DENSITY_KG_M3
 from ipe_ros.viz.palette import SUPPORT_RGB, group_rgb, nearest_group_name, risk_rgb
 from ipe_ros.engine.errors import shown
 from ipe_ros.engine.scene.bodies import DEFAULT_MAX_OBJECTS
+from ipe_ros.engine.scene.meshes import MeshAccess, mesh_shape
 
 from .stamps import header_to_stamp_ns, stamp_ns_to_header
 
@@ -132,11 +136,14 @@ def _vectors(marker: Marker, field: str) -> tuple[tuple[float, float, float], tu
     return position, extents
 
 
-_BODY_TYPES = ("CUBE", "SPHERE", "CYLINDER", "TRIANGLE_LIST")
+_BODY_TYPES = ("CUBE", "SPHERE", "CYLINDER", "TRIANGLE_LIST", "MESH_RESOURCE")
 
 
-def _shape(marker: Marker, extents: tuple[float, float, float], field: str):
+def _shape(marker: Marker, extents: tuple[float, float, float], field: str, meshes: MeshAccess | None):
     """The body's shape from the marker's type and scale."""
+    if marker.type == Marker.MESH_RESOURCE:  # scale: per-axis factors of the file's units, as RViz draws it
+        return mesh_shape({"uri": marker.mesh_resource, "scale": list(extents)}, field, meshes,
+                          uri_field=f"{field}.mesh_resource")
     if marker.type == Marker.CUBE:
         return BoxShape(extents)
     if marker.type == Marker.SPHERE:
@@ -164,8 +171,10 @@ def _is_identity(q: tuple[float, float, float, float]) -> bool:
     return abs(q[0]) < 1e-9 and abs(q[1]) < 1e-9 and abs(q[2]) < 1e-9 and abs(abs(q[3]) - 1) < 1e-9
 
 
-def markers_to_scene(msg: MarkerArray, *, max_objects: int = DEFAULT_MAX_OBJECTS) -> MarkerScene:
-    """Read a scene from a MarkerArray (see the module docstring for the mapping) and validate it."""
+def markers_to_scene(msg: MarkerArray, *, max_objects: int = DEFAULT_MAX_OBJECTS,
+                     meshes: MeshAccess | None = None) -> MarkerScene:
+    """Read a scene from a MarkerArray (see the module docstring for the mapping) and validate it;
+    MESH_RESOURCE markers read through ``meshes`` (None: refused)."""
     adds = [(i, m) for i, m in enumerate(msg.markers) if m.action not in (Marker.DELETE, Marker.DELETEALL)]
     if not adds:
         raise SceneError("markers", "the array holds no ADD markers; publish one CUBE, SPHERE, CYLINDER or "
@@ -238,7 +247,7 @@ def markers_to_scene(msg: MarkerArray, *, max_objects: int = DEFAULT_MAX_OBJECTS
                                 floor_z_m=floor_z)
             continue
         props = parse_properties(m.text, _DYNAMIC_KEYS, f"{field}.text")
-        shape = _shape(m, extents, field)
+        shape = _shape(m, extents, field, meshes)
         if "mass" in props and "density" in props:
             raise SceneError(f"{field}.text", "give mass or density, not both")
         mass = _number(props, "mass", f"{field}.text", None)

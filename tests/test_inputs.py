@@ -132,6 +132,8 @@ def test_the_ground_truth_refuses_a_perception_that_draws_the_scene():
                                        "support), or drop contact from the queries"),
     ({"contact_pairs": "A:A"}, "contact_pairs: A:A: an object always touches itself; name two"),
     ({"contact_pairs": "support:support"}, "contact_pairs: support:support: an object always touches itself; name two"),
+    ({"mesh_roots": "meshes"}, "mesh_roots: 'meshes' is not an absolute path of a folder; give folders as "
+                               "/path/a:/path/b"),
 ])
 def test_node_settings_no_scene_could_answer_are_refused_when_set_naming_the_parameter(changes, reason):
     """Accepted, they made every later scene fail, with errors naming the CLI's --contact."""

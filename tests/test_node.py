@@ -577,3 +577,36 @@ def test_a_640_x_480_depth_stream_at_10_hz_arrives_whole(ros):
     wait_until(lambda: node.service.stats().depth_images == 10, TIMEOUT_S, "all 10 depth images")
     stats = node.service.stats()
     assert stats.depth_images == 10 and stats.depth_images_refused == 0  # each once, though both subscriptions match
+
+
+def test_a_mesh_marker_is_read_under_mesh_roots_and_refused_where_none_are_set(ros, tmp_path, monkeypatch):
+    """A robot names its objects by their models: a MESH_RESOURCE mug with a ball in it is answered
+    (the ball stays in), and only from the folders the operator configured."""
+    pytest.importorskip("trimesh")
+    from tests.test_meshes import mug_mesh
+
+    monkeypatch.setenv("IPE_CACHE_DIR", str(tmp_path / "cache"))
+    mug_mesh().export(tmp_path / "mug.obj")
+    mug = Marker(type=Marker.MESH_RESOURCE, action=Marker.ADD, ns="objects", id=1, text="name=mug density=2000",
+                 mesh_resource=f"file://{tmp_path}/mug.obj")
+    mug.scale.x = mug.scale.y = mug.scale.z = 1.0
+    ball = Marker(type=Marker.SPHERE, action=Marker.ADD, ns="objects", id=2, text="name=ball mass=0.02")
+    ball.scale.x = ball.scale.y = ball.scale.z = 0.03
+    ball.pose.position.z = 0.0215
+    for m in (mug, ball):
+        m.header.frame_id = "world"
+        m.pose.orientation.w = 1.0
+    node = ros.start_ipe_node(samples=1, ground_truth=True, preset="paper", mesh_roots=str(tmp_path))
+    got = answers(ros)
+    pub = ros.publisher(MarkerArray, "/ipe/scene")
+    pub.publish(MarkerArray(markers=[mug, ball]))
+    wait_until(lambda: len(got), TIMEOUT_S, "the mug's answer")
+    assert "error" not in got[0], got[0]
+    assert got[0]["object_fall_probability"] == {"mug": 0.0, "ball": 0.0}
+    (result,) = set_params(ros, mesh_roots="")
+    assert result.successful, result.reason
+    pub.publish(MarkerArray(markers=[mug, ball]))
+    wait_until(lambda: len(got) == 2, TIMEOUT_S, "the refusal")
+    assert got[1]["error"].startswith("markers[0].mesh_resource: mesh shapes are read from files, which this input "
+                                      "may not reach")
+    assert node.service.stats().rejected == 1

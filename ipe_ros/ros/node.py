@@ -285,7 +285,8 @@ class IpeInterface:
 
     def _on_markers(self, msg: MarkerArray) -> None:
         try:
-            converted = markers_to_scene(msg, max_objects=self.service.config.max_objects)
+            converted = markers_to_scene(msg, max_objects=self.service.config.max_objects,
+                                         meshes=self.service.config.meshes)
             self.service.check(converted.scene, converted.frame_id, "header.frame_id")
         except Exception as exc:  # noqa: BLE001 - no input may end the node; name what happened
             if not isinstance(exc, ValueError):  # SceneError / ConfigError name the field
@@ -299,7 +300,8 @@ class IpeInterface:
 
     def _on_scene_json(self, msg: String) -> None:
         try:
-            scene = string_to_scene(msg, max_objects=self.service.config.max_objects)
+            scene = string_to_scene(msg, max_objects=self.service.config.max_objects,
+                                    meshes=self.service.config.meshes)
             self.service.check(scene)  # frame_id (the parameter) is checked against the frames at configuration
         except Exception as exc:  # noqa: BLE001 - no input may end the node; name what happened
             if not isinstance(exc, ValueError):
@@ -313,7 +315,8 @@ class IpeInterface:
         """A question about an action: answered on ~/answer (with its id), never blocking intake."""
         request_id = request_id_of(msg)
         try:
-            question, scene = string_to_question(msg, max_objects=self.service.config.max_objects)
+            question, scene = string_to_question(msg, max_objects=self.service.config.max_objects,
+                                                 meshes=self.service.config.meshes)
             source = None
             if scene is not None:
                 source = StampedScene(scene=scene, stamp_ns=self.get_clock().now().nanoseconds,

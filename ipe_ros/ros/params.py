@@ -25,6 +25,7 @@ from ..engine.inputs import INPUTS, Input, as_spelled, from_node, node_default
 from ..engine.perceptions import perception_names, perception_source
 from ..engine.request import build_request
 from ..engine.query.parameters import query_parameters
+from ..engine.scene.meshes import MeshAccess
 from ..service import ServiceConfig
 
 #: Frames conventionally gravity-aligned in ROS (REP 105: map, odom; world is common in simulation).
@@ -71,6 +72,9 @@ NODE_SETTINGS: tuple[Input, ...] = (
           fixed_at_start=True, choices=_reliability),
     _node("service_timeout_s", "float", 60.0, "s", "how long ~/predict waits for an answer, seconds",
           range=(0.1, 3600.0)),
+    _node("mesh_roots", "name", "", "folders", "folders (':'-separated) under which scenes on ~/scene_json, ~/scene "
+          "(MESH_RESOURCE markers) and ~/ask may name mesh files (and package:// meshes resolve); empty: scenes may "
+          "not name files"),
     _node("rerun.save_dir", "name", "", "folder", "folder for one .rrd recording per prediction; empty: no rerun "
           "logging"),
     _node("rerun.rollouts_logged", "int", 8, "count", "sampled rollouts shown in each .rrd", range=(0, 1000)),
@@ -195,11 +199,17 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
         raise ConfigError("rerun.save_dir", f"must not climb out of a folder ('..'), got {save_dir!r}; give the "
                                             "folder itself")
     connect = str(values["rerun.connect_url"]).strip()
+    roots = tuple(Path(r) for r in str(values["mesh_roots"]).split(":") if r.strip())
+    missing = [str(r) for r in roots if not r.is_absolute() or not r.is_dir()]
+    if missing:  # a scene arrives over the network: its files are read only where the operator points
+        raise ConfigError("mesh_roots", f"{missing[0]!r} is not an absolute path of a folder; give folders as "
+                                        "/path/a:/path/b")
     return ServiceConfig(request=request, max_objects=int(values["max_objects"]),
                          rerun_save_dir=save_dir or None, rerun_rollouts_logged=int(values["rerun.rollouts_logged"]),
                          rerun_frame_period_s=float(values["rerun.frame_period_s"]),
                          rerun_connect_url=connect or None, gravity_aligned_frames=frames,
-                         depth_max_age_s=float(values["depth.max_age_s"]))
+                         depth_max_age_s=float(values["depth.max_age_s"]),
+                         meshes=MeshAccess(roots=roots) if roots else None)
 
 
 def camera_pose(values: Mapping[str, Any]) -> tuple[tuple, tuple] | None:

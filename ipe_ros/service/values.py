@@ -10,6 +10,7 @@ from typing import Any
 from ..engine import Prediction, Scene
 from ..engine.request import Request
 from ..engine.scene.bodies import DEFAULT_MAX_OBJECTS
+from ..engine.scene.meshes import MeshAccess
 
 
 
@@ -37,6 +38,8 @@ class ServiceConfig:
     #: ``request.model.perception == "depth"``: a scene is predicted from the newest depth image taken
     #: at most this many seconds before or after its stamp
     depth_max_age_s: float = 0.5
+    #: where scenes' mesh files may be read from (``mesh_roots``); None: scenes may not name meshes
+    meshes: MeshAccess | None = None
 
     def replace_request(self, **changes) -> "ServiceConfig":
         """This config with the request's fields ``changes`` (model=..., seed=...) replaced."""

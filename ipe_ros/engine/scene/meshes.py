@@ -71,26 +71,26 @@ class MeshAccess:
         return Path(os.environ.get("IPE_CACHE_DIR") or Path.home() / ".cache" / "ipe_ros") / "convex_parts"
 
 
-def mesh_shape(data: dict, path: str, access: MeshAccess | None) -> Compound:
+def mesh_shape(data: dict, path: str, access: MeshAccess | None, uri_field: str | None = None) -> Compound:
     """The compound of convex parts of the mesh shape ``data`` (``uri``, ``scale``), or a SceneError
-    naming ``path`` and the fix."""
+    naming ``path`` (the URI as ``uri_field``, default ``<path>.uri``) and the fix."""
+    where = uri_field or f"{path}.uri"
     if access is None:
-        raise SceneError(f"{path}.uri", "mesh shapes are read from files, which this input may not reach; give "
-                                        "the object as convex parts (type compound), or send the scene where meshes "
-                                        "are allowed (ipe predict reads them beside the scene file; the node under "
-                                        "its mesh_roots)")
+        raise SceneError(where, "mesh shapes are read from files, which this input may not reach; give the object "
+                                "as convex parts (type compound), or send the scene where meshes are allowed (ipe "
+                                "predict reads them beside the scene file; the node under its mesh_roots)")
     uri = data["uri"]
     if not isinstance(uri, str) or not uri.strip():
-        raise SceneError(f"{path}.uri", f"must be a file path, file:// or package:// URI, got {shown(uri)}")
+        raise SceneError(where, f"must be a file path, file:// or package:// URI, got {shown(uri)}")
     scale = _scale(data.get("scale", 1.0), f"{path}.scale")
-    file = _resolve(uri, f"{path}.uri", access)
-    content = _read_bounded(file, f"{path}.uri")
+    file = _resolve(uri, where, access)
+    content = _read_bounded(file, where)
     key = hashlib.sha256(b"%d|%s|%r|%r" % (_CACHE_VERSION, file.suffix.lower().encode(), scale,
                                            access.decomposition) + content).hexdigest()
     parts = _cached_parts(access.cache(), key)
     if parts is None:
-        vertices, faces = _load(content, file, scale, f"{path}.uri")
-        parts = _decompose(vertices, faces, access.decomposition, f"{path}.uri")
+        vertices, faces = _load(content, file, scale, where)
+        parts = _decompose(vertices, faces, access.decomposition, where)
         _store_parts(access.cache(), key, parts)
     return Compound(tuple(CompoundPart(ConvexHull(tuple(tuple(map(float, v)) for v in part))) for part in parts))
 

@@ -10,7 +10,7 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*", "msg_bridge", "msg_bridge.*"]),
-    package_data={PACKAGE: ["data/*.json", "schema/*.json"]},
+    package_data={PACKAGE: ["data/*.json", "schema/*.json", "ros/fastdds_node.xml"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

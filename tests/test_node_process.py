@@ -187,3 +187,23 @@ def test_a_bad_parameter_override_ends_the_node_with_one_line(override, message)
                             capture_output=True, text=True, timeout=120)
     assert result.returncode == 2
     assert result.stderr.strip().splitlines()[-1] == message
+
+
+def test_the_node_runs_on_its_own_dds_profiles_unless_the_environment_names_its_own():
+    """rmw_fastrtps's default payload memory keeps every buffer at the largest message it carried: the
+    node's own profiles free each payload when its message is taken (ipe_ros/ros/fastdds_node.xml)."""
+    import xml.etree.ElementTree as ElementTree
+
+    from ipe_ros.ros.node import FASTDDS_PROFILES, use_node_dds_profiles
+
+    environ: dict[str, str] = {}
+    assert use_node_dds_profiles(environ)
+    assert environ == {"FASTRTPS_DEFAULT_PROFILES_FILE": str(FASTDDS_PROFILES),
+                       "FASTDDS_DEFAULT_PROFILES_FILE": str(FASTDDS_PROFILES), "RMW_FASTRTPS_USE_QOS_FROM_XML": "1"}
+    for own in ({"FASTRTPS_DEFAULT_PROFILES_FILE": "/etc/mine.xml"}, {"RMW_FASTRTPS_USE_QOS_FROM_XML": "0"},
+                {"RMW_IMPLEMENTATION": "rmw_cyclonedds_cpp"}):
+        environ = dict(own)
+        assert not use_node_dds_profiles(environ) and environ == own
+    policies = [e.text for e in ElementTree.parse(FASTDDS_PROFILES).iter()
+                if e.tag.endswith("historyMemoryPolicy")]
+    assert policies == ["DYNAMIC", "DYNAMIC"]  # writers and readers

@@ -8,8 +8,10 @@ processes and calls back here to publish. Topics, the service and parameters are
 from __future__ import annotations
 
 import collections
+import os
 import sys
 import time
+from pathlib import Path
 from typing import Any, Callable
 
 import rclpy
@@ -394,8 +396,26 @@ class IpeNode(IpeInterface, Node):
         super().destroy_node()
 
 
+#: the node's Fast DDS profiles (the file says why: payload memory that otherwise only grows)
+FASTDDS_PROFILES = Path(__file__).with_name("fastdds_node.xml")
+_PROFILE_VARIABLES = ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")  # Fast DDS 2.x, 3.x
+
+
+def use_node_dds_profiles(environ=os.environ) -> bool:
+    """Point Fast DDS at the node's profiles (before ``rclpy.init``), unless the environment chose
+    profiles of its own or another middleware; whether it did."""
+    if environ.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp") not in ("rmw_fastrtps_cpp", "rmw_fastrtps_dynamic_cpp"):
+        return False
+    if any(name in environ for name in (*_PROFILE_VARIABLES, "RMW_FASTRTPS_USE_QOS_FROM_XML")):
+        return False
+    environ.update({name: str(FASTDDS_PROFILES) for name in _PROFILE_VARIABLES})
+    environ["RMW_FASTRTPS_USE_QOS_FROM_XML"] = "1"  # else rmw_fastrtps sets its own memory policy
+    return True
+
+
 def main(args: list[str] | None = None, node_class: type = IpeNode) -> int:
     """Entry point of ``ipe_node`` / ``ros2 run ipe_ros ipe_node``; SIGINT and SIGTERM end it cleanly."""
+    use_node_dds_profiles()
     rclpy.init(args=args)  # installs SIGINT/SIGTERM handlers that shut the context down
     node = None
     code = 0

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, SceneError, load_scenes, predict, preset
-from ipe_ros.engine.scene import meshes
+from ipe_ros.engine.scene import household, meshes
 from ipe_ros.engine.scene.format import scenes_from_json
 from ipe_ros.engine.scene.shapes import Compound, ConvexHull
 
@@ -20,25 +20,10 @@ trimesh = pytest.importorskip("trimesh")
 R_OUT, R_IN, HEIGHT, BOTTOM = 0.04, 0.035, 0.1, 0.006
 
 
-def mug_mesh(closed: bool = True, n: int = 32):
-    """A cup without a handle: outer wall, rim, inner wall, inner floor and base, closed."""
-    angles = np.linspace(0, 2 * np.pi, n, endpoint=False)
-
-    def ring(r, z):
-        return np.c_[r * np.cos(angles), r * np.sin(angles), np.full(n, z)]
-
-    vertices = np.vstack([ring(R_OUT, 0), ring(R_OUT, HEIGHT), ring(R_IN, HEIGHT), ring(R_IN, BOTTOM),
-                          [[0, 0, 0], [0, 0, BOTTOM]]])
-    faces = []
-    for lower, upper in ((0, n), (n, 2 * n), (2 * n, 3 * n)):
-        for k in range(n):
-            a0, a1, b0, b1 = lower + k, lower + (k + 1) % n, upper + k, upper + (k + 1) % n
-            faces += [(a0, a1, b1), (a0, b1, b0)]
-    for k in range(n if closed else 0):
-        faces += [(4 * n, (k + 1) % n, k), (4 * n + 1, 3 * n + k, 3 * n + (k + 1) % n)]
-    mesh = trimesh.Trimesh(vertices, faces, process=True)
-    trimesh.repair.fix_normals(mesh)
-    return mesh
+def mug_mesh(closed: bool = True, sides: int = 32):
+    """A cup without a handle (engine/scene/household.py); open: without its base and inner floor."""
+    vertices, faces = household.cup(R_OUT, R_IN, HEIGHT, BOTTOM, sides=sides)
+    return trimesh.Trimesh(vertices, faces if closed else faces[:-2 * sides], process=True)
 
 
 def scene_with(shape: dict, ball: bool = True) -> dict:
@@ -153,3 +138,27 @@ def test_a_mesh_too_large_is_refused_before_it_is_read(folder, monkeypatch):
 def test_a_part_of_a_mesh_is_a_convex_hull_in_the_mesh_frame(folder):
     [scene] = load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "mug.obj"}, ball=False)))
     assert all(isinstance(p.shape, ConvexHull) and p.position_m == (0.0, 0.0, 0.0) for p in scene.objects[0].shape.parts)
+
+
+def test_a_mesh_object_weighs_what_the_mesh_encloses_not_what_its_parts_fill(folder):
+    """The parts' hulls overfill the cup's concave corners; its mass and centre of mass are the mesh's."""
+    from ipe_ros.engine.scene import shapes
+    from ipe_ros.engine.scene.format import shape_from_dict, shape_to_dict
+
+    [scene] = load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "mug.obj"}, ball=False)))
+    mug, exact = scene.objects[0], mug_mesh()
+    assert mug.resolved_mass_kg == pytest.approx(2000 * exact.volume, rel=1e-6)  # the OBJ rounds its numbers
+    assert np.allclose(shapes.centre_of_mass_m(mug.shape), exact.center_mass, atol=1e-6)
+    parts_only = Compound(mug.shape.parts)
+    assert shapes.volume_m3(parts_only) > 1.02 * exact.volume  # what the parts alone would weigh
+    assert shape_from_dict(shape_to_dict(mug.shape), "shape") == mug.shape  # JSON keeps both
+    import dataclasses
+
+    for changes, field, problem in [
+        ({"centre_of_mass_m": None}, "volume_m3", "give volume_m3 and centre_of_mass_m together"),
+        ({"centre_of_mass_m": (0.0, 0.0, 1.0)}, "centre_of_mass_m", "lies outside the parts' bounds"),
+        ({"volume_m3": 1.0}, "volume_m3", "the parts do not describe that solid"),
+    ]:
+        with pytest.raises(SceneError) as caught:
+            shapes.validate_shape(dataclasses.replace(mug.shape, **changes), "shape")
+        assert caught.value.field == f"shape.{field}" and problem in caught.value.problem

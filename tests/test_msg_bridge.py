@@ -140,8 +140,8 @@ def test_bad_marker_arrays_name_the_field(markers, expected):
 def test_other_marker_types_are_rejected_by_type_name():
     arrow = cube()
     arrow.type = Marker.ARROW
-    assert error_of(arrow) == ("markers[0].type: only CUBE, SPHERE, CYLINDER, TRIANGLE_LIST markers describe bodies "
-                               "here, got ARROW (ns 'objects', id 0); drop it from the scene array")
+    assert error_of(arrow) == ("markers[0].type: only CUBE, SPHERE, CYLINDER, TRIANGLE_LIST, MESH_RESOURCE markers describe "
+                               "bodies here, got ARROW (ns 'objects', id 0); drop it from the scene array")
     support_ball = cube(ns="support", text="role=obstacle")
     support_ball.type = Marker.SPHERE
     assert error_of(support_ball, cube()) == ("markers[0].type: only CUBE markers describe bodies here, got SPHERE "

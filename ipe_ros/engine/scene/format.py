@@ -65,7 +65,7 @@ _SHAPE_FIELDS = {"box": ("extents_m",), "sphere": ("radius_m",), "cylinder": ("r
                  "capsule": ("radius_m", "length_m"), "convex": ("vertices_m",), "compound": ("parts",),
                  "mesh": ("uri",)}
 #: fields a shape may leave out
-_SHAPE_OPTIONAL = {"mesh": ("scale",)}
+_SHAPE_OPTIONAL = {"mesh": ("scale",), "compound": ("volume_m3", "centre_of_mass_m")}
 FLOOR_FIELDS = ("type", "height_m", "friction", "restitution")
 TABLE_FIELDS = ("type", "top_height_m", "size_m", "center_xy_m", "thickness_m", "friction",
                  "restitution", "floor_z_m", "obstacles")
@@ -85,8 +85,11 @@ def shape_to_dict(shape) -> dict[str, Any]:
         return {"type": shape.type, "radius_m": shape.radius_m, "length_m": shape.length_m}
     if isinstance(shape, ConvexHull):
         return {"type": "convex", "vertices_m": [list(v) for v in shape.vertices_m]}
-    return {"type": "compound", "parts": [{"shape": shape_to_dict(p.shape), "position_m": list(p.position_m),
-                                           "orientation_xyzw": list(p.orientation_xyzw)} for p in shape.parts]}
+    out = {"type": "compound", "parts": [{"shape": shape_to_dict(p.shape), "position_m": list(p.position_m),
+                                          "orientation_xyzw": list(p.orientation_xyzw)} for p in shape.parts]}
+    if shape.volume_m3 is not None:  # the solid's own (a mesh's), not the parts'
+        out.update(volume_m3=shape.volume_m3, centre_of_mass_m=list(shape.centre_of_mass_m))
+    return out
 
 
 def object_to_dict(body: Body) -> dict[str, Any]:
@@ -211,7 +214,9 @@ def shape_from_dict(data: Any, path: str, *, nested: bool = False, meshes: MeshA
                                 position_m=_vec(part.get("position_m", [0.0, 0.0, 0.0]), 3, f"{where}.position_m"),
                                 orientation_xyzw=_vec(part.get("orientation_xyzw", [0.0, 0.0, 0.0, 1.0]), 4,
                                                       f"{where}.orientation_xyzw")))
-    return Compound(tuple(out))
+    volume, centre = data.get("volume_m3"), data.get("centre_of_mass_m")
+    return Compound(tuple(out), None if volume is None else _num(volume, f"{path}.volume_m3"),
+                    None if centre is None else _vec(centre, 3, f"{path}.centre_of_mass_m"))
 
 
 def _common_fields(data: dict, path: str) -> dict[str, Any]:

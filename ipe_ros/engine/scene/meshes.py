@@ -39,7 +39,7 @@ MAX_MESH_VERTICES = 200_000
 #: stay within the compound limits (limits.MAX_COMPOUND_VERTICES)
 MAX_PART_VERTICES = 64
 #: bump when the cached decomposition's meaning changes
-_CACHE_VERSION = 1
+_CACHE_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -87,12 +87,14 @@ def mesh_shape(data: dict, path: str, access: MeshAccess | None, uri_field: str 
     content = _read_bounded(file, where)
     key = hashlib.sha256(b"%d|%s|%r|%r" % (_CACHE_VERSION, file.suffix.lower().encode(), scale,
                                            access.decomposition) + content).hexdigest()
-    parts = _cached_parts(access.cache(), key)
-    if parts is None:
+    cached = _cached_parts(access.cache(), key)
+    if cached is None:
         vertices, faces = _load(content, file, scale, where)
-        parts = _decompose(vertices, faces, access.decomposition, where)
-        _store_parts(access.cache(), key, parts)
-    return Compound(tuple(CompoundPart(ConvexHull(tuple(tuple(map(float, v)) for v in part))) for part in parts))
+        cached = _decompose(vertices, faces, access.decomposition, where), *_mass_properties(vertices, faces)
+        _store_parts(access.cache(), key, *cached)
+    parts, volume, centre = cached
+    return Compound(tuple(CompoundPart(ConvexHull(tuple(tuple(map(float, v)) for v in part))) for part in parts),
+                    volume_m3=volume, centre_of_mass_m=centre)
 
 
 def _scale(value: Any, path: str) -> tuple[float, float, float]:
@@ -210,24 +212,36 @@ def _decompose(vertices: np.ndarray, faces: np.ndarray, settings: Decomposition,
     return hulls
 
 
-def _cached_parts(folder: Path, key: str) -> list[np.ndarray] | None:
-    """The parts stored under ``key`` (JSON, never code), or None when there are none usable."""
+def _mass_properties(vertices: np.ndarray, faces: np.ndarray) -> tuple[float, tuple[float, float, float]]:
+    """The closed mesh's own volume and centre of mass (its parts' hulls overfill it)."""
+    import trimesh
+
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    return float(mesh.volume), tuple(float(v) for v in mesh.center_mass)  # type: ignore[return-value]
+
+
+def _cached_parts(folder: Path, key: str) -> tuple[list[np.ndarray], float, tuple] | None:
+    """The parts, volume and centre of mass stored under ``key`` (JSON, never code), or None when
+    there are none usable."""
     try:
         data = json.loads((folder / f"{key}.json").read_text())
         parts = [np.asarray(p, float) for p in data["parts"]]
-        if data.get("key") != key or not parts or any(p.ndim != 2 or p.shape[1] != 3 or len(p) < 4 for p in parts):
+        volume, centre = float(data["volume_m3"]), tuple(float(v) for v in data["centre_of_mass_m"])
+        if data.get("key") != key or not parts or any(p.ndim != 2 or p.shape[1] != 3 or len(p) < 4 for p in parts) \
+                or len(centre) != 3:
             return None
-        return parts
+        return parts, volume, centre
     except (OSError, ValueError, KeyError, TypeError):
         return None
 
 
-def _store_parts(folder: Path, key: str, parts: list[np.ndarray]) -> None:
+def _store_parts(folder: Path, key: str, parts: list[np.ndarray], volume_m3: float, centre_m: tuple) -> None:
     """Written to a temporary file and renamed: a reader never sees half an entry."""
     try:
         folder.mkdir(parents=True, exist_ok=True)
         partial = folder / f"{key}.{os.getpid()}.part"
-        partial.write_text(json.dumps({"key": key, "parts": [p.tolist() for p in parts]}))
+        partial.write_text(json.dumps({"key": key, "parts": [p.tolist() for p in parts], "volume_m3": volume_m3,
+                                       "centre_of_mass_m": list(centre_m)}))
         os.replace(partial, folder / f"{key}.json")
     except OSError:  # a read-only home: decomposed again next time, answered all the same
         pass

@@ -73,7 +73,11 @@ def _shapes() -> dict[str, Any]:
                                   "the shape (at least 4, not all in one plane)",
                                   "items": _vector(3, "a point in the object frame, m")}},
         "compound": {"parts": {"type": "array", "minItems": 1, "items": {"$ref": "#/$defs/part"},
-                               "description": "convex parts in the object frame (not overlapping)"}},
+                               "description": "convex parts in the object frame (not overlapping)"},
+                     "volume_m3": _number("the solid's own volume (a mesh's), where the parts only approximate it: "
+                                          "mass from it; with centre_of_mass_m", 0.0, exclusive_minimum=True),
+                     "centre_of_mass_m": _vector(3, "the solid's own centre of mass in the object frame, m; with "
+                                                    "volume_m3")},
         "mesh": {"uri": {"type": "string", "minLength": 1,
                          "description": "a closed mesh (OBJ, STL, PLY, GLB) in the object frame, +z up (GLB: its "
                                         "+y): a path beside the scene file, file:// or package://; read as convex "
@@ -82,7 +86,7 @@ def _shapes() -> dict[str, Any]:
                            "oneOf": [_number("m per unit", 0.0, exclusive_minimum=True),
                                      _vector(3, "m per unit along x, y, z", None, 0.0)]}},
     }
-    optional = {"mesh": ("scale",)}
+    optional = {"mesh": ("scale",), "compound": ("volume_m3", "centre_of_mass_m")}
     return {kind: _closed({"type": {"const": kind}, **props},
                           ("type", *(p for p in props if p not in optional.get(kind, ()))), f"a {kind}")
             for kind, props in fields.items()}

@@ -74,7 +74,14 @@ class CompoundPart:
 
 @dataclass(frozen=True)
 class Compound:
+    """Convex parts in the object frame. ``volume_m3`` and ``centre_of_mass_m``: those of the solid
+    the parts approximate, where it is known (a mesh's own, exact; the parts' hulls overlap and
+    overfill a mesh's concave corners, 5-25% more volume): mass and centre of mass come from them.
+    Without them, from the parts (taken as not overlapping)."""
+
     parts: tuple[CompoundPart, ...]
+    volume_m3: float | None = None
+    centre_of_mass_m: Vec3 | None = None
 
     type = "compound"
 
@@ -168,6 +175,7 @@ def validate_shape(shape, path: str) -> None:
         if points > limits.MAX_COMPOUND_VERTICES:
             raise SceneError(f"{path}.parts", f"its hulls hold {points} points, more than the maximum of "
                                               f"{limits.MAX_COMPOUND_VERTICES} for one compound; decimate them")
+        _check_mass_properties(shape, path)
         for i, part in enumerate(shape.parts):
             if isinstance(part.shape, Compound):
                 raise SceneError(f"{path}.parts[{i}].shape", "parts must be simple shapes, not compounds; "
@@ -181,6 +189,29 @@ def validate_shape(shape, path: str) -> None:
                                  f"must be a unit quaternion, got norm {norm:.6g}")
     else:
         raise SceneError(f"{path}.type", f"unknown shape; choose one of {', '.join(SHAPE_TYPES)}")
+
+
+def _check_mass_properties(shape: Compound, path: str) -> None:
+    """A compound's own volume and centre of mass: both or neither, positive and finite, the centre
+    within the parts' bounds."""
+    if (shape.volume_m3 is None) != (shape.centre_of_mass_m is None):
+        raise SceneError(f"{path}.volume_m3", "give volume_m3 and centre_of_mass_m together (or neither: both "
+                                              "from the parts)")
+    if shape.volume_m3 is None:
+        return
+    _positive(shape.volume_m3, f"{path}.volume_m3", "the volume")
+    centre = shape.centre_of_mass_m
+    if len(centre) != 3 or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in centre):
+        raise SceneError(f"{path}.centre_of_mass_m", "must be 3 finite numbers (metres, object frame)")
+    vertices, _ = hull_faces(shape)
+    low, high = vertices.min(axis=0), vertices.max(axis=0)
+    if np.any(np.asarray(centre) < low) or np.any(np.asarray(centre) > high):
+        raise SceneError(f"{path}.centre_of_mass_m", f"{list(centre)} lies outside the parts' bounds "
+                                                     f"{low.round(4).tolist()} .. {high.round(4).tolist()}")
+    parts_volume = float(sum(volume_m3(p.shape) for p in shape.parts))
+    if not 0.2 * parts_volume <= shape.volume_m3 <= 1.2 * parts_volume:
+        raise SceneError(f"{path}.volume_m3", f"{shape.volume_m3:g} m^3 against the parts' {parts_volume:g}: the parts "
+                                              "do not describe that solid")
 
 
 # --------------------------------------------------------------------------------------------
@@ -254,6 +285,8 @@ def volume_m3(shape) -> float:
     if isinstance(shape, ConvexHull):
         return _hull_properties(tuple(map(tuple, surface_points(shape))))[0]
     if isinstance(shape, Compound):
+        if shape.volume_m3 is not None:
+            return float(shape.volume_m3)
         return float(sum(volume_m3(p.shape) for p in shape.parts))
     raise TypeError(f"not a shape: {shown(shape)}")
 
@@ -265,6 +298,8 @@ def centre_of_mass_m(shape) -> np.ndarray:
     if isinstance(shape, ConvexHull):
         return np.array(_hull_properties(tuple(map(tuple, surface_points(shape))))[1])
     if isinstance(shape, Compound):
+        if shape.centre_of_mass_m is not None:
+            return np.array(shape.centre_of_mass_m, float)
         vols = np.array([volume_m3(p.shape) for p in shape.parts])
         centres = np.array([rotation_matrix(p.orientation_xyzw) @ centre_of_mass_m(p.shape) + np.asarray(p.position_m)
                             for p in shape.parts])

@@ -338,6 +338,10 @@ def main() -> int:
         unanswered = sum(1 for n in asked.values() if n == 0)
         twice = sum(1 for n in asked.values() if n > 1)
     node_rss = np.array([m for _, _, m in memory])
+    node_slope = float(np.polyfit(times_min[half:], node_rss[half:], 1)[0]) if len(rss) - half >= 3 else float("nan")
+    # the node after warm-up (imports, worker start, caches, DDS discovery): its size at 10 min (or a
+    # third of a shorter run), against which the end is compared (issue 50: within 10%)
+    warm = int(np.searchsorted(times_min, min(10.0, times_min[-1] / 3))) if len(memory) else 0
     result = {
         "minutes": args.minutes, "only": args.only, "question_kinds": args.question_kinds, "date": time.strftime("%Y-%m-%d"), "sent": counts,
         "good_scenes_sent": counts["good"] + 20 * counts["flood"], "answers": answers,
@@ -345,6 +349,8 @@ def main() -> int:
         "questions": {"asked": len(asked), "replies": replies, "without_reply": unanswered, "replied_twice": twice,
                       "unreadable": unreadable},
         "rss_slope_second_half_mb_per_10_min": 10 * slope,
+        "node_rss_slope_second_half_mb_per_10_min": 10 * node_slope,
+        "node_rss_after_warm_up_mb": float(node_rss[warm]) if len(memory) else None,
         "latency_s": {f"p{q}": float(np.percentile(lat, q)) for q in (50, 90, 99)} | {"max": float(lat.max())},
         "rss_mb": {"first": float(rss[0]), "last": float(rss[-1]), "max": float(rss.max()),
                    "node_first": float(node_rss[0]), "node_last": float(node_rss[-1]),
@@ -376,8 +382,11 @@ def main() -> int:
           f"| latency send -> answer, s | p50 {result['latency_s']['p50']:.2f}, p90 {result['latency_s']['p90']:.2f}, "
           f"p99 {result['latency_s']['p99']:.2f}, max {result['latency_s']['max']:.2f} |",
           f"| resident memory (node + workers), MB | first {rss[0]:.0f}, last {rss[-1]:.0f}, max {rss.max():.0f} |",
-          f"| resident memory (node process alone), MB | first {node_rss[0]:.0f}, last {node_rss[-1]:.0f} |",
-          f"| memory trend over the second half, MB per 10 min | {10 * slope:+.1f} |",
+          f"| resident memory (node process alone), MB | first {node_rss[0]:.0f}, after warm-up (at "
+          f"{times_min[warm]:.0f} min) {node_rss[warm]:.0f}, last {node_rss[-1]:.0f} "
+          f"({100 * (node_rss[-1] / node_rss[warm] - 1):+.0f}%), max {node_rss.max():.0f} |",
+          f"| memory trend over the second half, MB per 10 min | node and workers {10 * slope:+.1f}, node alone "
+          f"{10 * node_slope:+.1f} |",
           f"| SIGINT -> exit | {exit_s:.2f} s, exit code {code}, processes left: {len(left)} |", ""]
     (out / "soak.md").write_text("\n".join(md))
     print("\n".join(md))

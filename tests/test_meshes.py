@@ -162,3 +162,18 @@ def test_a_mesh_object_weighs_what_the_mesh_encloses_not_what_its_parts_fill(fol
         with pytest.raises(SceneError) as caught:
             shapes.validate_shape(dataclasses.replace(mug.shape, **changes), "shape")
         assert caught.value.field == f"shape.{field}" and problem in caught.value.problem
+
+
+def test_a_bowl_holds_three_balls(folder):
+    """Balls dropped 2 cm into a bowl (engine/scene/household.py) roll to its floor and stay in it."""
+    household.write_obj(folder / "bowl.obj", *household.bowl())
+    data = scene_with({"type": "mesh", "uri": "bowl.obj"}, ball=False)
+    for i, (x, y) in enumerate([(-0.03, 0.0), (0.03, 0.0), (0.0, 0.035)]):
+        data["objects"].append({"name": f"ball{i}", "shape": {"type": "sphere", "radius_m": 0.015},
+                                "position_m": [x, y, 0.041], "orientation_xyzw": [0, 0, 0, 1], "friction": 0.6,
+                                "restitution": 0.0, "mass_kg": 0.02})
+    [scene] = load_scenes(_write(folder, data, "bowl.json"))
+    final = _finals(scene)
+    for i in range(3):
+        offset = final[f"ball{i}"] - final["mug"]  # the bowl is the first object, named mug by scene_with
+        assert np.hypot(*offset[:2]) < 0.07 and final[f"ball{i}"][2] < 0.06, (i, final)  # inside the rim

@@ -207,3 +207,11 @@ def test_the_node_runs_on_its_own_dds_profiles_unless_the_environment_names_its_
     policies = [e.text for e in ElementTree.parse(FASTDDS_PROFILES).iter()
                 if e.tag.endswith("historyMemoryPolicy")]
     assert policies == ["DYNAMIC", "DYNAMIC"]  # writers and readers
+
+
+def test_the_node_keeps_large_buffers_out_of_the_heap_unless_told_otherwise():
+    """A fixed mmap threshold (glibc): 1-2 MB messages are returned to the system when freed."""
+    from ipe_ros.ros.node import return_large_buffers_to_the_system
+
+    assert return_large_buffers_to_the_system({}) is True  # glibc here
+    assert return_large_buffers_to_the_system({"MALLOC_MMAP_THRESHOLD_": "65536"}) is False

@@ -413,9 +413,29 @@ def use_node_dds_profiles(environ=os.environ) -> bool:
     return True
 
 
+#: glibc's mallopt parameter for the size from which a buffer is mmapped (and unmapped when freed)
+_M_MMAP_THRESHOLD = -3
+
+
+def return_large_buffers_to_the_system(environ=os.environ, threshold_bytes: int = 128 * 1024) -> bool:
+    """Keep glibc's mmap threshold fixed (unless the environment sets it): glibc raises it each time
+    a large buffer is freed (up to 32 MB), after which the node's 1-2 MB messages come from the heap,
+    which fragments and does not shrink; fixed, they are mmapped and returned to the system when
+    freed. Whether it was set (False where the C library is not glibc)."""
+    if "MALLOC_MMAP_THRESHOLD_" in environ:
+        return False
+    try:
+        import ctypes
+
+        return bool(ctypes.CDLL(None).mallopt(_M_MMAP_THRESHOLD, threshold_bytes))
+    except (OSError, AttributeError):
+        return False
+
+
 def main(args: list[str] | None = None, node_class: type = IpeNode) -> int:
     """Entry point of ``ipe_node`` / ``ros2 run ipe_ros ipe_node``; SIGINT and SIGTERM end it cleanly."""
     use_node_dds_profiles()
+    return_large_buffers_to_the_system()
     rclpy.init(args=args)  # installs SIGINT/SIGTERM handlers that shut the context down
     node = None
     code = 0

@@ -37,7 +37,6 @@ def main() -> int:
     if len(snapshots) < 3:
         raise SystemExit(f"{args.capture}: {len(snapshots)} memory snapshots; capture longer")
     first = int(len(snapshots) * args.from_fraction)
-    last = len(snapshots) - 1
     # the last snapshot before the process began to shut down (its heap falls then)
     peak_rss = max(s.rss for s in snapshots[first:])
     last = max(i for i in range(first, len(snapshots)) if snapshots[i].rss >= 0.9 * peak_rss)

@@ -96,7 +96,7 @@ def add_input_options(parser: argparse.ArgumentParser, fields: Iterable[str], *,
 def given_request_arguments(args: argparse.Namespace) -> dict[str, Any]:
     """The request's arguments (``build_request``'s keywords) from the options the command has; an
     input given while the one it ``requires`` is off is refused naming both."""
-    given = {name: value for name, value in vars(args).items()}
+    given = dict(vars(args))
     for name, value in list(given.items()):
         found = _row_or_none(name)
         if found is None:

@@ -89,8 +89,9 @@ def mesh_shape(data: dict, path: str, access: MeshAccess | None, uri_field: str 
                                            access.decomposition) + content).hexdigest()
     cached = _cached_parts(access.cache(), key)
     if cached is None:
-        vertices, faces = _load(content, file, scale, where)
-        cached = _decompose(vertices, faces, access.decomposition, where), *_mass_properties(vertices, faces)
+        mesh = _load(content, file, scale, where)
+        cached = (_decompose(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64), access.decomposition,
+                             where), float(mesh.volume), tuple(float(v) for v in mesh.center_mass))
         _store_parts(access.cache(), key, *cached)
     parts, volume, centre = cached
     return Compound(tuple(CompoundPart(ConvexHull(tuple(tuple(map(float, v)) for v in part))) for part in parts),
@@ -168,8 +169,8 @@ def _read_bounded(file: Path, path: str) -> bytes:
     return content
 
 
-def _load(content: bytes, file: Path, scale: tuple[float, float, float], path: str) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (metres, +z up) and triangles of the file's one closed mesh."""
+def _load(content: bytes, file: Path, scale: tuple[float, float, float], path: str):
+    """The file's one closed mesh (a ``trimesh.Trimesh``) in metres, +z up."""
     import io
 
     import trimesh
@@ -185,15 +186,16 @@ def _load(content: bytes, file: Path, scale: tuple[float, float, float], path: s
     if len(mesh.vertices) > MAX_MESH_VERTICES:
         raise SceneError(path, f"{file}: {len(mesh.vertices)} vertices, more than the {MAX_MESH_VERTICES} read; "
                                "simplify it")
-    vertices = np.asarray(mesh.vertices, float)
-    if kind == "glb":  # glTF's up is +y: turn it to +z (x stays)
-        vertices = vertices[:, [0, 2, 1]] * np.array([1.0, -1.0, 1.0])
-    if not np.all(np.isfinite(vertices)):
+    transform = np.diag([*scale, 1.0])
+    if kind == "glb":  # glTF's up is +y: turn it to +z (x stays), then scale along the object's axes
+        transform = transform @ np.array([[1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]])
+    mesh.apply_transform(transform)
+    if not np.all(np.isfinite(mesh.vertices)):
         raise SceneError(path, f"{file}: has vertices that are not finite numbers")
     if not mesh.is_watertight:
         raise SceneError(path, f"{file}: is not closed (it has holes or loose edges), so it encloses no volume "
                                "to give a mass; close it (fill its holes) or give the object as convex parts")
-    return vertices * np.asarray(scale), np.asarray(mesh.faces, np.int64)
+    return mesh
 
 
 def _decompose(vertices: np.ndarray, faces: np.ndarray, settings: Decomposition, path: str) -> list[np.ndarray]:
@@ -210,14 +212,6 @@ def _decompose(vertices: np.ndarray, faces: np.ndarray, settings: Decomposition,
         raise SceneError(path, f"its {len(hulls)} convex parts have more than {limits.MAX_COMPOUND_VERTICES} vertices "
                                "together; raise the threshold or lower max_parts")
     return hulls
-
-
-def _mass_properties(vertices: np.ndarray, faces: np.ndarray) -> tuple[float, tuple[float, float, float]]:
-    """The closed mesh's own volume and centre of mass (its parts' hulls overfill it)."""
-    import trimesh
-
-    mesh = trimesh.Trimesh(vertices, faces, process=False)
-    return float(mesh.volume), tuple(float(v) for v in mesh.center_mass)  # type: ignore[return-value]
 
 
 def _cached_parts(folder: Path, key: str) -> tuple[list[np.ndarray], float, tuple] | None:

@@ -158,7 +158,7 @@ def perception_cases():
     camera = look_at((1.0, -0.7, 0.6), (0.0, 0.0, 0.1), width_px=160, height_px=120)
     observation = D.DepthObservation(camera, D.render_depth_m(small, camera))
     perceived = D.perceive_depth_for(small, 4, (observation,), seed=7,
-                                     settings=D.DepthSettings(updates_per_object=150))
+                                     settings=D.DepthSettings(kept_states=24))
     yield "depth/tower3", small, ModelConfig(perception="depth", samples=4), perceived
 
 

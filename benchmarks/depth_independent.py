@@ -193,7 +193,8 @@ def main() -> int:
     out.mkdir(parents=True, exist_ok=True)
     (out / "depth_independent.json").write_text(json.dumps(result, indent=1) + "\n")
     s = result["summary"]
-    command = " ".join(["--scenes", str(args.scenes), *(f"--set {x}" for x in args.set),
+    command = " ".join(["--scenes", str(args.scenes), *([f"--seed {args.seed}"] if args.seed != 49 else []),
+                        *(f"--set {x}" for x in args.set),
                         *(f"--without {x}" for x in args.without)])
     lines = [f"# Depth perception on independent images ({result['date']}{', ' + args.label if args.label else ''})",
              "", f"`.venv/bin/python benchmarks/depth_independent.py {command}`", "",

@@ -154,13 +154,13 @@ def test_depth_benchmark_reports_coverage_and_the_towers_cost(tmp_path):
 
 def test_independent_depth_benchmark_reports_coverage_for_objects_in_view_and_hidden(tmp_path):
     result = subprocess.run([sys.executable, str(REPO / "benchmarks" / "depth_independent.py"), "--scenes", "2",
-                             "--set", "updates_per_object=100", "--without", "bias", "--out", str(tmp_path)],
+                             "--set", "kept_states=16", "--without", "bias", "--out", str(tmp_path)],
                             capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr[-3000:]
     report = json.loads((tmp_path / "depth_independent.json").read_text())
     assert report["summary"]["scenes"] == 2 and 0 <= report["summary"]["all"]["coverage"] <= 1
     assert all(0 <= o["visible"] <= 1 and len(o["covered"]) == 4 for o in report["objects"])
-    assert "--set updates_per_object=100 --without bias" in (tmp_path / "depth_independent.md").read_text()
+    assert "--set kept_states=16 --without bias" in (tmp_path / "depth_independent.md").read_text()
 
 
 def test_queries_benchmark_compares_the_contact_watch_and_its_early_end(tmp_path):

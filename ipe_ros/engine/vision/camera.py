@@ -97,6 +97,12 @@ class PinholeCamera:
         local = np.stack(np.broadcast_arrays(u[None, :], v[:, None], np.ones((self.height_px, self.width_px))), axis=-1)
         return local @ self.axes
 
+    def rays_at(self, rows: np.ndarray, columns: np.ndarray) -> np.ndarray:
+        """(n, 3) ``rays()`` of the pixels (rows[i], columns[i]) alone."""
+        local = np.stack([(np.asarray(columns) - self.cx) / self.fx, (np.asarray(rows) - self.cy) / self.fy,
+                          np.ones(len(rows))], axis=1)
+        return local @ self.axes
+
 
 def look_at_axes(position_m, target_m) -> np.ndarray:
     """Rows: right, down, forward (unit vectors in the scene frame) of a camera at ``position_m``

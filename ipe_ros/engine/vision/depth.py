@@ -3,14 +3,14 @@
 The likelihood is ``depth_model.DepthModel``'s. The prior is the detector's: each object's published
 pose, x and y with SD ``prior_sd_m`` and yaw with ``prior_yaw_sd_rad``. A block in plain view is
 pinned down by its pixels; one hidden behind another keeps the prior's spread. Heights are
-estimated too (prior N(published, ``prior_height_sd_m``)), tilts taken as published.
-Metropolis-Hastings with single-object moves (x, y, height and yaw together, one scale per object
-tuned in burn-in) and an injected Generator; several cameras multiply their likelihoods.
+estimated too (prior N(published, ``prior_height_sd_m``)), tilts taken as published. The sampler
+(``depth_chain``) finds each object's peak, fits its curvature and samples by batched independence
+proposals, with an injected Generator; several cameras multiply their likelihoods.
 
 A real camera's range is biased by millimetres (a scale error, a calibration offset), which would
 move every object along the view and make the posterior confidently wrong: each camera's range
-offset is a nuisance parameter of the chain (prior N(0, ``offset_prior_sd_m``), one move per four
-scans of the objects), pinned down by the support around the objects, whose place is known.
+offset is a nuisance parameter of the chain (prior N(0, ``offset_prior_sd_m``), a block of its
+own), pinned down by the support around the objects, whose place is known.
 
 The chain's answer for the robot: k scenes for the IPE, each object's refined pose (the posterior
 mean) and covariance. Reading a robot's files is ``depth_io.py``.
@@ -29,11 +29,11 @@ import numpy as np
 from ..errors import ConfigError
 from ..scene.bodies import Scene
 from ..scene.shapes import quaternion_product
+from .depth_chain import projected_end, sample_depth_posterior
 from .depth_model import (DepthModel, DepthObservation, DepthSettings, check_layer_memory, render_depth_m,
                           support_depth_m)
 from .mcmc import effective_sample_size
-from .metropolis import run_metropolis, thinned_index
-from .render import scene_mesh
+from .metropolis import thinned_index
 
 __all__ = ["CHAIN_BUDGET_SHARE", "DEPTH_STREAM", "DepthObservation", "DepthPerceivedScenes", "DepthPosterior",
            "DepthSettings", "perceive_depth", "perceive_depth_for", "render_depth_m", "run_depth_chain",
@@ -47,15 +47,8 @@ DEPTH_STREAM = 0xDE9
 CHAIN_BUDGET_SHARE = 0.5
 
 
-#: the acceptance rate each object's proposal scale is tuned towards during burn-in
-TARGET_ACCEPTANCE = 0.3
-
-#: scans of the objects between checks of the chain's projected end against its deadline
-BUDGET_CHECK_SCANS = 10
-
-#: scans of the objects per move of the cameras' range offsets: an offset move reads every pixel in
-#: reach (an object's, its own patch), and the support pins the offset within a few moves
-OFFSET_MOVE_SCANS = 4
+#: batches of proposals between checks of the chain's projected end against its deadline
+BUDGET_CHECK_BATCHES = 10
 
 
 @dataclass(frozen=True)
@@ -116,121 +109,46 @@ class DepthPosterior:
 
 
 def run_depth_chain(scene: Scene, observations: tuple[DepthObservation, ...], settings: DepthSettings,
-                    rng: np.random.Generator, deadline_s: float | None = None) -> DepthPosterior:
-    """Metropolis-Hastings over the dynamic objects' (x, y, height, yaw) and each camera's range offset,
-    from the published scene.
+                    rng: np.random.Generator, deadline_s: float | None = None, k: int = 0) -> DepthPosterior:
+    """The posterior over the dynamic objects' (x, y, height, yaw) and each camera's range offset,
+    from the published scene (``depth_chain``): at least ``k`` states kept.
 
     ``deadline_s`` (``time.monotonic()``): the chain is refused (ConfigError naming ``budget_s``) as
-    soon as its first scans show it cannot finish by then, and stopped if it runs past it."""
+    soon as its first batches show it cannot finish by then, and stopped if it runs past it."""
     if not observations:
         raise ConfigError("depth", "depth perception needs at least one depth image")
     check_layer_memory(scene, observations)
     started = time.monotonic()
-    mesh = scene_mesh(scene)
     dynamic = len(scene.dynamic_objects)
-    positions = mesh.positions_m.copy()
+    bodies = [*scene.dynamic_objects, *(b for b in scene.objects if b.static)]
+    positions = np.array([b.position_m for b in bodies], float)
     yaws = np.zeros(len(positions))
-    model = DepthModel(scene, mesh, observations, settings)
-    current = model.start(positions, yaws)
+    model = DepthModel(scene, observations, settings)
+    model.start(positions, yaws)
     if deadline_s is not None and time.monotonic() > deadline_s:
         raise ConfigError("budget_s", f"reading the depth image for {dynamic} objects took "
                                       f"{time.monotonic() - started:.3g} s, all the budget leaves the depth chain; "
                                       "raise the budget, bin or crop the image, or send fewer objects")
 
-    total, burn_in = settings.chain_samples(dynamic), settings.burn_in(dynamic)
-    kernel = _PoseMoves(model, positions, yaws, current, dynamic, len(observations), settings, burn_in)
+    def check(done: int, total: int) -> None:
+        if deadline_s is not None and (done % BUDGET_CHECK_BATCHES == 0 or done == total):
+            _check_deadline(started, deadline_s, done, total, dynamic)
 
-    def check(sample: int) -> None:
-        if deadline_s is not None and sample % (BUDGET_CHECK_SCANS * dynamic) == 0 and sample:
-            _check_deadline(started, deadline_s, sample, total, dynamic)
-
-    run = run_metropolis(kernel, total, burn_in, rng, kernel.keep, check)
-    kept_xyz = [xyz for xyz, _, _ in run.kept]
-    kept_yaw = [yaw for _, yaw, _ in run.kept]
-    model.start(np.concatenate([np.mean(kept_xyz, axis=0), positions[dynamic:]]),
-                np.concatenate([np.mean(kept_yaw, axis=0), yaws[dynamic:]]))
-    return DepthPosterior(names=tuple(b.name for b in scene.dynamic_objects), positions_m=np.array(kept_xyz),
-                          yaws_rad=np.array(kept_yaw), acceptance_rate=run.acceptance_rate,
-                          offsets_m=np.array([offsets for _, _, offsets in run.kept]),
+    run = sample_depth_posterior(model, positions, yaws, dynamic, settings, rng, k, check)
+    model.start(np.concatenate([run.positions_m.mean(axis=0), positions[dynamic:]]),
+                np.concatenate([run.yaws_rad.mean(axis=0), yaws[dynamic:]]))
+    return DepthPosterior(names=tuple(b.name for b in scene.dynamic_objects), positions_m=run.positions_m,
+                          yaws_rad=run.yaws_rad, acceptance_rate=run.acceptance_rate, offsets_m=run.offsets_m,
                           pixels=model.pixels_seen(dynamic))
-
-
-class _PoseMoves:
-    """The depth chain's kernel: a Gaussian move of one object's x, y (height) and yaw under its
-    prior around the published pose, its scale tuned during burn-in towards TARGET_ACCEPTANCE (a
-    block in plain view is pinned to a fraction of a millimetre, a hidden one wanders over its prior)
-    then frozen; every ``OFFSET_MOVE_SCANS`` scans, a move of each camera's range offset."""
-
-    def __init__(self, model: DepthModel, positions: np.ndarray, yaws: np.ndarray, current: float, dynamic: int,
-                 cameras: int, settings: DepthSettings, burn_in: int):
-        self.model, self.positions, self.yaws, self.dynamic, self.settings = model, positions, yaws, dynamic, settings
-        self.current, self.burn_in = current, burn_in  # the state's log-likelihood; updates that adapt
-        self.prior_centre = positions[:dynamic, :3].copy()
-        self.heights = settings.prior_height_sd_m > 0  # estimated, or taken as published
-        self.scale = np.ones(dynamic)
-        self.offset_scale = np.ones(cameras)
-
-    def log_prior(self, b: int, xyz: np.ndarray, yaw: float) -> float:
-        s, centre = self.settings, self.prior_centre[b]
-        prior = (-0.5 * float(np.sum((xyz[:2] - centre[:2]) ** 2)) / s.prior_sd_m ** 2
-                 - 0.5 * yaw * yaw / s.prior_yaw_sd_rad ** 2)
-        return prior - 0.5 * (xyz[2] - centre[2]) ** 2 / s.prior_height_sd_m ** 2 if self.heights else prior
-
-    def propose(self, sample: int, rng: np.random.Generator) -> float:
-        s, b = self.settings, int(rng.integers(0, self.dynamic))
-        self.body = b
-        self.moved = self.positions[b].copy()
-        self.moved[:2] += self.scale[b] * s.proposal_sd_m * rng.standard_normal(2)
-        if self.heights:
-            self.moved[2] += self.scale[b] * s.proposal_height_sd_m * rng.standard_normal()
-        self.yaw = self.yaws[b] + self.scale[b] * s.proposal_yaw_sd_rad * rng.standard_normal()
-        self.candidate = self.model.propose(b, self.moved, self.yaw)
-        return (self.candidate - self.current + self.log_prior(b, self.moved, self.yaw)
-                - self.log_prior(b, self.positions[b], self.yaws[b]))
-
-    def accept(self) -> None:
-        self.model.accept()
-        b = self.body
-        self.positions[b], self.yaws[b], self.current = self.moved, self.yaw, self.candidate
-
-    def after(self, sample: int, accepted: bool, rng: np.random.Generator) -> None:
-        if sample < self.burn_in:
-            self.scale[self.body] = self._adapted(self.scale[self.body], accepted, sample)
-        if self.settings.offset_prior_sd_m > 0 and sample % (OFFSET_MOVE_SCANS * self.dynamic) == self.dynamic - 1:
-            self._move_offsets(sample, rng)
-
-    def keep(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return self.positions[:self.dynamic].copy(), self.yaws[:self.dynamic].copy(), self.model.offsets_m.copy()
-
-    def _adapted(self, value: float, accepted: bool, sample: int) -> float:
-        value *= math.exp(0.5 * ((1.0 if accepted else 0.0) - TARGET_ACCEPTANCE) / math.sqrt(1 + sample / self.dynamic))
-        return min(max(value, 1e-3), 10.0)
-
-    def _move_offsets(self, sample: int, rng: np.random.Generator) -> None:
-        """One move of each camera's range offset: a real camera's depth is biased by millimetres (range
-        error, calibration), which would otherwise move every object along the view; the support
-        around the objects, whose place is known, pins it down."""
-        s = self.settings
-        for v in range(len(self.offset_scale)):
-            old = self.model.offsets_m[v]
-            new = old + self.offset_scale[v] * s.offset_proposal_sd_m * rng.standard_normal()
-            candidate = self.model.propose_offset(v, new)
-            ratio = candidate - self.current - 0.5 * (new * new - old * old) / s.offset_prior_sd_m ** 2
-            accepted = bool(np.log(rng.random()) < ratio)
-            if accepted:
-                self.model.accept_offset()
-                self.current = candidate
-            if sample < self.burn_in:
-                self.offset_scale[v] = self._adapted(self.offset_scale[v], accepted, sample)
 
 
 def _check_deadline(started: float, deadline_s: float, done: int, total: int, objects: int) -> None:
     now = time.monotonic()
-    projected = started + (now - started) * total / done
+    projected = projected_end(started, done, total)
     if projected > deadline_s:
         raise ConfigError("budget_s", f"the depth chain over {objects} objects needs ~{projected - started:.3g} s "
-                                      f"({total} updates; {done} took {now - started:.3g} s), more than the "
-                                      f"{deadline_s - started:.3g} s the budget leaves it; raise the "
+                                      f"({total} batches of proposals; {done} took {now - started:.3g} s), more than "
+                                      f"the {deadline_s - started:.3g} s the budget leaves it; raise the "
                                       "budget or send fewer objects")
 
 
@@ -314,12 +232,10 @@ def _thinned_scenes(given: Scene, posterior: DepthPosterior, k: int) -> tuple[Sc
 def perceive_depth(scene: Scene, k: int, observations: tuple[DepthObservation, ...], settings: DepthSettings,
                    rng: np.random.Generator, deadline_s: float | None = None) -> DepthPerceivedScenes:
     """k scenes spread over the depth posterior of ``scene`` (the detector's guess) given the images."""
-    posterior = run_depth_chain(scene, observations, settings, rng, deadline_s)
-    if k > len(posterior.positions_m):
-        raise ConfigError("depth.updates_per_object", f"the chain keeps {len(posterior.positions_m)} states after "
-                                                      f"burn-in, fewer than the {k} samples asked; lengthen it")
+    posterior = run_depth_chain(scene, observations, settings, rng, deadline_s, k)
     objects = len(scene.dynamic_objects)
-    return DepthPerceivedScenes(scenes=_thinned_scenes(scene, posterior, k), posterior=posterior, chain_samples=settings.chain_samples(objects),
+    return DepthPerceivedScenes(scenes=_thinned_scenes(scene, posterior, k), posterior=posterior,
+                                chain_samples=settings.chain_samples(objects, k),
                                 burn_in=settings.burn_in(objects), refined=scene_at_pose(scene, *posterior.mean()),
                                 given=scene)
 

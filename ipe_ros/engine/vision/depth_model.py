@@ -1,9 +1,8 @@
 """The depth camera's likelihood: what a hypothesised scene would look like to it, pixel by pixel.
 
-A hypothesised scene (each dynamic object's x, y and yaw; heights as published, since stacking
-gives them) is rendered into the depth the camera would measure - the z-buffer of the hulls (our
-rasteriser, ``render.body_patch``) over the support plane, cast per pixel - and compared with the
-measured depth pixel by pixel:
+A hypothesised scene (each dynamic object's x, y, height and yaw) is rendered into the depth the
+camera would measure - each pixel's ray cast at the bodies' convex parts (``raycast``), the nearest
+hit or else the support plane - and compared with the measured depth pixel by pixel:
 
     p(d | d_hat) = (1 - outlier) N(d - offset; d_hat, sd(d_hat)) + outlier / max_range,
     sd(d_hat) = sd_m + sd_per_m2 * d_hat^2        (structured light and stereo: error grows with range^2)
@@ -30,7 +29,8 @@ from ..checks import integer, positive
 from ..errors import ConfigError
 from ..scene.bodies import Floor, Scene
 from .camera import PinholeCamera
-from .render import EMPTY, Patch, SceneMesh, body_patch, scene_mesh
+from .raycast import convex_body, pixel_box, ray_depths, turns
+from .render import body_patch, scene_mesh
 
 
 @dataclass(frozen=True)
@@ -51,7 +51,11 @@ class DepthObservation:
 
 @dataclass(frozen=True)
 class DepthSettings:
-    """The depth perception's model and chain (see the module docstring)."""
+    """The depth perception's model (see the module docstring) and its sampler (``depth_chain``):
+    ``locate_*`` the search for the posterior's peak, ``shape_points`` the poses its curvature is
+    fitted to, then ``burn_in_sweeps`` + ``kept_states`` sweeps (or k, when more) of
+    ``proposals_per_sweep`` independence proposals per object, a share ``prior_share`` of them
+    drawn from the prior and the rest from a Student-t (``proposal_dof``) around the peak."""
 
     sd_m: float = 0.002
     sd_per_m2: float = 0.0025
@@ -62,18 +66,22 @@ class DepthSettings:
     temperature: float = 4.0
     prior_sd_m: float = 0.03
     prior_yaw_sd_rad: float = 0.2
-    proposal_sd_m: float = 0.005
-    proposal_yaw_sd_rad: float = 0.03
-    updates_per_object: int = 1000
-    burn_in_fraction: float = 0.2
     offset_prior_sd_m: float = 0.01
-    offset_proposal_sd_m: float = 0.0005
     prior_height_sd_m: float = 0.01
-    proposal_height_sd_m: float = 0.002
+    locate_sweeps: int = 2
+    locate_rounds: int = 20
+    locate_candidates: int = 16
+    shape_points: int = 40
+    proposals_per_sweep: int = 4
+    walk_steps: int = 3
+    kept_states: int = 64
+    burn_in_sweeps: int = 16
+    proposal_dof: float = 4.0
+    prior_share: float = 0.1
 
     def __post_init__(self) -> None:
         for name in ("sd_m", "max_range_m", "reach_m", "temperature", "prior_sd_m", "prior_yaw_sd_rad",
-                     "proposal_sd_m", "proposal_yaw_sd_rad", "offset_proposal_sd_m", "proposal_height_sd_m"):
+                     "proposal_dof"):
             positive(getattr(self, name), f"depth.{name}")
         for name, meaning in (("offset_prior_sd_m", "the camera's range taken as exact"),
                               ("prior_height_sd_m", "the detector's heights taken as exact")):
@@ -82,33 +90,43 @@ class DepthSettings:
                 raise ConfigError(f"depth.{name}", f"must be in [0, 0.1] (0: {meaning}), got {value!r}")
         if not isinstance(self.sd_per_m2, (int, float)) or not 0 <= self.sd_per_m2 < 1:
             raise ConfigError("depth.sd_per_m2", f"must be in [0, 1), got {self.sd_per_m2!r}")
-        if not isinstance(self.outlier, (int, float)) or not 0 < self.outlier < 1:
-            raise ConfigError("depth.outlier", f"must be in (0, 1), got {self.outlier!r}")
+        for name in ("outlier", "prior_share"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < 1:
+                raise ConfigError(f"depth.{name}", f"must be in (0, 1), got {value!r}")
         integer(self.pixel_stride, "depth.pixel_stride", 1, 16)
-        integer(self.updates_per_object, "depth.updates_per_object", 1, 100_000)
-        if not isinstance(self.burn_in_fraction, (int, float)) or not 0 <= self.burn_in_fraction < 1:
-            raise ConfigError("depth.burn_in_fraction", f"must be in [0, 1), got {self.burn_in_fraction!r}")
+        for name, low, high in (("locate_sweeps", 0, 10), ("locate_rounds", 1, 30), ("locate_candidates", 1, 1000),
+                                ("shape_points", 16, 1000), ("proposals_per_sweep", 1, 100), ("walk_steps", 0, 100),
+                                ("kept_states", 1, 100_000), ("burn_in_sweeps", 0, 10_000)):
+            integer(getattr(self, name), f"depth.{name}", low, high)
 
-    def chain_samples(self, objects: int) -> int:
-        """Single-object updates in a chain over ``objects`` objects."""
-        return self.updates_per_object * objects
+    def sweeps(self, k: int = 0) -> int:
+        """Sweeps over the objects after the search: burn-in, then one kept state per sweep."""
+        return self.burn_in_sweeps + max(self.kept_states, k)
+
+    def chain_samples(self, objects: int, k: int = 0) -> int:
+        """Single-object proposals of the sampling sweeps over ``objects`` objects."""
+        return self.sweeps(k) * self.proposals_per_sweep * objects
 
     def burn_in(self, objects: int) -> int:
-        return int(self.burn_in_fraction * self.chain_samples(objects))
+        return self.burn_in_sweeps * self.proposals_per_sweep * objects
 
 
 def support_depth_m(scene: Scene, camera: PinholeCamera) -> np.ndarray:
     """(height, width) depth of the support under every pixel's ray (the floor, the table top within
     its edges, the floor under a table); NaN where the ray meets none."""
-    rays = camera.rays()
-    origin = np.asarray(camera.position_m, float)
+    return support_depth_from_rays(scene, np.asarray(camera.position_m, float), camera.rays())
+
+
+def support_depth_from_rays(scene: Scene, origin_m: np.ndarray, rays: np.ndarray) -> np.ndarray:
+    """``support_depth_m`` along these rays (``(..., 3)``, optical component 1) from ``origin_m``."""
     support = scene.support
 
     def plane(z: float) -> tuple[np.ndarray, np.ndarray]:
         with np.errstate(divide="ignore", invalid="ignore"):
-            t = (z - origin[2]) / rays[..., 2]
+            t = (z - origin_m[2]) / rays[..., 2]
         t = np.where(t > 0, t, np.nan)
-        return t, origin + t[..., None] * rays
+        return t, origin_m + t[..., None] * rays
 
     if isinstance(support, Floor):
         return plane(support.height_m)[0]
@@ -137,126 +155,139 @@ def _reach_mask(scene: Scene, camera: PinholeCamera, reach_m: float) -> np.ndarr
 
 
 class DepthModel:
-    """Every camera's measured depth at the pixels read, and the hypothesis' rendered depth, updated
-    one moved object at a time (each object keeps its own depth layer per camera, as
-    ``mcmc.ImageModel`` does for grey images)."""
+    """Every camera's measured depth at the pixels read, and the hypothesis' depth there: one layer
+    per body (its depth at every pixel read, inf where it does not cover it), so moving one body
+    re-casts that body's rays alone. ``log_likelihoods`` scores many poses of one body at once, the
+    others where they are."""
 
-    def __init__(self, scene: Scene, mesh: SceneMesh, observations: tuple[DepthObservation, ...],
-                 settings: DepthSettings):
-        self.mesh, self.observations, self.settings = mesh, observations, settings
+    def __init__(self, scene: Scene, observations: tuple[DepthObservation, ...], settings: DepthSettings):
+        self.observations, self.settings = observations, settings
+        self.bodies = [convex_body(b) for b in (*scene.dynamic_objects, *(b for b in scene.objects if b.static))]
         stride = settings.pixel_stride
-        self.read, self.measured, self.support = [], [], []
+        self.rows, self.columns, self.rays, self.measured, self.support = [], [], [], [], []
         for obs in observations:
             measured = np.asarray(obs.depth_m, float)
             with np.errstate(invalid="ignore"):  # 0, NaN, inf, negative or beyond the range: no reading
                 valid = np.isfinite(measured) & (measured > 0) & (measured < settings.max_range_m)
             grid = np.zeros_like(valid)
             grid[::stride, ::stride] = True
-            self.read.append(valid & grid & _reach_mask(scene, obs.camera, settings.reach_m))
-            self.measured.append(np.where(valid, measured, np.nan))
-            self.support.append(support_depth_m(scene, obs.camera))
-        self.read_pixels = [np.nonzero(read) for read in self.read]
-        if not any(len(rows) for rows, _ in self.read_pixels):
+            rows, columns = np.nonzero(valid & grid & _reach_mask(scene, obs.camera, settings.reach_m))
+            rays = obs.camera.rays_at(rows, columns)
+            self.rows.append(rows)
+            self.columns.append(columns)
+            self.rays.append(rays)
+            self.measured.append(measured[rows, columns])
+            support = support_depth_from_rays(scene, np.asarray(obs.camera.position_m, float), rays)
+            self.support.append(np.where(np.isnan(support), np.inf, support))  # inf: the outlier density alone
+        if not any(len(rows) for rows in self.rows):
             raise ConfigError("depth", "no usable depth where the objects are: every pixel that sees them (or the "
                                        f"support within {settings.reach_m:g} m) is 0, NaN, inf, negative or beyond "
                                        f"{settings.max_range_m:g} m, or the objects are out of view; check the camera "
                                        "driver, the camera info and the camera pose")
         self.offsets_m = np.zeros(len(observations))
-        self.log_outlier = math.log(settings.outlier / settings.max_range_m)
 
     def _pixel_ll(self, measured: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+        """Per pixel log p(measured | predicted); predicted inf: nothing there, the outlier density."""
         s = self.settings
-        sd = s.sd_m + s.sd_per_m2 * np.where(np.isfinite(predicted), predicted, 0.0) ** 2
+        finite = np.isfinite(predicted)
+        sd = s.sd_m + s.sd_per_m2 * np.where(finite, predicted, 0.0) ** 2
         with np.errstate(invalid="ignore", over="ignore"):
             normal = np.exp(-0.5 * ((measured - predicted) / sd) ** 2) / (sd * math.sqrt(2 * math.pi))
-        inlier = np.where(np.isfinite(predicted), (1 - s.outlier) * normal, 0.0)
-        return np.log(inlier + s.outlier / s.max_range_m)
+        return np.log(np.where(finite, (1 - s.outlier) * normal, 0.0) + s.outlier / s.max_range_m)
 
-    def _region_ll(self, v: int, region, depth_layers: np.ndarray) -> float:
-        v0, v1, u0, u1 = region
-        read = self.read[v][v0:v1, u0:u1]
-        if not read.any():
-            return 0.0
-        nearest = depth_layers.min(axis=0)
-        support = self.support[v][v0:v1, u0:u1]
-        predicted = np.where(np.isfinite(nearest), nearest, support)  # NaN: nothing there, outlier density only
-        predicted = np.where(np.isnan(predicted), np.inf, predicted)
-        return float(self._pixel_ll(self.measured[v][v0:v1, u0:u1][read] - self.offsets_m[v], predicted[read]).sum())
+    def _in_view(self, v: int, body: int, positions_m: np.ndarray, rotations: np.ndarray) -> np.ndarray:
+        """(pixels read,) bool: in the image box that ``body`` can cover in these poses."""
+        box = pixel_box(self.bodies[body], self.observations[v].camera, positions_m, rotations)
+        if box is None:
+            return np.ones(len(self.rows[v]), bool)
+        u0, u1, v0, v1 = box
+        rows, columns = self.rows[v], self.columns[v]
+        return (columns >= u0 - 1) & (columns <= u1 + 1) & (rows >= v0 - 1) & (rows <= v1 + 1)
+
+    def _depths(self, v: int, body: int, positions_m: np.ndarray, rotations: np.ndarray,
+                index: np.ndarray) -> np.ndarray:
+        """(poses, pixels) depth of ``body`` in each pose at the pixels read ``index``."""
+        return ray_depths(self.bodies[body], np.asarray(self.observations[v].camera.position_m, float),
+                          self.rays[v][index], positions_m, rotations)
+
+    def _predicted(self, v: int, index, nearest: np.ndarray) -> np.ndarray:
+        return np.where(np.isfinite(nearest), nearest, self.support[v][index])
+
+    def _rescore(self, v: int, index=slice(None)) -> None:
+        """Camera v's per-pixel log-likelihood of the state as it is, at these pixels read."""
+        self.pixel_ll_now[v][index] = self._pixel_ll(self.measured[v][index] - self.offsets_m[v],
+                                                     self._predicted(v, index, self.layers[v][:, index].min(axis=0)))
+
+    def start(self, positions_m: np.ndarray, yaws_rad: np.ndarray) -> float:
+        """Every body at its pose: the layers and the (tempered) log-likelihood."""
+        self.layers = [np.full((len(self.bodies), len(rows)), np.inf) for rows in self.rows]
+        self.pixel_ll_now = [np.zeros(len(rows)) for rows in self.rows]
+        for v in range(len(self.observations)):
+            for b in range(len(self.bodies)):
+                self._place(v, b, np.asarray(positions_m[b], float), float(yaws_rad[b]))
+            self._rescore(v)
+        self.current = float(sum(ll.sum() for ll in self.pixel_ll_now)) / self.settings.temperature
+        return self.current
+
+    def _place(self, v: int, body: int, position_m: np.ndarray, yaw_rad: float) -> np.ndarray:
+        """Cast ``body``'s rays in this pose; the pixels read whose depth may have changed."""
+        rotation = turns(np.array([yaw_rad]))
+        changed = self._in_view(v, body, position_m[None], rotation)
+        index = np.flatnonzero(changed)
+        changed |= np.isfinite(self.layers[v][body])
+        self.layers[v][body] = np.inf
+        self.layers[v][body, index] = self._depths(v, body, position_m[None], rotation, index)[0]
+        return changed
+
+    def log_likelihoods(self, body: int, positions_m: np.ndarray, yaws_rad: np.ndarray) -> np.ndarray:
+        """(poses,) the (tempered) log-likelihood with ``body`` at each pose, the rest as they are."""
+        positions_m = np.asarray(positions_m, float)
+        rotations = turns(np.asarray(yaws_rad, float))
+        change = np.zeros(len(positions_m))
+        for v in range(len(self.observations)):
+            if not len(self.rows[v]):
+                continue
+            # where the poses may show it, and where it shows now
+            index = np.flatnonzero(self._in_view(v, body, positions_m, rotations) | np.isfinite(self.layers[v][body]))
+            if not len(index):
+                continue
+            layers = self.layers[v][:, index]
+            others = np.delete(layers, body, axis=0).min(axis=0) if len(layers) > 1 else np.full(len(index), np.inf)
+            moved = self._depths(v, body, positions_m, rotations, index)
+            measured = self.measured[v][index] - self.offsets_m[v]
+            after = self._pixel_ll(measured, self._predicted(v, index, np.minimum(others, moved))).sum(axis=1)
+            change += after - self.pixel_ll_now[v][index].sum()
+        return self.current + change / self.settings.temperature
+
+    def move(self, body: int, position_m: np.ndarray, yaw_rad: float, log_likelihood: float) -> None:
+        """Put ``body`` at this pose, whose (tempered) log-likelihood ``log_likelihoods`` gave."""
+        for v in range(len(self.observations)):
+            self._rescore(v, np.flatnonzero(self._place(v, body, np.asarray(position_m, float), float(yaw_rad))))
+        self.current = float(log_likelihood)
+
+    def offset_log_likelihoods(self, v: int, offsets_m: np.ndarray) -> np.ndarray:
+        """(offsets,) the (tempered) log-likelihood with camera v's range offset at each value; the
+        hypothesis' depth at the pixels read is composed once."""
+        if not len(self.rows[v]):
+            return np.full(len(offsets_m), self.current)
+        predicted = self._predicted(v, slice(None), self.layers[v].min(axis=0))
+        moved = self._pixel_ll(self.measured[v][None] - np.asarray(offsets_m, float)[:, None], predicted).sum(axis=1)
+        return self.current + (moved - self.pixel_ll_now[v].sum()) / self.settings.temperature
+
+    def set_offset(self, v: int, offset_m: float, log_likelihood: float) -> None:
+        self.offsets_m[v] = offset_m
+        if len(self.rows[v]):
+            self._rescore(v)
+        self.current = float(log_likelihood)
 
     def pixels_seen(self, objects: int) -> np.ndarray:
         """(objects,) pixels read where each of the first ``objects`` bodies is the nearest surface now."""
         counts = np.zeros(objects, int)
-        for v, (rows, columns) in enumerate(self.read_pixels):
-            if len(rows):
-                depth = self.layers[v][:, rows, columns]
-                nearest = depth.argmin(axis=0)[np.isfinite(depth.min(axis=0))]
+        for layers in self.layers:
+            if layers.shape[1]:
+                nearest = layers.argmin(axis=0)[np.isfinite(layers.min(axis=0))]
                 counts += np.bincount(nearest[nearest < objects], minlength=objects)
         return counts
-
-    def propose_offset(self, v: int, offset_m: float) -> float:
-        """The (tempered) log-likelihood with camera v's range offset moved; pending until ``accept_offset``.
-        Only the offset changes, so the hypothesis' depth at the pixels read is composed once."""
-        rows, columns = self.read_pixels[v]
-        change = 0.0
-        if len(rows):
-            nearest = self.layers[v][:, rows, columns].min(axis=0)
-            predicted = np.where(np.isfinite(nearest), nearest, self.support[v][rows, columns])
-            predicted = np.where(np.isnan(predicted), np.inf, predicted)
-            measured = self.measured[v][rows, columns]
-            change = float(self._pixel_ll(measured - offset_m, predicted).sum()
-                           - self._pixel_ll(measured - self.offsets_m[v], predicted).sum())
-        self._proposed_offset = (v, offset_m, self.current + change / self.settings.temperature)
-        return self._proposed_offset[2]
-
-    def accept_offset(self) -> None:
-        v, offset_m, proposed = self._proposed_offset
-        self.offsets_m[v] = offset_m
-        self.current = proposed
-
-    def start(self, positions_m: np.ndarray, yaws_rad: np.ndarray) -> float:
-        bodies = len(positions_m)
-        self.layers = [np.full((bodies, obs.camera.height_px, obs.camera.width_px), np.inf) for obs in self.observations]
-        self.patches = [[EMPTY] * bodies for _ in self.observations]
-        for v, obs in enumerate(self.observations):
-            for b in range(bodies):
-                self._place(v, b, body_patch(self.mesh, obs.camera, b, positions_m[b], yaws_rad[b]))
-        self.current = sum(self._region_ll(v, (0, obs.camera.height_px, 0, obs.camera.width_px), self.layers[v])
-                           for v, obs in enumerate(self.observations)) / self.settings.temperature
-        return self.current
-
-    def _place(self, v: int, b: int, patch: Patch) -> None:
-        old = self.patches[v][b]
-        self.layers[v][b, old.v0:old.v1, old.u0:old.u1] = np.inf
-        self.layers[v][b, patch.v0:patch.v1, patch.u0:patch.u1] = patch.depth
-        self.patches[v][b] = patch
-
-    def propose(self, body: int, position_m, yaw_rad: float) -> float:
-        """The (tempered) log-likelihood with ``body`` moved; pending until ``accept``."""
-        change, self._pending = 0.0, []
-        for v, obs in enumerate(self.observations):
-            new, old = body_patch(self.mesh, obs.camera, body, position_m, yaw_rad), self.patches[v][body]
-            boxes = [p for p in (new, old) if p.v1 > p.v0]
-            if not boxes:
-                self._pending.append(None)
-                continue
-            region = (min(p.v0 for p in boxes), max(p.v1 for p in boxes), min(p.u0 for p in boxes),
-                      max(p.u1 for p in boxes))
-            v0, v1, u0, u1 = region
-            layers = self.layers[v][:, v0:v1, u0:u1].copy()
-            before = self._region_ll(v, region, layers)
-            layers[body] = np.inf
-            layers[body, new.v0 - v0:new.v1 - v0, new.u0 - u0:new.u1 - u0] = new.depth
-            change += self._region_ll(v, region, layers) - before
-            self._pending.append(new)
-        self._proposed = (body, self.current + change / self.settings.temperature)
-        return self._proposed[1]
-
-    def accept(self) -> None:
-        body, proposed = self._proposed
-        for v, new in enumerate(self._pending):
-            if new is not None:
-                self._place(v, body, new)
-        self.current = proposed
 
 
 #: the most memory the chain's depth layers (bodies x pixels x cameras, float64) may take
@@ -278,17 +309,26 @@ def render_depth_m(scene: Scene, camera: PinholeCamera, positions_m: np.ndarray 
                    yaws_rad: np.ndarray | None = None) -> np.ndarray:
     """(height, width) depth the camera would measure of the scene with its dynamic objects at
     ``positions_m`` turned by ``yaws_rad`` (default: as published): objects over the support; NaN
-    where neither is."""
-    mesh = scene_mesh(scene)
-    positions = mesh.positions_m.copy()
-    yaws = np.zeros(len(positions))
+    where neither is. The likelihood's own depth (``raycast``), at every pixel."""
+    bodies = [*scene.dynamic_objects, *(b for b in scene.objects if b.static)]
+    positions = np.array([b.position_m for b in bodies], float)
+    yaws = np.zeros(len(bodies))
     if positions_m is not None:
         positions[:len(positions_m)] = positions_m
     if yaws_rad is not None:
         yaws[:len(yaws_rad)] = yaws_rad
+    origin = np.asarray(camera.position_m, float)
     nearest = np.full((camera.height_px, camera.width_px), np.inf)
-    for b in range(len(positions)):
-        patch = body_patch(mesh, camera, b, positions[b], yaws[b])
-        window = nearest[patch.v0:patch.v1, patch.u0:patch.u1]
-        np.minimum(window, patch.depth, out=window)
+    for body, position, yaw in zip(bodies, positions, yaws):
+        convex, rotation = convex_body(body), turns(np.array([yaw]))
+        box = pixel_box(convex, camera, position[None], rotation)
+        u0, u1, v0, v1 = (0, camera.width_px - 1, 0, camera.height_px - 1) if box is None else box
+        columns = np.arange(max(int(np.floor(u0)), 0), min(int(np.ceil(u1)) + 1, camera.width_px))
+        rows = np.arange(max(int(np.floor(v0)), 0), min(int(np.ceil(v1)) + 1, camera.height_px))
+        if not len(rows) or not len(columns):
+            continue
+        grid_rows, grid_columns = (a.ravel() for a in np.meshgrid(rows, columns, indexing="ij"))
+        depth = ray_depths(convex, origin, camera.rays_at(grid_rows, grid_columns), position[None], rotation)[0]
+        window = nearest[rows[0]:rows[-1] + 1, columns[0]:columns[-1] + 1]
+        np.minimum(window, depth.reshape(len(rows), len(columns)), out=window)
     return np.where(np.isfinite(nearest), nearest, support_depth_m(scene, camera))

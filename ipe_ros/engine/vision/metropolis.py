@@ -1,12 +1,13 @@
-"""One Metropolis-Hastings driver for every perception chain, its moves pluggable (emcee's split of
+"""One Metropolis-Hastings driver for single-update chains, its moves pluggable (emcee's split of
 sampler and proposal).
 
 A :class:`Kernel` proposes one update (drawing what it moves, with the chain's ``rng``) and returns
 the log acceptance ratio (target and proposal terms); the driver draws the uniform that decides,
 tells the kernel (``accept``), lets it adapt or make moves of its own (``after``), and keeps what
 ``keep`` returns for every sample after burn-in. ``check(sample)`` runs before each update (a
-budget's deadline). The vision chain (``mcmc``) and the depth chain (``depth``) are kernels; a new
-perception's chain is one more.
+budget's deadline). The vision chain (``mcmc``) is a kernel; a new perception's chain is one more.
+The depth chain (``depth_chain``) scores its proposals in batches, which this driver's one update
+at a time cannot, and has a sampler of its own.
 """
 
 from __future__ import annotations

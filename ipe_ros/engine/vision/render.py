@@ -49,10 +49,19 @@ class SceneMesh:
 
 
 def outward_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """The hull's triangles wound counter-clockwise seen from outside (qhull's are not consistent)."""
+    """The hulls' triangles wound counter-clockwise seen from outside (qhull's are not consistent):
+    each judged from the centre of its own hull (a compound's parts are separate hulls, joined by no
+    triangle; judged from the whole body's centre, faces of a non-convex body turned inwards)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]]])
+    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(len(vertices),) * 2)
+    _, part = connected_components(graph, directed=False)
+    centres = np.array([vertices[part == p].mean(axis=0) for p in range(part.max() + 1)])
     tris = vertices[faces]
     normal = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
-    inward = np.einsum("ij,ij->i", normal, tris.mean(axis=1) - vertices.mean(axis=0)) < 0
+    inward = np.einsum("ij,ij->i", normal, tris.mean(axis=1) - centres[part[faces[:, 0]]]) < 0
     return np.where(inward[:, None], faces[:, ::-1], faces)
 
 

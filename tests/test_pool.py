@@ -35,6 +35,23 @@ def slow_square_or_die_on_three(value):
     return value * value
 
 
+def refuse(value):
+    from ipe_ros.engine import ConfigError
+
+    raise ConfigError("budget_s", f"item {value} needs more than the budget leaves it")
+
+
+def test_an_error_named_in_a_worker_arrives_whole():
+    """A ConfigError raised in a worker reaches the caller with its field and message (it used to
+    arrive as a TypeError from unpickling: its constructor takes two arguments)."""
+    from ipe_ros.engine import ConfigError
+
+    with WorkerPool(1) as pool:
+        with pytest.raises(ConfigError, match=r"^budget_s: item 2 needs more than the budget leaves it$") as info:
+            pool.map(refuse, [2])
+    assert info.value.field == "budget_s"
+
+
 def test_map_keeps_order_and_recovers_from_a_dead_worker(tmp_path):
     marker = str(tmp_path / "died")
     with WorkerPool(2) as pool:

@@ -77,6 +77,9 @@ class _NamedError(ValueError):
         self.problem = clip(str(problem), MAX_PROBLEM_CHARS)
         super().__init__(f"{self.field}: {self.problem}")
 
+    def __reduce__(self):  # raised in a worker process, it arrives whole (field and problem), not as a TypeError
+        return self.__class__, (self.field, self.problem)
+
 
 class SceneError(_NamedError):
     """A scene (or a model setting) is invalid.

@@ -77,9 +77,11 @@ class _Pose(_Block):
         return np.append(self.positions[self.body], self.yaws[self.body])[self.free]
 
     def _poses(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        full = np.tile(np.append(self.positions[self.body], self.yaws[self.body]), (len(values), 1))
-        full[:, self.free] = values
-        return full[:, :3], full[:, 3]
+        if len(self.free) == 4:
+            return values[:, :3], values[:, 3]
+        positions = np.empty((len(values), 3))
+        positions[:, :2], positions[:, 2] = values[:, :2], self.positions[self.body, 2]
+        return positions, values[:, 2]
 
     def evaluate(self, values: np.ndarray) -> np.ndarray:
         return self.model.log_likelihoods(self.body, *self._poses(values))
@@ -120,22 +122,27 @@ class _Proposal:
     prior_centre: np.ndarray
     prior_sd: np.ndarray
 
+    def __post_init__(self) -> None:
+        d, nu = len(self.centre), self.dof
+        object.__setattr__(self, "chol", np.linalg.cholesky(self.covariance))
+        # the normalising constants of the two parts, computed once
+        object.__setattr__(self, "_log_t0", math.log1p(-self.prior_share) + math.lgamma((nu + d) / 2)
+                           - math.lgamma(nu / 2) - d / 2 * math.log(nu * math.pi) - float(np.sum(np.log(np.diag(self.chol)))))
+        object.__setattr__(self, "_log_prior0", math.log(self.prior_share) - float(np.sum(np.log(self.prior_sd)))
+                           - d / 2 * math.log(2 * math.pi))
+
     def draw(self, n: int, rng: np.random.Generator) -> np.ndarray:
         d = len(self.centre)
-        chol = np.linalg.cholesky(self.covariance)
-        t = self.centre + (rng.standard_normal((n, d)) @ chol.T) / np.sqrt(rng.chisquare(self.dof, n) / self.dof)[:, None]
+        t = self.centre + (rng.standard_normal((n, d)) @ self.chol.T) / np.sqrt(rng.chisquare(self.dof, n) / self.dof)[:, None]
         prior = self.prior_centre + self.prior_sd * rng.standard_normal((n, d))
         return np.where((rng.random(n) < self.prior_share)[:, None], prior, t)
 
     def log_density(self, values: np.ndarray) -> np.ndarray:
         d, nu = len(self.centre), self.dof
-        chol = np.linalg.cholesky(self.covariance)
-        z = np.linalg.solve(chol, (values - self.centre).T)
-        log_t = (math.lgamma((nu + d) / 2) - math.lgamma(nu / 2) - d / 2 * math.log(nu * math.pi)
-                 - np.sum(np.log(np.diag(chol))) - (nu + d) / 2 * np.log1p(np.sum(z * z, axis=0) / nu))
-        log_prior = (-0.5 * np.sum(((values - self.prior_centre) / self.prior_sd) ** 2, axis=1)
-                     - np.sum(np.log(self.prior_sd)) - d / 2 * math.log(2 * math.pi))
-        return np.logaddexp(math.log1p(-self.prior_share) + log_t, math.log(self.prior_share) + log_prior)
+        z = np.linalg.solve(self.chol, (values - self.centre).T)
+        log_t = self._log_t0 - (nu + d) / 2 * np.log1p(np.sum(z * z, axis=0) / nu)
+        log_prior = self._log_prior0 - 0.5 * np.sum(((values - self.prior_centre) / self.prior_sd) ** 2, axis=1)
+        return np.logaddexp(log_t, log_prior)
 
 
 @dataclass(frozen=True)
@@ -273,15 +280,15 @@ def _walk_steps(block: _Block, proposal: _Proposal, model: DepthModel, n: int, s
                 rng: np.random.Generator) -> int:
     """n random-walk Metropolis steps of the block, Gaussian with the fitted covariance times
     ``scale``^2: they follow the block's conditional where its neighbours have moved it off the fit."""
-    chol, accepted = np.linalg.cholesky(proposal.covariance), 0
+    accepted, value = 0, block.value()
+    prior = float(block.log_prior(value[None])[0])
     for _ in range(n):
-        value = block.value()
-        candidate = value + scale * chol @ rng.standard_normal(len(value))
+        candidate = value + scale * proposal.chol @ rng.standard_normal(len(value))
         likelihood = float(block.evaluate(candidate[None])[0])
-        ratio = likelihood - model.current + float(block.log_prior(candidate[None])[0] - block.log_prior(value[None])[0])
-        if math.log(rng.random()) < ratio:
+        candidate_prior = float(block.log_prior(candidate[None])[0])
+        if math.log(rng.random()) < likelihood - model.current + candidate_prior - prior:
             block.set(candidate, likelihood)
-            accepted += 1
+            value, prior, accepted = candidate, candidate_prior, accepted + 1
     return accepted
 
 

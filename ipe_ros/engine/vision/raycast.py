@@ -61,11 +61,14 @@ def turns(yaws_rad: np.ndarray) -> np.ndarray:
 def pixel_box(body: ConvexBody, camera, positions_m: np.ndarray, rotations: np.ndarray) -> tuple[float, ...] | None:
     """(u0, u1, v0, v1): image coordinates that the body can cover in any of these poses; None when a
     corner is at or behind the camera's plane (then every pixel may be covered)."""
-    corners = np.einsum("nij,vj->nvi", rotations, body.vertices_m) + positions_m[:, None, :]
-    pixels, depth = camera.project(corners.reshape(-1, 3))
-    if (depth <= 1e-6).any():
+    corners = (body.vertices_m @ rotations.transpose(0, 2, 1) + positions_m[:, None, :]).reshape(-1, 3)
+    local = (corners - camera.position_m) @ camera.axes.T
+    depth = local[:, 2]
+    if depth.min() <= 1e-6:
         return None
-    return pixels[:, 0].min(), pixels[:, 0].max(), pixels[:, 1].min(), pixels[:, 1].max()
+    u = camera.fx * local[:, 0] / depth
+    v = camera.fy * local[:, 1] / depth
+    return u.min() + camera.cx, u.max() + camera.cx, v.min() + camera.cy, v.max() + camera.cy
 
 
 def ray_depths(body: ConvexBody, origin_m: np.ndarray, rays: np.ndarray, positions_m: np.ndarray,
@@ -74,16 +77,16 @@ def ray_depths(body: ConvexBody, origin_m: np.ndarray, rays: np.ndarray, positio
     component 1, from ``origin_m``) first meets the body in each pose; inf where it misses."""
     normals = body.normals @ rotations.transpose(0, 2, 1)                     # (poses, faces, 3)
     reach = body.offsets_m + (normals @ (positions_m - origin_m)[:, :, None])[:, :, 0]  # (poses, faces)
-    along = rays @ normals.transpose(0, 2, 1)                                  # (poses, pixels, faces)
+    along = normals @ rays.T                                                   # (poses, faces, pixels)
     with np.errstate(divide="ignore", invalid="ignore"):
-        t = reach[:, None, :] / along
+        t = reach[:, :, None] / along
     # a ray parallel to a face is inside it everywhere or nowhere
-    parallel_outside = (along == 0) & (reach[:, None, :] < 0)
+    parallel_outside = (along == 0) & (reach[:, :, None] < 0)
     enters = np.where(along < 0, t, np.where(parallel_outside, np.inf, -np.inf))
     leaves = np.where(along > 0, t, np.inf)
     if len(body.starts) == 1:
-        enter, leave = enters.max(axis=2), leaves.min(axis=2)
+        enter, leave = enters.max(axis=1), leaves.min(axis=1)
         return np.where((enter <= leave) & (enter > 0), enter, np.inf)
-    enter = np.maximum.reduceat(enters, body.starts, axis=2)
-    leave = np.minimum.reduceat(leaves, body.starts, axis=2)
-    return np.where((enter <= leave) & (enter > 0), enter, np.inf).min(axis=2)
+    enter = np.maximum.reduceat(enters, body.starts, axis=1)
+    leave = np.minimum.reduceat(leaves, body.starts, axis=1)
+    return np.where((enter <= leave) & (enter > 0), enter, np.inf).min(axis=1)

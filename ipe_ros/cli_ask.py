@@ -218,16 +218,17 @@ def _perceived(args, scene):
     return depth_posterior(args, scene, args.samples)[0]
 
 
-def depth_posterior(args, scene, k: int):
-    """The depth posterior's k scenes for ``scene`` from --depth, --camera-info and --camera-pose (one
-    chain, in this process, within its share of --budget; --budget then keeps what the chain left for
-    the samples), and the depth observation (ipe predict and ipe ask)."""
+def depth_posterior(args, scene, k: int, map_fn=None):
+    """The depth posterior's k scenes for ``scene`` from --depth, --camera-info and --camera-pose (its
+    chains through ``map_fn``, else in this process, within their share of --budget; --budget then
+    keeps what they left for the samples), and the depth observation (ipe predict and ipe ask)."""
     from .engine.vision import depth, depth_io
 
     observation = depth_io.load_observation(args.depth, args.camera_info, args.camera_pose)
     started = time.perf_counter()
     perceived = depth.perceive_depth_for(scene, k, (observation,), args.seed, budget_s=None
-                                         if args.budget_s is None else args.budget_s * depth.CHAIN_BUDGET_SHARE)
+                                         if args.budget_s is None else args.budget_s * depth.CHAIN_BUDGET_SHARE,
+                                         map_fn=map_fn)
     if args.budget_s is not None:
         args.budget_s = max(args.budget_s - (time.perf_counter() - started), 1e-3)
     return perceived, observation

@@ -4,9 +4,11 @@ from sigma, vision or a depth camera's images, on local worker processes or a Da
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 import sys
+import time
 
 from .cli_ask import depth_posterior
 from .cli_inputs import given_request_arguments
@@ -98,7 +100,9 @@ def sample_map(scheduler: str | None, workers: int):
 
 def run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: int, workers: int, emit,
                      stop: AdaptiveStop | None = None, budget_s: float | None = None, perceived=None,
-                     scheduler: str | None = None, check: SelfCheck = DEFAULT_CHECK) -> None:
+                     scheduler: str | None = None, check: SelfCheck = DEFAULT_CHECK, perceive=None) -> None:
+    """``perceive(map_fn)``: the perceived scenes, made with the samples' workers (the depth chains
+    run one per worker); the budget keeps what it leaves."""
     pool = sample_map(scheduler, min(workers, max(1, model.samples)) if workers > 0 else workers)
     if stop is not None:
         from .engine.compute.cluster import DaskMap
@@ -106,6 +110,11 @@ def run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: int
         parallel = pool.workers if isinstance(pool, DaskMap) else workers
         stop = dataclasses.replace(stop, batch_size=anytime_batch_size(parallel))
     try:
+        if perceive is not None:
+            started = time.perf_counter()
+            perceived = perceive(pool.map if pool else None)
+            if budget_s is not None:
+                budget_s = max(budget_s - (time.perf_counter() - started), 1e-3)
         for scene in steps(scenes, "predict") if len(scenes) > 1 else scenes:
             emit(predict(scene, model, sim, query, seed=seed, map_fn=pool.map if pool else None, stop=stop,
                          budget_s=budget_s, perceived=perceived, check=check))
@@ -114,11 +123,11 @@ def run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: int
             pool.close()
 
 
-def _perceive_depth(args, scenes, model):
+def _perceive_depth(args, scenes, model, map_fn=None):
     """The depth posterior's k scenes for the one scene asked about (the detector's guess)."""
     if len(scenes) != 1:
         raise ConfigError("--depth", f"one depth image describes one scene, but {args.path} holds {len(scenes)}")
-    perceived, observation = depth_posterior(args, scenes[0], model.samples)
+    perceived, observation = depth_posterior(args, scenes[0], model.samples, map_fn)
     if args.depth_rrd is not None:
         from .viz.perception_log import write_depth_rrd
 
@@ -143,13 +152,14 @@ def cmd_predict(args) -> int:
         from .engine.perceptions import perceive_vision
 
         perceived = perceive_vision(scenes[0], model, args.seed)
-    if args.perception == "depth":
-        perceived = _perceive_depth(args, scenes, model)
+    perceive = None
+    if args.perception == "depth":  # with the samples' workers, once they are started
+        perceive = functools.partial(_perceive_depth, args, scenes, model)
     collected: list[Prediction] = []
     if args.json:
         run_predictions(scenes, model, sim, query, args.seed, args.workers,
                         lambda p: (collected.append(p), print(prediction_json(p), flush=True)), stop, args.budget_s,
-                        perceived, args.scheduler, check)
+                        perceived, args.scheduler, check, perceive)
     else:
         k = 1 if all(is_deterministic(s, model) for s in scenes) else args.samples
         print(f"sigma = {model.sigma_m:g} m, phi = {','.join(f'{v:g}' for v in model.phi_m_s2)} m/s^2, mu = {args.mu}, "
@@ -159,7 +169,7 @@ def cmd_predict(args) -> int:
               + (f", perception = {args.perception} (sigma unused)"
                  if perception_source(args.perception).posterior and vision is None else ""))
         run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append, stop, args.budget_s,
-                        perceived, args.scheduler, check)
+                        perceived, args.scheduler, check, perceive)
         print(format_table(collected))
         for line in _perception_lines(collected, args.perception, vision is not None):
             print(line)

@@ -7,6 +7,7 @@ import dataclasses
 import json
 import math
 import re
+import time
 
 import numpy as np
 import pytest
@@ -118,6 +119,25 @@ def test_a_batch_of_poses_scores_as_each_pose_alone_and_moves_keep_the_score_exa
     kept = model.current
     positions[1], yaws[1] = poses[2], turns_[2]
     assert abs(model.start(positions, yaws) - kept) < 1e-9  # the running score is the fresh one
+
+
+def test_the_chains_give_the_same_posterior_in_workers_as_here():
+    """Two chains, one per worker or one after the other in this process: the same states, bit for bit
+    (their seeds never depend on the workers), and a chain's budget refusal arrives from its worker."""
+    from ipe_ros.engine import WorkerPool
+
+    scene = floor(cube("a", 0, 0, 0.05), cube("b", 0.01, 0, 0.15))
+    camera = look_at((1.0, -0.7, 0.6), (0, 0, 0.1))
+    observation, settings = observe(scene, camera), D.DepthSettings(kept_states=8, burn_in_sweeps=2)
+    here = D.run_depth_chain(scene, (observation,), settings, np.random.default_rng(5))
+    with WorkerPool(2) as pool:
+        there = D.run_depth_chain(scene, (observation,), settings, np.random.default_rng(5), map_fn=pool.map)
+        with pytest.raises(ConfigError, match=r"^budget_s: "):
+            D.run_depth_chain(scene, (observation,), D.DepthSettings(), np.random.default_rng(5),
+                              deadline_s=time.monotonic() + 1e-4, map_fn=pool.map)
+    assert here.chains == there.chains == 2 and len(here.positions_m) == 8
+    assert np.array_equal(here.positions_m, there.positions_m) and np.array_equal(here.yaws_rad, there.yaws_rad)
+    assert np.array_equal(here.pixels, there.pixels) and here.effective_sample_size == there.effective_sample_size
 
 
 def test_an_object_the_image_cannot_see_keeps_its_prior_exactly():

@@ -357,7 +357,8 @@ class PredictionService:
         budget_s = config.request.budget_s
         perceived = depth.perceive_depth_for(item.scene, config.request.model.samples, (observation,),
                                              config.request.seed,
-                                             budget_s=None if budget_s is None else budget_s * depth.CHAIN_BUDGET_SHARE)
+                                             budget_s=None if budget_s is None else budget_s * depth.CHAIN_BUDGET_SHARE,
+                                             map_fn=self._pool.map if self._pool is not None else None)
         with self._cond:
             self._posterior = (key, perceived)
             self._counts["depth_posteriors"] += 1

@@ -29,7 +29,8 @@ import numpy as np
 from ..errors import ConfigError
 from ..scene.bodies import Scene
 from ..scene.shapes import quaternion_product
-from .depth_chain import projected_end, sample_depth_posterior
+from ..sampling.montecarlo import MapFn
+from .depth_chain import ChainRun, projected_end, sample_depth_posterior
 from .depth_model import (DepthModel, DepthObservation, DepthSettings, check_layer_memory, render_depth_m,
                           support_depth_m)
 from .mcmc import effective_sample_size
@@ -61,6 +62,7 @@ class DepthPosterior:
     acceptance_rate: float
     offsets_m: np.ndarray | None = None  # (samples, cameras): each camera's range offset (measured - true)
     pixels: np.ndarray | None = None  # (objects,) pixels read where the object is in front at the mean pose
+    chains: int = 1  # the samples are this many independent chains' states, one after the other, equally many
 
     def camera_offsets(self) -> list[dict[str, float]]:
         """Per camera: posterior mean and SD of its range offset (how much longer it measures than the
@@ -71,11 +73,13 @@ class DepthPosterior:
 
     @property
     def effective_sample_size(self) -> float:
-        """The median ESS over every object's x, y and yaw (and z, when heights are estimated)."""
+        """The median ESS over every object's x, y and yaw (and z, when heights are estimated): the
+        sum of the chains' own."""
         values = self.pose_values()
         values = values.reshape(len(values), -1)
         varying = [j for j in range(values.shape[1]) if np.ptp(values[:, j]) > 0]
-        return float(np.median([effective_sample_size(values[:, j]) for j in varying or range(values.shape[1])]))
+        return float(np.median([sum(effective_sample_size(part) for part in np.split(values[:, j], self.chains))
+                                for j in varying or range(values.shape[1])]))
 
     def pose_values(self) -> np.ndarray:
         """(samples, objects, 4): each object's x, y, z (m) and yaw (rad, a turn from the published)."""
@@ -109,21 +113,60 @@ class DepthPosterior:
 
 
 def run_depth_chain(scene: Scene, observations: tuple[DepthObservation, ...], settings: DepthSettings,
-                    rng: np.random.Generator, deadline_s: float | None = None, k: int = 0) -> DepthPosterior:
+                    rng: np.random.Generator, deadline_s: float | None = None, k: int = 0,
+                    map_fn: MapFn | None = None) -> DepthPosterior:
     """The posterior over the dynamic objects' (x, y, height, yaw) and each camera's range offset,
-    from the published scene (``depth_chain``): at least ``k`` states kept.
+    from the published scene (``depth_chain``): ``settings.chains`` independent chains, through
+    ``map_fn`` (the worker pool: one chain per worker) or one after the other here, keeping at least
+    ``k`` states together. The chains and their seeds never depend on the workers.
 
-    ``deadline_s`` (``time.monotonic()``): the chain is refused (ConfigError naming ``budget_s``) as
+    ``deadline_s`` (``time.monotonic()``): a chain is refused (ConfigError naming ``budget_s``) as
     soon as its first batches show it cannot finish by then, and stopped if it runs past it."""
     if not observations:
         raise ConfigError("depth", "depth perception needs at least one depth image")
     check_layer_memory(scene, observations)
-    started = time.monotonic()
+    per_chain = -(-max(settings.kept_states, k) // settings.chains)
+    budget_s = None if deadline_s is None else deadline_s - time.monotonic()
+    tasks = [_ChainTask(scene, observations, dataclasses.replace(settings, kept_states=per_chain), chain_rng, budget_s)
+             for chain_rng in rng.spawn(settings.chains)]
+    runs = map_fn(run_one_chain, tasks) if map_fn is not None and len(tasks) > 1 else [run_one_chain(t) for t in tasks]
     dynamic = len(scene.dynamic_objects)
-    bodies = [*scene.dynamic_objects, *(b for b in scene.objects if b.static)]
-    positions = np.array([b.position_m for b in bodies], float)
-    yaws = np.zeros(len(positions))
-    model = DepthModel(scene, observations, settings)
+    positions, yaws = np.concatenate([r.positions_m for r in runs]), np.concatenate([r.yaws_rad for r in runs])
+    model = DepthModel(scene, observations, settings)  # which pixels show each object at the posterior mean
+    model.start(*_with_static(scene, positions.mean(axis=0), yaws.mean(axis=0)))
+    return DepthPosterior(names=tuple(b.name for b in scene.dynamic_objects), positions_m=positions, yaws_rad=yaws,
+                          acceptance_rate=float(np.mean([r.acceptance_rate for r in runs])),
+                          offsets_m=np.concatenate([r.offsets_m for r in runs]), pixels=model.pixels_seen(dynamic),
+                          chains=len(runs))
+
+
+@dataclass(frozen=True)
+class _ChainTask:
+    """One chain of the depth posterior, for a worker: ``budget_s`` is what the budget left it when
+    sent (each process's clock starts its own deadline from it)."""
+
+    scene: Scene
+    observations: tuple[DepthObservation, ...]
+    settings: DepthSettings
+    rng: np.random.Generator
+    budget_s: float | None
+
+
+def _with_static(scene: Scene, positions_m: np.ndarray, yaws_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every body's pose (dynamic ones first, as ``DepthModel`` orders them): the dynamic ones' given."""
+    static = [b for b in scene.objects if b.static]
+    return (np.concatenate([positions_m, np.array([b.position_m for b in static], float).reshape(-1, 3)]),
+            np.concatenate([yaws_rad, np.zeros(len(static))]))
+
+
+def run_one_chain(task: _ChainTask) -> ChainRun:
+    """One chain from the published scene (module-level: a worker process runs it)."""
+    started = time.monotonic()
+    deadline_s = None if task.budget_s is None else started + task.budget_s
+    scene, dynamic = task.scene, len(task.scene.dynamic_objects)
+    positions, yaws = _with_static(scene, np.array([b.position_m for b in scene.dynamic_objects], float).reshape(-1, 3),
+                                   np.zeros(dynamic))
+    model = DepthModel(scene, task.observations, task.settings)
     model.start(positions, yaws)
     if deadline_s is not None and time.monotonic() > deadline_s:
         raise ConfigError("budget_s", f"reading the depth image for {dynamic} objects took "
@@ -134,12 +177,7 @@ def run_depth_chain(scene: Scene, observations: tuple[DepthObservation, ...], se
         if deadline_s is not None and (done % BUDGET_CHECK_BATCHES == 0 or done == total):
             _check_deadline(started, deadline_s, done, total, dynamic)
 
-    run = sample_depth_posterior(model, positions, yaws, dynamic, settings, rng, k, check)
-    model.start(np.concatenate([run.positions_m.mean(axis=0), positions[dynamic:]]),
-                np.concatenate([run.yaws_rad.mean(axis=0), yaws[dynamic:]]))
-    return DepthPosterior(names=tuple(b.name for b in scene.dynamic_objects), positions_m=run.positions_m,
-                          yaws_rad=run.yaws_rad, acceptance_rate=run.acceptance_rate, offsets_m=run.offsets_m,
-                          pixels=model.pixels_seen(dynamic))
+    return sample_depth_posterior(model, positions, yaws, dynamic, task.settings, task.rng, 0, check)
 
 
 def _check_deadline(started: float, deadline_s: float, done: int, total: int, objects: int) -> None:
@@ -230,9 +268,10 @@ def _thinned_scenes(given: Scene, posterior: DepthPosterior, k: int) -> tuple[Sc
 
 
 def perceive_depth(scene: Scene, k: int, observations: tuple[DepthObservation, ...], settings: DepthSettings,
-                   rng: np.random.Generator, deadline_s: float | None = None) -> DepthPerceivedScenes:
+                   rng: np.random.Generator, deadline_s: float | None = None,
+                   map_fn: MapFn | None = None) -> DepthPerceivedScenes:
     """k scenes spread over the depth posterior of ``scene`` (the detector's guess) given the images."""
-    posterior = run_depth_chain(scene, observations, settings, rng, deadline_s, k)
+    posterior = run_depth_chain(scene, observations, settings, rng, deadline_s, k, map_fn)
     objects = len(scene.dynamic_objects)
     return DepthPerceivedScenes(scenes=_thinned_scenes(scene, posterior, k), posterior=posterior,
                                 chain_samples=settings.chain_samples(objects, k),
@@ -241,9 +280,11 @@ def perceive_depth(scene: Scene, k: int, observations: tuple[DepthObservation, .
 
 
 def perceive_depth_for(scene: Scene, k: int, observations: tuple[DepthObservation, ...], seed: int,
-                       settings: DepthSettings | None = None, budget_s: float | None = None) -> DepthPerceivedScenes:
-    """``perceive_depth`` as a prediction with this ``seed`` runs it (the CLI, the node): its chain on a
-    random stream of its own, apart from the samples', within ``budget_s`` seconds when given."""
+                       settings: DepthSettings | None = None, budget_s: float | None = None,
+                       map_fn: MapFn | None = None) -> DepthPerceivedScenes:
+    """``perceive_depth`` as a prediction with this ``seed`` runs it (the CLI, the node): its chains on
+    a random stream of their own, apart from the samples', within ``budget_s`` seconds when given,
+    through ``map_fn`` when given (the prediction's worker pool)."""
     rng = np.random.default_rng(np.random.SeedSequence([seed, DEPTH_STREAM]))
     deadline = None if budget_s is None else time.monotonic() + budget_s
-    return perceive_depth(scene, k, observations, settings or DepthSettings(), rng, deadline)
+    return perceive_depth(scene, k, observations, settings or DepthSettings(), rng, deadline, map_fn)

@@ -165,7 +165,7 @@ def sample_depth_posterior(model: DepthModel, positions: np.ndarray, yaws: np.nd
     poses = [_Pose(model, b, positions, yaws, s) for b in range(objects)]
     offsets = [_Offset(model, v, s) for v in range(len(model.offsets_m))] if s.offset_prior_sd_m > 0 else []
     blocks: list[_Block] = [*poses, *offsets]
-    sweeps = s.sweeps(k)
+    sweeps = s.burn_in_sweeps + max(s.kept_states, k)  # this chain's
     total = len(blocks) * (s.locate_sweeps * s.locate_rounds + 2 + sweeps)
     done = 0
 

@@ -52,10 +52,11 @@ class DepthObservation:
 @dataclass(frozen=True)
 class DepthSettings:
     """The depth perception's model (see the module docstring) and its sampler (``depth_chain``):
-    ``locate_*`` the search for the posterior's peak, ``shape_points`` the poses its curvature is
-    fitted to, then ``burn_in_sweeps`` + ``kept_states`` sweeps (or k, when more) of
-    ``proposals_per_sweep`` independence proposals per object, a share ``prior_share`` of them
-    drawn from the prior and the rest from a Student-t (``proposal_dof``) around the peak."""
+    ``chains`` independent chains (the workers run one each), each: ``locate_*`` the search for the
+    posterior's peak, ``shape_points`` the poses its curvature is fitted to, then ``burn_in_sweeps``
+    + its share of ``kept_states`` (or k, when more) sweeps of ``proposals_per_sweep`` independence
+    proposals per object - a share ``prior_share`` of them drawn from the prior and the rest from a
+    Student-t (``proposal_dof``) around the peak - and ``walk_steps`` random-walk steps."""
 
     sd_m: float = 0.002
     sd_per_m2: float = 0.0025
@@ -78,6 +79,7 @@ class DepthSettings:
     burn_in_sweeps: int = 16
     proposal_dof: float = 4.0
     prior_share: float = 0.1
+    chains: int = 2
 
     def __post_init__(self) -> None:
         for name in ("sd_m", "max_range_m", "reach_m", "temperature", "prior_sd_m", "prior_yaw_sd_rad",
@@ -97,19 +99,19 @@ class DepthSettings:
         integer(self.pixel_stride, "depth.pixel_stride", 1, 16)
         for name, low, high in (("locate_sweeps", 0, 10), ("locate_rounds", 1, 30), ("locate_candidates", 1, 1000),
                                 ("shape_points", 16, 1000), ("proposals_per_sweep", 1, 100), ("walk_steps", 0, 100),
-                                ("kept_states", 1, 100_000), ("burn_in_sweeps", 0, 10_000)):
+                                ("kept_states", 1, 100_000), ("burn_in_sweeps", 0, 10_000), ("chains", 1, 16)):
             integer(getattr(self, name), f"depth.{name}", low, high)
 
     def sweeps(self, k: int = 0) -> int:
-        """Sweeps over the objects after the search: burn-in, then one kept state per sweep."""
-        return self.burn_in_sweeps + max(self.kept_states, k)
+        """Sweeps over the objects after the search, per chain: burn-in, then one kept state per sweep."""
+        return self.burn_in_sweeps + -(-max(self.kept_states, k) // self.chains)
 
     def chain_samples(self, objects: int, k: int = 0) -> int:
-        """Single-object proposals of the sampling sweeps over ``objects`` objects."""
-        return self.sweeps(k) * self.proposals_per_sweep * objects
+        """Single-object proposals of the sampling sweeps over ``objects`` objects, every chain's."""
+        return self.chains * self.sweeps(k) * (self.proposals_per_sweep + self.walk_steps) * objects
 
     def burn_in(self, objects: int) -> int:
-        return self.burn_in_sweeps * self.proposals_per_sweep * objects
+        return self.chains * self.burn_in_sweeps * (self.proposals_per_sweep + self.walk_steps) * objects
 
 
 def support_depth_m(scene: Scene, camera: PinholeCamera) -> np.ndarray:

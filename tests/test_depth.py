@@ -390,7 +390,7 @@ def test_the_chain_stays_within_its_budget_and_memory():
     observation = D.DepthObservation(camera, D.render_depth_m(scene, camera))
     start = time.monotonic()
     with pytest.raises(ConfigError, match=r"^budget_s: the depth chain over 50 objects needs ~[\d.e+]+ s \(\d+ "
-                                          r"batches of proposals; \d+ took [\d.e+-]+ s\), more than the 0.3 s the budget "
+                                          r"scorings of the image; \d+ took [\d.e+-]+ s\), more than the 0.3 s the budget "
                                           r"leaves it; raise the budget or send fewer objects$"):
         D.perceive_depth_for(scene, 4, (observation,), seed=0, budget_s=0.3)
     assert time.monotonic() - start < 3.0  # the reading, the first ten batches and the refusal

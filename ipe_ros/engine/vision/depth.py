@@ -172,20 +172,25 @@ def run_one_chain(task: _ChainTask) -> ChainRun:
         raise ConfigError("budget_s", f"reading the depth image for {dynamic} objects took "
                                       f"{time.monotonic() - started:.3g} s, all the budget leaves the depth chain; "
                                       "raise the budget, bin or crop the image, or send fewer objects")
+    sampling, batches = time.monotonic(), 0  # the projection from the sampler's own pace, the reading apart
 
     def check(done: int, total: int) -> None:
-        if deadline_s is not None and (done % BUDGET_CHECK_BATCHES == 0 or done == total):
-            _check_deadline(started, deadline_s, done, total, dynamic)
+        nonlocal batches
+        batches += 1
+        if deadline_s is not None and (batches % BUDGET_CHECK_BATCHES == 0 or done == total):
+            _check_deadline(started, sampling, deadline_s, done, total, dynamic)
 
     return sample_depth_posterior(model, positions, yaws, dynamic, task.settings, task.rng, 0, check)
 
 
-def _check_deadline(started: float, deadline_s: float, done: int, total: int, objects: int) -> None:
+def _check_deadline(started: float, sampling: float, deadline_s: float, done: int, total: int, objects: int) -> None:
+    """Refused when the chain, at the pace of its ``done`` scorings since ``sampling`` began, would end
+    after ``deadline_s``."""
     now = time.monotonic()
-    projected = projected_end(started, done, total)
+    projected = projected_end(sampling, done, total)
     if projected > deadline_s:
         raise ConfigError("budget_s", f"the depth chain over {objects} objects needs ~{projected - started:.3g} s "
-                                      f"({total} batches of proposals; {done} took {now - started:.3g} s), more than "
+                                      f"({total} scorings of the image; {done} took {now - sampling:.3g} s), more than "
                                       f"the {deadline_s - started:.3g} s the budget leaves it; raise the "
                                       "budget or send fewer objects")
 

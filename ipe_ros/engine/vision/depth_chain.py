@@ -160,18 +160,19 @@ def sample_depth_posterior(model: DepthModel, positions: np.ndarray, yaws: np.nd
                            check: Callable[[int, int], None] | None = None) -> ChainRun:
     """Locate, shape and sample (module docstring) from the model's current state; ``positions`` and
     ``yaws`` (every body's) are moved in place. ``check(done, total)`` is called after every batch
-    of proposals (a deadline)."""
+    of proposals with the scorings done and to do (a deadline)."""
     s = settings
     poses = [_Pose(model, b, positions, yaws, s) for b in range(objects)]
     offsets = [_Offset(model, v, s) for v in range(len(model.offsets_m))] if s.offset_prior_sd_m > 0 else []
     blocks: list[_Block] = [*poses, *offsets]
     sweeps = s.burn_in_sweeps + max(s.kept_states, k)  # this chain's
-    total = len(blocks) * (s.locate_sweeps * s.locate_rounds + 2 + sweeps)
+    # the work in scorings of the model (a batch of proposals costs about one: its calls, not its size)
+    total = len(blocks) * (s.locate_sweeps * s.locate_rounds + 2 + sweeps * (1 + s.walk_steps))
     done = 0
 
-    def step() -> None:
+    def step(scorings: int = 1) -> None:
         nonlocal done
-        done += 1
+        done += scorings
         if check is not None:
             check(done, total)
 
@@ -188,7 +189,7 @@ def sample_depth_posterior(model: DepthModel, positions: np.ndarray, yaws: np.nd
             walked = _walk_steps(block, proposal, model, s.walk_steps, walk_scale[i], rng) if s.walk_steps else 0
             if sweep < s.burn_in_sweeps and s.walk_steps:  # towards a quarter of the walk's steps taken
                 walk_scale[i] *= math.exp(0.5 * (walked / s.walk_steps - 0.25))
-            step()
+            step(1 + s.walk_steps)
             if i < objects:
                 taken, offered = taken + accepted, offered + s.proposals_per_sweep
         if sweep >= s.burn_in_sweeps:

@@ -28,10 +28,18 @@ def optical_orientation(eye, target, roll_rad: float = 0.0) -> tuple[float, floa
     c, s = math.cos(roll_rad), math.sin(roll_rad)
     x, y = c * x + s * y, -s * x + c * y
     m = np.stack([x, y, z], axis=1)  # columns: the optical axes in the scene frame
-    w = math.sqrt(max(0.0, 1 + m[0, 0] + m[1, 1] + m[2, 2])) / 2
-    if w < 1e-3:
-        raise ValueError("choose another roll: this orientation's quaternion needs another branch")
-    q = np.array([(m[2, 1] - m[1, 2]) / (4 * w), (m[0, 2] - m[2, 0]) / (4 * w), (m[1, 0] - m[0, 1]) / (4 * w), w])
+    # Shepperd's method: the branch of the largest of w, x, y, z keeps the division well away from 0
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    largest = int(np.argmax([trace, m[0, 0], m[1, 1], m[2, 2]]))
+    if largest == 0:
+        w = math.sqrt(1 + trace) / 2
+        q = np.array([(m[2, 1] - m[1, 2]) / (4 * w), (m[0, 2] - m[2, 0]) / (4 * w), (m[1, 0] - m[0, 1]) / (4 * w), w])
+    else:
+        i = largest - 1
+        j, k = (i + 1) % 3, (i + 2) % 3
+        r = math.sqrt(1 + m[i, i] - m[j, j] - m[k, k]) / 2
+        q = np.zeros(4)
+        q[i], q[j], q[k], q[3] = r, (m[j, i] + m[i, j]) / (4 * r), (m[k, i] + m[i, k]) / (4 * r), (m[k, j] - m[j, k]) / (4 * r)
     return tuple(float(v) for v in q / np.linalg.norm(q))
 
 
@@ -63,9 +71,15 @@ def cast(rays, eye, boxes) -> tuple[np.ndarray, np.ndarray]:
 
 
 def box_entry(rays, eye, centre, yaw, half) -> np.ndarray:
-    """Where each ray enters one upright box (depth along the optical axis; inf: it misses)."""
+    """Where each ray enters one box (depth along the optical axis; inf: it misses). ``yaw``: its turn
+    about the vertical, or (yaw, a, b): that turn, then a tilt by the rotation vector (a, b, 0)."""
+    yaw, a, b = (yaw, 0.0, 0.0) if np.isscalar(yaw) else yaw
     c, s = math.cos(yaw), math.sin(yaw)
-    to_box = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # scene -> box frame
+    turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    angle = math.hypot(a, b)
+    k = np.array([[0.0, 0.0, b], [0.0, 0.0, -a], [-b, a, 0.0]]) / (angle or 1.0)  # the tilt axis's cross matrix
+    tilt = np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * (k @ k)
+    to_box = (tilt @ turn).T  # scene -> box frame
     origin, direction = to_box @ (np.asarray(eye, float) - np.asarray(centre, float)), rays @ to_box.T
     with np.errstate(divide="ignore", invalid="ignore"):
         t1, t2 = (-np.asarray(half) - origin) / direction, (np.asarray(half) - origin) / direction

@@ -165,6 +165,26 @@ def test_a_misplaced_detection_is_pulled_back_towards_the_truth():
     assert low[1, 0] <= 0.01 <= high[1, 0]
 
 
+def test_a_box_resting_tilted_on_another_is_found_tilted():
+    """The top box lies 0.06 rad (two prior SDs) tilted about x on the lower one (published flat);
+    pybullet renders the truth. Its tilt's posterior mean lands within 0.015 rad and three posterior
+    SDs of it (the prior pulls it a little towards flat), the other tilt near 0; the box on the floor
+    keeps its published (flat) orientation, tilt 0 with SD 0."""
+    tilt = 0.06
+    lower = cube("lower", 0, 0, 0.05)
+    tilted = dataclasses.replace(cube("upper", 0.0, 0.0, 0.1505), orientation_xyzw=(math.sin(tilt / 2), 0.0, 0.0,
+                                                                                    math.cos(tilt / 2)))
+    truth = floor(lower, tilted)
+    camera = look_at((0.9, -0.6, 0.55), (0, 0, 0.1))
+    guess = floor(lower, cube("upper", 0.004, -0.003, 0.1505))
+    perceived = D.perceive_depth(guess, 16, (observe(truth, camera),), D.DepthSettings(), np.random.default_rng(6))
+    objects = perceived.to_dict()["objects"]
+    assert objects["lower"]["tilt_rad"] == [0.0, 0.0] and objects["lower"]["tilt_sd_rad"] == [0.0, 0.0]
+    found, sd = objects["upper"]["tilt_rad"], objects["upper"]["tilt_sd_rad"]
+    assert abs(found[0] - tilt) < min(0.015, 3 * sd[0]), objects["upper"]
+    assert abs(found[1]) < min(0.015, 3 * sd[1])
+
+
 def test_a_hidden_block_keeps_a_wider_posterior_than_one_in_view():
     scene = floor(cube("hidden", 0, 0, 0.05), cube("seen", 0.0, 0.7, 0.05), wall())
     posterior = D.run_depth_chain(scene, (observe(scene, SIDE),), D.DepthSettings(), np.random.default_rng(1))

@@ -72,8 +72,7 @@ def write_depth_rrd(path: str | Path, scene: Scene, perceived, observations) -> 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     posterior = perceived.posterior
-    mean_positions = posterior.positions_m.mean(axis=0)
-    mean_yaws = posterior.yaws_rad.mean(axis=0)
+    mean_positions, mean_yaws, mean_tilts = posterior.mean()
     blueprint = rrb.Blueprint(
         rrb.Horizontal(
             rrb.Spatial3DView(name="posterior samples of each object's position", origin="world"),
@@ -88,7 +87,7 @@ def write_depth_rrd(path: str | Path, scene: Scene, perceived, observations) -> 
         for i, observation in enumerate(observations):
             camera = observation.camera
             measured = np.where(np.isfinite(observation.depth_m), observation.depth_m, 0.0).astype(np.float32)
-            rendered = render_depth_m(scene, camera, mean_positions, mean_yaws).astype(np.float32)
+            rendered = render_depth_m(scene, camera, mean_positions, mean_yaws, mean_tilts).astype(np.float32)
             residual = np.where((measured > 0) & np.isfinite(rendered), measured - rendered, 0.0).astype(np.float32)
             rec.log(f"depth/{i}/measured", rr.DepthImage(measured, meter=1.0), static=True)
             rec.log(f"depth/{i}/rendered", rr.DepthImage(np.nan_to_num(rendered, nan=0.0, posinf=0.0), meter=1.0),

@@ -34,6 +34,7 @@ from .depth_chain import ChainRun, projected_end, sample_depth_posterior
 from .depth_model import (DepthModel, DepthObservation, DepthSettings, check_layer_memory, render_depth_m,
                           support_depth_m)
 from .mcmc import effective_sample_size
+from .raycast import convex_body
 from .metropolis import thinned_index
 
 __all__ = ["CHAIN_BUDGET_SHARE", "DEPTH_STREAM", "DepthObservation", "DepthPerceivedScenes", "DepthPosterior",
@@ -63,6 +64,7 @@ class DepthPosterior:
     offsets_m: np.ndarray | None = None  # (samples, cameras): each camera's range offset (measured - true)
     pixels: np.ndarray | None = None  # (objects,) pixels read where the object is in front at the mean pose
     chains: int = 1  # the samples are this many independent chains' states, one after the other, equally many
+    tilts_rad: np.ndarray | None = None  # (samples, objects, 2): tilts about the scene's x and y axes (none: 0)
 
     def camera_offsets(self) -> list[dict[str, float]]:
         """Per camera: posterior mean and SD of its range offset (how much longer it measures than the
@@ -91,9 +93,14 @@ class DepthPosterior:
         return {n: {"x_sd_m": float(s[0]), "y_sd_m": float(s[1]), "z_sd_m": float(s[2]), "yaw_sd_rad": float(s[3])}
                 for n, s in zip(self.names, sd)}
 
-    def mean(self) -> tuple[np.ndarray, np.ndarray]:
-        """(objects, 3) posterior mean positions and (objects,) mean turns from the published yaw."""
-        return self.positions_m.mean(axis=0), self.yaws_rad.mean(axis=0)
+    def tilts(self) -> np.ndarray:
+        """(samples, objects, 2) tilts about the scene's x and y axes (rad; 0 where taken as published)."""
+        return self.tilts_rad if self.tilts_rad is not None else np.zeros((*self.yaws_rad.shape, 2))
+
+    def mean(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(objects, 3) posterior mean positions, (objects,) mean turns from the published yaw and
+        (objects, 2) mean tilts."""
+        return self.positions_m.mean(axis=0), self.yaws_rad.mean(axis=0), self.tilts().mean(axis=0)
 
     def covariance(self) -> np.ndarray:
         """(objects, 4, 4) posterior covariance of each object's (x, y, z, yaw) in m and rad."""
@@ -106,10 +113,10 @@ class DepthPosterior:
         values = self.pose_values()
         return np.quantile(values, 0.025, axis=0), np.quantile(values, 0.975, axis=0)
 
-    def thinned(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """k states spread evenly over the chain: positions and turns."""
+    def thinned(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """k states spread evenly over the chain: positions, turns and tilts."""
         index = thinned_index(len(self.positions_m), k)
-        return self.positions_m[index], self.yaws_rad[index]
+        return self.positions_m[index], self.yaws_rad[index], self.tilts()[index]
 
 
 def run_depth_chain(scene: Scene, observations: tuple[DepthObservation, ...], settings: DepthSettings,
@@ -132,12 +139,13 @@ def run_depth_chain(scene: Scene, observations: tuple[DepthObservation, ...], se
     runs = map_fn(run_one_chain, tasks) if map_fn is not None and len(tasks) > 1 else [run_one_chain(t) for t in tasks]
     dynamic = len(scene.dynamic_objects)
     positions, yaws = np.concatenate([r.positions_m for r in runs]), np.concatenate([r.yaws_rad for r in runs])
+    tilts = np.concatenate([r.tilts_rad for r in runs])
     model = DepthModel(scene, observations, settings)  # which pixels show each object at the posterior mean
-    model.start(*_with_static(scene, positions.mean(axis=0), yaws.mean(axis=0)))
+    model.start(*_with_static(scene, positions.mean(axis=0), yaws.mean(axis=0), tilts.mean(axis=0)))
     return DepthPosterior(names=tuple(b.name for b in scene.dynamic_objects), positions_m=positions, yaws_rad=yaws,
                           acceptance_rate=float(np.mean([r.acceptance_rate for r in runs])),
                           offsets_m=np.concatenate([r.offsets_m for r in runs]), pixels=model.pixels_seen(dynamic),
-                          chains=len(runs))
+                          chains=len(runs), tilts_rad=tilts)
 
 
 @dataclass(frozen=True)
@@ -152,11 +160,35 @@ class _ChainTask:
     budget_s: float | None
 
 
-def _with_static(scene: Scene, positions_m: np.ndarray, yaws_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _with_static(scene: Scene, positions_m: np.ndarray, yaws_rad: np.ndarray,
+                 tilts_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every body's pose (dynamic ones first, as ``DepthModel`` orders them): the dynamic ones' given."""
     static = [b for b in scene.objects if b.static]
     return (np.concatenate([positions_m, np.array([b.position_m for b in static], float).reshape(-1, 3)]),
-            np.concatenate([yaws_rad, np.zeros(len(static))]))
+            np.concatenate([yaws_rad, np.zeros(len(static))]), np.concatenate([tilts_rad, np.zeros((len(static), 2))]))
+
+
+#: an object whose lowest point is this far above the support rests on another: its tilt is estimated
+RESTING_ON_ANOTHER_M = 0.005
+
+
+def resting_on_another(scene: Scene) -> np.ndarray:
+    """(dynamic objects,) bool: the object's lowest point is above the support under it (a box on a
+    box can lie tilted; one on the floor or a table top lies as the support does)."""
+    from ..scene.bodies import Floor
+
+    support, out = scene.support, []
+    for body in scene.dynamic_objects:
+        corners = convex_body(body).vertices_m + np.asarray(body.position_m)
+        x, y = float(np.mean(corners[:, 0])), float(np.mean(corners[:, 1]))
+        if isinstance(support, Floor):
+            top = support.height_m
+        elif support.covers_xy(np.array([x]), np.array([y]))[0]:
+            top = support.top_height_m
+        else:
+            top = support.floor_z_m if support.floor_z_m is not None else -np.inf
+        out.append(float(corners[:, 2].min()) > top + RESTING_ON_ANOTHER_M)
+    return np.array(out, bool)
 
 
 def run_one_chain(task: _ChainTask) -> ChainRun:
@@ -164,10 +196,10 @@ def run_one_chain(task: _ChainTask) -> ChainRun:
     started = time.monotonic()
     deadline_s = None if task.budget_s is None else started + task.budget_s
     scene, dynamic = task.scene, len(task.scene.dynamic_objects)
-    positions, yaws = _with_static(scene, np.array([b.position_m for b in scene.dynamic_objects], float).reshape(-1, 3),
-                                   np.zeros(dynamic))
+    positions, yaws, tilts = _with_static(scene, np.array([b.position_m for b in scene.dynamic_objects],
+                                                          float).reshape(-1, 3), np.zeros(dynamic), np.zeros((dynamic, 2)))
     model = DepthModel(scene, task.observations, task.settings)
-    model.start(positions, yaws)
+    model.start(positions, yaws, tilts)
     if deadline_s is not None and time.monotonic() > deadline_s:
         raise ConfigError("budget_s", f"reading the depth image for {dynamic} objects took "
                                       f"{time.monotonic() - started:.3g} s, all the budget leaves the depth chain; "
@@ -180,7 +212,8 @@ def run_one_chain(task: _ChainTask) -> ChainRun:
         if deadline_s is not None and (batches % BUDGET_CHECK_BATCHES == 0 or done == total):
             _check_deadline(started, sampling, deadline_s, done, total, dynamic)
 
-    return sample_depth_posterior(model, positions, yaws, dynamic, task.settings, task.rng, 0, check)
+    tilted = resting_on_another(scene) & (task.settings.prior_tilt_sd_rad > 0)
+    return sample_depth_posterior(model, positions, yaws, tilts, tilted, task.settings, task.rng, 0, check)
 
 
 def _check_deadline(started: float, sampling: float, deadline_s: float, done: int, total: int, objects: int) -> None:
@@ -195,20 +228,25 @@ def _check_deadline(started: float, sampling: float, deadline_s: float, done: in
                                       "budget or send fewer objects")
 
 
-def scene_at_pose(scene: Scene, positions_m: np.ndarray, yaws_rad: np.ndarray) -> Scene:
+def scene_at_pose(scene: Scene, positions_m: np.ndarray, yaws_rad: np.ndarray,
+                  tilts_rad: np.ndarray | None = None) -> Scene:
     """The scene with its dynamic objects at these positions (frame origins), turned by these yaws from
-    their published orientation, their own noise removed (the posterior stands in for it)."""
-    state = iter(zip(positions_m, yaws_rad))
+    their published orientation and then tilted by these tilts (rotation vectors (a, b, 0) about the
+    scene's axes; none: as published), their own noise removed (the posterior stands in for it)."""
+    state = iter(zip(positions_m, yaws_rad, np.zeros((len(yaws_rad), 2)) if tilts_rad is None else tilts_rad))
     objects = []
     for body in scene.objects:
         if body.static:
             objects.append(body)
             continue
-        position, yaw = next(state)
+        position, yaw, (a, b) = next(state)
         turn = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+        angle = math.hypot(a, b)
+        tilt = (0.0, 0.0, 0.0, 1.0) if angle == 0 else (a / angle * math.sin(angle / 2), b / angle * math.sin(angle / 2),
+                                                         0.0, math.cos(angle / 2))
+        orientation = quaternion_product(tilt, quaternion_product(turn, body.orientation_xyzw))
         objects.append(dataclasses.replace(body, position_m=tuple(float(v) for v in position),
-                                           orientation_xyzw=tuple(float(v) for v in quaternion_product(
-                                               turn, body.orientation_xyzw)),
+                                           orientation_xyzw=tuple(float(v) for v in orientation),
                                            position_sigma_m=0.0, yaw_sigma_rad=None))
     return dataclasses.replace(scene, objects=tuple(objects))
 
@@ -251,25 +289,28 @@ class DepthPerceivedScenes:
                 "objects": self.objects(), "camera_offsets": self.posterior.camera_offsets()}
 
     def objects(self) -> dict[str, dict[str, Any]]:
-        """Per dynamic object: the refined pose (posterior mean; the tilt as published), how many pixels
-        read show it there (0: the image says nothing of it, its pose is the detector's prior), the
-        posterior covariance of (x, y, z, yaw) and the SDs on its diagonal."""
+        """Per dynamic object: the refined pose (posterior mean), how many pixels read show it there (0:
+        the image says nothing of it, its pose is the detector's prior), the posterior covariance of
+        (x, y, z, yaw) and the SDs on its diagonal, and its tilt from the published orientation about
+        the scene's x and y axes with their SDs (0 and 0 where taken as published: an object resting
+        on the support)."""
         covariance, spread = self.posterior.covariance(), self.posterior.spread()
+        tilts = self.posterior.tilts()
         refined = {b.name: b for b in self.refined.dynamic_objects}
         out = {}
         pixels = self.posterior.pixels if self.posterior.pixels is not None else [None] * len(covariance)
-        for name, c, seen in zip(self.posterior.names, covariance, pixels):
+        for i, (name, c, seen) in enumerate(zip(self.posterior.names, covariance, pixels)):
             body = refined[name]
             out[name] = {"position_m": list(body.position_m), "orientation_xyzw": list(body.orientation_xyzw),
                          "pixels": None if seen is None else int(seen),
-                         "covariance_x_y_z_yaw": c.tolist(), **spread[name]}
+                         "covariance_x_y_z_yaw": c.tolist(), **spread[name],
+                         "tilt_rad": tilts[:, i].mean(axis=0).tolist(), "tilt_sd_rad": tilts[:, i].std(axis=0).tolist()}
         return out
 
 
 def _thinned_scenes(given: Scene, posterior: DepthPosterior, k: int) -> tuple[Scene, ...]:
     """k scenes spread evenly over the chain: ``given`` with its objects at each kept pose."""
-    positions, yaws = posterior.thinned(k)
-    return tuple(scene_at_pose(given, p, y) for p, y in zip(positions, yaws))
+    return tuple(scene_at_pose(given, p, y, t) for p, y, t in zip(*posterior.thinned(k)))
 
 
 def perceive_depth(scene: Scene, k: int, observations: tuple[DepthObservation, ...], settings: DepthSettings,

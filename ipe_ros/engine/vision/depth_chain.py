@@ -1,8 +1,9 @@
 """The depth chain's sampler: each object's posterior peak found, its curvature fitted, then sweeps
 of independence proposals drawn around it, scored a batch at a time.
 
-A block is what one step moves: an object's pose (x, y, height, yaw; height only where estimated)
-or a camera's range offset. The posterior of an object in plain view is a peak a fraction of a
+A block is what one step moves: an object's pose (x, y, height, yaw, and its tilt about the scene's
+x and y axes where it rests on another object; height and tilt only where estimated) or a camera's
+range offset. The posterior of an object in plain view is a peak a fraction of a
 millimetre wide, and a random walk crawls over it (the chain before this one needed 1,000 updates
 per object for an effective sample size of ~18 of 48). Here:
 
@@ -41,8 +42,8 @@ import numpy as np
 
 from .depth_model import DepthModel, DepthSettings
 
-#: the first scale of the curvature fit's poses (x, y, z in m, yaw in rad), at most the prior's SD
-SHAPE_SCALE = np.array([0.001, 0.001, 0.001, 0.01])
+#: the first scale of the curvature fit's poses (x, y, z in m, yaw and tilts in rad), at most the prior's SD
+SHAPE_SCALE = np.array([0.001, 0.001, 0.001, 0.01, 0.01, 0.01])
 SHAPE_SCALE_OFFSET_M = 0.0002
 
 #: a fit whose SD in some coordinate is this many times the scale of its poses is made again at its SDs
@@ -61,35 +62,36 @@ class _Block:
 
 
 class _Pose(_Block):
-    """Object ``body``'s x, y, (z,) and its turn from the published yaw."""
+    """Object ``body``'s x, y, (z,) its turn from the published yaw (and its tilt, where ``tilted``)."""
 
-    def __init__(self, model: DepthModel, body: int, positions: np.ndarray, yaws: np.ndarray,
-                 settings: DepthSettings):
-        self.model, self.body, self.positions, self.yaws = model, body, positions, yaws
-        self.free = [0, 1, 2, 3] if settings.prior_height_sd_m > 0 else [0, 1, 3]
+    def __init__(self, model: DepthModel, body: int, positions: np.ndarray, yaws: np.ndarray, tilts: np.ndarray,
+                 settings: DepthSettings, tilted: bool):
+        self.model, self.body, self.positions, self.yaws, self.tilts = model, body, positions, yaws, tilts
+        self.free = [0, 1, *([2] if settings.prior_height_sd_m > 0 else []), 3, *([4, 5] if tilted else [])]
         full_sd = np.array([settings.prior_sd_m, settings.prior_sd_m, settings.prior_height_sd_m,
-                            settings.prior_yaw_sd_rad])
+                            settings.prior_yaw_sd_rad, settings.prior_tilt_sd_rad, settings.prior_tilt_sd_rad])
         self.prior_sd = full_sd[self.free]
         self.centre = self.value()
         self.shape_scale = np.minimum(SHAPE_SCALE[self.free], self.prior_sd)
 
-    def value(self) -> np.ndarray:
-        return np.append(self.positions[self.body], self.yaws[self.body])[self.free]
+    def _full(self) -> np.ndarray:
+        return np.concatenate([self.positions[self.body], [self.yaws[self.body]], self.tilts[self.body]])
 
-    def _poses(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        if len(self.free) == 4:
-            return values[:, :3], values[:, 3]
-        positions = np.empty((len(values), 3))
-        positions[:, :2], positions[:, 2] = values[:, :2], self.positions[self.body, 2]
-        return positions, values[:, 2]
+    def value(self) -> np.ndarray:
+        return self._full()[self.free]
+
+    def _poses(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        full = np.repeat(self._full()[None], len(values), axis=0)
+        full[:, self.free] = values
+        return full[:, :3], full[:, 3], full[:, 4:]
 
     def evaluate(self, values: np.ndarray) -> np.ndarray:
         return self.model.log_likelihoods(self.body, *self._poses(values))
 
     def set(self, value: np.ndarray, log_likelihood: float) -> None:
-        position, yaw = self._poses(value[None])
-        self.positions[self.body], self.yaws[self.body] = position[0], yaw[0]
-        self.model.move(self.body, position[0], float(yaw[0]), log_likelihood)
+        position, yaw, tilt = self._poses(value[None])
+        self.positions[self.body], self.yaws[self.body], self.tilts[self.body] = position[0], yaw[0], tilt[0]
+        self.model.move(self.body, position[0], float(yaw[0]), log_likelihood, tilt[0])
 
 
 class _Offset(_Block):
@@ -153,16 +155,18 @@ class ChainRun:
     yaws_rad: np.ndarray     # (states, objects)
     offsets_m: np.ndarray    # (states, cameras)
     acceptance_rate: float   # of the objects' proposals in the sampling sweeps
+    tilts_rad: np.ndarray    # (states, objects, 2): tilts about the scene's x and y axes
 
 
-def sample_depth_posterior(model: DepthModel, positions: np.ndarray, yaws: np.ndarray, objects: int,
-                           settings: DepthSettings, rng: np.random.Generator, k: int = 0,
+def sample_depth_posterior(model: DepthModel, positions: np.ndarray, yaws: np.ndarray, tilts: np.ndarray,
+                           tilted: np.ndarray, settings: DepthSettings, rng: np.random.Generator, k: int = 0,
                            check: Callable[[int, int], None] | None = None) -> ChainRun:
-    """Locate, shape and sample (module docstring) from the model's current state; ``positions`` and
-    ``yaws`` (every body's) are moved in place. ``check(done, total)`` is called after every batch
-    of proposals with the scorings done and to do (a deadline)."""
-    s = settings
-    poses = [_Pose(model, b, positions, yaws, s) for b in range(objects)]
+    """Locate, shape and sample (module docstring) from the model's current state; ``positions``,
+    ``yaws`` and ``tilts`` (every body's) are moved in place; the first ``len(tilted)`` bodies are the
+    objects, whose tilts are estimated where ``tilted``. ``check(done, total)`` is called after every
+    batch of proposals with the scorings done and to do (a deadline)."""
+    s, objects = settings, len(tilted)
+    poses = [_Pose(model, b, positions, yaws, tilts, s, bool(tilted[b])) for b in range(objects)]
     offsets = [_Offset(model, v, s) for v in range(len(model.offsets_m))] if s.offset_prior_sd_m > 0 else []
     blocks: list[_Block] = [*poses, *offsets]
     sweeps = s.burn_in_sweeps + max(s.kept_states, k)  # this chain's
@@ -180,7 +184,7 @@ def sample_depth_posterior(model: DepthModel, positions: np.ndarray, yaws: np.nd
         for block in blocks:
             _locate(block, model, s, rng, step)
     proposals = [_shape(block, model, s, rng, step) for block in blocks]
-    kept_xyz, kept_yaw, kept_offsets = [], [], []
+    kept_xyz, kept_yaw, kept_tilts, kept_offsets = [], [], [], []
     taken = offered = 0
     walk_scale = np.full(len(blocks), 2.38 / math.sqrt(4))
     for sweep in range(sweeps):
@@ -195,8 +199,10 @@ def sample_depth_posterior(model: DepthModel, positions: np.ndarray, yaws: np.nd
         if sweep >= s.burn_in_sweeps:
             kept_xyz.append(positions[:objects].copy())
             kept_yaw.append(yaws[:objects].copy())
+            kept_tilts.append(tilts[:objects].copy())
             kept_offsets.append(model.offsets_m.copy())
-    return ChainRun(np.array(kept_xyz), np.array(kept_yaw), np.array(kept_offsets), taken / max(1, offered))
+    return ChainRun(np.array(kept_xyz), np.array(kept_yaw), np.array(kept_offsets), taken / max(1, offered),
+                    np.array(kept_tilts))
 
 
 def _log_target(block: _Block, model: DepthModel, value: np.ndarray) -> float:

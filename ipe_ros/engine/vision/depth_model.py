@@ -29,7 +29,7 @@ from ..checks import integer, positive
 from ..errors import ConfigError
 from ..scene.bodies import Floor, Scene
 from .camera import PinholeCamera
-from .raycast import convex_body, pixel_box, ray_depths, turns
+from .raycast import convex_body, pixel_box, pose_rotations, ray_depths
 from .render import body_patch, scene_mesh
 
 
@@ -69,10 +69,11 @@ class DepthSettings:
     prior_yaw_sd_rad: float = 0.2
     offset_prior_sd_m: float = 0.01
     prior_height_sd_m: float = 0.01
+    prior_tilt_sd_rad: float = 0.03
     locate_sweeps: int = 2
     locate_rounds: int = 20
     locate_candidates: int = 16
-    shape_points: int = 40
+    shape_points: int = 64
     proposals_per_sweep: int = 4
     walk_steps: int = 3
     kept_states: int = 64
@@ -86,7 +87,8 @@ class DepthSettings:
                      "proposal_dof"):
             positive(getattr(self, name), f"depth.{name}")
         for name, meaning in (("offset_prior_sd_m", "the camera's range taken as exact"),
-                              ("prior_height_sd_m", "the detector's heights taken as exact")):
+                              ("prior_height_sd_m", "the detector's heights taken as exact"),
+                              ("prior_tilt_sd_rad", "the detector's tilts taken as exact")):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 0.1:
                 raise ConfigError(f"depth.{name}", f"must be in [0, 0.1] (0: {meaning}), got {value!r}")
@@ -220,20 +222,23 @@ class DepthModel:
         self.pixel_ll_now[v][index] = self._pixel_ll(self.measured[v][index] - self.offsets_m[v],
                                                      self._predicted(v, index, self.layers[v][:, index].min(axis=0)))
 
-    def start(self, positions_m: np.ndarray, yaws_rad: np.ndarray) -> float:
-        """Every body at its pose: the layers and the (tempered) log-likelihood."""
+    def start(self, positions_m: np.ndarray, yaws_rad: np.ndarray, tilts_rad: np.ndarray | None = None) -> float:
+        """Every body at its pose (``tilts_rad``: (bodies, 2), none: as published): the layers and the
+        (tempered) log-likelihood."""
         self.layers = [np.full((len(self.bodies), len(rows)), np.inf) for rows in self.rows]
         self.pixel_ll_now = [np.zeros(len(rows)) for rows in self.rows]
         for v in range(len(self.observations)):
             for b in range(len(self.bodies)):
-                self._place(v, b, np.asarray(positions_m[b], float), float(yaws_rad[b]))
+                self._place(v, b, np.asarray(positions_m[b], float), float(yaws_rad[b]),
+                            None if tilts_rad is None else tilts_rad[b])
             self._rescore(v)
         self.current = float(sum(ll.sum() for ll in self.pixel_ll_now)) / self.settings.temperature
         return self.current
 
-    def _place(self, v: int, body: int, position_m: np.ndarray, yaw_rad: float) -> np.ndarray:
+    def _place(self, v: int, body: int, position_m: np.ndarray, yaw_rad: float,
+               tilt_rad: np.ndarray | None = None) -> np.ndarray:
         """Cast ``body``'s rays in this pose; the pixels read whose depth may have changed."""
-        rotation = turns(np.array([yaw_rad]))
+        rotation = pose_rotations(np.array([yaw_rad]), None if tilt_rad is None else np.asarray(tilt_rad)[None])
         changed = self._in_view(v, body, position_m[None], rotation)
         index = np.flatnonzero(changed)
         changed |= np.isfinite(self.layers[v][body])
@@ -241,10 +246,11 @@ class DepthModel:
         self.layers[v][body, index] = self._depths(v, body, position_m[None], rotation, index)[0]
         return changed
 
-    def log_likelihoods(self, body: int, positions_m: np.ndarray, yaws_rad: np.ndarray) -> np.ndarray:
+    def log_likelihoods(self, body: int, positions_m: np.ndarray, yaws_rad: np.ndarray,
+                        tilts_rad: np.ndarray | None = None) -> np.ndarray:
         """(poses,) the (tempered) log-likelihood with ``body`` at each pose, the rest as they are."""
         positions_m = np.asarray(positions_m, float)
-        rotations = turns(np.asarray(yaws_rad, float))
+        rotations = pose_rotations(yaws_rad, tilts_rad)
         change = np.zeros(len(positions_m))
         for v in range(len(self.observations)):
             if not len(self.rows[v]):
@@ -261,10 +267,12 @@ class DepthModel:
             change += after - self.pixel_ll_now[v][index].sum()
         return self.current + change / self.settings.temperature
 
-    def move(self, body: int, position_m: np.ndarray, yaw_rad: float, log_likelihood: float) -> None:
+    def move(self, body: int, position_m: np.ndarray, yaw_rad: float, log_likelihood: float,
+             tilt_rad: np.ndarray | None = None) -> None:
         """Put ``body`` at this pose, whose (tempered) log-likelihood ``log_likelihoods`` gave."""
         for v in range(len(self.observations)):
-            self._rescore(v, np.flatnonzero(self._place(v, body, np.asarray(position_m, float), float(yaw_rad))))
+            self._rescore(v, np.flatnonzero(self._place(v, body, np.asarray(position_m, float), float(yaw_rad),
+                                                        tilt_rad)))
         self.current = float(log_likelihood)
 
     def offset_log_likelihoods(self, v: int, offsets_m: np.ndarray) -> np.ndarray:
@@ -308,7 +316,7 @@ def check_layer_memory(scene: Scene, observations: tuple[DepthObservation, ...])
 
 
 def render_depth_m(scene: Scene, camera: PinholeCamera, positions_m: np.ndarray | None = None,
-                   yaws_rad: np.ndarray | None = None) -> np.ndarray:
+                   yaws_rad: np.ndarray | None = None, tilts_rad: np.ndarray | None = None) -> np.ndarray:
     """(height, width) depth the camera would measure of the scene with its dynamic objects at
     ``positions_m`` turned by ``yaws_rad`` (default: as published): objects over the support; NaN
     where neither is. The likelihood's own depth (``raycast``), at every pixel."""
@@ -321,8 +329,11 @@ def render_depth_m(scene: Scene, camera: PinholeCamera, positions_m: np.ndarray 
         yaws[:len(yaws_rad)] = yaws_rad
     origin = np.asarray(camera.position_m, float)
     nearest = np.full((camera.height_px, camera.width_px), np.inf)
-    for body, position, yaw in zip(bodies, positions, yaws):
-        convex, rotation = convex_body(body), turns(np.array([yaw]))
+    tilted = np.zeros((len(bodies), 2))
+    if tilts_rad is not None:
+        tilted[:len(tilts_rad)] = tilts_rad
+    for body, position, yaw, tilt in zip(bodies, positions, yaws, tilted):
+        convex, rotation = convex_body(body), pose_rotations(np.array([yaw]), tilt[None])
         box = pixel_box(convex, camera, position[None], rotation)
         u0, u1, v0, v1 = (0, camera.width_px - 1, 0, camera.height_px - 1) if box is None else box
         columns = np.arange(max(int(np.floor(u0)), 0), min(int(np.ceil(u1)) + 1, camera.width_px))

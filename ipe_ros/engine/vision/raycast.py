@@ -58,6 +58,26 @@ def turns(yaws_rad: np.ndarray) -> np.ndarray:
     return out
 
 
+def tilts(tilts_rad: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) rotations by the rotation vectors (a, b, 0): a tilt about the scene's x and y axes."""
+    vectors = np.zeros((len(tilts_rad), 3))
+    vectors[:, :2] = tilts_rad
+    angle = np.linalg.norm(vectors, axis=1)
+    axis = vectors / np.where(angle > 0, angle, 1.0)[:, None]
+    cross = np.zeros((len(vectors), 3, 3))
+    cross[:, 0, 2], cross[:, 1, 2] = axis[:, 1], -axis[:, 0]
+    cross[:, 2, 0], cross[:, 2, 1] = -axis[:, 1], axis[:, 0]
+    sin, cos = np.sin(angle)[:, None, None], np.cos(angle)[:, None, None]
+    return np.eye(3) + sin * cross + (1 - cos) * (cross @ cross)  # Rodrigues
+
+
+def pose_rotations(yaws_rad: np.ndarray, tilts_rad: np.ndarray | None = None) -> np.ndarray:
+    """(n, 3, 3): a turn about the vertical by the yaw, then the tilt (``tilts``), both about the
+    body's frame origin, from its orientation in the scene."""
+    turned = turns(np.asarray(yaws_rad, float))
+    return turned if tilts_rad is None else tilts(np.asarray(tilts_rad, float)) @ turned
+
+
 def pixel_box(body: ConvexBody, camera, positions_m: np.ndarray, rotations: np.ndarray) -> tuple[float, ...] | None:
     """(u0, u1, v0, v1): image coordinates that the body can cover in any of these poses; None when a
     corner is at or behind the camera's plane (then every pixel may be covered)."""

@@ -52,3 +52,40 @@ def test_a_geometry_world_never_switches_to_the_direct_solver():
     assert world.can_bounce(scene)  # a rollout of it uses the direct solver
     assert geometry_world(scene).direct_solver is False
     assert contacts(scene).pairs  # and its contacts are still read
+
+
+def test_hull_files_are_bounded_and_a_hull_used_again_is_written_again(monkeypatch):
+    """A compound's hull parts reach pybullet as files, one per distinct hull: a node sent new shapes
+    for a week keeps the last MAX_HULL_FILES of them (here 4), not all; a hull whose file went is
+    written again under a new name (pybullet may cache a mesh by its file's name)."""
+    import os
+
+    from ipe_ros.engine.scene.bodies import Body, Floor, Scene
+    from ipe_ros.engine.scene.shapes import Compound, CompoundPart, ConvexHull
+
+    monkeypatch.setattr(world, "MAX_HULL_FILES", 4)
+
+    def scene_with(size: float) -> Scene:
+        corners = tuple((x * size, y * 0.05, z * 0.05) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1))
+        part = CompoundPart(ConvexHull(corners + ((0.0, 0.0, 0.07),)))
+        body = Body(name="roof", shape=Compound(parts=(part, CompoundPart(ConvexHull(corners), position_m=(0.0, 0.0, -0.1)))),
+                    position_m=(0.0, 0.0, 0.2), orientation_xyzw=(0.0, 0.0, 0.0, 1.0), friction=0.5, restitution=0.0,
+                    mass_kg=1.0)
+        return Scene(name="hulls", objects=(body,), support=Floor(friction=0.5, restitution=0.0),
+                     gravity_m_s2=(0.0, 0.0, -9.81))
+
+    def build(scene: Scene) -> None:
+        body = scene.dynamic_objects[0]
+        world.build_world(scene, np.array([body.centre_of_mass_m]), np.array([body.resolved_mass_kg]),
+                          preset("default"))
+
+    first = scene_with(0.05)
+    build(first)
+    names = set(world._HULL_FILES.values())
+    for i in range(12):  # 24 new hulls
+        build(scene_with(0.06 + 0.01 * i))
+        assert len(world._HULL_FILES) <= 4
+    on_disk = [n for n in os.listdir(world._hull_folder()) if n.endswith(".obj")]
+    assert len(on_disk) <= 4 and not names & set(world._HULL_FILES.values())
+    build(first)  # its files went: written again, under new names
+    assert not names & set(world._HULL_FILES.values()) and all(os.path.exists(p) for p in world._HULL_FILES.values())

@@ -9,6 +9,8 @@ Every other module of the simulation reaches pybullet through ``bullet.pybullet(
 
 from __future__ import annotations
 
+import collections
+import contextlib
 import itertools
 import os
 from dataclasses import dataclass
@@ -37,24 +39,36 @@ class World:
     static_ids: tuple[int, ...] = ()  # follow ``scene.static_objects``
 
 
-_HULL_FILES: dict[tuple, str] = {}
+#: distinct hulls whose files are kept (least recently used first out): a node that is sent new
+#: hull shapes for a week must not fill its memory and disk with them
+MAX_HULL_FILES = 4096
+
+_HULL_FILES: "collections.OrderedDict[tuple, str]" = collections.OrderedDict()
+_HULL_FILES_WRITTEN = itertools.count()  # file names are never reused (pybullet may cache a mesh by its name)
 
 
 def _hull_file(vertices_m: np.ndarray) -> str:
     """A Wavefront file of one convex hull: pybullet takes compound parts that are meshes only as
-    files. One per distinct hull and process, in a temporary folder removed at exit."""
+    files. One per distinct hull and process (the ``MAX_HULL_FILES`` last used), in a temporary
+    folder removed at exit."""
     key = tuple(map(tuple, np.round(vertices_m, 12)))
     path = _HULL_FILES.get(key)
-    if path is None:
-        from scipy.spatial import ConvexHull as QHull
+    if path is not None and os.path.exists(path):
+        _HULL_FILES.move_to_end(key)
+        return path
+    from scipy.spatial import ConvexHull as QHull
 
-        folder = _hull_folder()
-        path = os.path.join(folder, f"hull_{len(_HULL_FILES)}.obj")
-        faces = QHull(vertices_m).simplices
-        with open(path, "w") as handle:
-            handle.writelines(f"v {float(x)!r} {float(y)!r} {float(z)!r}\n" for x, y, z in vertices_m)
-            handle.writelines(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces)
-        _HULL_FILES[key] = path
+    folder = _hull_folder()
+    path = os.path.join(folder, f"hull_{next(_HULL_FILES_WRITTEN)}.obj")
+    faces = QHull(vertices_m).simplices
+    with open(path, "w") as handle:
+        handle.writelines(f"v {float(x)!r} {float(y)!r} {float(z)!r}\n" for x, y, z in vertices_m)
+        handle.writelines(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces)
+    _HULL_FILES[key] = path
+    while len(_HULL_FILES) > MAX_HULL_FILES:
+        _, old = _HULL_FILES.popitem(last=False)
+        with contextlib.suppress(OSError):  # read by pybullet when its shape was made; not needed after
+            os.remove(old)
     return path
 
 

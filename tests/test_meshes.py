@@ -164,6 +164,36 @@ def test_a_mesh_object_weighs_what_the_mesh_encloses_not_what_its_parts_fill(fol
         assert caught.value.field == f"shape.{field}" and problem in caught.value.problem
 
 
+def test_a_mesh_object_turns_with_the_mesh_inertia_not_its_bounding_box(folder):
+    """A cup's mass is in its thin wall, far from its axis: pybullet's estimate for a compound (its
+    bounding box's, a solid block) is 9-10% low on every axis. The world takes the mesh's (mass x the
+    diagonal per kg, trimesh's), JSON keeps it, and impossible moments are refused."""
+    from ipe_ros.engine.config import preset as settings_for
+    from ipe_ros.engine.scene.format import shape_from_dict, shape_to_dict
+    from ipe_ros.engine.simulation import world
+
+    [scene] = load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "mug.obj"}, ball=False)))
+    mug, exact = scene.objects[0], mug_mesh()
+    per_kg = np.diag(exact.moment_inertia) / exact.mass
+    assert np.allclose(mug.shape.inertia_diagonal_per_kg_m2, per_kg, rtol=1e-5)
+    assert shape_from_dict(shape_to_dict(mug.shape), "shape") == mug.shape
+    built = world.build_world(scene, np.array([mug.centre_of_mass_m]), np.array([mug.resolved_mass_kg]),
+                              settings_for("default"))
+    assert np.allclose(built.inertia_kg_m2[0], mug.resolved_mass_kg * per_kg, rtol=1e-6)
+    import dataclasses
+
+    boxed = dataclasses.replace(mug, shape=dataclasses.replace(mug.shape, inertia_diagonal_per_kg_m2=None))
+    guessed = world.build_world(dataclasses.replace(scene, objects=(boxed,)), np.array([mug.centre_of_mass_m]),
+                                np.array([mug.resolved_mass_kg]), settings_for("default")).inertia_kg_m2[0]
+    assert np.all(guessed < 0.95 * mug.resolved_mass_kg * per_kg)  # the bounding box's: 9-10% low for a cup
+    for value, problem in (((0.1, 0.1, 0.3), "each moment at most the sum of the other two"),
+                           ((1.0, 1.0, 1.0), "the parts' reach squared"), ((0.0, 1e-3, 1e-3), "finite numbers > 0")):
+        with pytest.raises(SceneError, match=rf"^shape.inertia_diagonal_per_kg_m2: .*{problem}"):
+            from ipe_ros.engine.scene import shapes
+
+            shapes.validate_shape(dataclasses.replace(mug.shape, inertia_diagonal_per_kg_m2=value), "shape")
+
+
 def test_a_bowl_holds_three_balls(folder):
     """Balls dropped 2 cm into a bowl (engine/scene/household.py) roll to its floor and stay in it."""
     household.write_obj(folder / "bowl.obj", *household.bowl())

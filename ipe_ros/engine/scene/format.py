@@ -65,7 +65,7 @@ _SHAPE_FIELDS = {"box": ("extents_m",), "sphere": ("radius_m",), "cylinder": ("r
                  "capsule": ("radius_m", "length_m"), "convex": ("vertices_m",), "compound": ("parts",),
                  "mesh": ("uri",)}
 #: fields a shape may leave out
-_SHAPE_OPTIONAL = {"mesh": ("scale",), "compound": ("volume_m3", "centre_of_mass_m")}
+_SHAPE_OPTIONAL = {"mesh": ("scale",), "compound": ("volume_m3", "centre_of_mass_m", "inertia_diagonal_per_kg_m2")}
 FLOOR_FIELDS = ("type", "height_m", "friction", "restitution")
 TABLE_FIELDS = ("type", "top_height_m", "size_m", "center_xy_m", "thickness_m", "friction",
                  "restitution", "floor_z_m", "obstacles")
@@ -89,6 +89,8 @@ def shape_to_dict(shape) -> dict[str, Any]:
                                           "orientation_xyzw": list(p.orientation_xyzw)} for p in shape.parts]}
     if shape.volume_m3 is not None:  # the solid's own (a mesh's), not the parts'
         out.update(volume_m3=shape.volume_m3, centre_of_mass_m=list(shape.centre_of_mass_m))
+    if shape.inertia_diagonal_per_kg_m2 is not None:
+        out.update(inertia_diagonal_per_kg_m2=list(shape.inertia_diagonal_per_kg_m2))
     return out
 
 
@@ -215,8 +217,10 @@ def shape_from_dict(data: Any, path: str, *, nested: bool = False, meshes: MeshA
                                 orientation_xyzw=_vec(part.get("orientation_xyzw", [0.0, 0.0, 0.0, 1.0]), 4,
                                                       f"{where}.orientation_xyzw")))
     volume, centre = data.get("volume_m3"), data.get("centre_of_mass_m")
+    inertia = data.get("inertia_diagonal_per_kg_m2")
     return Compound(tuple(out), None if volume is None else _num(volume, f"{path}.volume_m3"),
-                    None if centre is None else _vec(centre, 3, f"{path}.centre_of_mass_m"))
+                    None if centre is None else _vec(centre, 3, f"{path}.centre_of_mass_m"),
+                    None if inertia is None else _vec(inertia, 3, f"{path}.inertia_diagonal_per_kg_m2"))
 
 
 def _common_fields(data: dict, path: str) -> dict[str, Any]:

@@ -39,7 +39,7 @@ MAX_MESH_VERTICES = 200_000
 #: stay within the compound limits (limits.MAX_COMPOUND_VERTICES)
 MAX_PART_VERTICES = 64
 #: bump when the cached decomposition's meaning changes
-_CACHE_VERSION = 2
+_CACHE_VERSION = 3
 
 
 @dataclass(frozen=True)
@@ -90,12 +90,15 @@ def mesh_shape(data: dict, path: str, access: MeshAccess | None, uri_field: str 
     cached = _cached_parts(access.cache(), key)
     if cached is None:
         mesh = _load(content, file, scale, where)
+        # the solid's inertia about its centre of mass, per kg (trimesh's at density 1 weighs its volume)
+        inertia = np.diag(np.asarray(mesh.moment_inertia, float)) / float(mesh.mass)
         cached = (_decompose(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64), access.decomposition,
-                             where), float(mesh.volume), tuple(float(v) for v in mesh.center_mass))
+                             where), float(mesh.volume), tuple(float(v) for v in mesh.center_mass),
+                  tuple(float(v) for v in inertia))
         _store_parts(access.cache(), key, *cached)
-    parts, volume, centre = cached
+    parts, volume, centre, inertia = cached
     return Compound(tuple(CompoundPart(ConvexHull(tuple(tuple(map(float, v)) for v in part))) for part in parts),
-                    volume_m3=volume, centre_of_mass_m=centre)
+                    volume_m3=volume, centre_of_mass_m=centre, inertia_diagonal_per_kg_m2=inertia)
 
 
 def _scale(value: Any, path: str) -> tuple[float, float, float]:
@@ -214,28 +217,31 @@ def _decompose(vertices: np.ndarray, faces: np.ndarray, settings: Decomposition,
     return hulls
 
 
-def _cached_parts(folder: Path, key: str) -> tuple[list[np.ndarray], float, tuple] | None:
-    """The parts, volume and centre of mass stored under ``key`` (JSON, never code), or None when
-    there are none usable."""
+def _cached_parts(folder: Path, key: str) -> tuple[list[np.ndarray], float, tuple, tuple] | None:
+    """The parts, volume, centre of mass and inertia per kg stored under ``key`` (JSON, never code),
+    or None when there are none usable."""
     try:
         data = json.loads((folder / f"{key}.json").read_text())
         parts = [np.asarray(p, float) for p in data["parts"]]
         volume, centre = float(data["volume_m3"]), tuple(float(v) for v in data["centre_of_mass_m"])
+        inertia = tuple(float(v) for v in data["inertia_diagonal_per_kg_m2"])
         if data.get("key") != key or not parts or any(p.ndim != 2 or p.shape[1] != 3 or len(p) < 4 for p in parts) \
-                or len(centre) != 3:
+                or len(centre) != 3 or len(inertia) != 3:
             return None
-        return parts, volume, centre
+        return parts, volume, centre, inertia
     except (OSError, ValueError, KeyError, TypeError):
         return None
 
 
-def _store_parts(folder: Path, key: str, parts: list[np.ndarray], volume_m3: float, centre_m: tuple) -> None:
+def _store_parts(folder: Path, key: str, parts: list[np.ndarray], volume_m3: float, centre_m: tuple,
+                 inertia_per_kg_m2: tuple) -> None:
     """Written to a temporary file and renamed: a reader never sees half an entry."""
     try:
         folder.mkdir(parents=True, exist_ok=True)
         partial = folder / f"{key}.{os.getpid()}.part"
         partial.write_text(json.dumps({"key": key, "parts": [p.tolist() for p in parts], "volume_m3": volume_m3,
-                                       "centre_of_mass_m": list(centre_m)}))
+                                       "centre_of_mass_m": list(centre_m),
+                                       "inertia_diagonal_per_kg_m2": list(inertia_per_kg_m2)}))
         os.replace(partial, folder / f"{key}.json")
     except OSError:  # a read-only home: decomposed again next time, answered all the same
         pass

@@ -77,7 +77,10 @@ def _shapes() -> dict[str, Any]:
                      "volume_m3": _number("the solid's own volume (a mesh's), where the parts only approximate it: "
                                           "mass from it; with centre_of_mass_m", 0.0, exclusive_minimum=True),
                      "centre_of_mass_m": _vector(3, "the solid's own centre of mass in the object frame, m; with "
-                                                    "volume_m3")},
+                                                    "volume_m3"),
+                     "inertia_diagonal_per_kg_m2": _vector(3, "the diagonal of the solid's own inertia about its "
+                                                              "centre of mass in the object frame, per kg (m^2); "
+                                                              "with volume_m3")},
         "mesh": {"uri": {"type": "string", "minLength": 1,
                          "description": "a closed mesh (OBJ, STL, PLY, GLB) in the object frame, +z up (GLB: its "
                                         "+y): a path beside the scene file, file:// or package://; read as convex "
@@ -86,7 +89,7 @@ def _shapes() -> dict[str, Any]:
                            "oneOf": [_number("m per unit", 0.0, exclusive_minimum=True),
                                      _vector(3, "m per unit along x, y, z", None, 0.0)]}},
     }
-    optional = {"mesh": ("scale",), "compound": ("volume_m3", "centre_of_mass_m")}
+    optional = {"mesh": ("scale",), "compound": ("volume_m3", "centre_of_mass_m", "inertia_diagonal_per_kg_m2")}
     return {kind: _closed({"type": {"const": kind}, **props},
                           ("type", *(p for p in props if p not in optional.get(kind, ()))), f"a {kind}")
             for kind, props in fields.items()}

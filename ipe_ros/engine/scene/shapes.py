@@ -77,11 +77,14 @@ class Compound:
     """Convex parts in the object frame. ``volume_m3`` and ``centre_of_mass_m``: those of the solid
     the parts approximate, where it is known (a mesh's own, exact; the parts' hulls overlap and
     overfill a mesh's concave corners, 5-25% more volume): mass and centre of mass come from them.
-    Without them, from the parts (taken as not overlapping)."""
+    Without them, from the parts (taken as not overlapping). ``inertia_diagonal_per_kg_m2``: the
+    diagonal of the solid's inertia tensor about its centre of mass in the object frame, per kg
+    (m^2; a mesh's own); without it, pybullet's estimate from the parts' bounding box."""
 
     parts: tuple[CompoundPart, ...]
     volume_m3: float | None = None
     centre_of_mass_m: Vec3 | None = None
+    inertia_diagonal_per_kg_m2: Vec3 | None = None
 
     type = "compound"
 
@@ -193,11 +196,14 @@ def validate_shape(shape, path: str) -> None:
 
 def _check_mass_properties(shape: Compound, path: str) -> None:
     """A compound's own volume and centre of mass: both or neither, positive and finite, the centre
-    within the parts' bounds."""
+    within the parts' bounds; its inertia (with them) a rigid body's, within the parts' reach."""
     if (shape.volume_m3 is None) != (shape.centre_of_mass_m is None):
         raise SceneError(f"{path}.volume_m3", "give volume_m3 and centre_of_mass_m together (or neither: both "
                                               "from the parts)")
     if shape.volume_m3 is None:
+        if shape.inertia_diagonal_per_kg_m2 is not None:
+            raise SceneError(f"{path}.inertia_diagonal_per_kg_m2", "give it with volume_m3 and centre_of_mass_m (the "
+                                                                   "solid's own, about that centre)")
         return
     _positive(shape.volume_m3, f"{path}.volume_m3", "the volume")
     centre = shape.centre_of_mass_m
@@ -212,6 +218,17 @@ def _check_mass_properties(shape: Compound, path: str) -> None:
     if not 0.2 * parts_volume <= shape.volume_m3 <= 1.2 * parts_volume:
         raise SceneError(f"{path}.volume_m3", f"{shape.volume_m3:g} m^3 against the parts' {parts_volume:g}: the parts "
                                               "do not describe that solid")
+    inertia = shape.inertia_diagonal_per_kg_m2
+    if inertia is None:
+        return
+    where = f"{path}.inertia_diagonal_per_kg_m2"
+    if len(inertia) != 3 or not all(isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in inertia):
+        raise SceneError(where, "must be 3 finite numbers > 0 (m^2: the inertia about the centre of mass per kg)")
+    a, b, c = sorted(inertia)
+    reach = float(np.max(np.linalg.norm(vertices - np.asarray(centre), axis=1)))
+    if c > (a + b) * (1 + 1e-6) or c > reach ** 2:  # a rigid body's moments, and its mass within its parts
+        raise SceneError(where, f"{list(inertia)} m^2 is not a solid's within these parts (each moment at most the "
+                                f"sum of the other two, and at most {reach ** 2:.3g}, the parts' reach squared)")
 
 
 # --------------------------------------------------------------------------------------------

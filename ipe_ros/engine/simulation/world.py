@@ -164,14 +164,17 @@ def _add_body(p, cid: int, body: Body, position, mass_kg: float, maximal: bool =
                                basePosition=list(map(float, position)),
                                baseOrientation=list(map(float, quat)), useMaximalCoordinates=maximal,
                                physicsClientId=cid)
-    _set_dynamics(p, cid, handle, body)
+    _set_dynamics(p, cid, handle, body, mass_kg)
     return handle
 
 
-def _set_dynamics(p, cid: int, handle: int, body: Body) -> None:
-    """A body's surface (friction, restitution), and no damping (``NO_DAMPING``)."""
+def _set_dynamics(p, cid: int, handle: int, body: Body, mass_kg: float = 0.0) -> None:
+    """A body's surface (friction, restitution), no damping (``NO_DAMPING``), and a mesh's own inertia
+    where the shape carries it (pybullet's own estimate for a compound is its bounding box's)."""
+    inertia = getattr(body.shape, "inertia_diagonal_per_kg_m2", None)
+    own = {"localInertiaDiagonal": [mass_kg * float(v) for v in inertia]} if inertia is not None and mass_kg > 0 else {}
     p.changeDynamics(handle, -1, lateralFriction=body.friction, restitution=body.restitution,
-                     physicsClientId=cid, **NO_DAMPING)
+                     physicsClientId=cid, **NO_DAMPING, **own)
 
 
 def _add_dynamic_bodies(p, cid: int, bodies, positions_m, masses_kg, orientations_xyzw, maximal: bool) -> list[int]:
@@ -203,7 +206,7 @@ def _add_dynamic_bodies(p, cid: int, bodies, positions_m, masses_kg, orientation
                                 batchPositions=[list(map(float, pos)) for pos in positions_m[start:end]],
                                 useMaximalCoordinates=maximal, physicsClientId=cid)
         for handle, body in zip(run, bodies[start:end]):
-            _set_dynamics(p, cid, handle, body)
+            _set_dynamics(p, cid, handle, body, float(masses_kg[start]))
         ids.extend(run)
         start = end
     return ids

@@ -8,7 +8,8 @@ The mapping (MarkerArray has no notion of mass, friction or support, so some of 
   ``CUBE``: a box, ``scale`` its FULL extents in metres; ``SPHERE``: a sphere of diameter ``scale``
   (all three equal: an ellipsoid is refused); ``CYLINDER``: a cylinder along its z, diameter
   ``scale.x`` (= ``scale.y``), length ``scale.z``; ``TRIANGLE_LIST``: the convex hull of its
-  ``points`` (each multiplied by ``scale``, as RViz draws them): cones, pyramids, wedges;
+  ``points`` (each multiplied by ``scale``, as RViz draws them): cones, pyramids, wedges; with
+  ``decompose=true`` in ``text``, the closed surface its triangles make, as convex parts (a mug);
   ``MESH_RESOURCE``: the closed mesh at ``mesh_resource`` (``package://`` or ``file://``, under the
   node's ``mesh_roots``), scaled by ``scale`` per axis, read as its convex parts
   (``engine.scene.meshes``; ``mesh_use_embedded_materials`` is a colour and is ignored). Capsules
@@ -45,6 +46,7 @@ import math
 import re
 from dataclasses import dataclass
 
+import numpy as np
 from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
@@ -56,7 +58,7 @@ from ipe_ros.engine.config import MODEL_LIGHT_DENSITY_KG_M3
 from ipe_ros.viz.palette import SUPPORT_RGB, group_rgb, nearest_group_name, risk_rgb
 from ipe_ros.engine.errors import shown
 from ipe_ros.engine.scene.bodies import DEFAULT_MAX_OBJECTS
-from ipe_ros.engine.scene.meshes import MeshAccess, mesh_shape
+from ipe_ros.engine.scene.meshes import MeshAccess, mesh_shape, triangles_shape
 
 from .stamps import header_to_stamp_ns, stamp_ns_to_header
 
@@ -72,7 +74,7 @@ FLOOR_MARKER_THICKNESS_M = 0.01
 FLOOR_MARKER_SIZE_M = 20.0
 
 _DYNAMIC_KEYS = ("name", "mass", "density", "friction", "restitution", "group", "vx", "vy", "vz", "wx", "wy", "wz",
-                 "sigma", "yaw_sigma")
+                 "sigma", "yaw_sigma", "decompose")
 _FLOOR_KEYS = ("role", "name", "friction", "restitution", "gravity", "scene")
 _TABLE_KEYS = _FLOOR_KEYS + ("floor_z",)
 _OBSTACLE_KEYS = ("role", "name", "friction", "restitution", "group")
@@ -139,8 +141,10 @@ def _vectors(marker: Marker, field: str) -> tuple[tuple[float, float, float], tu
 _BODY_TYPES = ("CUBE", "SPHERE", "CYLINDER", "TRIANGLE_LIST", "MESH_RESOURCE")
 
 
-def _shape(marker: Marker, extents: tuple[float, float, float], field: str, meshes: MeshAccess | None):
-    """The body's shape from the marker's type and scale."""
+def _shape(marker: Marker, extents: tuple[float, float, float], field: str, meshes: MeshAccess | None,
+           decompose: bool = False):
+    """The body's shape from the marker's type and scale (``decompose``: a TRIANGLE_LIST's closed
+    surface as convex parts, not its hull)."""
     if marker.type == Marker.MESH_RESOURCE:  # scale: per-axis factors of the file's units, as RViz draws it
         return mesh_shape({"uri": marker.mesh_resource, "scale": list(extents)}, field, meshes,
                           uri_field=f"{field}.mesh_resource")
@@ -158,6 +162,8 @@ def _shape(marker: Marker, extents: tuple[float, float, float], field: str, mesh
     points = tuple((float(p.x) * extents[0], float(p.y) * extents[1], float(p.z) * extents[2]) for p in marker.points)
     if not all(math.isfinite(v) for point in points for v in point):
         raise SceneError(f"{field}.points", "must be finite")
+    if decompose:  # no file is read: allowed without mesh_roots, decomposed and cached as a mesh is
+        return triangles_shape(np.array(points), f"{field}.points", meshes or MeshAccess(roots=()))
     return ConvexHull(points)
 
 
@@ -247,7 +253,12 @@ def markers_to_scene(msg: MarkerArray, *, max_objects: int = DEFAULT_MAX_OBJECTS
                                 floor_z_m=floor_z)
             continue
         props = parse_properties(m.text, _DYNAMIC_KEYS, f"{field}.text")
-        shape = _shape(m, extents, field, meshes)
+        decompose = props.get("decompose", "false").lower()
+        if decompose not in ("true", "false") or (decompose == "true" and m.type != Marker.TRIANGLE_LIST):
+            raise SceneError(f"{field}.text", f"decompose=true is for TRIANGLE_LIST markers (their closed surface as "
+                                              f"convex parts, not their hull), got decompose={props['decompose']} on a "
+                                              f"{_TYPE_NAMES.get(m.type, m.type)}")
+        shape = _shape(m, extents, field, meshes, decompose == "true")
         if "mass" in props and "density" in props:
             raise SceneError(f"{field}.text", "give mass or density, not both")
         mass = _number(props, "mass", f"{field}.text", None)

@@ -194,6 +194,46 @@ def test_a_mesh_object_turns_with_the_mesh_inertia_not_its_bounding_box(folder):
             shapes.validate_shape(dataclasses.replace(mug.shape, inertia_diagonal_per_kg_m2=value), "shape")
 
 
+def test_a_triangle_list_marker_is_decomposed_on_request(folder):
+    """A TRIANGLE_LIST marker is its points' convex hull; with ``decompose=true`` in its text, the
+    closed surface its triangles make, as convex parts that hold the ball (no file read, so no
+    mesh_roots needed), weighing what it encloses. An open surface and decompose on a CUBE are
+    refused naming the marker."""
+    pytest.importorskip("visualization_msgs")
+    from geometry_msgs.msg import Point
+    from visualization_msgs.msg import Marker, MarkerArray
+
+    from msg_bridge.markers import markers_to_scene
+
+    mesh = mug_mesh()
+    triangle_points = [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in mesh.vertices[mesh.faces].reshape(-1, 3)]
+
+    def array(text: str, points, kind=Marker.TRIANGLE_LIST) -> MarkerArray:
+        mug = Marker(type=kind, action=Marker.ADD, ns="objects", id=1, text=text, points=points)
+        mug.header.frame_id = "world"
+        mug.pose.orientation.w = mug.scale.x = mug.scale.y = mug.scale.z = 1.0
+        ball = Marker(type=Marker.SPHERE, action=Marker.ADD, ns="objects", id=2, text="name=ball mass=0.02")
+        ball.header.frame_id = "world"
+        ball.pose.position.z, ball.pose.orientation.w = BOTTOM + 0.0155, 1.0
+        ball.scale.x = ball.scale.y = ball.scale.z = 0.03
+        return MarkerArray(markers=[mug, ball])
+
+    assert isinstance(markers_to_scene(array("name=mug density=2000", triangle_points)).scene.objects[0].shape,
+                      ConvexHull)
+    scene = markers_to_scene(array("name=mug density=2000 decompose=true", triangle_points)).scene
+    cup = scene.objects[0]
+    assert isinstance(cup.shape, Compound) and len(cup.shape.parts) > 1
+    assert cup.resolved_mass_kg == pytest.approx(2000 * mesh.volume, rel=1e-6)
+    final = _finals(scene)
+    assert np.hypot(*(final["ball"] - final["mug"])[:2]) < R_IN - 0.015  # still in the cup, on its floor
+    assert final["ball"][2] < BOTTOM + 0.015 + 0.004 and final["mug"][2] < 0.05, final
+    open_points = triangle_points[:-6 * 32]
+    with pytest.raises(SceneError, match=r"^markers\[0\]\.points: the triangles do not close a surface"):
+        markers_to_scene(array("name=mug decompose=true", open_points))
+    with pytest.raises(SceneError, match=r"^markers\[0\]\.text: decompose=true is for TRIANGLE_LIST markers .* on a CUBE$"):
+        markers_to_scene(array("name=mug decompose=true", [], Marker.CUBE))
+
+
 def test_a_bowl_holds_three_balls(folder):
     """Balls dropped 2 cm into a bowl (engine/scene/household.py) roll to its floor and stay in it."""
     household.write_obj(folder / "bowl.obj", *household.bowl())

@@ -124,7 +124,7 @@ def test_deleteall_markers_are_ignored():
     ([cube(text="mass=1 density=2")], "markers[0].text: give mass or density, not both"),
     ([cube(text="colour=red")],
      "markers[0].text: unknown key 'colour'; allowed here: name, mass, density, friction, restitution, group, vx, vy, "
-     "vz, wx, wy, wz, sigma, yaw_sigma"),
+     "vz, wx, wy, wz, sigma, yaw_sigma, decompose"),
     ([cube(text="mass=heavy")], "markers[0].text.mass: expected a number, got 'heavy'"),
     ([cube(text="mass")], "markers[0].text: expected key=value pairs, got 'mass'"),
     ([cube(ns="support", text="role=floor")],

@@ -87,13 +87,42 @@ def mesh_shape(data: dict, path: str, access: MeshAccess | None, uri_field: str 
     content = _read_bounded(file, where)
     key = hashlib.sha256(b"%d|%s|%r|%r" % (_CACHE_VERSION, file.suffix.lower().encode(), scale,
                                            access.decomposition) + content).hexdigest()
+    return _compound(key, lambda: _load(content, file, scale, where), access, where)
+
+
+def triangles_shape(points_m: np.ndarray, path: str, access: MeshAccess) -> Compound:
+    """The compound of convex parts of the closed surface whose triangles are ``points_m`` taken three
+    at a time (a TRIANGLE_LIST marker's points, scaled; vertices shared by position), or a
+    SceneError naming ``path`` (decomposed and cached as a mesh file is)."""
+    import trimesh
+
+    points = np.asarray(points_m, float).reshape(-1, 3)
+    if len(points) < 12 or len(points) % 3:
+        raise SceneError(path, f"a closed surface needs triangles, 3 points each (at least 4 triangles), got "
+                               f"{len(points)} points")
+    if len(points) > 3 * MAX_MESH_VERTICES:
+        raise SceneError(path, f"{len(points)} points, more than the {3 * MAX_MESH_VERTICES} read; simplify it")
+    key = hashlib.sha256(b"%d|triangles|%r" % (_CACHE_VERSION, access.decomposition) + points.tobytes()).hexdigest()
+
+    def load():
+        mesh = trimesh.Trimesh(points, np.arange(len(points)).reshape(-1, 3), process=True)
+        if not mesh.is_watertight:
+            raise SceneError(path, "the triangles do not close a surface (holes or loose edges), so they enclose no "
+                                   "volume to give a mass; close it, or leave out decompose to take their convex hull")
+        return mesh
+
+    return _compound(key, load, access, path)
+
+
+def _compound(key: str, load, access: MeshAccess, path: str) -> Compound:
+    """The mesh's compound from the cache under ``key``, else decomposed from ``load()`` and cached."""
     cached = _cached_parts(access.cache(), key)
     if cached is None:
-        mesh = _load(content, file, scale, where)
+        mesh = load()
         # the solid's inertia about its centre of mass, per kg (trimesh's at density 1 weighs its volume)
         inertia = np.diag(np.asarray(mesh.moment_inertia, float)) / float(mesh.mass)
         cached = (_decompose(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64), access.decomposition,
-                             where), float(mesh.volume), tuple(float(v) for v in mesh.center_mass),
+                             path), float(mesh.volume), tuple(float(v) for v in mesh.center_mass),
                   tuple(float(v) for v in inertia))
         _store_parts(access.cache(), key, *cached)
     parts, volume, centre, inertia = cached

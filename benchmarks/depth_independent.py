@@ -168,6 +168,7 @@ def one_scene(rng: np.random.Generator, chain_seed: int, settings: D.DepthSettin
                      "guess_height_error_m": float(abs(guessed[2] - centre[2])),
                      "sd_m": float(posterior.positions_m[:, i, :2].std(axis=0).mean()), "wall_s": wall_s,
                      "predict_s": predict_s, "tilted": i > 0 and tilt_sd_rad > 0,
+                     "effective_sample_size": perceived.effective_sample_size,
                      "tilt_covered": [bool(tilt_low[j] <= tilt[j] <= tilt_high[j]) for j in range(2)],
                      "tilt_error_rad": float(np.hypot(*(tilts[:, i].mean(axis=0) - tilt))),
                      "guess_tilt_error_rad": float(np.hypot(*tilt)),
@@ -196,6 +197,9 @@ def summary(rows: list[dict], scenes: int) -> dict:
             "chain_s_median": float(np.median(per_scene)),
             "end_to_end_s_median": float(np.median(totals)) if totals else None,
             "end_to_end_within_2_s": sum(t <= 2.0 for t in totals) if totals else None,
+            "effective_sample_size_median": float(np.median([r["effective_sample_size"] for r in rows if r["first"]])),
+            "scenes_with_ess_at_least_half_k": sum(r["effective_sample_size"] >= PREDICTION_K / 2
+                                                   for r in rows if r["first"]),
             "tilts": _tilt_summary([r for r in rows if r.get("tilted")])}
 
 
@@ -265,6 +269,9 @@ def main() -> int:
                          f"{z:.0%} / {yaw:.0%}) | {g['error_mm_median']:.2f} mm | {g['guess_error_mm_median']:.1f} mm | "
                          f"{g['sd_mm_median']:.2f} mm | {g['height_error_mm_median']:.2f} / "
                          f"{g['guess_height_error_mm_median']:.1f} mm |")
+    lines += ["", f"Effective sample size of the chains (k = {PREDICTION_K} scenes drawn), median "
+                  f"{s['effective_sample_size_median']:.0f}; at least k/2 in {s['scenes_with_ess_at_least_half_k']} "
+                  f"of {args.scenes} scenes."]
     lines += ["", f"Chains per scene, median {s['chain_s_median']:.1f} s"
               + (f" (on {args.predict_workers} workers); end to end with the prediction (k = {PREDICTION_K}, "
                  f"self-checked), median {s['end_to_end_s_median']:.2f} s, within 2 s in "

@@ -74,7 +74,7 @@ class DepthSettings:
     locate_rounds: int = 20
     locate_candidates: int = 16
     shape_points: int = 64
-    proposals_per_sweep: int = 4
+    proposals_per_sweep: int = 8
     walk_steps: int = 3
     kept_states: int = 64
     burn_in_sweeps: int = 16

@@ -166,8 +166,8 @@ def test_a_misplaced_detection_is_pulled_back_towards_the_truth():
 
 
 def test_a_box_resting_tilted_on_another_is_found_tilted():
-    """The top box lies 0.06 rad (two prior SDs) tilted about x on the lower one (published flat);
-    pybullet renders the truth. Its tilt's posterior mean lands within 0.015 rad and three posterior
+    """Tilts asked for (``prior_tilt_sd_rad``; off by default): the top box lies 0.06 rad (two prior
+    SDs) tilted about x on the lower one (published flat); pybullet renders the truth. Its tilt's posterior mean lands within 0.015 rad and three posterior
     SDs of it (the prior pulls it a little towards flat), the other tilt near 0; the box on the floor
     keeps its published (flat) orientation, tilt 0 with SD 0."""
     tilt = 0.06
@@ -177,7 +177,8 @@ def test_a_box_resting_tilted_on_another_is_found_tilted():
     truth = floor(lower, tilted)
     camera = look_at((0.9, -0.6, 0.55), (0, 0, 0.1))
     guess = floor(lower, cube("upper", 0.004, -0.003, 0.1505))
-    perceived = D.perceive_depth(guess, 16, (observe(truth, camera),), D.DepthSettings(), np.random.default_rng(6))
+    perceived = D.perceive_depth(guess, 16, (observe(truth, camera),), D.DepthSettings(prior_tilt_sd_rad=0.03),
+                                 np.random.default_rng(6))
     objects = perceived.to_dict()["objects"]
     assert objects["lower"]["tilt_rad"] == [0.0, 0.0] and objects["lower"]["tilt_sd_rad"] == [0.0, 0.0]
     found, sd = objects["upper"]["tilt_rad"], objects["upper"]["tilt_sd_rad"]

@@ -69,7 +69,7 @@ class DepthSettings:
     prior_yaw_sd_rad: float = 0.2
     offset_prior_sd_m: float = 0.01
     prior_height_sd_m: float = 0.01
-    prior_tilt_sd_rad: float = 0.03
+    prior_tilt_sd_rad: float = 0.0
     locate_sweeps: int = 2
     locate_rounds: int = 20
     locate_candidates: int = 16

@@ -25,16 +25,16 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from ..errors import ConfigError
-from ..scene.bodies import Scene
+from ..scene.bodies import Scene, lowest_z_m, support_top_below
 from ..scene.shapes import quaternion_product
 from ..sampling.montecarlo import MapFn
 from .depth_chain import ChainRun, projected_end, sample_depth_posterior
 from .depth_model import (DepthModel, DepthObservation, DepthSettings, check_layer_memory, render_depth_m,
                           support_depth_m)
 from .mcmc import effective_sample_size
-from .raycast import convex_body
 from .metropolis import thinned_index
 
 __all__ = ["CHAIN_BUDGET_SHARE", "DEPTH_STREAM", "DepthObservation", "DepthPerceivedScenes", "DepthPosterior",
@@ -132,10 +132,9 @@ def run_depth_chain(scene: Scene, observations: tuple[DepthObservation, ...], se
     if not observations:
         raise ConfigError("depth", "depth perception needs at least one depth image")
     check_layer_memory(scene, observations)
-    per_chain = -(-max(settings.kept_states, k) // settings.chains)
+    one_chain = dataclasses.replace(settings, kept_states=settings.kept_per_chain(k), chains=1)
     budget_s = None if deadline_s is None else deadline_s - time.monotonic()
-    tasks = [_ChainTask(scene, observations, dataclasses.replace(settings, kept_states=per_chain), chain_rng, budget_s)
-             for chain_rng in rng.spawn(settings.chains)]
+    tasks = [_ChainTask(scene, observations, one_chain, chain_rng, budget_s) for chain_rng in rng.spawn(settings.chains)]
     runs = map_fn(run_one_chain, tasks) if map_fn is not None and len(tasks) > 1 else [run_one_chain(t) for t in tasks]
     dynamic = len(scene.dynamic_objects)
     positions, yaws = np.concatenate([r.positions_m for r in runs]), np.concatenate([r.yaws_rad for r in runs])
@@ -175,19 +174,10 @@ RESTING_ON_ANOTHER_M = 0.005
 def resting_on_another(scene: Scene) -> np.ndarray:
     """(dynamic objects,) bool: the object's lowest point is above the support under it (a box on a
     box can lie tilted; one on the floor or a table top lies as the support does)."""
-    from ..scene.bodies import Floor
-
-    support, out = scene.support, []
+    out = []
     for body in scene.dynamic_objects:
-        corners = convex_body(body).vertices_m + np.asarray(body.position_m)
-        x, y = float(np.mean(corners[:, 0])), float(np.mean(corners[:, 1]))
-        if isinstance(support, Floor):
-            top = support.height_m
-        elif support.covers_xy(np.array([x]), np.array([y]))[0]:
-            top = support.top_height_m
-        else:
-            top = support.floor_z_m if support.floor_z_m is not None else -np.inf
-        out.append(float(corners[:, 2].min()) > top + RESTING_ON_ANOTHER_M)
+        top = support_top_below(scene.support, body.position_m[0], body.position_m[1])
+        out.append(lowest_z_m(body) > (-np.inf if top is None else top) + RESTING_ON_ANOTHER_M)
     return np.array(out, bool)
 
 
@@ -213,7 +203,7 @@ def run_one_chain(task: _ChainTask) -> ChainRun:
             _check_deadline(started, sampling, deadline_s, done, total, dynamic)
 
     tilted = resting_on_another(scene) & (task.settings.prior_tilt_sd_rad > 0)
-    return sample_depth_posterior(model, positions, yaws, tilts, tilted, task.settings, task.rng, 0, check)
+    return sample_depth_posterior(model, positions, yaws, tilts, tilted, task.settings, task.rng, check)
 
 
 def _check_deadline(started: float, sampling: float, deadline_s: float, done: int, total: int, objects: int) -> None:
@@ -241,9 +231,7 @@ def scene_at_pose(scene: Scene, positions_m: np.ndarray, yaws_rad: np.ndarray,
             continue
         position, yaw, (a, b) = next(state)
         turn = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
-        angle = math.hypot(a, b)
-        tilt = (0.0, 0.0, 0.0, 1.0) if angle == 0 else (a / angle * math.sin(angle / 2), b / angle * math.sin(angle / 2),
-                                                         0.0, math.cos(angle / 2))
+        tilt = Rotation.from_rotvec((a, b, 0.0)).as_quat()
         orientation = quaternion_product(tilt, quaternion_product(turn, body.orientation_xyzw))
         objects.append(dataclasses.replace(body, position_m=tuple(float(v) for v in position),
                                            orientation_xyzw=tuple(float(v) for v in orientation),

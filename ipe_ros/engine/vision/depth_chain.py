@@ -33,6 +33,7 @@ Randomness from the injected Generator alone.
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass
@@ -124,14 +125,22 @@ class _Proposal:
     prior_centre: np.ndarray
     prior_sd: np.ndarray
 
-    def __post_init__(self) -> None:
+    @functools.cached_property
+    def chol(self) -> np.ndarray:
+        return np.linalg.cholesky(self.covariance)
+
+    @functools.cached_property
+    def _log_t0(self) -> float:
+        """log of the Student-t part's weight and normalising constant (computed once)."""
         d, nu = len(self.centre), self.dof
-        object.__setattr__(self, "chol", np.linalg.cholesky(self.covariance))
-        # the normalising constants of the two parts, computed once
-        object.__setattr__(self, "_log_t0", math.log1p(-self.prior_share) + math.lgamma((nu + d) / 2)
-                           - math.lgamma(nu / 2) - d / 2 * math.log(nu * math.pi) - float(np.sum(np.log(np.diag(self.chol)))))
-        object.__setattr__(self, "_log_prior0", math.log(self.prior_share) - float(np.sum(np.log(self.prior_sd)))
-                           - d / 2 * math.log(2 * math.pi))
+        return (math.log1p(-self.prior_share) + math.lgamma((nu + d) / 2) - math.lgamma(nu / 2)
+                - d / 2 * math.log(nu * math.pi) - float(np.sum(np.log(np.diag(self.chol)))))
+
+    @functools.cached_property
+    def _log_prior0(self) -> float:
+        """log of the prior part's weight and normalising constant."""
+        return (math.log(self.prior_share) - float(np.sum(np.log(self.prior_sd)))
+                - len(self.centre) / 2 * math.log(2 * math.pi))
 
     def draw(self, n: int, rng: np.random.Generator) -> np.ndarray:
         d = len(self.centre)
@@ -159,9 +168,10 @@ class ChainRun:
 
 
 def sample_depth_posterior(model: DepthModel, positions: np.ndarray, yaws: np.ndarray, tilts: np.ndarray,
-                           tilted: np.ndarray, settings: DepthSettings, rng: np.random.Generator, k: int = 0,
+                           tilted: np.ndarray, settings: DepthSettings, rng: np.random.Generator,
                            check: Callable[[int, int], None] | None = None) -> ChainRun:
-    """Locate, shape and sample (module docstring) from the model's current state; ``positions``,
+    """Locate, shape and sample (module docstring) from the model's current state, keeping
+    ``settings.kept_states`` states (``settings`` are this one chain's); ``positions``,
     ``yaws`` and ``tilts`` (every body's) are moved in place; the first ``len(tilted)`` bodies are the
     objects, whose tilts are estimated where ``tilted``. ``check(done, total)`` is called after every
     batch of proposals with the scorings done and to do (a deadline)."""
@@ -169,7 +179,7 @@ def sample_depth_posterior(model: DepthModel, positions: np.ndarray, yaws: np.nd
     poses = [_Pose(model, b, positions, yaws, tilts, s, bool(tilted[b])) for b in range(objects)]
     offsets = [_Offset(model, v, s) for v in range(len(model.offsets_m))] if s.offset_prior_sd_m > 0 else []
     blocks: list[_Block] = [*poses, *offsets]
-    sweeps = s.burn_in_sweeps + max(s.kept_states, k)  # this chain's
+    sweeps = s.sweeps()  # one chain's settings: its own kept states
     # the work in scorings of the model (a batch of proposals costs about one: its calls, not its size)
     total = len(blocks) * (s.locate_sweeps * s.locate_rounds + 2 + sweeps * (1 + s.walk_steps))
     done = 0
@@ -300,5 +310,5 @@ def _walk_steps(block: _Block, proposal: _Proposal, model: DepthModel, n: int, s
 
 
 def projected_end(started_s: float, done: int, total: int) -> float:
-    """When the chain will end (``time.monotonic()``) at the pace of its first ``done`` of ``total`` batches."""
+    """When the chain will end (``time.monotonic()``) at the pace of its first ``done`` of ``total`` scorings."""
     return started_s + (time.monotonic() - started_s) * total / max(done, 1)

@@ -104,9 +104,13 @@ class DepthSettings:
                                 ("kept_states", 1, 100_000), ("burn_in_sweeps", 0, 10_000), ("chains", 1, 16)):
             integer(getattr(self, name), f"depth.{name}", low, high)
 
+    def kept_per_chain(self, k: int = 0) -> int:
+        """States each chain keeps: its share of ``kept_states``, or of k when more."""
+        return -(-max(self.kept_states, k) // self.chains)
+
     def sweeps(self, k: int = 0) -> int:
         """Sweeps over the objects after the search, per chain: burn-in, then one kept state per sweep."""
-        return self.burn_in_sweeps + -(-max(self.kept_states, k) // self.chains)
+        return self.burn_in_sweeps + self.kept_per_chain(k)
 
     def chain_samples(self, objects: int, k: int = 0) -> int:
         """Single-object proposals of the sampling sweeps over ``objects`` objects, every chain's."""

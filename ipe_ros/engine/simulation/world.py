@@ -172,7 +172,10 @@ def _set_dynamics(p, cid: int, handle: int, body: Body, mass_kg: float = 0.0) ->
     """A body's surface (friction, restitution), no damping (``NO_DAMPING``), and a mesh's own inertia
     where the shape carries it (pybullet's own estimate for a compound is its bounding box's)."""
     inertia = getattr(body.shape, "inertia_diagonal_per_kg_m2", None)
-    own = {"localInertiaDiagonal": [mass_kg * float(v) for v in inertia]} if inertia is not None and mass_kg > 0 else {}
+    # the mass with it: pybullet 3.2.7 sets a maximal-coordinates body's mass to the call's (0 when left
+    # out) with its inertia, and its first step is NaN
+    own = {"mass": float(mass_kg), "localInertiaDiagonal": [mass_kg * float(v) for v in inertia]} \
+        if inertia is not None and mass_kg > 0 else {}
     p.changeDynamics(handle, -1, lateralFriction=body.friction, restitution=body.restitution,
                      physicsClientId=cid, **NO_DAMPING, **own)
 

@@ -4,7 +4,8 @@ hidden objects, error of the posterior mean against the detector's guess, and ti
     .venv/bin/python benchmarks/depth_independent.py [--scenes 50] [--predict-workers 2] [--out DIR]
 
 (``--predict-workers N``: each scene also predicted end to end on N workers - the chains, one per
-worker, then k = 48 samples self-checked - and timed: the robot-time goal. ``--tilt-sd RAD``: every
+worker, then k = 48 samples self-checked - and timed: the robot-time goal; and P(anything falls)
+scored against what the true tower does, with the samples set down and with their heights as drawn. ``--tilt-sd RAD``: every
 box on another lies tilted by N(0, RAD) about x and y, published flat: the tilts' coverage.)
 
 benchmarks/depth.py renders its evidence with pybullet and adds the likelihood's own noise; this one
@@ -106,6 +107,16 @@ def sensor(depth: np.ndarray, rng: np.random.Generator, without: frozenset = fro
     return np.where(dropped, 0.0, measured if "quantisation" in without else np.round(measured * 1000) / 1000)
 
 
+def _tilted_scene(boxes, static: tuple | None) -> Scene:
+    """``scene_of`` with each box's tilts (about the scene's x and y, after its yaw) applied."""
+    from ipe_ros.engine.vision.depth import scene_at_pose
+
+    flat = scene_of([(c, np.atleast_1d(pose)[0], half) for c, pose, half in boxes], static)
+    tilts = np.array([np.atleast_1d(pose)[1:3] if np.size(pose) > 1 else (0.0, 0.0) for _, pose, _ in boxes])
+    positions = np.array([c for c, _, _ in boxes], float)
+    return dataclasses.replace(scene_at_pose(flat, positions, np.zeros(len(boxes)), tilts), name="independent")
+
+
 def scene_of(boxes, static: tuple | None) -> Scene:
     objects = [Box(name=f"b{i}", extents_m=tuple(2 * np.asarray(half)), position_m=tuple(map(float, centre)),
                    orientation_xyzw=(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)), friction=0.6, restitution=0.0,
@@ -143,7 +154,7 @@ def one_scene(rng: np.random.Generator, chain_seed: int, settings: D.DepthSettin
     perceived = D.perceive_depth(guess, PREDICTION_K, (observation,), settings, np.random.default_rng(chain_seed),
                                  map_fn=pool.map if pool is not None else None)
     posterior, wall_s = perceived.posterior, time.perf_counter() - start
-    predict_s = None
+    predict_s, outcome = None, {}
     if pool is not None:  # end to end: the prediction from the posterior's scenes, self-checked
         from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
         from ipe_ros.engine.config import DEFAULT_QUERIES
@@ -153,10 +164,21 @@ def one_scene(rng: np.random.Generator, chain_seed: int, settings: D.DepthSettin
         on_floor = dataclasses.replace(guess, objects=tuple(
             dataclasses.replace(b, position_m=(*b.position_m[:2], max(b.position_m[2], b.extents_m[2] / 2)))
             if i == 0 else b for i, b in enumerate(guess.objects)))
+        queries = QuerySpec(queries=DEFAULT_QUERIES)
         start = time.perf_counter()
-        predict(on_floor, ModelConfig(perception="depth", samples=PREDICTION_K), preset("default"),
-                QuerySpec(queries=DEFAULT_QUERIES), map_fn=pool.map, perceived=perceived)
+        answer = predict(on_floor, ModelConfig(perception="depth", samples=PREDICTION_K), preset("default"), queries,
+                         map_fn=pool.map, perceived=perceived)
         predict_s = time.perf_counter() - start
+        # what the tower does (its true poses, simulated as given), against the answer, and against the
+        # same posterior's samples with their heights as drawn (no set-down): the benchmark's own truth
+        truth = predict(scene_of(boxes, board) if tilt_sd_rad == 0 else _tilted_scene(boxes, board),
+                        ModelConfig(samples=1, object_noise=False), preset("default"), queries, map_fn=pool.map)
+        as_drawn = dataclasses.replace(perceived, scenes=tuple(dataclasses.replace(s, set_down_m=0.0)
+                                                               for s in perceived.scenes))
+        unset = predict(on_floor, ModelConfig(perception="depth", samples=PREDICTION_K), preset("default"), queries,
+                        map_fn=pool.map, perceived=as_drawn)
+        outcome = {"fell": truth.any_fall_probability, "p_any_falls": answer.any_fall_probability,
+                   "p_any_falls_as_drawn": unset.any_fall_probability}
     low, high = posterior.interval95()
     tilts = posterior.tilts()
     rows = []
@@ -177,7 +199,8 @@ def one_scene(rng: np.random.Generator, chain_seed: int, settings: D.DepthSettin
                      "tilt_covered": [bool(tilt_low[j] <= tilt[j] <= tilt_high[j]) for j in range(2)],
                      "tilt_error_rad": float(np.hypot(*(tilts[:, i].mean(axis=0) - tilt))),
                      "guess_tilt_error_rad": float(np.hypot(*tilt)),
-                     "boxes": len(boxes), "board": board is not None, "first": i == 0})
+                     "boxes": len(boxes), "board": board is not None, "first": i == 0,
+                     **(outcome if i == 0 else {})})
     return rows
 
 
@@ -205,7 +228,24 @@ def summary(rows: list[dict], scenes: int) -> dict:
             "effective_sample_size_median": float(np.median([r["effective_sample_size"] for r in rows if r["first"]])),
             "scenes_with_ess_at_least_half_k": sum(r["effective_sample_size"] >= PREDICTION_K / 2
                                                    for r in rows if r["first"]),
-            "tilts": _tilt_summary([r for r in rows if r.get("tilted")])}
+            "tilts": _tilt_summary([r for r in rows if r.get("tilted")]),
+            "outcomes": _outcome_summary([r for r in rows if r["first"] and "fell" in r])}
+
+
+def _outcome_summary(scenes: list[dict]) -> dict | None:
+    """P(anything falls) against what the true tower does: Brier score and the mean P where it stands
+    and where it falls, from the answer and from the same samples with their heights as drawn."""
+    if not scenes:
+        return None
+    fell = np.array([r["fell"] for r in scenes], float)
+    out = {"scenes": len(scenes), "fell": int(fell.sum())}
+    for key in ("p_any_falls", "p_any_falls_as_drawn"):
+        p = np.array([r[key] for r in scenes], float)
+        out[key] = {"brier": float(np.mean((p - fell) ** 2)),
+                    "mean_p_where_it_stands": float(p[fell == 0].mean()) if (fell == 0).any() else None,
+                    "mean_p_where_it_falls": float(p[fell == 1].mean()) if (fell == 1).any() else None,
+                    "scenes_wrong_side_of_half": int(np.sum((p >= 0.5) != (fell == 1)))}
+    return out
 
 
 def _tilt_summary(tilted: list[dict]) -> dict | None:
@@ -281,6 +321,17 @@ def main() -> int:
               + (f" (on {args.predict_workers} workers); end to end with the prediction (k = {PREDICTION_K}, "
                  f"self-checked), median {s['end_to_end_s_median']:.2f} s, within 2 s in "
                  f"{s['end_to_end_within_2_s']} of {args.scenes} scenes." if args.predict_workers else " (one process).")]
+    if s["outcomes"] is not None:
+        o = s["outcomes"]
+        lines += ["", f"P(anything falls) against what the true tower does ({o['fell']} of {o['scenes']} fall; "
+                      "simulated as given, default preset):", "",
+                  "| samples | Brier | mean P where it stands | mean P where it falls | wrong side of 0.5 |",
+                  "|---|---|---|---|---|"]
+        for key, name in (("p_any_falls", "set down (the answer)"), ("p_any_falls_as_drawn", "heights as drawn")):
+            g = o[key]
+            shown = [f"{v:.3f}" if v is not None else "-" for v in (g["brier"], g["mean_p_where_it_stands"],
+                                                                       g["mean_p_where_it_falls"])]
+            lines.append(f"| {name} | {' | '.join(shown)} | {g['scenes_wrong_side_of_half']} |")
     if s["tilts"] is not None:
         t = s["tilts"]
         lines += ["", f"Tilts of the {t['objects']} boxes lying tilted on another: 95% intervals cover "

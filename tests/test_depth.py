@@ -211,6 +211,26 @@ def test_a_tower_with_a_hidden_block_gets_a_less_certain_answer():
     assert answers["hidden"].request["perception"]["kind"] == "depth"
 
 
+def test_the_posteriors_samples_start_resting_on_their_supports():
+    """An image leaves each block's height a millimetre or so uncertain; the samples' blocks are set down
+    onto what is under them (the stack touching, as the camera saw it), not dropped onto it."""
+    truth = floor(cube("a", 0, 0, 0.05), cube("b", 0.01, 0.0, 0.15), cube("c", 0.0, 0.01, 0.25))
+    camera = look_at((1.0, -0.7, 0.6), (0, 0, 0.1))
+    starts = {}
+    for sds in (0.0, D.DepthSettings().set_down_sds):
+        settings = D.DepthSettings(set_down_sds=sds)
+        perceived = D.perceive_depth(truth, 8, (observe(truth, camera),), settings, np.random.default_rng(0))
+        prediction = predict(truth, ModelConfig(perception="depth", samples=8), preset("default"),
+                             QuerySpec(queries=frozenset({"any_fall"})), perceived=perceived, check=None)
+        starts[sds] = np.array([o.initial_positions_m[:, 2] for o in prediction.outcomes])
+        assert all(s.set_down_m == (0.0 if sds == 0 else perceived.scenes[0].set_down_m) for s in perceived.scenes)
+    assert perceived.scenes[0].set_down_m >= D.SET_DOWN_FLOOR_M
+    # each block on the one below; the bottom one on the floor within depenetration's tolerance (0.1 mm)
+    assert np.abs(np.diff(starts[sds], axis=1) - 0.1).max() < 2e-5
+    assert np.abs(starts[sds][:, 0] - 0.05).max() <= 1.01e-4
+    assert np.abs(np.diff(starts[0.0], axis=1) - 0.1).max() > 2e-4  # as sampled, they hover or were pushed apart
+
+
 def test_a_robot_question_draws_its_samples_from_the_depth_posterior():
     """The question's scene as it is is the prediction's sample (the same posterior scene i, seed i):
     a seen top block stands in both, a hidden one falls in the same samples in both; sigma, 20 cm here,

@@ -6,8 +6,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
+from ipe_ros.engine import Box, ModelConfig, QuerySpec, predict, preset
 from ipe_ros.engine import simulation
+from ipe_ros.engine.config import DEFAULT_QUERIES
 from ipe_ros.engine.scene.generators import make_table
 from ipe_ros.engine.sampling.perturb import draw_sample_inputs
 from ipe_ros.engine.scene.bodies import Scene
@@ -343,3 +344,50 @@ def test_end_substeps_read_a_collapse_at_the_horizon_at_a_finer_step():
     assert halved.max_penetration_fraction <= max(plain.max_penetration_fraction, 0.05)
     for a, b in zip(plain.outcomes, halved.outcomes):  # the same noisy scenes
         np.testing.assert_array_equal(a.initial_positions_m, b.initial_positions_m)
+
+
+def _separated(scene: Scene) -> np.ndarray:
+    """The scene's dynamic bodies as a sample starts them (built, overlaps removed, set down)."""
+    from ipe_ros.engine.sampling.rollout import separated_world
+
+    inputs = draw_sample_inputs(scene, ModelConfig(object_noise=False), np.random.default_rng(0))
+    return simulation.read_poses(separated_world(scene, preset("default"), inputs))[0]
+
+
+def test_heights_that_are_estimates_are_set_down_onto_their_supports_from_the_bottom_up():
+    # a detector's heights: the bottom block 2 mm above the floor, the middle one 3 mm into it (the
+    # overlap is removed first), the top one turned across it and 4 mm above; a block beside the stack
+    # touching it must not hold it up
+    scene = replace(floor_scene(block("a", 0, 0, 0.102), block("b", 0.01, 0, 0.297),
+                                Box(name="c", extents_m=(0.6, 0.1, 0.2), position_m=(0.0, 0.0, 0.504),
+                                    orientation_xyzw=(0, 0, math.sin(0.35), math.cos(0.35)), friction=0.9,
+                                    restitution=0.0, mass_kg=1.0),
+                                block("beside", 0.2, 0, 0.1)), set_down_m=0.01)
+    z = _separated(scene)[:, 2]
+    assert z == pytest.approx([0.1, 0.3, 0.5, 0.1], abs=2e-5)
+    as_given = _separated(replace(scene, set_down_m=0.0))[:, 2]
+    assert as_given[2] - as_given[1] > 0.202  # as given, the top block hovers (the overlap below removed)
+
+
+def test_set_down_leaves_a_body_farther_up_than_asked_and_works_for_any_shape():
+    from ipe_ros.engine import Body, Cylinder
+
+    lying = Body(name="can", shape=Cylinder(radius_m=0.05, length_m=0.3), position_m=(0.0, 0.0, 0.2553),
+                 orientation_xyzw=(math.sin(math.pi / 4), 0.0, 0.0, math.cos(math.pi / 4)), friction=0.9,
+                 restitution=0.0, mass_kg=1.0)
+    high = block("high", 1.0, 0.0, 0.13)  # 3 cm up: a thrown box, not an estimate
+    z = _separated(replace(floor_scene(block("a", 0, 0, 0.1), lying, high), set_down_m=0.01))[:, 2]
+    assert z == pytest.approx([0.1, 0.25, 0.13], abs=2e-5)
+
+
+def test_a_tower_with_estimated_heights_stands_only_when_set_down():
+    # each block 2 mm above the one below (a detector's heights): dropped, the near-balanced top (its
+    # blocks' centre of mass 3 mm inside the bottom block's edge) is knocked over; set down, it
+    # stands as the true tower does
+    offsets = [0.0, 0.05, 0.1, 0.14]
+    truth = floor_scene(*(block(f"b{i}", x, 0, 0.1 + 0.2 * i) for i, x in enumerate(offsets)))
+    estimated = floor_scene(*(block(f"b{i}", x, 0, 0.1 + 0.2 * i + 0.002 * (i + 1)) for i, x in enumerate(offsets)))
+    model, queries = ModelConfig(samples=1, object_noise=False), QuerySpec(queries=DEFAULT_QUERIES)
+    assert predict(truth, model, preset("default"), queries).any_fall_probability == 0
+    assert predict(estimated, model, preset("default"), queries).any_fall_probability == 1
+    assert predict(replace(estimated, set_down_m=0.01), model, preset("default"), queries).any_fall_probability == 0

@@ -29,7 +29,7 @@ def test_schema_and_reader_name_the_same_fields():
     defs = scene_schema()["$defs"]
     assert set(defs["object"]["properties"]) == set(io.OBJECT_REQUIRED) | set(io._OBJECT_OPTIONAL)
     assert set(defs["object"]["required"]) == set(io.OBJECT_REQUIRED)
-    assert set(defs["scene"]["properties"]) == {"format", "horizon_s", *io.SCENE_REQUIRED}
+    assert set(defs["scene"]["properties"]) == {"format", "horizon_s", "set_down_m", *io.SCENE_REQUIRED}
     assert set(defs["floor"]["properties"]) == set(io.FLOOR_FIELDS)
     assert set(defs["table"]["properties"]) == set(io.TABLE_FIELDS)
     for kind, fields in io._SHAPE_FIELDS.items():
@@ -56,6 +56,8 @@ def _refused_by_schema(scene: dict) -> str:
     (lambda s: s["objects"][1].update(restitution=1.5), "objects.1"),
     (lambda s: s["support"].update(type="ramp"), "support"),
     (lambda s: s.update(horizon_s=120.0), "horizon_s"),
+    (lambda s: s.update(set_down_m=-0.01), "set_down_m"),
+    (lambda s: s.update(set_down_m=0.5), "set_down_m"),
 ])
 def test_what_the_schema_can_say_it_refuses_as_the_engine_does(change, where):
     scene = scene_to_dict(capped_tower())

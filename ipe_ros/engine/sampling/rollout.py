@@ -134,7 +134,8 @@ def _never_falls(scene: Scene, decided_below_z: np.ndarray) -> np.ndarray | None
 
 
 def separated_world(scene: Scene, settings, inputs, probe: Probe = NO_PROBE) -> simulation.World:
-    """A sample's noisy scene built and de-penetrated. Separated in the same body representation
+    """A sample's noisy scene built and de-penetrated (and its objects set down onto their supports
+    where the scene's heights are estimates: ``Scene.set_down_m``). Separated in the same body representation
     whatever the preset, so that every preset starts from bit-identical initial scenes (the two
     representations round differently); plain rigid bodies are the default's own, so it simulates
     on in this world."""
@@ -144,6 +145,7 @@ def separated_world(scene: Scene, settings, inputs, probe: Probe = NO_PROBE) -> 
                                        orientations_xyzw=inputs.orientations_xyzw)
     with probe.part("depenetrate"):
         simulation.depenetrate(world, separation)
+        simulation.set_down(world, scene.set_down_m)
     return world
 
 

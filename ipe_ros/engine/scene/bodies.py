@@ -22,6 +22,8 @@ Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
 #: The longest horizon a scene may ask for: a prediction's cost grows with it.
 MAX_HORIZON_S = 60.0
+#: the farthest an object is set down onto its support (Scene.set_down_m): estimates, not placements
+MAX_SET_DOWN_M = 0.1
 
 #: A quaternion whose norm differs from 1 by more than this is rejected (not renormalised silently).
 QUATERNION_NORM_TOLERANCE = 1e-3
@@ -175,6 +177,10 @@ class Scene:
         support: a :class:`Floor` or a :class:`Table`.
         gravity_m_s2: gravity vector in m/s^2; z must be negative (z is up).
         horizon_s: how long to simulate this scene, or None for the settings' horizon.
+        set_down_m: each dynamic object whose lowest point is at most this far above what is under it
+            is set down onto it before the rollout (after overlaps are removed): for heights that are
+            estimates (a detector's, a depth posterior's), which leave objects hovering millimetres
+            above their supports. 0: heights as given (the paper's stacks).
     """
 
     name: str
@@ -182,6 +188,7 @@ class Scene:
     support: Support
     gravity_m_s2: Vec3 = (0.0, 0.0, -9.81)
     horizon_s: float | None = None
+    set_down_m: float = 0.0
 
     @property
     def dynamic_objects(self) -> tuple[Body, ...]:

@@ -132,6 +132,8 @@ def scene_to_dict(scene: Scene) -> dict[str, Any]:
     out = {"format": SCENE_FORMAT, "name": scene.name, "gravity_m_s2": list(scene.gravity_m_s2)}
     if scene.horizon_s is not None:
         out["horizon_s"] = scene.horizon_s
+    if scene.set_down_m:
+        out["set_down_m"] = scene.set_down_m
     out.update(support=sup, objects=[object_to_dict(b) for b in scene.objects])
     return out
 
@@ -309,7 +311,7 @@ def scene_from_dict(data: Any, max_objects: int = DEFAULT_MAX_OBJECTS, meshes: M
         _check_keys(data, _SCENE_REQUIRED_V1, ("format",), "")
         key, read_object = "boxes", box_from_dict
     elif fmt == SCENE_FORMAT:
-        _check_keys(data, SCENE_REQUIRED, ("format", "horizon_s"), "")
+        _check_keys(data, SCENE_REQUIRED, ("format", "horizon_s", "set_down_m"), "")
         key, read_object = "objects", functools.partial(object_from_dict, meshes=meshes)
     else:
         raise SceneError("format", f"unsupported format {shown(fmt)}; this version reads {shown(SCENE_FORMAT)} and "
@@ -330,6 +332,7 @@ def scene_from_dict(data: Any, max_objects: int = DEFAULT_MAX_OBJECTS, meshes: M
         support=_support_from_dict(data["support"], read_object),
         gravity_m_s2=_vec(data["gravity_m_s2"], 3, "gravity_m_s2"),  # type: ignore[arg-type]
         horizon_s=None if horizon is None else _num(horizon, "horizon_s"),
+        set_down_m=_num(data.get("set_down_m", 0.0), "set_down_m"),
     )
     try:
         return validate_scene(scene, max_objects=max_objects)

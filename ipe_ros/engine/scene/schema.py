@@ -20,7 +20,7 @@ from typing import Any
 
 from . import limits
 from . import format as io
-from .bodies import DEFAULT_MAX_OBJECTS, MAX_HORIZON_S, QUATERNION_NORM_TOLERANCE
+from .bodies import DEFAULT_MAX_OBJECTS, MAX_HORIZON_S, MAX_SET_DOWN_M, QUATERNION_NORM_TOLERANCE
 
 SCHEMA_PATH = Path(__file__).resolve().parents[2] / "schema" / "scene-2.json"
 SCHEMA_ID = "urn:ipe-ros:schema:scene-2"
@@ -151,6 +151,8 @@ def scene_schema() -> dict[str, Any]:
                                       f"{limits.MAX_GRAVITY_M_S2:g}]", limits.MAX_GRAVITY_M_S2),
                          "prefixItems": [{}, {}, {"exclusiveMaximum": 0}]},
         "horizon_s": _number("how long to simulate this scene, s", 0.0, MAX_HORIZON_S, exclusive_minimum=True),
+        "set_down_m": _number("objects at most this far above what is under them are set down onto it before "
+                              "the rollout (heights that are estimates); 0: heights as given", 0.0, MAX_SET_DOWN_M),
         "support": {"type": "object", "required": ["type"], "properties": {"type": {"enum": ["floor", "table"]}},
                     "if": {"properties": {"type": {"const": "floor"}}},
                     "then": {"$ref": "#/$defs/floor"}, "else": {"$ref": "#/$defs/table"}},

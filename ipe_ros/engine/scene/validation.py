@@ -10,7 +10,7 @@ import numpy as np
 
 from . import limits, shapes
 from ..errors import SceneError, shown
-from .bodies import (DEFAULT_MAX_OBJECTS, MAX_HORIZON_S, QUATERNION_NORM_TOLERANCE, Body, Floor, Scene, Table,
+from .bodies import (DEFAULT_MAX_OBJECTS, MAX_HORIZON_S, MAX_SET_DOWN_M, QUATERNION_NORM_TOLERANCE, Body, Floor, Scene, Table,
                      deepest_into_support)
 
 
@@ -200,6 +200,8 @@ def _validate(scene: Scene, max_objects: int) -> Scene:
     if scene.horizon_s is not None:
         _check_number(scene.horizon_s, "horizon_s", "the simulated time in seconds", lo=0.0, lo_open=True,
                       hi=MAX_HORIZON_S)
+    _check_number(scene.set_down_m, "set_down_m", "how far above its support an object is set down onto it, m",
+                  lo=0.0, hi=MAX_SET_DOWN_M)
     _check_count(scene, max_objects)
     if not scene.dynamic_objects:
         raise SceneError("objects", "the scene has no dynamic object: nothing can fall")

@@ -5,7 +5,7 @@ runs the loop that settling.py, collapse.py, termination.py and health.py each t
 probe.py lets a benchmark watch the parts.
 """
 
-from .depenetration import depenetrate
+from .depenetration import depenetrate, set_down
 from .probe import NO_PROBE, PHASES, Probe
 from .stepper import Push, RolloutEnd, simulate
 from .termination import DecidedHeights
@@ -13,4 +13,4 @@ from .bullet import client, pybullet
 from .world import World, build_world, read_poses, read_velocities
 
 __all__ = ["NO_PROBE", "PHASES", "DecidedHeights", "Probe", "Push", "RolloutEnd", "World", "build_world", "client",
-           "depenetrate", "pybullet", "read_poses", "read_velocities", "simulate"]
+           "depenetrate", "pybullet", "read_poses", "read_velocities", "set_down", "simulate"]

@@ -52,3 +52,53 @@ def depenetrate(world: World, settings: SimSettings) -> int:
                                                   physicsClientId=cid)
     raise PhysicsError(f"boxes still overlap after {settings.depenetration.max_iterations} "
                        "depenetration rounds; lower sigma or raise depenetration.max_iterations")
+
+
+#: halvings of the set-down distance when finding where a body touches (2^-16 of it: a micrometre of 6 cm)
+SET_DOWN_HALVINGS = 16
+
+
+def set_down(world: World, within_m: float) -> int:
+    """Lower every dynamic body whose lowest point is at most ``within_m`` above what is under it until
+    it touches it, from the lowest body up (so each lands on its support's final pose); return how many
+    moved. Heights from a detector or a depth posterior are estimates: a box left millimetres above its
+    support drops and strikes it, an impulse the scene at rest never had. A body farther up than
+    ``within_m`` (thrown, hanging) keeps its height.
+
+    Geometric, for every shape: the largest drop that leaves no pair deeper in contact than it was
+    (pybullet's signed distances), by halving; the bodies beside it (whose distance a vertical move
+    does not shorten) never stop it.
+    """
+    if within_m <= 0:
+        return 0
+    p = pybullet()
+    cid = world.client
+    lowest = {body: p.getAABB(body, physicsClientId=cid)[0][2] for body in world.dynamic_ids}
+    moved = 0
+    for body in sorted(world.dynamic_ids, key=lowest.__getitem__):
+        low, high = p.getAABB(body, physicsClientId=cid)
+        near = {other for other, _ in p.getOverlappingObjects([low[0], low[1], low[2] - within_m], high,
+                                                              physicsClientId=cid) or () if other != body}
+        position, orientation = p.getBasePositionAndOrientation(body, physicsClientId=cid)
+
+        def deepest_at(drop_m: float) -> dict[int, float]:
+            p.resetBasePositionAndOrientation(body, (position[0], position[1], position[2] - drop_m), orientation,
+                                              physicsClientId=cid)
+            return {other: min((c[8] for c in p.getClosestPoints(body, other, 0.0, physicsClientId=cid)), default=0.0)
+                    for other in near}
+
+        start = {other: min(depth, 0.0) for other, depth in deepest_at(0.0).items()}
+
+        def touches(drop_m: float) -> bool:
+            return any(depth < start[other] - 1e-9 for other, depth in deepest_at(drop_m).items())
+
+        if not touches(within_m):
+            p.resetBasePositionAndOrientation(body, position, orientation, physicsClientId=cid)
+            continue
+        free, touching = 0.0, within_m
+        for _ in range(SET_DOWN_HALVINGS):
+            middle = (free + touching) / 2
+            free, touching = (free, middle) if touches(middle) else (middle, touching)
+        deepest_at(free)
+        moved += free > 0
+    return moved

@@ -28,7 +28,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..errors import ConfigError
-from ..scene.bodies import Scene, lowest_z_m, support_top_below
+from ..scene.bodies import MAX_SET_DOWN_M, Scene, lowest_z_m, support_top_below
 from ..scene.shapes import quaternion_product
 from ..sampling.montecarlo import MapFn
 from .depth_chain import ChainRun, projected_end, sample_depth_posterior
@@ -301,11 +301,29 @@ def _thinned_scenes(given: Scene, posterior: DepthPosterior, k: int) -> tuple[Sc
     return tuple(scene_at_pose(given, p, y, t) for p, y, t in zip(*posterior.thinned(k)))
 
 
+#: objects are set down from at least this far above their supports (a posterior sure of its heights
+#: still leaves them apart by the contact's own scale)
+SET_DOWN_FLOOR_M = 0.001
+
+
+def with_heights_estimated(scene: Scene, posterior: DepthPosterior, settings: DepthSettings) -> Scene:
+    """``scene`` saying that its objects' heights are the posterior's estimates: each sample's objects
+    are set down onto what is under them from up to ``settings.set_down_sds`` SDs of the least certain
+    height above it (``Scene.set_down_m``; an image leaves a stack's heights millimetres apart, and a
+    block that drops them strikes its support: a standing tower would look less stable than it is)."""
+    if settings.set_down_sds == 0:
+        return scene
+    spread = float(posterior.positions_m[:, :, 2].std(axis=0).max(initial=0.0))
+    within = min(MAX_SET_DOWN_M, SET_DOWN_FLOOR_M + settings.set_down_sds * spread)
+    return dataclasses.replace(scene, set_down_m=max(scene.set_down_m, within))
+
+
 def perceive_depth(scene: Scene, k: int, observations: tuple[DepthObservation, ...], settings: DepthSettings,
                    rng: np.random.Generator, deadline_s: float | None = None,
                    map_fn: MapFn | None = None) -> DepthPerceivedScenes:
     """k scenes spread over the depth posterior of ``scene`` (the detector's guess) given the images."""
     posterior = run_depth_chain(scene, observations, settings, rng, deadline_s, k, map_fn)
+    scene = with_heights_estimated(scene, posterior, settings)
     objects = len(scene.dynamic_objects)
     return DepthPerceivedScenes(scenes=_thinned_scenes(scene, posterior, k), posterior=posterior,
                                 chain_samples=settings.chain_samples(objects, k),

@@ -56,7 +56,9 @@ class DepthSettings:
     posterior's peak, ``shape_points`` the poses its curvature is fitted to, then ``burn_in_sweeps``
     + its share of ``kept_states`` (or k, when more) sweeps of ``proposals_per_sweep`` independence
     proposals per object - a share ``prior_share`` of them drawn from the prior and the rest from a
-    Student-t (``proposal_dof``) around the peak - and ``walk_steps`` random-walk steps."""
+    Student-t (``proposal_dof``) around the peak - and ``walk_steps`` random-walk steps.
+    ``set_down_sds``: the samples' objects are set down onto what is under them (``Scene.set_down_m``)
+    when within this many posterior SDs of their height above it (0: heights as sampled)."""
 
     sd_m: float = 0.002
     sd_per_m2: float = 0.0025
@@ -81,6 +83,7 @@ class DepthSettings:
     proposal_dof: float = 4.0
     prior_share: float = 0.1
     chains: int = 2
+    set_down_sds: float = 5.0
 
     def __post_init__(self) -> None:
         for name in ("sd_m", "max_range_m", "reach_m", "temperature", "prior_sd_m", "prior_yaw_sd_rad",
@@ -92,6 +95,9 @@ class DepthSettings:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 0.1:
                 raise ConfigError(f"depth.{name}", f"must be in [0, 0.1] (0: {meaning}), got {value!r}")
+        if isinstance(self.set_down_sds, bool) or not isinstance(self.set_down_sds, (int, float)) \
+                or not 0 <= self.set_down_sds <= 20:
+            raise ConfigError("depth.set_down_sds", f"must be in [0, 20] (0: heights as sampled), got {self.set_down_sds!r}")
         if not isinstance(self.sd_per_m2, (int, float)) or not 0 <= self.sd_per_m2 < 1:
             raise ConfigError("depth.sd_per_m2", f"must be in [0, 1), got {self.sd_per_m2!r}")
         for name in ("outlier", "prior_share"):

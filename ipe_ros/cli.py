@@ -84,7 +84,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="vision: write the observed images, the posterior sample cloud and the acceptance trace "
                         "to a rerun recording (one scene only)")
     add_input_options(p, ("preset_name", "seed", "workers", "ground_truth", "ci_width", "deadline_s", "horizon_s",
-                          "until_rest", "budget_s", "self_check", "verify_samples"))
+                          "until_rest", "budget_s", "self_check", "verify_samples",
+                          "always_verify"))
     p.add_argument("--json", action="store_true", help="one JSON object per scene per line")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run the samples on a Dask cluster (e.g. tcp://10.0.0.2:8786; default: $IPE_DASK_SCHEDULER, "

@@ -167,7 +167,7 @@ def _table(answers: A.Answers) -> str:
         note = "" if v.simulated else "  (nothing within its reach: not simulated)"
         if v.stopped_by is not None:
             note += f"  [{v.decision or 'undecided'}: {v.stopped_by} after {v.samples_drawn} samples drawn]"
-        if v.fidelity not in (None, "verified"):  # escalated: the reference's answer; contradicted: do not act on it
+        if v.fidelity not in (None, "verified", "validated"):  # escalated: the reference's answer; contradicted: do not act on it
             note += f"  ({v.fidelity})"
         for key, q in (v.contact_probability or {}).items():
             note += f"; P({key.replace(':', ' touches ')}) {q:.2f}"

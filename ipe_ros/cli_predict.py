@@ -57,7 +57,7 @@ def format_table(predictions: list[Prediction]) -> str:
                 lines.extend(f"{'':<34} {line}" for line in QUERIES[name].describe(p))
         if p.failure_reasons:
             lines.append(f"{'':<34} failures: {'; '.join(p.failure_reasons)}")
-        if p.fidelity is not None and p.fidelity != "verified" or p.refined_samples:
+        if p.fidelity is not None and p.fidelity not in ("verified", "validated") or p.refined_samples:
             lines.append(f"{'':<34} fidelity: {describe_fidelity(p)}")
         if (p.max_penetration_fraction or 0) > NOTABLE_PENETRATION or (p.max_energy_gain_j or 0) > 0:
             lines.append(f"{'':<34} numerical health: a body ended {p.max_penetration_fraction:.1%} of its size inside "
@@ -68,6 +68,7 @@ def format_table(predictions: list[Prediction]) -> str:
 def describe_fidelity(p: Prediction) -> str:
     """One line on what the self-check did (engine.checking.fidelity)."""
     text = {"verified": "verified against the reference physics",
+            "validated": "inside the envelope where the fast physics was validated: not rerun at the reference",
             "escalated": "the reference physics disagreed with the fast one: every sample rerun at the reference",
             "contradicted": "the reference physics disagreed and the budget ran out before it could answer: "
                             "do not act on this answer",

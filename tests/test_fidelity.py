@@ -28,6 +28,8 @@ from ipe_ros.engine.scene.zoo import zoo_scene, zoo_sigma_m
 QUERY = QuerySpec(queries=DEFAULT_QUERIES)
 REFERENCE = reference_settings().name
 CHECK_FIELDS = ("fidelity", "refined_samples", "self_check", "wall_s")
+#: the example tower lies inside the validated envelope (checking/envelope.py): these tests check it anyway
+ALWAYS = SelfCheck(always_verify=True)
 
 
 def _answer(p) -> dict:
@@ -71,7 +73,7 @@ def _ramp_model(scene, samples=4):
 
 def test_the_verification_runs_first_in_the_same_map_as_the_fast_samples(tower):
     spy = CountingMap()
-    p = predict(tower, ModelConfig(sigma_m=0.01, samples=3), preset("default"), QUERY, seed=4, map_fn=spy)
+    p = predict(tower, ModelConfig(sigma_m=0.01, samples=3), preset("default"), QUERY, seed=4, map_fn=spy, check=ALWAYS)
     assert len(spy.calls) == 1
     assert [t.settings.name for t in spy.calls[0]] == [REFERENCE, "default", "default", "default"]
     assert [t.index for t in spy.calls[0]] == [0, 0, 1, 2]
@@ -82,7 +84,7 @@ def test_the_verification_runs_first_in_the_same_map_as_the_fast_samples(tower):
 def test_a_verified_answer_is_the_fast_answer_unchanged(tower):
     """The check never changes an answer it agrees with (seed 4: no rollout ends unhealthy)."""
     model = ModelConfig(sigma_m=0.01, samples=3)
-    checked = predict(tower, model, preset("default"), QUERY, seed=4)
+    checked = predict(tower, model, preset("default"), QUERY, seed=4, check=ALWAYS)
     unchecked = predict(tower, model, preset("default"), QUERY, seed=4, check=None)
     assert (checked.fidelity, unchecked.fidelity, checked.refined_samples) == ("verified", "unverified", 0)
     assert _answer(checked) == _answer(unchecked)
@@ -156,7 +158,7 @@ def test_one_disagreement_that_more_samples_do_not_confirm_is_chaos_not_a_verdic
 
     spy = CountingMap(flip_first_verification)
     model = ModelConfig(sigma_m=0.01, samples=6)
-    p = predict(tower, model, preset("default"), QUERY, seed=4, map_fn=spy)
+    p = predict(tower, model, preset("default"), QUERY, seed=4, map_fn=spy, check=ALWAYS)
     assert len(spy.calls) == 2  # one round of confirmation, then a verdict
     # the flip says the lower blocks fell where the fast physics kept them: every other sample
     # keeps them too, so the targeted samples are the next ones in line
@@ -322,7 +324,7 @@ def test_a_failed_fast_sample_is_rerun_at_the_reference(tower):
 
     model = ModelConfig(sigma_m=0.01, samples=3)
     spy = CountingMap(fail_second)
-    p = predict(tower, model, preset("default"), QUERY, seed=4, map_fn=spy)
+    p = predict(tower, model, preset("default"), QUERY, seed=4, map_fn=spy, check=ALWAYS)
     assert (p.samples, p.failed_samples, p.refined_samples) == (3, 0, 1)
     assert p.self_check["refined_reasons"] == {"1": "failed"} and p.fidelity == "verified"
     assert [(t.settings.name, t.index) for t in spy.calls[1]] == [(REFERENCE, 1)]
@@ -357,7 +359,7 @@ def test_every_unhealthy_rollout_is_replaced_by_its_reference_rerun(tower):
 
 def test_ground_truth_is_verified_too(tower):
     spy = CountingMap()
-    p = predict(tower, ModelConfig(sigma_m=0.0, samples=48), preset("default"), QUERY, map_fn=spy)
+    p = predict(tower, ModelConfig(sigma_m=0.0, samples=48), preset("default"), QUERY, map_fn=spy, check=ALWAYS)
     assert p.deterministic and p.fidelity in VERDICTS and p.fidelity != "unverified"
     assert [t.settings.name for t in spy.calls[0]] == [REFERENCE, "default"]
 
@@ -389,7 +391,7 @@ def test_anytime_sampling_is_checked_on_the_samples_it_drew(tower):
 
     stop = AdaptiveStop(deadline_s=1e-6, batch_size=2)  # stops after the first batch
     p = predict(tower, ModelConfig(sigma_m=0.01, samples=8), preset("default"), QUERY, seed=4, stop=stop,
-                check=SelfCheck(verify_samples=3))
+                check=SelfCheck(verify_samples=3, always_verify=True))
     assert (p.samples, p.stopped_by) == (2, "deadline")
     assert p.fidelity == "verified" and p.self_check["verified_samples"] == 2
 
@@ -465,3 +467,64 @@ def test_a_question_sent_as_json_checks_itself_only_when_it_asks_to(ramp_3):
     with pytest.raises(ConfigError, match=r"^self_check: must be true or false$"):
         question_from_dict({"question": "remove", "self_check": "yes"})
 
+
+
+def test_a_scene_inside_the_validated_envelope_answers_validated_without_reference_reruns(tower):
+    """Boxes at rest on a floor: the fast physics was validated there (checking/envelope.py), so the
+    answer is the fast one, in one map of fast samples, and says why nothing was verified."""
+    spy = CountingMap()
+    model = ModelConfig(sigma_m=0.01, samples=16)
+    p = predict(tower, model, preset("default"), QUERY, seed=4, map_fn=spy)
+    assert [[t.settings.name for t in call] for call in spy.calls] == [["default"] * 16]
+    assert p.fidelity == "validated" and p.self_check["verified_samples"] == 0
+    assert p.self_check["validated"].startswith("boxes at rest on a floor within the envelope `default` was validated")
+    assert _answer(p) == _answer(predict(tower, model, preset("default"), QUERY, seed=4, check=None))
+    assert predict(tower, model, preset("default"), QUERY, seed=4, check=ALWAYS).fidelity == "verified"
+
+
+def test_inside_the_envelope_an_unhealthy_rollout_is_still_refined(tower):
+    def fail_second(task, outcome: SampleOutcome):
+        if task.settings.name == "default" and task.index == 1:
+            return dataclasses.replace(outcome, ok=False, error="PhysicsError: injected", rollouts=())
+        return outcome
+
+    spy = CountingMap(fail_second)
+    p = predict(tower, ModelConfig(sigma_m=0.01, samples=16), preset("default"), QUERY, seed=4, map_fn=spy)
+    assert (p.fidelity, p.refined_samples, p.self_check["refined_reasons"]) == ("validated", 1, {"1": "failed"})
+    assert [(t.settings.name, t.index) for t in spy.calls[1]] == [(REFERENCE, 1)]
+
+
+def _box(name, x, z, extents=(0.2, 0.6, 0.2), **kw):
+    from ipe_ros.engine import Box
+
+    return Box(name=name, extents_m=extents, position_m=(x, 0.0, z), orientation_xyzw=(0, 0, 0, 1),
+               friction=kw.pop("friction", 0.8), restitution=kw.pop("restitution", 0.0), mass_kg=1.0, **kw)
+
+
+@pytest.mark.parametrize("change, why", [
+    (lambda s, m: (s, dataclasses.replace(m, samples=8), "default"), "fewer than 16 noisy samples"),
+    (lambda s, m: (s, dataclasses.replace(m, sigma_m=0.0, object_noise=False), "default"), "fewer than 16 noisy samples"),
+    (lambda s, m: (s, dataclasses.replace(m, phi_m_s2=(2.0,)), "default"), "the model pushes the support"),
+    (lambda s, m: (s, m, "fine"), "the preset is not default"),
+    (lambda s, m: (dataclasses.replace(s, horizon_s=5.0), m, "default"), "the horizon is longer than validated"),
+    (lambda s, m: (dataclasses.replace(s, objects=(_box("a", 0, 0.1), _box("b", 0, 0.3, restitution=0.5))), m,
+                   "default"), "a restitution is above the validated range"),
+    (lambda s, m: (dataclasses.replace(s, objects=(_box("a", 0, 0.1), _box("b", 0, 0.3, friction=0.2))), m,
+                   "default"), "a friction is outside the validated range"),
+    (lambda s, m: (dataclasses.replace(s, objects=(_box("a", 0, 0.1), _box("plate", 0, 0.21, (0.4, 0.4, 0.02)))), m,
+                   "default"), "plate is thinner than validated"),
+    (lambda s, m: (dataclasses.replace(s, objects=(_box("a", 0, 0.1), _box("b", 0, 0.3, linear_velocity_m_s=(1, 0, 0)))),
+                   m, "default"), "b is moving"),
+    (lambda s, m: (s, dataclasses.replace(m, sigma_m=0.1), "default"), "block0's position noise is larger than validated"),
+    (lambda s, m: (dataclasses.replace(s, objects=tuple(_box(f"c{i}", 0, 0.1 + 0.2 * i) for i in range(13))), m,
+                   "default"), "more than 12 objects"),
+])
+def test_the_envelope_names_why_a_scene_lies_outside_it(tower, change, why):
+    from ipe_ros.engine.checking.envelope import outside
+
+    model = ModelConfig(sigma_m=0.01, samples=16)
+    assert outside(tower, model, preset("default")) is None
+    scene, changed, name = change(tower, model)
+    assert outside(scene, changed, preset(name)) == why
+    if name == "default" and not changed.pushes:  # answered, checked as before
+        assert predict(scene, changed, preset(name), QUERY).fidelity in ("verified", "escalated")

@@ -138,6 +138,10 @@ INPUTS: tuple[Input, ...] = (
     Input("verify_samples", "int", DEFAULT_CHECK.verify_samples, "count",
           "samples rerun at the reference settings to verify the answer", "--verify-samples", "verify_samples",
           range=(0, 100), errors_as=("self_check.verify_samples",), requires="self_check", metavar="N"),
+    Input("always_verify", "bool", DEFAULT_CHECK.always_verify, "flag", "verify also answers inside the envelope the "
+          "fast physics was validated over (boxes at rest on a floor, no push: docs/model.md, 'Self-checking "
+          "answers'), which otherwise answer 'validated' without reference reruns", "--always-verify",
+          "always_verify", errors_as=("self_check.always_verify",)),
     Input("workers", "int", default_workers(), "count", "simulation worker processes (0: in this process; default "
           "one per CPU, at most 8)", "--workers", "workers", range=(0, 64), in_request=False, fixed_at_start=True, metavar="W"),
     Input("max_objects", "int", DEFAULT_MAX_OBJECTS, "count", "scenes with more objects are refused",

@@ -45,7 +45,7 @@ def build_request(*, samples: int = DEFAULT_SAMPLES, sigma_m: float = DEFAULT_SI
                   preset_name: str = DEFAULT_PRESET, horizon_s: float | None = None, until_rest: bool = False,
                   seed: int = 0, ci_width: float | None = None, deadline_s: float | None = None, batch_size: int = 4,
                   budget_s: float | None = DEFAULT_BUDGET_S, self_check: bool = True,
-                  verify_samples: int = DEFAULT_CHECK.verify_samples,
+                  verify_samples: int = DEFAULT_CHECK.verify_samples, always_verify: bool = DEFAULT_CHECK.always_verify,
                   query_parameters: Mapping[str, Any] | None = None) -> Request:
     """The request these inputs ask for, or a ConfigError naming the engine's field.
 
@@ -82,6 +82,6 @@ def build_request(*, samples: int = DEFAULT_SAMPLES, sigma_m: float = DEFAULT_SI
         check_ci_width(ci_width, query)
         stop = AdaptiveStop(ci_width=ci_width, deadline_s=deadline_s, batch_size=batch_size)
     check_budget(budget_s)
-    check = SelfCheck(enabled=bool(self_check), verify_samples=verify_samples)
+    check = SelfCheck(enabled=bool(self_check), verify_samples=verify_samples, always_verify=always_verify)
     return Request(model=model, settings=settings, query=query, seed=seed, stop=stop, budget_s=budget_s, check=check)
 

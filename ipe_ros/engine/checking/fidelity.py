@@ -28,6 +28,9 @@ settings starts from the bit-identical state):
 The verdict (``Prediction.fidelity``) a robot can act on:
 
 - ``verified``: the verified samples agree; unhealthy rollouts (if any) were refined.
+- ``validated``: the scene lies inside the envelope where the fast physics was validated against the
+  reference (``envelope.py``: boxes at rest on a floor, ...), so no sample was rerun to verify it;
+  unhealthy rollouts were refined, and a refinement that moved an outcome confirmed as anywhere.
 - ``escalated``: the fast physics disagreed with the reference; the answer is the reference's.
 - ``contradicted``: it disagreed, and the budget ran out before the reference could answer: the
   answer is the fast physics' and converged physics contradicts it. Do not act on it.
@@ -55,7 +58,7 @@ from ..sampling.outcome import SampleOutcome
 from ..scene.bodies import Scene
 
 #: The verdicts, from best to worst for a robot about to act.
-VERDICTS = ("reference", "verified", "escalated", "unverified", "contradicted")
+VERDICTS = ("reference", "verified", "validated", "escalated", "unverified", "contradicted")
 
 
 def reference_settings(horizon_s: float | None = None) -> SimSettings:
@@ -93,6 +96,8 @@ class SelfCheck:
         differences in three samples are what chaos gives a collapsing tower's marginal block now
         and then (on tower 292 of the authors' set a block `default` and the reference both drop in
         about a third of the samples differed in 2 of 3 targeted samples); three are rare.
+    always_verify: verify scenes inside the envelope the fast physics was validated over too
+        (``envelope.py``); False (the default): they answer ``validated`` without reference reruns.
     cover_samples: when the samples compared so far show no difference, this many more are verified
         where a bias could hide from them (``coverage_samples``): a fast physics that topples a block
         in half the samples and the reference in none agrees with the reference on every sample where
@@ -110,11 +115,13 @@ class SelfCheck:
     escalate_share: float = 0.6
     escalate_min_samples: int = 3
     cover_samples: int = 1
+    always_verify: bool = False
     max_end_penetration_fraction: float = 0.05
     max_energy_gain_fraction: float = 0.01
 
     def __post_init__(self) -> None:
         boolean(self.enabled, "self_check.enabled")
+        boolean(self.always_verify, "self_check.always_verify")
         integer(self.verify_samples, "self_check.verify_samples", 0, 1000)
         integer(self.confirm_samples, "self_check.confirm_samples", 0, 1000)
         integer(self.confirm_rounds, "self_check.confirm_rounds", 0, 100)
@@ -262,6 +269,7 @@ class FidelityReport:
     settings: part -> settings name ("samples": the fast preset; "refined"/"verification"/
         "escalation": the reference), for the parts that ran.
     refined_reasons: per refined sample index, why ("penetration", "energy", "failed").
+    validated: why no sample was verified (``validated``: inside the validated envelope).
     """
 
     verdict: str
@@ -271,12 +279,14 @@ class FidelityReport:
     refined_reasons: tuple[tuple[int, str], ...] = ()
     escalated_samples: int = 0
     settings: tuple[tuple[str, str], ...] = ()
+    validated: str = ""  # why no sample was verified (the scene is inside the validated envelope)
 
     def to_dict(self) -> dict[str, Any]:
         return {"verdict": self.verdict, "verified_samples": self.verified_samples,
                 "disagreeing_samples": self.disagreeing_samples, "refined_samples": self.refined_samples,
                 "refined_reasons": {str(i): why for i, why in self.refined_reasons},
-                "escalated_samples": self.escalated_samples, "settings": dict(self.settings)}
+                "escalated_samples": self.escalated_samples, "settings": dict(self.settings),
+                **({"validated": self.validated} if self.validated else {})}
 
 
 def check_request(check: SelfCheck | None) -> None:

@@ -35,11 +35,13 @@ class _Comparison:
 
 
 def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: dict[int, SampleOutcome],
-             check: SelfCheck, reference: SimSettings, fast_name: str) -> Plan:
+             check: SelfCheck, reference: SimSettings, fast_name: str, validated: str = "") -> Plan:
     """The self-check of one answer's samples, as a plan (``montecarlo``): it yields the samples it
     wants rerun, at the reference, is sent their reruns, and returns the outcomes the answer uses and
     the report. ``tasks[i]`` made ``outcomes[i]`` at the fast settings ``fast_name``; ``verified[i]``:
-    sample i already rerun at the reference."""
+    sample i already rerun at the reference. ``validated``: the scene lies inside the validated
+    envelope (``envelope.py``, why): nothing verified or covered, the unhealthy rollouts refined and
+    what they show confirmed as anywhere; the verdict ``validated`` unless that escalates."""
     parts = [("samples", fast_name)]
     if not check.enabled:
         return outcomes, FidelityReport("unverified", settings=tuple(parts))
@@ -48,7 +50,7 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: d
                         reference)
     # 1. verification: the first samples with a fast outcome (a prediction's ran beside the fast
     # samples, in the first map; anytime sampling may have stopped before them)
-    first = [i for i, o in enumerate(outcomes) if o.ok][:verification_count(check, len(outcomes))]
+    first = [] if validated else [i for i, o in enumerate(outcomes) if o.ok][:verification_count(check, len(outcomes))]
     yield from state.rerun([i for i in first if i not in state.checked])
     if state.checked:
         parts.append(("verification", reference.name))
@@ -63,7 +65,8 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: d
     # not small, and (chosen by how the fast rollouts ended) not unbiased; the reference answers
     repair = suspect([d for i, d in state.differences().items() if i in refined])
     # samples verified beyond the first ones (``fidelity.coverage_ahead``) were coverage's picks
-    cover = check.cover_samples - len([i for i in verified if i >= verification_count(check, len(tasks))])
+    cover = 0 if validated else check.cover_samples - len([i for i in verified
+                                                           if i >= verification_count(check, len(tasks))])
     yield from _confirm(state, repair, cover)
     compared = state.differences()
     disagreeing = [i for i, d in compared.items() if d.any()]
@@ -75,7 +78,9 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: d
         # a confirmation or a coverage rerun the budget cut off neither confirmed nor dismissed a bias
         unconfirmed = any(o.budget_stopped for o in state.checked.values())
         verdict = "verified" if first and all(i in compared for i in first) and not unconfirmed else "unverified"
-        return merge(outcomes, refined), FidelityReport(verdict, settings=tuple(parts), **common)
+        if validated:
+            verdict = "validated" if not unconfirmed else "unverified"
+        return merge(outcomes, refined), FidelityReport(verdict, settings=tuple(parts), validated=validated, **common)
     # 4. escalation: contradicted on this scene, so every sample at the reference
     yield from state.rerun([i for i in range(len(outcomes)) if i not in state.checked and not outcomes[i].skipped])
     parts.append(("escalation", reference.name))

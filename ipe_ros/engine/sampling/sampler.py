@@ -21,6 +21,7 @@ from ..config import ModelConfig, SimSettings
 from ..errors import ConfigError, shown
 from .estimate import Prediction, aggregate, sample_any_fall, sample_fall_fraction, wilson_interval
 from ..checking.fidelity import check_request as check_fidelity_request
+from ..checking.envelope import validated_because
 from ..checking.fidelity import (DEFAULT_CHECK, NO_CHECK, FidelityReport, SelfCheck, coverage_ahead, is_reference,
                        look_ahead_split, reference_settings, verification_count)
 from .montecarlo import (MapFn, MonteCarlo, Plan, check_budget, check_seed, check_some_sample_finished, child_seeds,
@@ -183,23 +184,28 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
     tasks = make_tasks(scene, model, settings, query, seed, record_every, record_samples)
     tasks, perceived = _from_perception(tasks, scene, model, seed, map_fn, perceived)
     check = NO_CHECK if check is None or is_reference(settings) else check
+    validated = "" if not check.enabled or check.always_verify else validated_because(scene, model, settings) or ""
     loop = MonteCarlo(run_sample, lost, map_fn, budget_s)  # the budget counts from here
     anytime = None if is_deterministic(scene, model) else stop
     outcomes, stopped_by, report = loop.drive(_prediction(tasks, query, settings, check, anytime, budget_s,
-                                                          loop.elapsed_s))
+                                                          loop.elapsed_s, validated))
     return _aggregate(scene, model, settings, query, seed, tasks, outcomes, loop.elapsed_s(), stopped_by, stop=stop,
                       budget_s=budget_s, perceived=perceived, fidelity=report)
 
 
 def _prediction(tasks: list[SampleTask], query: QuerySpec, settings: SimSettings, check: SelfCheck,
-                stop: AdaptiveStop | None, budget_s: float | None, clock: Callable[[], float]) -> Plan:
+                stop: AdaptiveStop | None, budget_s: float | None, clock: Callable[[], float],
+                validated: str = "") -> Plan:
     """A prediction's samples, then their self-check, as a plan (``montecarlo``): returns the
     outcomes the answer uses, what stopped the sampling, and the check's report.
 
     The verification samples are rerun at the reference in the first round, beside the fast samples;
     with a fixed k (``stop`` None) the coverage sample runs beside the last quarter of them
-    (``fidelity.look_ahead_split``), picked from the rest."""
+    (``fidelity.look_ahead_split``), picked from the rest. ``validated``: the scene is inside the
+    validated envelope (why): neither runs, only the unhealthy rollouts are rerun."""
     reference = reference_settings(settings.horizon_s)
+    if validated:
+        check = dataclasses.replace(check, verify_samples=0, cover_samples=0)
     verified: dict[int, SampleOutcome] = {}
     first = list(range(verification_count(check, len(tasks))))
     stopped_by = "samples"
@@ -224,7 +230,8 @@ def _prediction(tasks: list[SampleTask], query: QuerySpec, settings: SimSettings
     check_some_sample_finished(outcomes, budget_s)
     if is_reference(settings):
         return outcomes, stopped_by, FidelityReport("reference", settings=(("samples", settings.name),))
-    outcomes, report = yield from checking(tasks[:len(outcomes)], outcomes, verified, check, reference, settings.name)
+    outcomes, report = yield from checking(tasks[:len(outcomes)], outcomes, verified, check, reference, settings.name,
+                                           validated)
     return outcomes, stopped_by, report
 
 

@@ -12,7 +12,9 @@ physics without noticing (docs/zoo.md). Each family is one function ``(rng, name
 - ``rings``: rings (tori as compounds) dropped onto a static post;
 - ``bouncy``: large (0.3-1 m) bouncy (restitution 0.5-0.9) blocks stacked or dropped;
 - ``plates``: thin plates stacked with overhangs;
-- ``caps``: towers capped by a cone, a ring or a bowl, sometimes with a ball launched at the base.
+- ``caps``: towers capped by a cone, a ring or a bowl, sometimes with a ball launched at the base;
+- ``stacks``: boxes at rest in 1-3 stacks side by side, drawn over the whole envelope in which the
+  self-check trusts `default` without reference reruns (``checking/envelope.py``).
 
 Scene i of a family depends on (seed, family, i) only. Bodies the robot moves (thrown, launched,
 dropped) are known exactly (``position_sigma_m = 0``); the rest takes the model's sigma.
@@ -306,10 +308,61 @@ def caps(rng: np.random.Generator, name: str) -> Scene:
     return Scene(name=name, objects=tuple(bodies), support=_floor(rng))
 
 
+#: the ranges ``stacks`` draws over: those of the self-check's validated envelope (checking/envelope.py;
+#: tests/test_zoo.py holds the two together)
+STACK_SIDES_M = (0.02, 1.0)
+STACK_MAX_ASPECT = 3.0
+STACK_MAX_OBJECTS = 12
+STACK_FRICTION = (0.4, 1.0)
+STACK_MAX_RESTITUTION = 0.1
+STACK_MAX_MASS_RATIO = 10.0
+
+
+def stacks(rng: np.random.Generator, name: str) -> Scene:
+    """1-3 stacks of 1-6 boxes at rest side by side (12 at most), over the whole validated envelope:
+    sides 2 cm-1 m (a third of the boxes long, up to 3:1), friction 0.4-1, restitution 0-0.1, masses
+    up to 10x apart, each box shifted by 15% of the scene's size and turned: some stacks stand, some
+    topple into their neighbours, which stand within reach."""
+    size = float(np.exp(rng.uniform(math.log(0.04), math.log(0.5))))
+    counts = [int(rng.integers(1, 7)) for _ in range(int(rng.integers(1, 4)))]
+    lo, hi = STACK_SIDES_M
+    columns = []
+    for count in counts[:STACK_MAX_OBJECTS]:
+        column, z = [], 0.0
+        for _ in range(count):
+            ext = size * rng.uniform(0.6, 1.5, 3)
+            if rng.random() < 1 / 3:
+                ext[int(rng.integers(3))] *= float(rng.uniform(2.0, 3.0))
+            ext = np.clip(ext, lo, hi)
+            ext = np.minimum(ext, STACK_MAX_ASPECT * ext.min())
+            offset = rng.normal(0.0, 0.15 * size, 2)
+            column.append((ext, (float(offset[0]), float(offset[1]), z + float(ext[2]) / 2), float(rng.normal(0.0, 0.3)),
+                           500.0 * float(np.exp(rng.uniform(0.0, math.log(3.0)))) * float(np.prod(ext))))
+            z += float(ext[2])
+        columns.append(column)
+    heaviest = max(mass for column in columns for *_, mass in column)
+    bodies, right = [], None
+    for c, column in enumerate(columns):
+        # each stack clear of the last by up to half the size (footprints bounded by their diagonals)
+        reach = [(centre[0] - math.hypot(*ext[:2]) / 2, centre[0] + math.hypot(*ext[:2]) / 2)
+                 for ext, centre, _, _ in column]
+        shift = 0.0 if right is None else right - min(a for a, _ in reach) + float(rng.uniform(0.0, 0.5)) * size
+        right = shift + max(b for _, b in reach)
+        for i, (ext, (x, y, z), yaw, mass) in enumerate(column):
+            if len(bodies) == STACK_MAX_OBJECTS:
+                break
+            bodies.append(_body(f"s{c}b{i}", BoxShape(tuple(float(v) for v in ext)), (x + shift, y, z),
+                                mass_kg=max(mass, heaviest / STACK_MAX_MASS_RATIO),
+                                friction=float(rng.uniform(*STACK_FRICTION)),
+                                restitution=float(rng.uniform(0.0, STACK_MAX_RESTITUTION)), orientation=_yaw(yaw)))
+    floor = Floor(friction=float(rng.uniform(*STACK_FRICTION)), restitution=float(rng.uniform(0.0, STACK_MAX_RESTITUTION)))
+    return Scene(name=name, objects=tuple(bodies), support=floor)
+
+
 #: Every family, in the order the benchmark and the docs list them.
 FAMILIES: dict[str, Callable[[np.random.Generator, str], Scene]] = {
     "launch": launch, "dominoes": dominoes, "ramp": ramp, "drop": drop, "strike": strike, "rings": rings,
-    "bouncy": bouncy, "plates": plates, "caps": caps,
+    "bouncy": bouncy, "plates": plates, "caps": caps, "stacks": stacks,
 }
 
 

@@ -31,7 +31,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 import numpy as np  # noqa: E402
 
 from ipe_ros.engine import PRESETS, ModelConfig, QuerySpec, SimSettings, WorkerPool, predict  # noqa: E402
-from ipe_ros.engine.checking.fidelity import DEFAULT_CHECK  # noqa: E402
+from ipe_ros.engine.checking.fidelity import DEFAULT_CHECK, SelfCheck  # noqa: E402
 from ipe_ros.engine.scene.generators import generate_towers  # noqa: E402
 from ipe_ros.engine.scene.files import scenes_from_tower_csv  # noqa: E402
 from ipe_ros.analysis.paper_data import EXP1_DATASET, authors_outcomes, shared_data_dir  # noqa: E402
@@ -40,6 +40,14 @@ REPO = Path(__file__).resolve().parents[1]
 SHARED = shared_data_dir()
 SIGMA_M = 0.04
 UNCHECKED = "-unchecked"
+ALWAYS_VERIFY = "-always-verify"  # checked as outside the validated envelope (checking/envelope.py)
+
+
+def _check_for(name: str):
+    """The self-check a configuration runs with: none, every answer verified, or the default's."""
+    if name.endswith(UNCHECKED):
+        return None
+    return SelfCheck(always_verify=True) if name.endswith(ALWAYS_VERIFY) else DEFAULT_CHECK
 
 
 def candidates() -> list[SimSettings]:
@@ -50,7 +58,8 @@ def candidates() -> list[SimSettings]:
     base = paper.changed('', max_step_fraction_of_time_scale=0.1,
                          solver={"iterations": 100, "residual_threshold": 1e-05, "warm_start_factor": 1.0})
     # "-unchecked": the same settings without the self-check (engine.checking.fidelity), to show what it costs
-    out = [paper, PRESETS["default"], PRESETS["default"].changed("default" + UNCHECKED)]
+    out = [paper, PRESETS["default"], PRESETS["default"].changed("default" + UNCHECKED),
+           PRESETS["default"].changed("default" + ALWAYS_VERIFY)]
     for name in sorted(PRESETS):
         if name not in ("paper", "default"):
             out.append(PRESETS[name])
@@ -144,7 +153,7 @@ def run_configs(scenes, configs: list[SimSettings], model: ModelConfig, query: Q
         for c, settings in enumerate(configs):
             start = time.perf_counter()
             predictions[c].append(predict(scene, model, settings, query, seed=i, map_fn=pool.map,
-                                          check=None if settings.name.endswith(UNCHECKED) else DEFAULT_CHECK))
+                                          check=_check_for(settings.name)))
             walls[c] += time.perf_counter() - start
     return [{"wall_s": wall, "predictions": preds, "rollouts": sum(p.samples for p in preds)}
             for wall, preds in zip(walls, predictions)]

@@ -528,3 +528,21 @@ def test_the_envelope_names_why_a_scene_lies_outside_it(tower, change, why):
     assert outside(scene, changed, preset(name)) == why
     if name == "default" and not changed.pushes:  # answered, checked as before
         assert predict(scene, changed, preset(name), QUERY).fidelity in ("verified", "escalated")
+
+
+def test_the_authors_towers_lie_inside_the_validated_envelope_and_their_dropped_box_does_not():
+    """The envelope's evidence includes the authors' 60 towers (float32 sides of 0.2 x 0.6 x 0.2 m):
+    every one inside; one of them with its top block lifted 10 cm (dropped, not resting) outside."""
+    from ipe_ros.engine.checking.envelope import outside
+    from ipe_ros.engine.scene.files import scenes_from_tower_csv
+
+    from .conftest import shared_file
+
+    towers = scenes_from_tower_csv(shared_file("willitfall.csv"))
+    model = ModelConfig(sigma_m=0.04, samples=48)
+    assert [outside(t, model, preset("default")) for t in towers] == [None] * 60
+    top = max(towers[0].dynamic_objects, key=lambda b: b.position_m[2])
+    lifted = dataclasses.replace(towers[0], objects=tuple(
+        dataclasses.replace(b, position_m=(*b.position_m[:2], b.position_m[2] + 0.1)) if b is top else b
+        for b in towers[0].objects))
+    assert outside(lifted, model, preset("default")) == f"{top.name} is not resting on the floor or a box"

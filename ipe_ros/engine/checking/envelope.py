@@ -26,8 +26,8 @@ import numpy as np
 
 from ..config import PRESETS, ModelConfig, SimSettings
 from ..sampling.perturb import dynamic_masses, is_deterministic
-from ..scene.bodies import Floor, Scene
-from ..scene.shapes import BoxShape
+from ..scene.bodies import Floor, Scene, box_corners
+from ..scene.shapes import BoxShape, rotation_matrix
 
 
 @dataclass(frozen=True)
@@ -47,7 +47,11 @@ class Envelope:
     min_friction: float = 0.4
     max_friction: float = 1.0
     max_mass_ratio: float = 10.0  # heaviest / lightest dynamic box, under the model's mu
-    max_sigma_fraction: float = 0.25  # position noise, of the smallest box side
+    max_sigma_fraction: float = 0.25  # horizontal position noise, of the smallest box side
+    max_tilt_rad: float = 0.05  # each box lies on a face: one of its axes this close to vertical
+    #: each box rests: its lowest point this close (of its smallest side, beyond the scene's set_down_m)
+    #: to the floor or to the top of a box under it, not dropped or hanging
+    rest_gap_fraction: float = 0.05
     max_horizon_s: float = 2.0
     gravity_m_s2: float = 9.81
     gravity_tolerance: float = 0.01  # of the magnitude; horizontal parts 0
@@ -85,22 +89,46 @@ def outside(scene: Scene, model: ModelConfig, settings: SimSettings, envelope: E
         extents = body.shape.extents_m
         if min(extents) < envelope.min_extent_m or max(extents) > envelope.max_extent_m:
             return f"{body.name}'s size is outside the validated range"
-        if max(extents) > envelope.max_aspect * min(extents):
+        if max(extents) > envelope.max_aspect * min(extents) * (1 + 1e-6):  # the authors' 3:1, in single precision
             return f"{body.name} is thinner than validated"
         if any(body.linear_velocity_m_s) or any(body.angular_velocity_rad_s):
             return f"{body.name} is moving"
-        sigma = body.position_sigma_m if body.position_sigma_m is not None else model.sigma_m
-        if max(np.atleast_1d(sigma)) > envelope.max_sigma_fraction * min(extents):
+        sigma = np.atleast_1d(body.position_sigma_m if body.position_sigma_m is not None else model.sigma_m)
+        if sigma.max() > envelope.max_sigma_fraction * min(extents) or (len(sigma) == 3 and sigma[2] > 0):
             return f"{body.name}'s position noise is larger than validated"
+        if np.abs(rotation_matrix(body.orientation_xyzw)[2]).max() < math.cos(envelope.max_tilt_rad):
+            return f"{body.name} does not lie on a face"
         frictions.append(body.friction)
         restitutions.append(body.restitution)
     if not envelope.min_friction <= min(frictions) <= max(frictions) <= envelope.max_friction:
         return "a friction is outside the validated range"
     if max(restitutions) > envelope.max_restitution:
         return "a restitution is above the validated range"
+    hanging = _not_resting(scene, envelope)
+    if hanging is not None:
+        return f"{hanging} is not resting on the floor or a box"
     masses = dynamic_masses(scene, model.mu)
     if not math.isfinite(masses.max() / masses.min()) or masses.max() > envelope.max_mass_ratio * masses.min() * (1 + 1e-9):
         return f"masses differ by more than {envelope.max_mass_ratio:g}x"
+    return None
+
+
+def _not_resting(scene: Scene, envelope: Envelope) -> str | None:
+    """The first box whose lowest point is neither on the floor nor on the top of a box whose
+    footprint (bounding rectangle) meets its own, within the rest gap; None when all rest."""
+    corners = {b.name: box_corners(b.shape.extents_m, b.position_m, b.orientation_xyzw) for b in scene.dynamic_objects}
+    for body in scene.dynamic_objects:
+        mine = corners[body.name]
+        gap = envelope.rest_gap_fraction * min(body.shape.extents_m) + scene.set_down_m
+        low = mine[:, 2].min()
+        if abs(low - scene.support.height_m) <= gap:
+            continue
+        under = [c for name, c in corners.items() if name != body.name
+                 and abs(low - c[:, 2].max()) <= gap
+                 and (c[:, :2].min(axis=0) <= mine[:, :2].max(axis=0)).all()
+                 and (mine[:, :2].min(axis=0) <= c[:, :2].max(axis=0)).all()]
+        if not under:
+            return body.name
     return None
 
 

@@ -64,7 +64,7 @@ class PredictionService:
         self._seq = 0
         self._counts = dict(received=0, predicted=0, predictions=0, dropped=0, rejected=0, failed_predictions=0,
                             failed_samples=0, budget_stops=0, rrd_failures=0, refined_samples=0, escalated=0,
-                            contradicted=0, depth_images=0, depth_images_refused=0, depth_images_stale=0,
+                            contradicted=0, validated=0, depth_images=0, depth_images_refused=0, depth_images_stale=0,
                             depth_posteriors=0)
         self._recent: collections.deque[str] = collections.deque(maxlen=RECENT_EVENTS)
         self._last_predicted_seq = 0
@@ -291,6 +291,7 @@ class PredictionService:
                 self._counts["refined_samples"] += prediction.refined_samples
                 self._counts["escalated"] += prediction.fidelity == "escalated"
                 self._counts["contradicted"] += prediction.fidelity == "contradicted"
+                self._counts["validated"] += prediction.fidelity == "validated"
                 self._last_compute_s = answer.compute_s
                 if answer.rrd_error is not None:
                     self._last_error = answer.rrd_error

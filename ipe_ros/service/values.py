@@ -119,7 +119,8 @@ class ServiceStats:
     scenes replaced while waiting (keep-latest); budget_stops: answers cut short by the budget.
     refined_samples: rollouts the self-check reran at the reference because they ended unhealthy;
     escalated / contradicted: answers whose fast physics the reference contradicted, recomputed at
-    the reference / left as they were because the budget ran out (engine.checking.fidelity).
+    the reference / left as they were because the budget ran out (engine.checking.fidelity);
+    validated: answers inside the envelope where the fast physics was validated, not verified.
     recent: the last RECENT_EVENTS inputs and predictions, oldest first: "ok", "rejected",
     "failed", "partial" (some samples failed or were cut by the budget), "contradicted" or "rrd_failed".
     in_flight_s: how long the prediction in flight has run (None: none in flight).
@@ -149,6 +150,7 @@ class ServiceStats:
     refined_samples: int = 0
     escalated: int = 0
     contradicted: int = 0
+    validated: int = 0
     depth_images: int = 0  # depth images kept (the newest replaces the one before)
     depth_images_refused: int = 0  # unreadable, or no camera info or pose yet
     depth_images_stale: int = 0  # scenes refused because the newest image was too far from their stamp

@@ -8,8 +8,8 @@ change the answer, it is not run: a scene inside the envelope answers ``fidelity
 (saying why in ``self_check.validated``), its unhealthy rollouts still refined and a refinement that
 moves an outcome still confirmed and escalated as on any scene.
 
-The envelope is the hull of what was measured and no more: at least 16 noisy samples (the answer an
-average, not one rollout), boxes at rest on a floor, none thin, bouncy (any restitution) or slippery, masses within
+The envelope is the hull of what was measured and no more: a fixed k of at least 16 noisy samples
+(the answer an average, not one rollout; anytime sampling may stop after a few, and is checked), boxes at rest on a floor, none thin, bouncy (any restitution) or slippery, masses within
 10x, no push, the `default` preset. The zoo's ``stacks`` family
 draws its scenes over exactly these ranges, and `default` unchecked meets the zoo's bars there
 (benchmarks/zoo.py); outside them (a ball, a thrown box, thin plates, a bouncy floor, a table's edge,

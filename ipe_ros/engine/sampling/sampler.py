@@ -184,7 +184,9 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
     tasks = make_tasks(scene, model, settings, query, seed, record_every, record_samples)
     tasks, perceived = _from_perception(tasks, scene, model, seed, map_fn, perceived)
     check = NO_CHECK if check is None or is_reference(settings) else check
-    validated = "" if not check.enabled or check.always_verify else validated_because(scene, model, settings) or ""
+    # the envelope was validated on fixed k: anytime sampling may stop after a few samples
+    validated = "" if not check.enabled or check.always_verify or stop is not None else \
+        validated_because(scene, model, settings) or ""
     loop = MonteCarlo(run_sample, lost, map_fn, budget_s)  # the budget counts from here
     anytime = None if is_deterministic(scene, model) else stop
     outcomes, stopped_by, report = loop.drive(_prediction(tasks, query, settings, check, anytime, budget_s,

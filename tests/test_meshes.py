@@ -253,3 +253,47 @@ def test_a_bowl_holds_three_balls(folder):
     for i in range(3):
         offset = final[f"ball{i}"] - final["mug"]  # the bowl is the first object, named mug by scene_with
         assert np.hypot(*offset[:2]) < 0.07 and final[f"ball{i}"][2] < 0.06, (i, final)  # inside the rim
+
+
+def _spoon_in_mug(folder, spoon_kg: float):
+    """A rod (a ladle: 40 x 1.2 x 0.4 cm) standing in the mug, its end on the inner floor by the far
+    wall, leaning over the near rim; set down onto the mug (2 mm above it as placed). Returns the scene
+    and the heaviest rod the mug can hold: the two together tip about the base's edge once their centre
+    of mass passes it, M R / (x - R) for a rod whose centre of mass is x from the mug's axis."""
+    import math
+
+    far = -R_IN + 0.003
+    angle = math.atan2(HEIGHT - BOTTOM, R_IN - far)
+    along, across = np.array([math.cos(angle), 0, math.sin(angle)]), np.array([-math.sin(angle), 0, math.cos(angle)])
+    length, width, thickness = 0.4, 0.012, 0.004
+    centre = np.array([far, 0, BOTTOM]) + length / 2 * along + thickness / 2 * across
+    data = scene_with({"type": "mesh", "uri": "mug.obj"}, ball=False)
+    data["set_down_m"] = 0.01
+    data["objects"].append({"name": "spoon", "shape": {"type": "box", "extents_m": [length, width, thickness]},
+                            "position_m": (centre + [0, 0, 0.002]).tolist(),
+                            "orientation_xyzw": [0, math.sin(-angle / 2), 0, math.cos(-angle / 2)], "friction": 0.6,
+                            "restitution": 0.0, "mass_kg": spoon_kg})
+    [scene] = load_scenes(_write(folder, data, "spoon.json"))
+    mug_kg = scene.objects[0].resolved_mass_kg
+    return scene, mug_kg * R_OUT / (centre[0] - R_OUT)
+
+
+def _mug_tilt_deg(scene, preset_name: str) -> float:
+    from ipe_ros.engine.scene.shapes import rotation_matrix
+
+    answer = predict(scene, ModelConfig(sigma_m=0.0, samples=1, object_noise=False), preset(preset_name),
+                     QuerySpec(queries=frozenset({"final_pose"})), check=None)
+    up = rotation_matrix(answer.outcomes[0].rollouts[0].final_orientations_xyzw[0])[2, 2]
+    return float(np.degrees(np.arccos(min(1.0, abs(up)))))
+
+
+def test_a_spoon_in_a_mug_tips_it_only_when_heavier_than_the_mug_can_hold(folder):
+    """At 0.8x the heaviest rod the mug can hold (0.26 kg for this 0.28 kg mug) it stands; at 1.25x it
+    tips onto its side, in `default` as in `paper`."""
+    _, heaviest = _spoon_in_mug(folder, 0.1)
+    assert 0.2 < heaviest < 0.35
+    for factor, tips in ((0.8, False), (1.25, True)):
+        scene, _ = _spoon_in_mug(folder, factor * heaviest)
+        for name in ("default", "paper"):
+            tilt = _mug_tilt_deg(scene, name)
+            assert (tilt > 60) if tips else (tilt < 2), (factor, name, tilt)

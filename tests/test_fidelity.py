@@ -547,3 +547,24 @@ def test_the_authors_towers_lie_inside_the_validated_envelope_and_their_dropped_
         dataclasses.replace(b, position_m=(*b.position_m[:2], b.position_m[2] + 0.1)) if b is top else b
         for b in towers[0].objects))
     assert outside(lifted, model, preset("default")) == f"{top.name} is not resting on the floor or a box"
+
+
+def test_a_posterior_sample_outside_the_envelope_has_the_answer_verified(tower):
+    """A posterior's samples are the scenes simulated: one drawn tilted onto an edge (0.1 rad, as
+    depth perception may draw with tilts asked) takes the answer out of the envelope."""
+
+    class Perceived:
+        def __init__(self, scenes):
+            self.scenes = scenes
+
+        def to_dict(self):
+            return {"kind": "test"}
+
+    flat = [dataclasses.replace(tower, objects=tuple(dataclasses.replace(b, position_sigma_m=0.0) for b in tower.objects))
+            for _ in range(16)]
+    top = max(flat[0].objects, key=lambda b: b.position_m[2])
+    tilted = dataclasses.replace(top, orientation_xyzw=(float(np.sin(0.05)), 0.0, 0.0, float(np.cos(0.05))))
+    model = ModelConfig(perception="depth", samples=16)
+    assert predict(tower, model, preset("default"), QUERY, perceived=Perceived(flat)).fidelity == "validated"
+    flat[5] = dataclasses.replace(flat[5], objects=tuple(tilted if b.name == top.name else b for b in flat[5].objects))
+    assert predict(tower, model, preset("default"), QUERY, perceived=Perceived(flat)).fidelity in ("verified", "escalated")

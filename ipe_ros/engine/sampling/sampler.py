@@ -184,15 +184,25 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
     tasks = make_tasks(scene, model, settings, query, seed, record_every, record_samples)
     tasks, perceived = _from_perception(tasks, scene, model, seed, map_fn, perceived)
     check = NO_CHECK if check is None or is_reference(settings) else check
-    # the envelope was validated on fixed k: anytime sampling may stop after a few samples
-    validated = "" if not check.enabled or check.always_verify or stop is not None else \
-        validated_because(scene, model, settings) or ""
+    validated = _validated(tasks, model, settings, check, stop)
     loop = MonteCarlo(run_sample, lost, map_fn, budget_s)  # the budget counts from here
     anytime = None if is_deterministic(scene, model) else stop
     outcomes, stopped_by, report = loop.drive(_prediction(tasks, query, settings, check, anytime, budget_s,
                                                           loop.elapsed_s, validated))
     return _aggregate(scene, model, settings, query, seed, tasks, outcomes, loop.elapsed_s(), stopped_by, stop=stop,
                       budget_s=budget_s, perceived=perceived, fidelity=report)
+
+
+def _validated(tasks: list[SampleTask], model: ModelConfig, settings: SimSettings, check: SelfCheck,
+               stop: AdaptiveStop | None) -> str:
+    """Why the answer needs no verification (``checking.envelope``), or "": every scene the samples
+    start from (a posterior's samples each their own: one drawn tilted onto an edge is not a box
+    lying on a face) inside the validated envelope, at a fixed k (anytime sampling may stop after a
+    few samples)."""
+    if not check.enabled or check.always_verify or stop is not None:
+        return ""
+    reasons = [validated_because(scene, model, settings) for scene in {id(t.scene): t.scene for t in tasks}.values()]
+    return reasons[0] if reasons and all(reasons) else ""
 
 
 def _prediction(tasks: list[SampleTask], query: QuerySpec, settings: SimSettings, check: SelfCheck,

@@ -39,9 +39,9 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: d
     """The self-check of one answer's samples, as a plan (``montecarlo``): it yields the samples it
     wants rerun, at the reference, is sent their reruns, and returns the outcomes the answer uses and
     the report. ``tasks[i]`` made ``outcomes[i]`` at the fast settings ``fast_name``; ``verified[i]``:
-    sample i already rerun at the reference. ``validated``: the scene lies inside the validated
-    envelope (``envelope.py``, why): nothing verified or covered, the unhealthy rollouts refined and
-    what they show confirmed as anywhere; the verdict ``validated`` unless that escalates."""
+    sample i already rerun at the reference. ``validated``: why the scene lies inside the validated
+    envelope (``envelope.py``; ``check`` then verifies and covers nothing): the unhealthy rollouts are
+    refined and what they show confirmed as anywhere; the verdict ``validated`` unless that escalates."""
     parts = [("samples", fast_name)]
     if not check.enabled:
         return outcomes, FidelityReport("unverified", settings=tuple(parts))
@@ -50,7 +50,7 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: d
                         reference)
     # 1. verification: the first samples with a fast outcome (a prediction's ran beside the fast
     # samples, in the first map; anytime sampling may have stopped before them)
-    first = [] if validated else [i for i, o in enumerate(outcomes) if o.ok][:verification_count(check, len(outcomes))]
+    first = [i for i, o in enumerate(outcomes) if o.ok][:verification_count(check, len(outcomes))]
     yield from state.rerun([i for i in first if i not in state.checked])
     if state.checked:
         parts.append(("verification", reference.name))
@@ -65,8 +65,7 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: d
     # not small, and (chosen by how the fast rollouts ended) not unbiased; the reference answers
     repair = suspect([d for i, d in state.differences().items() if i in refined])
     # samples verified beyond the first ones (``fidelity.coverage_ahead``) were coverage's picks
-    cover = 0 if validated else check.cover_samples - len([i for i in verified
-                                                           if i >= verification_count(check, len(tasks))])
+    cover = check.cover_samples - len([i for i in verified if i >= verification_count(check, len(tasks))])
     yield from _confirm(state, repair, cover)
     compared = state.differences()
     disagreeing = [i for i, d in compared.items() if d.any()]

@@ -185,6 +185,8 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
     tasks, perceived = _from_perception(tasks, scene, model, seed, map_fn, perceived)
     check = NO_CHECK if check is None or is_reference(settings) else check
     validated = _validated(tasks, model, settings, check, stop)
+    if validated:  # nothing verified or covered: only unhealthy rollouts are rerun
+        check = dataclasses.replace(check, verify_samples=0, cover_samples=0)
     loop = MonteCarlo(run_sample, lost, map_fn, budget_s)  # the budget counts from here
     anytime = None if is_deterministic(scene, model) else stop
     outcomes, stopped_by, report = loop.drive(_prediction(tasks, query, settings, check, anytime, budget_s,
@@ -213,11 +215,9 @@ def _prediction(tasks: list[SampleTask], query: QuerySpec, settings: SimSettings
 
     The verification samples are rerun at the reference in the first round, beside the fast samples;
     with a fixed k (``stop`` None) the coverage sample runs beside the last quarter of them
-    (``fidelity.look_ahead_split``), picked from the rest. ``validated``: the scene is inside the
-    validated envelope (why): neither runs, only the unhealthy rollouts are rerun."""
+    (``fidelity.look_ahead_split``), picked from the rest. ``validated``: why the scene needs no
+    verification (``check`` then verifies and covers nothing), for the check's verdict."""
     reference = reference_settings(settings.horizon_s)
-    if validated:
-        check = dataclasses.replace(check, verify_samples=0, cover_samples=0)
     verified: dict[int, SampleOutcome] = {}
     first = list(range(verification_count(check, len(tasks))))
     stopped_by = "samples"

@@ -99,6 +99,7 @@ def set_down(world: World, within_m: float) -> int:
         for _ in range(SET_DOWN_HALVINGS):
             middle = (free + touching) / 2
             free, touching = (free, middle) if touches(middle) else (middle, touching)
-        deepest_at(free)
+        p.resetBasePositionAndOrientation(body, (position[0], position[1], position[2] - free), orientation,
+                                          physicsClientId=cid)
         moved += free > 0
     return moved

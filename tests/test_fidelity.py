@@ -345,6 +345,41 @@ def test_a_rollout_ending_inside_another_body_is_refined(tower):
     assert checked.self_check["refined_reasons"] == {"2": "penetration"}
 
 
+class RoundsOnly(CountingMap):
+    """Runs every task without its ``refine``: unhealthy samples are rerun in rounds of the check's own."""
+
+    def __call__(self, fn, items, on_lost=None):
+        return super().__call__(fn, [dataclasses.replace(t, refine=None) for t in items], on_lost)
+
+
+def test_an_unhealthy_rollout_is_rerun_in_its_own_task_and_the_answer_is_as_from_a_round(tower):
+    """The refinement's rerun runs in the task that found its rollout unhealthy (the worker goes on
+    to it at once, instead of the workers waiting for a round of one rerun), and the answer is the
+    same as when the check reruns it in a round of its own: the same sample at the same settings."""
+    model = ModelConfig(sigma_m=0.01, samples=3)
+    coarse_end = preset("default").changed("default-coarse-end", collapse={"end_substeps": 1})
+    inline, rounds = CountingMap(), RoundsOnly()
+    fast = predict(tower, model, coarse_end, QUERY, seed=2, map_fn=inline)
+    slow = predict(tower, model, coarse_end, QUERY, seed=2, map_fn=rounds)
+    assert fast.self_check["refined_reasons"] == slow.self_check["refined_reasons"] == {"2": "penetration"}
+    reruns = [[(t.settings.name, t.index) for t in call if t.settings.name == REFERENCE] for call in rounds.calls]
+    assert [(REFERENCE, 2)] in reruns  # a round of its own
+    assert (REFERENCE, 2) not in [(t.settings.name, t.index) for call in inline.calls for t in call]
+    # sample 0 is verified beside its fast run: its rerun is at hand
+    assert [t.refine is not None for t in inline.calls[0] if t.settings.name != REFERENCE] == [False, True, True]
+    assert len(inline.calls) < len(rounds.calls)
+    assert _answer(fast) == _answer(slow) and fast.self_check == slow.self_check
+    assert fast.max_penetration_fraction <= 0.05
+
+
+def test_a_sample_verified_beside_its_fast_run_is_not_rerun_again_when_unhealthy(tower):
+    """Sample 0 is verified in the first map: its fast run carries no ``refine``, since its rerun is at hand."""
+    spy = CountingMap()
+    predict(tower, ModelConfig(sigma_m=0.01, samples=3), preset("default"), QUERY, seed=4, map_fn=spy, check=ALWAYS)
+    assert [(t.settings.name, t.index, t.refine is None) for t in spy.calls[0]] == [
+        (REFERENCE, 0, True), ("default", 0, True), ("default", 1, False), ("default", 2, False)]
+
+
 def test_every_unhealthy_rollout_is_replaced_by_its_reference_rerun(tower):
     """With a zero tolerance every rollout that ends touching anything is refined: the answer is
     then the reference's, sample for sample."""

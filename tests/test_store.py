@@ -62,6 +62,22 @@ def test_keys_follow_what_a_result_depends_on_and_not_when_it_ran():
     assert result_key(run_sample, a) == result_key(run_sample, dataclasses.replace(a, deadline_unix_s=1e9))
 
 
+def test_a_task_field_keyed_when_set_keeps_older_runs_keys_until_it_is_set():
+    """``SampleTask.refine`` came after runs were stored: unset, it is not in the key."""
+    import dataclasses
+
+    from ipe_ros.engine.checking.fidelity import reference_settings
+    from ipe_ros.engine.compute.store import _canonical
+    from ipe_ros.engine.sampling.rollout import Refine, run_sample
+    from ipe_ros.engine.sampling.sampler import make_tasks
+
+    [a] = make_tasks(TOWER, ModelConfig(sigma_m=0.04, samples=1), preset("default"), QUERY, 0)
+    assert "refine" not in [name for name, _ in _canonical(a)[1]]
+    refined = dataclasses.replace(a, refine=Refine(reference_settings(), 0.05, 0.01))
+    assert "refine" in [name for name, _ in _canonical(refined)[1]]
+    assert result_key(run_sample, a) != result_key(run_sample, refined)
+
+
 @pytest.mark.slow
 def test_ipe_experiment_resume_reads_everything_back_the_second_time(tmp_path):
     command = [sys.executable, "-m", "ipe_ros.cli", "experiment", "far", "--quick", "--workers", "2", "--resamples",

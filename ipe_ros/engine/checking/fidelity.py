@@ -44,7 +44,6 @@ without simulating a tower at rest to the end of the horizon.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any, Sequence
 
@@ -55,7 +54,6 @@ from ..config import PRESETS, SimSettings
 from ..errors import ConfigError, shown
 from ..query import QUERIES
 from ..sampling.outcome import SampleOutcome
-from ..scene.bodies import Scene
 
 #: The verdicts, from best to worst for a robot about to act.
 VERDICTS = ("reference", "verified", "validated", "escalated", "unverified", "contradicted")
@@ -147,16 +145,7 @@ def is_reference(settings: SimSettings) -> bool:
 
 def unhealthy(outcome: SampleOutcome, energy_scale_j: float, check: SelfCheck) -> str | None:
     """Why a fast rollout cannot be trusted as it ended, or None when it can."""
-    if outcome.budget_stopped or outcome.worker_lost or outcome.skipped:
-        return None  # not the physics' doing (or not run): counted as before
-    if not outcome.ok:
-        return "failed"
-    for r in outcome.rollouts:
-        if r.penetration_fraction > check.max_end_penetration_fraction:
-            return "penetration"
-        if r.energy_gain_j > check.max_energy_gain_fraction * energy_scale_j:
-            return "energy"
-    return None
+    return outcome.unhealthy(energy_scale_j, check.max_end_penetration_fraction, check.max_energy_gain_fraction)
 
 
 def outcome_flags(outcome: SampleOutcome) -> np.ndarray:
@@ -336,9 +325,3 @@ def coverage_ahead(outcomes: Sequence[SampleOutcome], verified: dict[int, Sample
 def merge(outcomes: Sequence[SampleOutcome], replacements: dict[int, SampleOutcome]) -> list[SampleOutcome]:
     """``outcomes`` with some samples (by position) replaced by their rerun."""
     return [replacements.get(i, o) for i, o in enumerate(outcomes)]
-
-
-def scale_of(scene: Scene) -> float:
-    from ..simulation.health import energy_scale_j
-
-    return max(energy_scale_j(scene), math.ulp(1.0))

@@ -7,9 +7,9 @@ import numpy as np
 
 from ..config import SimSettings
 from .fidelity import (FidelityReport, SelfCheck, confirmation_samples, contradicts, coverage_samples, difference,
-                       merge, outcome_flags, scale_of, suspect, unhealthy, verification_count)
+                       merge, outcome_flags, suspect, unhealthy, verification_count)
 from ..sampling.montecarlo import Plan
-from ..sampling.outcome import SampleOutcome
+from ..sampling.outcome import SampleOutcome, energy_scale_of
 from ..sampling.rollout import SampleTask
 
 
@@ -35,28 +35,32 @@ class _Comparison:
 
 
 def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: dict[int, SampleOutcome],
-             check: SelfCheck, reference: SimSettings, fast_name: str, validated: str = "") -> Plan:
+             check: SelfCheck, reference: SimSettings, fast_name: str, validated: str = "",
+             rerun: dict[int, SampleOutcome] | None = None) -> Plan:
     """The self-check of one answer's samples, as a plan (``montecarlo``): it yields the samples it
     wants rerun, at the reference, is sent their reruns, and returns the outcomes the answer uses and
     the report. ``tasks[i]`` made ``outcomes[i]`` at the fast settings ``fast_name``; ``verified[i]``:
     sample i already rerun at the reference. ``validated``: why the scene lies inside the validated
     envelope (``envelope.py``; ``check`` then verifies and covers nothing): the unhealthy rollouts are
-    refined and what they show confirmed as anywhere; the verdict ``validated`` unless that escalates."""
+    refined and what they show confirmed as anywhere; the verdict ``validated`` unless that escalates.
+    ``rerun[i]``: sample i's rerun at the reference made in its own task because it ended unhealthy
+    (``rollout.Refine``), so that refinement needs no round for it."""
     parts = [("samples", fast_name)]
     if not check.enabled:
         return outcomes, FidelityReport("unverified", settings=tuple(parts))
         yield  # a generator even when it returns at once
-    state = _Comparison(tasks, outcomes, {i: ref for i, ref in verified.items() if i < len(outcomes)}, check,
-                        reference)
+    known = {i: ref for i, ref in verified.items() if i < len(outcomes)}
+    state = _Comparison(tasks, outcomes, {**{i: ref for i, ref in (rerun or {}).items() if i < len(outcomes)},
+                                          **known}, check, reference)
     # 1. verification: the first samples with a fast outcome (a prediction's ran beside the fast
     # samples, in the first map; anytime sampling may have stopped before them)
     first = [i for i, o in enumerate(outcomes) if o.ok][:verification_count(check, len(outcomes))]
     yield from state.rerun([i for i in first if i not in state.checked])
-    if state.checked:
+    if known or first:
         parts.append(("verification", reference.name))
     # 2. refinement: the rollouts that ended unhealthy are rerun (a verified sample's rerun is at hand)
     reasons = {i: why for i, (task, outcome) in enumerate(zip(tasks, outcomes))
-               if (why := unhealthy(outcome, scale_of(task.scene), check)) is not None}
+               if (why := unhealthy(outcome, energy_scale_of(task.scene), check)) is not None}
     yield from state.rerun([i for i in reasons if i not in state.checked])
     refined = {i: state.checked[i] for i in reasons if state.checked[i].ok}
     if refined:

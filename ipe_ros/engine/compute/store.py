@@ -78,8 +78,11 @@ def _canonical(value):
     """A representation that is the same in every process (pickle's is not: a frozenset's order
     follows string hashing, which Python salts per process)."""
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        # a field keyed "when set" (added after results were stored) is left out at its default
         return (type(value).__qualname__, tuple((f.name, _canonical(getattr(value, f.name)))
-                                                for f in dataclasses.fields(value)))
+                                                for f in dataclasses.fields(value)
+                                                if not (f.metadata.get("keyed") == "when set"
+                                                        and getattr(value, f.name) == f.default)))
     if isinstance(value, (set, frozenset)):
         return ("set", tuple(sorted((_canonical(v) for v in value), key=repr)))
     if isinstance(value, dict):

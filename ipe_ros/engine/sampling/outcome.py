@@ -65,3 +65,32 @@ class SampleOutcome:
     worker_lost: bool = False  # its worker process died twice: a failure of the machine, not of the sample
     names: tuple[str, ...] | None = None  # the objects the rollouts' arrays follow (None: the task scene's)
     skipped: bool = False  # not run (a question's variant in a sample it did not need): neither used nor a failure
+    #: this sample rerun at the reference in the same task, because its rollout ended unhealthy
+    #: (``rollout.Refine``); the self-check takes it out before the answer is made
+    refined: SampleOutcome | None = None
+
+    def unhealthy(self, energy_scale_j: float, max_end_penetration_fraction: float,
+                  max_energy_gain_fraction: float) -> str | None:
+        """Why this fast rollout cannot be trusted as it ended ("failed", "penetration", "energy"), or
+        None when it can: a body ending deeper than the fraction of its smallest extent inside
+        another, or energy gained beyond the fraction of the scene's ``energy_scale_j``."""
+        if self.budget_stopped or self.worker_lost or self.skipped:
+            return None  # not the physics' doing (or not run): counted as before
+        if not self.ok:
+            return "failed"
+        for r in self.rollouts:
+            if r.penetration_fraction > max_end_penetration_fraction:
+                return "penetration"
+            if r.energy_gain_j > max_energy_gain_fraction * energy_scale_j:
+                return "energy"
+        return None
+
+
+def energy_scale_of(scene) -> float:
+    """The scene's energy scale (weight x size + initial kinetic energy), never zero: what a
+    rollout's energy gain is measured against."""
+    import math
+
+    from ..simulation.health import energy_scale_j
+
+    return max(energy_scale_j(scene), math.ulp(1.0))

@@ -21,10 +21,22 @@ from ..query import QUERIES, QuerySpec, Reading
 from ..query.base import smallest_extents_m
 from ..config import ModelConfig, SimSettings
 from ..errors import BudgetExceeded, ConfigError, PhysicsError
-from .outcome import RolloutResult, SampleOutcome
+from .outcome import RolloutResult, SampleOutcome, energy_scale_of
 from .perturb import draw_sample_inputs
 from ..scene.bodies import Floor, Scene
 from ..simulation import NO_PROBE, DecidedHeights, Probe
+
+
+@dataclass(frozen=True)
+class Refine:
+    """A fast sample whose rollout ends unhealthy (``SampleOutcome.unhealthy``) is rerun at ``settings``
+    (the self-check's reference) in the same task, its rerun in ``SampleOutcome.refined``: the
+    self-check's refinement without a round of its own after the fast samples, in which one worker
+    runs the rerun and the others wait (``checking.self_check``)."""
+
+    settings: SimSettings
+    max_end_penetration_fraction: float
+    max_energy_gain_fraction: float
 
 
 @dataclass(frozen=True)
@@ -42,14 +54,17 @@ class SampleTask:
     #: yet started) is cut off and left out of the answer. Wall-clock time, so that worker processes
     #: share it; None: no budget.
     deadline_unix_s: float | None = None
+    #: rerun at once where the rollout ends unhealthy (None: never; part of a stored result's key
+    #: only when set, so that runs stored before it keep their keys)
+    refine: Refine | None = dataclasses.field(default=None, metadata={"keyed": "when set"})
 
     def at(self, settings: SimSettings) -> "SampleTask":
-        """The same sample (same seed, hence the same noisy scene) at other settings; a recorded
-        sample keeps its frames the same simulated time apart."""
+        """The same sample (same seed, hence the same noisy scene) at other settings, not refined; a
+        recorded sample keeps its frames the same simulated time apart."""
         every = self.record_every
         if every:
             every = max(1, round(every * self.settings.time_step_s / settings.time_step_s))
-        return dataclasses.replace(self, settings=settings, record_every=every)
+        return dataclasses.replace(self, settings=settings, record_every=every, refine=None)
 
 
 def read_rollout(scene: Scene, spec: QuerySpec, initial: np.ndarray, end: simulation.RolloutEnd,
@@ -208,9 +223,14 @@ def run_sample(task: SampleTask, probe: Probe = NO_PROBE) -> SampleOutcome:
     if task.deadline_unix_s is not None and time.time() >= task.deadline_unix_s:
         return _cut_off(task, float("nan"), "the budget was spent before this sample started")
     inputs = draw_sample_inputs(task.scene, task.model, np.random.default_rng(task.seed))
-    return guarded(task, inputs.push_direction_rad,
-                   lambda: simulate_sample(task, inputs, separated_world(task.scene, task.settings, inputs, probe),
-                                           probe))
+    outcome = guarded(task, inputs.push_direction_rad,
+                      lambda: simulate_sample(task, inputs, separated_world(task.scene, task.settings, inputs, probe),
+                                              probe))
+    refine = task.refine
+    if refine is not None and outcome.unhealthy(energy_scale_of(task.scene), refine.max_end_penetration_fraction,
+                                                refine.max_energy_gain_fraction):
+        outcome = dataclasses.replace(outcome, refined=run_sample(task.at(refine.settings), probe))
+    return outcome
 
 
 def simulate_sample(task: SampleTask, inputs, world: simulation.World, probe: Probe = NO_PROBE) -> SampleOutcome:

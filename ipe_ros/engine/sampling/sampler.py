@@ -28,7 +28,7 @@ from .montecarlo import (MapFn, MonteCarlo, Plan, check_budget, check_seed, chec
                          together)
 from ..perceptions import perception_source
 from .perturb import is_deterministic
-from .rollout import SampleOutcome, SampleTask, lost, run_sample
+from .rollout import Refine, SampleOutcome, SampleTask, lost, run_sample
 from ..checking.self_check import checking
 from ..query import QUERIES, QuerySpec
 from ..scene.bodies import DEFAULT_MAX_OBJECTS, Scene
@@ -219,21 +219,27 @@ def _prediction(tasks: list[SampleTask], query: QuerySpec, settings: SimSettings
     verification (``check`` then verifies and covers nothing), for the check's verdict."""
     reference = reference_settings(settings.horizon_s)
     verified: dict[int, SampleOutcome] = {}
+    refined: dict[int, SampleOutcome] = {}  # unhealthy samples' reruns at the reference, made in their own task
+    if check.enabled and not is_reference(settings):
+        tasks = [dataclasses.replace(t, refine=Refine(reference, check.max_end_penetration_fraction,
+                                                      check.max_energy_gain_fraction)) for t in tasks]
     first = list(range(verification_count(check, len(tasks))))
     stopped_by = "samples"
     if stop is None:
         split = look_ahead_split(check, len(tasks))
-        outcomes = yield from _beside(tasks, first, tasks[:split], reference, verified)
+        outcomes = yield from _beside(tasks, first, tasks[:split], reference, verified, refined)
         if split < len(tasks):
             ahead = coverage_ahead(outcomes, verified, check, len(tasks))
-            outcomes += yield from _beside(tasks, ahead, tasks[split:], reference, verified)
+            verified.update({i: refined[i] for i in ahead if i in refined})  # rerun already
+            outcomes += yield from _beside(tasks, [i for i in ahead if i not in refined], tasks[split:], reference,
+                                           verified, refined)
     else:
         per_sample_answer = sample_fall_fraction if query.wants("fall") else sample_any_fall
         outcomes = []
         for at in range(0, len(tasks), stop.batch_size):
             batch_started = clock()
             outcomes += yield from _beside(tasks, first if at == 0 else [], tasks[at:at + stop.batch_size],
-                                           reference, verified)
+                                           reference, verified, refined)
             if len(outcomes) == len(tasks):
                 break
             stopped_by = _anytime_stop(stop, outcomes, per_sample_answer, clock(), batch_started)
@@ -243,17 +249,22 @@ def _prediction(tasks: list[SampleTask], query: QuerySpec, settings: SimSettings
     if is_reference(settings):
         return outcomes, stopped_by, FidelityReport("reference", settings=(("samples", settings.name),))
     outcomes, report = yield from checking(tasks[:len(outcomes)], outcomes, verified, check, reference, settings.name,
-                                           validated)
+                                           validated, refined)
     return outcomes, stopped_by, report
 
 
 def _beside(tasks: list[SampleTask], samples: list[int], batch: list[SampleTask], reference: SimSettings,
-            verified: dict[int, SampleOutcome]) -> Plan:
+            verified: dict[int, SampleOutcome], refined: dict[int, SampleOutcome]) -> Plan:
     """One round: ``batch``, with ``samples`` rerun at the reference first (the longest tasks start
-    first; their reruns go to ``verified``); returns the batch's outcomes."""
+    first; their reruns go to ``verified``; these samples' fast runs are not refined, their rerun
+    being at hand); returns the batch's outcomes, the reruns of those that ended unhealthy (made
+    in their own task: ``Refine``) moved to ``refined``."""
+    batch = [dataclasses.replace(t, refine=None) if t.index in samples else t for t in batch]
     both = yield [tasks[i].at(reference) for i in samples] + batch
     verified.update(zip(samples, both[:len(samples)]))
-    return both[len(samples):]
+    outcomes = both[len(samples):]
+    refined.update({t.index: o.refined for t, o in zip(batch, outcomes) if o.refined is not None})
+    return [dataclasses.replace(o, refined=None) if o.refined is not None else o for o in outcomes]
 
 
 def _anytime_stop(stop: AdaptiveStop, outcomes: list[SampleOutcome], per_sample_answer, now_s: float,

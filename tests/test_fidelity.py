@@ -56,9 +56,11 @@ def tower():
 
 
 #: `default` as it was before its collapse steps were checked (never undone for the energy they
-#: make, never ended once everything is slow): the fast physics that topples the stack on this ramp.
-#: `default` itself now agrees with the reference here; the check's paths are tested against this one.
-WRONG_HERE = preset("default").changed(collapse={"max_created_energy_fraction": 1e9, "quiet_sizes_per_s": 1e-9})
+#: make, never ended once everything is slow, travelling half the smallest extent a step): the fast
+#: physics that topples the stack on this ramp. `default` itself now agrees with the reference here;
+#: the check's paths are tested against this one.
+WRONG_HERE = preset("default").changed(collapse={"max_created_energy_fraction": 1e9, "quiet_sizes_per_s": 1e-9,
+                                                 "max_travel_fraction": None})
 
 
 @pytest.fixture(scope="module")
@@ -434,19 +436,20 @@ def test_anytime_sampling_is_checked_on_the_samples_it_drew(tower):
 
 @pytest.fixture(scope="module")
 def ramp_3():
-    """On this ramp the ball topples block1 in every `default` sample (k = 8, seed 0), in 1 of 8 of the reference's."""
+    """On this ramp the ball topples block1 in every sample of the fast physics that is wrong here
+    (``WRONG_HERE``; k = 8, seed 0), in 1 of 8 of the reference's."""
     return zoo_scene("ramp", 2026, 3)
 
 
 def test_a_question_checks_every_variant_and_answers_a_contradicted_one_at_the_reference(ramp_3):
     """Robot questions asked to check themselves run the same check per variant: the scene as it is topples block1 under
-    `default` where the reference mostly keeps it, so that variant is escalated and answered as the
+    the wrong fast physics where the reference mostly keeps it, so that variant is escalated and answered as the
     reference answers it; without the rolling ball nothing moves in either physics, and that
     variant is verified. Each round of both variants' checks is one map call."""
     model = _ramp_model(ramp_3, 8)
     actions = [None, A.Remove(("mover",))]
     spy = CountingMap()
-    as_is, without = A.ask(ramp_3, actions, model, preset("default"), seed=0, map_fn=spy, check=DEFAULT_CHECK).variants
+    as_is, without = A.ask(ramp_3, actions, model, WRONG_HERE, seed=0, map_fn=spy, check=DEFAULT_CHECK).variants
     reference = A.ask(ramp_3, actions, model, reference_settings(), seed=0).variants
     assert as_is.fidelity == "escalated" and as_is.self_check["escalated_samples"] == 8
     assert as_is.object_fall_probability == reference[0].object_fall_probability
@@ -454,10 +457,10 @@ def test_a_question_checks_every_variant_and_answers_a_contradicted_one_at_the_r
     assert without.fidelity == "verified" and set(without.object_fall_probability.values()) == {0.0}
     assert reference[0].fidelity == "reference"  # the reference settings are not checked
     # the fast samples of both variants, then the verification of sample 0 of each, together
-    assert len(spy.calls[0]) == 8 and all(t.settings.name == "default" for t in spy.calls[0])
+    assert len(spy.calls[0]) == 8 and all(t.settings.name == WRONG_HERE.name for t in spy.calls[0])
     assert [(t.settings.name, t.index, t.actions) for t in spy.calls[1]] == [
         (REFERENCE, 0, (None,)), (REFERENCE, 0, (A.Remove(("mover",)),))]
-    unchecked = A.ask(ramp_3, actions, model, preset("default"), seed=0)  # questions' default: not checked
+    unchecked = A.ask(ramp_3, actions, model, WRONG_HERE, seed=0)  # questions' default: not checked
     assert unchecked.variants[0].fidelity == unchecked.variants[0].to_dict()["fidelity"] == "unverified"
     assert unchecked.variants[0].object_fall_probability["block1"] >= 0.75  # the fast physics alone
 
@@ -552,6 +555,8 @@ def _box(name, x, z, extents=(0.2, 0.6, 0.2), **kw):
     (lambda s, m: (dataclasses.replace(s, objects=(_box("a", 0, 0.1), _box("b", 0, 0.3, linear_velocity_m_s=(1, 0, 0)))),
                    m, "default"), "b is moving"),
     (lambda s, m: (s, dataclasses.replace(m, sigma_m=0.1), "default"), "block0's position noise is larger than validated"),
+    (lambda s, m: (dataclasses.replace(s, objects=(_box("a", 0, 0.1), dataclasses.replace(_box("b", 0, 0.3), mass_kg=3.5))),
+                   m, "default"), "masses differ by more than 3x"),
     (lambda s, m: (dataclasses.replace(s, objects=tuple(_box(f"c{i}", 0, 0.1 + 0.2 * i) for i in range(13))), m,
                    "default"), "more than 12 objects"),
 ])

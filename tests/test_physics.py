@@ -308,7 +308,7 @@ def test_changed_names_the_unknown_field():
 
     with pytest.raises(ConfigError, match=r"^collapse: .*unexpected keyword argument 'factor'.*; its fields are "
                                           r"step_factor, solver_iterations, drop_fraction, fine_before_end_s, end_substeps, "
-                                          r"max_created_energy_fraction, quiet_sizes_per_s$"):
+                                          r"max_created_energy_fraction, quiet_sizes_per_s, max_travel_fraction$"):
         preset("default").changed(collapse={"factor": 2})
     with pytest.raises(ConfigError, match="^solver_iterations: not a field of SimSettings$"):
         preset("default").changed(solver_iterations=2)

@@ -257,6 +257,13 @@ class CollapseSettings:
     and drop's from 0.016 / 0.188 to 0 (at 5%: ramp 0.070 / 0.562), at 15-60% more time on ramps,
     drops and domino chains (no domino answer changed); the end at quiet changes no zoo answer and
     costs plates 15%.
+
+    ``max_travel_fraction``: the collapse steps' own travel limit (None: the preset's
+    ``SimSettings.max_travel_fraction``). A falling body that travels half the smallest extent in
+    one coarse step lands deep in what it hits, and the solver's push-out throws small bodies
+    aside: on the zoo's ``stacks`` 2026/0 (a 3 cm box under larger, heavier ones) `default` knocked
+    the small box out in 31-44% of the samples at 0.5, 16-19% at 0.25, `paper` 9-16%, `default`
+    without collapse steps 13-16% (benchmarks/results/zoo_stacks/mass_ratio.md).
     """
 
     step_factor: int = 1
@@ -266,9 +273,12 @@ class CollapseSettings:
     end_substeps: int = 1
     max_created_energy_fraction: float = 0.01
     quiet_sizes_per_s: float = 1.0
+    max_travel_fraction: float | None = None
 
     def __post_init__(self) -> None:
         integer(self.step_factor, "collapse.step_factor", 1, 100, " (1: no collapse steps)")
+        if self.max_travel_fraction is not None:
+            positive(self.max_travel_fraction, "collapse.max_travel_fraction")
         if self.solver_iterations is not None:
             integer(self.solver_iterations, "collapse.solver_iterations", 1, 10_000, " or None")
         positive(self.drop_fraction, "collapse.drop_fraction")
@@ -419,16 +429,18 @@ PRESETS: dict[str, SimSettings] = {
                         settling=SettlingSettings(duration_s=0.1, substeps=2),
                         early_stop=EarlyStopSettings(enabled=True)),
     # The default: `fine`'s solver at 1/180 s steps until something falls, then up to 4x coarser
-    # collapse steps at 50 solver iterations (a collapse's statistics, not its every contact, are
-    # what the answer needs); settling as `fine`; a 0.15 s rest window from 0.2 s on, "at rest" read as
-    # slower than 0.4 sizes/s and 0.4 rad/s and not speeding up. Each of these is the coarsest
+    # collapse steps at 50 solver iterations, no body travelling more than a quarter of the smallest
+    # extent per step (a collapse's statistics, not its every contact, are what the answer needs);
+    # settling as `fine`; a 0.15 s rest window from 0.2 s on, "at rest" read as slower than 0.4
+    # sizes/s and 0.4 rad/s and not speeding up. Each of these is the coarsest
     # setting that keeps the hard cases (tests/test_hard_cases.py) and the authors' outcomes
     # (tests/test_paper_data.py); speed and accuracy against `paper` in benchmarks/README.md.
     "default": SimSettings(name="default", time_step_s=1 / 180, horizon_s=2.0, max_step_fraction_of_time_scale=0.04,
                            solver=SolverSettings(iterations=100, residual_threshold=3e-6, warm_start_factor=1.0,
                                                  maximal_coordinates=True),
                            settling=SettlingSettings(duration_s=0.1, substeps=2),
-                           collapse=CollapseSettings(step_factor=4, solver_iterations=50, end_substeps=2),
+                           collapse=CollapseSettings(step_factor=4, solver_iterations=50, end_substeps=2,
+                                                     max_travel_fraction=0.25),
                            early_stop=EarlyStopSettings(enabled=True, speed_sizes_per_s=0.4, angular_rad_s=0.4,
                                                         duration_s=0.15, min_time_s=0.2)),
 }

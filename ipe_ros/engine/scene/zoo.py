@@ -315,13 +315,13 @@ STACK_MAX_ASPECT = 3.0
 STACK_MAX_OBJECTS = 12
 STACK_FRICTION = (0.4, 1.0)
 STACK_MAX_RESTITUTION = 0.0
-STACK_MAX_MASS_RATIO = 10.0
+STACK_MAX_MASS_RATIO = 3.0
 
 
 def stacks(rng: np.random.Generator, name: str) -> Scene:
     """1-3 stacks of 1-6 boxes at rest side by side (12 at most), over the whole validated envelope:
     sides 2 cm-1 m (a third of the boxes long, up to 3:1), friction 0.4-1, no restitution, masses
-    up to 10x apart, each box shifted by 15% of the scene's size and turned: some stacks stand, some
+    up to 3x apart, each box shifted by 15% of the scene's size and turned: some stacks stand, some
     topple into their neighbours, which stand within reach."""
     size = float(np.exp(rng.uniform(math.log(0.04), math.log(0.5))))
     counts = [int(rng.integers(1, 7)) for _ in range(int(rng.integers(1, 4)))]

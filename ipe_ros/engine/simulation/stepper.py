@@ -310,7 +310,8 @@ class _Rollout:
             # coarse, but no body may travel more than the travel limit per step, and none while a
             # body is deep inside another: the solver pushes it out by a fraction per step, so coarse
             # steps leave it there (a heavy body on a light one, a landing at a coarse step)
-            ticks = self.collapse.coarse_factor(ticks_allowed(fastest_m_s, self.settings, self.world))
+            ticks = self.collapse.coarse_factor(ticks_allowed(fastest_m_s, self.settings, self.world,
+                                                              self.settings.collapse.max_travel_fraction))
             deep = ticks > 1 and self.tick < self.fine_from_tick and health.deeper_than(
                 self.world, self.smallest, self.settings.early_stop.max_penetration_fraction, detect=False)
             if ticks > 1 and (self.tick >= self.fine_from_tick or deep):

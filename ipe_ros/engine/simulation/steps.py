@@ -19,9 +19,11 @@ def substeps_for(fastest_m_s: float, settings: SimSettings, world: World) -> int
     return max(1, math.ceil(travel - 1e-9))
 
 
-def ticks_allowed(fastest_m_s: float, settings: SimSettings, world: World) -> int:
-    """The most ticks one step may span within the travel limit (0: not even one)."""
-    return int(settings.max_travel_fraction * world.scale_m / (fastest_m_s * world.time_step_s))
+def ticks_allowed(fastest_m_s: float, settings: SimSettings, world: World, travel_fraction: float | None = None) -> int:
+    """The most ticks one step may span within the travel limit (``travel_fraction``, None: the
+    settings' ``max_travel_fraction``; 0: not even one)."""
+    fraction = settings.max_travel_fraction if travel_fraction is None else travel_fraction
+    return int(fraction * world.scale_m / (fastest_m_s * world.time_step_s))
 
 
 class StepControl:

@@ -96,7 +96,7 @@ def test_generate_tower_and_table_write_loadable_scenes(tmp_path):
     (["predict", "/nonexistent.json"], "ipe: error: /nonexistent.json: no such file"),
     (["predict", "EXAMPLE", "--query", "fall,fly"], "ipe: error: argument --query: unknown query 'fly'; "
                                                     "choose from fall, any_fall, direction, far, bump, contact, rest, "
-                                                    "final_pose"),
+                                                    "final_pose, tipped"),
     (["predict", "EXAMPLE", "--samples", "0"], "ipe: error: --samples: must be an integer in [1, 100000], got 0"),
     (["predict", "EXAMPLE", "--sigma", "99"], "ipe: error: --sigma: must be at most 10 m (check the units), got 99.0"),
     (["ask", "remove", "EXAMPLE", "--sigma", "99"], "ipe: error: --sigma: must be at most 10 m (check the units), "

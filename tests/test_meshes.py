@@ -278,22 +278,27 @@ def _spoon_in_mug(folder, spoon_kg: float):
     return scene, mug_kg * R_OUT / (centre[0] - R_OUT)
 
 
-def _mug_tilt_deg(scene, preset_name: str) -> float:
+def _mug_tilt_deg(scene, preset_name: str) -> tuple[float, float, float]:
+    """The mug's final tilt (degrees), and the tipped and the fall query's answer for it."""
     from ipe_ros.engine.scene.shapes import rotation_matrix
 
     answer = predict(scene, ModelConfig(sigma_m=0.0, samples=1, object_noise=False), preset(preset_name),
-                     QuerySpec(queries=frozenset({"final_pose"})), check=None)
+                     QuerySpec(queries=frozenset({"final_pose", "tipped", "fall"})), check=None)
     up = rotation_matrix(answer.outcomes[0].rollouts[0].final_orientations_xyzw[0])[2, 2]
-    return float(np.degrees(np.arccos(min(1.0, abs(up)))))
+    mug = scene.objects[0].name
+    return (float(np.degrees(np.arccos(min(1.0, abs(up))))), answer.tipped_object_probability[mug],
+            answer.object_fall_probability[mug])
 
 
 def test_a_spoon_in_a_mug_tips_it_only_when_heavier_than_the_mug_can_hold(folder):
     """At 0.8x the heaviest rod the mug can hold (0.26 kg for this 0.28 kg mug) it stands; at 1.25x it
-    tips onto its side, in `default` as in `paper`."""
+    tips onto its side, in `default` as in `paper`: the tipped query says so, where the fall query (its
+    centre dropped by an eighth of its smallest extent) does not."""
     _, heaviest = _spoon_in_mug(folder, 0.1)
     assert 0.2 < heaviest < 0.35
     for factor, tips in ((0.8, False), (1.25, True)):
         scene, _ = _spoon_in_mug(folder, factor * heaviest)
         for name in ("default", "paper"):
-            tilt = _mug_tilt_deg(scene, name)
+            tilt, tipped, fallen = _mug_tilt_deg(scene, name)
             assert (tilt > 60) if tips else (tilt < 2), (factor, name, tilt)
+            assert tipped == float(tips) and fallen == 0.0, (factor, name, tipped, fallen)

@@ -199,7 +199,7 @@ def test_parameter_updates_accepted_and_rejected(ros, tower):
     [bad_query] = set_params(ros, queries=["fall", "nope"])
     assert not bad_query.successful
     assert bad_query.reason == ("queries: unknown query 'nope'; choose from fall, any_fall, direction, far, bump, "
-                                "contact, rest, final_pose")
+                                "contact, rest, final_pose, tipped")
     [bad_pair] = set_params(ros, contact_pairs="ball")
     assert bad_pair.reason == ('contact_pairs: a pair is written A:B (B may be support; names holding ":" as JSON: '
                                '["A", "B"]), got \'ball\'')

@@ -179,7 +179,7 @@ def test_the_demo_runs_end_to_end_and_writes_recordings(tmp_path):
     ("samples:=0", "ipe_node: error: Invalid parameter value (0) for parameter. Reason: Parameter samples out of "
                    "range. Min: 1, Max: 100000, value: 0: samples"),
     ("queries:=[nope]", "ipe_node: error: queries: unknown query 'nope'; choose from fall, any_fall, direction, far, bump, "
-                        "contact, rest, final_pose"),
+                        "contact, rest, final_pose, tipped"),
 ])
 def test_a_bad_parameter_override_ends_the_node_with_one_line(override, message):
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(domain_id_for_tests()))

@@ -217,8 +217,45 @@ def test_final_pose_spread_follows_the_noise():
     assert sd[2] < 1e-3
 
 
+def _standing(name: str, x: float, extents, beyond: float = 0.0) -> Scene:
+    """A tall box on the floor, its top half shifted ``beyond`` of its width past a square base: it
+    tips over (as two boxes, glued by nothing, the top one tips off the base)."""
+    w, _, h = extents
+    base = block(f"{name}_base", x, 0.0, h / 4, extents=(w, w, h / 2))
+    top = block(name, x + beyond * w, 0.0, 3 * h / 4, extents=(w, w, h / 2))
+    return floor_scene(base, top, name=name)
+
+
+def test_tipped_tells_an_object_tipping_over_from_one_spun_about_the_vertical():
+    spun = floor_scene(block("spinner", 0.0, 0.0, 0.05, extents=(0.3, 0.1, 0.1), angular_velocity_rad_s=(0, 0, 6.0)))
+    answer = _ask(spun, queries=("tipped", "final_pose"))
+    assert abs(answer.final_pose["spinner"]["yaw_rad"]) > 0.05  # it turned about the vertical
+    assert answer.tipped_object_probability == {"spinner": 0.0} and answer.tipped_probability == 0.0
+    tipping = _standing("top", 0.0, (0.1, 0.1, 0.2), beyond=0.7)  # its centre past the base's edge
+    answer = _ask(tipping, queries=("tipped", "fall"))
+    assert answer.tipped_object_probability == {"top_base": 0.0, "top": 1.0}
+    assert answer.tipped_probability == 1.0 and answer.tipped_probability_ci95 == (1.0, 1.0)
+    upright = _ask(_standing("top", 0.0, (0.1, 0.1, 0.2), beyond=0.3), queries=("tipped",))
+    assert upright.tipped_object_probability == {"top_base": 0.0, "top": 0.0}
+
+
+def test_tipped_counts_a_turn_beyond_its_threshold_and_refuses_a_bad_one():
+    from ipe_ros.engine.query.tipped import TippedParameters, tipped_by_deg
+    from scipy.spatial.transform import Rotation
+
+    start = Rotation.from_euler("y", 90, degrees=True)  # lying on its side
+    ends = [start * Rotation.from_euler("z", 70, degrees=True),  # turned about its own axis
+            Rotation.from_euler("z", 70, degrees=True) * start,  # about the world's vertical: not tipping
+            Rotation.from_euler("x", 50, degrees=True) * start]  # tipped by 50 degrees
+    turned = tipped_by_deg(np.array([start.as_quat()] * 3), np.array([e.as_quat() for e in ends]))
+    assert turned == pytest.approx([70.0, 0.0, 50.0], abs=1e-6)
+    for bad in (0.0, 180.0, float("nan"), True):
+        with pytest.raises(ConfigError, match=r"tipped.threshold_deg: must be in \(0, 180\) degrees"):
+            TippedParameters(threshold_deg=bad)
+
+
 def test_every_query_is_registered_with_its_fields_and_none_when_not_asked():
-    assert ALL_QUERIES == ("fall", "any_fall", "direction", "far", "bump", "contact", "rest", "final_pose")
+    assert ALL_QUERIES == ("fall", "any_fall", "direction", "far", "bump", "contact", "rest", "final_pose", "tipped")
     assert len(ANSWER_FIELDS) == len(set(ANSWER_FIELDS))
     answer = _ask(_rolled(1.5), "ball:box")
     data = answer.to_dict()

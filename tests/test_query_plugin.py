@@ -39,9 +39,10 @@ def test_a_registered_query_answers_with_its_own_parameter_here_and_in_workers(t
     assert plugin_modules() == ("tests.query_plugin_tilt",)
     strict = predict(TOWER, MODEL, preset("default"), _spec(tilt, 5.0), seed=3, check=None)
     loose = predict(TOWER, MODEL, preset("default"), _spec(tilt, 179.0), seed=3, check=None)
-    # the same rollouts (same seed): only the threshold differs, and what fell lies tilted
+    # the same rollouts (same seed): only the threshold differs, and what fell lies tilted (a block
+    # landing upside down, within a degree, is all that passes 179)
     assert strict.fall_fraction == loose.fall_fraction > 0
-    assert strict.tilt_probability > 0 and loose.tilt_probability == 0.0
+    assert strict.tilt_probability >= 0.5 > 0.2 >= loose.tilt_probability
     assert set(strict.tilted_object_probability) == {b.name for b in TOWER.dynamic_objects}
     assert strict.to_dict()["tilt_probability"] == strict.tilt_probability
     with WorkerPool(2, start_method="spawn") as pool:  # workers import the plugin to know the query
@@ -95,7 +96,7 @@ def test_a_questions_variants_answer_a_registered_query(tilt):
     assert question_from_dict(question.to_dict()) == question
     for data, message in (
             ({"queries": ["fall"]}, "queries: fall is answered by the question itself (fell_off, contact, what_falls "
-                                    "ask for it); list other queries: far, rest, final_pose, tilt"),
+                                    "ask for it); list other queries: far, rest, final_pose, tipped, tilt"),
             ({"queries": ["tilt"], "query_parameters": {"tilt.threshold_deg": 0}},
              "tilt.threshold_deg: must be in (0, 180) degrees, got 0.0"),
             ({"queries": ["tilt"], "query_parameters": {"tilt.steepness": 1}},

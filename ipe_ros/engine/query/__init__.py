@@ -8,11 +8,11 @@ one at run time.
 
 from __future__ import annotations
 
-from . import any_fall, bump, contact, direction, fall, far, final_pose, rest
+from . import any_fall, bump, contact, direction, fall, far, final_pose, rest, tipped
 from .base import Query, Reading, Samples, StepWatch
 from .spec import QUERIES, QuerySpec, parse_queries, register
 
-_MODULES = (fall, any_fall, direction, far, bump, contact, rest, final_pose)
+_MODULES = (fall, any_fall, direction, far, bump, contact, rest, final_pose, tipped)
 
 for _module in _MODULES:
     register(_module.QUERY)

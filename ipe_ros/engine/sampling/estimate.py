@@ -40,6 +40,7 @@ class Prediction:
     contact_probability / contact_time_s: P(A touches B) per asked pair, median first contact.
     rest_probability / max_final_speed_m_s: P(everything at rest at the end), largest speed left.
     final_pose: per object, mean and spread of its final position and yaw.
+    tipped_probability / tipped_object_probability: P(some object ends tipped over), per object.
 
     stopped_by: what ended sampling: "samples" (all k), "ci_width" / "deadline" (anytime sampling),
         or "budget" (the compute budget ran out: ``samples`` says how many were used; the samples cut

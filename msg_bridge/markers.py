@@ -12,8 +12,10 @@ The mapping (MarkerArray has no notion of mass, friction or support, so some of 
   ``decompose=true`` in ``text``, the closed surface its triangles make, as convex parts (a mug);
   ``MESH_RESOURCE``: the closed mesh at ``mesh_resource`` (``package://`` or ``file://``, under the
   node's ``mesh_roots``), scaled by ``scale`` per axis, read as its convex parts
-  (``engine.scene.meshes``; ``mesh_use_embedded_materials`` is a colour and is ignored). Capsules
-  and compounds given as parts have no marker: publish them on ``~/scene_json``.
+  (``engine.scene.meshes``; ``mesh_use_embedded_materials`` is a colour and is ignored); a scene's
+  objects read from a mesh file go out as this marker again (``scene_to_markers``, and the
+  prediction's markers: RViz draws the mesh, not its parts). Capsules and compounds given as parts
+  have no marker: publish them on ``~/scene_json``.
 * Markers in namespace ``support`` are static. ``text`` ``role=floor`` makes an infinite floor whose
   top is the cube's top face; ``role=table`` makes a table top (axis-aligned; the cube is the slab);
   ``role=obstacle`` (the default) a static box (a wall on the table, a fixture on the floor). At most
@@ -327,6 +329,10 @@ def _body_marker(header, ns: str, marker_id: int, body: Body, rgb, alpha: float,
     elif isinstance(shape, ConvexHull) and exact:
         m.type = Marker.TRIANGLE_LIST
         m.points = [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in shape.vertices_m]
+    elif isinstance(shape, shapes.Compound) and shape.source is not None:  # the mesh itself, as RViz loads it
+        m.type = Marker.MESH_RESOURCE
+        m.mesh_resource = shape.source.uri
+        m.scale.x, m.scale.y, m.scale.z = (float(v) for v in shape.source.scale)
     elif exact:
         raise ValueError(f"objects ({shown(body.name)}).shape: a {shape.type} has no marker; publish the scene on "
                          "~/scene_json (the JSON format carries every shape)")

@@ -302,3 +302,37 @@ def test_a_spoon_in_a_mug_tips_it_only_when_heavier_than_the_mug_can_hold(folder
             tilt, tipped, fallen = _mug_tilt_deg(scene, name)
             assert (tilt > 60) if tips else (tilt < 2), (factor, name, tilt)
             assert tipped == float(tips) and fallen == 0.0, (factor, name, tipped, fallen)
+
+
+def test_a_mesh_object_goes_out_as_its_mesh_to_rviz_and_back_in_the_json(folder):
+    """The parts are the physics, the mesh is what a person recognises: a scene's object read from a
+    mesh file keeps the file (as a file:// URI, or package:// as given) and its scale. The JSON
+    carries it beside the parts (read back equal, the file not read again); ``scene_to_markers`` and
+    the prediction's markers send a MESH_RESOURCE marker, which reads back to the same scene."""
+    from ipe_ros.engine.scene.format import scene_from_dict, scene_to_dict
+    from ipe_ros.engine.scene.meshes import MeshAccess
+    from ipe_ros.engine.scene.shapes import MeshSource
+    from msg_bridge.markers import markers_to_scene, prediction_to_markers, scene_to_markers
+    from visualization_msgs.msg import Marker
+
+    [scene] = load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "mug.obj", "scale": 1.5}), "scaled.json"))
+    mug = scene.objects[0].shape
+    assert mug.source == MeshSource((folder / "mug.obj").resolve().as_uri(), (1.5, 1.5, 1.5))
+    data = scene_to_dict(scene)
+    assert data["objects"][0]["shape"]["source"] == {"uri": mug.source.uri, "scale": [1.5, 1.5, 1.5]}
+    assert scene_from_dict(json.loads(json.dumps(data))) == scene  # no mesh access needed: parts are read
+    with pytest.raises(SceneError, match=r"objects\[0\].shape.source.scale: must be 3 finite numbers > 0"):
+        data["objects"][0]["shape"]["source"]["scale"] = [1.5, 0.0, 1.5]
+        scene_from_dict(data)
+
+    markers = scene_to_markers(scene, "world")
+    [sent] = [m for m in markers.markers if m.ns == "objects" and m.text.startswith("name=mug")]
+    assert (sent.type, sent.mesh_resource, (sent.scale.x, sent.scale.y, sent.scale.z)) == (
+        Marker.MESH_RESOURCE, mug.source.uri, (1.5, 1.5, 1.5))
+    access = MeshAccess(roots=(folder.resolve(),))
+    back = markers_to_scene(markers, meshes=access).scene.objects[0]
+    assert (back.shape, back.position_m, back.density_kg_m3) == (mug, (0.0, 0.0, 0.0), 2000.0)
+    answer = predict(scene, ModelConfig(sigma_m=0.0, samples=1, object_noise=False), preset("default"),
+                     QuerySpec(queries=frozenset({"fall"})), check=None)
+    shown = [m for m in prediction_to_markers(scene, answer, "world", 0).markers if m.ns == "ipe/objects"]
+    assert [(m.type, m.mesh_resource) for m in shown] == [(Marker.MESH_RESOURCE, mug.source.uri), (Marker.SPHERE, "")]

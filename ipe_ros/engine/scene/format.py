@@ -41,6 +41,7 @@ precision by the json module).
 from __future__ import annotations
 
 import functools
+import math
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,7 +52,7 @@ from .limits import MAX_JSON_CHARS
 from .bodies import DEFAULT_MAX_OBJECTS, Body, Box, Floor, Scene, Table
 from .meshes import MeshAccess, mesh_shape
 from .validation import validate_scene
-from .shapes import SHAPE_TYPES, BoxShape, Capsule, Compound, CompoundPart, ConvexHull, Cylinder, Sphere
+from .shapes import SHAPE_TYPES, BoxShape, Capsule, Compound, CompoundPart, ConvexHull, Cylinder, MeshSource, Sphere
 
 SCENE_FORMAT = "ipe_ros.scene/2"
 SCENE_FORMAT_V1 = "ipe_ros.scene/1"
@@ -65,7 +66,8 @@ _SHAPE_FIELDS = {"box": ("extents_m",), "sphere": ("radius_m",), "cylinder": ("r
                  "capsule": ("radius_m", "length_m"), "convex": ("vertices_m",), "compound": ("parts",),
                  "mesh": ("uri",)}
 #: fields a shape may leave out
-_SHAPE_OPTIONAL = {"mesh": ("scale",), "compound": ("volume_m3", "centre_of_mass_m", "inertia_diagonal_per_kg_m2")}
+_SHAPE_OPTIONAL = {"mesh": ("scale",), "compound": ("volume_m3", "centre_of_mass_m", "inertia_diagonal_per_kg_m2",
+                                                    "source")}
 FLOOR_FIELDS = ("type", "height_m", "friction", "restitution")
 TABLE_FIELDS = ("type", "top_height_m", "size_m", "center_xy_m", "thickness_m", "friction",
                  "restitution", "floor_z_m", "obstacles")
@@ -91,6 +93,8 @@ def shape_to_dict(shape) -> dict[str, Any]:
         out.update(volume_m3=shape.volume_m3, centre_of_mass_m=list(shape.centre_of_mass_m))
     if shape.inertia_diagonal_per_kg_m2 is not None:
         out.update(inertia_diagonal_per_kg_m2=list(shape.inertia_diagonal_per_kg_m2))
+    if shape.source is not None:
+        out.update(source={"uri": shape.source.uri, "scale": list(shape.source.scale)})
     return out
 
 
@@ -222,7 +226,21 @@ def shape_from_dict(data: Any, path: str, *, nested: bool = False, meshes: MeshA
     inertia = data.get("inertia_diagonal_per_kg_m2")
     return Compound(tuple(out), None if volume is None else _num(volume, f"{path}.volume_m3"),
                     None if centre is None else _vec(centre, 3, f"{path}.centre_of_mass_m"),
-                    None if inertia is None else _vec(inertia, 3, f"{path}.inertia_diagonal_per_kg_m2"))
+                    None if inertia is None else _vec(inertia, 3, f"{path}.inertia_diagonal_per_kg_m2"),
+                    None if "source" not in data else _mesh_source(data["source"], f"{path}.source"))
+
+
+def _mesh_source(data: Any, path: str) -> MeshSource:
+    """The mesh file a compound was read from (shown, never read: the parts are the shape)."""
+    data = _require_mapping(data, path)
+    _check_keys(data, ("uri", "scale"), (), path)
+    uri = data["uri"]
+    if not isinstance(uri, str) or not uri.strip():
+        raise SceneError(f"{path}.uri", f"must be the mesh's path or URI, got {shown(uri)}")
+    scale = _vec(data["scale"], 3, f"{path}.scale")
+    if not all(math.isfinite(v) and v > 0 for v in scale):
+        raise SceneError(f"{path}.scale", f"must be 3 finite numbers > 0 (metres per file unit), got {list(scale)}")
+    return MeshSource(uri, scale)
 
 
 def _common_fields(data: dict, path: str) -> dict[str, Any]:

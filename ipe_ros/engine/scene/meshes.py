@@ -15,6 +15,7 @@ enclose a volume is refused with the fix.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -28,7 +29,7 @@ import numpy as np
 
 from ..errors import SceneError, shown
 from . import limits
-from .shapes import Compound, CompoundPart, ConvexHull
+from .shapes import Compound, CompoundPart, ConvexHull, MeshSource
 
 #: what trimesh reads without extra libraries (DAE needs pycollada; glTF with external buffers reads
 #: other files): name a GLB instead
@@ -87,7 +88,10 @@ def mesh_shape(data: dict, path: str, access: MeshAccess | None, uri_field: str 
     content = _read_bounded(file, where)
     key = hashlib.sha256(b"%d|%s|%r|%r" % (_CACHE_VERSION, file.suffix.lower().encode(), scale,
                                            access.decomposition) + content).hexdigest()
-    return _compound(key, lambda: _load(content, file, scale, where), access, where)
+    compound = _compound(key, lambda: _load(content, file, scale, where), access, where)
+    # a package:// URI as given (it resolves on any machine with the package); a path as the file read
+    shown_uri = uri.strip() if uri.strip().startswith("package://") else file.as_uri()
+    return dataclasses.replace(compound, source=MeshSource(shown_uri, scale))
 
 
 def triangles_shape(points_m: np.ndarray, path: str, access: MeshAccess) -> Compound:

@@ -80,7 +80,12 @@ def _shapes() -> dict[str, Any]:
                                                     "volume_m3"),
                      "inertia_diagonal_per_kg_m2": _vector(3, "the diagonal of the solid's own inertia about its "
                                                               "centre of mass in the object frame, per kg (m^2); "
-                                                              "with volume_m3")},
+                                                              "with volume_m3"),
+                     "source": _closed({"uri": {"type": "string", "minLength": 1,
+                                                "description": "the mesh file as the scene named it"},
+                                        "scale": _vector(3, "metres per file unit along x, y, z", None, 0.0)},
+                                       ("uri", "scale"), "the mesh file these parts were read from: shown (RViz's "
+                                                         "MESH_RESOURCE), never read; the parts are the shape")},
         "mesh": {"uri": {"type": "string", "minLength": 1,
                          "description": "a closed mesh (OBJ, STL, PLY, GLB) in the object frame, +z up (GLB: its "
                                         "+y): a path beside the scene file, file:// or package://; read as convex "
@@ -89,7 +94,8 @@ def _shapes() -> dict[str, Any]:
                            "oneOf": [_number("m per unit", 0.0, exclusive_minimum=True),
                                      _vector(3, "m per unit along x, y, z", None, 0.0)]}},
     }
-    optional = {"mesh": ("scale",), "compound": ("volume_m3", "centre_of_mass_m", "inertia_diagonal_per_kg_m2")}
+    optional = {"mesh": ("scale",), "compound": ("volume_m3", "centre_of_mass_m", "inertia_diagonal_per_kg_m2",
+                                                 "source")}
     return {kind: _closed({"type": {"const": kind}, **props},
                           ("type", *(p for p in props if p not in optional.get(kind, ()))), f"a {kind}")
             for kind, props in fields.items()}

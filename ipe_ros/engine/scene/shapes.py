@@ -9,7 +9,7 @@ frame (non-convex objects as convex parts). Pure numpy + scipy (convex hulls); n
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Union
 
@@ -73,18 +73,31 @@ class CompoundPart:
 
 
 @dataclass(frozen=True)
+class MeshSource:
+    """The mesh file a compound was read from, as the scene named it: what RViz and the JSON show
+    (the physics uses the parts). ``uri`` as given (a path, file:// or package://), ``scale`` metres
+    per file unit along x, y, z."""
+
+    uri: str
+    scale: Vec3 = (1.0, 1.0, 1.0)
+
+
+@dataclass(frozen=True)
 class Compound:
     """Convex parts in the object frame. ``volume_m3`` and ``centre_of_mass_m``: those of the solid
     the parts approximate, where it is known (a mesh's own, exact; the parts' hulls overlap and
     overfill a mesh's concave corners, 5-25% more volume): mass and centre of mass come from them.
     Without them, from the parts (taken as not overlapping). ``inertia_diagonal_per_kg_m2``: the
     diagonal of the solid's inertia tensor about its centre of mass in the object frame, per kg
-    (m^2; a mesh's own); without it, pybullet's estimate from the parts' bounding box."""
+    (m^2; a mesh's own); without it, pybullet's estimate from the parts' bounding box. ``source``:
+    the mesh file it was read from (None: given as parts)."""
 
     parts: tuple[CompoundPart, ...]
     volume_m3: float | None = None
     centre_of_mass_m: Vec3 | None = None
     inertia_diagonal_per_kg_m2: Vec3 | None = None
+    #: part of a stored result's key only when set (compounds stored before it keep their keys)
+    source: MeshSource | None = field(default=None, metadata={"keyed": "when set"})
 
     type = "compound"
 

@@ -336,3 +336,24 @@ def test_a_mesh_object_goes_out_as_its_mesh_to_rviz_and_back_in_the_json(folder)
                      QuerySpec(queries=frozenset({"fall"})), check=None)
     shown = [m for m in prediction_to_markers(scene, answer, "world", 0).markers if m.ns == "ipe/objects"]
     assert [(m.type, m.mesh_resource) for m in shown] == [(Marker.MESH_RESOURCE, mug.source.uri), (Marker.SPHERE, "")]
+
+
+def test_a_robot_asks_whether_placing_a_spoon_in_the_mug_tips_it(folder):
+    """The robot question on a mesh object: place the rod into the mug (as the spoon test leans it),
+    asking the tipped query. At 0.8x the heaviest rod the mug can hold it stands; at 1.25x the place
+    variant tips the mug, which the fall query alone would call standing (its centre barely drops)."""
+    import dataclasses
+
+    from ipe_ros.engine import actions as A
+
+    scene, heaviest = _spoon_in_mug(folder, 0.1)
+    mug, spoon = scene.objects
+    alone = dataclasses.replace(scene, objects=(mug,))
+    for factor, tips in ((0.8, False), (1.25, True)):
+        placed = A.Place(dataclasses.replace(spoon, mass_kg=factor * heaviest))
+        answers = A.ask(alone, [placed], ModelConfig(sigma_m=0.0, samples=1, object_noise=False), preset("default"),
+                        queries=("tipped",))
+        [variant] = [v for v in answers.variants if v.to_dict()["tipped_object_probability"] is not None
+                     and "spoon" in v.to_dict()["tipped_object_probability"]]
+        assert variant.to_dict()["tipped_object_probability"]["mug"] == float(tips), factor
+        assert variant.object_fall_probability["mug"] == 0.0

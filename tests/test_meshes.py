@@ -357,3 +357,24 @@ def test_a_robot_asks_whether_placing_a_spoon_in_the_mug_tips_it(folder):
                      and "spoon" in v.to_dict()["tipped_object_probability"]]
         assert variant.to_dict()["tipped_object_probability"]["mug"] == float(tips), factor
         assert variant.object_fall_probability["mug"] == 0.0
+
+
+def test_a_decomposition_over_its_time_is_ended_and_the_scene_refused_saying_so(folder, tmp_path):
+    """The node bounds what a mesh not yet cached may cost (``mesh_decomposition_s``): the decomposition
+    runs in a spawned process, ended by its id when over, and the scene is refused naming the object
+    and the fix; within the time the parts are those decomposed in this process, and nothing is left running."""
+    import multiprocessing
+
+    from ipe_ros.engine.scene.meshes import MeshAccess
+
+    data = scene_with({"type": "mesh", "uri": "mug.obj"}, ball=False)
+    tight = MeshAccess(roots=(folder,), base=folder, cache_dir=tmp_path / "tight", decompose_within_s=0.05)
+    with pytest.raises(SceneError, match=r"^objects\[0\]\.shape\.uri: its convex decomposition did not finish within "
+                                         r"0.05 s; decompose it once ahead"):
+        scenes_from_json(json.dumps(data), meshes=tight)
+    assert multiprocessing.active_children() == [] and not list((tmp_path / "tight").glob("*.json"))
+    bounded = MeshAccess(roots=(folder,), base=folder, cache_dir=tmp_path / "bounded", decompose_within_s=120.0)
+    here = MeshAccess(roots=(folder,), base=folder, cache_dir=tmp_path / "here")
+    [a], [b] = scenes_from_json(json.dumps(data), meshes=bounded), scenes_from_json(json.dumps(data), meshes=here)
+    assert a.objects[0].shape == b.objects[0].shape and len(a.objects[0].shape.parts) > 1
+    assert multiprocessing.active_children() == []

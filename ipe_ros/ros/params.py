@@ -75,6 +75,9 @@ NODE_SETTINGS: tuple[Input, ...] = (
     _node("mesh_roots", "name", "", "folders", "folders (':'-separated) under which scenes on ~/scene_json, ~/scene "
           "(MESH_RESOURCE markers) and ~/ask may name mesh files (and package:// meshes resolve); empty: scenes may "
           "not name files"),
+    _node("mesh_decomposition_s", "float", 30.0, "s", "the most seconds a mesh not yet decomposed may take to "
+          "decompose into convex parts (in a process of its own, ended when over: the scene is refused, saying so); "
+          "cached meshes cost nothing", range=(0.1, 3600.0)),
     _node("rerun.save_dir", "name", "", "folder", "folder for one .rrd recording per prediction; empty: no rerun "
           "logging"),
     _node("rerun.rollouts_logged", "int", 8, "count", "sampled rollouts shown in each .rrd", range=(0, 1000)),
@@ -209,7 +212,8 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
                          rerun_frame_period_s=float(values["rerun.frame_period_s"]),
                          rerun_connect_url=connect or None, gravity_aligned_frames=frames,
                          depth_max_age_s=float(values["depth.max_age_s"]),
-                         meshes=MeshAccess(roots=roots) if roots else None)
+                         meshes=MeshAccess(roots=roots, decompose_within_s=float(values["mesh_decomposition_s"]))
+                         if roots else None)
 
 
 def camera_pose(values: Mapping[str, Any]) -> tuple[tuple, tuple] | None:

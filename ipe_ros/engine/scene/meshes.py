@@ -65,6 +65,10 @@ class MeshAccess:
     base: Path | None = None
     cache_dir: Path | None = None
     decomposition: Decomposition = field(default_factory=Decomposition)
+    #: the most seconds a mesh's decomposition (not yet cached) may take, None: no limit. With a
+    #: limit it runs in a process of its own (spawned), ended when over: CoACD has no time limit of
+    #: its own, and a large mesh can take minutes, which the node must not spend on one scene
+    decompose_within_s: float | None = None
 
     def cache(self) -> Path:
         if self.cache_dir is not None:
@@ -126,7 +130,8 @@ def _compound(key: str, load, access: MeshAccess, path: str) -> Compound:
         # the solid's inertia about its centre of mass, per kg (trimesh's at density 1 weighs its volume)
         inertia = np.diag(np.asarray(mesh.moment_inertia, float)) / float(mesh.mass)
         cached = (_decompose(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64), access.decomposition,
-                             path), float(mesh.volume), tuple(float(v) for v in mesh.center_mass),
+                             path, access.decompose_within_s), float(mesh.volume),
+                  tuple(float(v) for v in mesh.center_mass),
                   tuple(float(v) for v in inertia))
         _store_parts(access.cache(), key, *cached)
     parts, volume, centre, inertia = cached
@@ -234,14 +239,61 @@ def _load(content: bytes, file: Path, scale: tuple[float, float, float], path: s
     return mesh
 
 
-def _decompose(vertices: np.ndarray, faces: np.ndarray, settings: Decomposition, path: str) -> list[np.ndarray]:
+def _coacd_hulls(vertices: np.ndarray, faces: np.ndarray, settings: Decomposition) -> list[np.ndarray]:
     import coacd
 
     coacd.set_log_level("error")
     most = limits.MAX_COMPOUND_PARTS if settings.max_parts < 0 else min(settings.max_parts, limits.MAX_COMPOUND_PARTS)
     parts = coacd.run_coacd(coacd.Mesh(vertices, faces), threshold=settings.threshold, max_convex_hull=most,
                             max_ch_vertex=MAX_PART_VERTICES, seed=settings.seed)
-    hulls = [np.asarray(v, float) for v, _ in parts if len(v) >= 4]
+    return [np.asarray(v, float) for v, _ in parts if len(v) >= 4]
+
+
+def _coacd_in_process(connection, vertices: np.ndarray, faces: np.ndarray, settings: Decomposition) -> None:
+    """A spawned process's work: the hulls, or the error, sent back."""
+    try:
+        connection.send(("hulls", _coacd_hulls(vertices, faces, settings)))
+    except Exception as exc:  # noqa: BLE001 - the parent names the object and the fix
+        connection.send(("error", f"{type(exc).__name__}: {exc}"))
+    finally:
+        connection.close()
+
+
+def _coacd_within(vertices: np.ndarray, faces: np.ndarray, settings: Decomposition, within_s: float,
+                  path: str) -> list[np.ndarray]:
+    """``_coacd_hulls`` in a spawned process, ended (by its process id) when it takes longer than
+    ``within_s``: a SceneError naming ``path`` and the fix."""
+    import multiprocessing
+
+    context = multiprocessing.get_context("spawn")  # never fork: the node's process holds rclpy
+    receive, send = context.Pipe(duplex=False)
+    worker = context.Process(target=_coacd_in_process, args=(send, vertices, faces, settings), daemon=True)
+    worker.start()
+    send.close()
+    try:
+        answer = receive.recv() if receive.poll(within_s) else None
+    except EOFError:  # the process died without an answer
+        answer = ("error", f"the decomposition's process ended with code {worker.exitcode}")
+    finally:
+        receive.close()
+        if worker.is_alive():
+            worker.kill()
+        worker.join()
+    if answer is None:
+        raise SceneError(path, f"its convex decomposition did not finish within {within_s:g} s; decompose it once "
+                               "ahead (`ipe predict` of a scene naming it caches the parts by the file's content, in "
+                               "$IPE_CACHE_DIR, for every later scene), simplify the mesh, or allow more time (the "
+                               "node's mesh_decomposition_s)")
+    kind, value = answer
+    if kind == "error":
+        raise SceneError(path, f"its convex decomposition failed ({value})")
+    return value
+
+
+def _decompose(vertices: np.ndarray, faces: np.ndarray, settings: Decomposition, path: str,
+               within_s: float | None = None) -> list[np.ndarray]:
+    hulls = (_coacd_hulls(vertices, faces, settings) if within_s is None
+             else _coacd_within(vertices, faces, settings, within_s, path))
     if not hulls:
         raise SceneError(path, "its convex decomposition is empty (a flat or degenerate mesh)")
     if sum(len(h) for h in hulls) > limits.MAX_COMPOUND_VERTICES:

@@ -378,3 +378,38 @@ def test_a_decomposition_over_its_time_is_ended_and_the_scene_refused_saying_so(
     [a], [b] = scenes_from_json(json.dumps(data), meshes=bounded), scenes_from_json(json.dumps(data), meshes=here)
     assert a.objects[0].shape == b.objects[0].shape and len(a.objects[0].shape.parts) > 1
     assert multiprocessing.active_children() == []
+
+
+def test_a_recording_draws_the_mesh_an_object_was_read_from(folder, tmp_path):
+    """Rerun shows the mug itself (every vertex of the file, as read: scaled, +z up), not its parts'
+    hulls; where the file cannot be read again (a package:// URI here) the parts are drawn."""
+    import dataclasses
+
+    from rerun.chunk import RrdReader
+
+    from ipe_ros.engine.scene.meshes import source_triangles
+    from ipe_ros.viz.rerun_log import write_prediction_rrd
+
+    [scene] = load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "mug.obj"}), "drawn.json"))
+    vertices, triangles = source_triangles(scene.objects[0].shape.source)
+    assert len(vertices) == len(mug_mesh().vertices) and len(triangles) == len(mug_mesh().faces)
+
+    def drawn_vertices(scene) -> int:
+        prediction = predict(scene, ModelConfig(sigma_m=0.0, samples=1, object_noise=False), preset("default"),
+                             QuerySpec(queries=frozenset({"fall"})), check=None, record_every=20, record_samples=1)
+        path = tmp_path / "mug.rrd"
+        write_prediction_rrd(path, scene, prediction, answer=prediction.to_dict(), stamp_ns=1, rollouts_logged=1)
+        for chunk in RrdReader(path).stream().to_chunks():
+            if chunk.entity_path == "/world/scene/objects/mug":
+                batch = chunk.to_record_batch()
+                for name in batch.schema.names:
+                    if "vertex_positions" in name:
+                        return len(batch.column(name)[0])
+        raise AssertionError("no mesh drawn for the mug")
+
+    assert drawn_vertices(scene) == len(vertices)
+    packaged = dataclasses.replace(scene.objects[0].shape, source=dataclasses.replace(
+        scene.objects[0].shape.source, uri="package://nowhere/mug.obj"))
+    elsewhere = dataclasses.replace(scene, objects=(dataclasses.replace(scene.objects[0], shape=packaged),
+                                                    *scene.objects[1:]))
+    assert drawn_vertices(elsewhere) != len(vertices)  # the parts' hull faces

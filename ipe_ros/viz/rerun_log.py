@@ -55,7 +55,8 @@ def entity_part(name: str) -> str:
 
 def shape_archetype(body: Body, rgb, *, about_centre_of_mass: bool = False):
     """The body's shape drawn in its own frame (or about its centre of mass, as the engine's
-    rollouts place bodies): a box, an ellipsoid, a cylinder, a capsule, or a mesh of hull faces."""
+    rollouts place bodies): a box, an ellipsoid, a cylinder, a capsule, a mesh of hull faces, or the
+    mesh file an object was read from."""
     shape = body.shape
     offset = -shapes.centre_of_mass_m(shape) if about_centre_of_mass else np.zeros(3)
     color, solid = [to_rgb8(rgb)], rr.components.FillMode.Solid
@@ -71,7 +72,12 @@ def shape_archetype(body: Body, rgb, *, about_centre_of_mass: bool = False):
     if isinstance(shape, shapes.Capsule):  # rerun's capsule starts at its origin and runs along +z
         return rr.Capsules3D(translations=[offset - [0.0, 0.0, shape.length_m / 2]], lengths=[shape.length_m],
                              radii=[shape.radius_m], colors=color, labels=[body.name], fill_mode=solid)
-    vertices, triangles = shapes.hull_faces(shape)
+    drawn = None
+    if isinstance(shape, shapes.Compound) and shape.source is not None:  # the mesh itself, not its parts
+        from ..engine.scene.meshes import source_triangles
+
+        drawn = source_triangles(shape.source)
+    vertices, triangles = drawn if drawn is not None else shapes.hull_faces(shape)
     return rr.Mesh3D(vertex_positions=vertices + offset, triangle_indices=triangles, albedo_factor=color[0])
 
 

@@ -16,6 +16,7 @@ enclose a volume is refused with the fix.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import math
@@ -96,6 +97,23 @@ def mesh_shape(data: dict, path: str, access: MeshAccess | None, uri_field: str 
     # a package:// URI as given (it resolves on any machine with the package); a path as the file read
     shown_uri = uri.strip() if uri.strip().startswith("package://") else file.as_uri()
     return dataclasses.replace(compound, source=MeshSource(shown_uri, scale))
+
+
+@functools.lru_cache(maxsize=32)
+def source_triangles(source: MeshSource) -> tuple[np.ndarray, np.ndarray] | None:
+    """The mesh a compound was read from, as drawn (vertices in metres in the object frame, +z up, and
+    triangles), for recordings: read again from a ``file://`` source; None where it cannot be (a
+    ``package://`` URI, a file moved or changed into something unreadable): draw the parts then."""
+    from urllib.parse import unquote, urlparse
+
+    if not source.uri.startswith("file://"):
+        return None
+    file = Path(unquote(urlparse(source.uri).path))
+    try:
+        mesh = _load(_read_bounded(file, "source.uri"), file, tuple(source.scale), "source.uri")
+    except (SceneError, OSError):
+        return None
+    return np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
 
 
 def triangles_shape(points_m: np.ndarray, path: str, access: MeshAccess) -> Compound:

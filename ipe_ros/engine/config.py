@@ -21,7 +21,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from .scene import limits
@@ -273,7 +273,8 @@ class CollapseSettings:
     end_substeps: int = 1
     max_created_energy_fraction: float = 0.01
     quiet_sizes_per_s: float = 1.0
-    max_travel_fraction: float | None = None
+    #: part of a stored result's key only when set: results stored before it keep their keys
+    max_travel_fraction: float | None = field(default=None, metadata={"keyed": "when set"})
 
     def __post_init__(self) -> None:
         integer(self.step_factor, "collapse.step_factor", 1, 100, " (1: no collapse steps)")

@@ -249,6 +249,16 @@ def test_tipped_counts_a_turn_beyond_its_threshold_and_refuses_a_bad_one():
             Rotation.from_euler("x", 50, degrees=True) * start]  # tipped by 50 degrees
     turned = tipped_by_deg(np.array([start.as_quat()] * 3), np.array([e.as_quat() for e in ends]))
     assert turned == pytest.approx([70.0, 0.0, 50.0], abs=1e-6)
+    # up to a body's own symmetry: a ball never tips; a can lying on its side and rolling has not tipped,
+    # a can standing that ends on its side has
+    from ipe_ros.engine.scene.shapes import Cylinder, Sphere
+
+    lying = Rotation.from_euler("x", 90, degrees=True)
+    rolled = Rotation.from_euler("y", 120, degrees=True) * lying
+    turned = tipped_by_deg(np.array([start.as_quat(), lying.as_quat(), [0, 0, 0, 1.0]]),
+                           np.array([ends[2].as_quat(), rolled.as_quat(), lying.as_quat()]),
+                           (Sphere(0.1), Cylinder(0.03, 0.1), Cylinder(0.03, 0.1)))
+    assert turned == pytest.approx([0.0, 0.0, 90.0], abs=1e-6)
     for bad in (0.0, 180.0, float("nan"), True):
         with pytest.raises(ConfigError, match=r"tipped.threshold_deg: must be in \(0, 180\) degrees"):
             TippedParameters(threshold_deg=bad)

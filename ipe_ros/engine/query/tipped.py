@@ -6,7 +6,8 @@ extent): the paper's predicate for blocks in a tower. An object that tips over i
 onto its side or a bottle lying down, may drop its centre by less than that and is then not
 "fallen"; what a robot asks of it is whether it still stands as it stood. Tipped: the up direction,
 seen from the object, turned by more than the threshold between the start and the end (a turn
-about the vertical alone, a box spinning on the floor, is not tipping).
+about the vertical alone, a box spinning on the floor, is not tipping; nor is a ball rolling, or a
+can rolling on its side: a turn about a body's own axis of symmetry).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError, shown
+from ..scene.shapes import Capsule, Cylinder, Sphere
 from .base import Query, Reading, Samples
 
 
@@ -42,10 +44,20 @@ def up_in_body(orientations_xyzw: np.ndarray) -> np.ndarray:
     return np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=1)
 
 
-def tipped_by_deg(initial_xyzw: np.ndarray, final_xyzw: np.ndarray) -> np.ndarray:
-    """Per body, the angle (degrees) between the up direction it started and ended with, in its frame."""
+def tipped_by_deg(initial_xyzw: np.ndarray, final_xyzw: np.ndarray, shapes_: tuple | None = None) -> np.ndarray:
+    """Per body, the angle (degrees) between the up direction it started and ended with, in its
+    frame, up to the body's own symmetry (``shapes_``, per body; None: none): a sphere has no up, so
+    it never tips (a ball rolls); a cylinder's or a capsule's turn about its own axis is no tipping
+    (a can rolls on its side), so for them the change of its axis' tilt from the vertical."""
     before, after = up_in_body(initial_xyzw), up_in_body(final_xyzw)
-    return np.degrees(np.arccos(np.clip(np.sum(before * after, axis=1), -1.0, 1.0)))
+    turned = np.degrees(np.arccos(np.clip(np.sum(before * after, axis=1), -1.0, 1.0)))
+    for i, shape in enumerate(shapes_ or ()):
+        if isinstance(shape, Sphere):
+            turned[i] = 0.0
+        elif isinstance(shape, (Cylinder, Capsule)):  # the axis is z: its tilt is acos(up_z)
+            tilt = np.degrees(np.arccos(np.clip([before[i, 2], after[i, 2]], -1.0, 1.0)))
+            turned[i] = abs(tilt[1] - tilt[0])
+    return turned
 
 
 class Tipped(Query):
@@ -55,7 +67,8 @@ class Tipped(Query):
     Parameters = TippedParameters
 
     def read(self, reading: Reading) -> dict[str, Any]:
-        turned = tipped_by_deg(reading.initial_orientations_xyzw, reading.final_orientations_xyzw)
+        turned = tipped_by_deg(reading.initial_orientations_xyzw, reading.final_orientations_xyzw,
+                               tuple(b.shape for b in reading.scene.dynamic_objects))
         return {"tipped": turned > reading.spec.parameters_of(self.name).threshold_deg}
 
     def aggregate(self, samples: Samples) -> dict[str, Any]:

@@ -374,6 +374,25 @@ def test_an_unhealthy_rollout_is_rerun_in_its_own_task_and_the_answer_is_as_from
     assert fast.max_penetration_fraction <= 0.05
 
 
+def test_a_questions_unhealthy_variant_is_rerun_in_its_sample_task_as_it_would_be_in_a_round(tower):
+    """Robot questions too: asked where things land (far), both variants end unhealthy in sample 2 (as
+    the prediction's sample 2 does), and each rerun at the reference runs in that sample's task, the
+    variant alone; the answer is the one the check's own rounds give."""
+    model = ModelConfig(sigma_m=0.01, samples=3)
+    coarse_end = preset("default").changed("default-coarse-end", collapse={"end_substeps": 1})
+    actions = [None, A.Remove((tower.dynamic_objects[-1].name,))]
+    inline, rounds = CountingMap(), RoundsOnly()
+    fast = A.ask(tower, actions, model, coarse_end, seed=2, map_fn=inline, check=DEFAULT_CHECK, queries=("far",))
+    slow = A.ask(tower, actions, model, coarse_end, seed=2, map_fn=rounds, check=DEFAULT_CHECK, queries=("far",))
+    assert [v.self_check["refined_reasons"] for v in fast.variants] == [{"2": "penetration"}] * 2
+    ran_alone = [(t.settings.name, t.index, t.actions) for call in rounds.calls for t in call if len(t.actions) == 1]
+    assert (REFERENCE, 2, (None,)) in ran_alone and (REFERENCE, 2, (actions[1],)) in ran_alone  # rounds of their own
+    assert not [t for call in inline.calls for t in call if (t.settings.name, t.index) == (REFERENCE, 2)]
+    assert len(inline.calls) < len(rounds.calls)
+    for a, b in zip(fast.variants, slow.variants):
+        assert _answer(a) == _answer(b) and a.self_check == b.self_check
+
+
 def test_a_sample_verified_beside_its_fast_run_is_not_rerun_again_when_unhealthy(tower):
     """Sample 0 is verified in the first map: its fast run carries no ``refine``, since its rerun is at hand."""
     spy = CountingMap()

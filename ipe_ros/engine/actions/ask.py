@@ -24,6 +24,7 @@ from ..scene.bodies import Scene, Table
 from ..scene.validation import validate_scene
 from ..query.contact import check_pairs
 from ..sampling.outcome import SampleOutcome
+from ..sampling.rollout import Refine
 from .answers import QUESTION_QUERIES, Alone, Answers, aggregate_variant, aggregate_given, draws_noise, stood, fell, ran
 from .checks import check_action
 from .geometry import affected_regions, groups, reached
@@ -68,13 +69,17 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
                  what_falls, queries, query_parameters or {}, perceived)
     loop = MonteCarlo(run_variants, lost, map_fn, budget_s)  # the budget counts from here
     seeds = child_seeds(seed, plan.samples)
+    # an unhealthy variant's rerun at the reference runs in its sample's task (``rollout.Refine``)
+    refine = Refine(reference_settings(settings.horizon_s), check.max_end_penetration_fraction,
+                    check.max_energy_gain_fraction) if check is not None and check.enabled \
+        and not is_reference(settings) else None
 
     def tasks(indices, variants: list[int]) -> list[VariantTask]:
         return [VariantTask(scene=scene if perceived is None else perceived.scenes[i], model=model, settings=settings,
                             query=plan.query, index=i, seed=seeds[i],
                             actions=tuple(plan.simulated_actions[j] for j in variants),
                             regions=tuple(plan.regions[j] for j in variants),
-                            record_every=record_every if i < record_samples else 0)
+                            record_every=record_every if i < record_samples else 0, refine=refine)
                 for i in indices]
 
     per_sample, decisions, reports = loop.drive(_question(plan, tasks, settings, sequential, check, budget_s, scene,
@@ -257,8 +262,13 @@ def _check_variants(per_sample: list[list[SampleOutcome]], actions: list[Action]
         yield  # a plan even when it needs nothing run
     reference = reference_settings(settings.horizon_s)
     samples = range(len(per_sample))
+    # reruns made in their sample's task, taken out of the outcomes they came with
+    reruns = [{i: row[j].refined for i, row in enumerate(per_sample) if row[j].refined is not None}
+              for j in range(len(actions))]
+    for row in per_sample:
+        row[:] = [dataclasses.replace(o, refined=None) if o.refined is not None else o for o in row]
     checks = [mapped(checking(tasks(samples, [j]), [row[j] for row in per_sample], {}, check, reference,
-                              settings.name), _only)
+                              settings.name, rerun=reruns[j]), _only)
               for j in range(len(actions))]
     reports = {}
     for j, (outcomes, report) in enumerate((yield from together(checks))):

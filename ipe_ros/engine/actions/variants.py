@@ -14,6 +14,7 @@ import numpy as np
 from .. import simulation
 from ..errors import PhysicsError
 from ..sampling.perturb import draw_sample_inputs
+from ..sampling.outcome import energy_scale_of
 from ..sampling.rollout import (SampleOutcome, SampleTask, failed, guarded, rollout_result, separated_world, simulate_pushes,
                        simulate_sample)
 from ..scene.bodies import Scene
@@ -112,7 +113,20 @@ def run_variants(task: VariantTask) -> list[SampleOutcome]:
         if v not in out:
             out[v] = guarded(task, inputs.push_direction_rad,
                              lambda: _one_variant(task, action, shared, shared_orn, inputs, region))
-    return [out[v] for v in range(len(task.actions))]
+    return [_refined(task, v, out[v]) for v in range(len(task.actions))]
+
+
+def _refined(task: VariantTask, v: int, outcome: SampleOutcome) -> SampleOutcome:
+    """Variant ``v``'s outcome, with its rerun at the reference when it ended unhealthy and the task
+    asks for that (``rollout.Refine``): the very task the self-check would rerun, the variant alone."""
+    refine = task.refine
+    if refine is None or not outcome.unhealthy(energy_scale_of(task.scene), refine.max_end_penetration_fraction,
+                                               refine.max_energy_gain_fraction):
+        return outcome
+    alone = dataclasses.replace(task, actions=(task.actions[v],),
+                                regions=None if task.regions is None else (task.regions[v],))
+    (rerun,) = run_variants(alone.at(refine.settings))
+    return dataclasses.replace(outcome, refined=rerun)
 
 
 def _one_variant(task: VariantTask, action: Action, shared, shared_orn, inputs,

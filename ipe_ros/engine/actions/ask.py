@@ -15,7 +15,7 @@ from ..query.spec import check_names
 from ..sampling.decide import Sequential, Tally
 from ..errors import ConfigError
 from ..sampling.perturb import is_deterministic, position_sigmas_m
-from ..checking.fidelity import FidelityReport, SelfCheck, is_reference, reference_settings
+from ..checking.fidelity import FidelityReport, SelfCheck, is_reference, reference_settings, refine_in_task
 from ..checking.fidelity import check_request as check_fidelity_request
 from ..sampling.montecarlo import MapFn, MonteCarlo, Plan, check_budget, check_some_sample_finished, child_seeds, mapped, together
 from ..sampling.sampler import rollout_cost
@@ -24,7 +24,6 @@ from ..scene.bodies import Scene, Table
 from ..scene.validation import validate_scene
 from ..query.contact import check_pairs
 from ..sampling.outcome import SampleOutcome
-from ..sampling.rollout import Refine
 from .answers import QUESTION_QUERIES, Alone, Answers, aggregate_variant, aggregate_given, draws_noise, stood, fell, ran
 from .checks import check_action
 from .geometry import affected_regions, groups, reached
@@ -69,10 +68,7 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
                  what_falls, queries, query_parameters or {}, perceived)
     loop = MonteCarlo(run_variants, lost, map_fn, budget_s)  # the budget counts from here
     seeds = child_seeds(seed, plan.samples)
-    # an unhealthy variant's rerun at the reference runs in its sample's task (``rollout.Refine``)
-    refine = Refine(reference_settings(settings.horizon_s), check.max_end_penetration_fraction,
-                    check.max_energy_gain_fraction) if check is not None and check.enabled \
-        and not is_reference(settings) else None
+    refine = refine_in_task(check, settings)  # an unhealthy variant's rerun runs in its sample's task
 
     def tasks(indices, variants: list[int]) -> list[VariantTask]:
         return [VariantTask(scene=scene if perceived is None else perceived.scenes[i], model=model, settings=settings,

@@ -14,7 +14,6 @@ import numpy as np
 from .. import simulation
 from ..errors import PhysicsError
 from ..sampling.perturb import draw_sample_inputs
-from ..sampling.outcome import energy_scale_of
 from ..sampling.rollout import (SampleOutcome, SampleTask, failed, guarded, rollout_result, separated_world, simulate_pushes,
                        simulate_sample)
 from ..scene.bodies import Scene
@@ -119,13 +118,11 @@ def run_variants(task: VariantTask) -> list[SampleOutcome]:
 def _refined(task: VariantTask, v: int, outcome: SampleOutcome) -> SampleOutcome:
     """Variant ``v``'s outcome, with its rerun at the reference when it ended unhealthy and the task
     asks for that (``rollout.Refine``): the very task the self-check would rerun, the variant alone."""
-    refine = task.refine
-    if refine is None or not outcome.unhealthy(energy_scale_of(task.scene), refine.max_end_penetration_fraction,
-                                               refine.max_energy_gain_fraction):
+    if task.refine is None or not task.refine.why(outcome, task.scene):
         return outcome
     alone = dataclasses.replace(task, actions=(task.actions[v],),
                                 regions=None if task.regions is None else (task.regions[v],))
-    (rerun,) = run_variants(alone.at(refine.settings))
+    (rerun,) = run_variants(alone.at(task.refine.settings))
     return dataclasses.replace(outcome, refined=rerun)
 
 

@@ -54,6 +54,7 @@ from ..config import PRESETS, SimSettings
 from ..errors import ConfigError, shown
 from ..query import QUERIES
 from ..sampling.outcome import SampleOutcome
+from ..sampling.rollout import Refine
 
 #: The verdicts, from best to worst for a robot about to act.
 VERDICTS = ("reference", "verified", "validated", "escalated", "unverified", "contradicted")
@@ -141,6 +142,15 @@ def is_reference(settings: SimSettings) -> bool:
     ref = PRESETS["paper"]
     return (settings.time_step_s <= ref.time_step_s and settings.solver.iterations >= ref.solver.iterations
             and not settings.solver.maximal_coordinates and not settings.collapse.enabled)
+
+
+def refine_in_task(check: SelfCheck | None, settings: SimSettings) -> Refine | None:
+    """What a checked answer's fast tasks carry so that a sample ending unhealthy is rerun at the
+    reference in its own task (``rollout.Refine``); None where nothing is checked."""
+    if check is None or not check.enabled or is_reference(settings):
+        return None
+    return Refine(reference_settings(settings.horizon_s), check.max_end_penetration_fraction,
+                  check.max_energy_gain_fraction)
 
 
 def unhealthy(outcome: SampleOutcome, energy_scale_j: float, check: SelfCheck) -> str | None:

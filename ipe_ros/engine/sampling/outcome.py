@@ -4,6 +4,7 @@ the queries, the estimate, the self-check and the store; made by ``rollout``."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
@@ -89,8 +90,6 @@ class SampleOutcome:
 def energy_scale_of(scene) -> float:
     """The scene's energy scale (weight x size + initial kinetic energy), never zero: what a
     rollout's energy gain is measured against."""
-    import math
-
-    from ..simulation.health import energy_scale_j
+    from ..simulation.health import energy_scale_j  # here: the simulation package loads pybullet; plain data need not
 
     return max(energy_scale_j(scene), math.ulp(1.0))

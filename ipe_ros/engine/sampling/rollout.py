@@ -38,6 +38,11 @@ class Refine:
     max_end_penetration_fraction: float
     max_energy_gain_fraction: float
 
+    def why(self, outcome: SampleOutcome, scene: Scene) -> str | None:
+        """Why ``outcome`` (a sample of ``scene``) is rerun, or None when it ended healthy."""
+        return outcome.unhealthy(energy_scale_of(scene), self.max_end_penetration_fraction,
+                                 self.max_energy_gain_fraction)
+
 
 @dataclass(frozen=True)
 class SampleTask:
@@ -226,10 +231,8 @@ def run_sample(task: SampleTask, probe: Probe = NO_PROBE) -> SampleOutcome:
     outcome = guarded(task, inputs.push_direction_rad,
                       lambda: simulate_sample(task, inputs, separated_world(task.scene, task.settings, inputs, probe),
                                               probe))
-    refine = task.refine
-    if refine is not None and outcome.unhealthy(energy_scale_of(task.scene), refine.max_end_penetration_fraction,
-                                                refine.max_energy_gain_fraction):
-        outcome = dataclasses.replace(outcome, refined=run_sample(task.at(refine.settings), probe))
+    if task.refine is not None and task.refine.why(outcome, task.scene):
+        outcome = dataclasses.replace(outcome, refined=run_sample(task.at(task.refine.settings), probe))
     return outcome
 
 

@@ -23,12 +23,12 @@ from .estimate import Prediction, aggregate, sample_any_fall, sample_fall_fracti
 from ..checking.fidelity import check_request as check_fidelity_request
 from ..checking.envelope import validated_because
 from ..checking.fidelity import (DEFAULT_CHECK, NO_CHECK, FidelityReport, SelfCheck, coverage_ahead, is_reference,
-                       look_ahead_split, reference_settings, verification_count)
+                       look_ahead_split, reference_settings, refine_in_task, verification_count)
 from .montecarlo import (MapFn, MonteCarlo, Plan, check_budget, check_seed, check_some_sample_finished, child_seeds,
                          together)
 from ..perceptions import perception_source
 from .perturb import is_deterministic
-from .rollout import Refine, SampleOutcome, SampleTask, lost, run_sample
+from .rollout import SampleOutcome, SampleTask, lost, run_sample
 from ..checking.self_check import checking
 from ..query import QUERIES, QuerySpec
 from ..scene.bodies import DEFAULT_MAX_OBJECTS, Scene
@@ -220,9 +220,9 @@ def _prediction(tasks: list[SampleTask], query: QuerySpec, settings: SimSettings
     reference = reference_settings(settings.horizon_s)
     verified: dict[int, SampleOutcome] = {}
     refined: dict[int, SampleOutcome] = {}  # unhealthy samples' reruns at the reference, made in their own task
-    if check.enabled and not is_reference(settings):
-        tasks = [dataclasses.replace(t, refine=Refine(reference, check.max_end_penetration_fraction,
-                                                      check.max_energy_gain_fraction)) for t in tasks]
+    refine = refine_in_task(check, settings)
+    if refine is not None:
+        tasks = [dataclasses.replace(t, refine=refine) for t in tasks]
     first = list(range(verification_count(check, len(tasks))))
     stopped_by = "samples"
     if stop is None:

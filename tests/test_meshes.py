@@ -319,7 +319,7 @@ def test_a_mesh_object_goes_out_as_its_mesh_to_rviz_and_back_in_the_json(folder)
 
     [scene] = load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "mug.obj", "scale": 1.5}), "scaled.json"))
     mug = scene.objects[0].shape
-    assert mug.source == MeshSource((folder / "mug.obj").resolve().as_uri(), (1.5, 1.5, 1.5))
+    assert mug.source == MeshSource("file://" + str((folder / "mug.obj").resolve()), (1.5, 1.5, 1.5))
     data = scene_to_dict(scene)
     assert data["objects"][0]["shape"]["source"] == {"uri": mug.source.uri, "scale": [1.5, 1.5, 1.5]}
     assert scene_from_dict(json.loads(json.dumps(data))) == scene  # no mesh access needed: parts are read
@@ -338,6 +338,23 @@ def test_a_mesh_object_goes_out_as_its_mesh_to_rviz_and_back_in_the_json(folder)
                      QuerySpec(queries=frozenset({"fall"})), check=None)
     shown = [m for m in prediction_to_markers(scene, answer, "world", 0).markers if m.ns == "ipe/objects"]
     assert [(m.type, m.mesh_resource) for m in shown] == [(Marker.MESH_RESOURCE, mug.source.uri), (Marker.SPHERE, "")]
+
+
+def test_a_mesh_source_in_a_folder_with_a_space_reads_back_to_the_same_file(folder, tmp_path):
+    """The URI a mesh object goes out with (``file://`` and the path, as ROS writes it) is read back by
+    the same rule: from a MESH_RESOURCE marker, and by the recordings."""
+    from ipe_ros.engine.scene.meshes import MeshAccess, source_triangles
+    from msg_bridge.markers import markers_to_scene, scene_to_markers
+
+    spaced = tmp_path / "my meshes"
+    spaced.mkdir()
+    (spaced / "mug.obj").write_bytes((folder / "mug.obj").read_bytes())
+    [scene] = load_scenes(_write(spaced, scene_with({"type": "mesh", "uri": "mug.obj"}), "spaced.json"))
+    source = scene.objects[0].shape.source
+    assert source.uri == "file://" + str((spaced / "mug.obj").resolve())
+    back = markers_to_scene(scene_to_markers(scene, "world"), meshes=MeshAccess(roots=(spaced.resolve(),)))
+    assert back.scene.objects[0].shape == scene.objects[0].shape
+    assert source_triangles(source) is not None
 
 
 def test_a_robot_asks_whether_placing_a_spoon_in_the_mug_tips_it(folder):

@@ -95,8 +95,13 @@ def mesh_shape(data: dict, path: str, access: MeshAccess | None, uri_field: str 
                                            access.decomposition) + content).hexdigest()
     compound = _compound(key, lambda: _load(content, file, scale, where), access, where)
     # a package:// URI as given (it resolves on any machine with the package); a path as the file read
-    shown_uri = uri.strip() if uri.strip().startswith("package://") else file.as_uri()
+    shown_uri = uri.strip() if uri.strip().startswith("package://") else FILE_URI + str(file)
     return dataclasses.replace(compound, source=MeshSource(shown_uri, scale))
+
+
+#: a file:// URI is this and the absolute path, as ROS writes it (no percent-escapes): read and
+#: written by the one rule, so that a source read back names the same file
+FILE_URI = "file://"
 
 
 @functools.lru_cache(maxsize=32)
@@ -104,11 +109,9 @@ def source_triangles(source: MeshSource) -> tuple[np.ndarray, np.ndarray] | None
     """The mesh a compound was read from, as drawn (vertices in metres in the object frame, +z up, and
     triangles), for recordings: read again from a ``file://`` source; None where it cannot be (a
     ``package://`` URI, a file moved or changed into something unreadable): draw the parts then."""
-    from urllib.parse import unquote, urlparse
-
-    if not source.uri.startswith("file://"):
+    if not source.uri.startswith(FILE_URI):
         return None
-    file = Path(unquote(urlparse(source.uri).path))
+    file = Path(source.uri[len(FILE_URI):])
     try:
         mesh = _load(_read_bounded(file, "source.uri"), file, tuple(source.scale), "source.uri")
     except (SceneError, OSError):
@@ -175,8 +178,8 @@ def _resolve(uri: str, path: str, access: MeshAccess) -> Path:
             raise SceneError(path, f"package {shown(package)} is not in the ROS package index nor under "
                                    f"{', '.join(map(str, access.roots)) or 'any mesh root'}; source its workspace or "
                                    "add its parent folder to the mesh roots")
-    elif uri.startswith("file://"):
-        candidate = Path(uri[len("file://"):])
+    elif uri.startswith(FILE_URI):
+        candidate = Path(uri[len(FILE_URI):])
     elif "://" in uri:
         raise SceneError(path, f"{shown(uri)}: only file paths, file:// and package:// URIs are read")
     else:

@@ -121,6 +121,41 @@ def test_a_batch_of_poses_scores_as_each_pose_alone_and_moves_keep_the_score_exa
     assert abs(model.start(positions, yaws) - kept) < 1e-9  # the running score is the fresh one
 
 
+def test_a_move_to_a_pose_just_scored_leaves_the_model_as_a_fresh_cast_does():
+    """``move`` reuses the rays and pixel scores its pose was scored with: the model is then, bit for
+    bit, the one that casts the pose afresh; a pose scored before something else moved is cast again."""
+    from ipe_ros.engine.vision.depth_model import DepthModel
+
+    scene = floor(cube("a", 0, 0, 0.05), cube("b", 0.01, 0, 0.15), cube("c", 0.2, 0.1, 0.05))
+    camera = look_at((1.0, -0.7, 0.6), (0, 0, 0.1))
+    observation = observe(scene, camera)
+    reused, cast = (DepthModel(scene, (observation,), D.DepthSettings()) for _ in range(2))
+    positions, yaws = np.array([b.position_m for b in scene.objects]), np.zeros(3)
+    rng = np.random.default_rng(4)
+    poses, turns_ = positions[1] + 0.004 * rng.standard_normal((6, 3)), 0.05 * rng.standard_normal(6)
+    for model in (reused, cast):
+        model.start(positions, yaws)
+    batch = reused.log_likelihoods(1, poses, turns_)
+    assert reused._cast_at(1, poses[2], float(turns_[2]), None) is not None
+    reused.move(1, poses[2], turns_[2], batch[2])
+    cast.move(1, poses[2], turns_[2], batch[2])  # nothing scored here: cast afresh
+    assert all(np.array_equal(a, b) for a, b in zip(reused.layers, cast.layers))
+    assert all(np.array_equal(a, b) for a, b in zip(reused.pixel_ll_now, cast.pixel_ll_now))
+
+    step = positions[0] + [0.001, 0, 0]
+    score_of_step = reused.log_likelihoods(0, step[None], np.zeros(1))[0]
+    there = poses[1] + [0.2, 0.1, -0.1]
+    scored = reused.log_likelihoods(2, np.array([there, there + 0.002]), turns_[:2])
+    assert reused._cast_at(2, there, float(turns_[0]), None) is not None
+    reused.move(0, step, 0.0, score_of_step)  # something else moves: what was scored for c is stale
+    assert reused._cast_at(2, there, float(turns_[0]), None) is None
+    reused.move(2, there, turns_[0], reused.log_likelihoods(2, there[None], turns_[:1])[0])
+    assert np.isfinite(scored).all()
+    kept = reused.current
+    positions[0], positions[1], positions[2], yaws[1], yaws[2] = step, poses[2], there, turns_[2], turns_[0]
+    assert abs(reused.start(positions, yaws) - kept) < 1e-9  # the running score is the fresh one
+
+
 def test_the_chains_give_the_same_posterior_in_workers_as_here():
     """Two chains, one per worker or one after the other in this process: the same states, bit for bit
     (their seeds never depend on the workers), and a chain's budget refusal arrives from its worker."""

@@ -223,16 +223,21 @@ def scene_at_pose(scene: Scene, positions_m: np.ndarray, yaws_rad: np.ndarray,
     """The scene with its dynamic objects at these positions (frame origins), turned by these yaws from
     their published orientation and then tilted by these tilts (rotation vectors (a, b, 0) about the
     scene's axes; none: as published), their own noise removed (the posterior stands in for it)."""
-    state = iter(zip(positions_m, yaws_rad, np.zeros((len(yaws_rad), 2)) if tilts_rad is None else tilts_rad))
+    dynamic = [body for body in scene.objects if not body.static]
+    tilts = np.zeros((len(dynamic), 2)) if tilts_rad is None else np.asarray(tilts_rad, float)
+    # every object's turn and tilt composed in one call each (per object, scipy's overhead was most of
+    # a 10-block posterior's 48 scenes' 0.12 s)
+    turns = [(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)) for yaw in yaws_rad]
+    tilt_quats = Rotation.from_rotvec(np.column_stack([tilts, np.zeros(len(dynamic))])).as_quat()
+    orientations = iter(quaternion_product(tilt_quats, quaternion_product(
+        np.array(turns).reshape(-1, 4), np.array([body.orientation_xyzw for body in dynamic]).reshape(-1, 4))))
+    positions = iter(positions_m)
     objects = []
     for body in scene.objects:
         if body.static:
             objects.append(body)
             continue
-        position, yaw, (a, b) = next(state)
-        turn = (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
-        tilt = Rotation.from_rotvec((a, b, 0.0)).as_quat()
-        orientation = quaternion_product(tilt, quaternion_product(turn, body.orientation_xyzw))
+        position, orientation = next(positions), next(orientations)
         objects.append(dataclasses.replace(body, position_m=tuple(float(v) for v in position),
                                            orientation_xyzw=tuple(float(v) for v in orientation),
                                            position_sigma_m=0.0, yaw_sigma_rad=None))

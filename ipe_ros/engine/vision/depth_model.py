@@ -199,6 +199,8 @@ class DepthModel:
                                        f"{settings.max_range_m:g} m, or the objects are out of view; check the camera "
                                        "driver, the camera info and the camera pose")
         self.offsets_m = np.zeros(len(observations))
+        self.others = [np.delete(np.arange(len(self.bodies)), b) for b in range(len(self.bodies))]  # every body but b
+        self._cast = None  # the last poses scored, reused by ``move`` (``_cast_at``)
 
     def _pixel_ll(self, measured: np.ndarray, predicted: np.ndarray) -> np.ndarray:
         """Per pixel log p(measured | predicted); predicted inf: nothing there, the outlier density."""
@@ -215,8 +217,12 @@ class DepthModel:
         if box is None:
             return np.ones(len(self.rows[v]), bool)
         u0, u1, v0, v1 = box
-        rows, columns = self.rows[v], self.columns[v]
-        return (columns >= u0 - 1) & (columns <= u1 + 1) & (rows >= v0 - 1) & (rows <= v1 + 1)
+        # the pixels read are in raster order (np.nonzero): the box's rows are one run of them
+        first, end = np.searchsorted(self.rows[v], (math.ceil(v0 - 1), math.floor(v1 + 1) + 1))
+        inside = np.zeros(len(self.rows[v]), bool)
+        columns = self.columns[v][first:end]
+        inside[first:end] = (columns >= u0 - 1) & (columns <= u1 + 1)
+        return inside
 
     def _depths(self, v: int, body: int, positions_m: np.ndarray, rotations: np.ndarray,
                 index: np.ndarray) -> np.ndarray:
@@ -236,6 +242,7 @@ class DepthModel:
         """Every body at its pose (``tilts_rad``: (bodies, 2), none: as published): the layers and the
         (tempered) log-likelihood."""
         self.layers = [np.full((len(self.bodies), len(rows)), np.inf) for rows in self.rows]
+        self._cast = None
         self.pixel_ll_now = [np.zeros(len(rows)) for rows in self.rows]
         for v in range(len(self.observations)):
             for b in range(len(self.bodies)):
@@ -262,28 +269,54 @@ class DepthModel:
         positions_m = np.asarray(positions_m, float)
         rotations = pose_rotations(yaws_rad, tilts_rad)
         change = np.zeros(len(positions_m))
+        casts = []
+        # kept until the state changes: the pose taken is one of these (``move``)
+        self._cast = (body, positions_m, np.asarray(yaws_rad, float),
+                      None if tilts_rad is None else np.asarray(tilts_rad, float), casts)
         for v in range(len(self.observations)):
-            if not len(self.rows[v]):
-                continue
             # where the poses may show it, and where it shows now
             index = np.flatnonzero(self._in_view(v, body, positions_m, rotations) | np.isfinite(self.layers[v][body]))
+            casts.append((index, np.full((len(positions_m), 0), np.inf), np.zeros((len(positions_m), 0))))
             if not len(index):
                 continue
-            layers = self.layers[v][:, index]
-            others = np.delete(layers, body, axis=0).min(axis=0) if len(layers) > 1 else np.full(len(index), np.inf)
+            others = (self.layers[v][:, index][self.others[body]].min(axis=0) if len(self.bodies) > 1
+                      else np.full(len(index), np.inf))
             moved = self._depths(v, body, positions_m, rotations, index)
             measured = self.measured[v][index] - self.offsets_m[v]
-            after = self._pixel_ll(measured, self._predicted(v, index, np.minimum(others, moved))).sum(axis=1)
-            change += after - self.pixel_ll_now[v][index].sum()
+            after = self._pixel_ll(measured, self._predicted(v, index, np.minimum(others, moved)))
+            casts[v] = (index, moved, after)
+            change += after.sum(axis=1) - self.pixel_ll_now[v][index].sum()
         return self.current + change / self.settings.temperature
 
     def move(self, body: int, position_m: np.ndarray, yaw_rad: float, log_likelihood: float,
              tilt_rad: np.ndarray | None = None) -> None:
         """Put ``body`` at this pose, whose (tempered) log-likelihood ``log_likelihoods`` gave."""
+        position_m = np.asarray(position_m, float)
+        cast = self._cast_at(body, position_m, float(yaw_rad), tilt_rad)
         for v in range(len(self.observations)):
-            self._rescore(v, np.flatnonzero(self._place(v, body, np.asarray(position_m, float), float(yaw_rad),
-                                                        tilt_rad)))
+            if cast is None:
+                changed = self._place(v, body, position_m, float(yaw_rad), tilt_rad)
+                self._rescore(v, np.flatnonzero(changed))
+            else:  # as this pose was scored (a pose taken was just scored), at pixels that include where it was
+                index, depths, pixel_ll = cast[v]
+                self.layers[v][body] = np.inf
+                self.layers[v][body, index] = depths
+                self.pixel_ll_now[v][index] = pixel_ll
         self.current = float(log_likelihood)
+        self._cast = None  # scored against the state before this move
+
+    def _cast_at(self, body: int, position_m: np.ndarray, yaw_rad: float,
+                 tilt_rad: np.ndarray | None) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]] | None:
+        """Per camera, (pixels read, ``body``'s depth there, their log-likelihood) at this pose if the
+        last ``log_likelihoods`` scored it and nothing has moved since; None otherwise."""
+        if self._cast is None or self._cast[0] != body:
+            return None
+        _, positions, yaws, tilts, casts = self._cast
+        same = np.all(positions == position_m, axis=1) & (yaws == yaw_rad)
+        tilt = np.zeros(2) if tilt_rad is None else np.asarray(tilt_rad, float)
+        same &= np.all(tilt == 0) if tilts is None else np.all(tilts == tilt, axis=1)
+        hits = np.flatnonzero(same)
+        return None if not len(hits) else [(index, depths[hits[0]], pixel_ll[hits[0]]) for index, depths, pixel_ll in casts]
 
     def offset_log_likelihoods(self, v: int, offsets_m: np.ndarray) -> np.ndarray:
         """(offsets,) the (tempered) log-likelihood with camera v's range offset at each value; the
@@ -296,6 +329,7 @@ class DepthModel:
 
     def set_offset(self, v: int, offset_m: float, log_likelihood: float) -> None:
         self.offsets_m[v] = offset_m
+        self._cast = None
         if len(self.rows[v]):
             self._rescore(v)
         self.current = float(log_likelihood)

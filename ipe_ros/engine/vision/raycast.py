@@ -75,7 +75,8 @@ def pose_rotations(yaws_rad: np.ndarray, tilts_rad: np.ndarray | None = None) ->
     """(n, 3, 3): a turn about the vertical by the yaw, then the tilt (``tilts``), both about the
     body's frame origin, from its orientation in the scene."""
     turned = turns(np.asarray(yaws_rad, float))
-    return turned if tilts_rad is None else tilts(np.asarray(tilts_rad, float)) @ turned
+    # no tilt is the identity, exactly: most objects' tilts are not estimated, and the chain asks often
+    return turned if tilts_rad is None or not np.any(tilts_rad) else tilts(np.asarray(tilts_rad, float)) @ turned
 
 
 def pixel_box(body: ConvexBody, camera, positions_m: np.ndarray, rotations: np.ndarray) -> tuple[float, ...] | None:

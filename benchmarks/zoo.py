@@ -9,10 +9,13 @@ Every zoo family (ipe_ros.engine.scene.zoo) under `paper` (the converged referen
 the integrator at all) and the candidates (by default `default`, which checks itself, and
 `default-unchecked`, the same physics without the checks). Each scene's sigma is 5% of its smallest
 dynamic body; every configuration gets the same seeds, hence the same noisy scenes. Queries: the
-node's default (fall, any_fall, direction, far), so rollouts run as a user's do.
+node's default (fall, any_fall, direction, far), so rollouts run as a user's do, and what a family
+asks besides (``zoo.EXTRA_QUERIES``: `household` asks whether its objects tip over, and its tipping
+counts in the bars as falling does).
 
 Per family and configuration: seconds per prediction and speed-up over `paper` (configurations take
-turns scene by scene, so the machine's drift hits each alike), mean and max |dP(object falls)| and
+turns scene by scene, so the machine's drift hits each alike), mean and max |dP(object falls)| (and
+|dP(object tips)| where asked) and
 |dP(anything falls)| against `paper`, per-sample agreement on "did anything fall?", the worst end
 penetration and the rollouts ending > 5% inside another, the worst energy gain (% of the scene's
 scale), the share of samples the self-check refined or escalated, the share of rollouts whose
@@ -37,10 +40,23 @@ from accuracy_vs_time import _anything_fell  # noqa: E402 - the towers' "did any
 from ipe_ros.engine import PRESETS, ModelConfig, QuerySpec, WorkerPool, predict  # noqa: E402
 from ipe_ros.engine.config import DEFAULT_QUERIES  # noqa: E402
 from ipe_ros.engine.simulation.health import energy_scale_j  # noqa: E402
-from ipe_ros.engine.scene.zoo import FAMILIES, family_of, scene_zoo, zoo_sigma_m  # noqa: E402
+from ipe_ros.engine.scene.zoo import EXTRA_QUERIES, FAMILIES, family_of, scene_zoo, zoo_sigma_m  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 QUERY = QuerySpec(queries=DEFAULT_QUERIES)
+
+
+def family_query(family: str) -> QuerySpec:
+    return QuerySpec(queries=DEFAULT_QUERIES | EXTRA_QUERIES.get(family, frozenset()))
+
+
+def object_differences(p, r) -> list[float]:
+    """|dP| per object between two predictions: falling, and tipping where both asked it."""
+    diffs = [abs(p.object_fall_probability[n] - r.object_fall_probability[n]) for n in r.object_fall_probability]
+    if p.tipped_object_probability and r.tipped_object_probability:
+        diffs += [abs(p.tipped_object_probability[n] - r.tipped_object_probability[n])
+                  for n in r.tipped_object_probability]
+    return diffs
 PAPER = PRESETS["paper"]
 
 
@@ -65,7 +81,7 @@ def compare_family(rows: list[dict], reference: list[dict]) -> dict:
         p, r = row["prediction"], ref["prediction"]
         if not (p.samples and r.samples):
             continue
-        diffs = [abs(p.object_fall_probability[n] - r.object_fall_probability[n]) for n in r.object_fall_probability]
+        diffs = object_differences(p, r)
         d_obj.append(float(np.mean(diffs)))
         worst_scene = max(worst_scene, max(diffs), abs(p.any_fall_probability - r.any_fall_probability))
         d_any.append(abs(p.any_fall_probability - r.any_fall_probability))
@@ -111,7 +127,8 @@ def verdict(family_rows: dict[str, dict]) -> dict:
 
 def markdown(report: dict) -> str:
     lines = [f"# The scene zoo: {report['per_family']} scenes per family (seed {report['seed']}), k = "
-             f"{report['samples']}, queries {', '.join(sorted(QUERY.queries))}", "",
+             f"{report['samples']}, queries {', '.join(sorted(QUERY.queries))} (and "
+             + "; ".join(f"{f}: {', '.join(sorted(q))}" for f, q in EXTRA_QUERIES.items()) + ")", "",
              f"{report['machine']}; {report['date']}; sigma = 5% of each scene's smallest dynamic body; every "
              "configuration on the same noisy scenes (same seeds), taking turns scene by scene; "
              f"wall time {report['wall_s'] / 60:.0f} min.", "",
@@ -167,7 +184,8 @@ def main(argv: list[str] | None = None) -> None:
             line = []
             for name, (settings, check) in configs.items():
                 t0 = time.perf_counter()
-                prediction = predict(scene, model, settings, QUERY, seed=i, map_fn=pool.map, check=check)
+                prediction = predict(scene, model, settings, family_query(family_of(scene)), seed=i, map_fn=pool.map,
+                                     check=check)
                 wall = time.perf_counter() - t0
                 results[name].append({"family": family_of(scene), "prediction": prediction, "wall_s": wall,
                                       "energy_scale_j": energy_scale_j(scene)})

@@ -95,3 +95,33 @@ def visible_fraction(rays, eye, boxes, hit_by, i: int) -> float:
     """Share of box i's pixels (its own silhouette) where it is the nearest thing."""
     own = np.isfinite(box_entry(rays, eye, *boxes[i]))
     return float((hit_by[own] == i).mean()) if own.any() else 0.0
+
+
+def triangles_entry(rays, eye, triangles) -> np.ndarray:
+    """Where each ray first meets a triangle mesh (``triangles``: (n, 3, 3) corners in the scene frame;
+    depth along the optical axis; inf: it misses), by Moller-Trumbore, ray by triangle; only rays
+    through the mesh's bounding sphere are cast."""
+    rays = np.asarray(rays, float)
+    eye = np.asarray(eye, float)
+    flat = rays.reshape(-1, 3)
+    corners = triangles.reshape(-1, 3)
+    centre = (corners.min(axis=0) + corners.max(axis=0)) / 2
+    radius = np.linalg.norm(corners - centre, axis=1).max()
+    along = (centre - eye) @ flat.T / np.einsum("ij,ij->i", flat, flat)  # the ray point nearest the centre
+    near = np.linalg.norm(eye + along[:, None] * flat - centre, axis=1) <= radius
+    out = np.full(len(flat), np.inf)
+    a, edge1, edge2 = triangles[:, 0], triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]
+    for chunk in np.array_split(np.flatnonzero(near), max(1, int(near.sum()) // 256)):
+        d = flat[chunk][:, None, :]                                  # (rays, 1, 3)
+        p = np.cross(d, edge2[None])                                  # (rays, tris, 3)
+        det = np.einsum("rtk,tk->rt", p, edge1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inverse = 1.0 / det
+            s = eye - a                                               # (tris, 3)
+            u = np.einsum("rtk,tk->rt", p, s) * inverse
+            q = np.cross(s, edge1)                                    # (tris, 3)
+            v = np.einsum("rk,tk->rt", d[:, 0], q) * inverse
+            t = np.einsum("tk,tk->t", q, edge2)[None] * inverse
+        hit = (np.abs(det) > 1e-15) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
+        out[chunk] = np.where(hit, t, np.inf).min(axis=1)
+    return out.reshape(rays.shape[:-1])

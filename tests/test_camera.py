@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from ipe_ros.engine import Box, ConfigError, Floor, Scene
+from ipe_ros.engine import Body, Box, ConfigError, Floor, Scene
 from ipe_ros.engine.vision import depth as D
 from ipe_ros.engine.vision.camera import PinholeCamera, camera_from_info
 from ipe_ros.engine.vision.tinyrenderer import depth_with_pybullet
@@ -99,3 +99,35 @@ def test_camera_info_is_read_as_image_geometry_reads_it():
         camera_from_info({"width": 640, "height": 480, "k": k, "d": [0.1, 0, 0, 0, 0]}, *pose)
     with pytest.raises(ConfigError, match=r"^camera_info.p: must hold the 12 numbers of P"):
         camera_from_info({"width": 640, "height": 480, "k": k, "p": [1.0] * 9}, *pose)
+
+
+@pytest.mark.slow
+def test_a_mug_from_its_mesh_is_found_where_it_stands():
+    """Depth perception of a mesh object: the image is the true mug's triangles (a handle on one side,
+    the rest round) ray-cast here, by no code of the engine's, with 1 mm noise; the engine's
+    likelihood casts the mug's convex parts, which stand up to a millimetre proud of the mesh. The
+    detector's guess is 1.8 cm and 0.15 rad off: the posterior mean lands within 1.5 mm of the truth
+    (0.7 mm measured) and its turn within 0.03 rad (0.009; the handle alone tells the turn)."""
+    from ipe_ros.engine.scene import household
+    from ipe_ros.engine.scene.meshes import MeshAccess, triangles_shape
+    from tests.analytic_camera import triangles_entry
+
+    vertices, faces = household.mug()
+    shape = triangles_shape(vertices[faces].reshape(-1, 3), "mug", MeshAccess(roots=()))
+    centre, yaw = np.array([0.02, -0.01, 0.0]), 0.6
+    turn = np.array([[math.cos(yaw), -math.sin(yaw), 0.0], [math.sin(yaw), math.cos(yaw), 0.0], [0.0, 0.0, 1.0]])
+    truth = np.fmin(analytic_depth(RAYS, EYE, ()), triangles_entry(RAYS, EYE, vertices[faces] @ turn.T + centre))
+    measured = truth + 0.001 * np.random.default_rng(2).standard_normal(truth.shape)
+
+    def mug_at(position, turn_rad):
+        return Body(name="mug", shape=shape, position_m=tuple(position), friction=0.6, restitution=0.0,
+                    orientation_xyzw=(0.0, 0.0, math.sin(turn_rad / 2), math.cos(turn_rad / 2)), mass_kg=0.3)
+
+    guess = scene_of(mug_at(centre + [0.015, -0.01, 0.0], yaw + 0.15))
+    # a short chain: where it ends up is the question here, not its calibration
+    settings = D.DepthSettings(kept_states=16, burn_in_sweeps=4, locate_rounds=12)
+    posterior = D.run_depth_chain(guess, (D.DepthObservation(CAMERA, measured),), settings, np.random.default_rng(3))
+    mean_xy = posterior.positions_m[:, 0, :2].mean(axis=0)
+    mean_turn = float(posterior.yaws_rad[:, 0].mean())  # from the guess's orientation
+    assert np.hypot(*(mean_xy - centre[:2])) < 1.5e-3, mean_xy - centre[:2]
+    assert abs(mean_turn + 0.15) < 0.03, mean_turn

@@ -53,7 +53,7 @@ from ..checks import boolean, integer, positive
 from ..config import PRESETS, SimSettings
 from ..errors import ConfigError, shown
 from ..query import QUERIES
-from ..sampling.outcome import SampleOutcome
+from ..sampling.outcome import HEALTHY_END_PENETRATION_FRACTION, HEALTHY_ENERGY_GAIN_FRACTION, SampleOutcome
 from ..sampling.rollout import Refine
 
 #: The verdicts, from best to worst for a robot about to act.
@@ -115,8 +115,8 @@ class SelfCheck:
     escalate_min_samples: int = 3
     cover_samples: int = 1
     always_verify: bool = False
-    max_end_penetration_fraction: float = 0.05
-    max_energy_gain_fraction: float = 0.01
+    max_end_penetration_fraction: float = HEALTHY_END_PENETRATION_FRACTION
+    max_energy_gain_fraction: float = HEALTHY_ENERGY_GAIN_FRACTION
 
     def __post_init__(self) -> None:
         boolean(self.enabled, "self_check.enabled")
@@ -269,6 +269,8 @@ class FidelityReport:
         "escalation": the reference), for the parts that ran.
     refined_reasons: per refined sample index, why ("penetration", "energy", "failed").
     validated: why no sample was verified (``validated``: inside the validated envelope).
+    rigid_reruns: reference rollouts in multibodies that ended unhealthy and were rerun in plain
+        rigid bodies (``SimSettings.rigid_when_unhealthy``).
     """
 
     verdict: str
@@ -279,13 +281,15 @@ class FidelityReport:
     escalated_samples: int = 0
     settings: tuple[tuple[str, str], ...] = ()
     validated: str = ""  # why no sample was verified (the scene is inside the validated envelope)
+    rigid_reruns: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         return {"verdict": self.verdict, "verified_samples": self.verified_samples,
                 "disagreeing_samples": self.disagreeing_samples, "refined_samples": self.refined_samples,
                 "refined_reasons": {str(i): why for i, why in self.refined_reasons},
                 "escalated_samples": self.escalated_samples, "settings": dict(self.settings),
-                **({"validated": self.validated} if self.validated else {})}
+                **({"validated": self.validated} if self.validated else {}),
+                **({"rigid_reruns": self.rigid_reruns} if self.rigid_reruns else {})}
 
 
 def check_request(check: SelfCheck | None) -> None:

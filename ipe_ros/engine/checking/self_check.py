@@ -33,6 +33,10 @@ class _Comparison:
     def contradicted(self, compared: dict[int, np.ndarray]) -> bool:
         return contradicts(list(compared.values()), self.check.escalate_share, self.at_least)
 
+    def rigid_reruns(self) -> int:
+        """Reference reruns whose multibody rollout ended unhealthy and was rerun in plain rigid bodies."""
+        return sum(ref.rerun_rigid is not None for ref in self.checked.values())
+
 
 def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: dict[int, SampleOutcome],
              check: SelfCheck, reference: SimSettings, fast_name: str, validated: str = "",
@@ -83,15 +87,17 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: d
         verdict = "verified" if first and all(i in compared for i in first) and not unconfirmed else "unverified"
         if validated:
             verdict = "validated" if not unconfirmed else "unverified"
-        return merge(outcomes, refined), FidelityReport(verdict, settings=tuple(parts), validated=validated, **common)
+        return merge(outcomes, refined), FidelityReport(verdict, settings=tuple(parts), validated=validated,
+                                                        rigid_reruns=state.rigid_reruns(), **common)
     # 4. escalation: contradicted on this scene, so every sample at the reference
     yield from state.rerun([i for i in range(len(outcomes)) if i not in state.checked and not outcomes[i].skipped])
     parts.append(("escalation", reference.name))
     done = state.checked
     if any(o.budget_stopped for o in done.values()):
-        return merge(outcomes, refined), FidelityReport("contradicted", settings=tuple(parts), **common)
+        return merge(outcomes, refined), FidelityReport("contradicted", settings=tuple(parts),
+                                                        rigid_reruns=state.rigid_reruns(), **common)
     return merge(outcomes, done), FidelityReport("escalated", escalated_samples=len(done), settings=tuple(parts),
-                                                 **common)
+                                                 rigid_reruns=state.rigid_reruns(), **common)
 
 
 def _confirm(state: _Comparison, repair: int, cover: int) -> Plan:

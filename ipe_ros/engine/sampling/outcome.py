@@ -10,6 +10,12 @@ from typing import Any, Mapping
 
 import numpy as np
 
+#: a rollout ending with a body deeper than this fraction of its smallest extent inside another, or
+#: having gained more energy than this fraction of the scene's energy scale, ended unhealthy (the
+#: self-check's defaults; ``SimSettings.rigid_when_unhealthy``)
+HEALTHY_END_PENETRATION_FRACTION = 0.05
+HEALTHY_ENERGY_GAIN_FRACTION = 0.01
+
 
 @dataclass(frozen=True)
 class RolloutResult:
@@ -69,6 +75,9 @@ class SampleOutcome:
     #: this sample rerun at the reference in the same task, because its rollout ended unhealthy
     #: (``rollout.Refine``); the self-check takes it out before the answer is made
     refined: SampleOutcome | None = None
+    #: why this sample's rollout in multibodies was replaced by its rerun in plain rigid bodies at the
+    #: same step ("energy", "penetration", "failed"; ``SimSettings.rigid_when_unhealthy``), or None
+    rerun_rigid: str | None = None
 
     def unhealthy(self, energy_scale_j: float, max_end_penetration_fraction: float,
                   max_energy_gain_fraction: float) -> str | None:

@@ -21,7 +21,8 @@ from ..query import QUERIES, QuerySpec, Reading
 from ..query.base import smallest_extents_m
 from ..config import ModelConfig, SimSettings
 from ..errors import BudgetExceeded, ConfigError, PhysicsError
-from .outcome import RolloutResult, SampleOutcome, energy_scale_of
+from .outcome import (HEALTHY_END_PENETRATION_FRACTION, HEALTHY_ENERGY_GAIN_FRACTION, RolloutResult, SampleOutcome,
+                      energy_scale_of)
 from .perturb import draw_sample_inputs
 from ..scene.bodies import Floor, Scene
 from ..simulation import NO_PROBE, DecidedHeights, Probe
@@ -233,6 +234,13 @@ def run_sample(task: SampleTask, probe: Probe = NO_PROBE) -> SampleOutcome:
                                               probe))
     if task.refine is not None and task.refine.why(outcome, task.scene):
         outcome = dataclasses.replace(outcome, refined=run_sample(task.at(task.refine.settings), probe))
+    elif task.settings.rigid_when_unhealthy and not task.settings.solver.maximal_coordinates:
+        why = outcome.unhealthy(energy_scale_of(task.scene), HEALTHY_END_PENETRATION_FRACTION,
+                                HEALTHY_ENERGY_GAIN_FRACTION)
+        if why is not None:
+            rigid = task.settings.changed(f"{task.settings.name}+rigid", solver={"maximal_coordinates": True},
+                                          rigid_when_unhealthy=False)
+            outcome = dataclasses.replace(run_sample(task.at(rigid), probe), rerun_rigid=why)
     return outcome
 
 

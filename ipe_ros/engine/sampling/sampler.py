@@ -247,7 +247,8 @@ def _prediction(tasks: list[SampleTask], query: QuerySpec, settings: SimSettings
                 break
     check_some_sample_finished(outcomes, budget_s)
     if is_reference(settings):
-        return outcomes, stopped_by, FidelityReport("reference", settings=(("samples", settings.name),))
+        return outcomes, stopped_by, FidelityReport("reference", settings=(("samples", settings.name),),
+                                                    rigid_reruns=sum(o.rerun_rigid is not None for o in outcomes))
     outcomes, report = yield from checking(tasks[:len(outcomes)], outcomes, verified, check, reference, settings.name,
                                            validated, refined)
     return outcomes, stopped_by, report

@@ -14,7 +14,9 @@ physics without noticing (docs/zoo.md). Each family is one function ``(rng, name
 - ``plates``: thin plates stacked with overhangs;
 - ``caps``: towers capped by a cone, a ring or a bowl, sometimes with a ball launched at the base;
 - ``stacks``: boxes at rest in 1-3 stacks side by side, drawn over the whole envelope in which the
-  self-check trusts `default` without reference reruns (``checking/envelope.py``).
+  self-check trusts `default` without reference reruns (``checking/envelope.py``);
+- ``household``: a mug with a ladle leaning in it, a bowl with balls dropped in, a can on a box: real
+  non-convex objects from procedural meshes (``household.py``), read as convex parts.
 
 Scene i of a family depends on (seed, family, i) only. Bodies the robot moves (thrown, launched,
 dropped) are known exactly (``position_sigma_m = 0``); the rest takes the model's sigma.
@@ -22,6 +24,7 @@ dropped) are known exactly (``position_sigma_m = 0``); the rest takes the model'
 
 from __future__ import annotations
 
+import functools
 import math
 import zlib
 from typing import Callable
@@ -32,7 +35,7 @@ from scipy.spatial.transform import Rotation
 from .catalogue import cone, wedge
 from .bodies import Body, Floor, Scene
 from .validation import validate_scene
-from .shapes import BoxShape, Capsule, Compound, CompoundPart, Cylinder, Sphere
+from .shapes import BoxShape, Capsule, Compound, CompoundPart, Cylinder, Sphere, surface_points
 
 _IDENTITY = (0.0, 0.0, 0.0, 1.0)
 
@@ -359,10 +362,87 @@ def stacks(rng: np.random.Generator, name: str) -> Scene:
     return Scene(name=name, objects=tuple(bodies), support=floor)
 
 
+@functools.lru_cache(maxsize=1)
+def _household_meshes() -> tuple[Compound, Compound]:
+    """The mug (with a handle) and the bowl of engine/scene/household.py as convex parts, decomposed
+    once per machine (the decomposition cache, by their content) and once per process here."""
+    from . import household as H
+    from .meshes import MeshAccess, triangles_shape
+
+    access = MeshAccess(roots=())
+    return tuple(triangles_shape(vertices[faces].reshape(-1, 3), f"household.{what}", access)  # type: ignore[return-value]
+                 for what, (vertices, faces) in (("mug", H.mug()), ("bowl", H.bowl())))
+
+
+#: the household mug's inside (engine/scene/household.py's defaults)
+MUG_INNER_RADIUS_M, MUG_HEIGHT_M, MUG_BOTTOM_M = 0.035, 0.1, 0.006
+
+#: the heaviest ladle the household family leans into its mug (``household``)
+LADLE_MAX_KG = 0.5
+#: the gap pybullet's convex meshes keep at rest (their collision margin)
+MESH_MARGIN_M = 0.001
+#: how far above the mesh's rim the ladle is placed before the scene sets it down (``Scene.set_down_m``)
+LADLE_LIFT_M = 0.006
+
+
+def household(rng: np.random.Generator, name: str) -> Scene:
+    """Kitchen things on a floor, from procedural meshes read as convex parts: a mug (with a handle)
+    with a 40 cm rod (a ladle) leaning in it over the rim, a bowl with 1-3 balls dropped 1.5-3 cm
+    into it, and a can standing on a box 5-12 cm from the middle of its top (past 9.5 cm, its centre
+    is over the edge). The ladle weighs 0.1-0.5 kg: the mug tips under those over about 0.2 kg, in
+    `default`, `fine` and `paper` alike (the quasi-static bound, the two together with their centre of
+    mass over the base's edge, is 0.31 kg: the ladle settling onto the rim pushes it over sooner).
+    The ladle's end stands clear of the wall's convex parts: 3 mm from the wall (its corners inside
+    them), `paper` let it slide out over the rim at 0.42 kg where `default`, `fine` and MuJoCo tip
+    the mug (benchmarks/results/meshes/rod_on_rim.md)."""
+    mug_shape, bowl_shape = _household_meshes()
+    # the convex parts reach a little below the mesh's base (and above its rim), and pybullet keeps a
+    # convex mesh a collision margin (MESH_MARGIN_M) from what it touches: each object stands on its parts
+    mug_z, bowl_z = (MESH_MARGIN_M - float(surface_points(shape)[:, 2].min()) for shape in (mug_shape, bowl_shape))
+    bodies = []
+    mug_xy, mug_yaw = rng.normal(0.0, 0.01, 2), float(rng.uniform(-math.pi, math.pi))
+    turn = Rotation.from_euler("z", mug_yaw)
+    bodies.append(_body("mug", mug_shape, (*mug_xy, mug_z), mass_kg=2000.0 * mug_shape.volume_m3, friction=0.6,
+                        restitution=0.0, orientation=_quat(turn)))
+    # the ladle: one end on the inner floor by the far wall, leaning over the near rim (the handle's side)
+    far = -MUG_INNER_RADIUS_M + 0.01  # its 12 mm wide end clear of the curved wall
+    angle = math.atan2(MUG_HEIGHT_M - MUG_BOTTOM_M, MUG_INNER_RADIUS_M - far)
+    along, across = np.array([math.cos(angle), 0, math.sin(angle)]), np.array([-math.sin(angle), 0, math.cos(angle)])
+    length, width, thickness = 0.4, 0.012, 0.004
+    # LADLE_LIFT_M above the mesh's rim (clear of the parts' thicker one); the scene sets it down onto them
+    centre = np.array([far, 0, MUG_BOTTOM_M + mug_z + LADLE_LIFT_M]) + length / 2 * along + thickness / 2 * across
+    lean = turn * Rotation.from_euler("y", -angle)
+    bodies.append(_body("ladle", BoxShape((length, width, thickness)), (*(turn.apply(centre)[:2] + mug_xy),
+                                                                         centre[2]),
+                        mass_kg=float(np.exp(rng.uniform(math.log(0.1), math.log(LADLE_MAX_KG)))), friction=0.6,
+                        restitution=0.0, orientation=_quat(lean)))
+    bowl_x = 0.35 + float(rng.normal(0.0, 0.01))
+    bodies.append(_body("bowl", bowl_shape, (bowl_x, 0.0, bowl_z), mass_kg=2000.0 * bowl_shape.volume_m3, friction=0.6,
+                        restitution=0.0, orientation=_yaw(rng.uniform(-math.pi, math.pi))))
+    for i in range(int(rng.integers(1, 4))):
+        radius = float(rng.uniform(0.012, 0.02))
+        at = (bowl_x + 0.035 * math.cos(2.1 * i), 0.035 * math.sin(2.1 * i))
+        bodies.append(_body(f"ball{i}", Sphere(radius), (*at, bowl_z + 0.045 + radius + float(rng.uniform(0.015, 0.03))),
+                            mass_kg=float(rng.uniform(0.02, 0.06)), friction=0.6, restitution=0.0,
+                            position_sigma_m=0.0))
+    # a cereal box, and a can on it
+    box = (0.19, 0.07, 0.28)
+    box_x = 0.7 + float(rng.normal(0.0, 0.01))
+    bodies.append(_body("box", BoxShape(box), (box_x, 0.0, box[2] / 2), mass_kg=0.45, friction=0.6, restitution=0.0))
+    bodies.append(_body("can", Cylinder(0.033, 0.122), (box_x + float(rng.choice([-1, 1]) * rng.uniform(0.05, 0.12)),
+                                                       float(rng.uniform(-0.02, 0.02)), box[2] + 0.061),
+                        mass_kg=0.35, friction=0.5, restitution=0.0))
+    return Scene(name=name, objects=tuple(bodies), support=_floor(rng, restitution=0.0), set_down_m=0.01)
+
+
+#: What a family is asked besides the node's default queries: whether the mug has tipped over (its
+#: centre drops less than the fall query's threshold when it does)
+EXTRA_QUERIES: dict[str, frozenset[str]] = {"household": frozenset({"tipped"})}
+
 #: Every family, in the order the benchmark and the docs list them.
 FAMILIES: dict[str, Callable[[np.random.Generator, str], Scene]] = {
     "launch": launch, "dominoes": dominoes, "ramp": ramp, "drop": drop, "strike": strike, "rings": rings,
-    "bouncy": bouncy, "plates": plates, "caps": caps, "stacks": stacks,
+    "bouncy": bouncy, "plates": plates, "caps": caps, "stacks": stacks, "household": household,
 }
 
 

@@ -204,3 +204,12 @@ def test_the_reference_reruns_its_unhealthy_multibody_rollouts_in_plain_rigid_bo
     for ours, theirs in zip(answer.outcomes, multibody.outcomes):
         if ours.rerun_rigid is None:
             assert np.array_equal(ours.rollouts[0].final_positions_m, theirs.rollouts[0].final_positions_m)
+    # a robot question's variant is rerun so too: the scene as it is, as the prediction's sample
+    from ipe_ros.engine import actions as A
+
+    i = next(i for i, o in enumerate(answer.outcomes) if o.rerun_rigid)
+    (as_is,) = A.run_variants(A.VariantTask(scene=scene, model=model, settings=preset("paper"), query=spec, index=i,
+                                            seed=np.random.SeedSequence(4).spawn(4)[i], actions=(None,),
+                                            regions=(None,)))
+    assert as_is.rerun_rigid == "energy"
+    assert np.array_equal(as_is.rollouts[0].final_positions_m, answer.outcomes[i].rollouts[0].final_positions_m)

@@ -354,7 +354,7 @@ class SimSettings:
         smallest extent inside another, energy gained beyond 1% of the scene's scale, or a physics
         error) is rerun in plain rigid bodies at the same step and iterations, and the rerun is the
         sample (``SampleOutcome.rerun_rigid`` says why). pybullet's multibodies let a thin rod
-        against a mesh's convex parts gain up to 30x a scene's energy (a 4 mm ladle in a tipping mug:
+        against a mesh's convex parts gain up to 33x a scene's energy (a 4 mm ladle in a tipping mug:
         28 of 32 `paper` rollouts), where plain rigid bodies, at the same step, gain none; the
         paper's own engine, ODE, integrates plain rigid bodies (benchmarks/results/meshes).
     """

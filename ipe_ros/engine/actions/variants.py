@@ -14,8 +14,8 @@ import numpy as np
 from .. import simulation
 from ..errors import PhysicsError
 from ..sampling.perturb import draw_sample_inputs
-from ..sampling.rollout import (SampleOutcome, SampleTask, failed, guarded, rollout_result, separated_world, simulate_pushes,
-                       simulate_sample)
+from ..sampling.rollout import (SampleOutcome, SampleTask, failed, guarded, rigid_rerun, rollout_result, separated_world,
+                               simulate_pushes, simulate_sample)
 from ..scene.bodies import Scene
 from ..scene.shapes import rotation_matrix
 from .kinds import Action, Place, Push, Remove, label_of
@@ -117,13 +117,21 @@ def run_variants(task: VariantTask) -> list[SampleOutcome]:
 
 def _refined(task: VariantTask, v: int, outcome: SampleOutcome) -> SampleOutcome:
     """Variant ``v``'s outcome, with its rerun at the reference when it ended unhealthy and the task
-    asks for that (``rollout.Refine``): the very task the self-check would rerun, the variant alone."""
-    if task.refine is None or not task.refine.why(outcome, task.scene):
-        return outcome
+    asks for that (``rollout.Refine``): the very task the self-check would rerun, the variant alone;
+    or, at settings that rerun an unhealthy multibody rollout in plain rigid bodies
+    (``rollout.rigid_rerun``), that rerun in its place, as a prediction's sample is."""
     alone = dataclasses.replace(task, actions=(task.actions[v],),
                                 regions=None if task.regions is None else (task.regions[v],))
-    (rerun,) = run_variants(alone.at(task.refine.settings))
-    return dataclasses.replace(outcome, refined=rerun)
+    if task.refine is not None:
+        if not task.refine.why(outcome, task.scene):
+            return outcome
+        (rerun,) = run_variants(alone.at(task.refine.settings))
+        return dataclasses.replace(outcome, refined=rerun)
+    rigid = rigid_rerun(task.settings, outcome, task.scene)
+    if rigid is None:
+        return outcome
+    (rerun,) = run_variants(alone.at(rigid[0]))
+    return dataclasses.replace(rerun, rerun_rigid=rigid[1])
 
 
 def _one_variant(task: VariantTask, action: Action, shared, shared_orn, inputs,

@@ -234,14 +234,21 @@ def run_sample(task: SampleTask, probe: Probe = NO_PROBE) -> SampleOutcome:
                                               probe))
     if task.refine is not None and task.refine.why(outcome, task.scene):
         outcome = dataclasses.replace(outcome, refined=run_sample(task.at(task.refine.settings), probe))
-    elif task.settings.rigid_when_unhealthy and not task.settings.solver.maximal_coordinates:
-        why = outcome.unhealthy(energy_scale_of(task.scene), HEALTHY_END_PENETRATION_FRACTION,
-                                HEALTHY_ENERGY_GAIN_FRACTION)
-        if why is not None:
-            rigid = task.settings.changed(f"{task.settings.name}+rigid", solver={"maximal_coordinates": True},
-                                          rigid_when_unhealthy=False)
-            outcome = dataclasses.replace(run_sample(task.at(rigid), probe), rerun_rigid=why)
+    elif (rigid := rigid_rerun(task.settings, outcome, task.scene)) is not None:
+        outcome = dataclasses.replace(run_sample(task.at(rigid[0]), probe), rerun_rigid=rigid[1])
     return outcome
+
+
+def rigid_rerun(settings: SimSettings, outcome: SampleOutcome, scene: Scene) -> tuple[SimSettings, str] | None:
+    """Where ``settings`` rerun a multibody rollout that ended unhealthy in plain rigid bodies
+    (``SimSettings.rigid_when_unhealthy``): the settings to rerun it at, and why; else None."""
+    if not settings.rigid_when_unhealthy or settings.solver.maximal_coordinates:
+        return None
+    why = outcome.unhealthy(energy_scale_of(scene), HEALTHY_END_PENETRATION_FRACTION, HEALTHY_ENERGY_GAIN_FRACTION)
+    if why is None:
+        return None
+    return settings.changed(f"{settings.name}+rigid", solver={"maximal_coordinates": True},
+                            rigid_when_unhealthy=False), why
 
 
 def simulate_sample(task: SampleTask, inputs, world: simulation.World, probe: Probe = NO_PROBE) -> SampleOutcome:

@@ -270,9 +270,10 @@ class DepthModel:
         rotations = pose_rotations(yaws_rad, tilts_rad)
         change = np.zeros(len(positions_m))
         casts = []
-        # kept until the state changes: the pose taken is one of these (``move``)
-        self._cast = (body, positions_m, np.asarray(yaws_rad, float),
-                      None if tilts_rad is None else np.asarray(tilts_rad, float), casts)
+        # kept until the state changes: the pose taken is one of these (``move``); copies, so that a
+        # caller reusing its arrays cannot make a pose look scored
+        self._cast = (body, positions_m.copy(), np.array(yaws_rad, float),
+                      None if tilts_rad is None else np.array(tilts_rad, float), casts)
         for v in range(len(self.observations)):
             # where the poses may show it, and where it shows now
             index = np.flatnonzero(self._in_view(v, body, positions_m, rotations) | np.isfinite(self.layers[v][body]))

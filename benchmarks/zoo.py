@@ -40,14 +40,11 @@ from accuracy_vs_time import _anything_fell  # noqa: E402 - the towers' "did any
 from ipe_ros.engine import PRESETS, ModelConfig, QuerySpec, WorkerPool, predict  # noqa: E402
 from ipe_ros.engine.config import DEFAULT_QUERIES  # noqa: E402
 from ipe_ros.engine.simulation.health import energy_scale_j  # noqa: E402
-from ipe_ros.engine.scene.zoo import EXTRA_QUERIES, FAMILIES, family_of, scene_zoo, zoo_sigma_m  # noqa: E402
+from ipe_ros.engine.scene.zoo import EXTRA_QUERIES, FAMILIES, family_of, family_queries, scene_zoo, zoo_sigma_m  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 QUERY = QuerySpec(queries=DEFAULT_QUERIES)
-
-
-def family_query(family: str) -> QuerySpec:
-    return QuerySpec(queries=DEFAULT_QUERIES | EXTRA_QUERIES.get(family, frozenset()))
+PAPER = PRESETS["paper"]
 
 
 def object_differences(p, r) -> list[float]:
@@ -57,7 +54,6 @@ def object_differences(p, r) -> list[float]:
         diffs += [abs(p.tipped_object_probability[n] - r.tipped_object_probability[n])
                   for n in r.tipped_object_probability]
     return diffs
-PAPER = PRESETS["paper"]
 
 
 def configurations() -> dict[str, tuple]:
@@ -184,8 +180,8 @@ def main(argv: list[str] | None = None) -> None:
             line = []
             for name, (settings, check) in configs.items():
                 t0 = time.perf_counter()
-                prediction = predict(scene, model, settings, family_query(family_of(scene)), seed=i, map_fn=pool.map,
-                                     check=check)
+                prediction = predict(scene, model, settings, QuerySpec(queries=family_queries(family_of(scene))),
+                                     seed=i, map_fn=pool.map, check=check)
                 wall = time.perf_counter() - t0
                 results[name].append({"family": family_of(scene), "prediction": prediction, "wall_s": wall,
                                       "energy_scale_j": energy_scale_j(scene)})

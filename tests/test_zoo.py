@@ -65,7 +65,7 @@ PROMISES = {
 
 
 def family_query(family: str) -> QuerySpec:
-    return QuerySpec(queries=DEFAULT_QUERIES | Z.EXTRA_QUERIES.get(family, frozenset()))
+    return QuerySpec(queries=Z.family_queries(family))
 
 
 def test_every_family_has_a_promise_and_scenes_depend_on_seed_family_and_index_only():

@@ -23,7 +23,8 @@ from ..checking.self_check import checking
 from ..scene.bodies import Scene, Table
 from ..scene.validation import validate_scene
 from ..query.contact import check_pairs
-from ..sampling.outcome import SampleOutcome
+from ..sampling.outcome import SampleOutcome, rigid_reruns
+from ..sampling.rollout import take_refined
 from .answers import QUESTION_QUERIES, Alone, Answers, aggregate_variant, aggregate_given, draws_noise, stood, fell, ran
 from .checks import check_action
 from .geometry import affected_regions, groups, reached
@@ -252,17 +253,20 @@ def _check_variants(per_sample: list[list[SampleOutcome]], actions: list[Action]
     checked outcomes replace the fast ones in ``per_sample``. Returns variant index -> what its
     check did."""
     if is_reference(settings):
-        return {j: FidelityReport("reference", settings=(("samples", settings.name),)) for j in range(len(actions))}
+        return {j: FidelityReport("reference", settings=(("samples", settings.name),),
+                                  rigid_reruns=rigid_reruns(row[j] for row in per_sample)) for j in range(len(actions))}
     if check is None or not check.enabled or not per_sample:
         return {j: FidelityReport("unverified", settings=(("samples", settings.name),)) for j in range(len(actions))}
         yield  # a plan even when it needs nothing run
     reference = reference_settings(settings.horizon_s)
     samples = range(len(per_sample))
     # reruns made in their sample's task, taken out of the outcomes they came with
-    reruns = [{i: row[j].refined for i, row in enumerate(per_sample) if row[j].refined is not None}
-              for j in range(len(actions))]
-    for row in per_sample:
-        row[:] = [dataclasses.replace(o, refined=None) if o.refined is not None else o for o in row]
+    reruns = []
+    for j in range(len(actions)):
+        outcomes, taken = take_refined(samples, [row[j] for row in per_sample])
+        reruns.append(taken)
+        for row, outcome in zip(per_sample, outcomes):
+            row[j] = outcome
     checks = [mapped(checking(tasks(samples, [j]), [row[j] for row in per_sample], {}, check, reference,
                               settings.name, rerun=reruns[j]), _only)
               for j in range(len(actions))]

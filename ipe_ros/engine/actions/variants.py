@@ -14,7 +14,7 @@ import numpy as np
 from .. import simulation
 from ..errors import PhysicsError
 from ..sampling.perturb import draw_sample_inputs
-from ..sampling.rollout import (SampleOutcome, SampleTask, failed, guarded, rigid_rerun, rollout_result, separated_world,
+from ..sampling.rollout import (SampleOutcome, SampleTask, failed, guarded, kept, rollout_result, separated_world,
                                simulate_pushes, simulate_sample)
 from ..scene.bodies import Scene
 from ..scene.shapes import rotation_matrix
@@ -116,22 +116,17 @@ def run_variants(task: VariantTask) -> list[SampleOutcome]:
 
 
 def _refined(task: VariantTask, v: int, outcome: SampleOutcome) -> SampleOutcome:
-    """Variant ``v``'s outcome, with its rerun at the reference when it ended unhealthy and the task
-    asks for that (``rollout.Refine``): the very task the self-check would rerun, the variant alone;
-    or, at settings that rerun an unhealthy multibody rollout in plain rigid bodies
-    (``rollout.rigid_rerun``), that rerun in its place, as a prediction's sample is."""
-    alone = dataclasses.replace(task, actions=(task.actions[v],),
-                                regions=None if task.regions is None else (task.regions[v],))
-    if task.refine is not None:
-        if not task.refine.why(outcome, task.scene):
-            return outcome
-        (rerun,) = run_variants(alone.at(task.refine.settings))
-        return dataclasses.replace(outcome, refined=rerun)
-    rigid = rigid_rerun(task.settings, outcome, task.scene)
-    if rigid is None:
-        return outcome
-    (rerun,) = run_variants(alone.at(rigid[0]))
-    return dataclasses.replace(rerun, rerun_rigid=rigid[1])
+    """Variant ``v``'s outcome as a prediction's sample is kept (``rollout.kept``: its rerun at the
+    reference beside it, or in plain rigid bodies in its place), a rerun being the variant alone:
+    the very task the self-check would rerun."""
+
+    def alone(settings) -> SampleOutcome:
+        (rerun,) = run_variants(dataclasses.replace(task, actions=(task.actions[v],),
+                                                    regions=None if task.regions is None else (task.regions[v],))
+                                .at(settings))
+        return rerun
+
+    return kept(task, outcome, alone)
 
 
 def _one_variant(task: VariantTask, action: Action, shared, shared_orn, inputs,

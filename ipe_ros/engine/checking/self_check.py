@@ -9,7 +9,7 @@ from ..config import SimSettings
 from .fidelity import (FidelityReport, SelfCheck, confirmation_samples, contradicts, coverage_samples, difference,
                        merge, outcome_flags, suspect, unhealthy, verification_count)
 from ..sampling.montecarlo import Plan
-from ..sampling.outcome import SampleOutcome, energy_scale_of
+from ..sampling.outcome import SampleOutcome, energy_scale_of, rigid_reruns
 from ..sampling.rollout import SampleTask
 
 
@@ -35,7 +35,7 @@ class _Comparison:
 
     def rigid_reruns(self) -> int:
         """Reference reruns whose multibody rollout ended unhealthy and was rerun in plain rigid bodies."""
-        return sum(ref.rerun_rigid is not None for ref in self.checked.values())
+        return rigid_reruns(self.checked.values())
 
 
 def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: dict[int, SampleOutcome],

@@ -96,6 +96,11 @@ class SampleOutcome:
         return None
 
 
+def rigid_reruns(outcomes) -> int:
+    """How many of these outcomes are reruns in plain rigid bodies (``SampleOutcome.rerun_rigid``)."""
+    return sum(o.rerun_rigid is not None for o in outcomes)
+
+
 def energy_scale_of(scene) -> float:
     """The scene's energy scale (weight x size + initial kinetic energy), never zero: what a
     rollout's energy gain is measured against."""

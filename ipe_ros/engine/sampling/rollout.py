@@ -12,6 +12,7 @@ import os
 import time
 import traceback
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -232,11 +233,27 @@ def run_sample(task: SampleTask, probe: Probe = NO_PROBE) -> SampleOutcome:
     outcome = guarded(task, inputs.push_direction_rad,
                       lambda: simulate_sample(task, inputs, separated_world(task.scene, task.settings, inputs, probe),
                                               probe))
+    return kept(task, outcome, lambda settings: run_sample(task.at(settings), probe))
+
+
+def kept(task: SampleTask, outcome: SampleOutcome, rerun: Callable[[SimSettings], SampleOutcome]) -> SampleOutcome:
+    """What a task returns for its rollout (a prediction's sample, a question's variant): with its
+    rerun at the reference beside it when it ended unhealthy and the task asks for that (``Refine``),
+    or else its rerun in plain rigid bodies in its place where the settings ask for that
+    (``rigid_rerun``). ``rerun(settings)``: the same rollout at other settings."""
     if task.refine is not None and task.refine.why(outcome, task.scene):
-        outcome = dataclasses.replace(outcome, refined=run_sample(task.at(task.refine.settings), probe))
-    elif (rigid := rigid_rerun(task.settings, outcome, task.scene)) is not None:
-        outcome = dataclasses.replace(run_sample(task.at(rigid[0]), probe), rerun_rigid=rigid[1])
-    return outcome
+        return dataclasses.replace(outcome, refined=rerun(task.refine.settings))
+    rigid = rigid_rerun(task.settings, outcome, task.scene)
+    if rigid is None:
+        return outcome
+    return dataclasses.replace(rerun(rigid[0]), rerun_rigid=rigid[1])
+
+
+def take_refined(keys, outcomes: list[SampleOutcome]) -> tuple[list[SampleOutcome], dict]:
+    """The outcomes without the reruns made in their tasks (``Refine``), and those reruns by the
+    outcomes' ``keys``: the self-check takes them as its own."""
+    reruns = {key: o.refined for key, o in zip(keys, outcomes) if o.refined is not None}
+    return [dataclasses.replace(o, refined=None) if o.refined is not None else o for o in outcomes], reruns
 
 
 def rigid_rerun(settings: SimSettings, outcome: SampleOutcome, scene: Scene) -> tuple[SimSettings, str] | None:

@@ -28,7 +28,8 @@ from .montecarlo import (MapFn, MonteCarlo, Plan, check_budget, check_seed, chec
                          together)
 from ..perceptions import perception_source
 from .perturb import is_deterministic
-from .rollout import SampleOutcome, SampleTask, lost, run_sample
+from .outcome import rigid_reruns
+from .rollout import SampleOutcome, SampleTask, lost, run_sample, take_refined
 from ..checking.self_check import checking
 from ..query import QUERIES, QuerySpec
 from ..scene.bodies import DEFAULT_MAX_OBJECTS, Scene
@@ -248,7 +249,7 @@ def _prediction(tasks: list[SampleTask], query: QuerySpec, settings: SimSettings
     check_some_sample_finished(outcomes, budget_s)
     if is_reference(settings):
         return outcomes, stopped_by, FidelityReport("reference", settings=(("samples", settings.name),),
-                                                    rigid_reruns=sum(o.rerun_rigid is not None for o in outcomes))
+                                                    rigid_reruns=rigid_reruns(outcomes))
     outcomes, report = yield from checking(tasks[:len(outcomes)], outcomes, verified, check, reference, settings.name,
                                            validated, refined)
     return outcomes, stopped_by, report
@@ -263,9 +264,9 @@ def _beside(tasks: list[SampleTask], samples: list[int], batch: list[SampleTask]
     batch = [dataclasses.replace(t, refine=None) if t.index in samples else t for t in batch]
     both = yield [tasks[i].at(reference) for i in samples] + batch
     verified.update(zip(samples, both[:len(samples)]))
-    outcomes = both[len(samples):]
-    refined.update({t.index: o.refined for t, o in zip(batch, outcomes) if o.refined is not None})
-    return [dataclasses.replace(o, refined=None) if o.refined is not None else o for o in outcomes]
+    outcomes, reruns = take_refined([t.index for t in batch], both[len(samples):])
+    refined.update(reruns)
+    return outcomes
 
 
 def _anytime_stop(stop: AdaptiveStop, outcomes: list[SampleOutcome], per_sample_answer, now_s: float,

@@ -32,12 +32,17 @@ from typing import Callable
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from ..config import DEFAULT_QUERIES
 from .catalogue import cone, wedge
 from .bodies import Body, Floor, Scene
 from .validation import validate_scene
 from .shapes import BoxShape, Capsule, Compound, CompoundPart, Cylinder, Sphere, surface_points
 
 _IDENTITY = (0.0, 0.0, 0.0, 1.0)
+
+#: clear of Bullet's convex-hull collision margin (0.9 mm): a body set this far from a hull (the
+#: ramp's wedge, a mesh's parts) starts touching nothing, and one at rest on it stays about this far
+HULL_MARGIN_M = 1e-3
 
 
 def _quat(rotation: Rotation) -> tuple[float, float, float, float]:
@@ -181,7 +186,7 @@ def ramp(rng: np.random.Generator, name: str) -> Scene:
     else:
         side = size * float(rng.uniform(0.4, 0.7))
         shape, lift, friction = BoxShape((side, side, side)), side / 2, float(rng.uniform(0.05, 0.3))
-    start = np.array([x_top, 0.0, z_surface]) + (lift + 1e-3) * normal  # clear of Bullet's 0.9 mm hull margin
+    start = np.array([x_top, 0.0, z_surface]) + (lift + HULL_MARGIN_M) * normal
     mass = 500.0 * size ** 3 * float(np.exp(rng.uniform(0.0, math.log(5.0))))
     mover = _body("mover", shape, start, mass_kg=mass, friction=friction, restitution=0.1,
                   orientation=_quat(tilt), position_sigma_m=0.0)
@@ -379,8 +384,6 @@ MUG_INNER_RADIUS_M, MUG_HEIGHT_M, MUG_BOTTOM_M = 0.035, 0.1, 0.006
 
 #: the heaviest ladle the household family leans into its mug (``household``)
 LADLE_MAX_KG = 0.5
-#: the gap pybullet's convex meshes keep at rest (their collision margin)
-MESH_MARGIN_M = 0.001
 #: how far above the mesh's rim the ladle is placed before the scene sets it down (``Scene.set_down_m``)
 LADLE_LIFT_M = 0.006
 
@@ -397,8 +400,8 @@ def household(rng: np.random.Generator, name: str) -> Scene:
     the mug (benchmarks/results/meshes/rod_on_rim.md)."""
     mug_shape, bowl_shape = _household_meshes()
     # the convex parts reach a little below the mesh's base (and above its rim), and pybullet keeps a
-    # convex mesh a collision margin (MESH_MARGIN_M) from what it touches: each object stands on its parts
-    mug_z, bowl_z = (MESH_MARGIN_M - float(surface_points(shape)[:, 2].min()) for shape in (mug_shape, bowl_shape))
+    # convex mesh a collision margin from what it touches: each object stands on its parts
+    mug_z, bowl_z = (HULL_MARGIN_M - float(surface_points(shape)[:, 2].min()) for shape in (mug_shape, bowl_shape))
     bodies = []
     mug_xy, mug_yaw = rng.normal(0.0, 0.01, 2), float(rng.uniform(-math.pi, math.pi))
     turn = Rotation.from_euler("z", mug_yaw)
@@ -438,6 +441,12 @@ def household(rng: np.random.Generator, name: str) -> Scene:
 #: What a family is asked besides the node's default queries: whether the mug has tipped over (its
 #: centre drops less than the fall query's threshold when it does)
 EXTRA_QUERIES: dict[str, frozenset[str]] = {"household": frozenset({"tipped"})}
+
+
+def family_queries(family: str) -> frozenset[str]:
+    """What the benchmark and the tests ask of a family's scenes: the node's default queries and the
+    family's own (``EXTRA_QUERIES``)."""
+    return DEFAULT_QUERIES | EXTRA_QUERIES.get(family, frozenset())
 
 #: Every family, in the order the benchmark and the docs list them.
 FAMILIES: dict[str, Callable[[np.random.Generator, str], Scene]] = {

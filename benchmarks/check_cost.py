@@ -1,6 +1,7 @@
 """Where a self-checked prediction's time goes, map call by map call, against the unchecked one.
 
     .venv/bin/python benchmarks/check_cost.py --towers 60 --samples 48
+    .venv/bin/python benchmarks/check_cost.py --zoo 6 --samples 16    # the scene zoo, per family
 
 Each tower is predicted twice on the same seeds and the same warm pool (2 workers, `default`,
 queries fall), unchecked and self-checked, one after the other. The checked prediction's map calls
@@ -9,7 +10,9 @@ quarter with the coverage sample picked ahead, a round of confirmation or covera
 escalation (every sample at the reference). Per tower and overall: wall seconds per part, the
 reference reruns, the verdict. It measures the floor that the README's "Self-checking answers"
 argues: what the check adds beyond the fast samples, and which of its parts add it. Authors'
-towers need ``../shared``; without it generated towers are used.
+towers need ``../shared``; without it generated towers are used. With ``--zoo N`` the scenes are N
+per zoo family (benchmarks/zoo.py's scenes, noise and queries) instead, and the parts are given per
+family too.
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ from accuracy_vs_time import REPO, SIGMA_M, load_towers  # noqa: E402 - the same
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, preset  # noqa: E402
 from ipe_ros.engine.checking.fidelity import DEFAULT_CHECK, NO_CHECK  # noqa: E402
 from ipe_ros.engine.sampling.sampler import predict  # noqa: E402
+from ipe_ros.engine.scene.zoo import FAMILIES, family_of, family_queries, scene_zoo, zoo_sigma_m  # noqa: E402
 
 PARTS = ("fast + verification", "last quarter + coverage", "confirmation or coverage round", "escalation")
 
@@ -44,15 +48,26 @@ def _part(n: int, tasks: int, references: int, samples: int) -> str:
     return PARTS[2]
 
 
+def queries_for(scene, zoo: bool) -> QuerySpec:
+    """The towers' benchmark asks fall; the zoo's asks what benchmarks/zoo.py asks (the node's default)."""
+    return QuerySpec(queries=family_queries(family_of(scene)) if zoo else frozenset({"fall"}))
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--towers", type=int, default=60)
     parser.add_argument("--samples", type=int, default=48)
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--out", default=str(REPO / "benchmarks/results/check_cost"))
+    parser.add_argument("--zoo", type=int, default=0, help="scenes per zoo family instead of towers")
+    parser.add_argument("--families", default=",".join(FAMILIES), help="with --zoo: which families")
+    parser.add_argument("--out", default=None, help="default: benchmarks/results/check_cost (or check_cost_zoo)")
     args = parser.parse_args()
-    towers, _, source = load_towers(args.towers)
-    query = QuerySpec(queries=frozenset({"fall"}))
+    args.out = args.out or str(REPO / "benchmarks/results" / ("check_cost_zoo" if args.zoo else "check_cost"))
+    if args.zoo:
+        towers = scene_zoo(2026, args.zoo, tuple(args.families.split(",")))
+        source = f"the scene zoo, {args.zoo} scenes per family (seed 2026)"
+    else:
+        towers, _, source = load_towers(args.towers)
     settings = preset("default")
     rows = []
     with WorkerPool(args.workers) as pool:
@@ -67,9 +82,11 @@ def main() -> int:
                           time.perf_counter() - start))
             return out
 
-        model = ModelConfig(sigma_m=SIGMA_M, samples=args.samples)
-        predict(towers[0], ModelConfig(sigma_m=SIGMA_M, samples=2), settings, query, map_fn=timed_map)  # imports, caches
+        predict(towers[0], ModelConfig(sigma_m=SIGMA_M, samples=2), settings, queries_for(towers[0], args.zoo),
+                map_fn=timed_map)  # imports, caches
         for i, tower in enumerate(towers):
+            model = ModelConfig(sigma_m=zoo_sigma_m(tower) if args.zoo else SIGMA_M, samples=args.samples)
+            query = queries_for(tower, args.zoo)
             walls = {}
             for name, check in (("unchecked", NO_CHECK), ("checked", DEFAULT_CHECK)):
                 calls.clear()
@@ -79,7 +96,7 @@ def main() -> int:
             parts = Counter()
             for n, (tasks, references, wall) in enumerate(calls):
                 parts[_part(n, tasks, references, args.samples)] += wall
-            rows.append({"tower": tower.name, "unchecked_s": walls["unchecked"], "checked_s": walls["checked"],
+            rows.append({"tower": tower.name, "family": family_of(tower) if args.zoo else "towers", "unchecked_s": walls["unchecked"], "checked_s": walls["checked"],
                          "verdict": prediction.fidelity, "maps": [list(c) for c in calls],
                          "reference_reruns": sum(r for _, r, _ in calls), "parts_s": dict(parts)})
             print(f"{tower.name}: unchecked {walls['unchecked']:.2f} s, checked {walls['checked']:.2f} s "
@@ -96,16 +113,36 @@ def main() -> int:
                "verdicts": dict(verdicts)}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "check_cost.json").write_text(json.dumps({"summary": summary, "towers": rows}, indent=1) + "\n")
     lines = [f"# Where the self-check's time goes ({summary['date']})", "",
-             f"`.venv/bin/python benchmarks/check_cost.py --towers {args.towers} --samples {args.samples}`; {source}, "
-             f"k = {args.samples}, sigma {SIGMA_M:g} m, queries fall, `default`, {args.workers} workers, unchecked and checked "
+             f"`.venv/bin/python benchmarks/check_cost.py "
+             + (f"--zoo {args.zoo}" if args.zoo else f"--towers {args.towers}")
+             + (f" --families {args.families}" if args.zoo and args.families != ",".join(FAMILIES) else "") + f" --samples {args.samples}`; {source}, "
+             f"k = {args.samples}, "
+             + ("sigma 5% of each scene's smallest body, the zoo's queries" if args.zoo else f"sigma {SIGMA_M:g} m, queries fall")
+             + f", `default`, {args.workers} workers, unchecked and checked "
              "one after the other on the same seeds.", "",
              f"Unchecked {unchecked:.2f} s per prediction, checked {checked:.2f} s ({checked / unchecked:.2f}x); "
              f"{summary['reference_reruns_per_prediction']:.2f} reference reruns per prediction; verdicts "
              + ", ".join(f"{v} {n}" for v, n in sorted(verdicts.items())) + ".", "",
              "| part of the checked prediction | s per prediction (mean over all) | predictions with it |", "|---|---|---|"]
     lines += [f"| {part} | {per_part[part]:.3f} | {summary['predictions_with_part'][part]} |" for part in PARTS]
+    families = list(dict.fromkeys(r["family"] for r in rows))
+    if len(families) > 1:
+        lines += ["", "Per family (s per prediction, by part of the checked prediction):", "",
+                  "| family | unchecked | checked | " + " | ".join(PARTS) + " | verdicts |",
+                  "|---|---|---|" + "---|" * len(PARTS) + "---|"]
+        for family in families:
+            mine = [r for r in rows if r["family"] == family]
+            mean = lambda key: float(np.mean([r[key] for r in mine]))  # noqa: E731
+            part_means = [float(np.sum([r["parts_s"].get(part, 0.0) for r in mine])) / len(mine) for part in PARTS]
+            verdict_counts = Counter(r["verdict"] for r in mine)
+            lines.append(f"| {family} | {mean('unchecked_s'):.2f} | {mean('checked_s'):.2f} | "
+                         + " | ".join(f"{v:.2f}" for v in part_means) + " | "
+                         + ", ".join(f"{v} {n}" for v, n in sorted(verdict_counts.items())) + " |")
+        summary["per_family"] = {f: {"unchecked_s": float(np.mean([r["unchecked_s"] for r in rows if r["family"] == f])),
+                                     "checked_s": float(np.mean([r["checked_s"] for r in rows if r["family"] == f]))}
+                                 for f in families}
+    (out / "check_cost.json").write_text(json.dumps({"summary": summary, "towers": rows}, indent=1) + "\n")
     (out / "check_cost.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     return 0

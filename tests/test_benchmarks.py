@@ -239,6 +239,18 @@ def test_check_cost_sorts_the_checked_predictions_map_calls_into_its_parts(tmp_p
     assert "| fast + verification |" in (tmp_path / "check_cost.md").read_text()
 
 
+def test_check_cost_on_the_zoo_gives_its_parts_per_family(tmp_path):
+    result = subprocess.run([sys.executable, "benchmarks/check_cost.py", "--zoo", "1", "--families", "drop,bouncy",
+                             "--samples", "4", "--out", str(tmp_path)], cwd=REPO, env=ENV, capture_output=True,
+                            text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-3000:]
+    report = json.loads((tmp_path / "check_cost.json").read_text())
+    assert [row["family"] for row in report["towers"]] == ["drop", "bouncy"]
+    assert set(report["summary"]["per_family"]) == {"drop", "bouncy"}
+    text = (tmp_path / "check_cost.md").read_text()
+    assert "--zoo 1 --samples 4" in text and "| drop |" in text and "| bouncy |" in text
+
+
 def test_reference_tier_benchmark_compares_each_tier_with_the_reference_and_the_bar(tmp_path):
     result = subprocess.run(
         [sys.executable, str(REPO / "benchmarks" / "reference_tier.py"), "--towers", "1", "--per-family", "0",

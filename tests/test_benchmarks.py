@@ -248,7 +248,26 @@ def test_check_cost_on_the_zoo_gives_its_parts_per_family(tmp_path):
     assert [row["family"] for row in report["towers"]] == ["drop", "bouncy"]
     assert set(report["summary"]["per_family"]) == {"drop", "bouncy"}
     text = (tmp_path / "check_cost.md").read_text()
-    assert "--zoo 1 --samples 4" in text and "| drop |" in text and "| bouncy |" in text
+    assert "--zoo 1 --families drop,bouncy --samples 4" in text and "| drop |" in text and "| bouncy |" in text
+
+
+def test_thin_plates_export_gives_a_third_engine_every_samples_start_and_pybullets_answers(tmp_path):
+    out = tmp_path / "plates.json"
+    result = subprocess.run([sys.executable, "benchmarks/thin_plates/export.py", str(out), "0", "--samples", "2"],
+                            cwd=REPO, env=ENV, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-3000:]
+    (row,) = json.loads(out.read_text())
+    assert row["scene"] == "zoo_plates_2026_000" and len(row["samples"]) == 2
+    assert set(row["pybullet_fallen"]) == {"paper", "paper, plain rigid bodies", "default", "default, multibodies"}
+    for fallen in row["pybullet_fallen"].values():
+        assert [len(f) for f in fallen] == [len(row["names"])] * 2
+    body = row["samples"][0]["bodies"][0]
+    assert body["name"] == row["names"][0] and body["mass"] > 0 and len(body["quat_xyzw"]) == 4
+    # the start state is the sample's noisy, separated scene, not the scene as written
+    from ipe_ros.engine.scene.zoo import scene_zoo
+
+    written = scene_zoo(2026, 6, ("plates",))[0].dynamic_objects[0].position_m
+    assert max(abs(a - b) for a, b in zip(body["com"], written)) > 1e-4
 
 
 def test_reference_tier_benchmark_compares_each_tier_with_the_reference_and_the_bar(tmp_path):

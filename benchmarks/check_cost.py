@@ -53,6 +53,11 @@ def queries_for(scene, zoo: bool) -> QuerySpec:
     return QuerySpec(queries=family_queries(family_of(scene)) if zoo else frozenset({"fall"}))
 
 
+def model_for(scene, zoo: bool, samples: int) -> ModelConfig:
+    """The towers' noise, or the zoo's (5% of each scene's smallest body, as benchmarks/zoo.py)."""
+    return ModelConfig(sigma_m=zoo_sigma_m(scene) if zoo else SIGMA_M, samples=samples)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--towers", type=int, default=60)
@@ -82,11 +87,10 @@ def main() -> int:
                           time.perf_counter() - start))
             return out
 
-        predict(towers[0], ModelConfig(sigma_m=SIGMA_M, samples=2), settings, queries_for(towers[0], args.zoo),
+        predict(towers[0], model_for(towers[0], args.zoo, 2), settings, queries_for(towers[0], args.zoo),
                 map_fn=timed_map)  # imports, caches
         for i, tower in enumerate(towers):
-            model = ModelConfig(sigma_m=zoo_sigma_m(tower) if args.zoo else SIGMA_M, samples=args.samples)
-            query = queries_for(tower, args.zoo)
+            model, query = model_for(tower, args.zoo, args.samples), queries_for(tower, args.zoo)
             walls = {}
             for name, check in (("unchecked", NO_CHECK), ("checked", DEFAULT_CHECK)):
                 calls.clear()
@@ -96,7 +100,8 @@ def main() -> int:
             parts = Counter()
             for n, (tasks, references, wall) in enumerate(calls):
                 parts[_part(n, tasks, references, args.samples)] += wall
-            rows.append({"tower": tower.name, "family": family_of(tower) if args.zoo else "towers", "unchecked_s": walls["unchecked"], "checked_s": walls["checked"],
+            rows.append({"tower": tower.name, "family": family_of(tower) if args.zoo else "towers",
+                         "unchecked_s": walls["unchecked"], "checked_s": walls["checked"],
                          "verdict": prediction.fidelity, "maps": [list(c) for c in calls],
                          "reference_reruns": sum(r for _, r, _ in calls), "parts_s": dict(parts)})
             print(f"{tower.name}: unchecked {walls['unchecked']:.2f} s, checked {walls['checked']:.2f} s "
@@ -128,20 +133,22 @@ def main() -> int:
     lines += [f"| {part} | {per_part[part]:.3f} | {summary['predictions_with_part'][part]} |" for part in PARTS]
     families = list(dict.fromkeys(r["family"] for r in rows))
     if len(families) > 1:
+        summary["per_family"] = {}
+        for family in families:
+            mine = [r for r in rows if r["family"] == family]
+            summary["per_family"][family] = {
+                "unchecked_s": float(np.mean([r["unchecked_s"] for r in mine])),
+                "checked_s": float(np.mean([r["checked_s"] for r in mine])),
+                "per_part_s": {part: float(np.sum([r["parts_s"].get(part, 0.0) for r in mine])) / len(mine)
+                               for part in PARTS},
+                "verdicts": dict(Counter(r["verdict"] for r in mine))}
         lines += ["", "Per family (s per prediction, by part of the checked prediction):", "",
                   "| family | unchecked | checked | " + " | ".join(PARTS) + " | verdicts |",
                   "|---|---|---|" + "---|" * len(PARTS) + "---|"]
-        for family in families:
-            mine = [r for r in rows if r["family"] == family]
-            mean = lambda key: float(np.mean([r[key] for r in mine]))  # noqa: E731
-            part_means = [float(np.sum([r["parts_s"].get(part, 0.0) for r in mine])) / len(mine) for part in PARTS]
-            verdict_counts = Counter(r["verdict"] for r in mine)
-            lines.append(f"| {family} | {mean('unchecked_s'):.2f} | {mean('checked_s'):.2f} | "
-                         + " | ".join(f"{v:.2f}" for v in part_means) + " | "
-                         + ", ".join(f"{v} {n}" for v, n in sorted(verdict_counts.items())) + " |")
-        summary["per_family"] = {f: {"unchecked_s": float(np.mean([r["unchecked_s"] for r in rows if r["family"] == f])),
-                                     "checked_s": float(np.mean([r["checked_s"] for r in rows if r["family"] == f]))}
-                                 for f in families}
+        lines += [f"| {family} | {f['unchecked_s']:.2f} | {f['checked_s']:.2f} | "
+                  + " | ".join(f"{f['per_part_s'][part]:.2f}" for part in PARTS) + " | "
+                  + ", ".join(f"{v} {n}" for v, n in sorted(f["verdicts"].items())) + " |"
+                  for family, f in summary["per_family"].items()]
     (out / "check_cost.json").write_text(json.dumps({"summary": summary, "towers": rows}, indent=1) + "\n")
     (out / "check_cost.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))

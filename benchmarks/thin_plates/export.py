@@ -18,11 +18,8 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 import numpy as np  # noqa: E402
 
 from ipe_ros.engine import PRESETS, ModelConfig, QuerySpec, WorkerPool, predict  # noqa: E402
-from ipe_ros.engine.sampling.perturb import draw_sample_inputs  # noqa: E402
-from ipe_ros.engine.sampling.rollout import separated_world  # noqa: E402
-from ipe_ros.engine.sampling.sampler import make_tasks  # noqa: E402
+from ipe_ros.engine.sampling.perturb import dynamic_masses  # noqa: E402
 from ipe_ros.engine.scene.zoo import family_queries, scene_zoo, zoo_sigma_m  # noqa: E402
-from ipe_ros.engine.simulation.world import read_state  # noqa: E402
 
 PAPER, DEFAULT = PRESETS["paper"], PRESETS["default"]
 PHYSICS = {"paper": PAPER,
@@ -31,16 +28,18 @@ PHYSICS = {"paper": PAPER,
            "default, multibodies": DEFAULT.changed("default-multibody", solver={"maximal_coordinates": False})}
 
 
-def start_states(scene, model, query, seed) -> list[dict]:
+def start_states(scene, model, reference) -> list[dict]:
+    """Each sample's start state, read from a prediction's outcomes: every preset separates a
+    sample's noisy scene identically, so `paper`'s initial poses are every physics' start."""
+    masses = dynamic_masses(scene, model.mu)
     samples = []
-    for task in make_tasks(scene, model, PAPER, query, seed=seed):
-        inputs = draw_sample_inputs(task.scene, task.model, np.random.default_rng(task.seed))
-        com, orn, _ = read_state(separated_world(task.scene, task.settings, inputs))
+    for outcome in reference.outcomes:
         bodies = []
         for i, body in enumerate(scene.dynamic_objects):
-            e, m = np.asarray(body.shape.extents_m), float(inputs.masses_kg[i])
-            bodies.append({"name": body.name, "mass": m, "half": (e / 2).tolist(), "com": com[i].tolist(),
-                           "quat_xyzw": orn[i].tolist(), "friction": body.friction,
+            e, m = np.asarray(body.shape.extents_m), float(masses[i])
+            bodies.append({"name": body.name, "mass": m, "half": (e / 2).tolist(),
+                           "com": outcome.initial_positions_m[i].tolist(),
+                           "quat_xyzw": outcome.initial_orientations_xyzw[i].tolist(), "friction": body.friction,
                            "inertia": [m / 12 * (e[1] ** 2 + e[2] ** 2), m / 12 * (e[0] ** 2 + e[2] ** 2),
                                        m / 12 * (e[0] ** 2 + e[1] ** 2)]})
         samples.append({"bodies": bodies})
@@ -60,13 +59,14 @@ def main() -> None:
         for i in args.scenes:
             scene = scenes[i]
             model = ModelConfig(sigma_m=zoo_sigma_m(scene), samples=args.samples)
-            fallen = {name: [[bool(x) for x in o.rollouts[0].fallen] for o in
-                             predict(scene, model, settings, query, seed=i, map_fn=pool.map, check=None).outcomes]
-                      for name, settings in PHYSICS.items()}
+            predictions = {name: predict(scene, model, settings, query, seed=i, map_fn=pool.map, check=None)
+                           for name, settings in PHYSICS.items()}
+            fallen = {name: [[bool(x) for x in o.rollouts[0].fallen] for o in p.outcomes]
+                      for name, p in predictions.items()}
             rows.append({"scene": scene.name, "floor_friction": scene.support.friction,
                          "fall_threshold_fraction": query.fall_threshold_fraction,
                          "names": [b.name for b in scene.dynamic_objects], "pybullet_fallen": fallen,
-                         "samples": start_states(scene, model, query, i)})
+                         "samples": start_states(scene, model, predictions["paper"])})
             print(scene.name, {n: np.mean(f, axis=0).round(2).tolist() for n, f in fallen.items()}, flush=True)
     with open(args.out, "w") as f:
         json.dump(rows, f)

@@ -448,6 +448,7 @@ def family_queries(family: str) -> frozenset[str]:
     family's own (``EXTRA_QUERIES``)."""
     return DEFAULT_QUERIES | EXTRA_QUERIES.get(family, frozenset())
 
+
 #: Every family, in the order the benchmark and the docs list them.
 FAMILIES: dict[str, Callable[[np.random.Generator, str], Scene]] = {
     "launch": launch, "dominoes": dominoes, "ramp": ramp, "drop": drop, "strike": strike, "rings": rings,

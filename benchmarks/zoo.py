@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/zoo.py [--per-family 6] [--samples 16] [--seed 2026] [--workers 2]
                                        [--families launch,dominoes] [--only default,default-unchecked]
-                                       [--out benchmarks/results/zoo]
+                                       [--trial islands=true] [--out benchmarks/results/zoo]
 
 Every zoo family (ipe_ros.engine.scene.zoo) under `paper` (the converged reference), `paper-half-step`
 (the yardstick: `paper` at 0.5 ms on the same noisy scenes; how much a family's outcomes depend on
@@ -38,6 +38,7 @@ import numpy as np  # noqa: E402
 
 from accuracy_vs_time import _anything_fell  # noqa: E402 - the towers' "did anything fall?"
 from ipe_ros.engine import PRESETS, ModelConfig, QuerySpec, WorkerPool, predict  # noqa: E402
+from ipe_ros.engine.checking import envelope  # noqa: E402
 from ipe_ros.engine.config import DEFAULT_QUERIES  # noqa: E402
 from ipe_ros.engine.simulation.health import energy_scale_j  # noqa: E402
 from ipe_ros.engine.scene.zoo import EXTRA_QUERIES, FAMILIES, family_of, family_queries, scene_zoo, zoo_sigma_m  # noqa: E402
@@ -56,17 +57,27 @@ def object_differences(p, r) -> list[float]:
     return diffs
 
 
-def configurations() -> dict[str, tuple]:
-    """name -> (settings, self_check). `paper` first: it is the reference."""
+#: configurations that run as `default` would with a change on trial (``--trial``)
+TRIAL = "trial"
+
+
+def configurations(trial: dict | None = None) -> dict[str, tuple]:
+    """name -> (settings, self_check). `paper` first: it is the reference. ``trial``: ``changed()``'s
+    arguments for `default` with a change on trial, run as "trial" and "trial-unchecked" (under the
+    preset's name: the self-check treats it as the preset it would become)."""
     from ipe_ros.engine.checking.fidelity import SelfCheck
 
     default = PRESETS["default"]
-    return {
+    out = {
         "paper": (PAPER, None),
         "paper-half-step": (PAPER.changed("paper-half-step", time_step_s=PAPER.time_step_s / 2), None),
         "default": (default, SelfCheck()),
         "default-unchecked": (default, None),
     }
+    if trial:
+        changed = default.changed(default.name, **trial)
+        out |= {TRIAL: (changed, SelfCheck()), f"{TRIAL}-unchecked": (changed, None)}
+    return out
 
 
 def compare_family(rows: list[dict], reference: list[dict]) -> dict:
@@ -108,11 +119,11 @@ def compare_family(rows: list[dict], reference: list[dict]) -> dict:
     }
 
 
-def verdict(family_rows: dict[str, dict]) -> dict:
-    """The issue's bar for one family: default's mean |dP| <= max(0.03, 1.5x the yardstick's), no
+def verdict(family_rows: dict[str, dict], name: str = "default") -> dict:
+    """The issue's bar for one family: ``name``'s mean |dP| <= max(0.03, 1.5x the yardstick's), no
     scene off by more than the yardstick's worst + 0.1, no rollout ending > 5% inside another, no
     energy gain above 1% of the scale."""
-    yard, ours = family_rows["paper-half-step"], family_rows["default"]
+    yard, ours = family_rows["paper-half-step"], family_rows[name]
     return {
         "mean_ok": ours["mean_abs_dp_object"] <= max(0.03, 1.5 * yard["mean_abs_dp_object"]),
         "worst_ok": ours["max_abs_dp_scene"] <= yard["max_abs_dp_scene"] + 0.1,
@@ -144,9 +155,15 @@ def markdown(report: dict) -> str:
     lines += ["", "Against the bar (mean \\|ΔP\\| <= max(0.03, 1.5x yardstick); worst scene <= yardstick's worst + "
               "0.1; no rollout ending > 5% inside another; energy gain <= 1% of the scale):", "",
               "| family | mean | worst scene | penetration | energy |", "|---|---|---|---|---|"]
+    trial = report.get("trial_verdicts", {})
     for family, v in report.get("verdicts", {}).items():
         lines.append(f"| {family} | {'ok' if v['mean_ok'] else 'MISSED'} | {'ok' if v['worst_ok'] else 'MISSED'} | "
                      f"{'ok' if v['penetration_ok'] else 'MISSED'} | {'ok' if v['energy_ok'] else 'MISSED'} |")
+        if family in trial:
+            t = trial[family]
+            lines.append(f"| {family} (trial: {report['trial']}) | {'ok' if t['mean_ok'] else 'MISSED'} | "
+                         f"{'ok' if t['worst_ok'] else 'MISSED'} | {'ok' if t['penetration_ok'] else 'MISSED'} | "
+                         f"{'ok' if t['energy_ok'] else 'MISSED'} |")
     if "overall" in report:
         lines += ["", "Overall speed-up over `paper` (all scenes' time together): " +
                   ", ".join(f"`{k}` {v:.1f}x" for k, v in report["overall"].items())]
@@ -162,8 +179,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--families", default=",".join(FAMILIES))
     parser.add_argument("--only", default=None, help="configurations besides paper (comma-separated)")
     parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "zoo"))
+    parser.add_argument("--trial", action="append", default=[], metavar="NAME=VALUE",
+                        help="also run `default` with this change (e.g. islands=true; repeatable), as \"trial\"")
     args = parser.parse_args(argv)
-    configs = configurations()
+    from preset_trial import parse_change
+
+    configs = configurations(parse_change(args.trial) if args.trial else None)
     if args.only:
         wanted = ["paper"] + [n for n in args.only.split(",") if n != "paper"]
         unknown = [n for n in wanted if n not in configs]
@@ -179,23 +200,28 @@ def main(argv: list[str] | None = None) -> None:
             model = ModelConfig(sigma_m=zoo_sigma_m(scene), samples=args.samples)
             line = []
             for name, (settings, check) in configs.items():
+                envelope.PRESETS["default"] = settings if name.startswith(TRIAL) else PRESETS["default"]
                 t0 = time.perf_counter()
                 prediction = predict(scene, model, settings, QuerySpec(queries=family_queries(family_of(scene))),
                                      seed=i, map_fn=pool.map, check=check)
                 wall = time.perf_counter() - t0
+                envelope.PRESETS["default"] = PRESETS["default"]
                 results[name].append({"family": family_of(scene), "prediction": prediction, "wall_s": wall,
                                       "energy_scale_j": energy_scale_j(scene)})
                 line.append(f"{name} {wall:.2f}s any={prediction.any_fall_probability}")
             print(f"{scene.name}: " + " | ".join(line), flush=True)
     report = {"per_family": args.per_family, "seed": args.seed, "samples": args.samples,
               "machine": f"{os.cpu_count()} CPUs, {args.workers} workers", "date": time.strftime("%Y-%m-%d"),
-              "wall_s": time.perf_counter() - start, "families": {}, "verdicts": {}}
+              "wall_s": time.perf_counter() - start, "families": {}, "verdicts": {},
+              "trial": ", ".join(args.trial) or None}
     for family in dict.fromkeys(family_of(s) for s in scenes):
         ref = [r for r in results["paper"] if r["family"] == family]
         report["families"][family] = {name: compare_family([r for r in rows if r["family"] == family], ref)
                                       for name, rows in results.items()}
         if {"default", "paper-half-step"} <= set(configs):
             report["verdicts"][family] = verdict(report["families"][family])
+        if {TRIAL, "paper-half-step"} <= set(configs):
+            report.setdefault("trial_verdicts", {})[family] = verdict(report["families"][family], TRIAL)
     paper_wall = sum(r["wall_s"] for r in results["paper"])
     report["overall"] = {name: paper_wall / sum(r["wall_s"] for r in rows) for name, rows in results.items()}
     out = Path(args.out)

@@ -336,10 +336,11 @@ def test_a_failed_fast_sample_is_rerun_at_the_reference(tower):
 
 def test_a_rollout_ending_inside_another_body_is_refined(tower):
     """A real hard case: at the default's steps without its finer end (``collapse.end_substeps``)
-    one rollout of the example tower ends mid-impact at the horizon, a block 6% of its size inside
+    (nor ``collapse.end_travel_fraction``) one rollout of the example tower ends mid-impact at the horizon, a block 6% of its size inside
     another (sample 2 of seed 2)."""
     model = ModelConfig(sigma_m=0.01, samples=3)
-    coarse_end = preset("default").changed("default-coarse-end", collapse={"end_substeps": 1})
+    coarse_end = preset("default").changed("default-coarse-end",
+                                           collapse={"end_substeps": 1, "end_travel_fraction": None})
     unchecked = predict(tower, model, coarse_end, QUERY, seed=2, check=None)
     checked = predict(tower, model, coarse_end, QUERY, seed=2)
     assert unchecked.max_penetration_fraction > 0.05
@@ -359,7 +360,8 @@ def test_an_unhealthy_rollout_is_rerun_in_its_own_task_and_the_answer_is_as_from
     to it at once, instead of the workers waiting for a round of one rerun), and the answer is the
     same as when the check reruns it in a round of its own: the same sample at the same settings."""
     model = ModelConfig(sigma_m=0.01, samples=3)
-    coarse_end = preset("default").changed("default-coarse-end", collapse={"end_substeps": 1})
+    coarse_end = preset("default").changed("default-coarse-end",
+                                           collapse={"end_substeps": 1, "end_travel_fraction": None})
     inline, rounds = CountingMap(), RoundsOnly()
     fast = predict(tower, model, coarse_end, QUERY, seed=2, map_fn=inline)
     slow = predict(tower, model, coarse_end, QUERY, seed=2, map_fn=rounds)
@@ -379,7 +381,8 @@ def test_a_questions_unhealthy_variant_is_rerun_in_its_sample_task_as_it_would_b
     the prediction's sample 2 does), and each rerun at the reference runs in that sample's task, the
     variant alone; the answer is the one the check's own rounds give."""
     model = ModelConfig(sigma_m=0.01, samples=3)
-    coarse_end = preset("default").changed("default-coarse-end", collapse={"end_substeps": 1})
+    coarse_end = preset("default").changed("default-coarse-end",
+                                           collapse={"end_substeps": 1, "end_travel_fraction": None})
     actions = [None, A.Remove((tower.dynamic_objects[-1].name,))]
     inline, rounds = CountingMap(), RoundsOnly()
     fast = A.ask(tower, actions, model, coarse_end, seed=2, map_fn=inline, check=DEFAULT_CHECK, queries=("far",))

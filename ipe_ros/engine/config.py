@@ -230,6 +230,15 @@ class CollapseSettings:
     for the last 0.1 s, 2 (2.75 with the check's coverage; benchmarks/README.md, "the self-check's
     policies"). ``default`` uses 2.
 
+    ``end_travel_fraction``: in those last ``fine_before_end_s``, also as many substeps as keep the
+    fastest corner within this fraction of the smallest extent per substep (None: ``end_substeps``
+    alone), checked at every read. A body caught mid-impact at the horizon ends inside what it hit by
+    about its last substep's travel, which the solver has not yet pushed out, so the fraction is the
+    self-check's bar for a healthy end (5%): half steps left the 10-block depth example's one
+    unhealthy rollout 10.9% inside another (a tower landing at 5 m/s), rerun at the reference for
+    0.4 s of a worker; three substeps end it healthy. Rollouts whose bodies end slower than about
+    0.1 sizes per fine step keep ``end_substeps`` and are unchanged.
+
     ``max_created_energy_fraction``: collapse steps are on trial. When, at a look after they began
     (and before the end phase), the scene holds more energy than the least it held so far by more
     than this fraction of its energy scale (``health.energy_scale_j``), the rollout goes back to the
@@ -275,11 +284,14 @@ class CollapseSettings:
     quiet_sizes_per_s: float = 1.0
     #: part of a stored result's key only when set: results stored before it keep their keys
     max_travel_fraction: float | None = field(default=None, metadata={"keyed": "when set"})
+    end_travel_fraction: float | None = field(default=None, metadata={"keyed": "when set"})
 
     def __post_init__(self) -> None:
         integer(self.step_factor, "collapse.step_factor", 1, 100, " (1: no collapse steps)")
         if self.max_travel_fraction is not None:
             positive(self.max_travel_fraction, "collapse.max_travel_fraction")
+        if self.end_travel_fraction is not None:
+            positive(self.end_travel_fraction, "collapse.end_travel_fraction")
         if self.solver_iterations is not None:
             integer(self.solver_iterations, "collapse.solver_iterations", 1, 10_000, " or None")
         positive(self.drop_fraction, "collapse.drop_fraction")
@@ -357,6 +369,11 @@ class SimSettings:
         against a mesh's convex parts gain up to 33x a scene's energy (a 4 mm ladle in a tipping mug:
         28 of 32 `paper` rollouts), where plain rigid bodies, at the same step, gain none; the
         paper's own engine, ODE, integrates plain rigid bodies (benchmarks/results/meshes).
+    islands: groups of bodies that nothing brings together are simulated apart, each in a world of
+        its own with its own step (its smallest body's, not the scene's) and its own end at rest;
+        where two could have met (each island's reach, read at every look), the sample is simulated
+        again as one world (simulation/islands.py). Step watches (contact, event queries) and "will
+        anything fall?" keep one world.
     """
 
     name: str
@@ -373,10 +390,12 @@ class SimSettings:
     early_stop: EarlyStopSettings = EarlyStopSettings()
     #: part of a stored result's key only when set, so that results stored before it keep their keys
     rigid_when_unhealthy: bool = field(default=False, metadata={"keyed": "when set"})
+    islands: bool = field(default=False, metadata={"keyed": "when set"})
 
     def __post_init__(self) -> None:
         positive(self.time_step_s, "time_step_s")
         boolean(self.rigid_when_unhealthy, "rigid_when_unhealthy")
+        boolean(self.islands, "islands")
         positive(self.horizon_s, "horizon_s")
         positive(self.max_step_fraction_of_time_scale, "max_step_fraction_of_time_scale")
         positive(self.max_travel_fraction, "max_travel_fraction")
@@ -453,7 +472,7 @@ PRESETS: dict[str, SimSettings] = {
                                                  maximal_coordinates=True),
                            settling=SettlingSettings(duration_s=0.1, substeps=2),
                            collapse=CollapseSettings(step_factor=4, solver_iterations=50, end_substeps=2,
-                                                     max_travel_fraction=0.25),
+                                                     max_travel_fraction=0.25, end_travel_fraction=0.05),
                            early_stop=EarlyStopSettings(enabled=True, speed_sizes_per_s=0.4, angular_rad_s=0.4,
                                                         duration_s=0.15, min_time_s=0.2)),
 }

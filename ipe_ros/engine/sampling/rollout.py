@@ -190,18 +190,133 @@ def simulate_pushes(scene: Scene, model: ModelConfig, settings: SimSettings, spe
     decided = decided_heights(scene, settings, spec, initial)
     collapse_below_z = collapse_heights(scene, settings, initial)
     run_settings = query_settings(settings, spec)
+    apart = Apart.of(scene, settings, spec, world, decided, record_every)
     ends = []
     for i, phi in enumerate(model.phi_m_s2):
-        if i > 0 or fresh_first:
+        push = simulation.Push(phi, push_direction_rad, model.push_duration_s)
+        if apart is not None:
+            try:
+                ends.append((phi, apart.simulate(initial, initial_orn, masses_kg, run_settings, push, collapse_below_z,
+                                                 probe, deadline_unix_s)))
+                continue
+            except simulation.IslandsMet:
+                pass  # the whole scene, as one world
+        if i > 0 or fresh_first or apart is not None:
             with probe.part("build"):
                 world = simulation.build_world(scene, initial, masses_kg, settings, orientations_xyzw=initial_orn)
-        push = simulation.Push(phi, push_direction_rad, model.push_duration_s)
         watches, end_when_watched = watches_for(scene, spec, world)
         ends.append((phi, simulation.simulate(world, scene, run_settings, push, record_every=record_every,
                                               decided=decided, collapse_below_z_m=collapse_below_z, probe=probe,
                                               deadline_unix_s=deadline_unix_s, watches=watches,
                                               end_when_watched=end_when_watched)))
     return ends
+
+
+@dataclass(frozen=True)
+class Apart:
+    """A sample's islands (``simulation.islands``), each simulated in a world of its own, the answer
+    merged; the whole scene as one world once two of them could have met."""
+
+    scene: Scene
+    groups: tuple[np.ndarray, ...]
+    decided: DecidedHeights | None
+    record_every: int
+    whole_step_s: float
+    clearance_m: float
+
+    @classmethod
+    def of(cls, scene: Scene, settings: SimSettings, spec: QuerySpec, world: simulation.World,
+           decided: DecidedHeights | None, record_every: int) -> "Apart | None":
+        """The separated ``world``'s islands, or None where the settings keep one world, where there
+        is one island, or where the rollout needs the whole world: step watches (contacts, events:
+        any pair may be asked about) and "will anything fall?" (one world ends at the first fall)."""
+        if not settings.islands or len(world.dynamic_ids) < 2 or (decided is not None and decided.stop_at_first_fall):
+            return None
+        if watches_for(scene, spec, world)[0]:
+            return None
+        velocities = np.array([b.linear_velocity_m_s for b in scene.dynamic_objects], float)
+        # the whole world finds contacts this far ahead: islands closer than twice that are one
+        clearance = 2 * world.contact_distance_m
+        groups = simulation.islands.partition(world, velocities, settings.horizon_for(scene.horizon_s), 2 * clearance)
+        if len(groups) < 2:
+            return None
+        return cls(scene, tuple(groups), decided, record_every, world.time_step_s, clearance)
+
+    def simulate(self, initial: np.ndarray, initial_orn: np.ndarray, masses_kg: np.ndarray, settings: SimSettings,
+                 push: simulation.Push, collapse_below_z: np.ndarray | None, probe: Probe,
+                 deadline_unix_s: float | None) -> simulation.RolloutEnd:
+        """The islands side by side, each in a client of its own, the one furthest behind stepped on
+        to its next read; raises ``simulation.IslandsMet`` once two could have met."""
+        tracks = simulation.islands.Tracks(len(self.groups), settings.horizon_for(self.scene.horizon_s),
+                                           self.clearance_m)
+        statics = tuple(b for b in self.scene.objects if b.static)
+        trials: list = []
+        try:
+            rollouts = []
+            for slot, group in enumerate(self.groups):
+                island = dataclasses.replace(self.scene, objects=statics + tuple(self.scene.dynamic_objects[i]
+                                                                                   for i in group))
+                with probe.part("build"):
+                    world = simulation.build_world(island, initial[group], masses_kg[group], settings,
+                                                   orientations_xyzw=initial_orn[group], slot=slot)
+                every = max(1, round(self.record_every * self.whole_step_s / world.time_step_s)) \
+                    if self.record_every else 0
+                rollouts.append(simulation.begin(
+                    world, island, settings, push, trials, record_every=every, decided=_subset(self.decided, group),
+                    collapse_below_z_m=None if collapse_below_z is None else collapse_below_z[group], probe=probe,
+                    deadline_unix_s=deadline_unix_s, watches={}, footprints=tracks.of(slot)))
+            ends: list = [None] * len(rollouts)
+            reads = [r.reads() for r in rollouts]
+            now = [0.0] * len(rollouts)
+            while any(end is None for end in ends):
+                behind = min((i for i, end in enumerate(ends) if end is None), key=now.__getitem__)
+                try:
+                    now[behind] = next(reads[behind])
+                except StopIteration:
+                    ends[behind] = rollouts[behind].end()
+                    tracks.ended(behind)
+            return _merged(ends, self.groups, len(initial))
+        finally:
+            for trial in trials:
+                trial.close()
+
+
+def _subset(decided: DecidedHeights | None, group: np.ndarray) -> DecidedHeights | None:
+    if decided is None:
+        return None
+    return dataclasses.replace(decided, fallen_below_z_m=decided.fallen_below_z_m[group],
+                               never_falls=None if decided.never_falls is None else decided.never_falls[group])
+
+
+def _merged(ends: list[simulation.RolloutEnd], groups: tuple[np.ndarray, ...], n: int) -> simulation.RolloutEnd:
+    """The islands' ends as one rollout's: every body where its island left it; the energy gained
+    summed, the deepest penetration, the longest simulated time."""
+    positions, orientations, speeds, spins = np.empty((n, 3)), np.empty((n, 4)), np.empty(n), np.empty(n)
+    for group, end in zip(groups, ends):
+        positions[group], orientations[group] = end.positions_m, end.orientations_xyzw
+        speeds[group], spins[group] = end.speeds_m_s, end.spins_rad_s
+    undone = [end.collapse_undone_s for end in ends if end.collapse_undone_s is not None]
+    return simulation.RolloutEnd(positions, orientations, _merged_trajectory(ends, groups, n),
+                                 max(end.simulated_s for end in ends),
+                                 energy_gain_j=sum(end.energy_gain_j for end in ends),
+                                 penetration_fraction=max(end.penetration_fraction for end in ends),
+                                 speeds_m_s=speeds, spins_rad_s=spins, events={},
+                                 collapse_undone_s=min(undone) if undone else None)
+
+
+def _merged_trajectory(ends: list[simulation.RolloutEnd], groups: tuple[np.ndarray, ...], n: int) -> list | None:
+    """One frame at every time some island recorded one, each island as its latest frame then."""
+    if ends[0].trajectory is None:
+        return None
+    times = sorted({frame[0] for end in ends for frame in end.trajectory})
+    frames = []
+    for t in times:
+        positions, orientations = np.empty((n, 3)), np.empty((n, 4))
+        for group, end in zip(groups, ends):
+            latest = max((frame for frame in end.trajectory if frame[0] <= t + 1e-12), key=lambda frame: frame[0])
+            positions[group], orientations[group] = latest[1], latest[2]
+        frames.append((t, positions, orientations))
+    return frames
 
 
 def lost(task: SampleTask, reason: str) -> SampleOutcome:

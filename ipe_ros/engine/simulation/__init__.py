@@ -2,15 +2,17 @@
 
 world.py builds and reads pybullet worlds; depenetration.py separates overlapping boxes; stepper.py
 runs the loop that settling.py, collapse.py, termination.py and health.py each take part in;
-probe.py lets a benchmark watch the parts.
+islands.py tells which bodies can be simulated apart; probe.py lets a benchmark watch the parts.
 """
 
+from . import islands
 from .depenetration import depenetrate, set_down
+from .islands import IslandsMet
 from .probe import NO_PROBE, PHASES, Probe
-from .stepper import Push, RolloutEnd, simulate
+from .stepper import Push, RolloutEnd, begin, simulate
 from .termination import DecidedHeights
 from .bullet import client, pybullet
 from .world import World, build_world, read_poses, read_velocities
 
-__all__ = ["NO_PROBE", "PHASES", "DecidedHeights", "Probe", "Push", "RolloutEnd", "World", "build_world", "client",
+__all__ = ["NO_PROBE", "PHASES", "DecidedHeights", "IslandsMet", "Probe", "Push", "RolloutEnd", "World", "begin", "build_world", "client",
            "depenetrate", "pybullet", "read_poses", "read_velocities", "set_down", "simulate"]

@@ -2,7 +2,7 @@
 and the references its calls keep given back.
 
 One DIRECT client per process (``client()``), created on first use and re-created after a fork or
-a disconnect. The rest of the engine reaches pybullet through ``pybullet()``.
+a disconnect (more beside it only for islands simulated side by side). The rest of the engine reaches pybullet through ``pybullet()``.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import os
 import sys
 
 _PYBULLET = None
-_CLIENT: int | None = None
+_CLIENTS: dict[int, int] = {}  # slot -> this process's DIRECT client in it
 _CLIENT_PID: int | None = None
 
 
@@ -53,15 +53,19 @@ def pybullet():
     return _PYBULLET
 
 
-def client() -> int:
-    """This process's pybullet DIRECT client (re-created after a fork or a disconnect)."""
-    global _CLIENT, _CLIENT_PID
+def client(slot: int = 0) -> int:
+    """This process's pybullet DIRECT client (re-created after a fork or a disconnect). ``slot`` > 0:
+    another one, for a world that must exist beside slot 0's (islands simulated side by side)."""
+    global _CLIENT_PID
     p = pybullet()
-    if _CLIENT is None or _CLIENT_PID != os.getpid() or not p.isConnected(_CLIENT):
-        with quiet_c_output():
-            _CLIENT = p.connect(p.DIRECT)
+    if _CLIENT_PID != os.getpid():
+        _CLIENTS.clear()
         _CLIENT_PID = os.getpid()
-    return _CLIENT
+    cid = _CLIENTS.get(slot)
+    if cid is None or not p.isConnected(cid):
+        with quiet_c_output():
+            cid = _CLIENTS[slot] = p.connect(p.DIRECT)
+    return cid
 
 
 def without_leaked_references(call, arguments: tuple):

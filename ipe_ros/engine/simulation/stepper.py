@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from typing import Iterator
 
 import numpy as np
 
@@ -31,6 +32,7 @@ from ..errors import BudgetExceeded
 from ..scene.bodies import Scene
 from . import health
 from .collapse import CollapseTrial, CollapseWatch
+from .islands import Footprint
 from .probe import NO_PROBE, Probe
 from .settling import Settling
 from .steps import StepControl, substeps_for, ticks_allowed
@@ -94,7 +96,8 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, **kw
     name -> query.StepWatch, each shown the world at t = 0 and after every step; with
     ``end_when_watched`` the rollout ends once every watch has decided. Raises
     PhysicsError on non-finite states or speeds above ``health.speed_limit_m_s``, and
-    BudgetExceeded once ``time.time()`` passes ``deadline_unix_s``.
+    BudgetExceeded once ``time.time()`` passes ``deadline_unix_s``. ``footprints``: a list that gets
+    where the bodies were (and how fast their corners moved) at every read (``islands``).
     """
     trials: list[CollapseTrial] = []  # saved world states, freed however the rollout ends
     try:
@@ -108,6 +111,12 @@ def _simulate(world: World, scene: Scene, settings: SimSettings, push: Push, tri
     return _Rollout(world, scene, settings, push, trials, **kw).run()
 
 
+def begin(world: World, scene: Scene, settings: SimSettings, push: Push, trials: list, **kw) -> "_Rollout":
+    """A rollout set up as ``simulate`` sets it up, to be run read by read (``reads()``, then
+    ``end()``); the saved states it makes go in ``trials``, for the caller to ``close()``."""
+    return _Rollout(world, scene, settings, push, trials, **kw)
+
+
 class _Rollout:
     """One rollout's loop and the state its parts share: ``run`` steps on the tick grid and, at each
     health check or look, reads the world once and hands that reading to each part in turn."""
@@ -116,8 +125,10 @@ class _Rollout:
                  record_every: int = 0, decided: DecidedHeights | None = None,
                  collapse_below_z_m: np.ndarray | None = None, probe: Probe = NO_PROBE,
                  deadline_unix_s: float | None = None, watches: dict | None = None,
-                 end_when_watched: bool = False):
+                 end_when_watched: bool = False, footprints: list | None = None):
         self.world, self.settings, self.trials, self.probe = world, settings, trials, probe
+        #: where the bodies were at each read (islands.Footprint), for islands simulated apart
+        self.footprints = footprints
         self.deadline_unix_s, self.end_when_watched = deadline_unix_s, end_when_watched
         self.p = p = pybullet()
         self.cid = world.client
@@ -167,16 +178,27 @@ class _Rollout:
                               len(scene.dynamic_objects))
         self.travel_substeps = substeps_for(fastest_start_m_s + g * self.look_every * dt, settings, world) \
             if fastest_start_m_s else 1
+        self.fastest_m_s = fastest_start_m_s  # as of the last read: what the end phase's substeps start from
         self.watches = watches or {}
         for watch in self.watches.values():
             watch.start(world)
+        self._footprint(0.0, speeds_of(initial_velocities)[0] + speeds_of(initial_velocities)[1] * self.half_diagonals_m)
         self.tick = 0
         self.solver_switch_due = world.direct_solver
-        self.end_phase_due = settings.collapse.end_substeps > 1
+        self.end_phase_due = settings.collapse.end_substeps > 1 or settings.collapse.end_travel_fraction is not None
         if self.settling.ticks or self.travel_substeps > 1:
             self.steps.set(1, max(self.travel_substeps, self.settling.substeps if self.settling.ticks else 1))
 
     def run(self) -> RolloutEnd:
+        for _ in self.reads():
+            pass
+        return self.end()
+
+    def reads(self) -> Iterator[float]:
+        """The loop, pausing after every read of the world (at the simulated time it yields), so that
+        islands can run side by side (``begin``); ``end()`` once it is over."""
+        if self.footprints is not None:  # other worlds may have been built meanwhile
+            self.steps.reapply()
         while self.tick < self.total_ticks:
             previous = self._step()
             if self._watched():
@@ -184,9 +206,12 @@ class _Rollout:
             self._after_step(previous)
             look_due = (self.rest.enabled or self.collapse.active) and _crossed(self.tick, previous, self.look_every)
             health_due = _crossed(self.tick, previous, self.health_every) or self.tick == self.total_ticks
-            if (look_due or health_due) and self._look(look_due, health_due):
-                break
-        return self._end()
+            if look_due or health_due:
+                if self._look(look_due, health_due):
+                    break
+                yield self.tick * self.dt
+                if self.footprints is not None:  # other worlds may have stepped meanwhile
+                    self.steps.reapply()
 
     # -- between looks ---------------------------------------------------------------------------------
     def _step(self) -> int:
@@ -201,7 +226,7 @@ class _Rollout:
         # bodies sunk into each other (config.SolverSettings.direct_solver_for_restitution)
         if self.end_phase_due and self.tick >= self.fine_from_tick:
             self.end_phase_due = False
-            self.steps.end_phase()
+            self.steps.end_phase(self.fastest_m_s)
         if self.solver_switch_due and self.tick >= self.fine_from_tick:
             self.solver_switch_due = False
             use_sequential_solver(self.world)
@@ -258,9 +283,13 @@ class _Rollout:
             health.check_speeds(speeds, self.limit, self.tick * self.dt)
         # the fastest any corner can get until the next read
         period_ticks = self.look_every if look_due else self.health_every
-        fastest_corner_m_s = float((speeds + spins * self.half_diagonals_m).max())
+        corner_speeds = speeds + spins * self.half_diagonals_m
+        fastest_corner_m_s = float(corner_speeds.max())
+        self._footprint(self.tick * self.dt, corner_speeds)
         fastest_m_s = fastest_corner_m_s + self.g * period_ticks * self.dt
         self.travel_substeps = substeps_for(fastest_m_s, self.settings, self.world)
+        self.fastest_m_s = fastest_m_s
+        self.steps.end_speed(fastest_m_s)
         self.energy.look(energy_now_j)
         if not look_due:
             if not self.settling.covers(self.tick):
@@ -272,6 +301,12 @@ class _Rollout:
                             (positions, orientations, velocities, energy_now_j))
         self.steps.find_contacts_ahead(fastest_m_s)
         return self._at_rest(speeds, spins, heights)
+
+    def _footprint(self, t_s: float, corner_speeds_m_s: np.ndarray) -> None:
+        if self.footprints is not None:
+            boxes = np.array([np.concatenate(self.p.getAABB(body, physicsClientId=self.cid))
+                              for body in self.world.dynamic_ids])
+            self.footprints.append(Footprint(t_s, boxes[:, :3], boxes[:, 3:], np.asarray(corner_speeds_m_s, float)))
 
     def _undo_trial(self) -> tuple:
         """The collapse steps made energy (NaN: they diverged): back to the look where they began,
@@ -342,7 +377,7 @@ class _Rollout:
         self.steps.set(1, self.travel_substeps)
         return False
 
-    def _end(self) -> RolloutEnd:
+    def end(self) -> RolloutEnd:
         positions, orientations, velocities = read_state(self.world)
         positions, orientations = positions.copy(), orientations.copy()  # RolloutEnd's own, contiguous
         health.check_final_poses(positions, orientations)
@@ -351,6 +386,7 @@ class _Rollout:
         # has fallen, or can never fall, is answered whatever pose it ends in mid-collapse)
         read = self.rest.undecided if self.rest.needs_heights else None
         speeds, spins = speeds_of(velocities)
+        self._footprint(self.tick * self.dt, speeds + spins * self.half_diagonals_m)
         return RolloutEnd(positions, orientations, self.trajectory, self.tick * self.dt,
                           energy_gain_j=self.energy.max_gain_j,
                           penetration_fraction=health.deepest_penetration_fraction(self.world, self.smallest, read),

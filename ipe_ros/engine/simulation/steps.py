@@ -13,9 +13,11 @@ from ..config import SimSettings
 from .world import World, contact_distance_m, residual_threshold, set_contact_distance, set_step
 
 
-def substeps_for(fastest_m_s: float, settings: SimSettings, world: World) -> int:
-    """Substeps per tick that keep the fastest corner within the travel limit."""
-    travel = fastest_m_s * world.time_step_s / (settings.max_travel_fraction * world.scale_m)
+def substeps_for(fastest_m_s: float, settings: SimSettings, world: World, travel_fraction: float | None = None) -> int:
+    """Substeps per tick that keep the fastest corner within the travel limit (``travel_fraction``
+    of the smallest extent; None: the settings' ``max_travel_fraction``)."""
+    fraction = settings.max_travel_fraction if travel_fraction is None else travel_fraction
+    travel = fastest_m_s * world.time_step_s / (fraction * world.scale_m)
     return max(1, math.ceil(travel - 1e-9))
 
 
@@ -34,10 +36,25 @@ class StepControl:
         self.ticks, self.substeps = 1, 1
         self._contact_distance_m = world.contact_distance_m
         self._least_substeps = 1  # raised for the end of the horizon (collapse.end_substeps)
+        self._ending = False  # in the end phase
 
-    def end_phase(self) -> None:
-        """From now on every tick runs in at least ``collapse.end_substeps`` substeps."""
-        self._least_substeps = self._settings.collapse.end_substeps
+    def end_phase(self, fastest_m_s: float) -> None:
+        """From now on every tick runs in at least ``collapse.end_substeps`` substeps, and in as many
+        as keep the fastest corner within ``collapse.end_travel_fraction`` (``end_speed``)."""
+        self._ending = True
+        self.end_speed(fastest_m_s)
+
+    def end_speed(self, fastest_m_s: float) -> None:
+        """In the end phase: the least substeps for the fastest corner's speed now (the answer reads
+        the poses at the horizon, and a body caught mid-impact ends inside what it hit by about
+        its last substep's travel, which the solver has not yet pushed out)."""
+        if not self._ending:
+            return
+        group = self._settings.collapse
+        least = group.end_substeps
+        if group.end_travel_fraction is not None:
+            least = max(least, substeps_for(fastest_m_s, self._settings, self._world, group.end_travel_fraction))
+        self._least_substeps = least
         self.set(self.ticks, self.substeps)
 
     def find_contacts_ahead(self, fastest_m_s: float) -> None:
@@ -50,13 +67,19 @@ class StepControl:
             self._contact_distance_m = distance
             set_contact_distance(world, distance)
 
-    def snapshot(self) -> tuple[int, int, float, int]:
-        return self.ticks, self.substeps, self._contact_distance_m, self._least_substeps
+    def reapply(self) -> None:
+        """Set pybullet's contact distance to this world's again: Bullet keeps it in one global for
+        every client of the process, so a world stepped beside another (islands) must set its own
+        before it steps on."""
+        set_contact_distance(self._world, self._contact_distance_m)
 
-    def restore(self, snapshot: tuple[int, int, float, int]) -> None:
+    def snapshot(self) -> tuple[int, int, float, int, bool]:
+        return self.ticks, self.substeps, self._contact_distance_m, self._least_substeps, self._ending
+
+    def restore(self, snapshot: tuple[int, int, float, int, bool]) -> None:
         """Back to a ``snapshot()``, in pybullet too (its step and contact distance are not part of
         a saved world state)."""
-        self.ticks, self.substeps, self._contact_distance_m, self._least_substeps = snapshot
+        self.ticks, self.substeps, self._contact_distance_m, self._least_substeps, self._ending = snapshot
         world = self._world
         factor = self.ticks / self.substeps
         set_step(world, world.time_step_s * factor, residual_threshold(self._settings, world.scale_m, factor))

@@ -239,11 +239,12 @@ def set_step(world: World, step_s: float, residual: float | None = None) -> None
 
 
 def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
-                settings: SimSettings, orientations_xyzw: np.ndarray | None = None) -> World:
+                settings: SimSettings, orientations_xyzw: np.ndarray | None = None, slot: int = 0) -> World:
     """A fresh world: support, static bodies, and the dynamic bodies with their centres of mass at
-    ``positions_m`` (and ``orientations_xyzw``, default: the scene's), at rest."""
+    ``positions_m`` (and ``orientations_xyzw``, default: the scene's), at rest; in the client of
+    ``slot`` (``bullet.client``), whose world it replaces."""
     p = pybullet()
-    cid = client()
+    cid = client(slot)
     p.resetSimulation(physicsClientId=cid)
     p.setGravity(*scene.gravity_m_s2, physicsClientId=cid)
     scale = min(b.smallest_extent_m for b in scene.dynamic_objects)

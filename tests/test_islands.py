@@ -1,0 +1,141 @@
+"""Islands (``SimSettings.islands``, simulation/islands.py): groups of bodies that nothing brings
+together, each simulated in a world of its own, and the whole scene as one world once two could
+have met."""
+
+import math
+
+import numpy as np
+import pytest
+
+from ipe_ros.engine import Box, ModelConfig, QuerySpec, predict, preset
+from ipe_ros.engine import simulation
+from ipe_ros.engine.sampling import rollout
+from ipe_ros.engine.sampling.perturb import draw_sample_inputs
+
+from .helpers import block, floor_scene
+
+ISLANDS = preset("default").changed("default-islands", islands=True)
+FAR = QuerySpec(queries=frozenset({"far", "fall"}))  # rollouts run to rest: every pose read
+
+
+def _plate(name: str, x: float, **kw) -> Box:
+    """A 1 cm plate: the size cap gives it (and any world it is in) 2.6 ms steps against 1/180 s."""
+    return Box(name=name, extents_m=(0.1, 0.1, 0.01), position_m=(x, 0.0, 0.005), orientation_xyzw=(0, 0, 0, 1),
+               friction=0.9, restitution=0.0, mass_kg=0.1, **kw)
+
+
+def _tipping_tower():
+    """Two blocks, the top one over the edge (it falls), and a plate 2 m away."""
+    return floor_scene(block("b0", 0.0, 0.0, 0.1), block("b1", 0.13, 0.0, 0.3), _plate("plate", 2.0))
+
+
+def _separated(scene, settings=ISLANDS):
+    inputs = draw_sample_inputs(scene, ModelConfig(sigma_m=0.0), np.random.default_rng(0))
+    return rollout.separated_world(scene, settings, inputs)
+
+
+def _groups(scene, horizon_s=2.0, gap_m=0.002):
+    world = _separated(scene)
+    velocities = np.array([b.linear_velocity_m_s for b in scene.dynamic_objects], float)
+    return [[scene.dynamic_objects[i].name for i in g] for g in simulation.islands.partition(world, velocities,
+                                                                                               horizon_s, gap_m)]
+
+
+def test_bodies_that_touch_or_could_fall_or_be_thrown_onto_each_other_are_one_island():
+    assert _groups(_tipping_tower()) == [["b0", "b1"], ["plate"]]
+    # a block 5 cm above the plate falls onto it: one island
+    hovering = floor_scene(_plate("plate", 0.0), block("above", 0.0, 0.0, 0.16, extents=(0.2, 0.2, 0.2)))
+    assert _groups(hovering) == [["plate", "above"]]
+    # a block thrown at the plate from 1.5 m away reaches it within the horizon; thrown away from it, never
+    thrown = floor_scene(_plate("plate", 0.0), block("thrown", 1.5, 0.0, 0.1, extents=(0.2, 0.2, 0.2),
+                                                     linear_velocity_m_s=(-1.0, 0.0, 0.0)))
+    assert _groups(thrown) == [["plate", "thrown"]]
+    away = floor_scene(_plate("plate", 0.0), block("thrown", 1.5, 0.0, 0.1, extents=(0.2, 0.2, 0.2),
+                                                   linear_velocity_m_s=(1.0, 0.0, 0.0)))
+    assert _groups(away) == [["plate"], ["thrown"]]
+
+
+def test_each_island_is_answered_as_it_would_be_alone_at_its_own_step():
+    """The tower apart from a plate 2 m away: its rollout is, bit for bit, the tower's world alone
+    (built from the same start, at 1/180 s), where the whole scene steps at the plate's 2.6 ms. Bit
+    for bit because each island sets Bullet's contact distance, one global for every client of the
+    process, again before it steps on (``StepControl.reapply``)."""
+    scene = _tipping_tower()
+    model = ModelConfig(sigma_m=0.01, samples=2)
+    p = predict(scene, model, ISLANDS, FAR, seed=3, check=None)
+    whole = predict(scene, model, preset("default"), FAR, seed=3, check=None)
+    assert p.fall_fraction == whole.fall_fraction == pytest.approx(1 / 3)  # the top block, in both
+    assert _separated(scene).time_step_s < 0.003
+    outcome = p.outcomes[0]
+    tower = floor_scene(*scene.dynamic_objects[:2])
+    world = simulation.build_world(tower, outcome.initial_positions_m[:2], np.ones(2),
+                                   ISLANDS, orientations_xyzw=outcome.initial_orientations_xyzw[:2])
+    assert world.time_step_s == pytest.approx(1 / 180)
+    settings = rollout.query_settings(ISLANDS, FAR)
+    alone = simulation.simulate(world, tower, settings, simulation.Push(),
+                                collapse_below_z_m=rollout.collapse_heights(tower, ISLANDS,
+                                                                            outcome.initial_positions_m[:2]))
+    np.testing.assert_array_equal(outcome.rollouts[0].final_positions_m[:2], alone.positions_m)
+    # the plate never moved
+    np.testing.assert_allclose(outcome.rollouts[0].final_positions_m[2], outcome.initial_positions_m[2], atol=1e-4)
+
+
+def test_islands_that_could_meet_are_simulated_as_one_world():
+    """A domino tilted towards a box 10 cm away starts apart from it and falls onto it: the islands'
+    footprints meet, and the sample is simulated as one world, where the domino ends leaning on the
+    box (apart, it would have fallen flat through where the box is)."""
+    tilt = math.radians(12)
+    lowest = 0.2 * math.cos(tilt) + 0.02 * math.sin(tilt)  # of the tilted domino's corners, below its centre
+    domino = Box(name="domino", extents_m=(0.04, 0.2, 0.4), position_m=(0.0, 0.0, lowest + 0.001),
+                 orientation_xyzw=(0.0, math.sin(tilt / 2), 0.0, math.cos(tilt / 2)), friction=0.9, restitution=0.0,
+                 mass_kg=1.0, position_sigma_m=0.0)
+    box = block("box", 0.2 + 0.1 + 0.1, 0.0, 0.1, extents=(0.2, 0.2, 0.2), mass_kg=5.0, position_sigma_m=0.0)
+    scene = floor_scene(domino, box)
+    assert _groups(scene) == [["domino"], ["box"]]
+    met = []
+    original = rollout.Apart.simulate
+
+    def spy(self, *args, **kw):
+        try:
+            return original(self, *args, **kw)
+        except simulation.IslandsMet as exc:
+            met.append(str(exc))
+            raise
+
+    rollout.Apart.simulate = spy
+    try:
+        p = predict(scene, ModelConfig(sigma_m=0.0, samples=1), ISLANDS, FAR, seed=0, check=None)
+    finally:
+        rollout.Apart.simulate = original
+    assert len(met) == 1 and met[0].startswith("two islands could have met between t = ")
+    final = p.outcomes[0].rollouts[0].final_positions_m
+    assert final[0, 2] > 0.05  # leaning on the box, not lying on the floor (0.02)
+    assert not p.outcomes[0].rollouts[0].penetration_fraction > 0.05
+
+
+def test_recording_islands_changes_nothing_and_shows_every_body_on_one_clock():
+    scene = _tipping_tower()
+    model = ModelConfig(sigma_m=0.01, samples=1)
+    plain = predict(scene, model, ISLANDS, FAR, seed=3, check=None)
+    recorded = predict(scene, model, ISLANDS, FAR, seed=3, check=None, record_every=5, record_samples=1)
+    a, b = plain.outcomes[0].rollouts[0], recorded.outcomes[0].rollouts[0]
+    np.testing.assert_array_equal(a.final_positions_m, b.final_positions_m)
+    frames = b.trajectory
+    times = [t for t, *_ in frames]
+    assert times[0] == 0.0 and times == sorted(times) and len(set(times)) == len(times)
+    assert all(positions.shape == (3, 3) and orientations.shape == (3, 4) for _, positions, orientations in frames)
+    assert times[-1] <= b.simulated_s
+
+
+def test_questions_about_contacts_and_whether_anything_falls_keep_one_world():
+    scene = _tipping_tower()
+    world = _separated(scene)
+    initial = simulation.read_poses(world)[0]
+    any_fall = QuerySpec(queries=frozenset({"any_fall"}))
+    decided = rollout.decided_heights(scene, ISLANDS, any_fall, initial)
+    assert decided.stop_at_first_fall
+    assert rollout.Apart.of(scene, ISLANDS, any_fall, world, decided, 0) is None
+    contact = QuerySpec(queries=frozenset({"contact"}), contact_pairs=(("b0", "plate"),))
+    assert rollout.Apart.of(scene, ISLANDS, contact, world, None, 0) is None
+    assert rollout.Apart.of(scene, ISLANDS, FAR, world, None, 0) is not None
+    assert rollout.Apart.of(scene, preset("default"), FAR, world, None, 0) is None  # off unless asked for

@@ -193,6 +193,7 @@ def main(argv: list[str] | None = None) -> None:
         configs = {n: configs[n] for n in wanted}
     scenes = scene_zoo(args.seed, args.per_family, tuple(args.families.split(",")))
     results: dict[str, list[dict]] = {name: [] for name in configs}
+    preset_now = PRESETS["default"]
     start = time.perf_counter()
     with WorkerPool(args.workers) as pool:
         pool.warm()
@@ -200,12 +201,15 @@ def main(argv: list[str] | None = None) -> None:
             model = ModelConfig(sigma_m=zoo_sigma_m(scene), samples=args.samples)
             line = []
             for name, (settings, check) in configs.items():
-                envelope.PRESETS["default"] = settings if name.startswith(TRIAL) else PRESETS["default"]
+                # the envelope reads the preset from config.PRESETS itself: the trial is the preset while it runs
+                envelope.PRESETS["default"] = settings if name.startswith(TRIAL) else preset_now
                 t0 = time.perf_counter()
-                prediction = predict(scene, model, settings, QuerySpec(queries=family_queries(family_of(scene))),
-                                     seed=i, map_fn=pool.map, check=check)
+                try:
+                    prediction = predict(scene, model, settings, QuerySpec(queries=family_queries(family_of(scene))),
+                                         seed=i, map_fn=pool.map, check=check)
+                finally:
+                    envelope.PRESETS["default"] = preset_now
                 wall = time.perf_counter() - t0
-                envelope.PRESETS["default"] = PRESETS["default"]
                 results[name].append({"family": family_of(scene), "prediction": prediction, "wall_s": wall,
                                       "energy_scale_j": energy_scale_j(scene)})
                 line.append(f"{name} {wall:.2f}s any={prediction.any_fall_probability}")

@@ -139,3 +139,12 @@ def test_questions_about_contacts_and_whether_anything_falls_keep_one_world():
     assert rollout.Apart.of(scene, ISLANDS, contact, world, None, 0) is None
     assert rollout.Apart.of(scene, ISLANDS, FAR, world, None, 0) is not None
     assert rollout.Apart.of(scene, preset("default"), FAR, world, None, 0) is None  # off unless asked for
+
+
+def test_scattered_bodies_make_at_most_eight_islands():
+    scene = floor_scene(*(block(f"b{i}", 0.5 * i, 0.0, 0.1, extents=(0.2, 0.2, 0.2)) for i in range(12)))
+    groups = _groups(scene)
+    assert len(groups) == simulation.islands.MAX_ISLANDS
+    assert groups[-1] == [f"b{i}" for i in range(7, 12)] and sum(map(len, groups)) == 12
+    p = predict(scene, ModelConfig(sigma_m=0.01, samples=1), ISLANDS, FAR, seed=0, check=None)
+    assert p.fall_fraction == 0.0 and p.outcomes[0].rollouts[0].simulated_s < 2.0  # at rest, each island

@@ -279,6 +279,8 @@ class Apart:
         finally:
             for trial in trials:
                 trial.close()
+            for slot in range(1, len(self.groups)):  # slot 0's world is replaced by the next one built
+                simulation.pybullet().resetSimulation(physicsClientId=simulation.client(slot))
 
 
 def _subset(decided: DecidedHeights | None, group: np.ndarray) -> DecidedHeights | None:

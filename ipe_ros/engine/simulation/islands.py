@@ -24,6 +24,10 @@ import numpy as np
 from .bullet import pybullet
 
 
+#: the most islands (pybullet clients) a sample is split into: 200 scattered boxes must not open 200
+MAX_ISLANDS = 8
+
+
 @dataclass(frozen=True)
 class Footprint:
     """Where an island's bodies were at one read: each body's bounding box ((n, 3) corners, m), and
@@ -40,7 +44,8 @@ def partition(world, velocities_m_s: np.ndarray, horizon_s: float, gap_m: float)
     brings together, largest first. Each body's bounding box is stretched down to the lowest body
     (what it stands on, or what it would fall onto) and along its initial velocity for the horizon
     (where it is thrown); a body joins every body whose stretched box comes within ``gap_m`` of its
-    own. Whatever else brings two groups together later (a tipping body's reach) the footprints see."""
+    own. Whatever else brings two groups together later (a tipping body's reach) the footprints see.
+    At most ``MAX_ISLANDS``: the smallest groups beyond share the last."""
     p = pybullet()
     boxes = np.array([np.concatenate(p.getAABB(body, physicsClientId=world.client)) for body in world.dynamic_ids])
     low, high = boxes[:, :3].copy(), boxes[:, 3:].copy()
@@ -57,8 +62,10 @@ def partition(world, velocities_m_s: np.ndarray, horizon_s: float, gap_m: float)
         changed = bool(np.any(lowest < group))
         group = np.minimum(group, lowest)
         group = group[group]
-    groups = [np.flatnonzero(group == g) for g in np.unique(group)]
-    return sorted(groups, key=lambda g: (-len(g), g[0]))
+    groups = sorted((np.flatnonzero(group == g) for g in np.unique(group)), key=lambda g: (-len(g), g[0]))
+    if len(groups) > MAX_ISLANDS:  # the smallest together: one world holds any groups, only slower
+        groups = groups[:MAX_ISLANDS - 1] + [np.sort(np.concatenate(groups[MAX_ISLANDS - 1:]))]
+    return groups
 
 
 def _stretch(a: Footprint, b: Footprint, clearance_m: float) -> tuple[float, float, np.ndarray, np.ndarray]:

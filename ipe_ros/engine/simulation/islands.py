@@ -108,7 +108,9 @@ class Tracks:
 
     def add(self, island: int, footprint: Footprint) -> None:
         last, self._last[island] = self._last[island], footprint
-        if last is not None:
+        # collapse steps undone go back to an earlier read (config.CollapseSettings): the stretches
+        # made since stay, as places the island may have been, and it goes on from there
+        if last is not None and footprint.t_s >= last.t_s:
             self._check(island, _stretch(last, footprint, self._clearance_m / 2))
 
     def ended(self, island: int) -> None:

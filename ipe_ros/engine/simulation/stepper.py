@@ -182,7 +182,8 @@ class _Rollout:
         self.watches = watches or {}
         for watch in self.watches.values():
             watch.start(world)
-        self._footprint(0.0, speeds_of(initial_velocities)[0] + speeds_of(initial_velocities)[1] * self.half_diagonals_m)
+        start_speeds, start_spins = speeds_of(initial_velocities)
+        self._footprint(0.0, start_speeds + start_spins * self.half_diagonals_m)
         self.tick = 0
         self.solver_switch_due = world.direct_solver
         self.end_phase_due = settings.collapse.end_substeps > 1 or settings.collapse.end_travel_fraction is not None

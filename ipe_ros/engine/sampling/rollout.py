@@ -7,6 +7,7 @@ with ``ok=False`` and the reason, and the sampler counts it.
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import os
 import time
@@ -251,8 +252,8 @@ class Apart:
                                            self.clearance_m)
         statics = tuple(b for b in self.scene.objects if b.static)
         trials: list = []
+        rollouts: list = []
         try:
-            rollouts = []
             for slot, group in enumerate(self.groups):
                 island = dataclasses.replace(self.scene, objects=statics + tuple(self.scene.dynamic_objects[i]
                                                                                    for i in group))
@@ -279,7 +280,7 @@ class Apart:
         finally:
             for trial in trials:
                 trial.close()
-            for slot in range(1, len(self.groups)):  # slot 0's world is replaced by the next one built
+            for slot in range(1, len(rollouts)):  # slot 0's world is replaced by the next one built
                 simulation.pybullet().resetSimulation(physicsClientId=simulation.client(slot))
 
 
@@ -311,11 +312,12 @@ def _merged_trajectory(ends: list[simulation.RolloutEnd], groups: tuple[np.ndarr
     if ends[0].trajectory is None:
         return None
     times = sorted({frame[0] for end in ends for frame in end.trajectory})
+    recorded = [[frame[0] for frame in end.trajectory] for end in ends]  # each island's, in order
     frames = []
     for t in times:
         positions, orientations = np.empty((n, 3)), np.empty((n, 4))
-        for group, end in zip(groups, ends):
-            latest = max((frame for frame in end.trajectory if frame[0] <= t + 1e-12), key=lambda frame: frame[0])
+        for group, end, at in zip(groups, ends, recorded):
+            latest = end.trajectory[bisect.bisect_right(at, t) - 1]  # every island has a frame at t = 0
             positions[group], orientations[group] = latest[1], latest[2]
         frames.append((t, positions, orientations))
     return frames

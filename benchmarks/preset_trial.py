@@ -17,6 +17,7 @@ because they ended unhealthy: > 5% inside another, energy made, or failed) and t
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
@@ -55,23 +56,32 @@ def trial(base: SimSettings, changes: dict) -> SimSettings:
     return base.changed(base.name, **changes)
 
 
+@contextlib.contextmanager
+def as_the_preset(settings: SimSettings | None):
+    """``settings`` (a trial of `default`, under its name) as `default` while the block runs, so
+    that the validated envelope, which compares the settings with ``config.PRESETS["default"]``,
+    treats it as the preset it would become; None: `default` as it is."""
+    preset_now = envelope.PRESETS["default"]  # config.PRESETS itself
+    envelope.PRESETS["default"] = preset_now if settings is None else settings
+    try:
+        yield
+    finally:
+        envelope.PRESETS["default"] = preset_now
+
+
 def run(scenes, configs: dict[str, SimSettings], model: ModelConfig, query: QuerySpec, pool) -> dict[str, dict]:
     """Every configuration on every tower, taking turns; each inside the envelope as the preset."""
     results = {name: {"wall_s": 0.0, "predictions": [], "rollouts": 0} for name in configs}
-    preset_now = envelope.PRESETS["default"]
-    try:
-        for i, scene in enumerate(scenes):
-            for name, settings in configs.items():
-                envelope.PRESETS["default"] = settings if name != "paper" else preset_now
-                start = time.perf_counter()
+    for i, scene in enumerate(scenes):
+        for name, settings in configs.items():
+            start = time.perf_counter()
+            with as_the_preset(None if name == "paper" else settings):
                 prediction = predict(scene, model, settings, query, seed=i, map_fn=pool.map,
                                      check=None if name == "paper" else DEFAULT_CHECK)
-                results[name]["wall_s"] += time.perf_counter() - start
-                results[name]["predictions"].append(prediction)
-                results[name]["rollouts"] += prediction.samples
-            print(f"{scene.name}: " + "  ".join(f"{n} {r['wall_s']:.1f}s" for n, r in results.items()), flush=True)
-    finally:
-        envelope.PRESETS["default"] = preset_now
+            results[name]["wall_s"] += time.perf_counter() - start
+            results[name]["predictions"].append(prediction)
+            results[name]["rollouts"] += prediction.samples
+        print(f"{scene.name}: " + "  ".join(f"{n} {r['wall_s']:.1f}s" for n, r in results.items()), flush=True)
     return results
 
 
@@ -79,21 +89,25 @@ def summary(result: dict, reference: dict) -> dict:
     row = A.compare(result, reference)
     predictions = result["predictions"]
     row["refined_samples"] = sum(p.refined_samples for p in predictions)
-    row["verdicts"] = {v: sum(p.fidelity == v for p in predictions) for v in sorted({p.fidelity for p in predictions})}
+    row["verdicts"] = {v: sum(p.fidelity == v for p in predictions)
+                       for v in sorted({p.fidelity for p in predictions})}
     return row
 
 
 def markdown(report: dict) -> str:
-    lines = [f"# `default` with {report['change']} on trial: the authors' {report['towers']} towers, k = {report['samples']}",
-             "", f"{report['machine']}; {report['date']}; queries {report['queries']}; sigma {A.SIGMA_M} m, phi 0; "
-             f"`paper` and both configurations taking turns tower by tower (same seeds); wall {report['wall_s'] / 60:.0f} min.",
-             "", "| configuration | s / prediction | speed-up vs paper | mean \\|ΔFF\\| | max \\|ΔFF\\| | per-sample agreement "
-             "| direction error ° | samples refined | verdicts |",
+    lines = [f"# `default` with {report['change']} on trial: the authors' {report['towers']} towers, "
+             f"k = {report['samples']}",
+             "", f"{report['machine']}; {report['date']}; queries {report['queries']}; sigma {A.SIGMA_M} m, "
+             "phi 0; `paper` and both configurations taking turns tower by tower (same seeds); "
+             f"wall {report['wall_s'] / 60:.0f} min.",
+             "", "| configuration | s / prediction | speed-up vs paper | mean \\|ΔFF\\| | max \\|ΔFF\\| | "
+             "per-sample agreement | direction error ° | samples refined | verdicts |",
              "|---|---|---|---|---|---|---|---|---|"]
     for name, row in report["rows"].items():
         direction = row["mean_direction_error_deg"]
         lines.append(f"| {name} | {row['wall_s_per_prediction']:.3f} | {row['speedup_vs_paper']:.2f}x | "
-                     f"{row['mean_abs_dff']:.4f} | {row['max_abs_dff']:.4f} | {100 * row['per_sample_agreement']:.2f}% | "
+                     f"{row['mean_abs_dff']:.4f} | {row['max_abs_dff']:.4f} | "
+                     f"{100 * row['per_sample_agreement']:.2f}% | "
                      f"{'-' if direction is None else f'{direction:.2f}'} | {row['refined_samples']} | "
                      + ", ".join(f"{v} {n}" for v, n in row["verdicts"].items()) + " |")
     return "\n".join(lines) + "\n"
@@ -114,7 +128,8 @@ def main(argv: list[str] | None = None) -> None:
     model = ModelConfig(sigma_m=A.SIGMA_M, samples=args.samples)
     query = QuerySpec(queries=frozenset(args.query.split(",")))
     label = ", ".join(args.set)
-    configs = {"paper": PRESETS["paper"], "default": PRESETS["default"], f"default, {label}": trial(PRESETS["default"], change)}
+    configs = {"paper": PRESETS["paper"], "default": PRESETS["default"],
+               f"default, {label}": trial(PRESETS["default"], change)}
     start = time.perf_counter()
     with WorkerPool(args.workers) as pool:
         pool.warm()

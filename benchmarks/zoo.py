@@ -38,7 +38,6 @@ import numpy as np  # noqa: E402
 
 from accuracy_vs_time import _anything_fell  # noqa: E402 - the towers' "did anything fall?"
 from ipe_ros.engine import PRESETS, ModelConfig, QuerySpec, WorkerPool, predict  # noqa: E402
-from ipe_ros.engine.checking import envelope  # noqa: E402
 from ipe_ros.engine.config import DEFAULT_QUERIES  # noqa: E402
 from ipe_ros.engine.simulation.health import energy_scale_j  # noqa: E402
 from ipe_ros.engine.scene.zoo import EXTRA_QUERIES, FAMILIES, family_of, family_queries, scene_zoo, zoo_sigma_m  # noqa: E402
@@ -155,15 +154,15 @@ def markdown(report: dict) -> str:
     lines += ["", "Against the bar (mean \\|ΔP\\| <= max(0.03, 1.5x yardstick); worst scene <= yardstick's worst + "
               "0.1; no rollout ending > 5% inside another; energy gain <= 1% of the scale):", "",
               "| family | mean | worst scene | penetration | energy |", "|---|---|---|---|---|"]
+    def row(label: str, v: dict) -> str:
+        return f"| {label} | " + " | ".join("ok" if v[k] else "MISSED"
+                                             for k in ("mean_ok", "worst_ok", "penetration_ok", "energy_ok")) + " |"
+
     trial = report.get("trial_verdicts", {})
     for family, v in report.get("verdicts", {}).items():
-        lines.append(f"| {family} | {'ok' if v['mean_ok'] else 'MISSED'} | {'ok' if v['worst_ok'] else 'MISSED'} | "
-                     f"{'ok' if v['penetration_ok'] else 'MISSED'} | {'ok' if v['energy_ok'] else 'MISSED'} |")
+        lines.append(row(family, v))
         if family in trial:
-            t = trial[family]
-            lines.append(f"| {family} (trial: {report['trial']}) | {'ok' if t['mean_ok'] else 'MISSED'} | "
-                         f"{'ok' if t['worst_ok'] else 'MISSED'} | {'ok' if t['penetration_ok'] else 'MISSED'} | "
-                         f"{'ok' if t['energy_ok'] else 'MISSED'} |")
+            lines.append(row(f"{family} (trial: {report['trial']})", trial[family]))
     if "overall" in report:
         lines += ["", "Overall speed-up over `paper` (all scenes' time together): " +
                   ", ".join(f"`{k}` {v:.1f}x" for k, v in report["overall"].items())]
@@ -182,7 +181,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--trial", action="append", default=[], metavar="NAME=VALUE",
                         help="also run `default` with this change (e.g. islands=true; repeatable), as \"trial\"")
     args = parser.parse_args(argv)
-    from preset_trial import parse_change
+    from preset_trial import as_the_preset, parse_change
 
     configs = configurations(parse_change(args.trial) if args.trial else None)
     if args.only:
@@ -193,7 +192,6 @@ def main(argv: list[str] | None = None) -> None:
         configs = {n: configs[n] for n in wanted}
     scenes = scene_zoo(args.seed, args.per_family, tuple(args.families.split(",")))
     results: dict[str, list[dict]] = {name: [] for name in configs}
-    preset_now = PRESETS["default"]
     start = time.perf_counter()
     with WorkerPool(args.workers) as pool:
         pool.warm()
@@ -201,14 +199,10 @@ def main(argv: list[str] | None = None) -> None:
             model = ModelConfig(sigma_m=zoo_sigma_m(scene), samples=args.samples)
             line = []
             for name, (settings, check) in configs.items():
-                # the envelope reads the preset from config.PRESETS itself: the trial is the preset while it runs
-                envelope.PRESETS["default"] = settings if name.startswith(TRIAL) else preset_now
                 t0 = time.perf_counter()
-                try:
+                with as_the_preset(settings if name.startswith(TRIAL) else None):
                     prediction = predict(scene, model, settings, QuerySpec(queries=family_queries(family_of(scene))),
                                          seed=i, map_fn=pool.map, check=check)
-                finally:
-                    envelope.PRESETS["default"] = preset_now
                 wall = time.perf_counter() - t0
                 results[name].append({"family": family_of(scene), "prediction": prediction, "wall_s": wall,
                                       "energy_scale_j": energy_scale_j(scene)})

@@ -156,12 +156,10 @@ def test_a_footprint_back_in_time_goes_on_from_there():
     tracks = simulation.islands.Tracks(2, 2.0, 0.001)
     box = lambda x: (np.array([[x, 0.0, 0.0]]), np.array([[x + 0.1, 0.1, 0.1]]))  # noqa: E731
     footprint = lambda t, x, v=0.0: simulation.islands.Footprint(t, *box(x), np.array([v]))  # noqa: E731
-    other = tracks.of(1)
-    other.append(footprint(0.0, 1.0))
-    other.append(footprint(1.0, 1.0))
-    mine = tracks.of(0)
-    mine.append(footprint(0.0, 0.0))
-    mine.append(footprint(0.5, 0.3, v=1.0))  # reached 0.3 + 0.1 + 0.5 m: not the other at 1.0
-    mine.append(footprint(0.2, 0.0))  # undone: back to t = 0.2
+    tracks.add(1, footprint(0.0, 1.0))
+    tracks.add(1, footprint(1.0, 1.0))
+    tracks.add(0, footprint(0.0, 0.0))
+    tracks.add(0, footprint(0.5, 0.3, v=1.0))  # reached 0.3 + 0.1 + 0.5 m: not the other at 1.0
+    tracks.add(0, footprint(0.2, 0.0))  # undone: back to t = 0.2
     with pytest.raises(simulation.IslandsMet, match=r"^two islands could have met between t = 0\.200 s and 0\.400 s$"):
-        mine.append(footprint(0.4, 0.9, v=0.5))
+        tracks.add(0, footprint(0.4, 0.9, v=0.5))

@@ -49,7 +49,7 @@ def contacts(scene: Scene, margin_m: float = 0.0) -> Contacts:
     reach = margin_m + 0.01 * world.scale_m
     pairs = tuple((i, j) for (i, a), (j, b) in itertools.combinations(enumerate(world.dynamic_ids), 2)
                   if p.getClosestPoints(a, b, reach, physicsClientId=world.client))
-    boxes = tuple(np.array(p.getAABB(h, physicsClientId=world.client)) for h in world.dynamic_ids)
+    boxes = tuple(simulation.world.bounding_boxes(world))
     return Contacts(bodies, pairs, boxes)
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import bisect
 import dataclasses
+import functools
 import os
 import time
 import traceback
@@ -265,7 +266,8 @@ class Apart:
                 rollouts.append(simulation.begin(
                     world, island, settings, push, trials, record_every=every, decided=_subset(self.decided, group),
                     collapse_below_z_m=None if collapse_below_z is None else collapse_below_z[group], probe=probe,
-                    deadline_unix_s=deadline_unix_s, watches={}, footprints=tracks.of(slot)))
+                    deadline_unix_s=deadline_unix_s, watches={},
+                    on_footprint=functools.partial(tracks.add, slot)))
             ends: list = [None] * len(rollouts)
             reads = [r.reads() for r in rollouts]
             now = [0.0] * len(rollouts)

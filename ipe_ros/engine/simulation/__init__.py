@@ -14,5 +14,5 @@ from .termination import DecidedHeights
 from .bullet import client, pybullet
 from .world import World, build_world, read_poses, read_velocities
 
-__all__ = ["NO_PROBE", "PHASES", "DecidedHeights", "IslandsMet", "Probe", "Push", "RolloutEnd", "World", "begin", "build_world", "client",
-           "depenetrate", "pybullet", "read_poses", "read_velocities", "set_down", "simulate"]
+__all__ = ["NO_PROBE", "PHASES", "DecidedHeights", "IslandsMet", "Probe", "Push", "RolloutEnd", "World", "begin",
+           "build_world", "client", "depenetrate", "pybullet", "read_poses", "read_velocities", "set_down", "simulate"]

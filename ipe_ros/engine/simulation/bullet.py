@@ -2,7 +2,8 @@
 and the references its calls keep given back.
 
 One DIRECT client per process (``client()``), created on first use and re-created after a fork or
-a disconnect (more beside it only for islands simulated side by side). The rest of the engine reaches pybullet through ``pybullet()``.
+a disconnect (more beside it only for islands simulated side by side). The rest of the engine
+reaches pybullet through ``pybullet()``.
 """
 
 from __future__ import annotations

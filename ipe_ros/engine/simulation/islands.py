@@ -21,7 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bullet import pybullet
+from ..scene.disjoint import DisjointSets
+from .world import bounding_boxes
 
 
 #: the most islands (pybullet clients) a sample is split into: 200 scattered boxes must not open 200
@@ -46,23 +47,16 @@ def partition(world, velocities_m_s: np.ndarray, horizon_s: float, gap_m: float)
     (where it is thrown); a body joins every body whose stretched box comes within ``gap_m`` of its
     own. Whatever else brings two groups together later (a tipping body's reach) the footprints see.
     At most ``MAX_ISLANDS``: the smallest groups beyond share the last."""
-    p = pybullet()
-    boxes = np.array([np.concatenate(p.getAABB(body, physicsClientId=world.client)) for body in world.dynamic_ids])
-    low, high = boxes[:, :3].copy(), boxes[:, 3:].copy()
+    boxes = bounding_boxes(world)
     travel = np.asarray(velocities_m_s, float).reshape(len(boxes), 3) * horizon_s
-    low, high = np.minimum(low, low + travel), np.maximum(high, high + travel)
-    low[:, 2] = np.minimum(low[:, 2], boxes[:, 2].min())
+    low, high = np.minimum(boxes[:, 0], boxes[:, 0] + travel), np.maximum(boxes[:, 1], boxes[:, 1] + travel)
+    low[:, 2] = np.minimum(low[:, 2], boxes[:, 0, 2].min())
     low, high = low - gap_m / 2, high + gap_m / 2
-    n = len(boxes)
     near = np.all((low[:, None, :] <= high[None, :, :]) & (low[None, :, :] <= high[:, None, :]), axis=2)
-    group = np.arange(n)
-    changed = True
-    while changed:  # each body takes the lowest group number among those near it, until none changes
-        lowest = np.where(near, group[None, :], n).min(axis=1)
-        changed = bool(np.any(lowest < group))
-        group = np.minimum(group, lowest)
-        group = group[group]
-    groups = sorted((np.flatnonzero(group == g) for g in np.unique(group)), key=lambda g: (-len(g), g[0]))
+    sets = DisjointSets(len(boxes))
+    for i, j in zip(*np.nonzero(np.triu(near, 1))):
+        sets.union(int(i), int(j))
+    groups = sorted((np.array(members) for members in sets.groups().values()), key=lambda g: (-len(g), g[0]))
     if len(groups) > MAX_ISLANDS:  # the smallest together: one world holds any groups, only slower
         groups = groups[:MAX_ISLANDS - 1] + [np.sort(np.concatenate(groups[MAX_ISLANDS - 1:]))]
     return groups
@@ -74,7 +68,8 @@ def _stretch(a: Footprint, b: Footprint, clearance_m: float) -> tuple[float, flo
     times the time (the faster of the two reads, doubled: an impact can speed it up and slow it down
     again in between), and such a path stays within half its length of the two boxes."""
     reach = np.maximum(a.corner_speeds_m_s, b.corner_speeds_m_s) * (b.t_s - a.t_s) + clearance_m
-    return (a.t_s, b.t_s, np.minimum(a.low_m, b.low_m) - reach[:, None], np.maximum(a.high_m, b.high_m) + reach[:, None])
+    return (a.t_s, b.t_s, np.minimum(a.low_m, b.low_m) - reach[:, None],
+            np.maximum(a.high_m, b.high_m) + reach[:, None])
 
 
 def _meets(stretch: tuple[float, float, np.ndarray, np.ndarray], others: list) -> bool:
@@ -102,11 +97,8 @@ class Tracks:
         self._last: list[Footprint | None] = [None] * islands
         self._stretches: list[list] = [[] for _ in range(islands)]
 
-    def of(self, island: int) -> "_Track":
-        """What the stepper appends island ``island``'s footprints to."""
-        return _Track(self, island)
-
     def add(self, island: int, footprint: Footprint) -> None:
+        """Island ``island``'s rollout read ``footprint`` (the stepper's ``on_footprint``)."""
         last, self._last[island] = self._last[island], footprint
         # collapse steps undone go back to an earlier read (config.CollapseSettings): the stretches
         # made since stay, as places the island may have been, and it goes on from there
@@ -125,12 +117,3 @@ class Tracks:
         if _meets(stretch, others):
             raise IslandsMet(f"two islands could have met between t = {stretch[0]:.3f} s and {stretch[1]:.3f} s")
         self._stretches[island].append(stretch)
-
-
-@dataclass(frozen=True)
-class _Track:
-    tracks: Tracks
-    island: int
-
-    def append(self, footprint: Footprint) -> None:
-        self.tracks.add(self.island, footprint)

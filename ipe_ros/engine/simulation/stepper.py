@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Iterator
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -38,7 +38,7 @@ from .settling import Settling
 from .steps import StepControl, substeps_for, ticks_allowed
 from .termination import DecidedHeights, RestWatch
 from .bullet import pybullet
-from .world import (World, mass_ratio, read_poses, read_state, set_initial_velocities, speeds_of,
+from .world import (World, bounding_boxes, mass_ratio, read_poses, read_state, set_initial_velocities, speeds_of,
                     use_sequential_solver)
 
 #: Seconds between health checks (divergence, non-finite speeds), and between looks for rest and collapse.
@@ -96,8 +96,8 @@ def simulate(world: World, scene: Scene, settings: SimSettings, push: Push, **kw
     name -> query.StepWatch, each shown the world at t = 0 and after every step; with
     ``end_when_watched`` the rollout ends once every watch has decided. Raises
     PhysicsError on non-finite states or speeds above ``health.speed_limit_m_s``, and
-    BudgetExceeded once ``time.time()`` passes ``deadline_unix_s``. ``footprints``: a list that gets
-    where the bodies were (and how fast their corners moved) at every read (``islands``).
+    BudgetExceeded once ``time.time()`` passes ``deadline_unix_s``. ``on_footprint``: shown where the
+    bodies were (and how fast their corners moved) at every read (``islands.Tracks.add``).
     """
     trials: list[CollapseTrial] = []  # saved world states, freed however the rollout ends
     try:
@@ -125,10 +125,10 @@ class _Rollout:
                  record_every: int = 0, decided: DecidedHeights | None = None,
                  collapse_below_z_m: np.ndarray | None = None, probe: Probe = NO_PROBE,
                  deadline_unix_s: float | None = None, watches: dict | None = None,
-                 end_when_watched: bool = False, footprints: list | None = None):
+                 end_when_watched: bool = False, on_footprint: Callable[[Footprint], None] | None = None):
         self.world, self.settings, self.trials, self.probe = world, settings, trials, probe
-        #: where the bodies were at each read (islands.Footprint), for islands simulated apart
-        self.footprints = footprints
+        #: shown where the bodies were at each read (islands.Footprint), for islands simulated apart
+        self.on_footprint = on_footprint
         self.deadline_unix_s, self.end_when_watched = deadline_unix_s, end_when_watched
         self.p = p = pybullet()
         self.cid = world.client
@@ -198,7 +198,7 @@ class _Rollout:
     def reads(self) -> Iterator[float]:
         """The loop, pausing after every read of the world (at the simulated time it yields), so that
         islands can run side by side (``begin``); ``end()`` once it is over."""
-        if self.footprints is not None:  # other worlds may have been built meanwhile
+        if self.on_footprint is not None:  # other worlds may have been built meanwhile
             self.steps.reapply()
         while self.tick < self.total_ticks:
             previous = self._step()
@@ -211,7 +211,7 @@ class _Rollout:
                 if self._look(look_due, health_due):
                     break
                 yield self.tick * self.dt
-                if self.footprints is not None:  # other worlds may have stepped meanwhile
+                if self.on_footprint is not None:  # other worlds may have stepped meanwhile
                     self.steps.reapply()
 
     # -- between looks ---------------------------------------------------------------------------------
@@ -304,10 +304,9 @@ class _Rollout:
         return self._at_rest(speeds, spins, heights)
 
     def _footprint(self, t_s: float, corner_speeds_m_s: np.ndarray) -> None:
-        if self.footprints is not None:
-            boxes = np.array([np.concatenate(self.p.getAABB(body, physicsClientId=self.cid))
-                              for body in self.world.dynamic_ids])
-            self.footprints.append(Footprint(t_s, boxes[:, :3], boxes[:, 3:], np.asarray(corner_speeds_m_s, float)))
+        if self.on_footprint is not None:
+            boxes = bounding_boxes(self.world)
+            self.on_footprint(Footprint(t_s, boxes[:, 0], boxes[:, 1], np.asarray(corner_speeds_m_s, float)))
 
     def _undo_trial(self) -> tuple:
         """The collapse steps made energy (NaN: they diverged): back to the look where they began,

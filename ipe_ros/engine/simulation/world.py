@@ -379,6 +379,14 @@ def set_initial_velocities(world: World, scene: Scene) -> None:
                                 list(map(float, body.angular_velocity_rad_s)), physicsClientId=world.client)
 
 
+def bounding_boxes(world: World) -> np.ndarray:
+    """(n, 2, 3): each dynamic body's axis-aligned bounding box (lowest and highest corner, m), as
+    pybullet's broadphase has it."""
+    p = pybullet()
+    boxes = [p.getAABB(body, physicsClientId=world.client) for body in world.dynamic_ids]
+    return np.array(boxes, float).reshape(-1, 2, 3)
+
+
 def read_poses(world: World) -> tuple[np.ndarray, np.ndarray]:
     """(n, 3) centres of mass in metres and (n, 4) xyzw orientations of the dynamic bodies."""
     p = pybullet()

@@ -257,6 +257,53 @@ def test_collapse_steps_start_at_the_first_fall_and_keep_the_time_grid():
         assert rollout.final_positions_m[1, 2] == pytest.approx(0.1, abs=0.005)  # on the floor
 
 
+class _StepCounter(simulation.Probe):
+    """Counts pybullet steps by the phase they ran in."""
+
+    def __init__(self) -> None:
+        self.steps = dict.fromkeys(simulation.PHASES, 0)
+
+    def step(self, phase, run):
+        run()
+        self.steps[phase] += 1
+
+
+def test_collapse_steps_that_make_energy_go_back_to_the_trials_latest_anchor_not_its_start():
+    """A chain of 18 dominoes, asked where they land: in sample 2 the collapse steps, begun at
+    0.3 s, make energy at a late impact. Going back to where they began reran the rest at the fine
+    step (1656 pybullet steps in all); a trial that has gone ``anchor_after_steps`` without making
+    energy begins again at its next look, so the undo reruns only what follows the latest anchor
+    (1330 steps) and what fell is the same. A rollout whose collapse steps make no energy is bit for bit the same: saving the
+    world at an anchor changes nothing in it."""
+    from ipe_ros.engine.config import DEFAULT_QUERIES
+    from ipe_ros.engine.sampling.rollout import run_sample
+    from ipe_ros.engine.sampling.sampler import make_tasks
+    from ipe_ros.engine.scene.zoo import zoo_scene, zoo_sigma_m
+
+    scene = zoo_scene("dominoes", 2026, 2)
+    model, query = ModelConfig(sigma_m=zoo_sigma_m(scene), samples=3), QuerySpec(queries=DEFAULT_QUERIES)
+    assert preset("default").collapse.anchor_after_steps == 300
+    runs = {}
+    for name, settings in {"start": preset("default").changed(collapse={"anchor_after_steps": None}),
+                           "anchor": preset("default")}.items():
+        for index in (1, 2):
+            counter = _StepCounter()
+            outcome = run_sample(make_tasks(scene, model, settings, query, seed=2)[index], probe=counter)
+            assert outcome.ok, outcome.error
+            runs[name, index] = (outcome.rollouts[0], counter.steps)
+    for index in (1, 2):
+        assert runs["start", index][0].fallen.tolist() == runs["anchor", index][0].fallen.tolist()
+    kept_start, kept_anchor = runs["start", 1][0], runs["anchor", 1][0]
+    assert not kept_start.collapse_undone and not kept_anchor.collapse_undone
+    np.testing.assert_array_equal(kept_start.final_positions_m, kept_anchor.final_positions_m)
+    (undone_start, steps_start), (undone_anchor, steps_anchor) = runs["start", 2], runs["anchor", 2]
+    assert undone_start.collapse_undone and undone_anchor.collapse_undone
+    # the same collapse steps up to the energy; the fine rerun from the anchor (828 fine steps -> 502)
+    assert steps_anchor["collapse"] == steps_start["collapse"]
+    assert steps_anchor["fine"] < 0.7 * steps_start["fine"]
+    assert sum(steps_anchor.values()) < 0.85 * sum(steps_start.values())
+
+
 def test_settling_runs_the_first_ticks_in_substeps_on_the_same_time_grid():
     # the overhanging top block falls with and without settling; frames come at the same times and
     # the rollout ends on the horizon; one substep is no settling at all (bit-identical)
@@ -290,6 +337,8 @@ def physics_rollout(scene, settings):
      "collapse.step_factor: must be an integer in [1, 100] (1: no collapse steps), got 2.0"),
     ("collapse", "solver_iterations", 0,
      "collapse.solver_iterations: must be an integer in [1, 10000] or None, got 0"),
+    ("collapse", "anchor_after_steps", 0,
+     "collapse.anchor_after_steps: must be an integer in [1, 1000000] or None, got 0"),
     ("settling", "substeps", 0, "settling.substeps: must be an integer in [1, 100] (1: no settling substeps), got 0"),
     ("settling", "duration_s", -0.1, "settling.duration_s: must be a finite number >= 0, got -0.1"),
     ("early_stop", "growth_factor", 0.5, "early_stop.growth_factor: must be in [1, 10), got 0.5"),
@@ -309,7 +358,7 @@ def test_changed_names_the_unknown_field():
     with pytest.raises(ConfigError, match=r"^collapse: .*unexpected keyword argument 'factor'.*; its fields are "
                                           r"step_factor, solver_iterations, drop_fraction, fine_before_end_s, end_substeps, "
                                           r"max_created_energy_fraction, quiet_sizes_per_s, max_travel_fraction, "
-                                          r"end_travel_fraction$"):
+                                          r"end_travel_fraction, anchor_after_steps$"):
         preset("default").changed(collapse={"factor": 2})
     with pytest.raises(ConfigError, match="^solver_iterations: not a field of SimSettings$"):
         preset("default").changed(solver_iterations=2)

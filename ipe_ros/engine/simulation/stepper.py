@@ -44,6 +44,9 @@ from .world import (World, bounding_boxes, mass_ratio, read_poses, read_state, s
 #: Seconds between health checks (divergence, non-finite speeds), and between looks for rest and collapse.
 HEALTH_PERIOD_S = 0.1
 LOOK_PERIOD_S = 0.05
+#: A collapse trial begins again only at a look where its steps have made at most this share of the
+#: energy that undoes them: an anchor keeps what the steps before it did.
+ANCHOR_CREATED_SHARE = 0.1
 
 
 @dataclass(frozen=True)
@@ -185,6 +188,8 @@ class _Rollout:
         start_speeds, start_spins = speeds_of(initial_velocities)
         self._footprint(0.0, start_speeds + start_spins * self.half_diagonals_m)
         self.tick = 0
+        self.pybullet_steps = 0  # taken so far (what a collapse trial's anchors count)
+        self.trial_began_step = 0
         self.solver_switch_due = world.direct_solver
         self.end_phase_due = settings.collapse.end_substeps > 1 or settings.collapse.end_travel_fraction is not None
         if self.settling.ticks or self.travel_substeps > 1:
@@ -235,6 +240,7 @@ class _Rollout:
         phase = "settle" if settling_now else "collapse" if self.collapse.collapsing else "fine"
         for _ in range(self.steps.substeps):
             self.probe.step(phase, self._step_simulation)
+        self.pybullet_steps += self.steps.substeps
         if settling_now and self.tick + 1 == self.settling.ticks:
             self.steps.set(1, self.travel_substeps)
         previous, self.tick = self.tick, self.tick + step_ticks
@@ -276,9 +282,12 @@ class _Rollout:
         """Read the world once and hand it to each part; True when the rollout ends here (at rest)."""
         positions, orientations, velocities = read_state(self.world)  # one read serves every part
         energy_now_j = self.energy.energy(positions, orientations, velocities[:, 0], velocities[:, 1])
-        if self.trial is not None and look_due and not self.ending and self.tick <= self.fine_from_tick \
-                and not self.energy.created_j(energy_now_j) <= self.created_limit_j:
-            positions, orientations, velocities, energy_now_j = self._undo_trial()
+        if self.trial is not None and look_due and not self.ending and self.tick <= self.fine_from_tick:
+            created_j = self.energy.created_j(energy_now_j)
+            if not created_j <= self.created_limit_j:
+                positions, orientations, velocities, energy_now_j = self._undo_trial()
+            elif self._anchor_due(created_j):
+                self._begin_trial((positions, orientations, velocities, energy_now_j))
         speeds, spins = speeds_of(velocities)
         if health_due:
             health.check_speeds(speeds, self.limit, self.tick * self.dt)
@@ -321,6 +330,27 @@ class _Rollout:
         self._use_iterations(self.full_iterations)
         return state
 
+    def _begin_trial(self, state: tuple) -> None:
+        """Collapse steps on trial from this look: everything it read and the loop holds, as it is
+        now, to go back to (an earlier trial, whose steps made no energy up to here, is closed)."""
+        if self.trial is not None:
+            self.trial.close()
+        positions, orientations, velocities, energy_now_j = state
+        self.trial = CollapseTrial(self.world, self.tick, (positions.copy(), orientations.copy(),
+                                                           velocities.copy(), energy_now_j),
+                                   {"energy": self.energy, "rest": self.rest, "watches": self.watches,
+                                    "steps": self.steps.snapshot()},
+                                   0 if self.trajectory is None else len(self.trajectory))
+        self.trials.append(self.trial)
+        self.trial_began_step = self.pybullet_steps
+
+    def _anchor_due(self, created_j: float) -> bool:
+        """The trial has taken ``collapse.anchor_after_steps`` pybullet steps without making energy:
+        begin it again here."""
+        after = self.settings.collapse.anchor_after_steps
+        return after is not None and created_j <= ANCHOR_CREATED_SHARE * self.created_limit_j \
+            and self.pybullet_steps - self.trial_began_step >= after
+
     def _collapse_look(self, heights: np.ndarray, moving: bool, fastest_m_s: float, state: tuple) -> None:
         """The collapse steps: begun (on trial while the fine steps could still follow) once something
         has clearly fallen, ended once the fall is over; and the step they allow."""
@@ -331,14 +361,8 @@ class _Rollout:
                 self.trial = None
             self._use_iterations(self.full_iterations)
         if self.collapse.look(self.tick, max(self.push_ticks, self.settling.ticks), heights, moving):
-            if self.tick < self.fine_from_tick:  # on trial: everything this look read and holds, as it is now
-                positions, orientations, velocities, energy_now_j = state
-                self.trial = CollapseTrial(self.world, self.tick, (positions.copy(), orientations.copy(),
-                                                                   velocities.copy(), energy_now_j),
-                                           {"energy": self.energy, "rest": self.rest, "watches": self.watches,
-                                            "steps": self.steps.snapshot()},
-                                           0 if self.trajectory is None else len(self.trajectory))
-                self.trials.append(self.trial)
+            if self.tick < self.fine_from_tick:
+                self._begin_trial(state)
             if self.settings.collapse.solver_iterations is not None:
                 self._use_iterations(self.collapse_iterations)
         if self.collapse.collapsing:

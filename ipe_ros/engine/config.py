@@ -384,8 +384,9 @@ class SimSettings:
     islands: groups of bodies that nothing brings together are simulated apart, each in a world of
         its own with its own step (its smallest body's, not the scene's) and its own end at rest;
         where two could have met (each island's reach, read at every look), the sample is simulated
-        again as one world (simulation/islands.py). Step watches (contact, event queries) and "will
-        anything fall?" keep one world.
+        again as one world (simulation/islands.py). Only groups that step at least twice as coarse
+        apart are kept apart (``islands.by_step``); the others share a world. Step watches (contact,
+        event queries) and "will anything fall?" keep one world.
     """
 
     name: str
@@ -476,7 +477,8 @@ PRESETS: dict[str, SimSettings] = {
     # collapse steps at 50 solver iterations, no body travelling more than a quarter of the smallest
     # extent per step (a collapse's statistics, not its every contact, are what the answer needs);
     # settling as `fine`; a 0.15 s rest window from 0.2 s on, "at rest" read as slower than 0.4
-    # sizes/s and 0.4 rad/s and not speeding up. Each of these is the coarsest
+    # sizes/s and 0.4 rad/s and not speeding up; groups that nothing brings together and that step at
+    # least twice as coarse apart simulated apart (islands). Each of these is the coarsest
     # setting that keeps the hard cases (tests/test_hard_cases.py) and the authors' outcomes
     # (tests/test_paper_data.py); speed and accuracy against `paper` in benchmarks/README.md.
     "default": SimSettings(name="default", time_step_s=1 / 180, horizon_s=2.0, max_step_fraction_of_time_scale=0.04,
@@ -487,7 +489,8 @@ PRESETS: dict[str, SimSettings] = {
                                                      max_travel_fraction=0.25, end_travel_fraction=0.05,
                                                      anchor_after_steps=300),
                            early_stop=EarlyStopSettings(enabled=True, speed_sizes_per_s=0.4, angular_rad_s=0.4,
-                                                        duration_s=0.15, min_time_s=0.2)),
+                                                        duration_s=0.15, min_time_s=0.2),
+                           islands=True),
 }
 
 

@@ -242,6 +242,10 @@ class Apart:
         groups = simulation.islands.partition(world, velocities, settings.horizon_for(scene.horizon_s), 2 * clearance)
         if len(groups) < 2:
             return None
+        steps = [simulation.time_step_of(_island(scene, group), settings) for group in groups]
+        groups = simulation.islands.by_step(groups, steps)
+        if len(groups) < 2:
+            return None
         return cls(scene, tuple(groups), decided, record_every, world.time_step_s, clearance)
 
     def simulate(self, initial: np.ndarray, initial_orn: np.ndarray, masses_kg: np.ndarray, settings: SimSettings,
@@ -251,13 +255,11 @@ class Apart:
         to its next read; raises ``simulation.IslandsMet`` once two could have met."""
         tracks = simulation.islands.Tracks(len(self.groups), settings.horizon_for(self.scene.horizon_s),
                                            self.clearance_m)
-        statics = tuple(b for b in self.scene.objects if b.static)
         trials: list = []
         rollouts: list = []
         try:
             for slot, group in enumerate(self.groups):
-                island = dataclasses.replace(self.scene, objects=statics + tuple(self.scene.dynamic_objects[i]
-                                                                                   for i in group))
+                island = _island(self.scene, group)
                 with probe.part("build"):
                     world = simulation.build_world(island, initial[group], masses_kg[group], settings,
                                                    orientations_xyzw=initial_orn[group], slot=slot)
@@ -284,6 +286,12 @@ class Apart:
                 trial.close()
             for slot in range(1, len(rollouts)):  # slot 0's world is replaced by the next one built
                 simulation.pybullet().resetSimulation(physicsClientId=simulation.client(slot))
+
+
+def _island(scene: Scene, group: np.ndarray) -> Scene:
+    """The scene with only the dynamic bodies of ``group`` (and every static one)."""
+    statics = tuple(b for b in scene.objects if b.static)
+    return dataclasses.replace(scene, objects=statics + tuple(scene.dynamic_objects[i] for i in group))
 
 
 def _subset(decided: DecidedHeights | None, group: np.ndarray) -> DecidedHeights | None:

@@ -248,8 +248,7 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
     p.resetSimulation(physicsClientId=cid)
     p.setGravity(*scene.gravity_m_s2, physicsClientId=cid)
     scale = min(b.smallest_extent_m for b in scene.dynamic_objects)
-    time_step = settings.time_step_for(scale, float(np.linalg.norm(scene.gravity_m_s2)),
-                                       fastest_initial_speed_m_s(scene))
+    time_step = time_step_of(scene, settings)
     p.setTimeStep(time_step, physicsClientId=cid)
     contact_distance = contact_distance_m(settings, scale, fastest_initial_speed_m_s(scene) * time_step)
     p.setPhysicsEngineParameter(
@@ -361,6 +360,13 @@ def mass_ratio(masses_kg) -> float:
     """How many times the heaviest dynamic body outweighs the lightest."""
     masses = np.asarray(masses_kg, float)
     return float(masses.max() / masses.min()) if len(masses) else 1.0
+
+
+def time_step_of(scene: Scene, settings: SimSettings) -> float:
+    """The step a world of ``scene`` takes (``SimSettings.time_step_for`` its smallest body and its
+    fastest start)."""
+    return settings.time_step_for(min(b.smallest_extent_m for b in scene.dynamic_objects),
+                                  float(np.linalg.norm(scene.gravity_m_s2)), fastest_initial_speed_m_s(scene))
 
 
 def fastest_initial_speed_m_s(scene: Scene) -> float:

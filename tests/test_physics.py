@@ -273,8 +273,8 @@ def test_collapse_steps_that_make_energy_go_back_to_the_trials_latest_anchor_not
     0.3 s, make energy at a late impact. Going back to where they began reran the rest at the fine
     step (1656 pybullet steps in all); a trial that has gone ``anchor_after_steps`` without making
     energy begins again at its next look, so the undo reruns only what follows the latest anchor
-    (1330 steps) and what fell is the same. A rollout whose collapse steps make no energy is bit for bit the same: saving the
-    world at an anchor changes nothing in it."""
+    (1330 steps) and what fell is the same. A rollout whose collapse steps make no energy is bit for
+    bit the same: saving the world at an anchor changes nothing in it."""
     from ipe_ros.engine.config import DEFAULT_QUERIES
     from ipe_ros.engine.sampling.rollout import run_sample
     from ipe_ros.engine.sampling.sampler import make_tasks

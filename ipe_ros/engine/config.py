@@ -256,7 +256,8 @@ class CollapseSettings:
     that energy begins again at its next look (None: one trial from the collapse's start), so that an
     undo reruns at the fine step only what follows the latest anchor. A domino chain's last impacts
     made energy at 1.3-1.9 s and sent half its rollouts back to 0.3 s, to run the rest at the fine
-    step (dominoes 1.2-1.5x faster with anchors, the same answers). pybullet's saveState costs 5-20
+    step (the zoo's dominoes 1.1-1.15x faster with anchors, its longest chains up to 1.4x, the same
+    answers). pybullet's saveState costs 5-20
     steps' time, hence rare anchors: 300 steps cost the towers nothing measurable (a tower's collapse
     takes about 140). Saving the world changes nothing in it: a rollout whose collapse steps make no
     energy is bit for bit the same.

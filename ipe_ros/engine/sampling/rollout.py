@@ -230,7 +230,8 @@ class Apart:
     def of(cls, scene: Scene, settings: SimSettings, spec: QuerySpec, world: simulation.World,
            decided: DecidedHeights | None, record_every: int) -> "Apart | None":
         """The separated ``world``'s islands, or None where the settings keep one world, where there
-        is one island, or where the rollout needs the whole world: step watches (contacts, events:
+        is one island (groups that would not step at least twice as coarse apart share one:
+        ``islands.by_step``), or where the rollout needs the whole world: step watches (contacts, events:
         any pair may be asked about) and "will anything fall?" (one world ends at the first fall)."""
         if not settings.islands or len(world.dynamic_ids) < 2 or (decided is not None and decided.stop_at_first_fall):
             return None

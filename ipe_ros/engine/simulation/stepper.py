@@ -332,7 +332,7 @@ class _Rollout:
 
     def _begin_trial(self, state: tuple) -> None:
         """Collapse steps on trial from this look: everything it read and the loop holds, as it is
-        now, to go back to (an earlier trial, whose steps made no energy up to here, is closed)."""
+        now, to go back to (an earlier trial, whose steps made next to no energy up to here, is closed)."""
         if self.trial is not None:
             self.trial.close()
         positions, orientations, velocities, energy_now_j = state
@@ -345,8 +345,8 @@ class _Rollout:
         self.trial_began_step = self.pybullet_steps
 
     def _anchor_due(self, created_j: float) -> bool:
-        """The trial has taken ``collapse.anchor_after_steps`` pybullet steps without making energy:
-        begin it again here."""
+        """The trial has taken ``collapse.anchor_after_steps`` pybullet steps and made at most
+        ``ANCHOR_CREATED_SHARE`` of the energy that would undo it: begin it again here."""
         after = self.settings.collapse.anchor_after_steps
         return after is not None and created_j <= ANCHOR_CREATED_SHARE * self.created_limit_j \
             and self.pybullet_steps - self.trial_began_step >= after

@@ -79,10 +79,11 @@ class CollapseTrial:
     tests/test_hard_cases.py compares the answers).
     """
 
-    def __init__(self, world, tick: int, looked: tuple, parts: dict, frames: int):
+    def __init__(self, world, tick: int, looked: tuple, parts: dict, frames: int, pybullet_steps: int = 0):
         self._world = world
         self._state = pybullet().saveState(physicsClientId=world.client)
         self.tick = tick
+        self.pybullet_steps = pybullet_steps  # the rollout's steps taken when it began (its anchors count from it)
         self._looked = looked  # what the loop read and worked out at that look
         self._parts = copy.deepcopy(parts)  # the loop's watches, as they were before the collapse began
         self._frames = frames

@@ -189,7 +189,6 @@ class _Rollout:
         self._footprint(0.0, start_speeds + start_spins * self.half_diagonals_m)
         self.tick = 0
         self.pybullet_steps = 0  # taken so far (what a collapse trial's anchors count)
-        self.trial_began_step = 0
         self.solver_switch_due = world.direct_solver
         self.end_phase_due = settings.collapse.end_substeps > 1 or settings.collapse.end_travel_fraction is not None
         if self.settling.ticks or self.travel_substeps > 1:
@@ -340,16 +339,17 @@ class _Rollout:
                                                            velocities.copy(), energy_now_j),
                                    {"energy": self.energy, "rest": self.rest, "watches": self.watches,
                                     "steps": self.steps.snapshot()},
-                                   0 if self.trajectory is None else len(self.trajectory))
+                                   0 if self.trajectory is None else len(self.trajectory), self.pybullet_steps)
         self.trials.append(self.trial)
-        self.trial_began_step = self.pybullet_steps
 
     def _anchor_due(self, created_j: float) -> bool:
         """The trial has taken ``collapse.anchor_after_steps`` pybullet steps and made at most
-        ``ANCHOR_CREATED_SHARE`` of the energy that would undo it: begin it again here."""
+        ``ANCHOR_CREATED_SHARE`` of the energy that would undo it: begin it again here (before the
+        end phase, as a trial itself: nothing is undone after it begins)."""
         after = self.settings.collapse.anchor_after_steps
-        return after is not None and created_j <= ANCHOR_CREATED_SHARE * self.created_limit_j \
-            and self.pybullet_steps - self.trial_began_step >= after
+        return after is not None and self.tick < self.fine_from_tick \
+            and created_j <= ANCHOR_CREATED_SHARE * self.created_limit_j \
+            and self.pybullet_steps - self.trial.pybullet_steps >= after
 
     def _collapse_look(self, heights: np.ndarray, moving: bool, fastest_m_s: float, state: tuple) -> None:
         """The collapse steps: begun (on trial while the fine steps could still follow) once something

@@ -163,7 +163,7 @@ def separated_world(scene: Scene, settings, inputs, probe: Probe = NO_PROBE) -> 
     whatever the preset, so that every preset starts from bit-identical initial scenes (the two
     representations round differently); plain rigid bodies are the default's own, so it simulates
     on in this world."""
-    separation = settings.changed(solver={"maximal_coordinates": True})
+    separation = settings.changed(solver={"maximal_coordinates": True, "multibodies_from_aspect": None})
     with probe.part("build"):
         world = simulation.build_world(scene, inputs.positions_m, inputs.masses_kg, separation,
                                        orientations_xyzw=inputs.orientations_xyzw)
@@ -404,9 +404,9 @@ def simulate_sample(task: SampleTask, inputs, world: simulation.World, probe: Pr
     prediction's sample). Raises for physics trouble (``guarded`` turns that into the outcome)."""
     initial, initial_orn = simulation.read_poses(world)
     # the separation's world is in plain rigid bodies: another representation needs a fresh one
+    plain = simulation.in_plain_rigid_bodies(task.scene, task.settings, inputs.masses_kg)
     ends = simulate_pushes(task.scene, task.model, task.settings, task.query, world, initial, initial_orn,
-                           inputs.masses_kg, inputs.push_direction_rad,
-                           fresh_first=not task.settings.solver.maximal_coordinates,
+                           inputs.masses_kg, inputs.push_direction_rad, fresh_first=not plain,
                            record_every=task.record_every, deadline_unix_s=task.deadline_unix_s, probe=probe)
     results = [rollout_result(task.scene, task.query, initial, initial_orn, phi, end) for phi, end in ends]
     return SampleOutcome(index=task.index, ok=True, error=None, push_direction_rad=inputs.push_direction_rad,

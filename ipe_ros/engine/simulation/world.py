@@ -258,9 +258,7 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
         contactBreakingThreshold=contact_distance,
         deterministicOverlappingPairs=1,
         physicsClientId=cid)
-    solver = settings.solver
-    direct = solver.direct_solver_for_restitution and can_bounce(scene) \
-        and mass_ratio(masses_kg) <= solver.direct_solver_max_mass_ratio
+    direct = uses_direct_solver(scene, settings, masses_kg)
     if direct:
         _set_solver(p, cid, p.CONSTRAINT_SOLVER_LCP_DANTZIG)
 
@@ -289,7 +287,7 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
     orientations = [b.orientation_xyzw for b in scene.dynamic_objects] if orientations_xyzw is None \
         else orientations_xyzw
     dynamic_ids = _add_dynamic_bodies(p, cid, scene.dynamic_objects, positions_m, masses_kg, orientations,
-                                      settings.solver.maximal_coordinates)
+                                      in_plain_rigid_bodies(scene, settings, masses_kg))
     inertia = np.array([p.getDynamicsInfo(h, -1, physicsClientId=cid)[2] for h in dynamic_ids], float)
     return World(client=cid, dynamic_ids=dynamic_ids, scale_m=scale, time_step_s=time_step,
                  contact_distance_m=contact_distance,
@@ -321,6 +319,27 @@ def gap_to_others_m(world: World, handle: int, within_m: float) -> float:
         for point in p.getClosestPoints(handle, other, within_m, physicsClientId=world.client):
             gap = min(gap, point[8])
     return gap
+
+
+def uses_direct_solver(scene: Scene, settings: SimSettings, masses_kg) -> bool:
+    """Whether a world of ``scene`` is solved by the direct solver
+    (``SolverSettings.direct_solver_for_restitution``)."""
+    solver = settings.solver
+    return solver.direct_solver_for_restitution and can_bounce(scene) \
+        and mass_ratio(masses_kg) <= solver.direct_solver_max_mass_ratio
+
+
+def in_plain_rigid_bodies(scene: Scene, settings: SimSettings, masses_kg) -> bool:
+    """Whether a world of ``scene`` builds its dynamic bodies as plain rigid bodies
+    (``SolverSettings.maximal_coordinates``, except thin boxes on the direct solver:
+    ``SolverSettings.multibodies_from_aspect``)."""
+    solver = settings.solver
+    if not solver.maximal_coordinates:
+        return False
+    aspect = solver.multibodies_from_aspect
+    thin = aspect is not None and any(isinstance(b.shape, BoxShape) and max(b.extents_m) >= aspect * min(b.extents_m)
+                                      for b in scene.dynamic_objects)
+    return not (thin and uses_direct_solver(scene, settings, masses_kg))
 
 
 def can_bounce(scene: Scene) -> bool:

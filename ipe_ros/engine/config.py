@@ -161,6 +161,13 @@ class SolverSettings:
     #: that end phase before it ends: what rests at the end is pushed out.
     direct_solver_for_restitution: bool = True
     direct_solver_max_mass_ratio: float = 100.0
+    #: The direct solver only where two surfaces that may touch combine to at least this restitution
+    #: (Bullet multiplies the two; 0: any bounce). A bounce gives back e^2 of an impact's normal
+    #: energy, under 1% below 0.1 (the health check's share of the scene's scale), and the direct
+    #: solver's cost grows with the contacts it solves at once: a chain of 18 dominoes at 0.005 (0.05 on
+    #: a 0.1 floor) took 2.7x the time of the sequential-impulse solver on the zoo, with the same answers.
+    #: Thin boxes keep it at any restitution (``multibodies_from_aspect``: it is what holds their friction).
+    direct_solver_min_restitution: float = field(default=0.0, metadata={"keyed": "when set"})
     #: Plain rigid bodies let friction creep. On the zoo's thin plates a tipped plate slid 5-8 mm, past
     #: its fall threshold (an eighth of its 14 mm thickness), in 88-100% of `default`'s samples; Bullet's
     #: multibodies solved by the direct solver hold it in about half, as `paper` and a third engine with
@@ -177,6 +184,9 @@ class SolverSettings:
         integer(self.max_iterations, "solver.max_iterations", 1, 100_000)
 
         positive(self.residual_threshold, "solver.residual_threshold")
+        if not 0 <= self.direct_solver_min_restitution <= 1:
+            raise ConfigError("solver.direct_solver_min_restitution",
+                              f"must be a restitution in [0, 1], got {shown(self.direct_solver_min_restitution)}")
         aspect = self.multibodies_from_aspect
         if aspect is not None and not (isinstance(aspect, (int, float)) and not isinstance(aspect, bool)
                                        and math.isfinite(aspect) and aspect >= 1):
@@ -499,7 +509,8 @@ PRESETS: dict[str, SimSettings] = {
     # (tests/test_paper_data.py); speed and accuracy against `paper` in benchmarks/README.md.
     "default": SimSettings(name="default", time_step_s=1 / 180, horizon_s=2.0, max_step_fraction_of_time_scale=0.04,
                            solver=SolverSettings(iterations=100, residual_threshold=3e-6, warm_start_factor=1.0,
-                                                 maximal_coordinates=True, multibodies_from_aspect=10.0),
+                                                 maximal_coordinates=True, multibodies_from_aspect=10.0,
+                                                 direct_solver_min_restitution=0.1),
                            settling=SettlingSettings(duration_s=0.1, substeps=2),
                            collapse=CollapseSettings(step_factor=4, solver_iterations=50, end_substeps=2,
                                                      max_travel_fraction=0.25, end_travel_fraction=0.05,

@@ -12,8 +12,9 @@ from .probe import NO_PROBE, PHASES, Probe
 from .stepper import Push, RolloutEnd, begin, simulate
 from .termination import DecidedHeights
 from .bullet import client, pybullet
-from .world import World, build_world, in_plain_rigid_bodies, read_poses, read_velocities, time_step_of
+from .world import (World, build_world, combined_restitution, in_plain_rigid_bodies, read_poses, read_velocities,
+                    time_step_of, uses_direct_solver)
 
 __all__ = ["NO_PROBE", "PHASES", "DecidedHeights", "IslandsMet", "Probe", "Push", "RolloutEnd", "World", "begin",
-           "build_world", "client", "depenetrate", "in_plain_rigid_bodies", "pybullet", "read_poses", "read_velocities",
-           "set_down", "simulate", "time_step_of"]
+           "build_world", "client", "combined_restitution", "depenetrate", "in_plain_rigid_bodies", "pybullet",
+           "read_poses", "read_velocities", "set_down", "simulate", "time_step_of", "uses_direct_solver"]

@@ -51,7 +51,9 @@ def _hull_file(vertices_m: np.ndarray) -> str:
     """A Wavefront file of one convex hull: pybullet takes compound parts that are meshes only as
     files. One per distinct hull and process (the ``MAX_HULL_FILES`` last used), in a temporary
     folder removed at exit."""
-    key = tuple(map(tuple, np.round(vertices_m, 12)))
+    # the rounded coordinates' bytes (+ 0.0: no negative zeros), not tuples of floats: this runs for
+    # every part of every compound in every world built (a kitchen took 2.6 ms a world as tuples, 0.4 as bytes)
+    key = (vertices_m.shape, (np.round(vertices_m, 12) + 0.0).tobytes())
     path = _HULL_FILES.get(key)
     if path is not None and os.path.exists(path):
         _HULL_FILES.move_to_end(key)
@@ -322,34 +324,42 @@ def gap_to_others_m(world: World, handle: int, within_m: float) -> float:
 
 
 def uses_direct_solver(scene: Scene, settings: SimSettings, masses_kg) -> bool:
-    """Whether a world of ``scene`` is solved by the direct solver
-    (``SolverSettings.direct_solver_for_restitution``)."""
+    """Whether a world of ``scene`` is solved by the direct solver (``SolverSettings``:
+    ``direct_solver_for_restitution``, ``direct_solver_min_restitution``, ``multibodies_from_aspect``)."""
     solver = settings.solver
-    return solver.direct_solver_for_restitution and can_bounce(scene) \
-        and mass_ratio(masses_kg) <= solver.direct_solver_max_mass_ratio
+    bounce = combined_restitution(scene)
+    return solver.direct_solver_for_restitution and bounce > 0 \
+        and mass_ratio(masses_kg) <= solver.direct_solver_max_mass_ratio \
+        and (bounce >= solver.direct_solver_min_restitution or _thin_box(scene, settings))
 
 
 def in_plain_rigid_bodies(scene: Scene, settings: SimSettings, masses_kg) -> bool:
     """Whether a world of ``scene`` builds its dynamic bodies as plain rigid bodies
     (``SolverSettings.maximal_coordinates``, except thin boxes on the direct solver:
     ``SolverSettings.multibodies_from_aspect``)."""
-    solver = settings.solver
-    if not solver.maximal_coordinates:
-        return False
-    aspect = solver.multibodies_from_aspect
-    thin = aspect is not None and any(isinstance(b.shape, BoxShape) and max(b.extents_m) >= aspect * min(b.extents_m)
-                                      for b in scene.dynamic_objects)
-    return not (thin and uses_direct_solver(scene, settings, masses_kg))
+    return settings.solver.maximal_coordinates \
+        and not (_thin_box(scene, settings) and uses_direct_solver(scene, settings, masses_kg))
+
+
+def _thin_box(scene: Scene, settings: SimSettings) -> bool:
+    aspect = settings.solver.multibodies_from_aspect
+    return aspect is not None and settings.solver.maximal_coordinates \
+        and any(isinstance(b.shape, BoxShape) and max(b.extents_m) >= aspect * min(b.extents_m)
+                for b in scene.dynamic_objects)
+
+
+def combined_restitution(scene: Scene) -> float:
+    """The largest restitution two surfaces that may touch combine to (Bullet multiplies the two):
+    a dynamic body against the support, a static body or another dynamic one."""
+    dynamic = sorted((b.restitution for b in scene.dynamic_objects), reverse=True)
+    others = [scene.support.restitution] + [b.restitution for b in scene.static_objects]  # a table's floor too
+    pairs = [dynamic[0] * dynamic[1]] if len(dynamic) > 1 else []
+    return max(pairs + [dynamic[0] * max(others)] if dynamic else [0.0])
 
 
 def can_bounce(scene: Scene) -> bool:
-    """Whether two surfaces that may touch both have restitution (Bullet multiplies the two): a
-    bouncing dynamic body against the support, a static body or another bouncing one."""
-    bouncy = [b for b in scene.dynamic_objects if b.restitution > 0]
-    if not bouncy:
-        return False
-    others = [scene.support.restitution] + [b.restitution for b in scene.static_objects]  # a table's floor too
-    return len(bouncy) > 1 or any(e > 0 for e in others)
+    """Whether two surfaces that may touch both have restitution."""
+    return combined_restitution(scene) > 0
 
 
 def use_sequential_solver(world: World) -> None:

@@ -347,6 +347,8 @@ def physics_rollout(scene, settings):
     ("solver", "iterations", 0, "solver.iterations: must be an integer in [1, 10000], got 0"),
     ("solver", "multibodies_from_aspect", 0.5,
      "solver.multibodies_from_aspect: must be a length-to-thickness ratio >= 1 or None, got 0.5"),
+    ("solver", "direct_solver_min_restitution", 1.5,
+     "solver.direct_solver_min_restitution: must be a restitution in [0, 1], got 1.5"),
 ])
 def test_each_settings_group_validates_its_own_fields(group, field, value, message):
     from ipe_ros.engine import ConfigError

@@ -122,6 +122,10 @@ DEFAULT_MODEL = ModelConfig(sigma_m=DEFAULT_SIGMA_M, samples=DEFAULT_SAMPLES)
 # --------------------------------------------------------------------------------------------
 # simulation settings: one group per concern of the stepper (see engine/simulation/)
 
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
 @dataclass(frozen=True)
 class SolverSettings:
     """pybullet's constraint solver.
@@ -132,7 +136,8 @@ class SolverSettings:
     warm_start_factor: warm start of the solver from the last step's impulses (pybullet's default
         0.85); 1.0 carries resting contacts over fully, which keeps stacks quiet at coarse steps.
     maximal_coordinates: boxes as plain rigid bodies (pybullet's ``useMaximalCoordinates``) instead
-        of one-link multibodies: the classic sequential-impulse solver, cheaper per contact.
+        of one-link multibodies: the classic sequential-impulse solver, cheaper per contact (thin boxes
+        on the direct solver excepted: ``multibodies_from_aspect``).
     direct_solver_for_restitution: see the field.
     iterations_per_mass_ratio: the iterative solver passes impulses from body to body, and needs
         about as many iterations as the heaviest body outweighs the lightest: a 1000:1 heavy box on a
@@ -184,12 +189,12 @@ class SolverSettings:
         integer(self.max_iterations, "solver.max_iterations", 1, 100_000)
 
         positive(self.residual_threshold, "solver.residual_threshold")
-        if not 0 <= self.direct_solver_min_restitution <= 1:
+        least = self.direct_solver_min_restitution
+        if not (_is_number(least) and 0 <= least <= 1):
             raise ConfigError("solver.direct_solver_min_restitution",
-                              f"must be a restitution in [0, 1], got {shown(self.direct_solver_min_restitution)}")
+                              f"must be a restitution in [0, 1], got {shown(least)}")
         aspect = self.multibodies_from_aspect
-        if aspect is not None and not (isinstance(aspect, (int, float)) and not isinstance(aspect, bool)
-                                       and math.isfinite(aspect) and aspect >= 1):
+        if aspect is not None and not (_is_number(aspect) and math.isfinite(aspect) and aspect >= 1):
             raise ConfigError("solver.multibodies_from_aspect",
                               f"must be a length-to-thickness ratio >= 1 or None, got {shown(aspect)}")
         if not 0 <= self.warm_start_factor <= 1:
@@ -503,9 +508,10 @@ PRESETS: dict[str, SimSettings] = {
     # extent per step (a collapse's statistics, not its every contact, are what the answer needs);
     # settling as `fine`; a 0.15 s rest window from 0.2 s on, "at rest" read as slower than 0.4
     # sizes/s and 0.4 rad/s and not speeding up; groups that nothing brings together and that step at
-    # least twice as coarse apart simulated apart (islands); thin boxes on the direct solver in
-    # multibodies, which hold their friction (SolverSettings.multibodies_from_aspect). Each of these is the coarsest
-    # setting that keeps the hard cases (tests/test_hard_cases.py) and the authors' outcomes
+    # least twice as coarse apart simulated apart (islands); the direct solver only for bounces of 0.1
+    # and more, and thin boxes on it in multibodies, which hold their friction (SolverSettings:
+    # direct_solver_min_restitution, multibodies_from_aspect). Each of these is the coarsest setting
+    # that keeps the hard cases (tests/test_hard_cases.py) and the authors' outcomes
     # (tests/test_paper_data.py); speed and accuracy against `paper` in benchmarks/README.md.
     "default": SimSettings(name="default", time_step_s=1 / 180, horizon_s=2.0, max_step_fraction_of_time_scale=0.04,
                            solver=SolverSettings(iterations=100, residual_threshold=3e-6, warm_start_factor=1.0,

@@ -342,6 +342,8 @@ def in_plain_rigid_bodies(scene: Scene, settings: SimSettings, masses_kg) -> boo
 
 
 def _thin_box(scene: Scene, settings: SimSettings) -> bool:
+    """A box at least ``multibodies_from_aspect`` times as long as it is thin, where plain rigid
+    bodies are asked for."""
     aspect = settings.solver.multibodies_from_aspect
     return aspect is not None and settings.solver.maximal_coordinates \
         and any(isinstance(b.shape, BoxShape) and max(b.extents_m) >= aspect * min(b.extents_m)

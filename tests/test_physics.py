@@ -349,6 +349,8 @@ def physics_rollout(scene, settings):
      "solver.multibodies_from_aspect: must be a length-to-thickness ratio >= 1 or None, got 0.5"),
     ("solver", "direct_solver_min_restitution", 1.5,
      "solver.direct_solver_min_restitution: must be a restitution in [0, 1], got 1.5"),
+    ("solver", "direct_solver_from_speed_m_s", -1.0,
+     "solver.direct_solver_from_speed_m_s: must be a speed >= 0 or None, got -1.0"),
 ])
 def test_each_settings_group_validates_its_own_fields(group, field, value, message):
     from ipe_ros.engine import ConfigError
@@ -507,8 +509,9 @@ def test_thin_boxes_on_the_direct_solver_are_built_in_multibodies_which_hold_the
 def test_the_direct_solver_runs_only_where_a_bounce_gives_back_a_share_of_an_impact_worth_its_cost():
     """A chain of dominoes at restitution 0.05 on a 0.1 floor (0.005 together) took 2.7x the time on
     the direct solver, with the same answers: `default` solves such scenes with the sequential-impulse
-    solver from a combined restitution of 0.1 down; `paper` keeps the direct one for any bounce, and
-    thin boxes keep it in `default` too (it holds their friction)."""
+    solver from a combined restitution of 0.1 down, unless a body is thrown in at 1 m/s or more; `paper`
+    keeps the direct one for any bounce, and thin boxes keep it in `default` too (it holds their
+    friction)."""
     from ipe_ros.engine.scene.zoo import scene_zoo
 
     default, paper = preset("default"), preset("paper")
@@ -521,6 +524,10 @@ def test_the_direct_solver_runs_only_where_a_bounce_gives_back_a_share_of_an_imp
     assert simulation.uses_direct_solver(bouncy, default, [b.mass_kg for b in bouncy.dynamic_objects])
     assert simulation.combined_restitution(plates) < 0.1
     assert simulation.uses_direct_solver(plates, default, [b.mass_kg for b in plates.dynamic_objects])
+    # a body thrown in keeps it: launch 2027/1's ball at 3.8 m/s, 0.05 together; not a domino nudged at 0.4
+    launch = scene_zoo(2027, 2, ("launch",))[1]
+    assert simulation.combined_restitution(launch) < 0.1 and default.solver.direct_solver_from_speed_m_s == 1.0
+    assert simulation.uses_direct_solver(launch, default, [b.mass_kg for b in launch.dynamic_objects])
     world = simulation.build_world(dominoes, np.array([b.position_m for b in dominoes.dynamic_objects]),
                                    np.array([b.mass_kg for b in dominoes.dynamic_objects]), default)
     assert world.direct_solver is False

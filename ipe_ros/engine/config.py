@@ -166,13 +166,21 @@ class SolverSettings:
     #: that end phase before it ends: what rests at the end is pushed out.
     direct_solver_for_restitution: bool = True
     direct_solver_max_mass_ratio: float = 100.0
-    #: The direct solver only where two surfaces that may touch combine to at least this restitution
-    #: (Bullet multiplies the two; 0: any bounce). A bounce gives back e^2 of an impact's normal
+    #: Where a bounce is possible at all, the direct solver only where two surfaces that may touch
+    #: combine to at least this restitution (Bullet multiplies the two; 0: any bounce), or a body is
+    #: thrown in (``direct_solver_from_speed_m_s``). A bounce gives back e^2 of an impact's normal
     #: energy, under 1% below 0.1 (the health check's share of the scene's scale), and the direct
     #: solver's cost grows with the contacts it solves at once: a chain of 18 dominoes at 0.005 (0.05 on
     #: a 0.1 floor) took 2.7x the time of the sequential-impulse solver on the zoo, with the same answers.
     #: Thin boxes keep it at any restitution (``multibodies_from_aspect``: it is what holds their friction).
     direct_solver_min_restitution: float = field(default=0.0, metadata={"keyed": "when set"})
+    #: A body that starts at least this fast (linear speed + spin x half diagonal) keeps the direct
+    #: solver where a bounce is possible (``direct_solver_min_restitution``): it strikes
+    #: the others in its first steps, and the sequential-impulse solver at `default`'s steps does not
+    #: converge a fast impact into a stack, whatever the restitution (zoo launch 2027/1-2, balls at 3.8
+    #: and 7.2 m/s: one object off in 2 of 16 samples; caps 2027/3, thrown at 8.6 m/s: 0.875 off, 0.44 on
+    #: the direct solver). A domino nudged at 0.2-0.6 m/s tips; it does not strike. None: never.
+    direct_solver_from_speed_m_s: float | None = field(default=None, metadata={"keyed": "when set"})
     #: Plain rigid bodies let friction creep. On the zoo's thin plates a tipped plate slid 5-8 mm, past
     #: its fall threshold (an eighth of its 14 mm thickness), in 88-100% of `default`'s samples; Bullet's
     #: multibodies solved by the direct solver hold it in about half, as `paper` and a third engine with
@@ -193,6 +201,9 @@ class SolverSettings:
         if not (_is_number(least) and 0 <= least <= 1):
             raise ConfigError("solver.direct_solver_min_restitution",
                               f"must be a restitution in [0, 1], got {shown(least)}")
+        fast = self.direct_solver_from_speed_m_s
+        if fast is not None and not (_is_number(fast) and math.isfinite(fast) and fast >= 0):
+            raise ConfigError("solver.direct_solver_from_speed_m_s", f"must be a speed >= 0 or None, got {shown(fast)}")
         aspect = self.multibodies_from_aspect
         if aspect is not None and not (_is_number(aspect) and math.isfinite(aspect) and aspect >= 1):
             raise ConfigError("solver.multibodies_from_aspect",
@@ -509,14 +520,15 @@ PRESETS: dict[str, SimSettings] = {
     # settling as `fine`; a 0.15 s rest window from 0.2 s on, "at rest" read as slower than 0.4
     # sizes/s and 0.4 rad/s and not speeding up; groups that nothing brings together and that step at
     # least twice as coarse apart simulated apart (islands); the direct solver only for bounces of 0.1
-    # and more, and thin boxes on it in multibodies, which hold their friction (SolverSettings:
-    # direct_solver_min_restitution, multibodies_from_aspect). Each of these is the coarsest setting
+    # and more or bodies thrown in at 1 m/s and more, and thin boxes on it in multibodies, which hold
+    # their friction (SolverSettings: direct_solver_min_restitution, direct_solver_from_speed_m_s,
+    # multibodies_from_aspect). Each of these is the coarsest setting
     # that keeps the hard cases (tests/test_hard_cases.py) and the authors' outcomes
     # (tests/test_paper_data.py); speed and accuracy against `paper` in benchmarks/README.md.
     "default": SimSettings(name="default", time_step_s=1 / 180, horizon_s=2.0, max_step_fraction_of_time_scale=0.04,
                            solver=SolverSettings(iterations=100, residual_threshold=3e-6, warm_start_factor=1.0,
                                                  maximal_coordinates=True, multibodies_from_aspect=10.0,
-                                                 direct_solver_min_restitution=0.1),
+                                                 direct_solver_min_restitution=0.1, direct_solver_from_speed_m_s=1.0),
                            settling=SettlingSettings(duration_s=0.1, substeps=2),
                            collapse=CollapseSettings(step_factor=4, solver_iterations=50, end_substeps=2,
                                                      max_travel_fraction=0.25, end_travel_fraction=0.05,

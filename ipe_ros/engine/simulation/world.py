@@ -325,12 +325,14 @@ def gap_to_others_m(world: World, handle: int, within_m: float) -> float:
 
 def uses_direct_solver(scene: Scene, settings: SimSettings, masses_kg) -> bool:
     """Whether a world of ``scene`` is solved by the direct solver (``SolverSettings``:
-    ``direct_solver_for_restitution``, ``direct_solver_min_restitution``, ``multibodies_from_aspect``)."""
+    ``direct_solver_for_restitution``, ``direct_solver_min_restitution``, ``direct_solver_from_speed_m_s``,
+    ``multibodies_from_aspect``)."""
     solver = settings.solver
-    bounce = combined_restitution(scene)
+    bounce, thrown = combined_restitution(scene), solver.direct_solver_from_speed_m_s
     return solver.direct_solver_for_restitution and bounce > 0 \
         and mass_ratio(masses_kg) <= solver.direct_solver_max_mass_ratio \
-        and (bounce >= solver.direct_solver_min_restitution or _thin_box(scene, settings))
+        and (bounce >= solver.direct_solver_min_restitution or _thin_box(scene, settings)
+             or (thrown is not None and fastest_initial_speed_m_s(scene) >= thrown))
 
 
 def in_plain_rigid_bodies(scene: Scene, settings: SimSettings, masses_kg) -> bool:

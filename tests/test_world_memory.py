@@ -49,7 +49,8 @@ def test_a_scene_with_a_convex_hull_built_600_times_keeps_no_python_memory():
 def test_a_geometry_world_never_switches_to_the_direct_solver():
     """It is never stepped; each switch allocates memory pybullet never frees."""
     scene = capped_tower(3.0)
-    assert world.can_bounce(scene)  # a rollout of it uses the direct solver
+    masses = [b.resolved_mass_kg for b in scene.dynamic_objects]
+    assert world.uses_direct_solver(scene, preset("paper"), masses)  # a `paper` rollout of it uses the direct solver
     assert geometry_world(scene).direct_solver is False
     assert contacts(scene).pairs  # and its contacts are still read
 

@@ -289,7 +289,7 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
     orientations = [b.orientation_xyzw for b in scene.dynamic_objects] if orientations_xyzw is None \
         else orientations_xyzw
     dynamic_ids = _add_dynamic_bodies(p, cid, scene.dynamic_objects, positions_m, masses_kg, orientations,
-                                      in_plain_rigid_bodies(scene, settings, masses_kg))
+                                      _plain_rigid_bodies(scene, settings, direct))
     inertia = np.array([p.getDynamicsInfo(h, -1, physicsClientId=cid)[2] for h in dynamic_ids], float)
     return World(client=cid, dynamic_ids=dynamic_ids, scale_m=scale, time_step_s=time_step,
                  contact_distance_m=contact_distance,
@@ -339,8 +339,12 @@ def in_plain_rigid_bodies(scene: Scene, settings: SimSettings, masses_kg) -> boo
     """Whether a world of ``scene`` builds its dynamic bodies as plain rigid bodies
     (``SolverSettings.maximal_coordinates``, except thin boxes on the direct solver:
     ``SolverSettings.multibodies_from_aspect``)."""
-    return settings.solver.maximal_coordinates \
-        and not (_thin_box(scene, settings) and uses_direct_solver(scene, settings, masses_kg))
+    return _plain_rigid_bodies(scene, settings, uses_direct_solver(scene, settings, masses_kg))
+
+
+def _plain_rigid_bodies(scene: Scene, settings: SimSettings, direct: bool) -> bool:
+    """``in_plain_rigid_bodies`` for a world whose solver is already decided (``direct``)."""
+    return settings.solver.maximal_coordinates and not (direct and _thin_box(scene, settings))
 
 
 def _thin_box(scene: Scene, settings: SimSettings) -> bool:
@@ -359,11 +363,6 @@ def combined_restitution(scene: Scene) -> float:
     others = [scene.support.restitution] + [b.restitution for b in scene.static_objects]  # a table's floor too
     pairs = [dynamic[0] * dynamic[1]] if len(dynamic) > 1 else []
     return max(pairs + [dynamic[0] * max(others)] if dynamic else [0.0])
-
-
-def can_bounce(scene: Scene) -> bool:
-    """Whether two surfaces that may touch both have restitution."""
-    return combined_restitution(scene) > 0
 
 
 def use_sequential_solver(world: World) -> None:

@@ -263,12 +263,13 @@ class CollapseSettings:
     the fall query's 0.125, which a 30-block stack compressing under its own weight can reach
     without anything falling. ``step_factor`` = 1 switches this off.
 
-    ``end_substeps``: those last ``fine_before_end_s`` run in this many substeps per tick. A collapse
-    still under way at the horizon is read mid-impact: at 1/180 s steps 49 of 576 tower rollouts run
-    to 2 s (asked where things land) end with a body > 5% inside another, each then rerun at the
-    reference by the self-check (9.8 reference samples per k = 48 tower prediction); at half steps
-    for the last 0.1 s, 2 (2.75 with the check's coverage; benchmarks/README.md, "the self-check's
-    policies"). ``default`` uses 2.
+    ``end_substeps``: those last ``fine_before_end_s`` run in at least this many substeps per tick. A
+    collapse still under way at the horizon is read mid-impact: at 1/180 s steps 49 of 576 tower
+    rollouts run to 2 s (asked where things land) end with a body > 5% inside another, each then
+    rerun at the reference by the self-check (9.8 reference samples per k = 48 tower prediction); at
+    half steps for the last 0.1 s, 2 (2.75 with the check's coverage; benchmarks/README.md, "the
+    self-check's policies"). Since ``end_travel_fraction`` gives a fast end the substeps it needs,
+    ``default`` uses 1: half steps for slow ends too cost the towers 3% and changed no fall.
 
     ``end_travel_fraction``: in those last ``fine_before_end_s``, also as many substeps as keep the
     fastest corner within this fraction of the smallest extent per substep (None: ``end_substeps``
@@ -530,7 +531,7 @@ PRESETS: dict[str, SimSettings] = {
                                                  maximal_coordinates=True, multibodies_from_aspect=10.0,
                                                  direct_solver_min_restitution=0.1, direct_solver_from_speed_m_s=1.0),
                            settling=SettlingSettings(duration_s=0.1, substeps=2),
-                           collapse=CollapseSettings(step_factor=4, solver_iterations=50, end_substeps=2,
+                           collapse=CollapseSettings(step_factor=4, solver_iterations=50, end_substeps=1,
                                                      max_travel_fraction=0.25, end_travel_fraction=0.05,
                                                      anchor_after_steps=300),
                            early_stop=EarlyStopSettings(enabled=True, speed_sizes_per_s=0.4, angular_rad_s=0.4,

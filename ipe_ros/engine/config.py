@@ -269,7 +269,7 @@ class CollapseSettings:
     rerun at the reference by the self-check (9.8 reference samples per k = 48 tower prediction); at
     half steps for the last 0.1 s, 2 (2.75 with the check's coverage; benchmarks/README.md, "the
     self-check's policies"). Since ``end_travel_fraction`` gives a fast end the substeps it needs,
-    ``default`` uses 1: half steps for slow ends too cost the towers 3% and changed no fall.
+    ``default`` uses 1: half steps for slow ends too changed no fall on the towers and cost them 1-3%.
 
     ``end_travel_fraction``: in those last ``fine_before_end_s``, also as many substeps as keep the
     fastest corner within this fraction of the smallest extent per substep (None: ``end_substeps``

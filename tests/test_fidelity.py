@@ -458,32 +458,32 @@ def test_anytime_sampling_is_checked_on_the_samples_it_drew(tower):
 
 
 @pytest.fixture(scope="module")
-def ramp_3():
-    """On this ramp the ball topples block1 in every sample of the fast physics that is wrong here
-    (``WRONG_HERE``; k = 8, seed 0), in 1 of 8 of the reference's."""
-    return zoo_scene("ramp", 2026, 3)
+def ramp_4():
+    """On this ramp the ball topples block1 and block2 in 7 of 8 samples of the fast physics that
+    is wrong here (``WRONG_HERE``; k = 8, seed 0), in none of the reference's."""
+    return zoo_scene("ramp", 2026, 4)
 
 
-def test_a_question_checks_every_variant_and_answers_a_contradicted_one_at_the_reference(ramp_3):
+def test_a_question_checks_every_variant_and_answers_a_contradicted_one_at_the_reference(ramp_4):
     """Robot questions asked to check themselves run the same check per variant: the scene as it is topples block1 under
     the wrong fast physics where the reference mostly keeps it, so that variant is escalated and answered as the
     reference answers it; without the rolling ball nothing moves in either physics, and that
     variant is verified. Each round of both variants' checks is one map call."""
-    model = _ramp_model(ramp_3, 8)
+    model = _ramp_model(ramp_4, 8)
     actions = [None, A.Remove(("mover",))]
     spy = CountingMap()
-    as_is, without = A.ask(ramp_3, actions, model, WRONG_HERE, seed=0, map_fn=spy, check=DEFAULT_CHECK).variants
-    reference = A.ask(ramp_3, actions, model, reference_settings(), seed=0).variants
+    as_is, without = A.ask(ramp_4, actions, model, WRONG_HERE, seed=0, map_fn=spy, check=DEFAULT_CHECK).variants
+    reference = A.ask(ramp_4, actions, model, reference_settings(), seed=0).variants
     assert as_is.fidelity == "escalated" and as_is.self_check["escalated_samples"] == 8
     assert as_is.object_fall_probability == reference[0].object_fall_probability
-    assert as_is.object_fall_probability["block1"] == 0.125
+    assert as_is.object_fall_probability["block1"] == 0.0
     assert without.fidelity == "verified" and set(without.object_fall_probability.values()) == {0.0}
     assert reference[0].fidelity == "reference"  # the reference settings are not checked
     # the fast samples of both variants, then the verification of sample 0 of each, together
     assert len(spy.calls[0]) == 8 and all(t.settings.name == WRONG_HERE.name for t in spy.calls[0])
     assert [(t.settings.name, t.index, t.actions) for t in spy.calls[1]] == [
         (REFERENCE, 0, (None,)), (REFERENCE, 0, (A.Remove(("mover",)),))]
-    unchecked = A.ask(ramp_3, actions, model, WRONG_HERE, seed=0)  # questions' default: not checked
+    unchecked = A.ask(ramp_4, actions, model, WRONG_HERE, seed=0)  # questions' default: not checked
     assert unchecked.variants[0].fidelity == unchecked.variants[0].to_dict()["fidelity"] == "unverified"
     assert unchecked.variants[0].object_fall_probability["block1"] >= 0.75  # the fast physics alone
 
@@ -518,13 +518,13 @@ def test_a_sequential_decision_is_read_again_from_the_checked_samples():
         (None, "checked", 4, 0.0)
 
 
-def test_a_question_sent_as_json_checks_itself_only_when_it_asks_to(ramp_3):
+def test_a_question_sent_as_json_checks_itself_only_when_it_asks_to(ramp_4):
     from ipe_ros.engine.actions.question import question_from_dict
 
-    model = _ramp_model(ramp_3, 8)
+    model = _ramp_model(ramp_4, 8)
     for asked, verdict in ((True, "escalated"), (False, "unverified")):
         question = question_from_dict({"question": "remove", "objects": ["mover"], "self_check": asked})
-        answer = question.answer(ramp_3, model, WRONG_HERE, seed=0, check=DEFAULT_CHECK).data
+        answer = question.answer(ramp_4, model, WRONG_HERE, seed=0, check=DEFAULT_CHECK).data
         assert answer["variants"][0]["label"] == "as_is" and answer["variants"][0]["fidelity"] == verdict
     with pytest.raises(ConfigError, match=r"^self_check: must be true or false$"):
         question_from_dict({"question": "remove", "self_check": "yes"})

@@ -55,8 +55,9 @@ def test_the_travel_limit_sets_substeps_and_coarse_steps():
     assert ticks_allowed(2.0, DEFAULT, world) == 5 and ticks_allowed(50.0, DEFAULT, world) == 0
 
 
-def _rest(decided=None):
-    return RestWatch(DEFAULT.early_stop, scale_m=0.2, earliest_stop_s=0.2, decided=decided, n_boxes=2)
+def _rest(decided=None, radii_m=None):
+    return RestWatch(DEFAULT.early_stop, scale_m=0.2, earliest_stop_s=0.2, decided=decided, n_boxes=2,
+                     radii_m=radii_m)
 
 
 def test_rest_needs_a_whole_window_without_growing_motion():
@@ -72,16 +73,29 @@ def test_rest_needs_a_whole_window_without_growing_motion():
     assert REST_NOISE_FLOOR_PER_S > 0
 
 
-def test_decided_bodies_do_not_hold_up_the_end_and_a_yes_no_question_ends_at_the_first_fall():
+def test_a_decided_body_holds_up_the_end_while_it_can_still_reach_an_open_one():
     decided = DecidedHeights(fallen_below_z_m=np.array([0.1, 0.3]))
-    rest = _rest(decided)
-    moving = np.array([0.0, 5.0])
-    heights = np.array([0.2, 0.05])  # the second body fell: its motion no longer matters
-    assert not rest.should_stop(0.2, moving, np.zeros(2), heights)
-    assert rest.should_stop(0.35, moving, np.zeros(2), heights)
+    radii = np.array([0.1, 0.1])
+    moving, still = np.array([0.0, 5.0]), np.zeros(2)
+    # the second body fell but rolls on beside the first, which stands: it may still knock it over
+    beside = np.array([0.2, 0.15])
+    rest = _rest(decided, radii)
+    for t in (0.2, 0.35, 1.0):
+        assert not rest.should_stop(t, moving, still, beside)
     assert rest.undecided.tolist() == [True, False]
+    # once it lies still, its outcome and its motion are both settled
+    assert not rest.should_stop(1.05, still, still, beside) and rest.should_stop(1.2, still, still, beside)
+    # fallen off the table, wholly below the open body: nothing it does reaches it
+    below = np.array([0.2, -0.5])
+    rest = _rest(decided, radii)
+    assert not rest.should_stop(0.2, moving, still, below) and rest.should_stop(0.35, moving, still, below)
+
+
+def test_a_yes_no_question_ends_at_the_first_fall():
     first_fall = _rest(DecidedHeights(fallen_below_z_m=np.array([0.1, 0.3]), stop_at_first_fall=True))
-    assert first_fall.should_stop(0.05, moving, np.zeros(2), heights)
+    assert first_fall.should_stop(0.05, np.array([0.0, 5.0]), np.zeros(2), np.array([0.2, 0.05]))
+    assert not _rest(DecidedHeights(fallen_below_z_m=np.array([0.1, 0.3]), stop_at_first_fall=True)).should_stop(
+        0.05, np.array([0.0, 5.0]), np.zeros(2), np.array([0.2, 0.35]))
 
 
 def test_health_names_divergence_and_watches_energy_after_the_inputs():

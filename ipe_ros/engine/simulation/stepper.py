@@ -178,7 +178,7 @@ class _Rollout:
         self.steps = StepControl(settings, world)
         self.rest = RestWatch(settings.early_stop, world.scale_m,
                               max(self.push_ticks * dt, settings.early_stop.min_time_s), decided,
-                              len(scene.dynamic_objects))
+                              len(scene.dynamic_objects), self.half_diagonals_m)
         self.travel_substeps = substeps_for(fastest_start_m_s + g * self.look_every * dt, settings, world) \
             if fastest_start_m_s else 1
         self.fastest_m_s = fastest_start_m_s  # as of the last read: what the end phase's substeps start from

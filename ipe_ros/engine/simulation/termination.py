@@ -24,7 +24,8 @@ REST_NOISE_FLOOR_PER_S = 0.0025
 class DecidedHeights:
     """Per dynamic box, the outcomes already decided (only when nothing but fall / any_fall is asked).
 
-    fallen_below_z_m: a box whose centre is below this height has fallen; its motion no longer matters.
+    fallen_below_z_m: a box whose centre is below this height has fallen: its outcome no longer changes,
+        though its motion may still change another's (``RestWatch``).
     never_falls: boxes that cannot drop that far whatever happens (a block lying on the floor), or None.
     stop_at_first_fall: the yes/no question "will anything fall?": end at the first fallen box.
     """
@@ -38,12 +39,14 @@ class RestWatch:
     """Looks at the boxes every so often and says when the rollout can end."""
 
     def __init__(self, settings: EarlyStopSettings, scale_m: float, earliest_stop_s: float,
-                 decided: DecidedHeights | None, n_boxes: int):
+                 decided: DecidedHeights | None, n_boxes: int, radii_m: np.ndarray | None = None):
+        """``radii_m``: each box's bounding radius (half its diagonal), what it reaches from its centre."""
         self._settings = settings
         self._scale_m = scale_m
         self._rest_speed_m_s = settings.speed_sizes_per_s * scale_m
         self._earliest_stop_s = earliest_stop_s
         self._decided = decided
+        self._radii_m = np.zeros(n_boxes) if radii_m is None else np.asarray(radii_m, float)
         self._resting_since: float | None = None
         self._motion_at_start = np.zeros(n_boxes)
         #: the bodies whose outcome is not decided yet (as of the last look): only they must be at rest
@@ -70,8 +73,13 @@ class RestWatch:
             never = self._decided.never_falls
             decided = fallen_now if never is None else fallen_now | never
             self.undecided = ~decided
-            settled |= decided
-            motion = np.where(decided, 0.0, motion)
+            # a decided box's outcome is settled, not its motion: a fallen block rolling on, or a
+            # bottom block shoved along, can still topple one whose outcome is open. Only a box wholly
+            # below every open one (fallen off the table) cannot reach them any more
+            lowest_open_m = np.min(heights_m - self._radii_m, where=~decided, initial=np.inf)
+            out_of_reach = decided & (heights_m + self._radii_m < lowest_open_m)
+            settled |= out_of_reach
+            motion = np.where(out_of_reach, 0.0, motion)
         if not (np.all(settled) and t_s >= self._earliest_stop_s):
             self._resting_since = None
             return False

@@ -293,8 +293,8 @@ def test_collapse_steps_that_make_energy_go_back_to_the_trials_latest_anchor_not
     energy begins again at its next look, so the undo reruns only what follows the latest anchor
     (1330 steps) and what fell is the same. A rollout whose collapse steps make no energy is bit for
     bit the same: saving the world at an anchor changes nothing in it. On the direct solver, as
-    `default` solved the chain before ``direct_solver_min_restitution``: on the sequential-impulse
-    solver its collapse steps make no energy to undo."""
+    `default` solved the chain before ``direct_solver_min_restitution`` (and to its residual of then):
+    on the sequential-impulse solver its collapse steps make no energy to undo."""
     from ipe_ros.engine.config import DEFAULT_QUERIES
     from ipe_ros.engine.sampling.rollout import run_sample
     from ipe_ros.engine.sampling.sampler import make_tasks
@@ -303,7 +303,7 @@ def test_collapse_steps_that_make_energy_go_back_to_the_trials_latest_anchor_not
     scene = zoo_scene("dominoes", 2026, 2)
     model, query = ModelConfig(sigma_m=zoo_sigma_m(scene), samples=3), QuerySpec(queries=DEFAULT_QUERIES)
     assert preset("default").collapse.anchor_after_steps == 300
-    direct = preset("default").changed(solver={"direct_solver_min_restitution": 0.0})
+    direct = preset("default").changed(solver={"direct_solver_min_restitution": 0.0, "residual_threshold": 3e-6})
     runs = {}
     for name, settings in {"start": direct.changed(collapse={"anchor_after_steps": None}), "anchor": direct}.items():
         for index in (1, 2):
@@ -359,6 +359,7 @@ def physics_rollout(scene, settings):
      "collapse.solver_iterations: must be an integer in [1, 10000] or None, got 0"),
     ("collapse", "anchor_after_steps", 0,
      "collapse.anchor_after_steps: must be an integer in [1, 1000000] or None, got 0"),
+    ("collapse", "residual_threshold", 0.0, "collapse.residual_threshold: must be a finite number > 0, got 0.0"),
     ("settling", "substeps", 0, "settling.substeps: must be an integer in [1, 100] (1: no settling substeps), got 0"),
     ("settling", "duration_s", -0.1, "settling.duration_s: must be a finite number >= 0, got -0.1"),
     ("early_stop", "growth_factor", 0.5, "early_stop.growth_factor: must be in [1, 10), got 0.5"),
@@ -384,7 +385,7 @@ def test_changed_names_the_unknown_field():
     with pytest.raises(ConfigError, match=r"^collapse: .*unexpected keyword argument 'factor'.*; its fields are "
                                           r"step_factor, solver_iterations, drop_fraction, fine_before_end_s, end_substeps, "
                                           r"max_created_energy_fraction, quiet_sizes_per_s, max_travel_fraction, "
-                                          r"end_travel_fraction, anchor_after_steps$"):
+                                          r"end_travel_fraction, anchor_after_steps, residual_threshold$"):
         preset("default").changed(collapse={"factor": 2})
     with pytest.raises(ConfigError, match="^solver_iterations: not a field of SimSettings$"):
         preset("default").changed(solver_iterations=2)

@@ -326,7 +326,7 @@ class _Rollout:
         self.trial.close()
         self.trial = None
         self.collapse.end()
-        self._use_iterations(self.full_iterations)
+        self._use_iterations(self.full_iterations)  # the step's residual came back with the step
         return state
 
     def _begin_trial(self, state: tuple) -> None:
@@ -360,11 +360,13 @@ class _Rollout:
                 self.trial.close()
                 self.trial = None
             self._use_iterations(self.full_iterations)
+            self.steps.solve_to(None)
         if self.collapse.look(self.tick, max(self.push_ticks, self.settling.ticks), heights, moving):
             if self.tick < self.fine_from_tick:
                 self._begin_trial(state)
             if self.settings.collapse.solver_iterations is not None:
                 self._use_iterations(self.collapse_iterations)
+            self.steps.solve_to(self.settings.collapse.residual_threshold)
         if self.collapse.collapsing:
             # coarse, but no body may travel more than the travel limit per step, and none while a
             # body is deep inside another: the solver pushes it out by a fraction per step, so coarse

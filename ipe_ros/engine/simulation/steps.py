@@ -37,6 +37,7 @@ class StepControl:
         self._contact_distance_m = world.contact_distance_m
         self._least_substeps = 1  # raised for the end of the horizon (collapse.end_substeps)
         self._ending = False  # in the end phase
+        self._residual: float | None = None  # the unscaled residual threshold in force (None: the solver's)
 
     def end_phase(self, fastest_m_s: float) -> None:
         """From now on every tick runs in at least ``collapse.end_substeps`` substeps, and in as many
@@ -73,24 +74,33 @@ class StepControl:
         before it steps on."""
         set_contact_distance(self._world, self._contact_distance_m)
 
-    def snapshot(self) -> tuple[int, int, float, int, bool]:
-        return self.ticks, self.substeps, self._contact_distance_m, self._least_substeps, self._ending
+    def solve_to(self, residual: float | None) -> None:
+        """Solve the steps from now on to this unscaled residual threshold (None: the solver's)."""
+        if residual != self._residual:
+            self._residual = residual
+            self._apply()
 
-    def restore(self, snapshot: tuple[int, int, float, int, bool]) -> None:
+    def snapshot(self) -> tuple[int, int, float, int, bool, float | None]:
+        return self.ticks, self.substeps, self._contact_distance_m, self._least_substeps, self._ending, self._residual
+
+    def restore(self, snapshot: tuple[int, int, float, int, bool, float | None]) -> None:
         """Back to a ``snapshot()``, in pybullet too (its step and contact distance are not part of
         a saved world state)."""
-        self.ticks, self.substeps, self._contact_distance_m, self._least_substeps, self._ending = snapshot
+        (self.ticks, self.substeps, self._contact_distance_m, self._least_substeps, self._ending,
+         self._residual) = snapshot
+        self._apply(self._world.time_step_s * (self.ticks / self.substeps))
+        set_contact_distance(self._world, self._contact_distance_m)
+
+    def _apply(self, step_s: float | None = None) -> None:
         world = self._world
         factor = self.ticks / self.substeps
-        set_step(world, world.time_step_s * factor, residual_threshold(self._settings, world.scale_m, factor))
-        set_contact_distance(world, self._contact_distance_m)
+        set_step(world, world.time_step_s * self.ticks / self.substeps if step_s is None else step_s,
+                 residual_threshold(self._settings, world.scale_m, factor, self._residual))
 
     def set(self, ticks: int, substeps: int) -> None:
         substeps = min(max(substeps, self._least_substeps), self._settings.max_substeps)
         if (ticks, substeps) == (self.ticks, self.substeps):
             return
         self.ticks, self.substeps = ticks, substeps
-        world = self._world
-        factor = ticks / substeps
-        set_step(world, world.time_step_s * ticks / substeps, residual_threshold(self._settings, world.scale_m, factor))
+        self._apply()
 

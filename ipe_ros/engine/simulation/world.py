@@ -222,14 +222,16 @@ def _unit(quaternion) -> list[float]:
     return [float(v) for v in q / np.linalg.norm(q)]
 
 
-def residual_threshold(settings: SimSettings, scale_m: float, step_factor: float = 1) -> float:
+def residual_threshold(settings: SimSettings, scale_m: float, step_factor: float = 1,
+                       threshold: float | None = None) -> float:
     """pybullet's solver stops once the largest squared impulse change of an iteration is below this.
 
     The threshold is absolute: scale it with the scene so small blocks converge too, and with the
     square of the step, since impulses grow with the step (steps ``step_factor`` times longer are
-    solved to the same relative precision).
+    solved to the same relative precision). ``threshold``: the unscaled one (None: the solver's).
     """
-    return settings.solver.residual_threshold * scale_m / 0.2 * step_factor ** 2
+    base = settings.solver.residual_threshold if threshold is None else threshold
+    return base * scale_m / 0.2 * step_factor ** 2
 
 
 def set_step(world: World, step_s: float, residual: float | None = None) -> None:

@@ -428,7 +428,7 @@ def test_the_end_phase_takes_as_many_substeps_as_keep_a_landing_within_the_healt
     half steps; substeps that keep every corner within 5% of the smallest extent per substep end it
     healthy (``collapse.end_travel_fraction``); which blocks fell is as at half steps, sample by
     sample (the end phase is the last 0.1 s of a collapse). `default` takes no half steps besides
-    (``collapse.end_substeps`` 1)."""
+    (``collapse.end_substeps`` 1). On the fine steps' residual the case was found at (3e-6)."""
     from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes
     from ipe_ros.engine.config import DEFAULT_QUERIES
     from ipe_ros.engine.sampling.sampler import predict
@@ -436,9 +436,10 @@ def test_the_end_phase_takes_as_many_substeps_as_keep_a_landing_within_the_healt
     tower = load_scenes("ipe_ros/data/example_tower.json")[0]
     model, query = ModelConfig(sigma_m=0.01, samples=3), QuerySpec(queries=DEFAULT_QUERIES)
     assert preset("default").collapse.end_travel_fraction == 0.05
-    halves = predict(tower, model, preset("default").changed(collapse={"end_travel_fraction": None, "end_substeps": 2}),
+    then = preset("default").changed(solver={"residual_threshold": 3e-6})
+    halves = predict(tower, model, then.changed(collapse={"end_travel_fraction": None, "end_substeps": 2}),
                      query, seed=8, check=None)
-    limited = predict(tower, model, preset("default"), query, seed=8, check=None)
+    limited = predict(tower, model, then, query, seed=8, check=None)
     assert halves.outcomes[0].rollouts[0].penetration_fraction > 0.1
     assert limited.max_penetration_fraction < 0.05
     for a, b in zip(halves.outcomes, limited.outcomes):

@@ -11,6 +11,12 @@ per prediction, the estimated speed-up against `paper` (fast time + reference sa
 measured mean time, perfect balance over the workers), escalations, and the checked answer's
 mean / worst |dP(object falls)| against the full reference answer. Authors' towers need
 ``../shared``; without it generated towers are used.
+
+With ``--draws N --draw-samples k`` each policy is replayed on N random draws of k of a scene's
+samples, each a prediction of its own: simulate more samples than a prediction uses (``--zoo-samples
+64``) and the replay says how often a policy catches a bias, where one draw says only whether it did
+that once. A draw *needs* escalating where its unchecked answer is ``NEEDS_ESCALATION_DP`` or more
+from the reference's on the same samples; *missed* counts those the policy did not escalate.
 """
 
 from __future__ import annotations
@@ -47,6 +53,9 @@ POLICIES = {
     "one confirmation round": dataclasses.replace(DEFAULT_CHECK, confirm_rounds=1),
     "no confirmation": dataclasses.replace(DEFAULT_CHECK, confirm_rounds=0),
     "verify 2": dataclasses.replace(DEFAULT_CHECK, verify_samples=2),
+    # issue 52's stratified estimate of the bias (fidelity.bias_estimates), on trial
+    "stratified bias 0.1": dataclasses.replace(DEFAULT_CHECK, bias_tolerance=0.1, escalate_min_samples=2,
+                                               confirm_rounds=3),
     "unchecked": SelfCheck(enabled=False),
 }
 
@@ -58,7 +67,7 @@ def _scenes(args) -> list[tuple[str, object, ModelConfig]]:
     out = [("towers", t, ModelConfig(sigma_m=0.04, samples=args.samples)) for t in towers]
     for family in FAMILIES:
         for scene in scene_zoo(2026, args.zoo, (family,)):
-            out.append((f"zoo/{family}", scene, ModelConfig(sigma_m=zoo_sigma_m(scene), samples=min(16, args.samples))))
+            out.append((f"zoo/{family}", scene, ModelConfig(sigma_m=zoo_sigma_m(scene), samples=args.zoo_samples)))
     return out
 
 
@@ -74,6 +83,11 @@ def main() -> int:
     parser.add_argument("--towers", type=int, default=12)
     parser.add_argument("--zoo", type=int, default=2, help="scenes per zoo family")
     parser.add_argument("--samples", type=int, default=48)
+    parser.add_argument("--zoo-samples", type=int, default=16, help="samples per zoo scene (the zoo's own k: 16)")
+    parser.add_argument("--draws", type=int, default=1,
+                        help="replay each policy on this many random draws of --draw-samples of a scene's samples "
+                             "(1: the samples as simulated): how often the check catches a bias, not on one draw")
+    parser.add_argument("--draw-samples", type=int, default=None, help="samples per draw (default: all)")
     parser.add_argument("--query", type=parse_queries, default=DEFAULT_QUERIES,
                         help="the queries asked (default: the node's and the CLI's, fall,any_fall,direction,far)")
     parser.add_argument("--end-substeps", type=int, default=None,
@@ -97,7 +111,7 @@ def main() -> int:
         stored = _simulate(args, fast_settings, reference, query)
         if args.cache is not None:
             args.cache.write_bytes(pickle.dumps(stored))
-    rows, scenes = _replay(stored, reference)
+    rows, scenes = _replay(stored, reference, args.draws, args.draw_samples)
     tasks = stored[0][2]
     title = (f"# Self-check policies replayed on the same samples ({time.strftime('%Y-%m-%d')}): fast "
              f"`{tasks[0].settings.name}` (collapse.end_substeps {tasks[0].settings.collapse.end_substeps}), "
@@ -134,56 +148,87 @@ def _simulate(args, fast_settings, reference, query) -> list:
     return stored
 
 
-def _replay(stored: list, reference) -> list[dict]:
-    """Each policy's self-check on the stored samples, the reference outcomes handed back as reruns."""
+#: a draw whose unchecked answer is this far from the reference's on the same samples (worst object
+#: or "anything falls") needs escalating: beyond the zoo's worst-scene bars of every family
+NEEDS_ESCALATION_DP = 0.25
+
+
+def _draws(n_samples: int, draws: int, size: int | None) -> list[np.ndarray]:
+    """The samples each replay uses: all of them, or ``draws`` random draws of ``size`` (fixed seed)."""
+    if draws <= 1 and (size is None or size >= n_samples):
+        return [np.arange(n_samples)]
+    rng = np.random.default_rng(5)
+    return [np.sort(rng.choice(n_samples, min(size or n_samples, n_samples), replace=False)) for _ in range(draws)]
+
+
+def _worst_dp(answer, ref) -> float:
+    p = object_p(answer) - object_p(ref)
+    fell = [np.mean([r.fallen.any() for r in o.rollouts]) for o in answer if o.ok]
+    ref_fell = [np.mean([r.fallen.any() for r in o.rollouts]) for o in ref if o.ok]
+    return float(max(np.max(np.abs(p)), abs(np.mean(fell) - np.mean(ref_fell))))
+
+
+def _replay(stored: list, reference, draws: int = 1, draw_samples: int | None = None) -> list[dict]:
+    """Each policy's self-check on the stored samples (on each draw of them), the reference outcomes
+    handed back as reruns."""
     rows, scenes = [], []
     for name, check in POLICIES.items():
         per_group: dict[str, dict] = {}
-        for group, scene_name, tasks, fast, ref, fast_s, ref_s in stored:
-            used: list[int] = []
+        for group, scene_name, all_tasks, all_fast, all_ref, fast_s, ref_s in stored:
+            for picked in _draws(len(all_tasks), draws, draw_samples):
+                # a draw is a prediction of its own: its samples renumbered 0..k-1, as predict numbers them
+                tasks = [dataclasses.replace(all_tasks[i], index=j) for j, i in enumerate(picked)]
+                fast, ref = [all_fast[i] for i in picked], [all_ref[i] for i in picked]
+                used: list[int] = []
 
-            def run(batch, ref=ref, used=used):
-                used.extend(t.index for t in batch)
-                return [ref[t.index] for t in batch]
+                def run(batch, ref=ref, used=used):
+                    used.extend(t.index for t in batch)
+                    return [ref[t.index] for t in batch]
 
-            # as predict runs it: the verification, and the coverage sample picked ahead of the last samples
-            verified = {i: ref[i] for i in range(verification_count(check, len(tasks)))}
-            split = look_ahead_split(check, len(tasks))
-            if split < len(tasks):
-                verified.update({i: ref[i] for i in coverage_ahead(fast[:split], verified, check, len(tasks))})
-            used.extend(verified)
-            answer, report = drive(checking(tasks, list(fast), verified, check, reference, "default"), run)
-            dp = np.abs(object_p(answer) - object_p(ref))
-            g = per_group.setdefault(group, {"scenes": 0, "reference_samples": 0, "fast_s": 0.0, "ref_s": 0.0,
-                                             "paper_s": 0.0, "escalated": 0, "dp": [], "worst": 0.0})
-            per_sample_ref = ref_s / len(tasks)
-            g["scenes"] += 1
-            g["reference_samples"] += len(set(used))
-            g["fast_s"] += fast_s
-            g["ref_s"] += per_sample_ref * len(set(used))
-            g["paper_s"] += ref_s  # the reference at every sample: what `paper` itself costs, about
-            g["escalated"] += report.verdict == "escalated"
-            g["dp"].append(float(dp.mean()))
-            g["worst"] = max(g["worst"], float(dp.max()))
-            scenes.append({"policy": name, "scene": scene_name, "verdict": report.verdict,
-                           "reference_samples": len(set(used)), "worst_abs_dp": float(dp.max())})
+                # as predict runs it: the verification, and the coverage sample picked ahead of the last samples
+                verified = {i: ref[i] for i in range(verification_count(check, len(tasks)))}
+                split = look_ahead_split(check, len(tasks))
+                if split < len(tasks):
+                    verified.update({i: ref[i] for i in coverage_ahead(fast[:split], verified, check, len(tasks))})
+                used.extend(verified)
+                answer, report = drive(checking(tasks, list(fast), verified, check, reference, "default"), run)
+                dp = np.abs(object_p(answer) - object_p(ref))
+                needed = _worst_dp(fast, ref) >= NEEDS_ESCALATION_DP
+                g = per_group.setdefault(group, {"scenes": 0, "reference_samples": 0, "fast_s": 0.0, "ref_s": 0.0,
+                                                 "paper_s": 0.0, "escalated": 0, "dp": [], "worst": 0.0,
+                                                 "needed": 0, "missed": 0})
+                per_sample_fast, per_sample_ref = fast_s / len(all_tasks), ref_s / len(all_tasks)
+                g["scenes"] += 1
+                g["reference_samples"] += len(set(used))
+                g["fast_s"] += per_sample_fast * len(tasks)
+                g["ref_s"] += per_sample_ref * len(set(used))
+                g["paper_s"] += per_sample_ref * len(tasks)  # the reference at every sample: what `paper` costs, about
+                g["escalated"] += report.verdict == "escalated"
+                g["needed"] += needed
+                g["missed"] += needed and report.verdict != "escalated"
+                g["dp"].append(float(dp.mean()))
+                g["worst"] = max(g["worst"], float(dp.max()))
+                scenes.append({"policy": name, "scene": scene_name, "samples": [int(i) for i in picked],
+                               "verdict": report.verdict, "reference_samples": len(set(used)),
+                               "worst_abs_dp": float(dp.max()), "needed": bool(needed)})
         for group, g in per_group.items():
             rows.append({"policy": name, "group": group, "scenes": g["scenes"],
                          "reference_samples_per_prediction": g["reference_samples"] / g["scenes"],
                          "speedup_vs_reference": g["paper_s"] / (g["fast_s"] + g["ref_s"]),
-                         "escalated": g["escalated"], "mean_abs_dp": float(np.mean(g["dp"])),
-                         "worst_abs_dp": g["worst"]})
+                         "escalated": g["escalated"], "needed": g["needed"], "missed": g["missed"],
+                         "mean_abs_dp": float(np.mean(g["dp"])), "worst_abs_dp": g["worst"]})
     return rows, scenes
 
 
 def _write(rows: list[dict], out: Path, title: str) -> None:
     out.mkdir(parents=True, exist_ok=True)
     (out / "check_policy.json").write_text(json.dumps(rows, indent=1))
-    lines = ["| policy | set | scenes | reference samples / prediction | speed-up vs reference | escalated | "
-             "mean \\|dP\\| | worst \\|dP\\| |", "|---" * 8 + "|"]
+    lines = ["| policy | set | predictions | reference samples / prediction | speed-up vs reference | escalated | "
+             "needed escalating | missed | mean \\|dP\\| | worst \\|dP\\| |", "|---" * 10 + "|"]
     for r in sorted(rows, key=lambda r: (r["group"] != "towers", r["group"])):
         lines.append(f"| {r['policy']} | {r['group']} | {r['scenes']} | {r['reference_samples_per_prediction']:.2f} | "
-                     f"{r['speedup_vs_reference']:.1f}x | {r['escalated']} | {r['mean_abs_dp']:.3f} | "
+                     f"{r['speedup_vs_reference']:.1f}x | {r['escalated']} | {r['needed']} | {r['missed']} | "
+                     f"{r['mean_abs_dp']:.3f} | "
                      f"{r['worst_abs_dp']:.3f} |")
     (out / "check_policy.md").write_text(title + "\n".join(lines) + "\n")
     print("\n".join(lines))

@@ -194,6 +194,14 @@ def test_check_policy_replays_every_policy_on_the_same_samples(tmp_path):
     assert set(by_policy) >= {"current", "no confirmation", "unchecked"}
     assert by_policy["unchecked"]["reference_samples_per_prediction"] == 0
     assert by_policy["current"]["reference_samples_per_prediction"] >= 1  # the verified sample at least
+    # replayed on draws of the same samples: each draw a prediction of its own
+    drawn = subprocess.run(
+        [sys.executable, str(REPO / "benchmarks" / "check_policy.py"), "--towers", "1", "--zoo", "0", "--samples", "2",
+         "--cache", str(tmp_path / "samples.pkl"), "--draws", "3", "--draw-samples", "1", "--out", str(tmp_path / "d")],
+        capture_output=True, text=True, timeout=600, env=ENV)
+    assert drawn.returncode == 0, drawn.stderr[-3000:]
+    rows = json.loads((tmp_path / "d" / "check_policy.json").read_text())
+    assert {r["scenes"] for r in rows} == {3} and all(r["missed"] <= r["needed"] for r in rows)
 
 
 def test_collapse_trial_benchmark_compares_each_rule_on_columns_the_zoo_and_towers(tmp_path):

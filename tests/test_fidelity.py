@@ -18,8 +18,9 @@ from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
 from ipe_ros.engine import actions as A
 from ipe_ros.engine.config import DEFAULT_QUERIES
 from ipe_ros.engine.errors import ConfigError
-from ipe_ros.engine.checking.fidelity import (DEFAULT_CHECK, VERDICTS, SelfCheck, confirmation_samples, coverage_samples,
-                                     look_ahead_split, reference_settings)
+from ipe_ros.engine.checking.fidelity import (DEFAULT_CHECK, VERDICTS, SelfCheck, bias_estimates, confirmation_samples,
+                                              coverage_samples, look_ahead_split, reference_settings,
+                                              undecided_bias_samples)
 from ipe_ros.engine.sampling.rollout import SampleOutcome, run_sample
 from ipe_ros.engine.scene.files import load_scenes
 from ipe_ros.engine.scene.examples import example_scene_path
@@ -209,6 +210,45 @@ def test_coverage_looks_where_a_bias_could_hide_from_the_samples_compared():
     assert coverage_samples(fast, [_flags_of(0, 0), _flags_of(1, 1)], at_least=3, count=2) == []
     assert coverage_samples(fast, looked, at_least=4, count=2) == []
     assert coverage_samples({}, looked, 3, 1) == [] and coverage_samples(fast, looked, 3, 0) == []
+
+
+def test_the_stratified_bias_weighs_each_fast_side_by_its_samples():
+    """Issue 52's estimate on trial (``bias_tolerance``). 15 of 16 fast samples say object 0 fell;
+    of the 3 compared among them, 1 differs (the reference keeps it). One difference in three looks
+    on a side that holds nearly every sample: a bias of about a third, credibly beyond 0.1 but on
+    one difference alone, so the next looks go to that side; a second difference in five decides. A block that falls in 5 of 16 fast samples and differs in 2 of 3 looked at on
+    its "yes" side stays open until its "no" side, two thirds of the samples, has been looked at:
+    chaos there flips it back (a difference the other way) and the interval takes in 0."""
+    fast = {i: _flags_of(0.0 if i == 7 else 1.0, 0.0) for i in range(16)}
+    looked = {0: _flags_of(1, 0), 1: _flags_of(0, 0), 2: _flags_of(0, 0)}
+    (bias,) = bias_estimates(fast, looked)
+    assert bias.outcome == 0 and bias.strata == ((1, 0, 0), (15, 3, 1)) and bias.same_way == 1
+    assert 0.25 < bias.estimate < 0.4 and bias.beyond(0.1) and not bias.within(0.1)
+    rest = [i for i in fast if i not in looked]
+    assert undecided_bias_samples(fast, rest, [bias], 0.1, 2, at_least=2) == [3, 4]
+    looked |= {3: _flags_of(1, 0), 4: _flags_of(0, 0)}
+    (bias,) = bias_estimates(fast, looked)
+    assert bias.beyond(0.1) and bias.same_way == 2
+    assert undecided_bias_samples(fast, [5, 6], [bias], 0.1, 2, at_least=2) == []  # decided: escalate
+    assert bias_estimates(fast, {0: _flags_of(0, 0)}) == []  # nothing differs: nothing to estimate
+    chaos = {i: _flags_of(1.0 if i < 5 else 0.0) for i in range(16)}
+    looked = {0: _flags_of(1), 1: _flags_of(1), 2: _flags_of(0)}
+    (bias,) = bias_estimates(chaos, looked)
+    assert not bias.beyond(0.1) and not bias.within(0.1)
+    assert undecided_bias_samples(chaos, list(range(3, 16)), [bias], 0.1, 2, at_least=2) == [5, 6]
+    looked |= {5: _flags_of(-1), 6: _flags_of(0)}
+    (bias,) = bias_estimates(chaos, looked)
+    assert bias.low < 0 < bias.high and not bias.beyond(0.1)  # 2 differences one way, 1 the other
+
+
+def test_the_stratified_check_escalates_a_contradicted_scene_as_the_counts_do(contradicted_scene):
+    stratified = dataclasses.replace(DEFAULT_CHECK, bias_tolerance=0.1, escalate_min_samples=2, confirm_rounds=3)
+    model = _ramp_model(contradicted_scene, 8)
+    p = predict(contradicted_scene, model, WRONG_HERE, QUERY, seed=0, check=stratified)
+    reference = predict(contradicted_scene, model, reference_settings(), QUERY, seed=0)
+    assert p.fidelity == "escalated" and p.object_fall_probability == reference.object_fall_probability
+    with pytest.raises(ConfigError, match=r"^self_check.bias_tolerance: must be in \(0, 1\) or None, got 1.5$"):
+        SelfCheck(bias_tolerance=1.5)
 
 
 def test_a_bias_the_verified_sample_could_not_show_is_found_by_coverage(contradicted_scene):

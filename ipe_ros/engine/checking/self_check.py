@@ -6,8 +6,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import SimSettings
-from .fidelity import (FidelityReport, SelfCheck, confirmation_samples, contradicts, coverage_samples, difference,
-                       merge, outcome_flags, suspect, unhealthy, verification_count)
+from .fidelity import (FidelityReport, SelfCheck, bias_estimates, confirmation_samples, contradicts, coverage_samples,
+                       difference, merge, outcome_flags, suspect, undecided_bias_samples, unhealthy,
+                       verification_count)
 from ..sampling.montecarlo import Plan
 from ..sampling.outcome import SampleOutcome, energy_scale_of, rigid_reruns
 from ..sampling.rollout import SampleTask
@@ -20,6 +21,8 @@ class _Comparison:
                  check: SelfCheck, reference: SimSettings):
         self.tasks, self.outcomes, self.checked, self.check, self.reference = tasks, outcomes, checked, check, reference
         self.at_least = min(check.escalate_min_samples, len(tasks))
+        #: every good sample's fast outcome flags (what the bias is estimated over)
+        self.fast_flags = {i: outcome_flags(o) for i, o in enumerate(outcomes) if o.ok}
 
     def rerun(self, samples: list[int]) -> Plan:
         """These samples rerun at the reference (a round only when there are any)."""
@@ -31,7 +34,11 @@ class _Comparison:
                 if ref.ok and self.outcomes[i].ok}
 
     def contradicted(self, compared: dict[int, np.ndarray]) -> bool:
-        return contradicts(list(compared.values()), self.check.escalate_share, self.at_least)
+        tolerance = self.check.bias_tolerance
+        if tolerance is None:
+            return contradicts(list(compared.values()), self.check.escalate_share, self.at_least)
+        return any(b.beyond(tolerance) and b.same_way >= self.at_least
+                   for b in bias_estimates(self.fast_flags, compared))
 
     def rigid_reruns(self) -> int:
         """Reference reruns whose multibody rollout ended unhealthy and was rerun in plain rigid bodies."""
@@ -113,9 +120,15 @@ def _confirm(state: _Comparison, repair: int, cover: int) -> Plan:
         found = suspect(list(compared.values()))
         if repair >= state.at_least or state.contradicted(compared):
             return  # decided
-        fast = {i: outcome_flags(o) for i, o in enumerate(outcomes) if i not in state.checked and o.ok}
+        fast = {i: f for i, f in state.fast_flags.items() if i not in state.checked}
+        if check.bias_tolerance is not None and any(d.any() for d in compared.values()):
+            # some outcome differs: compare more where its bias is still undecided
+            picked = [] if confirmations >= check.confirm_rounds else undecided_bias_samples(
+                state.fast_flags, list(fast), bias_estimates(state.fast_flags, compared), check.bias_tolerance,
+                check.confirm_samples, state.at_least)
+            confirmations += 1
         # a second confirmation round only while something is suspicious
-        if found and confirmations < check.confirm_rounds and not (confirmations and found < 2):
+        elif found and confirmations < check.confirm_rounds and not (confirmations and found < 2):
             picked = confirmation_samples(fast, compared, check.confirm_samples)
             confirmations += 1
         elif not found and cover > 0:

@@ -117,7 +117,7 @@ def main() -> int:
              f"`{tasks[0].settings.name}` (collapse.end_substeps {tasks[0].settings.collapse.end_substeps}), "
              f"queries {', '.join(sorted(tasks[0].query.queries))}, against `{reference.name}`\n\n")
     _write(rows, Path(args.out), title)
-    (Path(args.out) / "check_policy_scenes.json").write_text(json.dumps(scenes, indent=1))
+    (Path(args.out) / "check_policy_scenes.json").write_text(json.dumps(_per_scene(scenes), indent=1))
     return 0
 
 
@@ -208,8 +208,7 @@ def _replay(stored: list, reference, draws: int = 1, draw_samples: int | None = 
                 g["missed"] += needed and report.verdict != "escalated"
                 g["dp"].append(float(dp.mean()))
                 g["worst"] = max(g["worst"], float(dp.max()))
-                scenes.append({"policy": name, "scene": scene_name, "samples": [int(i) for i in picked],
-                               "verdict": report.verdict, "reference_samples": len(set(used)),
+                scenes.append({"policy": name, "scene": scene_name, "verdict": report.verdict, "reference_samples": len(set(used)),
                                "worst_abs_dp": float(dp.max()), "needed": bool(needed)})
         for group, g in per_group.items():
             rows.append({"policy": name, "group": group, "scenes": g["scenes"],
@@ -218,6 +217,23 @@ def _replay(stored: list, reference, draws: int = 1, draw_samples: int | None = 
                          "escalated": g["escalated"], "needed": g["needed"], "missed": g["missed"],
                          "mean_abs_dp": float(np.mean(g["dp"])), "worst_abs_dp": g["worst"]})
     return rows, scenes
+
+
+def _per_scene(scenes: list[dict]) -> list[dict]:
+    """Per policy and scene: its draws' verdicts, reruns and worst |dP| (one row per draw is too many
+    to keep for 30 draws of 66 scenes under 9 policies)."""
+    out: dict[tuple[str, str], dict] = {}
+    for s in scenes:
+        row = out.setdefault((s["policy"], s["scene"]), {"policy": s["policy"], "scene": s["scene"], "draws": 0,
+                                                         "verdicts": {}, "reference_samples": 0, "needed": 0,
+                                                         "missed": 0, "worst_abs_dp": 0.0})
+        row["draws"] += 1
+        row["verdicts"][s["verdict"]] = row["verdicts"].get(s["verdict"], 0) + 1
+        row["reference_samples"] += s["reference_samples"]
+        row["needed"] += s["needed"]
+        row["missed"] += s["needed"] and s["verdict"] != "escalated"
+        row["worst_abs_dp"] = max(row["worst_abs_dp"], s["worst_abs_dp"])
+    return list(out.values())
 
 
 def _write(rows: list[dict], out: Path, title: str) -> None:

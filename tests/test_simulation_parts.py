@@ -55,9 +55,9 @@ def test_the_travel_limit_sets_substeps_and_coarse_steps():
     assert ticks_allowed(2.0, DEFAULT, world) == 5 and ticks_allowed(50.0, DEFAULT, world) == 0
 
 
-def _rest(decided=None, radii_m=None):
+def _rest(decided=None, radii_m=(0.1, 0.1)):
     return RestWatch(DEFAULT.early_stop, scale_m=0.2, earliest_stop_s=0.2, decided=decided, n_boxes=2,
-                     radii_m=radii_m)
+                     radii_m=np.array(radii_m))
 
 
 def test_rest_needs_a_whole_window_without_growing_motion():

@@ -88,6 +88,9 @@ class StepControl:
         a saved world state)."""
         (self.ticks, self.substeps, self._contact_distance_m, self._least_substeps, self._ending,
          self._residual) = snapshot
+        # dt x (ticks / substeps): restore has always rounded the step so, where ``set`` rounds it as
+        # dt x ticks / substeps; the two may differ in the last bit, and answers after an undo are
+        # pinned (benchmarks/bit_identity.py)
         self._apply(self._world.time_step_s * (self.ticks / self.substeps))
         set_contact_distance(self._world, self._contact_distance_m)
 

@@ -39,14 +39,14 @@ class RestWatch:
     """Looks at the boxes every so often and says when the rollout can end."""
 
     def __init__(self, settings: EarlyStopSettings, scale_m: float, earliest_stop_s: float,
-                 decided: DecidedHeights | None, n_boxes: int, radii_m: np.ndarray | None = None):
+                 decided: DecidedHeights | None, n_boxes: int, radii_m: np.ndarray):
         """``radii_m``: each box's bounding radius (half its diagonal), what it reaches from its centre."""
         self._settings = settings
         self._scale_m = scale_m
         self._rest_speed_m_s = settings.speed_sizes_per_s * scale_m
         self._earliest_stop_s = earliest_stop_s
         self._decided = decided
-        self._radii_m = np.zeros(n_boxes) if radii_m is None else np.asarray(radii_m, float)
+        self._radii_m = np.asarray(radii_m, float)
         self._resting_since: float | None = None
         self._motion_at_start = np.zeros(n_boxes)
         #: the bodies whose outcome is not decided yet (as of the last look): only they must be at rest

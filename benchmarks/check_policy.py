@@ -53,9 +53,10 @@ POLICIES = {
     "one confirmation round": dataclasses.replace(DEFAULT_CHECK, confirm_rounds=1),
     "no confirmation": dataclasses.replace(DEFAULT_CHECK, confirm_rounds=0),
     "verify 2": dataclasses.replace(DEFAULT_CHECK, verify_samples=2),
-    # issue 52's stratified estimate of the bias (fidelity.bias_estimates), on trial
-    "stratified bias 0.1": dataclasses.replace(DEFAULT_CHECK, bias_tolerance=0.1, escalate_min_samples=2,
-                                               confirm_rounds=3),
+    "bias tolerance 0.05": dataclasses.replace(DEFAULT_CHECK, bias_tolerance=0.05),
+    "bias tolerance 0.15": dataclasses.replace(DEFAULT_CHECK, bias_tolerance=0.15),
+    # the rule before issue 52's stratified estimate of the bias: counts of same-way differences
+    "counts": dataclasses.replace(DEFAULT_CHECK, bias_tolerance=None, escalate_min_samples=3, confirm_rounds=2),
     "unchecked": SelfCheck(enabled=False),
 }
 

@@ -31,6 +31,8 @@ REFERENCE = reference_settings().name
 CHECK_FIELDS = ("fidelity", "refined_samples", "self_check", "wall_s")
 #: the example tower lies inside the validated envelope (checking/envelope.py): these tests check it anyway
 ALWAYS = SelfCheck(always_verify=True)
+#: the check deciding by counts of same-way differences (``bias_tolerance=None``), the default until issue 52
+COUNTS = SelfCheck(bias_tolerance=None, escalate_min_samples=3, confirm_rounds=2)
 
 
 def _answer(p) -> dict:
@@ -152,8 +154,10 @@ def test_unverified_when_the_budget_ends_before_a_disagreement_is_confirmed(cont
     assert (p.self_check["verified_samples"], p.self_check["disagreeing_samples"]) == (1, 1)
 
 
-def test_one_disagreement_that_more_samples_do_not_confirm_is_chaos_not_a_verdict(tower):
-    def flip_first_verification(task, outcome: SampleOutcome):
+def _flipped_first_verification():
+    """A map whose first verification (sample 0's reference rerun) says the opposite of what it
+    simulated for every object and for "anything falls": one disagreement, nowhere else."""
+    def flip(task, outcome: SampleOutcome):
         if task.settings.name == REFERENCE and task.index == 0 and len(spy.calls) == 1:
             rollout = outcome.rollouts[0]
             flipped = dataclasses.replace(rollout, values={**rollout.values, "fallen": ~rollout.fallen,
@@ -161,15 +165,24 @@ def test_one_disagreement_that_more_samples_do_not_confirm_is_chaos_not_a_verdic
             return dataclasses.replace(outcome, rollouts=(flipped,))
         return outcome
 
-    spy = CountingMap(flip_first_verification)
-    model = ModelConfig(sigma_m=0.01, samples=6)
+    spy = CountingMap(flip)
+    return spy
+
+
+def test_one_disagreement_that_more_samples_do_not_confirm_is_chaos_not_a_verdict(tower):
+    """k = 16: one sample's difference is a bias of 1/16, inside the tolerance (0.1) unless more
+    samples differ the same way. The confirmation rounds (at most 3) look for them and find one
+    more difference (chaos between the two physics, object 9 here), not a bias: verified, and the
+    answer is the fast one unchanged."""
+    spy = _flipped_first_verification()
+    model = ModelConfig(sigma_m=0.01, samples=16)
     p = predict(tower, model, preset("default"), QUERY, seed=4, map_fn=spy, check=ALWAYS)
-    assert len(spy.calls) == 2  # one round of confirmation, then a verdict
-    # the flip says the lower blocks fell where the fast physics kept them: every other sample
-    # keeps them too, so the targeted samples are the next ones in line
+    assert len(spy.calls) == 1 + DEFAULT_CHECK.confirm_rounds
+    # the flip says block0 fell where the fast physics kept it, as every fast sample does: the one
+    # side there is to look at, in index order
     assert [(t.settings.name, t.index) for t in spy.calls[1]] == [(REFERENCE, 1), (REFERENCE, 2)]
     assert p.fidelity == "verified"
-    assert (p.self_check["verified_samples"], p.self_check["disagreeing_samples"]) == (3, 1)
+    assert (p.self_check["verified_samples"], p.self_check["disagreeing_samples"]) == (7, 2)
     assert _answer(p) == _answer(predict(tower, model, preset("default"), QUERY, seed=4, check=None))
 
 
@@ -213,19 +226,21 @@ def test_coverage_looks_where_a_bias_could_hide_from_the_samples_compared():
 
 
 def test_the_stratified_bias_weighs_each_fast_side_by_its_samples():
-    """Issue 52's estimate on trial (``bias_tolerance``). 15 of 16 fast samples say object 0 fell;
-    of the 3 compared among them, 1 differs (the reference keeps it). One difference in three looks
-    on a side that holds nearly every sample: a bias of about a third, credibly beyond 0.1 but on
-    one difference alone, so the next looks go to that side; a second difference in five decides. A block that falls in 5 of 16 fast samples and differs in 2 of 3 looked at on
-    its "yes" side stays open until its "no" side, two thirds of the samples, has been looked at:
-    chaos there flips it back (a difference the other way) and the interval takes in 0."""
+    """``bias_estimates``. 15 of 16 fast samples say object 0 fell; of the 3 compared among them,
+    1 differs (the reference keeps it). One difference in three looks on a side that holds nearly
+    every sample: a bias of about a third, credibly beyond 0.1 but on one difference alone, so the
+    next looks go to both sides, the large one first; a second difference decides. A block that
+    falls in 5 of 16 fast samples and differs in 2 of 3 looked at on its "yes" side stays open until
+    its "no" side, two thirds of the samples, has been looked at: chaos there flips it back (a
+    difference the other way) and the interval takes in 0 and more than the tolerance the other way.
+    Once a side is looked through, its share is known, and bounds the bias."""
     fast = {i: _flags_of(0.0 if i == 7 else 1.0, 0.0) for i in range(16)}
     looked = {0: _flags_of(1, 0), 1: _flags_of(0, 0), 2: _flags_of(0, 0)}
     (bias,) = bias_estimates(fast, looked)
     assert bias.outcome == 0 and bias.strata == ((1, 0, 0), (15, 3, 1)) and bias.same_way == 1
     assert 0.25 < bias.estimate < 0.4 and bias.beyond(0.1) and not bias.within(0.1)
     rest = [i for i in fast if i not in looked]
-    assert undecided_bias_samples(fast, rest, [bias], 0.1, 2, at_least=2) == [3, 4]
+    assert undecided_bias_samples(fast, rest, [bias], 0.1, 2, at_least=2) == [3, 7]
     looked |= {3: _flags_of(1, 0), 4: _flags_of(0, 0)}
     (bias,) = bias_estimates(fast, looked)
     assert bias.beyond(0.1) and bias.same_way == 2
@@ -235,16 +250,20 @@ def test_the_stratified_bias_weighs_each_fast_side_by_its_samples():
     looked = {0: _flags_of(1), 1: _flags_of(1), 2: _flags_of(0)}
     (bias,) = bias_estimates(chaos, looked)
     assert not bias.beyond(0.1) and not bias.within(0.1)
-    assert undecided_bias_samples(chaos, list(range(3, 16)), [bias], 0.1, 2, at_least=2) == [5, 6]
+    assert undecided_bias_samples(chaos, list(range(3, 16)), [bias], 0.1, 2, at_least=2) == [5, 3]
     looked |= {5: _flags_of(-1), 6: _flags_of(0)}
     (bias,) = bias_estimates(chaos, looked)
-    assert bias.low < 0 < bias.high and not bias.beyond(0.1)  # 2 differences one way, 1 the other
+    assert bias.low < -0.1 and bias.high >= 0 and not bias.beyond(0.1)  # 2 differences one way, 1 the other
+    # the "yes" side looked through: 2 of its 5 differ, exactly 2/16, which bounds the bias; what
+    # the unseen "no" side may hold the other way widens it downwards only
+    looked = {i: _flags_of(1 if i < 2 else 0) for i in range(5)}
+    (bias,) = bias_estimates(chaos, looked)
+    assert bias.strata[1] == (5, 5, 2) and bias.high <= 2 / 16 and bias.low < 0
 
 
-def test_the_stratified_check_escalates_a_contradicted_scene_as_the_counts_do(contradicted_scene):
-    stratified = dataclasses.replace(DEFAULT_CHECK, bias_tolerance=0.1, escalate_min_samples=2, confirm_rounds=3)
+def test_the_counts_rule_escalates_a_contradicted_scene_as_the_stratified_one_does(contradicted_scene):
     model = _ramp_model(contradicted_scene, 8)
-    p = predict(contradicted_scene, model, WRONG_HERE, QUERY, seed=0, check=stratified)
+    p = predict(contradicted_scene, model, WRONG_HERE, QUERY, seed=0, check=COUNTS)
     reference = predict(contradicted_scene, model, reference_settings(), QUERY, seed=0)
     assert p.fidelity == "escalated" and p.object_fall_probability == reference.object_fall_probability
     with pytest.raises(ConfigError, match=r"^self_check.bias_tolerance: must be in \(0, 1\) or None, got 1.5$"):
@@ -254,12 +273,13 @@ def test_the_stratified_check_escalates_a_contradicted_scene_as_the_counts_do(co
 def test_a_bias_the_verified_sample_could_not_show_is_found_by_coverage(contradicted_scene):
     """The fast physics topples the stack in samples 3, 5 and 6 of 8 and keeps it in sample 0, the
     verified one, as the reference does everywhere: no difference, yet nothing compared could
-    have shown this bias. Coverage verifies sample 3, finds it, confirmation finds it at 5 and 6,
-    and the scene is escalated instead of being called verified."""
+    have shown this bias. Coverage verifies sample 3 and finds it; confirmation looks at both sides,
+    1 (standing, as the reference's) and 5 (a second same-way difference), and the scene is
+    escalated instead of being called verified."""
     spy = _toppled_only_in(contradicted_scene, (3, 5, 6))
     p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), WRONG_HERE, QUERY, seed=0,
                 map_fn=spy)
-    assert [[t.index for t in call] for call in spy.calls[1:3]] == [[3], [5, 6]]
+    assert [[t.index for t in call] for call in spy.calls[1:3]] == [[3], [1, 5]]
     assert p.fidelity == "escalated" and p.object_fall_probability["block1"] == 0.0
     no_coverage = dataclasses.replace(SelfCheck(), cover_samples=0)
     spy = _toppled_only_in(contradicted_scene, (3, 5, 6))
@@ -272,17 +292,19 @@ def test_a_bias_the_verified_sample_could_not_show_is_found_by_coverage(contradi
 def test_the_coverage_sample_is_picked_ahead_and_runs_beside_the_last_fast_samples(contradicted_scene):
     """k = 32: samples 0-23 run with the verification (sample 0, standing like the reference's);
     three of them topple (2, 3, 5), a side no compared sample took: sample 2 is verified in the map
-    that runs the last 8 fast samples, not in a round of its own. It differs; confirmation finds 3
-    and 5 differing too, and the scene is escalated. Where the split falls depends on k alone."""
+    that runs the last 8 fast samples, not in a round of its own. It differs; confirmation looks
+    on both sides and finds 3 and 5 differing too, but three of 32 samples are a bias of 0.094, and
+    once three standing samples agree it is credibly within the tolerance (0.1): verified, the
+    answer the fast one. Where the split falls depends on k alone."""
     spy = _toppled_only_in(contradicted_scene, (2, 3, 5))
     p = predict(contradicted_scene, _ramp_model(contradicted_scene, 32), WRONG_HERE, QUERY, seed=0,
                 map_fn=spy)
     calls = [[(t.index, t.settings.name) for t in call] for call in spy.calls]
     assert calls[0] == [(0, REFERENCE)] + [(i, "default") for i in range(24)]
     assert calls[1] == [(2, REFERENCE)] + [(i, "default") for i in range(24, 32)]
-    assert calls[2] == [(3, REFERENCE), (5, REFERENCE)]
-    assert p.fidelity == "escalated" and p.object_fall_probability["block1"] == 0.0
-    assert (p.self_check["verified_samples"], p.self_check["disagreeing_samples"]) == (4, 3)
+    assert calls[2:] == [[(1, REFERENCE), (3, REFERENCE)], [(4, REFERENCE), (5, REFERENCE)]]
+    assert p.fidelity == "verified" and p.object_fall_probability["block1"] == 3 / 32
+    assert (p.self_check["verified_samples"], p.self_check["disagreeing_samples"]) == (6, 3)
     assert look_ahead_split(SelfCheck(), 48) == 36 and look_ahead_split(SelfCheck(), 31) == 31
     assert look_ahead_split(SelfCheck(cover_samples=0), 48) == 48
 
@@ -313,13 +335,14 @@ def _toppled_only_in(scene, kept: tuple[int, ...], unhealthy: bool = False):
 
 
 def test_a_bias_on_a_minority_of_samples_is_confirmed_where_it_shows(contradicted_scene):
-    """The fast physics topples the stack in samples 0, 3 and 5 of 8: confirmation looks at 3 and
-    5, not at 1 and 2 where no bias could show, and three verified samples differing the same way
+    """The fast physics topples the stack in samples 0, 3 and 5 of 8: confirmation looks at 3,
+    where the bias can show again, beside 1 on the standing side (the larger one), not at 1 and 2
+    alone where none could; two same-way differences in three, a bias credibly beyond 0.1,
     escalate."""
     spy = _toppled_only_in(contradicted_scene, (0, 3, 5))
     p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), WRONG_HERE, QUERY, seed=0,
                 map_fn=spy)
-    assert [t.index for t in spy.calls[1]] == [3, 5]
+    assert [[t.index for t in call] for call in spy.calls[1:]] == [[1, 3], [2, 4, 5, 6, 7]]  # then the escalation
     assert p.fidelity == "escalated" and p.object_fall_probability["block1"] == 0.0
 
 
@@ -336,28 +359,48 @@ def test_refined_rollouts_that_differ_the_same_way_are_evidence_too(contradicted
     assert p.fidelity == "escalated" and p.self_check["disagreeing_samples"] == 3
 
 
-def test_two_same_way_differences_in_three_samples_look_again_before_escalating(contradicted_scene):
-    """Toppled in samples 0 and 5 only: after 5 (the one sample where it can show) confirms, two of
-    three are suspicious, not proof; a second round verifies two more, and two of five do not
-    escalate."""
+def test_the_counts_rule_looks_again_at_two_same_way_differences_in_three_samples(contradicted_scene):
+    """The counts rule (``bias_tolerance=None``), toppled in samples 0 and 5 only: after 5 (the one
+    sample where it can show) confirms, two of three are suspicious, not proof; a second round
+    verifies two more, and two of five do not escalate."""
     spy = _toppled_only_in(contradicted_scene, (0, 5))
     p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), WRONG_HERE, QUERY, seed=0,
-                map_fn=spy)
+                map_fn=spy, check=COUNTS)
     assert [[t.index for t in call] for call in spy.calls[1:]] == [[5, 1], [2, 3]]
     assert p.fidelity == "verified"
     assert (p.self_check["verified_samples"], p.self_check["disagreeing_samples"]) == (5, 2)
 
 
-def test_an_answer_whose_every_sample_was_rerun_is_the_reference_answer(contradicted_scene):
-    """k = 4, toppled in samples 0 and 2 only: two same-way differences can never make the three
-    that escalate, but confirming them reruns all four samples, and with every reference outcome
-    at hand the answer is the reference's (as escalation would give), not the fast one's."""
-    spy = _toppled_only_in(contradicted_scene, (0, 2))
-    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 4), WRONG_HERE, QUERY, seed=0,
+def test_two_same_way_differences_on_a_small_side_escalate_once_the_large_side_is_seen_clean(contradicted_scene):
+    """Toppled in samples 0 and 5 only, a bias of 2/8 where the reference keeps the stack in all:
+    the first round looks at both sides (1 standing, 5 toppled: a second same-way difference), and
+    while the six standing samples could still hold differences the other way the bias is not
+    credibly beyond 0.1; a second round finds 2 and 3 standing as the reference's, and the scene is
+    escalated (the counts, needing three, called it verified at 0.25 off)."""
+    spy = _toppled_only_in(contradicted_scene, (0, 5))
+    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), WRONG_HERE, QUERY, seed=0,
                 map_fn=spy)
-    assert [[t.index for t in call] for call in spy.calls[1:]] == [[2, 1], [3]]
+    assert [[t.index for t in call] for call in spy.calls[1:]] == [[1, 5], [2, 3], [4, 6, 7]]
     assert p.fidelity == "escalated" and p.object_fall_probability["block1"] == 0.0
-    assert p.self_check["verified_samples"] == 4 and p.self_check["disagreeing_samples"] == 2
+    assert (p.self_check["verified_samples"], p.self_check["disagreeing_samples"]) == (5, 2)
+
+
+def test_an_answer_whose_every_sample_was_rerun_is_the_reference_answer(tower):
+    """k = 6: one flipped verification is a bias of 1/6, beyond the tolerance (0.1) unless a
+    difference the other way cancels it, so the confirmation rounds look through every sample; none
+    differs again, and with every reference outcome at hand the answer is the reference's (as
+    escalation would give, the flip included), not the fast one's."""
+    spy = _flipped_first_verification()
+    model = ModelConfig(sigma_m=0.01, samples=6)
+    p = predict(tower, model, preset("default"), QUERY, seed=4, map_fn=spy, check=ALWAYS)
+    assert [[t.index for t in call] for call in spy.calls[1:]] == [[1, 2], [3, 4], [5]]
+    assert p.fidelity == "escalated"
+    assert p.self_check["verified_samples"] == 6 and p.self_check["disagreeing_samples"] == 1
+    reference = predict(tower, model, reference_settings(), QUERY, seed=4, check=None)
+    first = reference.outcomes[0].rollouts[0].fallen
+    for n, body in enumerate(b.name for b in tower.dynamic_objects):
+        flip = (1.0 - 2.0 * first[n]) / 6  # sample 0's answer, flipped
+        assert p.object_fall_probability[body] == pytest.approx(reference.object_fall_probability[body] + flip)
 
 
 def test_a_failed_fast_sample_is_rerun_at_the_reference(tower):

@@ -100,3 +100,35 @@ def test_blocks_created_together_simulate_as_blocks_created_one_by_one(monkeypat
         assert a.ok and b.ok
         assert np.array_equal(a.rollouts[0].final_positions_m, b.rollouts[0].final_positions_m)
         assert np.array_equal(a.rollouts[0].final_orientations_xyzw, b.rollouts[0].final_orientations_xyzw)
+
+
+def test_the_simulation_clients_carry_no_renderer_and_simulate_as_a_client_with_one(monkeypatch):
+    # bullet.client() unloads pybullet's software renderer (it meshes every body as it is created,
+    # for images these clients never take): that must change nothing a sample simulates
+    import pybullet as p
+
+    from ipe_ros.engine.scene.generators import generate_towers
+    from ipe_ros.engine.sampling.rollout import run_sample
+    from ipe_ros.engine.sampling.sampler import make_tasks
+    from ipe_ros.engine.simulation import bullet
+
+    cid = bullet.client()
+    body = p.createMultiBody(1.0, p.createCollisionShape(p.GEOM_SPHERE, radius=0.1, physicsClientId=cid),
+                             physicsClientId=cid)
+    with pytest.raises(p.error, match="^Error receiving visual shape info$"):
+        p.getVisualShapeData(body, physicsClientId=cid)  # nothing meshed it
+    tasks = [t for i, tower in enumerate(generate_towers(5, 2))
+             for t in make_tasks(tower, MODEL, preset("default"), QUERY, seed=i)]
+    without = [run_sample(t) for t in tasks]
+    monkeypatch.setattr(bullet, "RENDERER_PLUGIN", "no such plugin")  # loading it fails: the renderer stays
+    monkeypatch.setattr(bullet, "_CLIENTS", {})
+    with_renderer = [run_sample(t) for t in tasks]
+    cid = bullet.client()
+    body = p.createMultiBody(1.0, p.createCollisionShape(p.GEOM_SPHERE, radius=0.1, physicsClientId=cid),
+                             physicsClientId=cid)
+    assert len(p.getVisualShapeData(body, physicsClientId=cid)) == 1
+    p.disconnect(cid)  # this test's own client; the process's goes back in place
+    for a, b in zip(without, with_renderer):
+        assert a.ok and b.ok
+        assert np.array_equal(a.rollouts[0].final_positions_m, b.rollouts[0].final_positions_m)
+        assert np.array_equal(a.rollouts[0].final_orientations_xyzw, b.rollouts[0].final_orientations_xyzw)

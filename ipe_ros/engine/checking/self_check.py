@@ -23,6 +23,7 @@ class _Comparison:
         self.at_least = min(check.escalate_min_samples, len(tasks))
         #: every good sample's fast outcome flags (what the bias is estimated over)
         self.fast_flags = {i: outcome_flags(o) for i, o in enumerate(outcomes) if o.ok}
+        self._biases: tuple[tuple[int, ...], list] = ((), [])  # the last compared samples' bias estimates
 
     def rerun(self, samples: list[int]) -> Plan:
         """These samples rerun at the reference (a round only when there are any)."""
@@ -37,8 +38,14 @@ class _Comparison:
         tolerance = self.check.bias_tolerance
         if tolerance is None:
             return contradicts(list(compared.values()), self.check.escalate_share, self.at_least)
-        return any(b.beyond(tolerance) and b.same_way >= self.at_least
-                   for b in bias_estimates(self.fast_flags, compared))
+        return any(b.beyond(tolerance) and b.same_way >= self.at_least for b in self.biases(compared))
+
+    def biases(self, compared: dict[int, np.ndarray]) -> list:
+        """``bias_estimates`` of these compared samples (a round asks twice: to decide, then to pick)."""
+        key = tuple(sorted(compared))
+        if key != self._biases[0]:
+            self._biases = (key, bias_estimates(self.fast_flags, compared))
+        return self._biases[1]
 
     def rigid_reruns(self) -> int:
         """Reference reruns whose multibody rollout ended unhealthy and was rerun in plain rigid bodies."""
@@ -124,7 +131,7 @@ def _confirm(state: _Comparison, repair: int, cover: int) -> Plan:
         if check.bias_tolerance is not None and any(d.any() for d in compared.values()):
             # some outcome differs: compare more where its bias is still undecided
             picked = [] if confirmations >= check.confirm_rounds else undecided_bias_samples(
-                state.fast_flags, list(fast), bias_estimates(state.fast_flags, compared), check.bias_tolerance,
+                state.fast_flags, list(fast), state.biases(compared), check.bias_tolerance,
                 check.confirm_samples, state.at_least)
             confirmations += 1
         # a second confirmation round only while something is suspicious

@@ -80,9 +80,10 @@ class SelfCheck:
     enabled: False answers at the fast settings alone (``fidelity: "unverified"``).
     verify_samples: samples rerun at the reference settings to verify the fast ones (the first
         ones; at most k). Each costs about as much as 5-12 fast samples (benchmarks/README.md).
-    confirm_samples: when a verified sample disagrees, this many more are verified before deciding
-        (2: one round on two workers), chosen where the suspect difference can show
-        (``confirmation_samples``).
+    confirm_samples: when a verified sample disagrees, this many more are verified a round before
+        deciding (2: one round on two workers), chosen on both sides of the undecided outcome
+        (``undecided_bias_samples``; by the counts rule, where the suspect difference can show:
+        ``confirmation_samples``).
     confirm_rounds: the most rounds of confirmation: while some outcome's bias is neither credibly
         beyond ``bias_tolerance`` nor credibly within it (by the counts rule, a round after the
         first runs only while some outcome differs the same way in two or more verified samples

@@ -21,11 +21,13 @@ def speed_limit_m_s(gravity_m_s2: float, horizon_s: float, push_m_s2: float, pus
 
 def check_speeds(speeds_m_s: np.ndarray, limit_m_s: float, t_s: float) -> None:
     """Raise PhysicsError for a non-finite speed or one above the physical bound."""
+    fastest = speeds_m_s.max()
+    if fastest <= limit_m_s:  # the usual case, in one pass (a NaN or an infinity fails it)
+        return
     if not np.all(np.isfinite(speeds_m_s)):
         raise PhysicsError(f"non-finite velocity at t = {t_s:.3f} s; {_FIX}")
-    if speeds_m_s.max() > limit_m_s:
-        raise PhysicsError(f"a box reached {speeds_m_s.max():.3g} m/s at t = {t_s:.3f} s,"
-                           f" above the physical bound {limit_m_s:.3g} m/s (solver divergence); {_FIX}")
+    raise PhysicsError(f"a box reached {fastest:.3g} m/s at t = {t_s:.3f} s,"
+                       f" above the physical bound {limit_m_s:.3g} m/s (solver divergence); {_FIX}")
 
 
 def check_final_poses(positions_m: np.ndarray, orientations_xyzw: np.ndarray) -> None:
@@ -39,16 +41,23 @@ def energy_j(masses_kg: np.ndarray, inertia_kg_m2: np.ndarray, gravity_m_s2: np.
 
     ``inertia_kg_m2``: (n, 3) principal moments about each body's own axes; ``spins_rad_s``: (n, 3)
     angular velocities in the scene frame, turned into each body's frame by its unit quaternion
-    (v - 2w (u x v) + 2 u x (u x v)). Plain floats, body by body: this runs at every look of every
-    rollout, and for a scene's handful of bodies numpy's per-operation cost is five times the
-    arithmetic.
+    (v - 2w (u x v) + 2 u x (u x v)).
     """
-    gx, gy, gz = (float(v) for v in gravity_m_s2)
+    return _energy_j(np.asarray(masses_kg, float).tolist(), np.asarray(inertia_kg_m2, float).tolist(),
+                     [float(v) for v in gravity_m_s2], positions_m, orientations_xyzw, velocities_m_s, spins_rad_s)
+
+
+def _energy_j(masses_kg, inertia_kg_m2, gravity_m_s2, positions_m, orientations_xyzw,
+              velocities_m_s, spins_rad_s) -> float:
+    """``energy_j`` with the bodies' constants already sequences of floats. Plain floats, body by
+    body: this runs at every look of every rollout, and for a scene's handful of bodies numpy's
+    per-operation cost is five times the arithmetic."""
+    gx, gy, gz = gravity_m_s2
     total = 0.0
     for m, (ix, iy, iz), (px, py, pz), (ux, uy, uz, w), (vx, vy, vz), (ox, oy, oz) in zip(
-            np.asarray(masses_kg, float).tolist(), np.asarray(inertia_kg_m2, float).tolist(),
-            np.asarray(positions_m, float).tolist(), np.asarray(orientations_xyzw, float).tolist(),
-            np.asarray(velocities_m_s, float).tolist(), np.asarray(spins_rad_s, float).tolist()):
+            masses_kg, inertia_kg_m2, np.asarray(positions_m, float).tolist(),
+            np.asarray(orientations_xyzw, float).tolist(), np.asarray(velocities_m_s, float).tolist(),
+            np.asarray(spins_rad_s, float).tolist()):
         norm = math.sqrt(ux * ux + uy * uy + uz * uz + w * w)
         ux, uy, uz, w = ux / norm, uy / norm, uz / norm, w / norm
         tx, ty, tz = 2 * (uy * oz - uz * oy), 2 * (uz * ox - ux * oz), 2 * (ux * oy - uy * ox)  # 2 u x v
@@ -78,14 +87,18 @@ class EnergyWatch:
     """
 
     def __init__(self, masses_kg: np.ndarray, inertia_kg_m2: np.ndarray, gravity_m_s2: np.ndarray):
-        self._masses, self._inertia, self._gravity = masses_kg, inertia_kg_m2, gravity_m_s2
+        # plain floats once: the energy is worked out at every look (tuples: a collapse trial's deep
+        # copy of this watch shares them)
+        self._masses = tuple(np.asarray(masses_kg, float).tolist())
+        self._inertia = tuple(map(tuple, np.asarray(inertia_kg_m2, float).tolist()))
+        self._gravity = tuple(float(v) for v in gravity_m_s2)
         self._reference: float | None = None
         self.max_gain_j = 0.0
         #: the least energy seen since the reference: what the scene holds at most from then on
         self.lowest_j: float | None = None
 
     def energy(self, positions, orientations, velocities, spins) -> float:
-        return energy_j(self._masses, self._inertia, self._gravity, positions, orientations, velocities, spins)
+        return _energy_j(self._masses, self._inertia, self._gravity, positions, orientations, velocities, spins)
 
     def reference(self, energy: float) -> None:
         self._reference = self.lowest_j = energy

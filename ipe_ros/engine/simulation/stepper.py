@@ -236,10 +236,16 @@ class _Rollout:
             self.solver_switch_due = False
             use_sequential_solver(self.world)
         settling_now = self.settling.covers(self.tick)
-        phase = "settle" if settling_now else "collapse" if self.collapse.collapsing else "fine"
-        for _ in range(self.steps.substeps):
-            self.probe.step(phase, self._step_simulation)
-        self.pybullet_steps += self.steps.substeps
+        substeps = self.steps.substeps
+        if self.probe is NO_PROBE:  # the usual case, without the probe's two calls per step
+            step, cid = self.p.stepSimulation, self.cid
+            for _ in range(substeps):
+                step(physicsClientId=cid)
+        else:
+            phase = "settle" if settling_now else "collapse" if self.collapse.collapsing else "fine"
+            for _ in range(substeps):
+                self.probe.step(phase, self._step_simulation)
+        self.pybullet_steps += substeps
         if settling_now and self.tick + 1 == self.settling.ticks:
             self.steps.set(1, self.travel_substeps)
         previous, self.tick = self.tick, self.tick + step_ticks

@@ -64,8 +64,7 @@ class RestWatch:
                     heights_m: np.ndarray | None) -> bool:
         settings = self._settings
         settled = (speeds_m_s < self._rest_speed_m_s) & (spins_rad_s < settings.angular_rad_s)
-        # how much each box still moves, in 1/s (box sizes per second or rad/s)
-        motion = np.maximum(speeds_m_s / self._scale_m, spins_rad_s)
+        out_of_reach = None
         if self._decided is not None:
             fallen_now = heights_m < self._decided.fallen_below_z_m
             if self._decided.stop_at_first_fall and fallen_now.any():
@@ -79,10 +78,14 @@ class RestWatch:
             lowest_open_m = np.min(heights_m - self._radii_m, where=~decided, initial=np.inf)
             out_of_reach = decided & (heights_m + self._radii_m < lowest_open_m)
             settled |= out_of_reach
-            motion = np.where(out_of_reach, 0.0, motion)
-        if not (np.all(settled) and t_s >= self._earliest_stop_s):
+        if not (t_s >= self._earliest_stop_s and settled.all()):
             self._resting_since = None
             return False
+        # how much each box still moves, in 1/s (box sizes per second or rad/s): worked out only
+        # once everything is settled, which most looks are not
+        motion = np.maximum(speeds_m_s / self._scale_m, spins_rad_s)
+        if out_of_reach is not None:
+            motion = np.where(out_of_reach, 0.0, motion)
         if self._resting_since is None:
             self._resting_since, self._motion_at_start = t_s, motion
             return False

@@ -43,8 +43,14 @@ def energy_j(masses_kg: np.ndarray, inertia_kg_m2: np.ndarray, gravity_m_s2: np.
     angular velocities in the scene frame, turned into each body's frame by its unit quaternion
     (v - 2w (u x v) + 2 u x (u x v)).
     """
-    return _energy_j(np.asarray(masses_kg, float).tolist(), np.asarray(inertia_kg_m2, float).tolist(),
-                     [float(v) for v in gravity_m_s2], positions_m, orientations_xyzw, velocities_m_s, spins_rad_s)
+    return _energy_j(*_plain_constants(masses_kg, inertia_kg_m2, gravity_m_s2), positions_m, orientations_xyzw,
+                     velocities_m_s, spins_rad_s)
+
+
+def _plain_constants(masses_kg, inertia_kg_m2, gravity_m_s2) -> tuple[tuple, tuple, tuple]:
+    """The bodies' masses, (n, 3) inertia and gravity as tuples of floats, what ``_energy_j`` takes."""
+    return (tuple(np.asarray(masses_kg, float).tolist()), tuple(map(tuple, np.asarray(inertia_kg_m2, float).tolist())),
+            tuple(float(v) for v in gravity_m_s2))
 
 
 def _energy_j(masses_kg, inertia_kg_m2, gravity_m_s2, positions_m, orientations_xyzw,
@@ -89,16 +95,14 @@ class EnergyWatch:
     def __init__(self, masses_kg: np.ndarray, inertia_kg_m2: np.ndarray, gravity_m_s2: np.ndarray):
         # plain floats once: the energy is worked out at every look (tuples: a collapse trial's deep
         # copy of this watch shares them)
-        self._masses = tuple(np.asarray(masses_kg, float).tolist())
-        self._inertia = tuple(map(tuple, np.asarray(inertia_kg_m2, float).tolist()))
-        self._gravity = tuple(float(v) for v in gravity_m_s2)
+        self._constants = _plain_constants(masses_kg, inertia_kg_m2, gravity_m_s2)
         self._reference: float | None = None
         self.max_gain_j = 0.0
         #: the least energy seen since the reference: what the scene holds at most from then on
         self.lowest_j: float | None = None
 
     def energy(self, positions, orientations, velocities, spins) -> float:
-        return _energy_j(self._masses, self._inertia, self._gravity, positions, orientations, velocities, spins)
+        return _energy_j(*self._constants, positions, orientations, velocities, spins)
 
     def reference(self, energy: float) -> None:
         self._reference = self.lowest_j = energy

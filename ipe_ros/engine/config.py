@@ -168,6 +168,13 @@ class SolverSettings:
     #: that end phase before it ends: what rests at the end is pushed out.
     direct_solver_for_restitution: bool = True
     direct_solver_max_mass_ratio: float = 100.0
+    #: The direct solver's friction is a box along the world's axes, not a cone: a box slid at 30 deg
+    #: veered to 18 deg, one slid at 45 deg stopped at 0.71x Coulomb's distance. So where it is used
+    #: (the fields around this one), it solves only the steps in which a contact whose surfaces can
+    #: bounce closes faster than Bullet's restitution threshold, and the sequential-impulse solver,
+    #: whose friction is a cone, every other step (simulation/impacts.py; docs/model.md). False: the
+    #: direct solver for the whole rollout, as before (for comparison only).
+    direct_solver_for_impacts_only: bool = field(default=False, metadata={"keyed": "when set"})
     #: Where a bounce is possible at all, the direct solver only where two surfaces that may touch
     #: combine to at least this restitution (Bullet multiplies the two; 0: any bounce), or a body is
     #: thrown in (``direct_solver_from_speed_m_s``). A bounce gives back e^2 of an impact's normal
@@ -195,6 +202,7 @@ class SolverSettings:
 
     def __post_init__(self) -> None:
         integer(self.iterations, "solver.iterations", 1, 10_000)
+        boolean(self.direct_solver_for_impacts_only, "solver.direct_solver_for_impacts_only")
         non_negative(self.iterations_per_mass_ratio, "solver.iterations_per_mass_ratio")
         integer(self.max_iterations, "solver.max_iterations", 1, 100_000)
 
@@ -512,10 +520,10 @@ class SimSettings:
 
 PRESETS: dict[str, SimSettings] = {
     # The paper's settings: 1 ms steps for the full 2 s, a fully converged solver, no shortcuts.
-    "paper": SimSettings(name="paper", time_step_s=0.001, horizon_s=2.0, solver=SolverSettings(iterations=50),
+    "paper": SimSettings(name="paper", time_step_s=0.001, horizon_s=2.0, solver=SolverSettings(iterations=50, direct_solver_for_impacts_only=True),
                          rigid_when_unhealthy=True),
     # 1 ms / 2 s with 20 solver iterations: close to `paper` (mean |dFF| ~0.006) at ~1.8x its speed.
-    "accurate": SimSettings(name="accurate", time_step_s=0.001, horizon_s=2.0, solver=SolverSettings(iterations=20),
+    "accurate": SimSettings(name="accurate", time_step_s=0.001, horizon_s=2.0, solver=SolverSettings(iterations=20, direct_solver_for_impacts_only=True),
                             rigid_when_unhealthy=True),
     # 1/240 s steps (1/233 s for 0.2 m blocks, by the size cap), plain rigid bodies with a full warm
     # start, up to 100 solver iterations to a residual of 3e-6 (a looser 1e-5 topples a delicately
@@ -523,7 +531,7 @@ PRESETS: dict[str, SimSettings] = {
     # everything has been at rest (and slowing down) for 0.2 s.
     "fine": SimSettings(name="fine", time_step_s=1 / 240, horizon_s=2.0,
                         solver=SolverSettings(iterations=100, residual_threshold=3e-6, warm_start_factor=1.0,
-                                              maximal_coordinates=True),
+                                              maximal_coordinates=True, direct_solver_for_impacts_only=True),
                         settling=SettlingSettings(duration_s=0.1, substeps=2),
                         early_stop=EarlyStopSettings(enabled=True)),
     # The default: `fine`'s solver at 1/180 s steps, to a residual of 1e-5 (at these steps the
@@ -541,7 +549,8 @@ PRESETS: dict[str, SimSettings] = {
     "default": SimSettings(name="default", time_step_s=1 / 180, horizon_s=2.0, max_step_fraction_of_time_scale=0.04,
                            solver=SolverSettings(iterations=100, residual_threshold=1e-5, warm_start_factor=1.0,
                                                  maximal_coordinates=True, multibodies_from_aspect=10.0,
-                                                 direct_solver_min_restitution=0.1, direct_solver_from_speed_m_s=1.0),
+                                                 direct_solver_min_restitution=0.1, direct_solver_from_speed_m_s=1.0,
+                                                 direct_solver_for_impacts_only=True),
                            settling=SettlingSettings(duration_s=0.1, substeps=2),
                            collapse=CollapseSettings(step_factor=4, solver_iterations=50, end_substeps=1,
                                                      max_travel_fraction=0.25, end_travel_fraction=0.05,

@@ -32,6 +32,7 @@ from ..errors import BudgetExceeded
 from ..scene.bodies import Scene
 from . import health
 from .collapse import CollapseTrial, CollapseWatch
+from .impacts import ImpactWatch
 from .islands import Footprint
 from .probe import NO_PROBE, Probe
 from .settling import Settling
@@ -189,7 +190,11 @@ class _Rollout:
         self._footprint(0.0, start_speeds + start_spins * self.half_diagonals_m)
         self.tick = 0
         self.pybullet_steps = 0  # taken so far (what a collapse trial's anchors count)
-        self.solver_switch_due = world.direct_solver
+        #: a world that may bounce: the direct solver for its impacts only (simulation/impacts.py), or
+        #: for the whole rollout but its end phase (``solver.direct_solver_for_impacts_only`` off)
+        self.impacts = ImpactWatch(world, scene) \
+            if world.direct_solver and settings.solver.direct_solver_for_impacts_only else None
+        self.solver_switch_due = world.direct_solver and self.impacts is None
         self.end_phase_due = settings.collapse.end_substeps > 1 or settings.collapse.end_travel_fraction is not None
         if self.settling.ticks or self.travel_substeps > 1:
             self.steps.set(1, max(self.travel_substeps, self.settling.substeps if self.settling.ticks else 1))
@@ -237,7 +242,16 @@ class _Rollout:
             use_sequential_solver(self.world)
         settling_now = self.settling.covers(self.tick)
         substeps = self.steps.substeps
-        if self.probe is NO_PROBE:  # the usual case, without the probe's two calls per step
+        if self.impacts is not None:  # each pybullet step on the solver it needs
+            step_s, choose, step, cid = self.dt * step_ticks / substeps, self.impacts.choose, self.p.stepSimulation, self.cid
+            for _ in range(substeps):
+                choose(step_s)
+                if self.probe is NO_PROBE:
+                    step(physicsClientId=cid)
+                else:
+                    self.probe.step("settle" if settling_now else "collapse" if self.collapse.collapsing else "fine",
+                                    self._step_simulation)
+        elif self.probe is NO_PROBE:  # the usual case, without the probe's two calls per step
             step, cid = self.p.stepSimulation, self.cid
             for _ in range(substeps):
                 step(physicsClientId=cid)

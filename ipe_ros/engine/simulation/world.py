@@ -374,6 +374,11 @@ def use_sequential_solver(world: World) -> None:
     _set_solver(p, world.client, p.CONSTRAINT_SOLVER_LCP_SI)
 
 
+def set_solver_kind(world: World, kind: int) -> None:
+    """pybullet's constraint solver (``p.CONSTRAINT_SOLVER_LCP_*``) for the next steps of ``world``."""
+    _set_solver(pybullet(), world.client, kind)
+
+
 def _set_solver(p, cid: int, kind: int) -> None:
     """pybullet's constraint solver for this world (``resetSimulation`` puts back the
     sequential-impulse one). Quietly: pybullet prints on every switch."""

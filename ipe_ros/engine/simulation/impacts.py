@@ -1,0 +1,96 @@
+"""Which of pybullet's solvers the next step of a bouncy world needs: the direct one for impacts only.
+
+Bullet's two solvers each get one thing right. The direct (MLCP, Dantzig) solver solves an impact's
+contacts at once, so a bounce gives back what Newton's restitution says (the sequential-impulse
+solver, giving each contact its restitution in turn, added 6.6 J to a 12 J scene where a thrown ball
+wedged under a cylinder against the floor). But its friction is a box, not a cone: each of the two
+friction directions, which Bullet takes along the world's axes for a floor, is bounded by mu N on its
+own, so a box slid at 30 deg veered to 18 deg and one slid at 45 deg stopped at 0.71x Coulomb's
+distance. The sequential-impulse solver's friction is a cone (pybullet's implicit cone friction):
+the same in every direction.
+
+Restitution only acts where a contact closes faster than Bullet's restitution threshold; everywhere
+else the two solvers solve the same contacts. So a world that may bounce steps on the
+sequential-impulse solver, and on the direct one only for the steps in which some contact whose
+surfaces can bounce closes that fast (docs/model.md, "Friction and bounces").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..scene.bodies import Scene
+from .bullet import pybullet
+from .world import World, set_solver_kind
+
+#: Bullet's restitution velocity threshold (btContactSolverInfo's default, which pybullet keeps): a
+#: contact closing slower than this does not bounce, whatever its restitution
+#: (tests/test_mechanics.py holds pybullet to it).
+RESTITUTION_THRESHOLD_M_S = 0.2
+#: a contact is an impact of the next step when it closes within this many of the step's lengths
+#: (contacts are read at the start of the step, and a body speeds up within it)
+CLOSING_STEPS = 2.0
+
+
+class ImpactWatch:
+    """Before each step of a world that may bounce, the solver that step needs (``choose``)."""
+
+    def __init__(self, world: World, scene: Scene):
+        self.world = world
+        self.p = pybullet()
+        restitution = {handle: body.restitution for handle, body in zip(world.dynamic_ids, scene.dynamic_objects)}
+        restitution.update({handle: body.restitution for handle, body in zip(world.static_ids,
+                                                                               scene.static_objects)})
+        restitution.update({handle: scene.support.restitution for handle in world.support_ids})
+        self.restitution = restitution
+        self.dynamic = set(world.dynamic_ids)
+        self.direct: bool | None = None  # the solver in force (None: not yet set by this watch)
+        self.direct_steps = 0  # how many steps the direct solver took (diagnostics, tests)
+
+    def choose(self, step_s: float) -> bool:
+        """Put the solver the next ``step_s`` needs in force; True when that is the direct one."""
+        direct = self.impact_ahead(step_s)
+        if direct != self.direct:
+            p = self.p
+            set_solver_kind(self.world, p.CONSTRAINT_SOLVER_LCP_DANTZIG if direct else p.CONSTRAINT_SOLVER_LCP_SI)
+            self.direct = direct
+        self.direct_steps += direct
+        return direct
+
+    def forget(self) -> None:
+        """The solver in force is no longer known (another part set one): the next step sets it."""
+        self.direct = None
+
+    def impact_ahead(self, step_s: float) -> bool:
+        """Whether a contact between surfaces that can bounce closes faster than the restitution
+        threshold within ``CLOSING_STEPS`` steps of ``step_s``, at the bodies' present poses."""
+        p, cid = self.p, self.world.client
+        p.performCollisionDetection(physicsClientId=cid)
+        contacts = p.getContactPoints(physicsClientId=cid)
+        if not contacts:
+            return False
+        restitution, dynamic = self.restitution, self.dynamic
+        motion: dict[int, tuple] = {}
+        for contact in contacts:
+            a, b = contact[1], contact[2]
+            if restitution.get(a, 0.0) * restitution.get(b, 0.0) <= 0.0:
+                continue  # Bullet multiplies the two: one surface that does not bounce, no bounce
+            relative = self._point_velocity(a, contact[5], motion, dynamic) \
+                - self._point_velocity(b, contact[6], motion, dynamic)
+            closing_m_s = -float(np.dot(relative, contact[7]))  # the normal points from b to a
+            if closing_m_s > RESTITUTION_THRESHOLD_M_S and closing_m_s * CLOSING_STEPS * step_s >= contact[8]:
+                return True
+        return False
+
+    def _point_velocity(self, handle: int, point, motion: dict, dynamic: set) -> np.ndarray:
+        """The velocity of body ``handle``'s material point at ``point`` (static bodies: zero)."""
+        if handle not in dynamic:
+            return np.zeros(3)
+        state = motion.get(handle)
+        if state is None:
+            p, cid = self.p, self.world.client
+            centre = p.getBasePositionAndOrientation(handle, physicsClientId=cid)[0]
+            linear, angular = p.getBaseVelocity(handle, physicsClientId=cid)
+            state = motion[handle] = (np.asarray(centre), np.asarray(linear), np.asarray(angular))
+        centre, linear, angular = state
+        return linear + np.cross(angular, np.asarray(point) - centre)

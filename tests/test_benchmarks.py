@@ -287,3 +287,15 @@ def test_reference_tier_benchmark_compares_each_tier_with_the_reference_and_the_
     assert row["paper+rest"] == {"agreement": 1.0, "mean_dp": 0.0, "max_dp": 0.0, "failed": 0}
     assert {"paper-half", "accurate+rest", "paper-30it+rest", "fine"} <= set(row["seconds_per_sample"])
     assert "| towers | 1 |" in (tmp_path / "reference_tier.md").read_text()
+
+
+def test_impacts_compares_the_direct_solver_for_impacts_only_with_it_for_whole_rollouts(tmp_path):
+    result = subprocess.run([sys.executable, "benchmarks/impacts.py", "--per-family", "1", "--samples", "2",
+                             "--presets", "default", "--families", "bouncy,drop", "--out", str(tmp_path)],
+                            cwd=REPO, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    rows = json.loads((tmp_path / "impacts.json").read_text())["rows"]
+    assert rows and {r["family"] for r in rows} <= {"bouncy", "drop"}
+    for row in rows:
+        assert 0.0 < row["direct_share"] < 1.0  # impacts on the direct solver, the rest not
+        assert 0.0 <= row["mean_abs_dP"] <= row["max_abs_dP"] <= 1.0

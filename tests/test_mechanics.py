@@ -37,6 +37,7 @@ import pytest
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
 from ipe_ros.engine.scene.bodies import Body, Box, Floor, Scene
 from ipe_ros.engine.scene.shapes import Sphere
+from ipe_ros.engine.scene.turn import turned
 
 G = 9.81
 PRESETS = ["paper", "accurate", "fine", "default"]
@@ -289,26 +290,6 @@ def test_a_block_on_a_block_falls_once_its_centre_of_mass_is_past_the_edge(name,
 
 # -- turned scenes ----------------------------------------------------------------------------------
 
-def _turned(scene: Scene, yaw_rad: float) -> Scene:
-    """``scene`` turned about the vertical through the origin by ``yaw_rad`` (a floor scene)."""
-    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
-
-    def turn(v):
-        return (c * v[0] - s * v[1], s * v[0] + c * v[1], v[2])
-
-    def turn_quaternion(q):
-        qz = _yaw(yaw_rad)  # qz * q
-        x1, y1, z1, w1 = qz
-        x2, y2, z2, w2 = q
-        return (w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2, w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-                w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2, w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2)
-
-    objects = tuple(replace(b, position_m=turn(b.position_m), orientation_xyzw=turn_quaternion(b.orientation_xyzw),
-                            linear_velocity_m_s=turn(b.linear_velocity_m_s),
-                            angular_velocity_rad_s=turn(b.angular_velocity_rad_s)) for b in scene.objects)
-    return replace(scene, objects=objects, gravity_m_s2=turn(scene.gravity_m_s2))
-
-
 @pytest.mark.parametrize("name", ["paper", "default"])
 def test_a_bouncy_scene_turned_about_the_vertical_ends_turned(name):
     # a ball thrown across a bouncy floor into a box that slides off: every contact has friction and
@@ -319,9 +300,9 @@ def test_a_bouncy_scene_turned_about_the_vertical_ends_turned(name):
     scene = _scene(ball, box, floor_restitution=0.6, horizon_s=1.5)
     yaw = math.radians(37.0)
     straight, _ = _end(scene, name)
-    turned, _ = _end(_turned(scene, yaw), name)
-    expected = np.array([_turned(replace(scene, objects=tuple(replace(b, position_m=tuple(p)) for b, p in
+    ends_turned, _ = _end(turned(scene, yaw), name)
+    expected = np.array([turned(replace(scene, objects=tuple(replace(b, position_m=tuple(p)) for b, p in
                                                              zip(scene.objects, straight))), yaw).objects[i].position_m
                          for i in range(2)])
     assert float(np.linalg.norm(straight[1, :2] - [0.1, 0.0])) > 0.05  # the box was struck and moved
-    _holds(np.abs(turned - expected).max() < 0.002, ("turned", name), f"{np.abs(turned - expected).max():.4f} m apart")
+    _holds(np.abs(ends_turned - expected).max() < 0.002, ("turned", name), f"{np.abs(ends_turned - expected).max():.4f} m apart")

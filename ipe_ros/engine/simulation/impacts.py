@@ -17,6 +17,10 @@ surfaces can bounce closes that fast (docs/model.md, "Friction and bounces").
 
 from __future__ import annotations
 
+import math
+
+import numpy as np
+
 from ..scene.bodies import Scene
 from .bullet import pybullet
 from .world import World, set_solver_kind
@@ -42,8 +46,10 @@ class ImpactWatch:
         restitution.update({handle: scene.support.restitution for handle in world.support_ids})
         self.restitution = restitution
         self.dynamic = set(world.dynamic_ids)
+        #: how far a point of each dynamic body can be from its centre of mass (its bounding box's
+        #: diagonal: a mesh's centre of mass may lie off the box's centre)
+        self.reach_m = [float(np.linalg.norm(body.extents_m)) for body in scene.dynamic_objects]
         self.direct: bool | None = None  # the solver in force (None: not yet set by this watch)
-        self.direct_steps = 0  # how many steps the direct solver took (diagnostics, tests)
 
     def choose(self, step_s: float) -> bool:
         """Put the solver the next ``step_s`` needs in force; True when that is the direct one."""
@@ -52,17 +58,19 @@ class ImpactWatch:
             p = self.p
             set_solver_kind(self.world, p.CONSTRAINT_SOLVER_LCP_DANTZIG if direct else p.CONSTRAINT_SOLVER_LCP_SI)
             self.direct = direct
-        self.direct_steps += direct
         return direct
-
-    def forget(self) -> None:
-        """The solver in force is no longer known (another part set one): the next step sets it."""
-        self.direct = None
 
     def impact_ahead(self, step_s: float) -> bool:
         """Whether a contact between surfaces that can bounce closes faster than the restitution
         threshold within ``CLOSING_STEPS`` steps of ``step_s``, at the bodies' present poses."""
         p, cid = self.p, self.world.client
+        velocities = {handle: p.getBaseVelocity(handle, physicsClientId=cid) for handle in self.world.dynamic_ids}
+        # no point of a body moves faster than this; no contact closes faster than its two bodies' sum
+        bound = {handle: math.sqrt(vx * vx + vy * vy + vz * vz) + math.sqrt(wx * wx + wy * wy + wz * wz) * reach
+                 for (handle, ((vx, vy, vz), (wx, wy, wz))), reach in zip(velocities.items(), self.reach_m)}
+        fastest = sorted(bound.values(), reverse=True)
+        if sum(fastest[:2]) <= RESTITUTION_THRESHOLD_M_S:
+            return False  # at rest: look no further
         p.performCollisionDetection(physicsClientId=cid)
         contacts = p.getContactPoints(physicsClientId=cid)
         if not contacts:
@@ -70,10 +78,13 @@ class ImpactWatch:
         restitution = self.restitution
         ahead_s = CLOSING_STEPS * step_s
         motion: dict[int, tuple] = {}  # plain floats: numpy's per-call cost is 20x the arithmetic here
+        self._velocities = velocities
         for contact in contacts:
             a, b = contact[1], contact[2]
             if restitution.get(a, 0.0) * restitution.get(b, 0.0) <= 0.0:
                 continue  # Bullet multiplies the two: one surface that does not bounce, no bounce
+            if bound.get(a, 0.0) + bound.get(b, 0.0) <= RESTITUTION_THRESHOLD_M_S:
+                continue
             ax, ay, az = self._point_velocity(a, contact[5], motion)
             bx, by, bz = self._point_velocity(b, contact[6], motion)
             nx, ny, nz = contact[7]  # from b to a
@@ -90,7 +101,7 @@ class ImpactWatch:
         if state is None:
             p, cid = self.p, self.world.client
             state = motion[handle] = (p.getBasePositionAndOrientation(handle, physicsClientId=cid)[0],
-                                      *p.getBaseVelocity(handle, physicsClientId=cid))
+                                      *self._velocities[handle])
         (cx, cy, cz), (vx, vy, vz), (wx, wy, wz) = state
         rx, ry, rz = point[0] - cx, point[1] - cy, point[2] - cz
         return (vx + wy * rz - wz * ry, vy + wz * rx - wx * rz, vz + wx * ry - wy * rx)

@@ -299,3 +299,20 @@ def test_impacts_compares_the_direct_solver_for_impacts_only_with_it_for_whole_r
     for row in rows:
         assert 0.0 < row["direct_share"] < 1.0  # impacts on the direct solver, the rest not
         assert 0.0 <= row["mean_abs_dP"] <= row["max_abs_dP"] <= 1.0
+
+
+def test_the_witness_export_writes_every_shape_and_start_the_other_engine_needs(tmp_path):
+    out = tmp_path / "witness.json"
+    result = subprocess.run([sys.executable, "benchmarks/witness/export.py", str(out), "--per-family", "1",
+                             "--samples", "2", "--families", "rings,drop", "--preset", "default"],
+                            cwd=REPO, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    rows = json.loads(out.read_text())["rows"]
+    mechanics = [r for r in rows if r["kind"] == "mechanics"]
+    assert len(mechanics) >= 10 and all(r["closed_form"] for r in mechanics)
+    rings = next(r for r in rows if r["kind"] == "rings")
+    parts = [part["type"] for body in rings["scene"]["dynamic"] + rings["scene"]["static"] for part in body["parts"]]
+    assert len(parts) > 2 and set(parts) <= {"box", "sphere", "cylinder", "capsule", "hull"}  # a compound's parts
+    for row in rows:
+        assert row["samples"] and len(row["samples"][0]["initial_m"]) == len(row["scene"]["dynamic"])
+        assert all(b["mass_kg"] > 0 and min(b["inertia_kg_m2"]) > 0 for b in row["scene"]["dynamic"])

@@ -37,7 +37,7 @@ CLOSING_STEPS = 2.0
 class ImpactWatch:
     """Before each step of a world that may bounce, the solver that step needs (``choose``)."""
 
-    def __init__(self, world: World, scene: Scene):
+    def __init__(self, world: World, scene: Scene, push_m_s2: float = 0.0):
         self.world = world
         self.p = pybullet()
         restitution = {handle: body.restitution for handle, body in zip(world.dynamic_ids, scene.dynamic_objects)}
@@ -50,10 +50,17 @@ class ImpactWatch:
         #: diagonal: a mesh's centre of mass may lie off the box's centre)
         self.reach_m = [float(np.linalg.norm(body.extents_m)) for body in scene.dynamic_objects]
         self.direct: bool | None = None  # the solver in force (None: not yet set by this watch)
+        #: the fastest anything can speed up without a contact (gravity, tilted by the push)
+        self.acceleration_m_s2 = float(np.linalg.norm(scene.gravity_m_s2)) + push_m_s2
+        self.quiet_s = 0.0  # for this long nothing can close fast enough to bounce: no look needed
 
     def choose(self, step_s: float) -> bool:
         """Put the solver the next ``step_s`` needs in force; True when that is the direct one."""
-        direct = self.impact_ahead(step_s)
+        if self.quiet_s > 0:
+            self.quiet_s -= step_s
+            direct = False
+        else:
+            direct = self.impact_ahead(step_s)
         if direct != self.direct:
             p = self.p
             set_solver_kind(self.world, p.CONSTRAINT_SOLVER_LCP_DANTZIG if direct else p.CONSTRAINT_SOLVER_LCP_SI)
@@ -69,8 +76,12 @@ class ImpactWatch:
         bound = {handle: math.sqrt(vx * vx + vy * vy + vz * vz) + math.sqrt(wx * wx + wy * wy + wz * wz) * reach
                  for (handle, ((vx, vy, vz), (wx, wy, wz))), reach in zip(velocities.items(), self.reach_m)}
         fastest = sorted(bound.values(), reverse=True)
-        if sum(fastest[:2]) <= RESTITUTION_THRESHOLD_M_S:
-            return False  # at rest: look no further
+        closing_at_most = sum(fastest[:2])
+        if closing_at_most <= RESTITUTION_THRESHOLD_M_S:
+            # nearly at rest: look no further, nor again until two bodies speeding up freely could
+            # close that fast (a quarter of that time: contacts can pass speed on, as a lever does)
+            self.quiet_s = (RESTITUTION_THRESHOLD_M_S - closing_at_most) / (8 * self.acceleration_m_s2)
+            return False
         p.performCollisionDetection(physicsClientId=cid)
         contacts = p.getContactPoints(physicsClientId=cid)
         if not contacts:

@@ -192,7 +192,7 @@ class _Rollout:
         self.pybullet_steps = 0  # taken so far (what a collapse trial's anchors count)
         #: a world that may bounce: the direct solver for its impacts only (simulation/impacts.py), or
         #: for the whole rollout but its end phase (``solver.direct_solver_for_impacts_only`` off)
-        self.impacts = ImpactWatch(world, scene) \
+        self.impacts = ImpactWatch(world, scene, push.acceleration_m_s2) \
             if world.direct_solver and settings.solver.direct_solver_for_impacts_only else None
         self.solver_switch_due = world.direct_solver and self.impacts is None
         self.end_phase_due = settings.collapse.end_substeps > 1 or settings.collapse.end_travel_fraction is not None

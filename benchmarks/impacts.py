@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -90,6 +91,13 @@ def main() -> None:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "impacts.json").write_text(json.dumps({"args": vars(args) | {"out": str(args.out)},
                                                            "rows": rows}, indent=1))
+        lines = ["| preset | family | scenes | impacts only s | whole rollout s | impacts only vs whole | "
+                 "direct solver on | mean \\|dP\\| | max \\|dP\\| |", "|---|---|---|---|---|---|---|---|---|"]
+        lines += [f"| {r['preset']} | {r['family']} | {r['scenes']} | {r['s_impacts']:.2f} | {r['s_whole']:.2f} | "
+                  f"{r['s_whole'] / r['s_impacts']:.2f}x | {100 * r['direct_share']:.1f}% of steps | "
+                  f"{r['mean_abs_dP']:.3f} | {r['max_abs_dP']:.3f} |" for r in rows]
+        (args.out / "impacts.md").write_text(f"# The direct solver for impacts only, against it for whole rollouts\n\n"
+                                             f"`{' '.join(sys.argv)}`\n\n" + "\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":

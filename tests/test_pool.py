@@ -143,3 +143,28 @@ def test_workers_run_single_threaded_blas_unless_the_user_chose_otherwise():
     with WorkerPool(1) as pool:
         [in_worker] = pool.map(os.getenv, ["OPENBLAS_NUM_THREADS"])
     assert in_worker == os.environ["OPENBLAS_NUM_THREADS"]  # "1" unless set before the pool started
+
+
+def _hold_memory(megabytes: int) -> int:
+    """Grow this worker by ``megabytes`` for good (as pybullet's leaks do) and return its pid."""
+    _HELD.append(bytearray(megabytes * 1_000_000))
+    for i in range(0, len(_HELD[-1]), 4096):  # touch every page: resident, not only reserved
+        _HELD[-1][i] = 1
+    return os.getpid()
+
+
+_HELD: list = []
+
+
+def test_a_worker_that_has_grown_too_much_is_renewed_before_the_next_map():
+    """pybullet's leaks grow with what a sample does (a mesh's many contacts leak more), so workers
+    are renewed by their growth too, not only by their count of items."""
+    with WorkerPool(1, max_tasks_per_worker=None, max_worker_growth_mb=50) as pool:
+        [first] = pool.warm()
+        assert pool.map(_hold_memory, [10]) == [first]
+        assert pool.map(_square, [2]) == [4] and pool.recycles == 0  # grown by 10 MB: kept
+        assert pool.map(_hold_memory, [80]) == [first]
+        assert pool.map(_square, [3]) == [9]  # grown by 90 MB: renewed before this map
+        assert pool.recycles == 1 and first not in pool.worker_pids()
+    with pytest.raises(ValueError, match=r"max_worker_growth_mb: must be a number > 0 or None, got 0"):
+        WorkerPool(1, max_worker_growth_mb=0)

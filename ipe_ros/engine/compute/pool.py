@@ -26,11 +26,15 @@ R = TypeVar("R")
 
 START_METHODS = ("forkserver", "spawn")
 #: Workers are replaced by fresh ones, between two ``map`` calls, once they have run this many items
-#: each on average. pybullet leaks native memory it never frees (~30 kB each time a world switches to
-#: its MLCP solver, i.e. every bouncing sample; disconnecting does not free it either): a 30-minute
-#: soak of the node grew by 290 MB. Fresh workers cost ~0.3 s, once per this many samples per worker.
-#: (ProcessPoolExecutor's own max_tasks_per_child hangs on Python 3.11.)
+#: each on average, or once one of them has grown by ``DEFAULT_MAX_WORKER_GROWTH_MB`` since it
+#: started. pybullet leaks native memory it never frees (disconnecting does not free it either): the
+#: working memory of its direct solver, at every switch to it and back. A 30-minute soak of the node
+#: grew by 290 MB when a bouncing sample switched once; with the direct solver for impacts only
+#: (simulation/impacts.py) a bouncing sample switches 15-25 times, 30-150 kB a sample on the zoo's
+#: launches and bouncy blocks and 740 kB on its capped towers (meshes: many contacts). Fresh workers
+#: cost ~0.3 s. (ProcessPoolExecutor's own max_tasks_per_child hangs on Python 3.11.)
 DEFAULT_MAX_TASKS_PER_WORKER = 1000
+DEFAULT_MAX_WORKER_GROWTH_MB = 150.0
 
 
 #: Environment variables that size the BLAS/OpenMP thread pools numpy's linear algebra may start.
@@ -60,6 +64,15 @@ def _exit_when_gone(pid: int, period_s: float = 1.0) -> None:
             pass  # it exists (owned by someone else after a pid reuse): keep going
 
 
+def resident_mb(pid: int) -> float | None:
+    """Process ``pid``'s resident memory in MB (Linux's /proc), or None where it cannot be read."""
+    try:
+        with open(f"/proc/{pid}/statm") as handle:
+            return int(handle.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1e6
+    except (OSError, ValueError, IndexError):
+        return None
+
+
 def _worker_pid(hold_s: float = 0.0) -> int:
     time.sleep(hold_s)
     return os.getpid()
@@ -69,12 +82,19 @@ class WorkerPool:
     """``WorkerPool(workers).map(fn, items)``: an ordered, crash-tolerant parallel map."""
 
     def __init__(self, workers: int, start_method: str = "forkserver",
-                 max_tasks_per_worker: int | None = DEFAULT_MAX_TASKS_PER_WORKER):
+                 max_tasks_per_worker: int | None = DEFAULT_MAX_TASKS_PER_WORKER,
+                 max_worker_growth_mb: float | None = DEFAULT_MAX_WORKER_GROWTH_MB):
         if not isinstance(workers, int) or workers < 1:
             raise ValueError(f"workers: must be an integer >= 1, got {workers!r}")
         if max_tasks_per_worker is not None and (not isinstance(max_tasks_per_worker, int) or max_tasks_per_worker < 1):
             raise ValueError(f"max_tasks_per_worker: must be an integer >= 1 or None, got {max_tasks_per_worker!r}")
         self.max_tasks_per_worker = max_tasks_per_worker
+        if max_worker_growth_mb is not None and not (isinstance(max_worker_growth_mb, (int, float))
+                                                     and not isinstance(max_worker_growth_mb, bool)
+                                                     and max_worker_growth_mb > 0):
+            raise ValueError(f"max_worker_growth_mb: must be a number > 0 or None, got {max_worker_growth_mb!r}")
+        self.max_worker_growth_mb = max_worker_growth_mb
+        self._started_mb: dict[int, float] = {}  # each worker's resident memory when first seen
         if start_method not in START_METHODS:
             raise ValueError(f"start_method: must be one of {', '.join(START_METHODS)}, got {start_method!r}")
         self.workers = workers
@@ -202,14 +222,33 @@ class WorkerPool:
 
     def _recycle_if_due(self) -> None:
         """Fresh workers once the current ones have run max_tasks_per_worker items each (on
-        average): between two maps, so no item is ever interrupted."""
+        average), or once one has grown by max_worker_growth_mb: between two maps, so no item is
+        ever interrupted."""
         limit = self.max_tasks_per_worker
+        grown = self._grown_worker()
         with self._lock:
-            if limit is None or self._executor is None or self._items_run < limit * self.workers:
+            if self._executor is None:
+                return
+            if not grown and (limit is None or self._items_run < limit * self.workers):
                 return
             old, self._executor = self._executor, None
             self.recycles += 1
+            self._started_mb.clear()
         old.shutdown(wait=True)
+
+    def _grown_worker(self) -> bool:
+        """Whether some worker's resident memory grew by ``max_worker_growth_mb`` since it was first
+        seen (Linux's /proc; elsewhere never)."""
+        if self.max_worker_growth_mb is None:
+            return False
+        grown = False
+        for pid in self.worker_pids():
+            now = resident_mb(pid)
+            if now is None:
+                continue
+            first = self._started_mb.setdefault(pid, now)
+            grown |= now - first > self.max_worker_growth_mb
+        return grown
 
     def _run_round(self, fn: Callable[[T], R], items: list[T], indices: list[int],
                    results: list) -> list[int]:

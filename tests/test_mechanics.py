@@ -277,6 +277,36 @@ def test_a_head_on_collision_keeps_momentum_and_gives_back_its_restitution(name,
     assert np.abs(sideways).max() < 1e-3
 
 
+@pytest.mark.parametrize("closing_m_s, bounces", [(0.15, False), (0.3, True)])
+def test_bullet_bounces_only_contacts_closing_faster_than_the_threshold_the_engine_assumes(closing_m_s, bounces):
+    # simulation/impacts.py takes the direct solver for contacts closing faster than this: it must be
+    # pybullet's own threshold. pybullet alone, its contacts solved only once they touch (found
+    # ahead, a slow contact loses its bounce anyway: ``KNOWN``, "bounce"), a ball with restitution
+    # 1 x 1 and gravity almost off
+    from ipe_ros.engine.simulation.bullet import pybullet
+    from ipe_ros.engine.simulation.impacts import RESTITUTION_THRESHOLD_M_S
+
+    assert 0.15 < RESTITUTION_THRESHOLD_M_S < 0.3
+    p = pybullet()
+    cid = p.connect(p.DIRECT)
+    try:
+        p.setGravity(0, 0, -1e-3, physicsClientId=cid)
+        p.setTimeStep(0.001, physicsClientId=cid)
+        floor = p.createMultiBody(0, p.createCollisionShape(p.GEOM_PLANE, physicsClientId=cid), physicsClientId=cid)
+        ball = p.createMultiBody(1.0, p.createCollisionShape(p.GEOM_SPHERE, radius=0.05, physicsClientId=cid),
+                                 basePosition=[0, 0, 0.06], useMaximalCoordinates=True, physicsClientId=cid)
+        for body in (floor, ball):
+            p.changeDynamics(body, -1, restitution=1.0, contactProcessingThreshold=0.0, linearDamping=0.0,
+                             physicsClientId=cid)
+        p.resetBaseVelocity(ball, [0, 0, -closing_m_s], [0, 0, 0], physicsClientId=cid)
+        for _ in range(300):
+            p.stepSimulation(physicsClientId=cid)
+        rising_m_s = p.getBaseVelocity(ball, physicsClientId=cid)[0][2]
+    finally:
+        p.disconnect(cid)
+    assert (rising_m_s > 0.5 * closing_m_s) is bounces, rising_m_s
+
+
 # -- a stack ----------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("name", PRESETS)

@@ -12,7 +12,7 @@ the same in every direction.
 Restitution only acts where a contact closes faster than Bullet's restitution threshold; everywhere
 else the two solvers solve the same contacts. So a world that may bounce steps on the
 sequential-impulse solver, and on the direct one only for the steps in which some contact whose
-surfaces can bounce closes that fast (docs/model.md, "Friction and bounces").
+surfaces can bounce closes that fast (docs/model.md, "Friction the same in every direction").
 """
 
 from __future__ import annotations
@@ -53,6 +53,7 @@ class ImpactWatch:
         #: the fastest anything can speed up without a contact (gravity, tilted by the push)
         self.acceleration_m_s2 = float(np.linalg.norm(scene.gravity_m_s2)) + push_m_s2
         self.quiet_s = 0.0  # for this long nothing can close fast enough to bounce: no look needed
+        self._velocities: dict[int, tuple] = {}  # the dynamic bodies' (linear, angular) at the last look
 
     def choose(self, step_s: float) -> bool:
         """Put the solver the next ``step_s`` needs in force; True when that is the direct one.

@@ -27,12 +27,12 @@ R = TypeVar("R")
 START_METHODS = ("forkserver", "spawn")
 #: Workers are replaced by fresh ones, between two ``map`` calls, once they have run this many items
 #: each on average, or once one of them has grown by ``DEFAULT_MAX_WORKER_GROWTH_MB`` since it
-#: started. pybullet leaks native memory it never frees (disconnecting does not free it either): the
-#: working memory of its direct solver, at every switch to it and back. A 30-minute soak of the node
-#: grew by 290 MB when a bouncing sample switched once; with the direct solver for impacts only
-#: (simulation/impacts.py) a bouncing sample switches 15-25 times, 30-150 kB a sample on the zoo's
-#: launches and bouncy blocks and 740 kB on its capped towers (meshes: many contacts). Fresh workers
-#: cost ~0.3 s. (ProcessPoolExecutor's own max_tasks_per_child hangs on Python 3.11.)
+#: started: a bound whatever leaks. pybullet leaks native memory it never frees (disconnecting does
+#: not free it either) around its direct solver: a world built on it leaked ~30 kB a bouncing sample
+#: in a 30-minute soak of the node (+290 MB), 110 kB a sample on the zoo's capped towers. Worlds are
+#: now built on the sequential-impulse solver and take the direct one for impacts only
+#: (simulation/impacts.py): ~1 kB a sample there (2026-11-29). Fresh workers cost ~0.3 s.
+#: (ProcessPoolExecutor's own max_tasks_per_child hangs on Python 3.11.)
 DEFAULT_MAX_TASKS_PER_WORKER = 1000
 DEFAULT_MAX_WORKER_GROWTH_MB = 150.0
 

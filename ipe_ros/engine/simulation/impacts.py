@@ -23,7 +23,7 @@ import numpy as np
 
 from ..scene.bodies import Scene
 from .bullet import pybullet
-from .world import World, set_solver_kind
+from .world import World, use_direct_solver, use_sequential_solver
 
 #: Bullet's restitution velocity threshold (btContactSolverInfo's default, which pybullet keeps): a
 #: contact closing slower than this does not bounce, whatever its restitution
@@ -45,31 +45,27 @@ class ImpactWatch:
                                                                                scene.static_objects)})
         restitution.update({handle: scene.support.restitution for handle in world.support_ids})
         self.restitution = restitution
-        self.dynamic = set(world.dynamic_ids)
         #: how far a point of each dynamic body can be from its centre of mass (its bounding box's
         #: diagonal: a mesh's centre of mass may lie off the box's centre)
         self.reach_m = [float(np.linalg.norm(body.extents_m)) for body in scene.dynamic_objects]
-        self.direct: bool | None = None  # the solver in force (None: not yet set by this watch)
+        self.direct = False  # the solver in force: a world is built on the sequential-impulse one
         #: the fastest anything can speed up without a contact (gravity, tilted by the push)
         self.acceleration_m_s2 = float(np.linalg.norm(scene.gravity_m_s2)) + push_m_s2
         self.quiet_s = 0.0  # for this long nothing can close fast enough to bounce: no look needed
-        self._velocities: dict[int, tuple] = {}  # the dynamic bodies' (linear, angular) at the last look
 
     def choose(self, step_s: float) -> bool:
         """Put the solver the next ``step_s`` needs in force; True when that is the direct one.
 
-        Every switch leaks the direct solver's working memory in pybullet (compute/pool.py renews
-        workers by their growth). Holding the direct solver on after an impact would switch less, but
-        its friction then acts for longer: held 30 ms, the zoo's bouncy blocks fell 20 deg off the way
-        they fall turned (tests/test_invariance.py)."""
+        Holding the direct solver on after an impact would switch less, but its friction then acts
+        for longer: held 30 ms, the zoo's bouncy blocks fell 20 deg off the way they fall turned
+        (tests/test_invariance.py)."""
         if self.quiet_s > 0:
             self.quiet_s -= step_s
             direct = False
         else:
             direct = self.impact_ahead(step_s)
         if direct != self.direct:
-            p = self.p
-            set_solver_kind(self.world, p.CONSTRAINT_SOLVER_LCP_DANTZIG if direct else p.CONSTRAINT_SOLVER_LCP_SI)
+            (use_direct_solver if direct else use_sequential_solver)(self.world)
             self.direct = direct
         return direct
 
@@ -94,31 +90,31 @@ class ImpactWatch:
             return False
         restitution = self.restitution
         ahead_s = CLOSING_STEPS * step_s
-        motion: dict[int, tuple] = {}  # plain floats: numpy's per-call cost is 20x the arithmetic here
-        self._velocities = velocities
+        centres: dict[int, tuple] = {}  # plain floats: numpy's per-call cost is 20x the arithmetic here
         for contact in contacts:
             a, b = contact[1], contact[2]
             if restitution.get(a, 0.0) * restitution.get(b, 0.0) <= 0.0:
                 continue  # Bullet multiplies the two: one surface that does not bounce, no bounce
             if bound.get(a, 0.0) + bound.get(b, 0.0) <= RESTITUTION_THRESHOLD_M_S:
                 continue
-            ax, ay, az = self._point_velocity(a, contact[5], motion)
-            bx, by, bz = self._point_velocity(b, contact[6], motion)
+            ax, ay, az = self._point_velocity(a, contact[5], velocities, centres)
+            bx, by, bz = self._point_velocity(b, contact[6], velocities, centres)
             nx, ny, nz = contact[7]  # from b to a
             closing_m_s = (bx - ax) * nx + (by - ay) * ny + (bz - az) * nz
             if closing_m_s > RESTITUTION_THRESHOLD_M_S and closing_m_s * ahead_s >= contact[8]:
                 return True
         return False
 
-    def _point_velocity(self, handle: int, point, motion: dict) -> tuple[float, float, float]:
-        """The velocity of body ``handle``'s material point at ``point`` (static bodies: zero)."""
-        if handle not in self.dynamic:
+    def _point_velocity(self, handle: int, point, velocities: dict, centres: dict) -> tuple[float, float, float]:
+        """The velocity of body ``handle``'s material point at ``point``, from the dynamic bodies'
+        ``velocities`` (static bodies: zero); their centres of mass read once a look, in ``centres``."""
+        motion = velocities.get(handle)
+        if motion is None:
             return (0.0, 0.0, 0.0)
-        state = motion.get(handle)
-        if state is None:
-            p, cid = self.p, self.world.client
-            state = motion[handle] = (p.getBasePositionAndOrientation(handle, physicsClientId=cid)[0],
-                                      *self._velocities[handle])
-        (cx, cy, cz), (vx, vy, vz), (wx, wy, wz) = state
+        centre = centres.get(handle)
+        if centre is None:
+            centre = centres[handle] = self.p.getBasePositionAndOrientation(handle,
+                                                                            physicsClientId=self.world.client)[0]
+        (cx, cy, cz), ((vx, vy, vz), (wx, wy, wz)) = centre, motion
         rx, ry, rz = point[0] - cx, point[1] - cy, point[2] - cz
         return (vx + wy * rz - wz * ry, vy + wz * rx - wx * rz, vz + wx * ry - wy * rx)

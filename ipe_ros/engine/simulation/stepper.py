@@ -242,22 +242,18 @@ class _Rollout:
             use_sequential_solver(self.world)
         settling_now = self.settling.covers(self.tick)
         substeps = self.steps.substeps
-        if self.impacts is not None:  # each pybullet step on the solver it needs
-            step_s, choose, step, cid = self.dt * step_ticks / substeps, self.impacts.choose, self.p.stepSimulation, self.cid
-            for _ in range(substeps):
+        # each pybullet step on the solver it needs (a bouncy world), and shown to the probe when one
+        # watches; otherwise pybullet stepped directly, the usual case
+        choose = None if self.impacts is None else self.impacts.choose
+        phase = None if self.probe is NO_PROBE else \
+            "settle" if settling_now else "collapse" if self.collapse.collapsing else "fine"
+        step, cid, step_s = self.p.stepSimulation, self.cid, self.dt * step_ticks / substeps
+        for _ in range(substeps):
+            if choose is not None:
                 choose(step_s)
-                if self.probe is NO_PROBE:
-                    step(physicsClientId=cid)
-                else:
-                    self.probe.step("settle" if settling_now else "collapse" if self.collapse.collapsing else "fine",
-                                    self._step_simulation)
-        elif self.probe is NO_PROBE:  # the usual case, without the probe's two calls per step
-            step, cid = self.p.stepSimulation, self.cid
-            for _ in range(substeps):
+            if phase is None:
                 step(physicsClientId=cid)
-        else:
-            phase = "settle" if settling_now else "collapse" if self.collapse.collapsing else "fine"
-            for _ in range(substeps):
+            else:
                 self.probe.step(phase, self._step_simulation)
         self.pybullet_steps += substeps
         if settling_now and self.tick + 1 == self.settling.ticks:

@@ -34,7 +34,7 @@ class World:
     contact_distance_m: float = 0.0  # how far ahead contacts are found (Bullet's breaking threshold), as built
     masses_kg: np.ndarray | None = None  # of the dynamic bodies
     inertia_kg_m2: np.ndarray | None = None  # (n, 3) their principal moments (pybullet's)
-    direct_solver: bool = False  # solved by pybullet's MLCP (Dantzig) solver, for bounces
+    direct_solver: bool = False  # bounces solved by pybullet's MLCP (Dantzig) solver (all steps, or impacts only)
     support_ids: tuple[int, ...] = ()  # the floor, or the table top and the floor under it
     static_ids: tuple[int, ...] = ()  # follow ``scene.static_objects``
 
@@ -263,7 +263,7 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
         deterministicOverlappingPairs=1,
         physicsClientId=cid)
     direct = uses_direct_solver(scene, settings, masses_kg)
-    if direct:
+    if direct and not settings.solver.direct_solver_for_impacts_only:  # else the rollout takes it per step
         _set_solver(p, cid, p.CONSTRAINT_SOLVER_LCP_DANTZIG)
 
     support = scene.support
@@ -374,9 +374,10 @@ def use_sequential_solver(world: World) -> None:
     _set_solver(p, world.client, p.CONSTRAINT_SOLVER_LCP_SI)
 
 
-def set_solver_kind(world: World, kind: int) -> None:
-    """pybullet's constraint solver (``p.CONSTRAINT_SOLVER_LCP_*``) for the next steps of ``world``."""
-    _set_solver(pybullet(), world.client, kind)
+def use_direct_solver(world: World) -> None:
+    """pybullet's direct MLCP (Dantzig) solver for the next steps (an impact: simulation/impacts.py)."""
+    p = pybullet()
+    _set_solver(p, world.client, p.CONSTRAINT_SOLVER_LCP_DANTZIG)
 
 
 def _set_solver(p, cid: int, kind: int) -> None:

@@ -1,0 +1,9 @@
+"""Inference room: an object's unknown properties (mass, friction, restitution) from observed motion.
+
+priors.py (a property's prior, drawn and weighed in an unbounded coordinate), observation.py (the
+``ipe_ros.observation/1`` input, checked once), likelihood.py (how far a rollout stays from the
+frames, with the physics' own error), particle.py (one candidate's rollout, run by the workers),
+amis.py (the sampler: adaptive importance sampling as a plan of the one Monte Carlo loop),
+infer.py (the answer), probe_push.py (observations made at known properties, for tests and docs).
+Sits beside ``sampling/``: it uses the rollout, and nothing below imports it.
+"""

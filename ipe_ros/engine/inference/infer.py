@@ -1,0 +1,230 @@
+"""``infer``: the posterior over an observation's unknown properties, by the IPE's own rollouts.
+
+Each candidate is a set of property values (and, for an object whose initial velocity the scene left
+out, a velocity: a nuisance drawn around the frames' own estimate and integrated over); its rollout
+is weighed by how likely the frames are given it (``likelihood``: the tracker's noise and the
+physics' error); the sampler is ``amis``. The answer says per unknown the posterior mean, median,
+90% interval and effective sample size, P(m_a > m_b) for every pair of mass unknowns, how far the
+best rollout stays from the frames, and the scene with the posterior medians in place. An
+observation no candidate reproduces is answered ``consistent: false``, never with a posterior.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import checks
+from ..config import preset
+from ..errors import ConfigError
+from ..sampling.montecarlo import MapFn, MonteCarlo, check_seed
+from ..scene.bodies import Scene
+from ..scene.format import scene_to_dict
+from .amis import AmisResult, AmisSettings, amis
+from .likelihood import CONSISTENT_WITHIN_SD, DEFAULT_MODEL_ERROR_FRACTION
+from .observation import Observation, Unknown
+from .particle import ParticleOutcome, ParticleTask, lost_particle, run_particle, with_values
+from .priors import Normal
+
+#: the frames within this much of t = 0 estimate an unknown initial velocity
+VELOCITY_WINDOW_S = 0.15
+
+
+@dataclass(frozen=True)
+class InferSettings:
+    preset: str = "default"
+    seed: int = 0
+    sampler: AmisSettings = AmisSettings()
+    model_error_fraction: float = DEFAULT_MODEL_ERROR_FRACTION
+    budget_s: float | None = 60.0
+
+    def __post_init__(self) -> None:
+        preset(self.preset)
+        check_seed(self.seed)
+        checks.non_negative(self.model_error_fraction, "model_error_fraction")
+        checks.at_most(self.model_error_fraction, "model_error_fraction", 1.0, "(a fraction of the distance travelled)")
+        checks.integer(self.sampler.particles_per_round, "particles_per_round", 4, 10_000)
+        checks.integer(self.sampler.max_rounds, "max_rounds", 1, 100)
+
+
+@dataclass(frozen=True)
+class Estimate:
+    label: str  # "box1.mass_kg", "group:red.mass_kg", "support.friction"
+    property: str
+    mean: float
+    median: float
+    low_90: float
+    high_90: float
+    ess: float
+
+
+@dataclass(frozen=True)
+class Inference:
+    scene_name: str
+    consistent: bool
+    message: str
+    estimates: tuple[Estimate, ...]
+    heavier: tuple[tuple[str, str, float], ...]  # (a, b, P(m_a > m_b))
+    worst_residual_m: float  # the best rollout's farthest frame
+    worst_t_s: float
+    worst_object: str
+    candidates: int
+    failed: int
+    rounds: int
+    ess: float
+    stopped_by: str
+    elapsed_s: float
+    refined_scene: Scene | None
+    settings: InferSettings
+
+    def estimate(self, label: str) -> Estimate:
+        return next(e for e in self.estimates if e.label == label)
+
+    def to_dict(self) -> dict:
+        return {"scene": self.scene_name, "consistent": self.consistent, "message": self.message,
+                "unknowns": {e.label: {"mean": e.mean, "median": e.median, "interval_90": [e.low_90, e.high_90],
+                                       "ess": round(e.ess, 1)} for e in self.estimates},
+                "p_heavier": [{"a": a, "b": b, "p": round(p, 4)} for a, b, p in self.heavier],
+                "check": {"worst_residual_mm": round(1000 * self.worst_residual_m, 2), "t_s": self.worst_t_s,
+                          "object": self.worst_object},
+                "candidates": self.candidates, "failed": self.failed, "rounds": self.rounds, "ess": round(self.ess, 1),
+                "stopped_by": self.stopped_by, "elapsed_s": round(self.elapsed_s, 3),
+                "settings": {"preset": self.settings.preset, "seed": self.settings.seed,
+                             "model_error_fraction": self.settings.model_error_fraction,
+                             "particles_per_round": self.settings.sampler.particles_per_round,
+                             "max_rounds": self.settings.sampler.max_rounds,
+                             "target_ess": self.settings.sampler.target_ess, "budget_s": self.settings.budget_s},
+                "refined_scene": None if self.refined_scene is None else scene_to_dict(self.refined_scene)}
+
+
+def velocity_prior(observation: Observation, name: str) -> list[Normal]:
+    """An unknown initial velocity's prior, per axis: N(the frames' estimate, a wide SD). The estimate
+    fits p(t) = p0 + v t + a t^2 / 2 (p0 is the scene's exact pose) to the frames within
+    VELOCITY_WINDOW_S (at least the first two); the SD is 3x the fit's noise SD plus 20% of the
+    estimate and 0.05 m/s, since friction or a contact may already act within the window."""
+    times, positions = observation.track(name)
+    origin = np.asarray(next(b.position_m for b in observation.scene.objects if b.name == name), float)
+    keep = max(2, int(np.sum(times <= VELOCITY_WINDOW_S)))
+    t, p = times[:keep], positions[:keep] - origin
+    design = np.stack([t, t * t / 2], axis=1) if keep >= 3 else t[:, None]
+    solution, *_ = np.linalg.lstsq(design, p, rcond=None)
+    v = solution[0]
+    noise_sd = observation.position_sd_m * math.sqrt(float(np.linalg.inv(design.T @ design)[0, 0]))
+    return [Normal(float(v[axis]), 3 * noise_sd + 0.2 * abs(float(v[axis])) + 0.05) for axis in range(3)]
+
+
+def infer(observation: Observation, settings: InferSettings = InferSettings(), map_fn: MapFn | None = None) -> Inference:
+    started = time.perf_counter()
+    unknowns = observation.unknowns
+    priors = [u.prior for u in unknowns]
+    nuisance = {name: velocity_prior(observation, name) for name in observation.unknown_velocity}
+    for name in observation.unknown_velocity:
+        priors.extend(nuisance[name])
+    scene = dataclasses.replace(observation.scene, horizon_s=observation.window_s)
+    sim = preset(settings.preset)
+    tracks = _tracks(observation)
+
+    def candidate(z: np.ndarray) -> Scene:
+        values = [p.value(zj) for p, zj in zip(priors, z)]
+        assigned = {(body, u.property): float(x) for u, x in zip(unknowns, values) for body in u.applies_to(scene)}
+        velocities, at = {}, len(unknowns)
+        for name in observation.unknown_velocity:
+            velocities[name] = np.array(values[at:at + 3], float)
+            at += 3
+        candidate_scene = with_values(scene, assigned, {})
+        return with_values(candidate_scene, {}, _pushed(candidate_scene, observation, velocities))
+
+    def make_task(i: int, z: np.ndarray) -> ParticleTask:
+        return ParticleTask(i, candidate(z), sim, tracks, observation.position_sd_m, observation.yaw_sd_rad,
+                            settings.model_error_fraction)
+
+    def read(outcome: ParticleOutcome) -> float | None:
+        if outcome.budget_stopped:
+            return None
+        return outcome.fit.log_likelihood if outcome.ok else -math.inf
+
+    loop = MonteCarlo(run_particle, lost_particle, map_fn, settings.budget_s)
+    result: AmisResult = loop.drive(amis(priors, make_task, read, settings.seed, settings.sampler))
+    return _answer(observation, settings, result, unknowns, priors, candidate, time.perf_counter() - started)
+
+
+def _pushed(scene: Scene, observation: Observation, velocities: dict) -> dict:
+    """Each pushed or nuisance-moving object's initial velocity: its own (given or drawn) plus its pushes."""
+    out = {name: np.asarray(v, float) for name, v in velocities.items()}
+    bodies = {b.name: b for b in scene.objects}
+    for push in observation.actions:
+        body = bodies[push.object]
+        base = out.get(push.object, np.asarray(body.linear_velocity_m_s, float))
+        change = np.array(push.velocity_m_s if push.velocity_m_s is not None
+                          else np.asarray(push.impulse_N_s) / body.resolved_mass_kg, float)
+        out[push.object] = base + np.array([change[0], change[1], 0.0])
+    return out
+
+
+def _tracks(observation: Observation) -> tuple:
+    out = []
+    for body in observation.scene.dynamic_objects:
+        times, positions = observation.track(body.name)
+        if not len(times):
+            continue
+        orientations = np.full((len(times), 4), np.nan)
+        row = 0
+        for frame in observation.frames:
+            for seen, pose in frame.poses:
+                if seen == body.name:
+                    if pose.orientation_xyzw is not None:
+                        orientations[row] = pose.orientation_xyzw
+                    row += 1
+        out.append((body.name, times, positions, orientations))
+    return tuple(out)
+
+
+def _weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> float:
+    order = np.argsort(values)
+    cumulative = np.cumsum(weights[order])
+    return float(values[order][min(np.searchsorted(cumulative, q * cumulative[-1]), len(values) - 1)])
+
+
+def _answer(observation: Observation, settings: InferSettings, result: AmisResult, unknowns: tuple[Unknown, ...],
+            priors: list, candidate, elapsed_s: float) -> Inference:
+    ok = [o for o in result.outcomes if o.ok]
+    failed = sum(1 for o in result.outcomes if not o.ok and not o.budget_stopped)
+    common = dict(scene_name=observation.scene.name, candidates=len(result.outcomes), failed=failed,
+                  rounds=result.rounds, ess=result.ess, stopped_by=result.stopped_by, elapsed_s=elapsed_s,
+                  settings=settings)
+    if not ok:
+        raise ConfigError("budget_s" if result.stopped_by == "budget" else "observation",
+                          "no candidate's rollout finished: raise the budget" if result.stopped_by == "budget"
+                          else f"every rollout failed ({result.outcomes[0].error}); check the scene")
+    best = max(ok, key=lambda o: o.fit.log_likelihood).fit
+    if best.worst_sds > CONSISTENT_WITHIN_SD:
+        message = (f"no property values reproduce the observation: worst residual {1000 * best.worst_residual_m:.1f} mm "
+                   f"at t = {best.worst_t_s:g} s on {best.worst_object}")
+        return Inference(consistent=False, message=message, estimates=(), heavier=(), worst_residual_m=best.worst_residual_m,
+                         worst_t_s=best.worst_t_s, worst_object=best.worst_object, refined_scene=None, **common)
+    w = result.weights
+    values = np.stack([p.value(result.coordinates[:, j]) for j, p in enumerate(priors)], axis=1) \
+        if len(priors) else np.empty((len(w), 0))
+    usable = np.isfinite(result.log_weights)
+    estimates = []
+    for j, unknown in enumerate(unknowns):
+        x, wj = values[usable, j], w[usable]
+        estimates.append(Estimate(unknown.label, unknown.property, float(wj @ x / wj.sum()),
+                                  _weighted_quantile(x, wj, 0.5), _weighted_quantile(x, wj, 0.05),
+                                  _weighted_quantile(x, wj, 0.95), result.ess))
+    masses = [j for j, u in enumerate(unknowns) if u.property == "mass_kg"]
+    heavier = tuple((unknowns[a].label, unknowns[b].label,
+                     float(w[usable] @ (values[usable, a] > values[usable, b]) / w[usable].sum()))
+                    for a, b in itertools.combinations(masses, 2))
+    medians = {(body, u.property): e.median for u, e in zip(unknowns, estimates) for body in u.applies_to(observation.scene)}
+    refined = with_values(observation.scene, medians, {})
+    message = (f"{len(estimates)} unknown(s) from {len(result.outcomes)} rollouts; effective sample size "
+               f"{result.ess:.0f}" + ("; stopped by the budget: a partial answer" if result.stopped_by == "budget" else ""))
+    return Inference(consistent=True, message=message, estimates=tuple(estimates), heavier=heavier,
+                     worst_residual_m=best.worst_residual_m, worst_t_s=best.worst_t_s, worst_object=best.worst_object,
+                     refined_scene=refined, **common)

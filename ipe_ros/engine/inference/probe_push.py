@@ -1,0 +1,105 @@
+"""Observations made at known properties: the engine's own rollout at `paper` settings, read at a
+tracker's frame rate, with its noise. For the tests (analytic cases), the docs' worked example and
+``ipe generate probe-push``. Everything random comes from the ``Generator`` passed in.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..config import preset
+from ..scene.bodies import Body, Box, Floor, Scene
+from ..scene.format import scene_to_dict
+from ..scene.shapes import Sphere
+from .observation import OBSERVATION_FORMAT
+from .particle import _EXACT, _SPEC, _origins
+from ..sampling.rollout import SampleTask, run_sample
+
+UPRIGHT = (0.0, 0.0, 0.0, 1.0)
+
+
+def observe(scene: Scene, window_s: float, rng: np.random.Generator, *, unknowns: list, frame_rate_hz: float = 30.0,
+            position_sd_m: float = 0.002, actions: list = (), velocity_unknown: tuple[str, ...] = (),
+            settings: str = "paper") -> dict:
+    """An ``ipe_ros.observation/1`` dict of ``scene`` rolled out at ``settings`` (with ``actions``'
+    velocities already in the scene's initial state), each object's position read every
+    1/frame_rate_hz s with N(0, position_sd_m^2) noise per axis. ``velocity_unknown``: objects whose
+    initial velocity the observation leaves out."""
+    rolled = dataclasses.replace(scene, horizon_s=window_s)
+    task = SampleTask(scene=rolled, model=_EXACT, settings=preset(settings), query=_SPEC, index=0,
+                      seed=np.random.SeedSequence(0), record_every=1)
+    outcome = run_sample(task)
+    if not outcome.ok:
+        raise RuntimeError(f"the observed rollout failed: {outcome.error}")
+    trajectory = outcome.rollouts[0].trajectory
+    times = np.array([f[0] for f in trajectory])
+    centres = np.stack([f[1] for f in trajectory])
+    orientations = np.stack([f[2] for f in trajectory])
+    frame_times = np.arange(1, int(np.floor(window_s * frame_rate_hz + 1e-9)) + 1) / frame_rate_hz
+    frames = [{"t_s": round(float(t), 6), "objects": {}} for t in frame_times]
+    for i, body in enumerate(scene.dynamic_objects):
+        origins = _origins(body, centres[:, i], orientations[:, i])
+        for frame, t in zip(frames, frame_times):
+            at = [float(np.interp(t, times, origins[:, axis])) for axis in range(3)]
+            noisy = np.asarray(at) + position_sd_m * rng.standard_normal(3)
+            frame["objects"][body.name] = {"position_m": [round(float(v), 6) for v in noisy]}
+    scene_dict = scene_to_dict(scene)
+    for item in scene_dict["objects"]:
+        if item["name"] in velocity_unknown:
+            item.pop("linear_velocity_m_s", None)
+    return {"format": OBSERVATION_FORMAT, "scene": scene_dict, "position_sd_m": position_sd_m, "frames": frames,
+            "unknowns": list(unknowns), "actions": list(actions)}
+
+
+def sliding_box(speed_m_s: float, friction: float, heading_rad: float = 0.0) -> Scene:
+    """A 10 cm box sliding on a floor of friction 1 (so the pair's friction is the box's)."""
+    v = (speed_m_s * np.cos(heading_rad), speed_m_s * np.sin(heading_rad), 0.0)
+    box = Box("box", (0.1, 0.1, 0.1), (0.0, 0.0, 0.05), UPRIGHT, friction, 0.0, mass_kg=0.5,
+              linear_velocity_m_s=tuple(float(c) for c in v))
+    return Scene("sliding-box", (box,), Floor(friction=1.0, restitution=0.0))
+
+
+def head_on(mass_a_kg: float, mass_b_kg: float, speed_m_s: float = 1.5, restitution: float = 0.5) -> Scene:
+    """Box a slides into box b at rest, 30 cm ahead, on a nearly frictionless floor."""
+    a = Box("a", (0.1, 0.1, 0.1), (0.0, 0.0, 0.05), UPRIGHT, 0.05, restitution, mass_kg=mass_a_kg,
+            linear_velocity_m_s=(speed_m_s, 0.0, 0.0))
+    b = Box("b", (0.1, 0.1, 0.1), (0.3, 0.0, 0.05), UPRIGHT, 0.05, restitution, mass_kg=mass_b_kg)
+    return Scene("head-on", (a, b), Floor(friction=1.0, restitution=1.0))
+
+
+def bouncing_ball(restitution: float, height_m: float = 0.5) -> Scene:
+    """A 5 cm-radius ball dropped onto a floor of restitution 1 (so the pair's is the ball's)."""
+    ball = Body("ball", Sphere(0.05), (0.0, 0.0, height_m), UPRIGHT, 0.5, restitution, mass_kg=0.2)
+    return Scene("bouncing-ball", (ball,), Floor(friction=0.5, restitution=1.0))
+
+
+def heavy_light_tower(heavy: str, ratio: float, rng: np.random.Generator, blocks: int = 6) -> Scene:
+    """A leaning tower of red and yellow blocks (alternating), offsets drawn so it falls; one colour
+    ``ratio`` times denser than the other (Hamrick et al. 2016's "which is heavier?")."""
+    objects, x = [], 0.0
+    for i in range(blocks):
+        colour = "red" if i % 2 == 0 else "yellow"
+        density = 500.0 * (ratio if colour == heavy else 1.0)
+        x += 0.0 if i == 0 else float(rng.uniform(0.02, 0.045))
+        objects.append(Box(f"block{i}", (0.1, 0.1, 0.06), (x, float(rng.uniform(-0.01, 0.01)), 0.03 + 0.06 * i),
+                           UPRIGHT, 0.6, 0.0, density_kg_m3=density, group=colour))
+    return Scene("heavy-light-tower", tuple(objects), Floor(friction=0.6, restitution=0.0))
+
+
+def probe_push(rng: np.random.Generator, mass_kg: float = 0.8, friction: float = 0.45, impulse_N_s: float = 1.2,
+               position_sd_m: float = 0.002) -> dict:
+    """The worked example: the robot pushes a box of unknown mass and friction with a known impulse
+    and watches it slide to a stop for 1 s."""
+    box = Box("box", (0.1, 0.1, 0.1), (0.0, 0.0, 0.05), UPRIGHT, friction, 0.0, mass_kg=mass_kg,
+              linear_velocity_m_s=(impulse_N_s / mass_kg, 0.0, 0.0))
+    scene = Scene("probe-push", (box,), Floor(friction=1.0, restitution=0.0))
+    observation = observe(scene, 1.0, rng, position_sd_m=position_sd_m, unknowns=[
+        {"object": "box", "property": "mass_kg", "prior": {"log_uniform": [0.05, 5.0]}},
+        {"object": "box", "property": "friction", "prior": {"uniform": [0.05, 1.2]}}],
+        actions=[{"kind": "push", "object": "box", "at_s": 0.0, "impulse_N_s": [impulse_N_s, 0.0]}])
+    # the scene the robot knows: the box at rest before its push
+    for item in observation["scene"]["objects"]:
+        item["linear_velocity_m_s"] = [0.0, 0.0, 0.0]
+    return observation

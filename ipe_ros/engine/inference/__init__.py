@@ -4,6 +4,6 @@ priors.py (a property's prior, drawn and weighed in an unbounded coordinate), ob
 ``ipe_ros.observation/1`` input, checked once), likelihood.py (how far a rollout stays from the
 frames, with the physics' own error), particle.py (one candidate's rollout, run by the workers),
 amis.py (the sampler: adaptive importance sampling as a plan of the one Monte Carlo loop),
-infer.py (the answer), probe_push.py (observations made at known properties, for tests and docs).
+infer.py (the answer), known.py (observations made at known properties: the tests' analytic cases, the worked example).
 Sits beside ``sampling/``: it uses the rollout, and nothing below imports it.
 """

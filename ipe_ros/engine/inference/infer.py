@@ -26,7 +26,7 @@ from ..sampling.montecarlo import MapFn, MonteCarlo, check_seed
 from ..scene.bodies import Scene
 from ..scene.format import scene_to_dict
 from .amis import AmisResult, AmisSettings, amis
-from .likelihood import CONSISTENT_WITHIN_SD, DEFAULT_MODEL_ERROR_FRACTION
+from .likelihood import CONSISTENT_WITHIN_SD, DEFAULT_MODEL_ERROR_FRACTION, Track, track
 from .observation import Observation, Unknown
 from .particle import ParticleOutcome, ParticleTask, lost_particle, run_particle, with_values
 from .priors import Normal
@@ -64,12 +64,25 @@ class Estimate:
 
 
 @dataclass(frozen=True)
+class MassPair:
+    """Two mass unknowns compared: P(m_a > m_b) and the ratio m_a / m_b (identifiable without any
+    known impulse, where the masses themselves are not)."""
+
+    a: str
+    b: str
+    p_a_heavier: float
+    ratio_median: float
+    ratio_low_90: float
+    ratio_high_90: float
+
+
+@dataclass(frozen=True)
 class Inference:
     scene_name: str
     consistent: bool
     message: str
     estimates: tuple[Estimate, ...]
-    heavier: tuple[tuple[str, str, float], ...]  # (a, b, P(m_a > m_b))
+    heavier: tuple["MassPair", ...]
     worst_residual_m: float  # the best rollout's farthest frame
     worst_t_s: float
     worst_object: str
@@ -89,7 +102,9 @@ class Inference:
         return {"scene": self.scene_name, "consistent": self.consistent, "message": self.message,
                 "unknowns": {e.label: {"mean": e.mean, "median": e.median, "interval_90": [e.low_90, e.high_90],
                                        "ess": round(e.ess, 1)} for e in self.estimates},
-                "p_heavier": [{"a": a, "b": b, "p": round(p, 4)} for a, b, p in self.heavier],
+                "mass_pairs": [{"a": m.a, "b": m.b, "p_a_heavier": round(m.p_a_heavier, 4),
+                                "ratio_median": m.ratio_median, "ratio_interval_90": [m.ratio_low_90, m.ratio_high_90]}
+                               for m in self.heavier],
                 "check": {"worst_residual_mm": round(1000 * self.worst_residual_m, 2), "t_s": self.worst_t_s,
                           "object": self.worst_object},
                 "candidates": self.candidates, "failed": self.failed, "rounds": self.rounds, "ess": round(self.ess, 1),
@@ -127,7 +142,7 @@ def infer(observation: Observation, settings: InferSettings = InferSettings(), m
         priors.extend(nuisance[name])
     scene = dataclasses.replace(observation.scene, horizon_s=observation.window_s)
     sim = preset(settings.preset)
-    tracks = _tracks(observation)
+    tracks = _tracks(observation, settings.model_error_fraction)
 
     def candidate(z: np.ndarray) -> Scene:
         values = [p.value(zj) for p, zj in zip(priors, z)]
@@ -140,8 +155,7 @@ def infer(observation: Observation, settings: InferSettings = InferSettings(), m
         return with_values(candidate_scene, {}, _pushed(candidate_scene, observation, velocities))
 
     def make_task(i: int, z: np.ndarray) -> ParticleTask:
-        return ParticleTask(i, candidate(z), sim, tracks, observation.position_sd_m, observation.yaw_sd_rad,
-                            settings.model_error_fraction)
+        return ParticleTask(i, candidate(z), sim, tracks, observation.yaw_sd_rad, settings.model_error_fraction)
 
     def read(outcome: ParticleOutcome) -> float | None:
         if outcome.budget_stopped:
@@ -166,7 +180,7 @@ def _pushed(scene: Scene, observation: Observation, velocities: dict) -> dict:
     return out
 
 
-def _tracks(observation: Observation) -> tuple:
+def _tracks(observation: Observation, model_error_fraction: float) -> tuple[Track, ...]:
     out = []
     for body in observation.scene.dynamic_objects:
         times, positions = observation.track(body.name)
@@ -180,7 +194,7 @@ def _tracks(observation: Observation) -> tuple:
                     if pose.orientation_xyzw is not None:
                         orientations[row] = pose.orientation_xyzw
                     row += 1
-        out.append((body.name, times, positions, orientations))
+        out.append(track(body.name, times, positions, orientations, observation.position_sd_m, model_error_fraction))
     return tuple(out)
 
 
@@ -188,6 +202,12 @@ def _weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> flo
     order = np.argsort(values)
     cumulative = np.cumsum(weights[order])
     return float(values[order][min(np.searchsorted(cumulative, q * cumulative[-1]), len(values) - 1)])
+
+
+def _pair(a: str, b: str, mass_a: np.ndarray, mass_b: np.ndarray, w: np.ndarray) -> MassPair:
+    ratio = mass_a / mass_b
+    return MassPair(a, b, float(w @ (mass_a > mass_b) / w.sum()), _weighted_quantile(ratio, w, 0.5),
+                    _weighted_quantile(ratio, w, 0.05), _weighted_quantile(ratio, w, 0.95))
 
 
 def _answer(observation: Observation, settings: InferSettings, result: AmisResult, unknowns: tuple[Unknown, ...],
@@ -218,8 +238,7 @@ def _answer(observation: Observation, settings: InferSettings, result: AmisResul
                                   _weighted_quantile(x, wj, 0.5), _weighted_quantile(x, wj, 0.05),
                                   _weighted_quantile(x, wj, 0.95), result.ess))
     masses = [j for j, u in enumerate(unknowns) if u.property == "mass_kg"]
-    heavier = tuple((unknowns[a].label, unknowns[b].label,
-                     float(w[usable] @ (values[usable, a] > values[usable, b]) / w[usable].sum()))
+    heavier = tuple(_pair(unknowns[a].label, unknowns[b].label, values[usable, a], values[usable, b], w[usable])
                     for a, b in itertools.combinations(masses, 2))
     medians = {(body, u.property): e.median for u, e in zip(unknowns, estimates) for body in u.applies_to(observation.scene)}
     refined = with_values(observation.scene, medians, {})

@@ -5,13 +5,18 @@ object has travelled (benchmarks/results/witness: 0.2% on a plain slide, 5-12% a
 bounces). A likelihood of the tracker's noise alone would be confidently wrong on observations made
 elsewhere, so each object's residual along each axis is modelled as
 
-    r(t) = noise(t) + model_error_fraction * travelled(t) * g,    noise ~ N(0, sd^2) per frame, g ~ N(0, 1)
+    r(t) = noise(t) + model_error_fraction * travelled(t) * g(t),    noise ~ N(0, sd^2) per frame,
 
-one g per object and axis for the whole window: an engine whose friction or restitution is a little
-off is off by a share of the path that grows through the window, not afresh at every frame (treating
-it as fresh per frame would let 60 frames shrink it 8-fold). The covariance is diagonal plus rank one,
-so its density is closed form (Sherman-Morrison), O(frames). ``travelled`` is the rollout's own path
-length, so an object at rest adds no error however long it rests. Orientations, where a frame gives
+g a unit Gaussian process with correlation exp(-|t - t'| / MODEL_ERROR_MEMORY_S): an engine whose
+friction or restitution is a little off is off by a share of the path, the same share for frames
+close in time (treated as fresh at every frame, 60 frames would shrink it 8-fold), while after a
+bounce or a collision the error may change its sign (a single share for the whole window, rank one,
+left the ball's bounces confidently wrong). ``travelled`` is the observed path's length (the frames
+smoothed over ``SMOOTHING_FRAMES``, so the tracker's noise does not add path), so an object at rest
+adds no error however long it rests. It is the observation's, not each rollout's: a covariance that
+shrank with the rollout's own path would favour candidates that move less (their smaller
+determinant outweighed centimetres of misfit). So the covariance is one per object for the whole
+inference, factored once (``Tracks``). Orientations, where a frame gives
 one and the observation a ``yaw_sd_rad``, add the angle between observed and simulated orientation,
 its SD growing with the angle the object has turned.
 """
@@ -26,6 +31,10 @@ import numpy as np
 #: benchmarks/results/witness: pybullet's and MuJoCo's ends part by 0.2% of the travel on plain
 #: slides and rolls, 4-12% after a collision or bounce; 5% is stated for all, not fitted
 DEFAULT_MODEL_ERROR_FRACTION = 0.05
+#: how long the physics' error keeps its direction (about one bounce of a ball dropped 30 cm)
+MODEL_ERROR_MEMORY_S = 0.25
+#: frames averaged to read the observed path's length through the tracker's noise
+SMOOTHING_FRAMES = 5
 #: an observation is "consistent" when the best rollout stays within this many SDs of every frame
 CONSISTENT_WITHIN_SD = 5.0
 
@@ -41,20 +50,44 @@ class Fit:
     worst_sds: float  # that residual over its frame's allowed SD (noise and model error)
 
 
-def path_length_m(times_s: np.ndarray, positions_m: np.ndarray, at_s: np.ndarray) -> np.ndarray:
-    """Distance travelled along the recorded path up to each of ``at_s``."""
-    steps = np.linalg.norm(np.diff(positions_m, axis=0), axis=1)
-    travelled = np.concatenate([[0.0], np.cumsum(steps)])
-    return np.interp(at_s, times_s, travelled)
+@dataclass(frozen=True)
+class Track:
+    """One object's frames, and the covariance of its residuals, factored."""
+
+    name: str
+    times_s: np.ndarray
+    positions_m: np.ndarray  # (m, 3)
+    orientations_xyzw: np.ndarray  # (m, 4), NaN rows where a frame gave none
+    allowed_sd_m: np.ndarray  # (m,) each frame's SD of the residual's length (noise and model error)
+    cholesky: np.ndarray  # (m, m) of sd^2 I + (scale scale^T) o K
+    log_det: float
+    turned_rad: np.ndarray  # (m,) the observed orientation's turn so far (NaN-free; 0 where unknown)
 
 
-def rank_one_log_density(residual: np.ndarray, sd_m: float, shape: np.ndarray) -> float:
-    """log N(residual; 0, sd^2 I + shape shape^T), by Sherman-Morrison and the matrix determinant lemma."""
-    a = sd_m * sd_m
-    ss, sr, rr = float(shape @ shape), float(shape @ residual), float(residual @ residual)
-    quadratic = (rr - sr * sr / (a + ss)) / a
-    log_det = len(residual) * math.log(a) + math.log1p(ss / a)
-    return -0.5 * (quadratic + log_det + len(residual) * math.log(2 * math.pi))
+def observed_path_m(positions_m: np.ndarray) -> np.ndarray:
+    """Path length up to each frame, along the frames smoothed by a centred moving average."""
+    m = len(positions_m)
+    half = min(SMOOTHING_FRAMES // 2, max(0, (m - 1) // 2))
+    padded = np.concatenate([np.repeat(positions_m[:1], half, 0), positions_m, np.repeat(positions_m[-1:], half, 0)])
+    kernel = np.ones(2 * half + 1) / (2 * half + 1)
+    smooth = np.stack([np.convolve(padded[:, a], kernel, mode="valid") for a in range(3)], axis=1)
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(smooth, axis=0), axis=1))])
+
+
+def track(name: str, times_s, positions_m, orientations_xyzw, sd_m: float, model_error_fraction: float) -> Track:
+    times_s, positions_m = np.asarray(times_s, float), np.asarray(positions_m, float)
+    scale = model_error_fraction * observed_path_m(positions_m)
+    correlation = np.exp(-np.abs(times_s[:, None] - times_s[None, :]) / MODEL_ERROR_MEMORY_S)
+    cov = np.outer(scale, scale) * correlation + sd_m * sd_m * np.eye(len(times_s))
+    chol = np.linalg.cholesky(cov)
+    q = np.asarray(orientations_xyzw, float)
+    seen = ~np.isnan(q[:, 0])
+    turned = np.zeros(len(q))
+    if seen.sum() > 1:
+        steps = rotation_angle_rad(q[seen][1:], q[seen][:-1])
+        turned[seen] = np.concatenate([[0.0], np.cumsum(steps)])
+    return Track(name, times_s, positions_m, q, np.sqrt(3 * sd_m ** 2 + 3 * scale ** 2), chol,
+                 float(2 * np.log(np.diag(chol)).sum()), turned)
 
 
 def interpolate_positions(times_s: np.ndarray, positions_m: np.ndarray, at_s: np.ndarray) -> np.ndarray:
@@ -67,34 +100,24 @@ def rotation_angle_rad(a_xyzw: np.ndarray, b_xyzw: np.ndarray) -> np.ndarray:
     return 2 * np.arccos(np.clip(dots, 0.0, 1.0))
 
 
-def fit(tracks: dict, rolled: dict, sd_m: float, yaw_sd_rad: float | None, model_error_fraction: float) -> Fit:
-    """``tracks``: name -> (times, observed positions, observed orientations or None per frame);
-    ``rolled``: name -> (times, simulated positions, simulated orientations)."""
+def fit(tracks, rolled: dict, yaw_sd_rad: float | None, model_error_fraction: float) -> Fit:
+    """The frames of ``tracks`` (``Track``s) against ``rolled``: name -> (times, simulated positions,
+    simulated orientations)."""
     total, worst = 0.0, (0.0, 0.0, "", 0.0)
-    for name, (times, observed, observed_orn) in tracks.items():
-        sim_t, sim_p, sim_q = rolled[name]
-        at = interpolate_positions(sim_t, sim_p, times)
-        travelled = path_length_m(sim_t, sim_p, times)
-        shape = model_error_fraction * travelled
-        residual = observed - at
-        for axis in range(3):
-            total += rank_one_log_density(residual[:, axis], sd_m, shape)
-        distance = np.linalg.norm(residual, axis=1)
-        allowed = np.sqrt(3 * sd_m ** 2 + 3 * shape ** 2)
-        i = int(np.argmax(distance / allowed))
-        if distance[i] / allowed[i] > worst[3]:
-            worst = (float(distance[i]), float(times[i]), name, float(distance[i] / allowed[i]))
-        if yaw_sd_rad is not None and observed_orn is not None:
-            seen = ~np.isnan(observed_orn[:, 0])
-            if seen.any():
-                nearest = np.clip(np.searchsorted(sim_t, times[seen]), 0, len(sim_t) - 1)
-                angle = rotation_angle_rad(observed_orn[seen], sim_q[nearest])
-                turned = _turned_rad(sim_q, sim_t, times[seen])
-                sd = np.sqrt(yaw_sd_rad ** 2 + (model_error_fraction * turned) ** 2)
-                total += float(np.sum(-0.5 * (angle / sd) ** 2 - np.log(sd) - 0.5 * math.log(2 * math.pi)))
+    for seen in tracks:
+        sim_t, sim_p, sim_q = rolled[seen.name]
+        residual = seen.positions_m - interpolate_positions(sim_t, sim_p, seen.times_s)
+        solved = np.linalg.solve(seen.cholesky, residual)
+        m = len(seen.times_s)
+        total += float(-0.5 * (np.sum(solved * solved) + 3 * seen.log_det + 3 * m * math.log(2 * math.pi)))
+        ratio = np.linalg.norm(residual, axis=1) / seen.allowed_sd_m
+        i = int(np.argmax(ratio))
+        if ratio[i] > worst[3]:
+            worst = (float(np.linalg.norm(residual[i])), float(seen.times_s[i]), seen.name, float(ratio[i]))
+        has = ~np.isnan(seen.orientations_xyzw[:, 0])
+        if yaw_sd_rad is not None and has.any():
+            nearest = np.clip(np.searchsorted(sim_t, seen.times_s[has]), 0, len(sim_t) - 1)
+            angle = rotation_angle_rad(seen.orientations_xyzw[has], sim_q[nearest])
+            sd = np.sqrt(yaw_sd_rad ** 2 + (model_error_fraction * seen.turned_rad[has]) ** 2)
+            total += float(np.sum(-0.5 * (angle / sd) ** 2 - np.log(sd) - 0.5 * math.log(2 * math.pi)))
     return Fit(total, *worst)
-
-
-def _turned_rad(orientations_xyzw: np.ndarray, times_s: np.ndarray, at_s: np.ndarray) -> np.ndarray:
-    steps = rotation_angle_rad(orientations_xyzw[1:], orientations_xyzw[:-1])
-    return np.interp(at_s, times_s, np.concatenate([[0.0], np.cumsum(steps)]))

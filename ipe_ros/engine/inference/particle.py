@@ -21,23 +21,21 @@ from ..scene.bodies import Scene
 from .likelihood import Fit, fit
 
 #: the rollout's answer is its trajectory: the query that waits for rest and reads where bodies are
-_SPEC = QuerySpec(queries=frozenset({"final_pose"}))
+TRAJECTORY_SPEC = QuerySpec(queries=frozenset({"final_pose"}))
 #: no noise of the model's own: the candidates' values and velocities are the only differences
-_EXACT = ModelConfig(sigma_m=0.0, samples=1, object_noise=False)
+EXACT_MODEL = ModelConfig(sigma_m=0.0, samples=1, object_noise=False)
 
 
 @dataclass(frozen=True)
 class ParticleTask:
     """One candidate: ``scene`` holds its property values and initial velocities.
 
-    ``tracks``: per observed object, (name, times (m,), positions (m, 3), orientations (m, 4) with NaN
-    rows where a frame gave none, or None)."""
+    ``tracks``: the observed objects' frames (``likelihood.Track``), factored once for all candidates."""
 
     index: int
     scene: Scene
     settings: SimSettings
     tracks: tuple
-    position_sd_m: float
     yaw_sd_rad: float | None
     model_error_fraction: float
     deadline_unix_s: float | None = None
@@ -54,7 +52,7 @@ class ParticleOutcome:
 
 
 def run_particle(task: ParticleTask) -> ParticleOutcome:
-    sample = SampleTask(scene=task.scene, model=_EXACT, settings=task.settings, query=_SPEC, index=task.index,
+    sample = SampleTask(scene=task.scene, model=EXACT_MODEL, settings=task.settings, query=TRAJECTORY_SPEC, index=task.index,
                         seed=np.random.SeedSequence(task.index), record_every=1, deadline_unix_s=task.deadline_unix_s)
     outcome = run_sample(sample)
     if not outcome.ok:
@@ -64,21 +62,19 @@ def run_particle(task: ParticleTask) -> ParticleOutcome:
     positions = np.stack([frame[1] for frame in trajectory])  # (T, n, 3) centres of mass
     orientations = np.stack([frame[2] for frame in trajectory])
     index = {b.name: i for i, b in enumerate(task.scene.dynamic_objects)}
-    rolled, observed = {}, {}
-    for name, t, p, q in task.tracks:
-        body = task.scene.dynamic_objects[index[name]]
-        origins = _origins(body, positions[:, index[name]], orientations[:, index[name]])
-        rolled[name] = (times, origins, orientations[:, index[name]])
-        observed[name] = (t, p, q)
-    return ParticleOutcome(task.index, True, fit=fit(observed, rolled, task.position_sd_m, task.yaw_sd_rad,
-                                                      task.model_error_fraction))
+    rolled = {}
+    for seen in task.tracks:
+        i = index[seen.name]
+        rolled[seen.name] = (times, origins_of(task.scene.dynamic_objects[i], positions[:, i], orientations[:, i]),
+                             orientations[:, i])
+    return ParticleOutcome(task.index, True, fit=fit(task.tracks, rolled, task.yaw_sd_rad, task.model_error_fraction))
 
 
 def lost_particle(task: ParticleTask, reason: str) -> ParticleOutcome:
     return ParticleOutcome(task.index, False, f"WorkerLost: {reason}", worker_lost=True)
 
 
-def _origins(body, centres_m: np.ndarray, orientations_xyzw: np.ndarray) -> np.ndarray:
+def origins_of(body, centres_m: np.ndarray, orientations_xyzw: np.ndarray) -> np.ndarray:
     """The body frame's origins (what a tracker reports) from its centres of mass."""
     local = shapes.centre_of_mass_m(body.shape)
     if not np.any(local):

@@ -6,6 +6,7 @@ tracker's frame rate, with its noise. For the tests (analytic cases), the docs' 
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -14,7 +15,7 @@ from ..scene.bodies import Body, Box, Floor, Scene
 from ..scene.format import scene_to_dict
 from ..scene.shapes import Sphere
 from .observation import OBSERVATION_FORMAT
-from .particle import _EXACT, _SPEC, _origins
+from .particle import EXACT_MODEL, TRAJECTORY_SPEC, origins_of
 from ..sampling.rollout import SampleTask, run_sample
 
 UPRIGHT = (0.0, 0.0, 0.0, 1.0)
@@ -28,7 +29,7 @@ def observe(scene: Scene, window_s: float, rng: np.random.Generator, *, unknowns
     1/frame_rate_hz s with N(0, position_sd_m^2) noise per axis. ``velocity_unknown``: objects whose
     initial velocity the observation leaves out."""
     rolled = dataclasses.replace(scene, horizon_s=window_s)
-    task = SampleTask(scene=rolled, model=_EXACT, settings=preset(settings), query=_SPEC, index=0,
+    task = SampleTask(scene=rolled, model=EXACT_MODEL, settings=preset(settings), query=TRAJECTORY_SPEC, index=0,
                       seed=np.random.SeedSequence(0), record_every=1)
     outcome = run_sample(task)
     if not outcome.ok:
@@ -40,7 +41,7 @@ def observe(scene: Scene, window_s: float, rng: np.random.Generator, *, unknowns
     frame_times = np.arange(1, int(np.floor(window_s * frame_rate_hz + 1e-9)) + 1) / frame_rate_hz
     frames = [{"t_s": round(float(t), 6), "objects": {}} for t in frame_times]
     for i, body in enumerate(scene.dynamic_objects):
-        origins = _origins(body, centres[:, i], orientations[:, i])
+        origins = origins_of(body, centres[:, i], orientations[:, i])
         for frame, t in zip(frames, frame_times):
             at = [float(np.interp(t, times, origins[:, axis])) for axis in range(3)]
             noisy = np.asarray(at) + position_sd_m * rng.standard_normal(3)
@@ -103,3 +104,66 @@ def probe_push(rng: np.random.Generator, mass_kg: float = 0.8, friction: float =
     for item in observation["scene"]["objects"]:
         item["linear_velocity_m_s"] = [0.0, 0.0, 0.0]
     return observation
+
+
+@dataclass(frozen=True)
+class KnownCase:
+    """An observation made at known values: ``truth`` by unknown label; ``heavier``: (a, b) mass
+    labels where a's truth is the larger. ``scored``: what the observation can tell (a single
+    mass is not, where only the ratio shows: then "ratio", m_a / m_b of ``heavier``)."""
+
+    family: str
+    observation: dict
+    truth: dict
+    heavier: tuple[str, str] | None = None
+    scored: tuple[str, ...] = ()
+
+    @property
+    def true_ratio(self) -> float:
+        return self.truth[self.heavier[0]] / self.truth[self.heavier[1]]
+
+
+def slide_case(seed: int) -> KnownCase:
+    """A box slid at a random heading and speed: its friction (stops after v^2 / (2 mu g))."""
+    rng = np.random.default_rng(seed)
+    friction, speed, heading = rng.uniform(0.2, 0.9), rng.uniform(1.0, 2.0), rng.uniform(-np.pi, np.pi)
+    obs = observe(sliding_box(speed, friction, heading), 1.2, rng, unknowns=[
+        {"object": "box", "property": "friction", "prior": {"uniform": [0.05, 1.2]}}])
+    return KnownCase("slide", obs, {"box.friction": friction}, scored=("box.friction",))
+
+
+def head_on_case(seed: int) -> KnownCase:
+    """Two boxes colliding head-on: their mass ratio (momentum exchanged)."""
+    rng = np.random.default_rng(seed)
+    ma, mb = np.exp(rng.uniform(np.log(0.2), np.log(2.0), 2))
+    obs = observe(head_on(ma, mb), 1.0, rng, unknowns=[
+        {"object": "a", "property": "mass_kg", "prior": {"log_uniform": [0.05, 5.0]}},
+        {"object": "b", "property": "mass_kg", "prior": {"log_uniform": [0.05, 5.0]}}])
+    heavier = ("a.mass_kg", "b.mass_kg") if ma > mb else ("b.mass_kg", "a.mass_kg")
+    return KnownCase("head-on", obs, {"a.mass_kg": ma, "b.mass_kg": mb}, heavier, ("ratio",))
+
+
+def bounce_case(seed: int) -> KnownCase:
+    """A ball dropped from 0.5 m: its restitution (each bounce e^2 as high)."""
+    rng = np.random.default_rng(seed)
+    restitution = rng.uniform(0.2, 0.8)
+    obs = observe(bouncing_ball(restitution), 1.5, rng, unknowns=[
+        {"object": "ball", "property": "restitution", "prior": {"uniform": [0.0, 1.0]}}])
+    return KnownCase("bounce", obs, {"ball.restitution": restitution}, scored=("ball.restitution",))
+
+
+def tower_case(seed: int) -> KnownCase:
+    """A falling tower of red and yellow blocks, one colour 2-4x denser: which is heavier."""
+    rng = np.random.default_rng(seed)
+    heavy = "red" if rng.random() < 0.5 else "yellow"
+    scene = heavy_light_tower(heavy, rng.uniform(2.0, 4.0), rng)
+    prior = {"log_uniform": [0.05, 5.0]}
+    obs = observe(scene, 1.5, rng, unknowns=[{"group": "red", "property": "mass_kg", "prior": prior},
+                                             {"group": "yellow", "property": "mass_kg", "prior": prior}])
+    masses = {g: next(b.resolved_mass_kg for b in scene.objects if b.group == g) for g in ("red", "yellow")}
+    light = "yellow" if heavy == "red" else "red"
+    return KnownCase("tower", obs, {f"group:{g}.mass_kg": m for g, m in masses.items()},
+                     (f"group:{heavy}.mass_kg", f"group:{light}.mass_kg"), ("ratio",))
+
+
+CASES = {"slide": slide_case, "head-on": head_on_case, "bounce": bounce_case, "tower": tower_case}

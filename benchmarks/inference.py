@@ -1,0 +1,84 @@
+"""Properties from observed motion: coverage, error and cost of ``ipe infer`` on observations made at
+known values (engine/inference/known.py: slide, head-on, bounce, tower).
+
+    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST .venv/bin/python benchmarks/inference.py --cases 50 --workers 2
+
+Writes benchmarks/results/inference/{inference.json,README.md}.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ipe_ros.engine.compute.pool import WorkerPool
+from ipe_ros.engine.inference.infer import InferSettings, infer
+from ipe_ros.engine.inference.known import CASES
+from ipe_ros.engine.inference.observation import observation_from_dict
+
+OUT = Path(__file__).parent / "results" / "inference"
+
+
+def run_family(family: str, cases: int, pool, settings: InferSettings) -> dict:
+    rows = []
+    for seed in range(cases):
+        case = CASES[family](seed)
+        started = time.perf_counter()
+        answer = infer(observation_from_dict(case.observation), settings, pool.map if pool else None)
+        row = {"seed": seed, "seconds": time.perf_counter() - started, "consistent": answer.consistent,
+               "candidates": answer.candidates, "ess": answer.ess, "truth": {k: float(v) for k, v in case.truth.items()}, "covered": {}, "error": {}}
+        if answer.consistent:
+            for label in case.scored:
+                if label == "ratio":
+                    pair = next(p for p in answer.heavier if {p.a, p.b} == set(case.heavier))
+                    flip = pair.a != case.heavier[0]
+                    low, median, high = pair.ratio_low_90, pair.ratio_median, pair.ratio_high_90
+                    if flip:
+                        low, median, high = 1 / high, 1 / median, 1 / low
+                    truth = case.true_ratio
+                    row["heavier_right"] = bool((1 - pair.p_a_heavier if flip else pair.p_a_heavier) > 0.5)
+                else:
+                    e = answer.estimate(label)
+                    low, median, high, truth = e.low_90, e.median, e.high_90, case.truth[label]
+                row["covered"][label] = bool(low <= truth <= high)
+                row["error"][label] = float((median - truth) / truth)
+        rows.append(row)
+        print(family, seed, f"{row['seconds']:.1f} s", row["covered"], {k: round(v, 3) for k, v in row["error"].items()},
+              flush=True)
+    covered = [c for r in rows for c in r["covered"].values()]
+    summary = {"family": family, "cases": cases, "coverage_90": float(np.mean(covered)) if covered else None,
+               "median_abs_error": float(np.median([abs(v) for r in rows for v in r["error"].values()])),
+               "median_seconds": float(np.median([r["seconds"] for r in rows])),
+               "max_seconds": float(np.max([r["seconds"] for r in rows])),
+               "inconsistent": sum(not r["consistent"] for r in rows)}
+    if any("heavier_right" in r for r in rows):
+        summary["heavier_right"] = float(np.mean([r["heavier_right"] for r in rows if "heavier_right" in r]))
+    return {"summary": summary, "rows": rows}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cases", type=int, default=50)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--families", default=",".join(CASES))
+    parser.add_argument("--preset", default="default")
+    args = parser.parse_args()
+    settings = InferSettings(preset=args.preset)
+    pool = WorkerPool(args.workers) if args.workers else None
+    try:
+        results = {f: run_family(f, args.cases, pool, settings) for f in args.families.split(",")}
+    finally:
+        if pool:
+            pool.close()
+    OUT.mkdir(parents=True, exist_ok=True)
+    (OUT / "inference.json").write_text(json.dumps(results, indent=1))
+    for family, result in results.items():
+        print(json.dumps(result["summary"]))
+
+
+if __name__ == "__main__":
+    main()

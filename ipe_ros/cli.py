@@ -5,12 +5,14 @@
                 [--workers W] [--ci-width W] [--deadline S] [--horizon S] [--until-rest] [--budget S] [--json] [--png FILE]
                 [--no-self-check] [--verify-samples N]
     ipe ask remove|support|clear|place|push PATH ...   (questions about an action: ipe_ros/cli_ask.py)
+    ipe infer OBS.json [--unknown LABEL ...] [--json] ...  (properties from observed motion: ipe_ros/cli_infer.py)
     ipe generate tower --count N --seed S -o FILE [--pairs RATIO]
     ipe generate table --configurations N --seed S -o FILE
     ipe generate catalogue --count N --seed S -o FILE
     ipe generate capped-tower [--ball-speed M_S] -o FILE
     ipe generate depth-example -o DIR
     ipe generate zoo --per-family N --seed S [--families launch,dominoes,...] -o FILE
+    ipe generate probe-push [--seed S] [--mass KG] [--friction MU] -o OBS.json
     ipe demo
     ipe experiment NAME|all [--quick] [--out DIR] [--data DIR] [--samples K] [--stimuli N] [--seed N]
                 [--workers W] [--preset NAME] [--resamples N] [--grid-samples K]
@@ -29,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from .cli_ask import add_ask_parser, cmd_ask
+from .cli_infer import add_infer_parser, cmd_infer
 from .cli_inputs import add_input_options, finite
 from .cli_predict import EXIT_BAD_INPUT, cmd_predict, format_table, run_predictions, sample_map
 from .cli_queries import add_query_parameter_options
@@ -95,6 +98,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "(one scene only)")
 
     add_ask_parser(sub, _OneLineParser)
+    add_infer_parser(sub)
 
     g = sub.add_parser("generate", help="write generated scenes (JSON)")
     gsub = g.add_subparsers(dest="kind", required=True, parser_class=_OneLineParser)
@@ -126,6 +130,13 @@ def build_parser() -> argparse.ArgumentParser:
     zoo.add_argument("--seed", type=int, required=True)
     zoo.add_argument("--families", default=",".join(FAMILIES), help="comma-separated (default: all)")
     zoo.add_argument("-o", "--output", required=True)
+    probe = gsub.add_parser("probe-push", help="an observation (ipe_ros.observation/1) of a box pushed with a known "
+                                               "impulse, made at known mass and friction (for ipe infer)")
+    probe.add_argument("--seed", type=int, default=0, help="the tracker noise's seed")
+    probe.add_argument("--mass", type=finite, default=0.8, metavar="KG", help="the box's true mass (default 0.8 kg)")
+    probe.add_argument("--friction", type=finite, default=0.45, metavar="MU",
+                       help="the box's true friction on a floor of friction 1 (default 0.45)")
+    probe.add_argument("-o", "--output", required=True)
 
     sub.add_parser("demo", help="predict on the built-in example tower (IPE and ground truth)")
 
@@ -155,6 +166,19 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def cmd_generate(args) -> int:
+    if args.kind == "probe-push":
+        import json
+
+        from .engine.inference.known import probe_push
+
+        if not 0.05 <= args.mass <= 5:
+            raise ConfigError("--mass", f"must be in [0.05, 5] kg (the example's prior), got {args.mass:g}")
+        if not 0.05 <= args.friction <= 1.2:
+            raise ConfigError("--friction", f"must be in [0.05, 1.2] (the example's prior), got {args.friction:g}")
+        observation = probe_push(np.random.default_rng(args.seed), mass_kg=args.mass, friction=args.friction)
+        Path(args.output).write_text(json.dumps(observation, indent=1) + "\n")
+        print(f"wrote an observation of {len(observation['frames'])} frames to {args.output}", file=sys.stderr)
+        return 0
     if args.kind == "depth-example":
         from .engine.vision.depth_io import write_depth_example
 
@@ -290,6 +314,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_generate(args)
         if args.command == "ask":
             return cmd_ask(args)
+        if args.command == "infer":
+            return cmd_infer(args)
         if args.command == "experiment":
             return cmd_experiment(args)
         return cmd_demo(args)

@@ -30,10 +30,14 @@ from ..sampling.montecarlo import Plan, child_seeds
 
 @dataclass(frozen=True)
 class AmisSettings:
-    particles_per_round: int = 48
-    max_rounds: int = 16
+    particles_per_round: int = 32
+    max_rounds: int = 12
     #: stop once the untempered weights' effective sample size reaches this
-    target_ess: float = 100.0
+    target_ess: float = 60.0
+    #: the answer's weights keep at least this effective size: where the full likelihood leaves
+    #: fewer (a chaotic scene, too few rollouts), it is raised to the power that keeps this many
+    #: (a coarsened posterior, Miller & Dunson 2019), and the answer says so; never one lucky rollout
+    min_ess: float = 20.0
     defensive_fraction: float = 0.1
     #: the next proposal is fitted to tempered weights whose effective size is this share of a round
     adapt_fraction: float = 0.2
@@ -50,6 +54,7 @@ class AmisResult:
     rounds: int
     ess: float
     stopped_by: str  # "ess", "rounds" or "budget"
+    likelihood_power: float = 1.0  # below 1: the likelihood coarsened to keep ``min_ess``
 
     @property
     def weights(self) -> np.ndarray:
@@ -143,9 +148,10 @@ def amis(priors: Sequence, make_task: Callable[[int, np.ndarray], object],
             break
         proposals.append(_fitted(coordinates, weights(_temperature(weights, settings.adapt_fraction * n)),
                                       settings.spread))
-    final = weights(1.0)
+    power = _temperature(weights, min(settings.min_ess, np.isfinite(log_likelihoods).sum() / 2))
+    final = weights(power)
     return AmisResult(coordinates, log_likelihoods, _normalised(final), outcomes, len(proposals), effective_size(final),
-                      stopped_by)
+                      stopped_by, power)
 
 
 def _temperature(weights: Callable[[float], np.ndarray], keep: float) -> float:

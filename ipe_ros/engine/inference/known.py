@@ -76,16 +76,21 @@ def bouncing_ball(restitution: float, height_m: float = 0.5) -> Scene:
     return Scene("bouncing-ball", (ball,), Floor(friction=0.5, restitution=1.0))
 
 
-def heavy_light_tower(heavy: str, ratio: float, rng: np.random.Generator, blocks: int = 6) -> Scene:
-    """A leaning tower of red and yellow blocks (alternating), offsets drawn so it falls; one colour
-    ``ratio`` times denser than the other (Hamrick et al. 2016's "which is heavier?")."""
-    objects, x = [], 0.0
-    for i in range(blocks):
-        colour = "red" if i % 2 == 0 else "yellow"
+def heavy_light_tower(heavy: str, ratio: float, rng: np.random.Generator) -> Scene:
+    """A plank balanced on a post, a red stack on one end and a yellow stack on the other, about as
+    far out: one colour ``ratio`` times denser, so the tower tips and falls toward it (Hamrick et
+    al. 2016's "which is heavier?", watched instead of judged). Post and plank are grey, of known mass."""
+    post = Box("post", (0.06, 0.1, 0.2), (0.0, 0.0, 0.1), UPRIGHT, 0.6, 0.0, density_kg_m3=500.0, group="grey")
+    plank = Box("plank", (0.4, 0.1, 0.03), (float(rng.uniform(-0.005, 0.005)), 0.0, 0.215), UPRIGHT, 0.6, 0.0,
+                density_kg_m3=500.0, group="grey")
+    objects, reach = [post, plank], float(rng.uniform(0.11, 0.16))
+    for side, colour in ((-1, "red"), (1, "yellow")):
         density = 500.0 * (ratio if colour == heavy else 1.0)
-        x += 0.0 if i == 0 else float(rng.uniform(0.02, 0.045))
-        objects.append(Box(f"block{i}", (0.1, 0.1, 0.06), (x, float(rng.uniform(-0.01, 0.01)), 0.03 + 0.06 * i),
-                           UPRIGHT, 0.6, 0.0, density_kg_m3=density, group=colour))
+        x = side * (reach + float(rng.uniform(-0.01, 0.01)))
+        for level in range(2):
+            objects.append(Box(f"{colour}{level}", (0.07, 0.07, 0.07), (x, float(rng.uniform(-0.01, 0.01)),
+                                                                         0.265 + 0.07 * level),
+                               UPRIGHT, 0.6, 0.0, density_kg_m3=density, group=colour))
     return Scene("heavy-light-tower", tuple(objects), Floor(friction=0.6, restitution=0.0))
 
 
@@ -153,7 +158,7 @@ def bounce_case(seed: int) -> KnownCase:
 
 
 def tower_case(seed: int) -> KnownCase:
-    """A falling tower of red and yellow blocks, one colour 2-4x denser: which is heavier."""
+    """A falling tower of red and yellow blocks on a balance, one colour 2-4x denser: which is heavier."""
     rng = np.random.default_rng(seed)
     heavy = "red" if rng.random() < 0.5 else "yellow"
     scene = heavy_light_tower(heavy, rng.uniform(2.0, 4.0), rng)

@@ -16,7 +16,14 @@ smoothed over ``SMOOTHING_FRAMES``, so the tracker's noise does not add path), s
 adds no error however long it rests. It is the observation's, not each rollout's: a covariance that
 shrank with the rollout's own path would favour candidates that move less (their smaller
 determinant outweighed centimetres of misfit). So the covariance is one per object for the whole
-inference, factored once (``Tracks``). Orientations, where a frame gives
+inference, factored once (``Track``).
+
+Chaos is the engine's own: a candidate rolled out from starts a tracker's error apart may end
+centimetres or decimetres apart (a falling tower). One rollout per candidate would let a lucky start
+decide. So a candidate of a scene where that can happen is rolled out several times (``particle``),
+and its frames are judged against the replicates' mean, their spread added to the covariance as a
+third term of the same form (a synthetic likelihood, Wood 2010, made for chaotic dynamics); where
+the first two replicates agree within the tracker's noise, no more are run. Orientations, where a frame gives
 one and the observation a ``yaw_sd_rad``, add the angle between observed and simulated orientation,
 its SD growing with the angle the object has turned.
 """
@@ -58,7 +65,9 @@ class Track:
     times_s: np.ndarray
     positions_m: np.ndarray  # (m, 3)
     orientations_xyzw: np.ndarray  # (m, 4), NaN rows where a frame gave none
-    allowed_sd_m: np.ndarray  # (m,) each frame's SD of the residual's length (noise and model error)
+    sd_m: float
+    scale_m: np.ndarray  # (m,) the physics' error's SD at each frame
+    correlation: np.ndarray  # (m, m) K
     cholesky: np.ndarray  # (m, m) of sd^2 I + (scale scale^T) o K
     log_det: float
     turned_rad: np.ndarray  # (m,) the observed orientation's turn so far (NaN-free; 0 where unknown)
@@ -86,8 +95,8 @@ def track(name: str, times_s, positions_m, orientations_xyzw, sd_m: float, model
     if seen.sum() > 1:
         steps = rotation_angle_rad(q[seen][1:], q[seen][:-1])
         turned[seen] = np.concatenate([[0.0], np.cumsum(steps)])
-    return Track(name, times_s, positions_m, q, np.sqrt(3 * sd_m ** 2 + 3 * scale ** 2), chol,
-                 float(2 * np.log(np.diag(chol)).sum()), turned)
+    return Track(name, times_s, positions_m, q, sd_m, scale, correlation, chol, float(2 * np.log(np.diag(chol)).sum()),
+                 turned)
 
 
 def interpolate_positions(times_s: np.ndarray, positions_m: np.ndarray, at_s: np.ndarray) -> np.ndarray:
@@ -100,24 +109,38 @@ def rotation_angle_rad(a_xyzw: np.ndarray, b_xyzw: np.ndarray) -> np.ndarray:
     return 2 * np.arccos(np.clip(dots, 0.0, 1.0))
 
 
-def fit(tracks, rolled: dict, yaw_sd_rad: float | None, model_error_fraction: float) -> Fit:
-    """The frames of ``tracks`` (``Track``s) against ``rolled``: name -> (times, simulated positions,
-    simulated orientations)."""
+@dataclass(frozen=True)
+class Predicted:
+    """A candidate's rollouts read at one track's frame times: their mean position, their spread
+    (SD per axis, None for one rollout or where they agree), orientations (the first replicate's)."""
+
+    positions_m: np.ndarray  # (m, 3)
+    spread_m: np.ndarray | None  # (m,)
+    orientations_xyzw: np.ndarray  # (m, 4)
+
+
+def fit(tracks, predicted: dict, yaw_sd_rad: float | None, model_error_fraction: float) -> Fit:
+    """The frames of ``tracks`` (``Track``s) against ``predicted``: name -> ``Predicted``."""
     total, worst = 0.0, (0.0, 0.0, "", 0.0)
     for seen in tracks:
-        sim_t, sim_p, sim_q = rolled[seen.name]
-        residual = seen.positions_m - interpolate_positions(sim_t, sim_p, seen.times_s)
-        solved = np.linalg.solve(seen.cholesky, residual)
+        guess = predicted[seen.name]
+        residual = seen.positions_m - guess.positions_m
+        chol, log_det, allowed = seen.cholesky, seen.log_det, seen.sd_m ** 2 + seen.scale_m ** 2
+        if guess.spread_m is not None:
+            cov = chol @ chol.T + np.outer(guess.spread_m, guess.spread_m) * seen.correlation
+            chol = np.linalg.cholesky(cov)
+            log_det = float(2 * np.log(np.diag(chol)).sum())
+            allowed = allowed + guess.spread_m ** 2
+        solved = np.linalg.solve(chol, residual)
         m = len(seen.times_s)
-        total += float(-0.5 * (np.sum(solved * solved) + 3 * seen.log_det + 3 * m * math.log(2 * math.pi)))
-        ratio = np.linalg.norm(residual, axis=1) / seen.allowed_sd_m
+        total += float(-0.5 * (np.sum(solved * solved) + 3 * log_det + 3 * m * math.log(2 * math.pi)))
+        ratio = np.linalg.norm(residual, axis=1) / np.sqrt(3 * allowed)
         i = int(np.argmax(ratio))
         if ratio[i] > worst[3]:
             worst = (float(np.linalg.norm(residual[i])), float(seen.times_s[i]), seen.name, float(ratio[i]))
         has = ~np.isnan(seen.orientations_xyzw[:, 0])
         if yaw_sd_rad is not None and has.any():
-            nearest = np.clip(np.searchsorted(sim_t, seen.times_s[has]), 0, len(sim_t) - 1)
-            angle = rotation_angle_rad(seen.orientations_xyzw[has], sim_q[nearest])
+            angle = rotation_angle_rad(seen.orientations_xyzw[has], guess.orientations_xyzw[has])
             sd = np.sqrt(yaw_sd_rad ** 2 + (model_error_fraction * seen.turned_rad[has]) ** 2)
             total += float(np.sum(-0.5 * (angle / sd) ** 2 - np.log(sd) - 0.5 * math.log(2 * math.pi)))
     return Fit(total, *worst)

@@ -18,10 +18,12 @@ from ..query import QuerySpec
 from ..sampling.rollout import SampleTask, run_sample
 from ..scene import shapes
 from ..scene.bodies import Scene
-from .likelihood import Fit, fit
+from .likelihood import Fit, Predicted, fit, interpolate_positions
 
 #: the rollout's answer is its trajectory: the query that waits for rest and reads where bodies are
 TRAJECTORY_SPEC = QuerySpec(queries=frozenset({"final_pose"}))
+#: two rollouts that part by more than this many times their first frame's distance are chaotic
+CHAOS_AMPLIFICATION = 3.0
 #: no noise of the model's own: the candidates' values and velocities are the only differences
 EXACT_MODEL = ModelConfig(sigma_m=0.0, samples=1, object_noise=False)
 
@@ -38,6 +40,11 @@ class ParticleTask:
     tracks: tuple
     yaw_sd_rad: float | None
     model_error_fraction: float
+    #: the initial state's noise integrated over: up to ``replicates`` rollouts from the scene's
+    #: poses moved by N(0, initial_sd_m^2) horizontally, each from its own child of ``seed``
+    initial_sd_m: float = 0.0
+    replicates: int = 1
+    seed: np.random.SeedSequence | None = None
     deadline_unix_s: float | None = None
 
 
@@ -49,25 +56,59 @@ class ParticleOutcome:
     fit: Fit | None = None
     budget_stopped: bool = False
     worker_lost: bool = False
+    replicates: int = 0  # rollouts run for it
 
 
 def run_particle(task: ParticleTask) -> ParticleOutcome:
-    sample = SampleTask(scene=task.scene, model=EXACT_MODEL, settings=task.settings, query=TRAJECTORY_SPEC, index=task.index,
-                        seed=np.random.SeedSequence(task.index), record_every=1, deadline_unix_s=task.deadline_unix_s)
-    outcome = run_sample(sample)
-    if not outcome.ok:
-        return ParticleOutcome(task.index, False, outcome.error, budget_stopped=outcome.budget_stopped)
-    trajectory = outcome.rollouts[0].trajectory
+    """The candidate's fit: one rollout where the start is exact, else two, and up to
+    ``replicates`` where those two part by more than the tracker's noise (chaos: see likelihood)."""
+    noisy = task.initial_sd_m > 0 and task.replicates > 1
+    model = dataclasses.replace(EXACT_MODEL, sigma_m=task.initial_sd_m if noisy else 0.0)
+    seeds = task.seed.spawn(task.replicates) if noisy else [np.random.SeedSequence(task.index)]
+    runs = []
+    for r, seed in enumerate(seeds):
+        sample = SampleTask(scene=task.scene, model=model, settings=task.settings, query=TRAJECTORY_SPEC,
+                            index=task.index, seed=seed, record_every=1, deadline_unix_s=task.deadline_unix_s)
+        outcome = run_sample(sample)
+        if not outcome.ok:
+            return ParticleOutcome(task.index, False, outcome.error, budget_stopped=outcome.budget_stopped)
+        runs.append(_at_frames(task, outcome.rollouts[0].trajectory))
+        if r == 1 and _agree(task, runs):
+            break
+    predicted = {}
+    for seen in task.tracks:
+        positions = np.stack([run[seen.name][0] for run in runs])  # (replicates, m, 3)
+        spread = None
+        if len(runs) > 1 and not _agree(task, runs):
+            spread = np.sqrt(np.mean(positions.var(axis=0, ddof=1), axis=1))
+        predicted[seen.name] = Predicted(positions.mean(axis=0), spread, runs[0][seen.name][1])
+    return ParticleOutcome(task.index, True, fit=fit(task.tracks, predicted, task.yaw_sd_rad, task.model_error_fraction),
+                           replicates=len(runs))
+
+
+def _agree(task: ParticleTask, runs: list) -> bool:
+    """The first two replicates part by at most ``CHAOS_AMPLIFICATION`` times what they started
+    apart (or the tracker's noise, where less): the candidate's motion is not chaotic."""
+    for seen in task.tracks:
+        apart = np.linalg.norm(runs[0][seen.name][0] - runs[1][seen.name][0], axis=1)
+        if apart.max() > CHAOS_AMPLIFICATION * max(apart[0], seen.sd_m):
+            return False
+    return True
+
+
+def _at_frames(task: ParticleTask, trajectory) -> dict:
+    """Per observed object, its simulated (origins, orientations) at the frames' times."""
     times = np.array([frame[0] for frame in trajectory])
     positions = np.stack([frame[1] for frame in trajectory])  # (T, n, 3) centres of mass
     orientations = np.stack([frame[2] for frame in trajectory])
     index = {b.name: i for i, b in enumerate(task.scene.dynamic_objects)}
-    rolled = {}
+    out = {}
     for seen in task.tracks:
         i = index[seen.name]
-        rolled[seen.name] = (times, origins_of(task.scene.dynamic_objects[i], positions[:, i], orientations[:, i]),
-                             orientations[:, i])
-    return ParticleOutcome(task.index, True, fit=fit(task.tracks, rolled, task.yaw_sd_rad, task.model_error_fraction))
+        origins = origins_of(task.scene.dynamic_objects[i], positions[:, i], orientations[:, i])
+        nearest = np.clip(np.searchsorted(times, seen.times_s), 0, len(times) - 1)
+        out[seen.name] = (interpolate_positions(times, origins, seen.times_s), orientations[nearest, i])
+    return out
 
 
 def lost_particle(task: ParticleTask, reason: str) -> ParticleOutcome:

@@ -40,7 +40,9 @@ def run_family(family: str, cases: int, pool, settings: InferSettings) -> dict:
                     if flip:
                         low, median, high = 1 / high, 1 / median, 1 / low
                     truth = case.true_ratio
-                    row["heavier_right"] = bool((1 - pair.p_a_heavier if flip else pair.p_a_heavier) > 0.5)
+                    row["true_ratio"] = truth
+                    if truth >= 2:  # the bar: "which is heavier" at a true ratio of 2 or more
+                        row["heavier_right"] = bool((1 - pair.p_a_heavier if flip else pair.p_a_heavier) > 0.5)
                 else:
                     e = answer.estimate(label)
                     low, median, high, truth = e.low_90, e.median, e.high_90, case.truth[label]

@@ -177,3 +177,19 @@ def test_ipe_infer_answers_the_generated_probe_push_in_json(tmp_path):
     assert bad.returncode == 2
     assert bad.stderr.strip().splitlines() == [
         "ipe: error: --unknown: 'box.colour' is not an unknown of obs.json; it has box.mass_kg, box.friction"]
+
+
+def test_the_observation_schema_is_current_and_holds_the_generated_observations(probe):
+    import jsonschema
+    from referencing import Registry, Resource
+
+    from ipe_ros.engine.inference.schema import SCHEMA_PATH, observation_schema, schema_text
+    from ipe_ros.engine.scene.schema import SCHEMA_ID, scene_schema
+
+    assert SCHEMA_PATH.read_text() == schema_text(), "regenerate it: python -m ipe_ros.engine.inference.schema"
+    jsonschema.Draft202012Validator.check_schema(observation_schema())
+    registry = Registry().with_resource(SCHEMA_ID, Resource.from_contents(scene_schema()))
+    validator = jsonschema.Draft202012Validator(observation_schema(), registry=registry)
+    for data in (probe, *(CASES[f](0).observation for f in CASES)):
+        validator.validate(data)
+    assert not validator.is_valid(edited(probe, lambda d: d["unknowns"][0].__setitem__("property", "colour")))

@@ -47,9 +47,11 @@ def observe(scene: Scene, window_s: float, rng: np.random.Generator, *, unknowns
             noisy = np.asarray(at) + position_sd_m * rng.standard_normal(3)
             frame["objects"][body.name] = {"position_m": [round(float(v), 6) for v in noisy]}
     scene_dict = scene_to_dict(scene)
+    velocities = {b.name: b.linear_velocity_m_s for b in scene.objects}
     for item in scene_dict["objects"]:
-        if item["name"] in velocity_unknown:
-            item.pop("linear_velocity_m_s", None)
+        item.pop("linear_velocity_m_s", None)  # the writer leaves out a zero; the observation says it: at rest
+        if item["name"] not in velocity_unknown and not item.get("static", False):
+            item["linear_velocity_m_s"] = list(velocities[item["name"]])
     return {"format": OBSERVATION_FORMAT, "scene": scene_dict, "position_sd_m": position_sd_m, "frames": frames,
             "unknowns": list(unknowns), "actions": list(actions)}
 
@@ -106,8 +108,7 @@ def probe_push(rng: np.random.Generator, mass_kg: float = 0.8, friction: float =
         {"object": "box", "property": "friction", "prior": {"uniform": [0.05, 1.2]}}],
         actions=[{"kind": "push", "object": "box", "at_s": 0.0, "impulse_N_s": [impulse_N_s, 0.0]}])
     # the scene the robot knows: the box at rest before its push
-    for item in observation["scene"]["objects"]:
-        item["linear_velocity_m_s"] = [0.0, 0.0, 0.0]
+    observation["scene"]["objects"][0]["linear_velocity_m_s"] = [0.0, 0.0, 0.0]
     return observation
 
 

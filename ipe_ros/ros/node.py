@@ -38,6 +38,7 @@ from msg_bridge.outputs import fall_direction_msg, fall_fraction_msg, fall_proba
 from msg_bridge.stamps import header_to_stamp_ns
 
 from ..engine import ConfigError
+from .observe import ObserveInterface
 from ..engine.errors import clip
 from ..service import (Answer, NoSceneError, PredictionFailed, PredictionService, QuestionService, ServiceConfig,
                        StampedScene, error_answer, refusal_answer)
@@ -66,7 +67,7 @@ DIAGNOSTICS_PERIOD_S = 1.0
 REFUSAL_LOG_LINES_PER_S = 5
 
 
-class IpeInterface:
+class IpeInterface(ObserveInterface):
     """The node's topics, service and prediction service, shared by :class:`IpeNode` (starts
     answering at once) and :class:`IpeLifecycleNode` (configure starts the workers, activate starts
     answering; ros/lifecycle.py). Mixed into an rclpy ``Node``."""
@@ -123,6 +124,7 @@ class IpeInterface:
                                                     callback_group=MutuallyExclusiveCallbackGroup())
         self.service.start()
         self.questions.start()
+        self._open_observations(LATCHED_QOS)
         return config
 
     def _listen(self) -> None:
@@ -133,6 +135,8 @@ class IpeInterface:
         self._subscribe_per_reliability("scene_reliability", INPUT_QOS.depth, inputs, (
             (MarkerArray, "~/scene", self._on_markers), (String, "~/scene_json", self._on_scene_json)))
         self._inputs.append(self.create_subscription(String, "~/ask", self._on_ask, ASK_QOS, callback_group=inputs))
+        self._inputs.append(self.create_subscription(String, "~/observe", self._on_observe, ASK_QOS,
+                                                     callback_group=inputs))
         # camera streams: a best-effort subscription turns a reliable publisher's images best effort,
         # and Fast DDS loses most best-effort messages over ~500 KB (a 640 x 480 depth image) in their
         # fragments: with "both" a reliable publisher's images come whole through the reliable one
@@ -174,12 +178,15 @@ class IpeInterface:
         # so the two never wait one after the other (that took shutdown past 2 s mid-question)
         if self.questions is not None:
             self.questions.close(reason=reason, join=False)
+        if self.observations is not None:
+            self.observations.close(reason=reason, join=False)
         opened = self.service is not None
         if opened:
             self.service.close(reason=reason)
-        if self.questions is not None:
-            self.questions.join(0.5)
-        self.service = self.questions = None
+        for job in (self.questions, self.observations):
+            if job is not None:
+                job.join(0.5)
+        self.service = self.questions = self.observations = None
         return opened
 
     def _close(self, reason: str) -> None:
@@ -234,8 +241,10 @@ class IpeInterface:
                                                                      clip(frame_id, 256), topic)))
 
     def _accept(self, scene, stamp_ns: int, frame_id: str) -> None:
-        item = StampedScene(scene=scene, stamp_ns=stamp_ns, frame_id=frame_id, scene_id=scene.name,
-                            seq=self.service.next_seq(), received_monotonic_s=time.monotonic())
+        name = scene.name
+        scene, learned = self.observations.learned.apply(scene) if self.observations is not None else (scene, ())
+        item = StampedScene(scene=scene, stamp_ns=stamp_ns, frame_id=frame_id, scene_id=name,
+                            seq=self.service.next_seq(), received_monotonic_s=time.monotonic(), learned=learned)
         if self.service.submit(item):
             self.get_logger().debug("a waiting scene was replaced by a newer one (keep-latest)")
 

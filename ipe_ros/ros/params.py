@@ -72,6 +72,9 @@ NODE_SETTINGS: tuple[Input, ...] = (
           fixed_at_start=True, choices=_reliability),
     _node("service_timeout_s", "float", 60.0, "s", "how long ~/predict waits for an answer, seconds",
           range=(0.1, 3600.0)),
+    _node("learned_properties_s", "float", 600.0, "s", "how long properties inferred from an observation on "
+          "~/observe (answered on ~/properties) replace an object's own in the scenes that follow, by name; 0: never",
+          range=(0.0, 86400.0)),
     _node("mesh_roots", "name", "", "folders", "folders (':'-separated) under which scenes on ~/scene_json, ~/scene "
           "(MESH_RESOURCE markers) and ~/ask may name mesh files (and package:// meshes resolve); empty: scenes may "
           "not name files"),

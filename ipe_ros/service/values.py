@@ -56,6 +56,8 @@ class StampedScene:
     scene_id: str
     seq: int = 0
     received_monotonic_s: float = 0.0
+    #: (object, property, value) learned from observed motion and used in place of the scene's own
+    learned: tuple[tuple[str, str, float], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -85,6 +87,8 @@ class Answer:
                    scene_id=self.source.scene_id, scene_seq=self.source.seq, compute_s=self.compute_s,
                    latency_s=self.latency_s, rrd_path=self.rrd_path, rollouts_logged=self.rollouts_logged,
                    rrd_error=self.rrd_error)
+        if self.source.learned:
+            out["learned_properties"] = [{"object": o, "property": p, "value": v} for o, p, v in self.source.learned]
         return out
 
 

@@ -103,6 +103,11 @@ class Observation:
 
 
 def observation_from_json(text: str) -> Observation:
+    return observation_from_dict(parsed_json(text))
+
+
+def parsed_json(text: str) -> Any:
+    """The JSON value of ``text``, refused in one line when too long, malformed or holding NaN."""
     if len(text) > MAX_JSON_CHARS:
         raise ConfigError("observation", f"{len(text)} characters exceed the maximum of {MAX_JSON_CHARS}; "
                                          "send fewer frames")
@@ -112,7 +117,7 @@ def observation_from_json(text: str) -> Observation:
         raise ConfigError("observation", f"malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
     except RecursionError:
         raise ConfigError("observation", "nested too deeply to read") from None
-    return observation_from_dict(data)
+    return data
 
 
 def _reject_constant(token: str) -> None:

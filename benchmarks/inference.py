@@ -23,13 +23,13 @@ from ipe_ros.engine.inference.observation import observation_from_dict
 OUT = Path(__file__).parent / "results" / "inference"
 
 
-def run_family(family: str, cases: int, pool, settings: InferSettings) -> dict:
+def run_family(family: str, cases: int, pool, settings: InferSettings, first_seed: int = 0) -> dict:
     rows = []
-    for seed in range(cases):
+    for seed in range(first_seed, first_seed + cases):
         case = CASES[family](seed)
         started = time.perf_counter()
         answer = infer(observation_from_dict(case.observation), settings, pool.map if pool else None)
-        row = {"seed": seed, "seconds": time.perf_counter() - started, "consistent": answer.consistent,
+        row = {"model_error": None if answer.model_error is None else answer.model_error.median, "seed": seed, "seconds": time.perf_counter() - started, "consistent": answer.consistent,
                "candidates": answer.candidates, "ess": answer.ess, "truth": {k: float(v) for k, v in case.truth.items()}, "covered": {}, "error": {}}
         if answer.consistent:
             for label in case.scored:
@@ -68,16 +68,20 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--families", default=",".join(CASES))
     parser.add_argument("--preset", default="default")
+    parser.add_argument("--model-error", type=float, default=None, help="fixed (default: inferred)")
+    parser.add_argument("--first-seed", type=int, default=0)
+    parser.add_argument("--out", default=str(OUT))
     args = parser.parse_args()
-    settings = InferSettings(preset=args.preset)
+    settings = InferSettings(preset=args.preset, model_error_fraction=args.model_error)
     pool = WorkerPool(args.workers) if args.workers else None
     try:
-        results = {f: run_family(f, args.cases, pool, settings) for f in args.families.split(",")}
+        results = {f: run_family(f, args.cases, pool, settings, args.first_seed) for f in args.families.split(",")}
     finally:
         if pool:
             pool.close()
-    OUT.mkdir(parents=True, exist_ok=True)
-    (OUT / "inference.json").write_text(json.dumps(results, indent=1))
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "inference.json").write_text(json.dumps({"settings": vars(args), "results": results}, indent=1))
     for family, result in results.items():
         print(json.dumps(result["summary"]))
 

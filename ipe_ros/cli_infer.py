@@ -19,7 +19,7 @@ from .cli_predict import sample_map
 from .engine.errors import ConfigError
 from .engine.inference.amis import AmisSettings
 from .engine.inference.infer import Inference, InferSettings, infer
-from .engine.inference.likelihood import DEFAULT_MODEL_ERROR_FRACTION
+from .engine.inference.likelihood import MODEL_ERROR_GRID
 from .engine.inference.observation import Observation, observation_from_json
 from .engine.scene.format import scene_to_json
 from .engine.scene.limits import MAX_JSON_CHARS
@@ -33,9 +33,10 @@ def add_infer_parser(sub) -> None:
                    help="infer only this unknown of the file (box1.mass_kg, group:red.mass_kg, support.friction; "
                         "repeatable; the others keep the scene's values)")
     add_input_options(p, ("preset_name", "seed", "workers", "budget_s"))
-    p.add_argument("--model-error", type=finite, default=DEFAULT_MODEL_ERROR_FRACTION, metavar="F",
-                   help="the physics' own error, as a fraction of the distance an object travelled (default "
-                        f"{DEFAULT_MODEL_ERROR_FRACTION:g}; docs/inference.md says how it was set)")
+    p.add_argument("--model-error", type=finite, default=None, metavar="F",
+                   help="the physics' own error, as a fraction of the distance an object travelled (default: inferred "
+                        f"with the properties, log-uniform over {MODEL_ERROR_GRID[0]:g}..{MODEL_ERROR_GRID[-1]:g}; "
+                        "docs/inference.md)")
     p.add_argument("--particles", type=int, default=AmisSettings.particles_per_round, metavar="N",
                    help=f"candidates per round (default {AmisSettings.particles_per_round})")
     p.add_argument("--rounds", type=int, default=AmisSettings.max_rounds, metavar="N",
@@ -69,6 +70,10 @@ def format_inference(answer: Inference) -> str:
         for pair in answer.heavier:
             lines.append(f"P({pair.a} > {pair.b}) = {pair.p_a_heavier:.3f}; ratio {pair.ratio_median:.3g} "
                          f"[{pair.ratio_low_90:.3g}, {pair.ratio_high_90:.3g}]")
+    if answer.model_error is not None:
+        e = answer.model_error
+        lines.append(f"the physics' own error: {100 * e.median:.2g}% of the distance travelled "
+                     f"[{100 * e.low_90:.2g}, {100 * e.high_90:.2g}]")
     lines.append(f"check: the best rollout's farthest frame {1000 * answer.worst_residual_m:.1f} mm "
                  f"(t = {answer.worst_t_s:g} s, {answer.worst_object}); {answer.candidates} candidates, "
                  f"{answer.failed} failed, {answer.elapsed_s:.1f} s")

@@ -26,7 +26,7 @@ from ..sampling.montecarlo import MapFn, MonteCarlo, check_seed
 from ..scene.bodies import Scene
 from ..scene.format import scene_to_dict
 from .amis import AmisResult, AmisSettings, amis
-from .likelihood import CONSISTENT_WITHIN_SD, DEFAULT_MODEL_ERROR_FRACTION, Track, track
+from .likelihood import CONSISTENT_WITHIN_SD, MODEL_ERROR_GRID, Track, track
 from .observation import Observation, Unknown
 from .particle import ParticleOutcome, ParticleTask, lost_particle, run_particle, with_values
 from .priors import Normal
@@ -40,7 +40,9 @@ class InferSettings:
     preset: str = "default"
     seed: int = 0
     sampler: AmisSettings = AmisSettings()
-    model_error_fraction: float = DEFAULT_MODEL_ERROR_FRACTION
+    #: the physics' own error as a fraction of the distance travelled (likelihood.py); None: inferred
+    #: with the properties (marginalised over MODEL_ERROR_GRID)
+    model_error_fraction: float | None = None
     #: the t = 0 poses' noise integrated over (a nuisance: chaos must not let one lucky rollout
     #: decide), horizontal SD in metres; None: the observation's position_sd_m
     initial_sd_m: float | None = None
@@ -51,8 +53,10 @@ class InferSettings:
     def __post_init__(self) -> None:
         preset(self.preset)
         check_seed(self.seed)
-        checks.non_negative(self.model_error_fraction, "model_error_fraction")
-        checks.at_most(self.model_error_fraction, "model_error_fraction", 1.0, "(a fraction of the distance travelled)")
+        if self.model_error_fraction is not None:
+            checks.non_negative(self.model_error_fraction, "model_error_fraction")
+            checks.at_most(self.model_error_fraction, "model_error_fraction", 1.0,
+                           "(a fraction of the distance travelled)")
         checks.integer(self.sampler.particles_per_round, "particles_per_round", 4, 10_000)
         checks.integer(self.sampler.max_rounds, "max_rounds", 1, 100)
         checks.integer(self.replicates, "replicates", 1, 64)
@@ -104,6 +108,8 @@ class Inference:
     elapsed_s: float
     refined_scene: Scene | None
     settings: InferSettings
+    #: the physics' error inferred with the properties (None where the settings fixed it)
+    model_error: Estimate | None = None
 
     def estimate(self, label: str) -> Estimate:
         return next(e for e in self.estimates if e.label == label)
@@ -119,6 +125,8 @@ class Inference:
                           "object": self.worst_object},
                 "candidates": self.candidates, "failed": self.failed, "rounds": self.rounds, "ess": round(self.ess, 1),
                 "likelihood_power": round(self.likelihood_power, 4), "stopped_by": self.stopped_by, "elapsed_s": round(self.elapsed_s, 3),
+                "model_error_fraction": None if self.model_error is None else {
+                    "median": self.model_error.median, "interval_90": [self.model_error.low_90, self.model_error.high_90]},
                 "settings": {"preset": self.settings.preset, "seed": self.settings.seed,
                              "model_error_fraction": self.settings.model_error_fraction,
                              "particles_per_round": self.settings.sampler.particles_per_round,
@@ -161,7 +169,8 @@ def infer(observation: Observation, settings: InferSettings = InferSettings(), m
         priors.extend(nuisance[name])
     scene = dataclasses.replace(observation.scene, horizon_s=observation.window_s)
     sim = trajectory_settings(settings.preset)
-    tracks = _tracks(observation, settings.model_error_fraction)
+    tracks = _tracks(observation)
+    errors = MODEL_ERROR_GRID if settings.model_error_fraction is None else (settings.model_error_fraction,)
     initial_sd = observation.position_sd_m if settings.initial_sd_m is None else settings.initial_sd_m
     if len(scene.dynamic_objects) == 1:
         initial_sd = 0.0  # a lone object on a flat support is not chaotic: one exact rollout per candidate
@@ -177,7 +186,7 @@ def infer(observation: Observation, settings: InferSettings = InferSettings(), m
         return with_values(candidate_scene, {}, _pushed(candidate_scene, observation, velocities))
 
     def make_task(i: int, z: np.ndarray) -> ParticleTask:
-        return ParticleTask(i, candidate(z), sim, tracks, observation.yaw_sd_rad, settings.model_error_fraction,
+        return ParticleTask(i, candidate(z), sim, tracks, observation.yaw_sd_rad, errors,
                             initial_sd, settings.replicates, np.random.SeedSequence(settings.seed, spawn_key=(1, i)))
 
     def read(outcome: ParticleOutcome) -> float | None:
@@ -203,7 +212,7 @@ def _pushed(scene: Scene, observation: Observation, velocities: dict) -> dict:
     return out
 
 
-def _tracks(observation: Observation, model_error_fraction: float) -> tuple[Track, ...]:
+def _tracks(observation: Observation) -> tuple[Track, ...]:
     out = []
     for body in observation.scene.dynamic_objects:
         times, positions = observation.track(body.name)
@@ -217,7 +226,7 @@ def _tracks(observation: Observation, model_error_fraction: float) -> tuple[Trac
                     if pose.orientation_xyzw is not None:
                         orientations[row] = pose.orientation_xyzw
                     row += 1
-        out.append(track(body.name, times, positions, orientations, observation.position_sd_m, model_error_fraction))
+        out.append(track(body.name, times, positions, orientations, observation.position_sd_m))
     return tuple(out)
 
 
@@ -225,6 +234,20 @@ def _weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> flo
     order = np.argsort(values)
     cumulative = np.cumsum(weights[order])
     return float(values[order][min(np.searchsorted(cumulative, q * cumulative[-1]), len(values) - 1)])
+
+
+def _model_error(result: AmisResult, w: np.ndarray, usable: np.ndarray) -> Estimate:
+    """The physics' error's posterior on its grid: each candidate's weight shared among the grid's
+    fractions in proportion to its likelihood at each."""
+    mass = np.zeros(len(MODEL_ERROR_GRID))
+    for weight, outcome in zip(w[usable], [o for o, u in zip(result.outcomes, usable) if u]):
+        by_error = np.asarray(outcome.fit.log_likelihood_by_error) * result.likelihood_power
+        share = np.exp(by_error - by_error.max())
+        mass += weight * share / share.sum()
+    grid = np.asarray(MODEL_ERROR_GRID)
+    return Estimate("model_error_fraction", "model_error_fraction", float(grid @ mass / mass.sum()),
+                    _weighted_quantile(grid, mass, 0.5), _weighted_quantile(grid, mass, 0.05),
+                    _weighted_quantile(grid, mass, 0.95), result.ess)
 
 
 def _pair(a: str, b: str, mass_a: np.ndarray, mass_b: np.ndarray, w: np.ndarray) -> MassPair:
@@ -261,6 +284,7 @@ def _answer(observation: Observation, settings: InferSettings, result: AmisResul
         estimates.append(Estimate(unknown.label, unknown.property, float(wj @ x / wj.sum()),
                                   _weighted_quantile(x, wj, 0.5), _weighted_quantile(x, wj, 0.05),
                                   _weighted_quantile(x, wj, 0.95), result.ess))
+    model_error = None if settings.model_error_fraction is not None else _model_error(result, w, usable)
     masses = [j for j, u in enumerate(unknowns) if u.property == "mass_kg"]
     heavier = tuple(_pair(unknowns[a].label, unknowns[b].label, values[usable, a], values[usable, b], w[usable])
                     for a, b in itertools.combinations(masses, 2))
@@ -272,4 +296,4 @@ def _answer(observation: Observation, settings: InferSettings, result: AmisResul
                   "fit, or chaotic motion, to weigh them fully)" if result.likelihood_power < 1 else ""))
     return Inference(consistent=True, message=message, estimates=tuple(estimates), heavier=heavier,
                      worst_residual_m=best.worst_residual_m, worst_t_s=best.worst_t_s, worst_object=best.worst_object,
-                     refined_scene=refined, **common)
+                     refined_scene=refined, model_error=model_error, **common)

@@ -39,7 +39,8 @@ class ParticleTask:
     settings: SimSettings
     tracks: tuple
     yaw_sd_rad: float | None
-    model_error_fraction: float
+    #: the physics' error's fractions to weigh it at (likelihood.MODEL_ERROR_GRID, or one fixed)
+    model_errors: tuple[float, ...]
     #: the initial state's noise integrated over: up to ``replicates`` rollouts from the scene's
     #: poses moved by N(0, initial_sd_m^2) horizontally, each from its own child of ``seed``
     initial_sd_m: float = 0.0
@@ -82,7 +83,7 @@ def run_particle(task: ParticleTask) -> ParticleOutcome:
         if len(runs) > 1 and not _agree(task, runs):
             spread = np.sqrt(np.mean(positions.var(axis=0, ddof=1), axis=1))
         predicted[seen.name] = Predicted(positions.mean(axis=0), spread, runs[0][seen.name][1])
-    return ParticleOutcome(task.index, True, fit=fit(task.tracks, predicted, task.yaw_sd_rad, task.model_error_fraction),
+    return ParticleOutcome(task.index, True, fit=fit(task.tracks, predicted, task.yaw_sd_rad, task.model_errors),
                            replicates=len(runs))
 
 

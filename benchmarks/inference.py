@@ -70,9 +70,11 @@ def main() -> None:
     parser.add_argument("--preset", default="default")
     parser.add_argument("--model-error", type=float, default=None, help="fixed (default: inferred)")
     parser.add_argument("--first-seed", type=int, default=0)
+    parser.add_argument("--grid", type=int, default=None, metavar="POINTS",
+                        help="a plain grid of POINTS per unknown instead of AMIS (the baseline)")
     parser.add_argument("--out", default=str(OUT))
     args = parser.parse_args()
-    settings = InferSettings(preset=args.preset, model_error_fraction=args.model_error)
+    settings = InferSettings(preset=args.preset, model_error_fraction=args.model_error, grid_points=args.grid)
     pool = WorkerPool(args.workers) if args.workers else None
     try:
         results = {f: run_family(f, args.cases, pool, settings, args.first_seed) for f in args.families.split(",")}

@@ -176,3 +176,19 @@ def _fitted(coordinates: np.ndarray, log_weights: np.ndarray, spread: float) -> 
     cov = (centred * w[:, None]).T @ centred
     cov = spread ** 2 * cov + 1e-6 * np.eye(z.shape[1])
     return _Gaussian(mean, np.linalg.cholesky(cov))
+
+
+def grid(priors: Sequence, make_task: Callable[[int, np.ndarray], object],
+         read: Callable[[object], float | None], points: int) -> Plan:
+    """A plain grid, the baseline AMIS is measured against (benchmarks/inference.py): ``points`` per
+    unknown at the midpoints of equal prior mass (each point its prior's share), one round."""
+    u = (np.arange(points) + 0.5) / points
+    axes = [np.array([p.z_from_uniform(float(x)) for x in u]) for p in priors]
+    coordinates = np.stack([a.ravel() for a in np.meshgrid(*axes, indexing="ij")], axis=1)
+    outcomes = yield [make_task(i, z) for i, z in enumerate(coordinates)]
+    values = [read(o) for o in outcomes]
+    log_likelihoods = np.array([np.nan if v is None else v for v in values], float)
+    log_weights = np.where(np.isfinite(log_likelihoods), log_likelihoods, -np.inf)
+    stopped_by = "budget" if any(v is None for v in values) else "rounds"
+    return AmisResult(coordinates, log_likelihoods, _normalised(log_weights), list(outcomes), 1,
+                      effective_size(log_weights), stopped_by)

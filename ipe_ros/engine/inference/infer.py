@@ -25,7 +25,7 @@ from ..errors import ConfigError
 from ..sampling.montecarlo import MapFn, MonteCarlo, check_seed
 from ..scene.bodies import Scene
 from ..scene.format import scene_to_dict
-from .amis import AmisResult, AmisSettings, amis
+from .amis import AmisResult, AmisSettings, amis, grid
 from .likelihood import CONSISTENT_WITHIN_SD, MODEL_ERROR_GRID, Track, track
 from .observation import Observation, Unknown
 from .particle import ParticleOutcome, ParticleTask, lost_particle, run_particle, with_values
@@ -55,6 +55,9 @@ class InferSettings:
     #: the t = 0 poses' noise integrated over (a nuisance: chaos must not let one lucky rollout
     #: decide), horizontal SD in metres; None: the observation's position_sd_m
     initial_sd_m: float | None = None
+    #: a plain grid of this many points per unknown instead of AMIS (the benchmark's baseline; no
+    #: unknown initial velocities)
+    grid_points: int | None = None
     #: the answer's values are the world's, the engine's own spread by ENGINE_DISCREPANCY_LOG_SD
     engine_discrepancy: bool = True
     #: the most rollouts per candidate, each from its own noisy start (two where two agree)
@@ -207,7 +210,13 @@ def infer(observation: Observation, settings: InferSettings = InferSettings(), m
         return outcome.fit.log_likelihood if outcome.ok else -math.inf
 
     loop = MonteCarlo(run_particle, lost_particle, map_fn, settings.budget_s)
-    result: AmisResult = loop.drive(amis(priors, make_task, read, settings.seed, settings.sampler))
+    if settings.grid_points is not None:
+        if observation.unknown_velocity:
+            raise ConfigError("grid_points", "a grid takes no unknown initial velocities; give them in the scene")
+        plan = grid(priors, make_task, read, settings.grid_points)
+    else:
+        plan = amis(priors, make_task, read, settings.seed, settings.sampler)
+    result: AmisResult = loop.drive(plan)
     return _answer(observation, settings, result, unknowns, priors, candidate, time.perf_counter() - started)
 
 

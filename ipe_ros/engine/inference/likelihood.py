@@ -45,6 +45,9 @@ MODEL_ERROR_GRID = tuple(float(f) for f in np.geomspace(0.0002, 0.25, 13))
 MODEL_ERROR_MEMORY_S = 0.25
 #: frames averaged to read the observed path's length through the tracker's noise
 SMOOTHING_FRAMES = 5
+#: the largest error the witness saw pybullet make (12% of the distance travelled, a collision's):
+#: what the consistency check allows at most
+CONSISTENT_MODEL_ERROR = 0.12
 #: an observation is "consistent" when the best rollout stays within this many SDs of every frame
 CONSISTENT_WITHIN_SD = 5.0
 
@@ -120,11 +123,12 @@ class Predicted:
 def fit(tracks, predicted: dict, yaw_sd_rad: float | None, model_errors: tuple[float, ...]) -> Fit:
     """The frames of ``tracks`` (``Track``s) against ``predicted`` (name -> ``Predicted``), at each of
     ``model_errors`` (fractions, equally likely a priori): the likelihood marginal over them, and
-    the misfit at the most likely one."""
+    the worst misfit in SDs allowed with the physics' error at most CONSISTENT_MODEL_ERROR (a grid
+    reaching 25% would call an object that jumps half a metre consistent)."""
     by_error = np.array([_log_likelihood(tracks, predicted, yaw_sd_rad, f) for f in model_errors])
-    best = int(np.argmax(by_error))
     marginal = float(np.logaddexp.reduce(by_error) - math.log(len(model_errors)))
-    return Fit(marginal, *_worst(tracks, predicted, model_errors[best]), log_likelihood_by_error=tuple(by_error))
+    check = min(max(model_errors), CONSISTENT_MODEL_ERROR)
+    return Fit(marginal, *_worst(tracks, predicted, check), log_likelihood_by_error=tuple(by_error))
 
 
 def _log_likelihood(tracks, predicted: dict, yaw_sd_rad: float | None, model_error_fraction: float) -> float:

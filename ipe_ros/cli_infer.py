@@ -44,6 +44,9 @@ def add_infer_parser(sub) -> None:
                         f"sample size reaches {AmisSettings.target_ess:g})")
     p.add_argument("--refined", default=None, metavar="FILE",
                    help="write the scene with the posterior medians in place (for ipe predict / ipe ask)")
+    p.add_argument("--rrd", default=None, metavar="FILE",
+                   help="write a rerun recording: the observed frames over the rollout at the posterior medians, "
+                        "each unknown's posterior as a histogram")
     p.add_argument("--json", action="store_true", help="one JSON object")
 
 
@@ -94,6 +97,10 @@ def cmd_infer(args) -> int:
             pool.close()
     if args.refined and answer.refined_scene is not None:
         Path(args.refined).write_text(scene_to_json(answer.refined_scene, indent=1) + "\n")
+    if args.rrd:
+        from .viz.inference_log import write_inference_rrd
+
+        write_inference_rrd(args.rrd, observation, answer)
     if args.json:
         print(json.dumps(answer.to_dict()))
     else:

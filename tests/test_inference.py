@@ -193,3 +193,18 @@ def test_the_observation_schema_is_current_and_holds_the_generated_observations(
     for data in (probe, *(CASES[f](0).observation for f in CASES)):
         validator.validate(data)
     assert not validator.is_valid(edited(probe, lambda d: d["unknowns"][0].__setitem__("property", "colour")))
+
+
+def test_ipe_infer_records_the_frames_the_rollout_and_the_posterior(probe, tmp_path):
+    from rerun.chunk import RrdReader  # as tests/test_rerun_log.py reads recordings
+
+    from ipe_ros.viz.inference_log import write_inference_rrd
+
+    observation = observation_from_dict(probe)
+    answer = infer(observation, InferSettings(seed=2, sampler=InferSettings().sampler.__class__(max_rounds=3)))
+    path = tmp_path / "infer.rrd"
+    write_inference_rrd(path, observation, answer)
+    entities = {c.entity_path for c in RrdReader(path).stream().to_chunks()}
+    assert {"/world/observed/box", "/world/observed/box/path", "/world/rollout/box", "/world/rollout/box/path",
+            "/posterior/box.mass_kg", "/posterior/box.friction"} <= entities
+    assert answer.draws.shape == (400, 2)

@@ -40,6 +40,8 @@ from .priors import Normal
 #: therefore the engine's times exp(N(0, sd^2)), sd per property (log scale): stated, not fitted.
 ENGINE_DISCREPANCY_LOG_SD = {"restitution": 0.03, "mass_kg": 0.02, "friction": 0.005}
 DISCREPANCY_COPIES = 16
+#: equally weighted draws an answer keeps for plots
+DRAWS = 400
 #: the frames within this much of t = 0 estimate an unknown initial velocity
 VELOCITY_WINDOW_S = 0.15
 
@@ -124,6 +126,8 @@ class Inference:
     settings: InferSettings
     #: the physics' error inferred with the properties (None where the settings fixed it)
     model_error: Estimate | None = None
+    #: equally weighted draws of the unknowns (DRAWS x unknowns), the world's values: for plots
+    draws: np.ndarray | None = dataclasses.field(default=None, compare=False, repr=False)
 
     def estimate(self, label: str) -> Estimate:
         return next(e for e in self.estimates if e.label == label)
@@ -218,6 +222,14 @@ def infer(observation: Observation, settings: InferSettings = InferSettings(), m
         plan = amis(priors, make_task, read, settings.seed, settings.sampler)
     result: AmisResult = loop.drive(plan)
     return _answer(observation, settings, result, unknowns, priors, candidate, time.perf_counter() - started)
+
+
+def observed_rollout_scene(observation: Observation, scene: Scene) -> Scene:
+    """``scene`` (the observation's, or a refined one) as the observation rolled it out: its window as
+    the horizon, the pushes applied, unknown initial velocities at the frames' estimates."""
+    velocities = {name: [n.mean for n in velocity_prior(observation, name)] for name in observation.unknown_velocity}
+    scene = dataclasses.replace(scene, horizon_s=observation.window_s)
+    return with_values(scene, {}, _pushed(with_values(scene, {}, velocities), observation, velocities))
 
 
 def _pushed(scene: Scene, observation: Observation, velocities: dict) -> dict:
@@ -324,6 +336,8 @@ def _answer(observation: Observation, settings: InferSettings, result: AmisResul
     masses = [j for j, u in enumerate(unknowns) if u.property == "mass_kg"]
     heavier = tuple(_pair(unknowns[a].label, unknowns[b].label, values[usable, a], values[usable, b], w[usable])
                     for a, b in itertools.combinations(masses, 2))
+    chosen = np.random.default_rng(np.random.SeedSequence(settings.seed, spawn_key=(3,))).choice(
+        len(w), size=DRAWS, p=w / w.sum())
     medians = {(body, u.property): e.median for u, e in zip(unknowns, estimates) for body in u.applies_to(observation.scene)}
     refined = with_values(observation.scene, medians, {})
     message = (f"{len(estimates)} unknown(s) from {len(result.outcomes)} rollouts; effective sample size "
@@ -332,4 +346,4 @@ def _answer(observation: Observation, settings: InferSettings, result: AmisResul
                   "fit, or chaotic motion, to weigh them fully)" if result.likelihood_power < 1 else ""))
     return Inference(consistent=True, message=message, estimates=tuple(estimates), heavier=heavier,
                      worst_residual_m=best.worst_residual_m, worst_t_s=best.worst_t_s, worst_object=best.worst_object,
-                     refined_scene=refined, model_error=model_error, **common)
+                     refined_scene=refined, model_error=model_error, draws=values[chosen], **common)

@@ -208,3 +208,16 @@ def test_ipe_infer_records_the_frames_the_rollout_and_the_posterior(probe, tmp_p
     assert {"/world/observed/box", "/world/observed/box/path", "/world/rollout/box", "/world/rollout/box/path",
             "/posterior/box.mass_kg", "/posterior/box.friction"} <= entities
     assert answer.draws.shape == (400, 2)
+
+
+def test_an_unknown_initial_velocity_is_a_nuisance_estimated_from_the_frames():
+    from ipe_ros.engine.inference.known import observe, sliding_box
+
+    rng = np.random.default_rng(11)
+    data = observe(sliding_box(1.6, 0.5, 0.7), 1.2, rng, velocity_unknown=("box",), unknowns=[
+        {"object": "box", "property": "friction", "prior": {"uniform": [0.05, 1.2]}}])
+    observation = observation_from_dict(data)
+    assert observation.unknown_velocity == ("box",)
+    answer = infer(observation, InferSettings(seed=3))
+    friction = answer.estimate("box.friction")
+    assert friction.low_90 <= 0.5 <= friction.high_90 and friction.median == pytest.approx(0.5, rel=0.05)

@@ -34,17 +34,21 @@ def _probit(u: float) -> float:
 
 
 @dataclass(frozen=True)
-class Uniform:
-    """Uniform on [low, high]; z = logit of the position in the interval."""
+class _Interval:
+    """Uniform on [low, high] after ``_scaled`` (the identity, or log); z = logit of the position in it."""
 
     low: float
     high: float
 
+    _scaled, _unscaled = staticmethod(lambda x: x), staticmethod(lambda y: y)
+
     def value(self, z):
-        return self.low + (self.high - self.low) / (1.0 + np.exp(-np.asarray(z, float)))
+        a, b = self._scaled(self.low), self._scaled(self.high)
+        return self._unscaled(a + (b - a) / (1.0 + np.exp(-np.asarray(z, float))))
 
     def coordinate(self, x):
-        u = (np.asarray(x, float) - self.low) / (self.high - self.low)
+        a, b = self._scaled(self.low), self._scaled(self.high)
+        u = (self._scaled(np.asarray(x, float)) - a) / (b - a)
         return np.log(u) - np.log1p(-u)
 
     def log_density_z(self, z):
@@ -53,33 +57,21 @@ class Uniform:
     @staticmethod
     def z_from_uniform(u: float) -> float:
         return _logit(u)
+
+
+@dataclass(frozen=True)
+class Uniform(_Interval):
+    """Uniform on [low, high]."""
 
     def to_dict(self) -> dict:
         return {"uniform": [self.low, self.high]}
 
 
 @dataclass(frozen=True)
-class LogUniform:
+class LogUniform(_Interval):
     """Uniform in log x on [low, high] (scale-free: a mass of 0.1 kg as likely as one of 1 kg per decade)."""
 
-    low: float
-    high: float
-
-    def value(self, z):
-        a, b = math.log(self.low), math.log(self.high)
-        return np.exp(a + (b - a) / (1.0 + np.exp(-np.asarray(z, float))))
-
-    def coordinate(self, x):
-        a, b = math.log(self.low), math.log(self.high)
-        u = (np.log(np.asarray(x, float)) - a) / (b - a)
-        return np.log(u) - np.log1p(-u)
-
-    def log_density_z(self, z):
-        return _logistic_log_density(np.asarray(z, float))
-
-    @staticmethod
-    def z_from_uniform(u: float) -> float:
-        return _logit(u)
+    _scaled, _unscaled = staticmethod(np.log), staticmethod(np.exp)
 
     def to_dict(self) -> dict:
         return {"log_uniform": [self.low, self.high]}

@@ -316,3 +316,14 @@ def test_the_witness_export_writes_every_shape_and_start_the_other_engine_needs(
     for row in rows:
         assert row["samples"] and len(row["samples"][0]["initial_m"]) == len(row["scene"]["dynamic"])
         assert all(b["mass_kg"] > 0 and min(b["inertia_kg_m2"]) > 0 for b in row["scene"]["dynamic"])
+
+
+def test_inference_benchmark_scores_each_case_and_writes_its_json(tmp_path):
+    result = subprocess.run(
+        [sys.executable, str(REPO / "benchmarks" / "inference.py"), "--cases", "2", "--workers", "0", "--families",
+         "slide", "--out", str(tmp_path)], capture_output=True, text=True, timeout=600, env=ENV)
+    assert result.returncode == 0, result.stderr[-3000:]
+    data = json.loads((tmp_path / "inference.json").read_text())
+    rows = data["results"]["slide"]["rows"]
+    assert [r["seed"] for r in rows] == [0, 1] and all(set(r["covered"]) == {"box.friction"} for r in rows)
+    assert data["results"]["slide"]["summary"]["cases"] == 2 and data["settings"]["grid"] is None

@@ -30,7 +30,8 @@ class LearnedProperties:
         self._lock = threading.Lock()
         self._by_object: dict[str, dict[str, tuple[float, float]]] = {}  # name -> property -> (value, when)
 
-    def learn(self, observation: Observation, medians: dict[tuple[str, str], float]) -> None:
+    def learn(self, medians: dict[tuple[str, str], float]) -> None:
+        """``medians``: (object name or "support", property) -> value."""
         now = self._clock()
         with self._lock:
             for (name, prop), value in medians.items():
@@ -118,7 +119,7 @@ class ObservationService:
                 answer = infer(observation, settings, pool.map if pool is not None else None)
                 message = {"id": request_id, **answer.to_dict()}
                 if answer.consistent:
-                    self.learned.learn(observation, {(body, e.property): e.median for u, e in
+                    self.learned.learn({(body, e.property): e.median for u, e in
                                                      zip(observation.unknowns, answer.estimates)
                                                      for body in u.applies_to(observation.scene)})
                 ok = True

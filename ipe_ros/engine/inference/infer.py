@@ -221,7 +221,7 @@ def infer(observation: Observation, settings: InferSettings = InferSettings(), m
     else:
         plan = amis(priors, make_task, read, settings.seed, settings.sampler)
     result: AmisResult = loop.drive(plan)
-    return _answer(observation, settings, result, unknowns, priors, candidate, time.perf_counter() - started)
+    return _answer(observation, settings, result, unknowns, priors, time.perf_counter() - started)
 
 
 def observed_rollout_scene(observation: Observation, scene: Scene) -> Scene:
@@ -304,7 +304,7 @@ def _pair(a: str, b: str, mass_a: np.ndarray, mass_b: np.ndarray, w: np.ndarray)
 
 
 def _answer(observation: Observation, settings: InferSettings, result: AmisResult, unknowns: tuple[Unknown, ...],
-            priors: list, candidate, elapsed_s: float) -> Inference:
+            priors: list, elapsed_s: float) -> Inference:
     ok = [o for o in result.outcomes if o.ok]
     failed = sum(1 for o in result.outcomes if not o.ok and not o.budget_stopped)
     common = dict(scene_name=observation.scene.name, candidates=len(result.outcomes), failed=failed,

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ipe_ros.engine.compute.pool import WorkerPool
+from ipe_ros.engine.config import preset
 from ipe_ros.engine.inference.infer import InferSettings, infer
 from ipe_ros.engine.inference.known import CASES
 from ipe_ros.engine.inference.observation import observation_from_dict
@@ -74,7 +75,7 @@ def main() -> None:
                         help="a plain grid of POINTS per unknown instead of AMIS (the baseline)")
     parser.add_argument("--out", default=str(OUT))
     args = parser.parse_args()
-    settings = InferSettings(preset=args.preset, model_error_fraction=args.model_error, grid_points=args.grid)
+    settings = InferSettings(simulation=preset(args.preset), model_error_fraction=args.model_error, grid_points=args.grid)
     pool = WorkerPool(args.workers) if args.workers else None
     try:
         results = {f: run_family(f, args.cases, pool, settings, args.first_seed) for f in args.families.split(",")}

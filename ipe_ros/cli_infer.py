@@ -16,6 +16,7 @@ from pathlib import Path
 
 from .cli_inputs import add_input_options, finite
 from .cli_predict import sample_map
+from .engine.config import preset
 from .engine.errors import ConfigError
 from .engine.inference.amis import AmisSettings
 from .engine.inference.infer import Inference, InferSettings, infer
@@ -85,7 +86,7 @@ def format_inference(answer: Inference) -> str:
 
 def cmd_infer(args) -> int:
     observation = read_observation(args.path, args.unknown)
-    settings = InferSettings(preset=args.preset_name, seed=args.seed, budget_s=args.budget_s,
+    settings = InferSettings(simulation=preset(args.preset_name), seed=args.seed, budget_s=args.budget_s,
                              model_error_fraction=args.model_error,
                              sampler=dataclasses.replace(AmisSettings(), particles_per_round=args.particles,
                                                          max_rounds=args.rounds))

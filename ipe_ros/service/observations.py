@@ -114,8 +114,7 @@ class ObservationService:
             request = self._predictions.config.request
             pool = self._predictions.pool
             try:
-                settings = InferSettings(preset=request.settings.name.split("+")[0], seed=request.seed,
-                                         budget_s=request.budget_s)
+                settings = InferSettings(simulation=request.settings, seed=request.seed, budget_s=request.budget_s)
                 answer = infer(observation, settings, pool.map if pool is not None else None)
                 message = {"id": request_id, **answer.to_dict()}
                 if answer.consistent:

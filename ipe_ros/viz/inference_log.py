@@ -10,11 +10,9 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from ..engine.config import preset
 from ..engine.inference.infer import Inference, observed_rollout_scene, trajectory_settings
 from ..engine.inference.observation import Observation
-from ..engine.inference.particle import EXACT_MODEL, TRAJECTORY_SPEC, origins_of
-from ..engine.sampling.rollout import SampleTask, run_sample
+from ..engine.inference.particle import body_paths, trajectory_sample
 from .palette import group_rgb, to_rgb8
 from .rerun_log import APPLICATION_ID, entity_part, log_scene
 
@@ -37,7 +35,7 @@ def write_inference_rrd(path: str | Path, observation: Observation, answer: Infe
         log_scene(rec, observation.scene)
         colours = {b.name: to_rgb8(group_rgb(b.group)) for b in observation.scene.dynamic_objects}
         for body in observation.scene.dynamic_objects:
-            times, positions = observation.track(body.name)
+            times, positions, _ = observation.track(body.name)
             if not len(times):
                 continue
             base = f"world/observed/{entity_part(body.name)}"
@@ -58,20 +56,15 @@ def write_inference_rrd(path: str | Path, observation: Observation, answer: Infe
 
 def _log_rollout(rec: rr.RecordingStream, observation: Observation, answer: Inference, colours: dict) -> None:
     scene = observed_rollout_scene(observation, answer.refined_scene)
-    settings = trajectory_settings(answer.settings.preset) if answer.settings.preset else preset("default")
-    outcome = run_sample(SampleTask(scene=scene, model=EXACT_MODEL, settings=settings, query=TRAJECTORY_SPEC, index=0,
-                                    seed=np.random.SeedSequence(0), record_every=1))
+    outcome = trajectory_sample(scene, trajectory_settings(answer.settings.simulation))
     if not outcome.ok:
         rec.log("world/rollout", rr.TextDocument(f"the rollout at the posterior medians failed: {outcome.error}"),
                 static=True)
         return
-    trajectory = outcome.rollouts[0].trajectory
-    times = np.array([f[0] for f in trajectory])
-    centres, orientations = np.stack([f[1] for f in trajectory]), np.stack([f[2] for f in trajectory])
-    for i, body in enumerate(scene.dynamic_objects):
-        origins = origins_of(body, centres[:, i], orientations[:, i])
-        base = f"world/rollout/{entity_part(body.name)}"
-        rec.log(f"{base}/path", rr.LineStrips3D([origins], colors=[colours[body.name]]), static=True)
+    times, paths = body_paths(scene, outcome.rollouts[0].trajectory)
+    for name, (origins, _) in paths.items():
+        base = f"world/rollout/{entity_part(name)}"
+        rec.log(f"{base}/path", rr.LineStrips3D([origins], colors=[colours[name]]), static=True)
         rec.send_columns(base, indexes=[rr.TimeColumn("sim_time", duration=times)],
                          columns=rr.Points3D.columns(positions=origins, radii=np.full(len(times), 0.006)).partition(
                              [1] * len(times)))

@@ -109,16 +109,15 @@ def amis(priors: Sequence, make_task: Callable[[int, np.ndarray], object],
     def log_proposal(z, proposal):
         if proposal is None:
             return log_prior(z)
-        mixed = np.logaddexp(math.log1p(-settings.defensive_fraction) + proposal.log_density(z),
-                             math.log(settings.defensive_fraction) + log_prior(z))
-        return mixed
+        return np.logaddexp(math.log1p(-settings.defensive_fraction) + proposal.log_density(z),
+                            math.log(settings.defensive_fraction) + log_prior(z))
 
     def weights(beta):
-        mixture = np.logaddexp.reduce(np.stack([log_proposal(coordinates, q) for q in proposals]), axis=0) \
-            - math.log(len(proposals))
-        usable = np.isfinite(log_likelihoods)
+        """Log weights with the likelihood raised to ``beta``; the prior and the proposals' mixture at
+        the candidates are made once a round (``densities``), not at every tempering trial."""
+        prior, mixture, usable = densities
         out = np.full(len(log_likelihoods), -np.inf)
-        out[usable] = log_prior(coordinates[usable]) + beta * log_likelihoods[usable] - mixture[usable]
+        out[usable] = prior + beta * log_likelihoods[usable] - mixture
         return out
 
     for r in range(settings.max_rounds):
@@ -137,6 +136,7 @@ def amis(priors: Sequence, make_task: Callable[[int, np.ndarray], object],
         coordinates = np.vstack([coordinates, drawn])
         log_likelihoods = np.concatenate([log_likelihoods,
                                           [np.nan if v is None else v for v in read_values]])
+        densities = _densities(coordinates, log_likelihoods, log_prior, log_proposal, proposals)
         if any(v is None for v in read_values):
             stopped_by = "budget"
             break
@@ -152,6 +152,15 @@ def amis(priors: Sequence, make_task: Callable[[int, np.ndarray], object],
     final = weights(power)
     return AmisResult(coordinates, log_likelihoods, _normalised(final), outcomes, len(proposals), effective_size(final),
                       stopped_by, power)
+
+
+def _densities(coordinates, log_likelihoods, log_prior, log_proposal, proposals) -> tuple:
+    """(the prior's log density, the deterministic mixture of every proposal so far, both at the
+    usable candidates; which candidates are usable: a finite log-likelihood)."""
+    mixture = np.logaddexp.reduce(np.stack([log_proposal(coordinates, q) for q in proposals]), axis=0) \
+        - math.log(len(proposals))
+    usable = np.isfinite(log_likelihoods)
+    return log_prior(coordinates[usable]), mixture[usable], usable
 
 
 def _temperature(weights: Callable[[float], np.ndarray], keep: float) -> float:

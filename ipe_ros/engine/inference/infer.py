@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import checks
-from ..config import CollapseSettings, SimSettings, preset
+from ..config import DEFAULT_PRESET, CollapseSettings, SimSettings, preset
 from ..errors import ConfigError
 from ..sampling.montecarlo import MapFn, MonteCarlo, check_seed
 from ..scene.bodies import Scene
@@ -48,7 +48,9 @@ VELOCITY_WINDOW_S = 0.15
 
 @dataclass(frozen=True)
 class InferSettings:
-    preset: str = "default"
+    #: the preset (or a request's settings) candidates are rolled out at, without its collapse steps
+    #: (``trajectory_settings``)
+    simulation: SimSettings = preset(DEFAULT_PRESET)
     seed: int = 0
     sampler: AmisSettings = AmisSettings()
     #: the physics' own error as a fraction of the distance travelled (likelihood.py); None: inferred
@@ -67,7 +69,9 @@ class InferSettings:
     budget_s: float | None = 60.0
 
     def __post_init__(self) -> None:
-        preset(self.preset)
+        if not isinstance(self.simulation, SimSettings):
+            raise ConfigError("simulation", f"must be a preset's settings (config.preset(NAME)), got "
+                                            f"{type(self.simulation).__name__}")
         check_seed(self.seed)
         if self.model_error_fraction is not None:
             checks.non_negative(self.model_error_fraction, "model_error_fraction")
@@ -145,7 +149,7 @@ class Inference:
                 "likelihood_power": round(self.likelihood_power, 4), "stopped_by": self.stopped_by, "elapsed_s": round(self.elapsed_s, 3),
                 "model_error_fraction": None if self.model_error is None else {
                     "median": self.model_error.median, "interval_90": [self.model_error.low_90, self.model_error.high_90]},
-                "settings": {"preset": self.settings.preset, "seed": self.settings.seed,
+                "settings": {"preset": self.settings.simulation.name, "seed": self.settings.seed,
                              "model_error_fraction": self.settings.model_error_fraction,
                              "particles_per_round": self.settings.sampler.particles_per_round,
                              "max_rounds": self.settings.sampler.max_rounds,
@@ -155,11 +159,10 @@ class Inference:
                 "refined_scene": None if self.refined_scene is None else scene_to_dict(self.refined_scene)}
 
 
-def trajectory_settings(name: str) -> SimSettings:
-    """The preset's settings for following trajectories: without its collapse steps, which keep a
-    collapse's statistics but not its path (under `default`, a tipping tower's top block 35 mm from
-    `paper` 0.13 s in; 1.7-4.8 SDs at the truth without them, 8.2 with)."""
-    settings = preset(name)
+def trajectory_settings(settings: SimSettings) -> SimSettings:
+    """``settings`` for following trajectories: without its collapse steps, which keep a collapse's
+    statistics but not its path (under `default`, a tipping tower's top block 35 mm from `paper`
+    0.13 s in; 1.7-4.8 SDs at the truth without them, 8.2 with)."""
     return dataclasses.replace(settings, collapse=CollapseSettings()) if settings.collapse.enabled else settings
 
 
@@ -168,7 +171,7 @@ def velocity_prior(observation: Observation, name: str) -> list[Normal]:
     fits p(t) = p0 + v t + a t^2 / 2 (p0 is the scene's exact pose) to the frames within
     VELOCITY_WINDOW_S (at least the first two); the SD is 3x the fit's noise SD plus 20% of the
     estimate and 0.05 m/s, since friction or a contact may already act within the window."""
-    times, positions = observation.track(name)
+    times, positions, _ = observation.track(name)
     origin = np.asarray(next(b.position_m for b in observation.scene.objects if b.name == name), float)
     keep = max(2, int(np.sum(times <= VELOCITY_WINDOW_S)))
     t, p = times[:keep], positions[:keep] - origin
@@ -183,11 +186,10 @@ def infer(observation: Observation, settings: InferSettings = InferSettings(), m
     started = time.perf_counter()
     unknowns = observation.unknowns
     priors = [u.prior for u in unknowns]
-    nuisance = {name: velocity_prior(observation, name) for name in observation.unknown_velocity}
-    for name in observation.unknown_velocity:
-        priors.extend(nuisance[name])
+    for name in observation.unknown_velocity:  # then each unknown initial velocity's three axes
+        priors.extend(velocity_prior(observation, name))
     scene = dataclasses.replace(observation.scene, horizon_s=observation.window_s)
-    sim = trajectory_settings(settings.preset)
+    sim = trajectory_settings(settings.simulation)
     tracks = _tracks(observation)
     errors = MODEL_ERROR_GRID if settings.model_error_fraction is None else (settings.model_error_fraction,)
     initial_sd = observation.position_sd_m if settings.initial_sd_m is None else settings.initial_sd_m
@@ -229,7 +231,7 @@ def observed_rollout_scene(observation: Observation, scene: Scene) -> Scene:
     the horizon, the pushes applied, unknown initial velocities at the frames' estimates."""
     velocities = {name: [n.mean for n in velocity_prior(observation, name)] for name in observation.unknown_velocity}
     scene = dataclasses.replace(scene, horizon_s=observation.window_s)
-    return with_values(scene, {}, _pushed(with_values(scene, {}, velocities), observation, velocities))
+    return with_values(scene, {}, _pushed(scene, observation, velocities))
 
 
 def _pushed(scene: Scene, observation: Observation, velocities: dict) -> dict:
@@ -248,19 +250,16 @@ def _pushed(scene: Scene, observation: Observation, velocities: dict) -> dict:
 def _tracks(observation: Observation) -> tuple[Track, ...]:
     out = []
     for body in observation.scene.dynamic_objects:
-        times, positions = observation.track(body.name)
-        if not len(times):
-            continue
-        orientations = np.full((len(times), 4), np.nan)
-        row = 0
-        for frame in observation.frames:
-            for seen, pose in frame.poses:
-                if seen == body.name:
-                    if pose.orientation_xyzw is not None:
-                        orientations[row] = pose.orientation_xyzw
-                    row += 1
-        out.append(track(body.name, times, positions, orientations, observation.position_sd_m))
+        times, positions, orientations = observation.track(body.name)
+        if len(times):
+            out.append(track(body.name, times, positions, orientations, observation.position_sd_m))
     return tuple(out)
+
+
+def _summary(label: str, prop: str, values: np.ndarray, weights: np.ndarray, ess: float) -> Estimate:
+    """The weighted values' mean, median and 90% interval."""
+    return Estimate(label, prop, float(weights @ values / weights.sum()), _weighted_quantile(values, weights, 0.5),
+                    _weighted_quantile(values, weights, 0.05), _weighted_quantile(values, weights, 0.95), ess)
 
 
 def _weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> float:
@@ -291,10 +290,7 @@ def _model_error(result: AmisResult, w: np.ndarray, usable: np.ndarray) -> Estim
         by_error = np.asarray(outcome.fit.log_likelihood_by_error) * result.likelihood_power
         share = np.exp(by_error - by_error.max())
         mass += weight * share / share.sum()
-    grid = np.asarray(MODEL_ERROR_GRID)
-    return Estimate("model_error_fraction", "model_error_fraction", float(grid @ mass / mass.sum()),
-                    _weighted_quantile(grid, mass, 0.5), _weighted_quantile(grid, mass, 0.05),
-                    _weighted_quantile(grid, mass, 0.95), result.ess)
+    return _summary("model_error_fraction", "model_error_fraction", np.asarray(MODEL_ERROR_GRID), mass, result.ess)
 
 
 def _pair(a: str, b: str, mass_a: np.ndarray, mass_b: np.ndarray, w: np.ndarray) -> MassPair:
@@ -326,15 +322,9 @@ def _answer(observation: Observation, settings: InferSettings, result: AmisResul
     model_error = None if settings.model_error_fraction is not None else _model_error(result, w, usable)
     values = np.stack([p.value(result.coordinates[usable, j]) for j, p in enumerate(priors[:len(unknowns)])], axis=1)
     values, w = _in_the_world(values, w[usable], unknowns, settings)
-    usable = np.ones(len(w), bool)
-    estimates = []
-    for j, unknown in enumerate(unknowns):
-        x, wj = values[usable, j], w[usable]
-        estimates.append(Estimate(unknown.label, unknown.property, float(wj @ x / wj.sum()),
-                                  _weighted_quantile(x, wj, 0.5), _weighted_quantile(x, wj, 0.05),
-                                  _weighted_quantile(x, wj, 0.95), result.ess))
+    estimates = [_summary(u.label, u.property, values[:, j], w, result.ess) for j, u in enumerate(unknowns)]
     masses = [j for j, u in enumerate(unknowns) if u.property == "mass_kg"]
-    heavier = tuple(_pair(unknowns[a].label, unknowns[b].label, values[usable, a], values[usable, b], w[usable])
+    heavier = tuple(_pair(unknowns[a].label, unknowns[b].label, values[:, a], values[:, b], w)
                     for a, b in itertools.combinations(masses, 2))
     chosen = np.random.default_rng(np.random.SeedSequence(settings.seed, spawn_key=(3,))).choice(
         len(w), size=DRAWS, p=w / w.sum())

@@ -15,8 +15,8 @@ from ..scene.bodies import Body, Box, Floor, Scene
 from ..scene.format import scene_to_dict
 from ..scene.shapes import Sphere
 from .observation import OBSERVATION_FORMAT
-from .particle import EXACT_MODEL, TRAJECTORY_SPEC, origins_of
-from ..sampling.rollout import SampleTask, run_sample
+from .likelihood import interpolate_positions
+from .particle import body_paths, trajectory_sample
 
 UPRIGHT = (0.0, 0.0, 0.0, 1.0)
 
@@ -28,23 +28,16 @@ def observe(scene: Scene, window_s: float, rng: np.random.Generator, *, unknowns
     velocities already in the scene's initial state), each object's position read every
     1/frame_rate_hz s with N(0, position_sd_m^2) noise per axis. ``velocity_unknown``: objects whose
     initial velocity the observation leaves out."""
-    rolled = dataclasses.replace(scene, horizon_s=window_s)
-    task = SampleTask(scene=rolled, model=EXACT_MODEL, settings=preset(settings), query=TRAJECTORY_SPEC, index=0,
-                      seed=np.random.SeedSequence(0), record_every=1)
-    outcome = run_sample(task)
+    outcome = trajectory_sample(dataclasses.replace(scene, horizon_s=window_s), preset(settings))
     if not outcome.ok:
         raise RuntimeError(f"the observed rollout failed: {outcome.error}")
-    trajectory = outcome.rollouts[0].trajectory
-    times = np.array([f[0] for f in trajectory])
-    centres = np.stack([f[1] for f in trajectory])
-    orientations = np.stack([f[2] for f in trajectory])
+    times, paths = body_paths(scene, outcome.rollouts[0].trajectory)
     frame_times = np.arange(1, int(np.floor(window_s * frame_rate_hz + 1e-9)) + 1) / frame_rate_hz
     frames = [{"t_s": round(float(t), 6), "objects": {}} for t in frame_times]
-    for i, body in enumerate(scene.dynamic_objects):
-        origins = origins_of(body, centres[:, i], orientations[:, i])
-        for frame, t in zip(frames, frame_times):
-            at = [float(np.interp(t, times, origins[:, axis])) for axis in range(3)]
-            noisy = np.asarray(at) + position_sd_m * rng.standard_normal(3)
+    for body in scene.dynamic_objects:
+        seen = interpolate_positions(times, paths[body.name][0], frame_times)
+        for frame, at in zip(frames, seen):
+            noisy = at + position_sd_m * rng.standard_normal(3)
             frame["objects"][body.name] = {"position_m": [round(float(v), 6) for v in noisy]}
     scene_dict = scene_to_dict(scene)
     velocities = {b.name: b.linear_velocity_m_s for b in scene.objects}

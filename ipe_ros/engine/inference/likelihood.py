@@ -15,15 +15,15 @@ left the ball's bounces confidently wrong). ``travelled`` is the observed path's
 smoothed over ``SMOOTHING_FRAMES``, so the tracker's noise does not add path), so an object at rest
 adds no error however long it rests. It is the observation's, not each rollout's: a covariance that
 shrank with the rollout's own path would favour candidates that move less (their smaller
-determinant outweighed centimetres of misfit). So the covariance is one per object for the whole
-inference, factored once (``Track``).
+determinant outweighed centimetres of misfit). The fraction itself is inferred: each candidate is
+weighed at every fraction of MODEL_ERROR_GRID (``fit``).
 
 Chaos is the engine's own: a candidate rolled out from starts a tracker's error apart may end
 centimetres or decimetres apart (a falling tower). One rollout per candidate would let a lucky start
 decide. So a candidate of a scene where that can happen is rolled out several times (``particle``),
 and its frames are judged against the replicates' mean, their spread added to the covariance as a
 third term of the same form (a synthetic likelihood, Wood 2010, made for chaotic dynamics); where
-the first two replicates agree within the tracker's noise, no more are run. Orientations, where a frame gives
+the first two replicates part by no more than a few times what they started apart, no more are run. Orientations, where a frame gives
 one and the observation a ``yaw_sd_rad``, add the angle between observed and simulated orientation,
 its SD growing with the angle the object has turned.
 """
@@ -66,7 +66,7 @@ class Fit:
 
 @dataclass(frozen=True)
 class Track:
-    """One object's frames, and the covariance of its residuals, factored."""
+    """One object's frames, and what its residuals' covariance is made of (``_log_likelihood``)."""
 
     name: str
     times_s: np.ndarray
@@ -89,6 +89,7 @@ def observed_path_m(positions_m: np.ndarray) -> np.ndarray:
 
 
 def track(name: str, times_s, positions_m, orientations_xyzw, sd_m: float) -> Track:
+    """An object's frames (orientations: NaN rows where a frame gave none) with the tracker's ``sd_m``."""
     times_s, positions_m = np.asarray(times_s, float), np.asarray(positions_m, float)
     correlation = np.exp(-np.abs(times_s[:, None] - times_s[None, :]) / MODEL_ERROR_MEMORY_S)
     q = np.asarray(orientations_xyzw, float)
@@ -139,7 +140,9 @@ def _log_likelihood(tracks, predicted: dict, yaw_sd_rad: float | None, model_err
         scale = model_error_fraction * seen.path_m
         if guess.spread_m is not None:
             scale = np.sqrt(scale ** 2 + guess.spread_m ** 2)
-        chol = np.linalg.cholesky(np.outer(scale, scale) * seen.correlation + seen.sd_m ** 2 * np.eye(len(scale)))
+        cov = np.outer(scale, scale) * seen.correlation
+        cov[np.diag_indices_from(cov)] += seen.sd_m ** 2  # the tracker's noise (no identity matrix built per fraction)
+        chol = np.linalg.cholesky(cov)
         log_det = float(2 * np.log(np.diag(chol)).sum())
         solved = np.linalg.solve(chol, residual)
         m = len(seen.times_s)

@@ -91,15 +91,18 @@ class Observation:
     def window_s(self) -> float:
         return self.frames[-1].t_s
 
-    def track(self, name: str) -> tuple[np.ndarray, np.ndarray]:
-        """(times (m,), positions (m, 3)) of the frames that saw ``name``."""
-        times, positions = [], []
+    def track(self, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(times (m,), positions (m, 3), orientations (m, 4): NaN rows where a frame gave none) of
+        the frames that saw ``name``."""
+        times, positions, orientations = [], [], []
         for frame in self.frames:
             for seen, pose in frame.poses:
                 if seen == name:
                     times.append(frame.t_s)
                     positions.append(pose.position_m)
-        return np.array(times, float), np.array(positions, float).reshape(-1, 3)
+                    orientations.append((math.nan,) * 4 if pose.orientation_xyzw is None else pose.orientation_xyzw)
+        return (np.array(times, float), np.array(positions, float).reshape(-1, 3),
+                np.array(orientations, float).reshape(-1, 4))
 
 
 def observation_from_json(text: str) -> Observation:

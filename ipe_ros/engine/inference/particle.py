@@ -15,6 +15,7 @@ import numpy as np
 
 from ..config import ModelConfig, SimSettings
 from ..query import QuerySpec
+from ..sampling.outcome import SampleOutcome
 from ..sampling.rollout import SampleTask, run_sample
 from ..scene import shapes
 from ..scene.bodies import Scene
@@ -32,7 +33,7 @@ EXACT_MODEL = ModelConfig(sigma_m=0.0, samples=1, object_noise=False)
 class ParticleTask:
     """One candidate: ``scene`` holds its property values and initial velocities.
 
-    ``tracks``: the observed objects' frames (``likelihood.Track``), factored once for all candidates."""
+    ``tracks``: the observed objects' frames (``likelihood.Track``), the same for all candidates."""
 
     index: int
     scene: Scene
@@ -61,30 +62,50 @@ class ParticleOutcome:
 
 
 def run_particle(task: ParticleTask) -> ParticleOutcome:
-    """The candidate's fit: one rollout where the start is exact, else two, and up to
-    ``replicates`` where those two part by more than the tracker's noise (chaos: see likelihood)."""
+    """The candidate's fit: one rollout where the start is exact, else two, and up to ``replicates``
+    where those two part by more than CHAOS_AMPLIFICATION times what they started apart (chaos: see
+    likelihood), whose spread then widens the fit."""
     noisy = task.initial_sd_m > 0 and task.replicates > 1
     model = dataclasses.replace(EXACT_MODEL, sigma_m=task.initial_sd_m if noisy else 0.0)
     seeds = task.seed.spawn(task.replicates) if noisy else [np.random.SeedSequence(task.index)]
-    runs = []
+    runs, chaotic = [], False
     for r, seed in enumerate(seeds):
-        sample = SampleTask(scene=task.scene, model=model, settings=task.settings, query=TRAJECTORY_SPEC,
-                            index=task.index, seed=seed, record_every=1, deadline_unix_s=task.deadline_unix_s)
-        outcome = run_sample(sample)
+        outcome = trajectory_sample(task.scene, task.settings, model=model, seed=seed, index=task.index,
+                                    deadline_unix_s=task.deadline_unix_s)
         if not outcome.ok:
             return ParticleOutcome(task.index, False, outcome.error, budget_stopped=outcome.budget_stopped)
         runs.append(_at_frames(task, outcome.rollouts[0].trajectory))
-        if r == 1 and _agree(task, runs):
-            break
+        if r == 1:
+            chaotic = not _agree(task, runs)
+            if not chaotic:
+                break
     predicted = {}
     for seen in task.tracks:
         positions = np.stack([run[seen.name][0] for run in runs])  # (replicates, m, 3)
-        spread = None
-        if len(runs) > 1 and not _agree(task, runs):
-            spread = np.sqrt(np.mean(positions.var(axis=0, ddof=1), axis=1))
+        spread = np.sqrt(np.mean(positions.var(axis=0, ddof=1), axis=1)) if chaotic else None
         predicted[seen.name] = Predicted(positions.mean(axis=0), spread, runs[0][seen.name][1])
     return ParticleOutcome(task.index, True, fit=fit(task.tracks, predicted, task.yaw_sd_rad, task.model_errors),
                            replicates=len(runs))
+
+
+def trajectory_sample(scene: Scene, settings: SimSettings, *, model: ModelConfig = EXACT_MODEL,
+                      seed: np.random.SeedSequence | None = None, index: int = 0,
+                      deadline_unix_s: float | None = None) -> SampleOutcome:
+    """``scene`` rolled out through the prediction's own sample path, every step recorded: a
+    candidate's replicate, an observation made at known properties, a recording's rollout."""
+    return run_sample(SampleTask(scene=scene, model=model, settings=settings, query=TRAJECTORY_SPEC, index=index,
+                                 seed=np.random.SeedSequence(index) if seed is None else seed, record_every=1,
+                                 deadline_unix_s=deadline_unix_s))
+
+
+def body_paths(scene: Scene, trajectory) -> tuple[np.ndarray, dict[str, tuple[np.ndarray, np.ndarray]]]:
+    """A recorded trajectory as (its times (T,), dynamic body name -> (its frame's origins (T, 3),
+    orientations (T, 4))): where a tracker would have seen each body."""
+    times = np.array([frame[0] for frame in trajectory])
+    centres = np.stack([frame[1] for frame in trajectory])  # (T, n, 3) centres of mass
+    orientations = np.stack([frame[2] for frame in trajectory])
+    return times, {body.name: (origins_of(body, centres[:, i], orientations[:, i]), orientations[:, i])
+                   for i, body in enumerate(scene.dynamic_objects)}
 
 
 def _agree(task: ParticleTask, runs: list) -> bool:
@@ -99,16 +120,12 @@ def _agree(task: ParticleTask, runs: list) -> bool:
 
 def _at_frames(task: ParticleTask, trajectory) -> dict:
     """Per observed object, its simulated (origins, orientations) at the frames' times."""
-    times = np.array([frame[0] for frame in trajectory])
-    positions = np.stack([frame[1] for frame in trajectory])  # (T, n, 3) centres of mass
-    orientations = np.stack([frame[2] for frame in trajectory])
-    index = {b.name: i for i, b in enumerate(task.scene.dynamic_objects)}
+    times, paths = body_paths(task.scene, trajectory)
     out = {}
     for seen in task.tracks:
-        i = index[seen.name]
-        origins = origins_of(task.scene.dynamic_objects[i], positions[:, i], orientations[:, i])
+        origins, orientations = paths[seen.name]
         nearest = np.clip(np.searchsorted(times, seen.times_s), 0, len(times) - 1)
-        out[seen.name] = (interpolate_positions(times, origins, seen.times_s), orientations[nearest, i])
+        out[seen.name] = (interpolate_positions(times, origins, seen.times_s), orientations[nearest])
     return out
 
 

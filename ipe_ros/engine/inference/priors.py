@@ -77,8 +77,20 @@ class LogUniform(_Interval):
         return {"log_uniform": [self.low, self.high]}
 
 
+class _NormalCoordinate:
+    """A prior whose coordinate z is a standard normal."""
+
+    def log_density_z(self, z):
+        z = np.asarray(z, float)
+        return -0.5 * z * z - 0.5 * math.log(2 * math.pi)
+
+    @staticmethod
+    def z_from_uniform(u: float) -> float:
+        return _probit(u)
+
+
 @dataclass(frozen=True)
-class LogNormal:
+class LogNormal(_NormalCoordinate):
     """log x ~ N(log median, log_sd^2); z = (log x - log median) / log_sd."""
 
     median: float
@@ -90,20 +102,12 @@ class LogNormal:
     def coordinate(self, x):
         return np.log(np.asarray(x, float) / self.median) / self.log_sd
 
-    def log_density_z(self, z):
-        z = np.asarray(z, float)
-        return -0.5 * z * z - 0.5 * math.log(2 * math.pi)
-
-    @staticmethod
-    def z_from_uniform(u: float) -> float:
-        return _probit(u)
-
     def to_dict(self) -> dict:
         return {"log_sd": self.log_sd, "median": self.median}
 
 
 @dataclass(frozen=True)
-class Normal:
+class Normal(_NormalCoordinate):
     """x ~ N(mean, sd^2): a nuisance (an initial velocity estimated from the frames), z = (x - mean) / sd."""
 
     mean: float
@@ -114,14 +118,6 @@ class Normal:
 
     def coordinate(self, x):
         return (np.asarray(x, float) - self.mean) / self.sd
-
-    def log_density_z(self, z):
-        z = np.asarray(z, float)
-        return -0.5 * z * z - 0.5 * math.log(2 * math.pi)
-
-    @staticmethod
-    def z_from_uniform(u: float) -> float:
-        return _probit(u)
 
     def to_dict(self) -> dict:
         return {"normal": [self.mean, self.sd]}

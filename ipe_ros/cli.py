@@ -66,7 +66,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="only this scene/tower (repeatable; default: all in the file)")
     add_input_options(p, ("queries", "contact"))
     add_query_parameter_options(p)
-    add_input_options(p, ("samples", "sigma_m", "phi_m_s2", "force_direction_deg", "mu", "perception"), notes={
+    add_input_options(p, ("samples", "sigma_m", "phi_m_s2", "force_direction_deg", "mu", "mass_log_sd",
+                          "friction_log_sd", "restitution_half_width", "perception"), notes={
         "perception": "where the k noisy scenes come from: " + "; ".join(
             f"{n}: {perception_source(n).summary}" for n in perception_names())
         + " (depth: --depth, --camera-info, --camera-pose); sigma unused but by gaussian"})

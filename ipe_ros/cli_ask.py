@@ -64,8 +64,9 @@ def add_ask_parser(sub, one_line_parser) -> None:
     def common(q):
         q.add_argument("path", help="a JSON scene file (or a paper-format tower CSV)")
         q.add_argument("--scene", default=None, metavar="NAME", help="which scene of the file (default: the only one)")
-        add_input_options(q, ("samples", "sigma_m", "ground_truth", "preset_name", "seed", "workers", "budget_s",
-                              "fell_off", "self_check", "verify_samples"),
+        add_input_options(q, ("samples", "sigma_m", "mass_log_sd", "friction_log_sd", "restitution_half_width",
+                              "ground_truth", "preset_name", "seed", "workers", "budget_s", "fell_off", "self_check",
+                              "verify_samples"),
                           defaults={"samples": DEFAULT_ASK_SAMPLES, "self_check": False},
                           notes={"samples": "samples per variant",
                                  "ground_truth": "no noise at all (sigma = 0, no body's own noise; a push with noise "

@@ -55,6 +55,8 @@ def format_table(predictions: list[Prediction]) -> str:
         for name in p.request.get("queries", ()):
             if name in QUERIES and p.samples:
                 lines.extend(f"{'':<34} {line}" for line in QUERIES[name].describe(p))
+        if p.property_influence:
+            lines.append(f"{'':<34} {describe_influence(p.property_influence[0])}")
         if p.failure_reasons:
             lines.append(f"{'':<34} failures: {'; '.join(p.failure_reasons)}")
         if p.fidelity is not None and p.fidelity not in ("verified", "validated") or p.refined_samples:
@@ -63,6 +65,13 @@ def format_table(predictions: list[Prediction]) -> str:
             lines.append(f"{'':<34} numerical health: a body ended {p.max_penetration_fraction:.1%} of its size inside "
                          f"another; a rollout gained {p.max_energy_gain_j:.3g} J")
     return "\n".join(lines)
+
+
+def describe_influence(row: dict) -> str:
+    """One line on the uncertain property that moves the answer most (``sampling.influence``)."""
+    what = f"P({row['object']} falls)" if row["outcome"] == "fall_probability" else f"{row['object']}'s travel (m)"
+    return (f"most influential: {row['property']} (median {row['median']:.3g}): {what} {row['below_median']:.2f} "
+            f"below it, {row['above_median']:.2f} above (+-{2 * row['difference_se']:.2f}); measure it first")
 
 
 def describe_fidelity(p: Prediction) -> str:

@@ -17,7 +17,7 @@ from ipe_ros.engine.errors import ConfigError, SceneError
 from ipe_ros.engine.inference.infer import InferSettings, infer
 from ipe_ros.engine.inference.known import CASES, probe_push
 from ipe_ros.engine.inference.observation import MAX_FRAMES, observation_from_dict, observation_from_json
-from ipe_ros.engine.inference.priors import LogNormal, LogUniform, Normal, Uniform
+from ipe_ros.engine.scene.properties import LogNormal, LogUniform, Normal, Uniform
 
 G = 9.81
 
@@ -116,6 +116,12 @@ def test_a_pushed_box_gives_its_mass_and_friction_within_the_intervals(probe):
     assert answer.worst_residual_m < 0.02 and answer.failed == 0
     refined = {b.name: b for b in answer.refined_scene.objects}["box"]
     assert refined.mass_kg == mass.median and refined.friction == friction.median
+    # what is still uncertain rides along as the object's priors: log-normal, the 90% interval's width
+    priors = dict(refined.priors)
+    assert priors["friction"].median == friction.median
+    assert priors["friction"].value(1.6449) == pytest.approx(friction.high_90, rel=0.05 * (
+        friction.high_90 / friction.low_90))  # a log-normal's 95th percentile, where the interval's ends are skewed
+    assert set(priors) == {"mass_kg", "friction"}
 
 
 @pytest.mark.parametrize("family, seed", [("slide", 0), ("bounce", 1)])
@@ -172,6 +178,14 @@ def test_ipe_infer_answers_the_generated_probe_push_in_json(tmp_path):
     assert low <= 0.45 <= high
     refined = json.loads((tmp_path / "refined.json").read_text())
     assert refined["objects"][0]["friction"] == answer["unknowns"]["box.friction"]["median"]
+    assert refined["objects"][0]["friction_prior"]["median"] == answer["unknowns"]["box.friction"]["median"]
+    # predicting from the refined scene draws the friction still uncertain, and names it
+    predicted = subprocess.run([sys.executable, "-m", "ipe_ros.cli", "predict", str(tmp_path / "refined.json"),
+                                "--workers", "0", "--samples", "8", "--sigma", "0", "--query", "final_pose",
+                                "--json"], capture_output=True, text=True, timeout=300)
+    assert predicted.returncode == 0, predicted.stderr
+    (influence,) = json.loads(predicted.stdout)["property_influence"]
+    assert influence["property"] == "box.friction" and influence["outcome"] == "travel_m"
     bad = subprocess.run([sys.executable, "-m", "ipe_ros.cli", "infer", str(path), "--unknown", "box.colour"],
                          capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2

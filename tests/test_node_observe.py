@@ -50,3 +50,25 @@ def test_an_observation_is_answered_on_properties_and_its_lesson_reaches_the_nex
     used = {(u["object"], u["property"]): u["value"] for u in prediction["learned_properties"]}
     assert used == {("box", "mass_kg"): answer["unknowns"]["box.mass_kg"]["median"],
                     ("box", "friction"): friction["median"]}
+
+
+def test_an_infer_question_on_ask_is_answered_on_answer_with_the_other_questions(ros):
+    """``~/ask`` takes an ``infer`` question (the observation as its field): answered once, final, on
+    ``~/answer``; a bad one refused there in one line naming the field."""
+    ros.start_ipe_node(samples=4, sigma=0.0)
+    replies = ros.collect(String, "/ipe/answer", LATCHED_QOS)
+    ask = ros.publisher(String, "/ipe/ask")
+    observation = probe_push(np.random.default_rng(6))
+    ask.publish(String(data=json.dumps({"question": "infer", "id": "bad", "observations": observation})))
+    wait_until(lambda: len(replies), TIMEOUT_S, "the refusal of a bad infer question")
+    assert json.loads(replies[0].data) == {
+        "question": "infer", "final": True, "id": "bad",
+        "error": "observations: unknown field of an infer question; allowed: id, observation"}
+    ask.publish(String(data=json.dumps({"question": "infer", "id": "i1", "observation": observation})))
+    wait_until(lambda: len(replies) >= 2, TIMEOUT_S, "the answer to the infer question")
+    answer = json.loads(replies[1].data)
+    assert (answer["question"], answer["id"], answer["final"], answer["consistent"]) == ("infer", "i1", True, True)
+    low, high = answer["unknowns"]["box.friction"]["interval_90"]
+    assert low <= 0.45 <= high
+    assert answer["refined_scene"]["objects"][0]["friction_prior"]["median"] == \
+        answer["unknowns"]["box.friction"]["median"]

@@ -30,8 +30,9 @@ def test_schema_and_reader_name_the_same_fields():
     assert set(defs["object"]["properties"]) == set(io.OBJECT_REQUIRED) | set(io._OBJECT_OPTIONAL)
     assert set(defs["object"]["required"]) == set(io.OBJECT_REQUIRED)
     assert set(defs["scene"]["properties"]) == {"format", "horizon_s", "set_down_m", *io.SCENE_REQUIRED}
-    assert set(defs["floor"]["properties"]) == set(io.FLOOR_FIELDS)
-    assert set(defs["table"]["properties"]) == set(io.TABLE_FIELDS)
+    assert set(defs["floor"]["properties"]) == set(io.FLOOR_FIELDS) | set(io.SUPPORT_OPTIONAL)
+    assert set(defs["table"]["properties"]) == set(io.TABLE_FIELDS) | set(io.SUPPORT_OPTIONAL)
+    assert set(defs["floor"]["required"]) == set(io.FLOOR_FIELDS)
     for kind, fields in io._SHAPE_FIELDS.items():
         assert set(defs[kind]["properties"]) == {"type", *fields, *io._SHAPE_OPTIONAL.get(kind, ())}, kind
 

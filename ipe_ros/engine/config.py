@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from .scene import limits
+from .scene.properties import PropertySpread
 from .checks import at_most, boolean, integer, non_negative, positive
 from .errors import ConfigError, shown
 from .perceptions import perception_source
@@ -82,6 +83,8 @@ class ModelConfig:
     #: draw each body's own noise (``position_sigma_m``, ``yaw_sigma_rad``) where the scene gives it;
     #: False takes the scene exactly as given, as the ground truth (``--ground-truth``) must
     object_noise: bool = True
+    #: model-wide priors over masses, frictions and restitutions (None: the scene's values, exact)
+    property_spread: PropertySpread | None = field(default=None, metadata={"keyed": "when set"})
 
     def __post_init__(self) -> None:
         non_negative(self.sigma_m, "sigma_m")
@@ -113,7 +116,8 @@ class ModelConfig:
         """sigma = phi = 0 and no posterior to draw from: no noise of the model's own. Whether a
         prediction is deterministic also depends on the scene's per-body noise:
         ``perturb.is_deterministic``."""
-        return self.sigma_m == 0 and not self.pushes and not perception_source(self.perception).posterior
+        return self.sigma_m == 0 and not self.pushes and not perception_source(self.perception).posterior \
+            and self.property_spread is None
 
 #: The paper's IPE with the default sigma and k (phi = 0, the scene's own masses).
 DEFAULT_MODEL = ModelConfig(sigma_m=DEFAULT_SIGMA_M, samples=DEFAULT_SAMPLES)

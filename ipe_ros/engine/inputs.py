@@ -100,6 +100,15 @@ INPUTS: tuple[Input, ...] = (
           errors_as=("force_direction_rad",), metavar="DEG", constraints="finite degrees, or NaN for any direction"),
     Input("mu", "float", None, "ratio", "heavy/light density ratio for bodies in group 'heavy'", "--mu", "mu",
           range=(0.0, limits.MAX_MASS_RATIO), unset=0.0, unset_means="the scene's own masses", metavar="R"),
+    Input("mass_log_sd", "float", 0.0, "log SD", "uncertain masses: every dynamic object without a mass_prior of its "
+          "own draws its mass per sample, log-normal around the scene's (0: exact, as given)", "--mass-log-sd",
+          "mass_log_sd", range=(0.0, 5.0), metavar="S"),
+    Input("friction_log_sd", "float", 0.0, "log SD", "uncertain frictions: every surface (objects and support) "
+          "without a friction_prior of its own draws its friction per sample, log-normal around the scene's (0: "
+          "exact)", "--friction-log-sd", "friction_log_sd", range=(0.0, 5.0), metavar="S"),
+    Input("restitution_half_width", "float", 0.0, "restitution", "uncertain restitutions: every surface without a "
+          "restitution_prior of its own draws its restitution per sample, uniform within +- this of the scene's, "
+          "cut to [0, 1] (0: exact)", "--restitution-spread", "restitution_spread", range=(0.0, 1.0), metavar="W"),
     Input("ground_truth", "bool", False, "flag",
           "the ground-truth model: the scene exactly as given, one deterministic rollout (sigma and phi read as 0, "
           "and no body's own position or yaw noise)", "--ground-truth", "ground_truth"),

@@ -21,6 +21,7 @@ from .query import QUERIES, QuerySpec
 from .query.parameters import spec_parameters
 from .sampling.montecarlo import check_budget
 from .sampling.sampler import AdaptiveStop, check_ci_width
+from .scene.properties import PropertySpread
 
 
 @dataclass(frozen=True)
@@ -46,14 +47,16 @@ def build_request(*, samples: int = DEFAULT_SAMPLES, sigma_m: float = DEFAULT_SI
                   seed: int = 0, ci_width: float | None = None, deadline_s: float | None = None, batch_size: int = 4,
                   budget_s: float | None = DEFAULT_BUDGET_S, self_check: bool = True,
                   verify_samples: int = DEFAULT_CHECK.verify_samples, always_verify: bool = DEFAULT_CHECK.always_verify,
-                  query_parameters: Mapping[str, Any] | None = None) -> Request:
+                  query_parameters: Mapping[str, Any] | None = None, mass_log_sd: float = 0.0,
+                  friction_log_sd: float = 0.0, restitution_half_width: float = 0.0) -> Request:
     """The request these inputs ask for, or a ConfigError naming the engine's field.
 
     ``ground_truth``: sigma = phi = 0 and no body's own noise (the scene as given, one rollout).
     ``contact``: (A, B) pairs; giving any adds the contact query. ``horizon_s`` None and
     ``force_direction_deg`` None: the preset's horizon, any push direction. ``query_parameters``:
     queries' own parameters by name (``"<query>.<field>"``, ``query.parameters``); those of queries
-    not asked are left out.
+    not asked are left out. ``mass_log_sd``, ``friction_log_sd``, ``restitution_half_width``: the
+    model-wide priors of every value a scene gives exactly (``scene.properties.PropertySpread``; 0: off).
     """
     if ground_truth and perception_source(perception).posterior:
         raise ConfigError("ground_truth", f"takes the scene exactly as given, but perception {perception} draws it from "
@@ -66,7 +69,9 @@ def build_request(*, samples: int = DEFAULT_SAMPLES, sigma_m: float = DEFAULT_SI
     model = ModelConfig(sigma_m=0.0 if ground_truth else sigma_m,
                         phi_m_s2=(0.0,) if ground_truth else tuple(phi_m_s2),
                         force_direction_rad=None if force_direction_deg is None else math.radians(force_direction_deg),
-                        mu=mu, samples=samples, perception=perception, vision=vision, object_noise=not ground_truth)
+                        mu=mu, samples=samples, perception=perception, vision=vision, object_noise=not ground_truth,
+                        property_spread=None if ground_truth else
+                        property_spread(mass_log_sd, friction_log_sd, restitution_half_width))
     contact = tuple(contact)
     asked = frozenset(queries) | ({"contact"} if contact else set())
     query = QuerySpec(queries=asked, contact_pairs=contact,
@@ -85,3 +90,9 @@ def build_request(*, samples: int = DEFAULT_SAMPLES, sigma_m: float = DEFAULT_SI
     check = SelfCheck(enabled=bool(self_check), verify_samples=verify_samples, always_verify=always_verify)
     return Request(model=model, settings=settings, query=query, seed=seed, stop=stop, budget_s=budget_s, check=check)
 
+
+def property_spread(mass_log_sd: float, friction_log_sd: float, restitution_half_width: float) -> PropertySpread | None:
+    """The model-wide priors, or None when all are off (so that a request without them is keyed,
+    stored and answered exactly as before they existed)."""
+    spread = PropertySpread(mass_log_sd, friction_log_sd, restitution_half_width)
+    return None if spread == PropertySpread() else spread

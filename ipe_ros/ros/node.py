@@ -324,6 +324,8 @@ class IpeInterface(ObserveInterface):
 
     def _on_ask(self, msg: String) -> None:
         """A question about an action: answered on ~/answer (with its id), never blocking intake."""
+        if self._asked_to_infer(msg):
+            return
         request_id = request_id_of(msg)
         try:
             question, scene = string_to_question(msg, max_objects=self.service.config.max_objects,

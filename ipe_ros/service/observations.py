@@ -5,16 +5,16 @@ prediction service's pool and config; what was learned kept by object name for t
 from __future__ import annotations
 
 import collections
-import dataclasses
 import threading
 import time
 import traceback
 from typing import Any, Callable
 
 from ..engine.errors import clip
-from ..engine.inference.infer import InferSettings, infer
+from ..engine.inference.infer import InferSettings, infer, posterior_priors
 from ..engine.inference.observation import Observation
 from ..engine.scene.bodies import Scene
+from ..engine.scene.properties import with_properties
 from .predictions import PredictionService
 
 #: observations waiting beyond this are refused at once ("busy")
@@ -22,42 +22,38 @@ MAX_WAITING_OBSERVATIONS = 2
 
 
 class LearnedProperties:
-    """Each object's inferred properties (posterior medians) by name, for ``keep_s`` seconds after the
-    observation that taught them; a scene that names the object takes them in place of its own."""
+    """Each object's inferred properties by name, for ``keep_s`` seconds after the observation that
+    taught them: a scene that names the object takes the posterior median in place of its own value,
+    and the posterior as the property's prior (what is still uncertain is drawn per sample)."""
 
     def __init__(self, keep_s: float, clock: Callable[[], float] = time.monotonic):
         self.keep_s, self._clock = keep_s, clock
         self._lock = threading.Lock()
-        self._by_object: dict[str, dict[str, tuple[float, float]]] = {}  # name -> property -> (value, when)
+        #: (name, property) -> (value, prior or None, when)
+        self._known: dict[tuple[str, str], tuple[float, Any, float]] = {}
 
-    def learn(self, medians: dict[tuple[str, str], float]) -> None:
-        """``medians``: (object name or "support", property) -> value."""
+    def learn(self, medians: dict[tuple[str, str], float], priors: dict | None = None) -> None:
+        """``medians``: (object name or "support", property) -> value; ``priors``: the same keys ->
+        the posterior as a prior (``scene.properties.posterior_prior``), where it has width."""
         now = self._clock()
         with self._lock:
-            for (name, prop), value in medians.items():
-                self._by_object.setdefault(name, {})[prop] = (float(value), now)
+            for key, value in medians.items():
+                self._known[key] = (float(value), (priors or {}).get(key), now)
 
     def apply(self, scene: Scene) -> tuple[Scene, tuple[tuple[str, str, float], ...]]:
         """The scene with what is still known in place, and (object, property, value) for each used."""
         if self.keep_s <= 0:
             return scene, ()
-        now, used, objects = self._clock(), [], []
-        support = scene.support
+        now = self._clock()
+        owners = {"support"} | {b.name for b in scene.objects if not b.static}
         with self._lock:
-            fresh = {p: v for p, (v, when) in self._by_object.get("support", {}).items() if now - when <= self.keep_s}
-            if fresh:
-                used.extend(("support", p, v) for p, v in sorted(fresh.items()))
-                support = dataclasses.replace(support, **fresh)
-            for body in scene.objects:
-                fresh = {p: v for p, (v, when) in self._by_object.get(body.name, {}).items()
-                         if now - when <= self.keep_s and not body.static}
-                if fresh:
-                    used.extend((body.name, p, v) for p, v in sorted(fresh.items()))
-                    if "mass_kg" in fresh:
-                        fresh["density_kg_m3"] = None
-                    body = dataclasses.replace(body, **fresh)
-                objects.append(body)
-        return (dataclasses.replace(scene, objects=tuple(objects), support=support), tuple(used)) if used else (scene, ())
+            fresh = {key: (value, prior) for key, (value, prior, when) in self._known.items()
+                     if key[0] in owners and now - when <= self.keep_s}
+        if not fresh:
+            return scene, ()
+        values = {key: value for key, (value, _) in fresh.items()}
+        priors = {key: prior for key, (_, prior) in fresh.items() if prior is not None}
+        return with_properties(scene, values, priors), tuple((o, p, v) for (o, p), v in sorted(values.items()))
 
 
 class ObservationService:
@@ -83,8 +79,8 @@ class ObservationService:
             abandoned = list(self._queue)
             self._queue.clear()
             self._cond.notify_all()
-        for request_id, _ in abandoned:
-            self._deliver({"id": request_id, "error": f"{reason}: the observation was not answered"})
+        for request_id, _, publish in abandoned:
+            self._deliver({"id": request_id, "error": f"{reason}: the observation was not answered"}, publish)
         if join:
             self.join(timeout_s)
 
@@ -92,14 +88,16 @@ class ObservationService:
         if self._thread.is_alive():
             self._thread.join(timeout_s)
 
-    def submit(self, request_id: str, observation: Observation) -> str | None:
-        """Queue an observation; why it was refused, or None."""
+    def submit(self, request_id: str, observation: Observation,
+               publish: Callable[[dict[str, Any]], None] | None = None) -> str | None:
+        """Queue an observation, its answer for ``publish`` (None: the service's own, ``~/properties``);
+        why it was refused, or None."""
         with self._cond:
             if self._closing:
                 return "the node is shutting down"
             if len(self._queue) >= MAX_WAITING_OBSERVATIONS:
                 return f"busy: {len(self._queue)} observations are waiting; send it again later"
-            self._queue.append((request_id, observation))
+            self._queue.append((request_id, observation, publish or self._publish))
             self._cond.notify_all()
         return None
 
@@ -110,7 +108,7 @@ class ObservationService:
                     self._cond.wait()
                 if self._closing:
                     return
-                request_id, observation = self._queue.popleft()
+                request_id, observation, publish = self._queue.popleft()
             request = self._predictions.config.request
             pool = self._predictions.pool
             try:
@@ -119,8 +117,9 @@ class ObservationService:
                 message = {"id": request_id, **answer.to_dict()}
                 if answer.consistent:
                     self.learned.learn({(body, e.property): e.median for u, e in
-                                                     zip(observation.unknowns, answer.estimates)
-                                                     for body in u.applies_to(observation.scene)})
+                                        zip(observation.unknowns, answer.estimates)
+                                        for body in u.applies_to(observation.scene)},
+                                       posterior_priors(observation.unknowns, answer.estimates, observation.scene))
                 ok = True
             except Exception as exc:  # noqa: BLE001 - one observation's trouble is its answer, never the thread's end
                 error = str(exc) if isinstance(exc, ValueError) else "".join(
@@ -131,10 +130,10 @@ class ObservationService:
                     return
                 self.answered += ok
                 self.refused += not ok
-            self._deliver(message)
+            self._deliver(message, publish)
 
-    def _deliver(self, message: dict[str, Any]) -> None:
+    def _deliver(self, message: dict[str, Any], publish: Callable[[dict[str, Any]], None]) -> None:
         try:
-            self._publish(message)
+            publish(message)
         except Exception as exc:  # noqa: BLE001
             self._log_error(f"publishing the properties for observation {message.get('id')!r} failed: {exc}")

@@ -13,7 +13,7 @@ import numpy as np
 
 from .. import simulation
 from ..errors import PhysicsError
-from ..sampling.perturb import draw_sample_inputs
+from ..sampling.perturb import draw_sample, draw_sample_inputs, with_drawn_properties
 from ..sampling.rollout import (SampleOutcome, SampleTask, failed, guarded, kept, rollout_result, separated_world,
                                simulate_pushes, simulate_sample)
 from ..scene.bodies import Scene
@@ -92,7 +92,9 @@ def run_variants(task: VariantTask) -> list[SampleOutcome]:
     (``rollout.simulate_sample``); the other variants start from its separated poses."""
     if task.deadline_unix_s is not None and time.time() >= task.deadline_unix_s:
         return [failed(task, "BudgetExceeded: not started", budget_stopped=True) for _ in task.actions]
-    inputs = draw_sample_inputs(task.scene, task.model, np.random.default_rng(task.seed))
+    scene, inputs = draw_sample(task.scene, task.model, task.seed)
+    shown_task = task
+    task = task if scene is task.scene else dataclasses.replace(task, scene=scene)  # its drawn properties
     try:
         world = separated_world(task.scene, task.settings, inputs)
         shared, shared_orn = simulation.read_poses(world)
@@ -112,10 +114,10 @@ def run_variants(task: VariantTask) -> list[SampleOutcome]:
         if v not in out:
             out[v] = guarded(task, inputs.push_direction_rad,
                              lambda: _one_variant(task, action, shared, shared_orn, inputs, region))
-    return [_refined(task, v, out[v]) for v in range(len(task.actions))]
+    return [_refined(shown_task, task.scene, v, out[v]) for v in range(len(task.actions))]
 
 
-def _refined(task: VariantTask, v: int, outcome: SampleOutcome) -> SampleOutcome:
+def _refined(task: VariantTask, scene: Scene, v: int, outcome: SampleOutcome) -> SampleOutcome:
     """Variant ``v``'s outcome as a prediction's sample is kept (``rollout.kept``: its rerun at the
     reference beside it, or in plain rigid bodies in its place), a rerun being the variant alone:
     the very task the self-check would rerun."""
@@ -126,7 +128,7 @@ def _refined(task: VariantTask, v: int, outcome: SampleOutcome) -> SampleOutcome
                                 .at(settings))
         return rerun
 
-    return kept(task, outcome, alone)
+    return kept(dataclasses.replace(task, scene=scene), outcome, alone)
 
 
 def _one_variant(task: VariantTask, action: Action, shared, shared_orn, inputs,
@@ -141,6 +143,7 @@ def _one_variant(task: VariantTask, action: Action, shared, shared_orn, inputs,
         positions, orientations, masses = positions[keep], orientations[keep], masses[keep]
         shared, shared_orn = positions, orientations
     separate = False
+    properties = inputs.properties
     if isinstance(action, Remove):
         keep = np.array([b.name not in action.names for b in bodies])
         scene = dataclasses.replace(scene, objects=tuple(b for b in scene.objects if b.name not in action.names))
@@ -149,7 +152,11 @@ def _one_variant(task: VariantTask, action: Action, shared, shared_orn, inputs,
         rng = _action_rng(task, action)
         new = action.body
         added = dataclasses.replace(scene, objects=(new,))
-        drawn = draw_sample_inputs(added, task.model, rng)  # the new object's own noise, second stream
+        # the new object's own noise on the second stream, its properties on their own as every object's
+        added, drawn = with_drawn_properties(added, task.model, task.seed, draw_sample_inputs(added, task.model, rng),
+                                             owners=frozenset({new.name}))
+        new = added.objects[0]
+        properties += drawn.properties
         scene = dataclasses.replace(scene, objects=scene.objects + (new,))
         positions = np.vstack([shared, drawn.positions_m])
         orientations = np.vstack([shared_orn, drawn.orientations_xyzw])
@@ -169,4 +176,4 @@ def _one_variant(task: VariantTask, action: Action, shared, shared_orn, inputs,
     result = rollout_result(scene, task.query, initial, initial_orn, phi, end)  # the queries a prediction reads
     return SampleOutcome(index=task.index, ok=True, error=None, push_direction_rad=inputs.push_direction_rad,
                          initial_positions_m=initial, initial_orientations_xyzw=initial_orn, rollouts=(result,),
-                         names=tuple(b.name for b in scene.dynamic_objects))
+                         names=tuple(b.name for b in scene.dynamic_objects), properties=properties)

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import PRESETS, ModelConfig, SimSettings
-from ..sampling.perturb import dynamic_masses, is_deterministic
+from ..sampling.perturb import dynamic_masses, is_deterministic, sample_properties
 from ..scene.bodies import Floor, Scene, box_corners
 from ..scene.shapes import BoxShape, rotation_matrix
 
@@ -85,6 +85,8 @@ def outside(scene: Scene, model: ModelConfig, settings: SimSettings, envelope: E
         return "gravity is not the validated one"
     if model.pushes:
         return "the model pushes the support"
+    if sample_properties(scene, model):  # drawn values may lie outside the ranges below
+        return "masses, frictions or restitutions are uncertain"
     bodies = scene.dynamic_objects
     if len(bodies) > envelope.max_objects:
         return f"more than {envelope.max_objects} objects"

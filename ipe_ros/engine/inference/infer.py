@@ -29,7 +29,7 @@ from .amis import AmisResult, AmisSettings, amis, grid
 from .likelihood import CONSISTENT_WITHIN_SD, MODEL_ERROR_GRID, Track, track
 from .observation import Observation, Unknown
 from .particle import ParticleOutcome, ParticleTask, lost_particle, run_particle, with_values
-from .priors import Normal
+from ..scene.properties import Normal, posterior_prior, with_properties
 
 #: A property that reproduces an observation in this engine differs from the world's (or another
 #: engine's) by a factor no trajectory can show, since the property itself absorbs it: pybullet's
@@ -299,6 +299,18 @@ def _pair(a: str, b: str, mass_a: np.ndarray, mass_b: np.ndarray, w: np.ndarray)
                     _weighted_quantile(ratio, w, 0.05), _weighted_quantile(ratio, w, 0.95))
 
 
+def posterior_priors(unknowns, estimates, scene: Scene) -> dict:
+    """(owner, property) -> the posterior as a prior (``posterior_prior``), for each owner an
+    unknown applies to: a refined scene's predictions then carry what is still uncertain. A group's
+    members draw independently there (the scene format has no shared draw)."""
+    out = {}
+    for u, e in zip(unknowns, estimates):
+        prior = posterior_prior(u.property, e.median, e.low_90, e.high_90)
+        if prior is not None:
+            out.update({(owner, u.property): prior for owner in u.applies_to(scene)})
+    return out
+
+
 def _answer(observation: Observation, settings: InferSettings, result: AmisResult, unknowns: tuple[Unknown, ...],
             priors: list, elapsed_s: float) -> Inference:
     ok = [o for o in result.outcomes if o.ok]
@@ -329,7 +341,7 @@ def _answer(observation: Observation, settings: InferSettings, result: AmisResul
     chosen = np.random.default_rng(np.random.SeedSequence(settings.seed, spawn_key=(3,))).choice(
         len(w), size=DRAWS, p=w / w.sum())
     medians = {(body, u.property): e.median for u, e in zip(unknowns, estimates) for body in u.applies_to(observation.scene)}
-    refined = with_values(observation.scene, medians, {})
+    refined = with_properties(observation.scene, medians, posterior_priors(unknowns, estimates, observation.scene))
     message = (f"{len(estimates)} unknown(s) from {len(result.outcomes)} rollouts; effective sample size "
                f"{result.ess:.0f}" + ("; stopped by the budget: a partial answer" if result.stopped_by == "budget" else "")
                + (f"; the frames weighed at power {result.likelihood_power:.2g} (too few rollouts near the best "

@@ -17,7 +17,7 @@ from ..errors import ConfigError, SceneError, shown
 from ..scene.bodies import QUATERNION_NORM_TOLERANCE, Scene
 from ..scene.format import scene_from_dict
 from ..scene.limits import MAX_JSON_CHARS, MAX_SPEED_M_S
-from .priors import PROPERTIES, Prior, prior_from_dict
+from ..scene.properties import PROPERTIES, Prior, prior_from_dict
 
 OBSERVATION_FORMAT = "ipe_ros.observation/1"
 #: an inference simulates the whole window for every candidate: its cost grows with it

@@ -19,6 +19,7 @@ from ..sampling.outcome import SampleOutcome
 from ..sampling.rollout import SampleTask, run_sample
 from ..scene import shapes
 from ..scene.bodies import Scene
+from ..scene.properties import with_properties
 from .likelihood import Fit, Predicted, fit, interpolate_positions
 
 #: the rollout's answer is its trajectory: the query that waits for rest and reads where bodies are
@@ -144,16 +145,9 @@ def origins_of(body, centres_m: np.ndarray, orientations_xyzw: np.ndarray) -> np
 def with_values(scene: Scene, assigned: dict, velocities: dict) -> Scene:
     """The scene with ``assigned`` ((body name or "support", property) -> value) and ``velocities``
     (body name -> (vx, vy, vz), m/s) in place."""
-    support = scene.support
-    changes = {prop: value for (name, prop), value in assigned.items() if name == "support"}
-    if changes:
-        support = dataclasses.replace(support, **changes)
-    objects = []
-    for body in scene.objects:
-        fields = {prop: float(value) for (name, prop), value in assigned.items() if name == body.name}
-        if "mass_kg" in fields:
-            fields["density_kg_m3"] = None
-        if body.name in velocities:
-            fields["linear_velocity_m_s"] = tuple(float(v) for v in velocities[body.name])
-        objects.append(dataclasses.replace(body, **fields) if fields else body)
-    return dataclasses.replace(scene, objects=tuple(objects), support=support)
+    scene = with_properties(scene, assigned)
+    if not velocities:
+        return scene
+    return dataclasses.replace(scene, objects=tuple(
+        dataclasses.replace(b, linear_velocity_m_s=tuple(float(v) for v in velocities[b.name]))
+        if b.name in velocities else b for b in scene.objects))

@@ -12,9 +12,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..scene.schema import SCHEMA_ID as SCENE_SCHEMA_ID
+from ..scene.schema import SCHEMA_ID as SCENE_SCHEMA_ID, prior_schema
 from .observation import MAX_FRAMES, MAX_UNKNOWNS, MAX_WINDOW_S, OBSERVATION_FORMAT
-from .priors import PROPERTIES
+from ..scene.properties import PROPERTIES
 
 SCHEMA_PATH = Path(__file__).resolve().parents[2] / "schema" / "observation-1.json"
 SCHEMA_ID = "urn:ipe-ros:schema:observation-1"
@@ -22,17 +22,6 @@ SCHEMA_ID = "urn:ipe-ros:schema:observation-1"
 
 def _numbers(n: int, description: str) -> dict[str, Any]:
     return {"type": "array", "items": {"type": "number"}, "minItems": n, "maxItems": n, "description": description}
-
-
-def _prior() -> dict[str, Any]:
-    bounds = _numbers(2, "[LOW, HIGH] inside the property's physical bounds")
-    return {"description": "the property's prior", "oneOf": [
-        {"type": "object", "properties": {"uniform": bounds}, "required": ["uniform"], "additionalProperties": False},
-        {"type": "object", "properties": {"log_uniform": bounds}, "required": ["log_uniform"],
-         "additionalProperties": False},
-        {"type": "object", "properties": {"log_sd": {"type": "number", "exclusiveMinimum": 0, "maximum": 5},
-                                          "median": {"type": "number", "exclusiveMinimum": 0}},
-         "required": ["log_sd"], "additionalProperties": False}]}
 
 
 def observation_schema() -> dict[str, Any]:
@@ -48,7 +37,7 @@ def observation_schema() -> dict[str, Any]:
     unknown = {"type": "object", "properties": {
         "object": {"type": "string", "description": "a dynamic object's name, or \"support\""},
         "group": {"type": "string", "description": "every dynamic object of this group shares one value"},
-        "property": {"enum": list(PROPERTIES)}, "prior": _prior()},
+        "property": {"enum": list(PROPERTIES)}, "prior": prior_schema("the property's prior")},
         "required": ["property", "prior"], "oneOf": [{"required": ["object"]}, {"required": ["group"]}],
         "additionalProperties": False}
     push = {"type": "object", "properties": {

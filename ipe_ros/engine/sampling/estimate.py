@@ -13,6 +13,7 @@ from ..query import QUERIES, QuerySpec, Samples, answer_fields
 from ..query.any_fall import sample_any_fall  # noqa: F401 - re-exported
 from ..query.fall import sample_fall_fraction  # noqa: F401 - re-exported
 from ..query.far import sample_far_m  # noqa: F401 - re-exported
+from .influence import property_influence
 from .outcome import SampleOutcome
 from ..scene.bodies import Scene
 from .stats import Z95, circular_mean, half_circle_decisiveness, mean_interval, wilson_interval  # noqa: F401
@@ -68,6 +69,9 @@ class Prediction:
     refined_samples: int = 0
     self_check: dict[str, Any] | None = None
     request: dict[str, Any] = field(default_factory=dict)
+    #: per uncertain mass, friction or restitution, strongest first: how much the samples drawing it
+    #: above its median differ from those below (``sampling.influence``); None: none uncertain
+    property_influence: tuple[dict, ...] | None = None
     outcomes: tuple[SampleOutcome, ...] = field(default=(), repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -93,6 +97,10 @@ class Prediction:
             elif name != "outcomes":
                 out[name] = getattr(self, name)
         out["failure_reasons"] = list(out["failure_reasons"])
+        if self.property_influence is None:  # a scene with every property exact answers as it always did
+            del out["property_influence"]
+        else:
+            out["property_influence"] = list(self.property_influence)
         return out
 
 
@@ -116,7 +124,7 @@ def aggregate(scene: Scene, outcomes: Sequence[SampleOutcome], *, query: QuerySp
     for name, asked in QUERIES.items():  # in the registry's order
         if name in query.queries:
             answers.update(asked.aggregate(samples))
-    return Prediction(**base, answers=answers,
+    return Prediction(**base, answers=answers, property_influence=property_influence(scene, ok),
                       max_penetration_fraction=float(max(r.penetration_fraction for r in rollouts)),
                       max_energy_gain_j=float(max(r.energy_gain_j for r in rollouts)),
                       collapse_undone_rollouts=sum(r.collapse_undone for r in rollouts))

@@ -78,6 +78,8 @@ class SampleOutcome:
     #: why this sample's rollout in multibodies was replaced by its rerun in plain rigid bodies at the
     #: same step ("energy", "penetration", "failed"; ``SimSettings.rigid_when_unhealthy``), or None
     rerun_rigid: str | None = None
+    #: the uncertain properties' values this sample drew, ("owner.property", value) (``perturb.draw_sample``)
+    properties: tuple[tuple[str, float], ...] = ()
 
     def unhealthy(self, energy_scale_j: float, max_end_penetration_fraction: float,
                   max_energy_gain_fraction: float) -> str | None:

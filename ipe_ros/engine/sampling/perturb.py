@@ -4,11 +4,14 @@ The draw order is fixed (horizontal position noise first, then the push directio
 yaw noise, only when some body asks for them), and the first two are always drawn, so a sample's noisy
 scene depends on its seed and the noise SDs only: never on phi, the preset, or which queries were
 asked. Each body's noise is the model's sigma unless the body gives its own (``position_sigma_m``,
-``yaw_sigma_rad``: 0 for a body known exactly, such as one the robot holds).
+``yaw_sigma_rad``: 0 for a body known exactly, such as one the robot holds). Uncertain masses,
+frictions and restitutions (a scene's priors, the model's ``property_spread``) are drawn from streams
+of their own (``scene.properties.draw_uncertain``), so turning them on leaves every other draw as it was.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -17,6 +20,7 @@ from scipy.spatial.transform import Rotation
 
 from ..config import MODEL_LIGHT_DENSITY_KG_M3, ModelConfig
 from ..scene.bodies import Scene
+from ..scene.properties import draw_uncertain, uncertain_properties, with_properties, without_priors
 from ..scene.shapes import quaternion_product
 
 
@@ -29,12 +33,15 @@ class SampleInputs:
         orientations_xyzw: (n_dynamic, 4) their orientations (turned by the yaw noise, if any).
         masses_kg: (n_dynamic,) masses after the mass ratio mu.
         push_direction_rad: direction of the support's acceleration in the scene's xy plane.
+        properties: the uncertain properties' drawn values, ("owner.property", value) in
+            ``sample_properties``' order (a mass in kg before mu; under mu its body's mass is scaled alike).
     """
 
     positions_m: np.ndarray
     orientations_xyzw: np.ndarray
     masses_kg: np.ndarray
     push_direction_rad: float
+    properties: tuple[tuple[str, float], ...] = ()
 
 
 def dynamic_masses(scene: Scene, mu: float | None) -> np.ndarray:
@@ -74,7 +81,15 @@ def is_deterministic(scene: Scene, model: ModelConfig) -> bool:
     """No noise at all for this scene: neither the model's (sigma = phi = 0, no vision) nor any body's
     own. One rollout then says everything; with a body's own noise and sigma = 0 it does not."""
     return model.is_deterministic and not position_sigmas_m(scene, model).any() and \
-        not yaw_sigmas_rad(scene, model).any()
+        not yaw_sigmas_rad(scene, model).any() and not sample_properties(scene, model)
+
+
+def sample_properties(scene: Scene, model: ModelConfig) -> tuple:
+    """The properties each sample draws: (owner, property, prior), the scene's priors (unless
+    ``model.object_noise`` is off: the ground truth takes the scene as given) and the model's spread."""
+    if not model.object_noise:
+        return () if model.property_spread is None else uncertain_properties(without_priors(scene), model.property_spread)
+    return uncertain_properties(scene, model.property_spread)
 
 
 def _yaw_quaternions(yaw_rad: np.ndarray) -> np.ndarray:
@@ -108,3 +123,29 @@ def draw_sample_inputs(scene: Scene, model: ModelConfig, rng: np.random.Generato
         orientations = quaternion_product(turn, orientations)
     return SampleInputs(positions_m=positions, orientations_xyzw=orientations,
                         masses_kg=dynamic_masses(scene, model.mu), push_direction_rad=float(direction))
+
+
+def draw_sample(scene: Scene, model: ModelConfig, seed: np.random.SeedSequence) -> tuple[Scene, SampleInputs]:
+    """One sample's scene and inputs from its ``seed``: ``draw_sample_inputs`` on the sample's main
+    stream, then ``with_drawn_properties``."""
+    return with_drawn_properties(scene, model, seed, draw_sample_inputs(scene, model, np.random.default_rng(seed)))
+
+
+def with_drawn_properties(scene: Scene, model: ModelConfig, seed: np.random.SeedSequence, inputs: SampleInputs,
+                          owners: frozenset[str] | None = None) -> tuple[Scene, SampleInputs]:
+    """The scene and inputs with each uncertain property's value drawn from its own stream of
+    ``seed`` (``draw_uncertain``): frictions and restitutions in the scene, masses in the inputs (a
+    drawn mass over the scene's scales the body's mass, so under mu the model's mass is scaled alike).
+    ``owners``: only these objects' (None: every object's and the support's)."""
+    uncertain = tuple(u for u in sample_properties(scene, model) if owners is None or u[0] in owners)
+    if not uncertain:
+        return scene, inputs
+    values = draw_uncertain(uncertain, seed)
+    drawn = {(owner, prop): value for (owner, prop, _), value in zip(uncertain, values)}
+    masses = inputs.masses_kg.copy()
+    for i, body in enumerate(scene.dynamic_objects):
+        mass = drawn.pop((body.name, "mass_kg"), None)
+        if mass is not None:
+            masses[i] *= mass / body.resolved_mass_kg
+    named = tuple((f"{owner}.{prop}", value) for (owner, prop, _), value in zip(uncertain, values))
+    return with_properties(scene, drawn), dataclasses.replace(inputs, masses_kg=masses, properties=named)

@@ -26,7 +26,7 @@ from ..config import ModelConfig, SimSettings
 from ..errors import BudgetExceeded, ConfigError, PhysicsError
 from .outcome import (HEALTHY_END_PENETRATION_FRACTION, HEALTHY_ENERGY_GAIN_FRACTION, RolloutResult, SampleOutcome,
                       energy_scale_of)
-from .perturb import draw_sample_inputs
+from .perturb import draw_sample
 from ..scene.bodies import Floor, Scene
 from ..simulation import NO_PROBE, DecidedHeights, Probe
 
@@ -359,11 +359,12 @@ def run_sample(task: SampleTask, probe: Probe = NO_PROBE) -> SampleOutcome:
     """
     if task.deadline_unix_s is not None and time.time() >= task.deadline_unix_s:
         return _cut_off(task, float("nan"), "the budget was spent before this sample started")
-    inputs = draw_sample_inputs(task.scene, task.model, np.random.default_rng(task.seed))
-    outcome = guarded(task, inputs.push_direction_rad,
-                      lambda: simulate_sample(task, inputs, separated_world(task.scene, task.settings, inputs, probe),
+    scene, inputs = draw_sample(task.scene, task.model, task.seed)
+    sample = task if scene is task.scene else dataclasses.replace(task, scene=scene)  # its drawn properties
+    outcome = guarded(sample, inputs.push_direction_rad,
+                      lambda: simulate_sample(sample, inputs, separated_world(scene, task.settings, inputs, probe),
                                               probe))
-    return kept(task, outcome, lambda settings: run_sample(task.at(settings), probe))
+    return kept(sample, outcome, lambda settings: run_sample(task.at(settings), probe))
 
 
 def kept(task: SampleTask, outcome: SampleOutcome, rerun: Callable[[SimSettings], SampleOutcome]) -> SampleOutcome:
@@ -411,7 +412,7 @@ def simulate_sample(task: SampleTask, inputs, world: simulation.World, probe: Pr
     results = [rollout_result(task.scene, task.query, initial, initial_orn, phi, end) for phi, end in ends]
     return SampleOutcome(index=task.index, ok=True, error=None, push_direction_rad=inputs.push_direction_rad,
                          initial_positions_m=initial, initial_orientations_xyzw=initial_orn,
-                         rollouts=tuple(results))
+                         rollouts=tuple(results), properties=inputs.properties)
 
 
 def _check_registered(spec: QuerySpec) -> None:

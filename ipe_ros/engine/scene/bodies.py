@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import functools
 
-from dataclasses import dataclass
-from typing import Union
+from dataclasses import dataclass, field
+from typing import Any, Union
 
 import numpy as np
 
@@ -56,6 +56,8 @@ class Body:
         position_sigma_m: this body's own position noise (SD, metres), overriding the model's sigma:
             a number (horizontal, as the paper's) or (sx, sy, sz); 0 = known exactly. None: the model's.
         yaw_sigma_rad: SD of a rotation about the vertical, radians; None or 0: none.
+        priors: (property, prior) pairs (``scene.properties``): properties the robot does not know
+            exactly, each sample drawing its own value; the value above is then only the prior's centre.
     """
 
     name: str
@@ -72,6 +74,7 @@ class Body:
     angular_velocity_rad_s: Vec3 = (0.0, 0.0, 0.0)
     position_sigma_m: float | Vec3 | None = None
     yaw_sigma_rad: float | None = None
+    priors: tuple[tuple[str, Any], ...] = field(default=(), metadata={"keyed": "when set"})
 
     @functools.cached_property  # a mesh's is every part's points turned: ~0.6 ms, asked at every look
     def extents_m(self) -> Vec3:
@@ -127,6 +130,7 @@ class Floor:
     friction: float
     restitution: float
     height_m: float = 0.0
+    priors: tuple[tuple[str, Any], ...] = field(default=(), metadata={"keyed": "when set"})  # as Body's
 
     @property
     def top_m(self) -> float:
@@ -145,6 +149,7 @@ class Table:
         friction, restitution: surface properties of the top.
         floor_z_m: z of an infinite floor under the table, or None for no floor.
         obstacles: static bodies attached to the table (short walls); each must be ``static``.
+        priors: the top's uncertain friction and restitution, as ``Body.priors``.
     """
 
     top_height_m: float
@@ -155,6 +160,7 @@ class Table:
     restitution: float
     floor_z_m: float | None
     obstacles: tuple[Body, ...] = ()
+    priors: tuple[tuple[str, Any], ...] = field(default=(), metadata={"keyed": "when set"})
 
     @property
     def top_m(self) -> float:

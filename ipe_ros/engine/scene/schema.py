@@ -21,6 +21,7 @@ from typing import Any
 from . import limits
 from . import format as io
 from .bodies import DEFAULT_MAX_OBJECTS, MAX_HORIZON_S, MAX_SET_DOWN_M, QUATERNION_NORM_TOLERANCE
+from .properties import PRIOR_FIELDS, PROPERTIES, SUPPORT_PROPERTIES
 
 SCHEMA_PATH = Path(__file__).resolve().parents[2] / "schema" / "scene-2.json"
 SCHEMA_ID = "urn:ipe-ros:schema:scene-2"
@@ -101,6 +102,25 @@ def _shapes() -> dict[str, Any]:
             for kind, props in fields.items()}
 
 
+def prior_schema(description: str) -> dict[str, Any]:
+    """A property's prior (``properties.prior_from_dict``); its bounds per property are the reader's."""
+    bounds = {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2,
+              "description": "[LOW, HIGH] inside the property's physical bounds"}
+    return {"description": description, "oneOf": [
+        {"type": "object", "properties": {"uniform": bounds}, "required": ["uniform"], "additionalProperties": False},
+        {"type": "object", "properties": {"log_uniform": bounds}, "required": ["log_uniform"],
+         "additionalProperties": False},
+        {"type": "object", "properties": {"log_sd": {"type": "number", "exclusiveMinimum": 0, "maximum": 5},
+                                          "median": {"type": "number", "exclusiveMinimum": 0}},
+         "required": ["log_sd"], "additionalProperties": False,
+         "description": "log-normal around the given value (or its median): not for a restitution"}]}
+
+
+def _priors(properties) -> dict[str, Any]:
+    return {PRIOR_FIELDS[p]: prior_schema(f"the {p} is uncertain: each sample draws its own from this prior "
+                                          "(the given value is its centre)") for p in properties}
+
+
 def _object_properties() -> dict[str, Any]:
     sigma = limits.MAX_SIGMA_M
     props = {
@@ -124,6 +144,7 @@ def _object_properties() -> dict[str, Any]:
                                             "[sx, sy, sz]; 0: known exactly",
                              "oneOf": [_number("m", 0.0, sigma), _vector(3, "m", sigma, 0.0)]},
         "yaw_sigma_rad": _number("SD of a turn about the vertical through the centre of mass, rad", 0.0, math.pi),
+        **_priors(PROPERTIES),
     }
     return props
 
@@ -133,7 +154,8 @@ def scene_schema() -> dict[str, Any]:
     coordinate = limits.MAX_COORDINATE_M
     obj = _closed(_object_properties(), io.OBJECT_REQUIRED, "a rigid body")
     floor = _closed({"type": {"const": "floor"}, "height_m": _number("m", -coordinate, coordinate),
-                     "friction": _number("Coulomb friction", 0.0, limits.MAX_FRICTION), "restitution": _number("restitution", 0.0, 1.0)},
+                     "friction": _number("Coulomb friction", 0.0, limits.MAX_FRICTION), "restitution": _number("restitution", 0.0, 1.0),
+                     **_priors(SUPPORT_PROPERTIES)},
                     io.FLOOR_FIELDS, "an infinite horizontal plane")
     table = _closed({
         "type": {"const": "table"},
@@ -149,6 +171,7 @@ def scene_schema() -> dict[str, Any]:
                                                            {"properties": {"static": {"const": True}},
                                                             "required": ["static"]}]},
                       "description": "static objects attached to the table"},
+        **_priors(SUPPORT_PROPERTIES),
     }, io.TABLE_FIELDS, "a table top of finite size: objects can fall off its edge")
     scene = _closed({
         "format": {"const": io.SCENE_FORMAT},

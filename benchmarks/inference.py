@@ -3,7 +3,9 @@ known values (engine/inference/known.py: slide, head-on, bounce, tower).
 
     ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST .venv/bin/python benchmarks/inference.py --cases 50 --workers 2
 
-Writes benchmarks/results/inference/{inference.json,README.md}.
+Against the number of frames and unknowns: ``--every N`` keeps every N-th frame (30 Hz -> 30/N Hz),
+``--window S`` the first S seconds, ``--also OBJ.PROPERTY=LOW,HIGH`` adds a unknown with a uniform
+prior (not scored: it costs and widens). Writes benchmarks/results/inference/inference.json.
 """
 
 from __future__ import annotations
@@ -24,13 +26,26 @@ from ipe_ros.engine.inference.observation import observation_from_dict
 OUT = Path(__file__).parent / "results" / "inference"
 
 
-def run_family(family: str, cases: int, pool, settings: InferSettings, first_seed: int = 0) -> dict:
+def thinned(observation: dict, every: int = 1, window_s: float | None = None, also: tuple = ()) -> dict:
+    """The observation with every ``every``-th frame within ``window_s``, and ``also``'s unknowns
+    ((object, property, (low, high)) each) added."""
+    frames = [f for f in observation["frames"][every - 1::every] if window_s is None or f["t_s"] <= window_s + 1e-9]
+    unknowns = observation["unknowns"] + [{"object": o, "property": p, "prior": {"uniform": list(bounds)}}
+                                          for o, p, bounds in also]
+    return {**observation, "frames": frames, "unknowns": unknowns}
+
+
+def run_family(family: str, cases: int, pool, settings: InferSettings, first_seed: int = 0, every: int = 1,
+               window_s: float | None = None, also: tuple = ()) -> dict:
     rows = []
     for seed in range(first_seed, first_seed + cases):
         case = CASES[family](seed)
+        observation = thinned(case.observation, every, window_s, also)
         started = time.perf_counter()
-        answer = infer(observation_from_dict(case.observation), settings, pool.map if pool else None)
-        row = {"model_error": None if answer.model_error is None else answer.model_error.median, "seed": seed, "seconds": time.perf_counter() - started, "consistent": answer.consistent,
+        answer = infer(observation_from_dict(observation), settings, pool.map if pool else None)
+        row = {"model_error": None if answer.model_error is None else answer.model_error.median, "seed": seed,
+               "seconds": time.perf_counter() - started, "consistent": answer.consistent,
+               "frames": len(observation["frames"]), "unknowns": len(observation["unknowns"]),
                "candidates": answer.candidates, "ess": answer.ess, "truth": {k: float(v) for k, v in case.truth.items()}, "covered": {}, "error": {}}
         if answer.consistent:
             for label in case.scored:
@@ -53,7 +68,8 @@ def run_family(family: str, cases: int, pool, settings: InferSettings, first_see
         print(family, seed, f"{row['seconds']:.1f} s", row["covered"], {k: round(v, 3) for k, v in row["error"].items()},
               flush=True)
     covered = [c for r in rows for c in r["covered"].values()]
-    summary = {"family": family, "cases": cases, "coverage_90": float(np.mean(covered)) if covered else None,
+    summary = {"family": family, "cases": cases, "frames": rows[0]["frames"], "unknowns": rows[0]["unknowns"],
+               "coverage_90": float(np.mean(covered)) if covered else None,
                "median_abs_error": float(np.median([abs(v) for r in rows for v in r["error"].values()])),
                "median_seconds": float(np.median([r["seconds"] for r in rows])),
                "max_seconds": float(np.max([r["seconds"] for r in rows])),
@@ -73,12 +89,19 @@ def main() -> None:
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--grid", type=int, default=None, metavar="POINTS",
                         help="a plain grid of POINTS per unknown instead of AMIS (the baseline)")
+    parser.add_argument("--every", type=int, default=1, metavar="N", help="keep every N-th frame")
+    parser.add_argument("--window", type=float, default=None, metavar="S", help="keep the frames of the first S s")
+    parser.add_argument("--also", action="append", default=[], metavar="OBJ.PROPERTY=LOW,HIGH",
+                        help="another unknown, uniform prior (repeatable)")
     parser.add_argument("--out", default=str(OUT))
     args = parser.parse_args()
+    also = tuple((spec.split("=")[0].rsplit(".", 1)[0], spec.split("=")[0].rsplit(".", 1)[1],
+                  tuple(float(v) for v in spec.split("=")[1].split(","))) for spec in args.also)
     settings = InferSettings(simulation=preset(args.preset), model_error_fraction=args.model_error, grid_points=args.grid)
     pool = WorkerPool(args.workers) if args.workers else None
     try:
-        results = {f: run_family(f, args.cases, pool, settings, args.first_seed) for f in args.families.split(",")}
+        results = {f: run_family(f, args.cases, pool, settings, args.first_seed, args.every, args.window, also)
+                   for f in args.families.split(",")}
     finally:
         if pool:
             pool.close()

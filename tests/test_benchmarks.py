@@ -321,9 +321,12 @@ def test_the_witness_export_writes_every_shape_and_start_the_other_engine_needs(
 def test_inference_benchmark_scores_each_case_and_writes_its_json(tmp_path):
     result = subprocess.run(
         [sys.executable, str(REPO / "benchmarks" / "inference.py"), "--cases", "2", "--workers", "0", "--families",
-         "slide", "--out", str(tmp_path)], capture_output=True, text=True, timeout=600, env=ENV)
+         "slide", "--out", str(tmp_path), "--every", "3", "--window", "0.6", "--also", "box.mass_kg=0.1,2"],
+        capture_output=True, text=True, timeout=600, env=ENV)
     assert result.returncode == 0, result.stderr[-3000:]
     data = json.loads((tmp_path / "inference.json").read_text())
     rows = data["results"]["slide"]["rows"]
     assert [r["seed"] for r in rows] == [0, 1] and all(set(r["covered"]) == {"box.friction"} for r in rows)
     assert data["results"]["slide"]["summary"]["cases"] == 2 and data["settings"]["grid"] is None
+    # 30 Hz thinned to 10 Hz over 0.6 s: 6 frames; the mass added as a second (unscored) unknown
+    assert all((r["frames"], r["unknowns"]) == (6, 2) for r in rows)

@@ -211,3 +211,13 @@ def test_the_fall_probability_follows_the_friction_prior():
             assert bool(outcome.rollouts[0].fallen[0]) == (mu < threshold), mu
     (top, *_) = prediction.property_influence
     assert top["property"] == "box.friction" and top["difference"] < -0.5
+
+
+def test_the_draws_do_not_depend_on_the_worker_count(pool):
+    scene = scene_from_dict(_scene({"friction_prior": {"uniform": list(FRICTION)}, "mass_prior": {"log_sd": 0.3}}))
+    request = _request(6, restitution_half_width=0.1)
+    serial = predict(scene, request.model, request.settings, request.query, seed=3)
+    pooled = predict(scene, request.model, request.settings, request.query, seed=3, map_fn=pool.map)
+    assert [o.properties for o in serial.outcomes] == [o.properties for o in pooled.outcomes]
+    assert [o.properties[0][0] for o in serial.outcomes] == ["box.mass_kg"] * 6
+    assert serial.property_influence == pooled.property_influence

@@ -148,7 +148,11 @@ def _perceive_depth(args, scenes, model, map_fn=None):
 
 def cmd_predict(args) -> int:
     refused: list[RefusedScene] = []  # scenes of the file that cannot be answered: reported, the rest answered
-    scenes = load_scenes(args.path, towers=args.tower, on_refused=refused.append)
+    try:
+        scenes = load_scenes(args.path, towers=args.tower, on_refused=refused.append)
+    except SceneError:
+        _report_refused(args, refused)  # none of the file's scenes read: each refusal said before the verdict
+        raise
     vision = _vision_settings(args)
     # one request from the options (engine.request); its errors read as the options (main: as_spelled)
     request = build_request(vision=vision, query_parameters=given_query_parameters(args), **given_request_arguments(args))
@@ -240,13 +244,17 @@ def _answerable(args, scenes: list, refused: list[RefusedScene], request) -> lis
             refused.append(RefusedScene(positions[id(scene)], scene.name, ConfigError(field, exc.problem)))
     if len(scenes) == 1 and not answerable and len(refused) == 1:
         raise refused[-1].error
+    _report_refused(args, refused)
+    if not answerable:
+        raise SceneError(args.path, f"none of its {len(refused)} scenes can be answered (each refusal is reported)")
+    return answerable
+
+
+def _report_refused(args, refused: list[RefusedScene]) -> None:
     for refusal in refused:
         report = {"scene": refusal.name, "index": refusal.index, "error": str(refusal.error)}
         print(json.dumps(report) if args.json else f"ipe: refused scene {refusal.index} "
               f"({refusal.name or 'unnamed'}): {refusal.error}", file=sys.stdout if args.json else sys.stderr, flush=True)
-    if not answerable:
-        raise SceneError(args.path, f"none of its {len(refused)} scenes can be answered (each refusal is reported)")
-    return answerable
 
 
 def _perception_lines(collected: list[Prediction], perception: str, vision: bool) -> list[str]:

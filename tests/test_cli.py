@@ -239,6 +239,13 @@ def test_a_file_with_bad_scenes_answers_every_good_one_and_reports_each_refused_
     none = run_cli("predict", str(mixed), "--samples", "2", "--budget", "1")
     assert none.returncode == 2
     assert none.stderr.splitlines()[-1] == f"ipe: error: {mixed}: none of its 2 scenes can be answered (each refusal is reported)"
+    mixed.write_text(json.dumps([unreadable, dict(unreadable, name="broken_too")]))  # none even read (issue 76)
+    unread = run_cli("predict", str(mixed), "--samples", "2", "--budget", "1")
+    assert unread.returncode == 2
+    assert unread.stderr.splitlines() == [
+        "ipe: refused scene 0 (broken): scenes[0].objects[0] ('block0').mass_kg: mass in kg must be > 0, got -1.0",
+        "ipe: refused scene 1 (broken_too): scenes[1].objects[0] ('block0').mass_kg: mass in kg must be > 0, got -1.0",
+        "ipe: error: json: none of the 2 scenes can be read (each refusal is reported)"]
 
 
 def test_the_parsers_experiment_names_and_scales_are_the_analyses_own():

@@ -134,6 +134,9 @@ def test_the_ground_truth_refuses_a_perception_that_draws_the_scene():
     ({"contact_pairs": "support:support"}, "contact_pairs: support:support: an object always touches itself; name two"),
     ({"mesh_roots": "meshes"}, "mesh_roots: 'meshes' is not an absolute path of a folder; give folders as "
                                "/path/a:/path/b"),
+    # a name past the file system's limit raised an OSError out of the parameter callback (issue 76)
+    ({"mesh_roots": "/" + "a" * 300}, f"mesh_roots: '/{'a' * 300}' is not an absolute path of a folder; give "
+                                      "folders as /path/a:/path/b"),
 ])
 def test_node_settings_no_scene_could_answer_are_refused_when_set_naming_the_parameter(changes, reason):
     """Accepted, they made every later scene fail, with errors naming the CLI's --contact."""

@@ -459,3 +459,25 @@ def test_a_mug_with_a_handle_holds_a_ball_in_default_as_in_paper(folder):
         assert np.hypot(*(final["ball"] - final["mug"])[:2]) < R_IN - 0.015, (name, final)  # still in the cup
         assert final["ball"][2] < BOTTOM + 0.015 + 0.004, (name, final)  # on its floor
         assert answer.tipped_object_probability["mug"] == 0.0 and answer.object_fall_probability["mug"] == 0.0
+
+
+def test_package_uris_fall_back_to_the_mesh_path_without_a_sourced_workspace(folder, tmp_path, monkeypatch):
+    """Without AMENT_PREFIX_PATH the package index raised an OSError naming no field (issue 76): a
+    package:// URI is then looked for under the mesh roots ($IPE_MESH_PATH for ipe predict), and
+    refused in one line naming the object where it is not there."""
+    monkeypatch.delenv("AMENT_PREFIX_PATH", raising=False)
+    share = tmp_path / "share"
+    (share / "my_objects" / "meshes").mkdir(parents=True)
+    mug_mesh().export(share / "my_objects" / "meshes" / "mug.obj")
+    monkeypatch.setenv("IPE_MESH_PATH", str(share))
+    found = load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "package://my_objects/meshes/mug.obj"}),
+                               "package.json"))
+    assert found[0].objects[0].shape.source.uri == "package://my_objects/meshes/mug.obj"
+    with pytest.raises(SceneError) as caught:
+        load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "package://elsewhere/mug.obj"}), "package.json"))
+    assert str(caught.value).startswith("objects[0].shape.uri: package 'elsewhere' is not in the ROS package index "
+                                        "nor under ")
+    with pytest.raises(SceneError) as caught:
+        load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "mug.obj\u0000.stl"}), "nul.json"))
+    assert str(caught.value) == ("objects[0].shape.uri: 'mug.obj\\x00.stl' holds a control character (a NUL, a "
+                                 "newline); give the path as it is")

@@ -77,12 +77,14 @@ NODE_SETTINGS: tuple[Input, ...] = (
           range=(0.0, 86400.0)),
     _node("mesh_roots", "name", "", "folders", "folders (':'-separated) under which scenes on ~/scene_json, ~/scene "
           "(MESH_RESOURCE markers) and ~/ask may name mesh files (and package:// meshes resolve); empty: scenes may "
-          "not name files"),
+          "not name files. Fixed at start-up: no participant on the network may point the node at other files",
+          fixed_at_start=True),
     _node("mesh_decomposition_s", "float", 30.0, "s", "the most seconds a mesh not yet decomposed may take to "
           "decompose into convex parts (in a process of its own, ended when over: the scene is refused, saying so); "
           "cached meshes cost nothing", range=(0.1, 3600.0)),
     _node("rerun.save_dir", "name", "", "folder", "folder for one .rrd recording per prediction; empty: no rerun "
-          "logging"),
+          "logging. Fixed at start-up: no participant on the network may have the node write elsewhere",
+          fixed_at_start=True),
     _node("rerun.rollouts_logged", "int", 8, "count", "sampled rollouts shown in each .rrd", range=(0, 1000)),
     _node("rerun.frame_period_s", "float", 0.02, "s", "simulated seconds between logged frames of a rollout",
           range=(0.001, 1.0)),
@@ -206,7 +208,7 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
                                             "folder itself")
     connect = str(values["rerun.connect_url"]).strip()
     roots = tuple(Path(r) for r in str(values["mesh_roots"]).split(":") if r.strip())
-    missing = [str(r) for r in roots if not r.is_absolute() or not r.is_dir()]
+    missing = [str(r) for r in roots if not r.is_absolute() or not _is_folder(r)]
     if missing:  # a scene arrives over the network: its files are read only where the operator points
         raise ConfigError("mesh_roots", f"{missing[0]!r} is not an absolute path of a folder; give folders as "
                                         "/path/a:/path/b")
@@ -217,6 +219,14 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
                          depth_max_age_s=float(values["depth.max_age_s"]),
                          meshes=MeshAccess(roots=roots, decompose_within_s=float(values["mesh_decomposition_s"]))
                          if roots else None)
+
+
+def _is_folder(path: Path) -> bool:
+    """Whether ``path`` is a folder; False, not an OSError, for a name too long or otherwise unusable."""
+    try:
+        return path.is_dir()
+    except (OSError, ValueError):
+        return False
 
 
 def camera_pose(values: Mapping[str, Any]) -> tuple[tuple, tuple] | None:

@@ -138,16 +138,18 @@ def load_scenes(path: str | Path, towers: Iterable[str] | None = None,
         raise SceneError(str(path), f"not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start}); "
                                     "save the file as UTF-8") from None
     refusals: list[RefusedScene] = []
+    wanted = None if towers is None else set(towers)
+
+    def refuse(refusal: RefusedScene) -> None:  # handed on at once: the read may still end in an error
+        if wanted is None or refusal.name in wanted:
+            refusals.append(refusal)
+            on_refused(refusal)
+
     # a file's meshes are read beside it and under the folders $IPE_MESH_PATH names (os.pathsep-separated)
     roots = (path.resolve().parent, *(Path(p).resolve() for p in os.environ.get("IPE_MESH_PATH", "").split(os.pathsep)
                                       if p))
-    scenes = scenes_from_json(text, max_objects, refusals.append if on_refused is not None else None,
+    scenes = scenes_from_json(text, max_objects, refuse if on_refused is not None else None,
                               MeshAccess(roots=roots, base=path.resolve().parent))
-    wanted = None if towers is None else set(towers)
-    if wanted is not None:
-        refusals = [r for r in refusals if r.name in wanted]
-    for refusal in refusals:
-        on_refused(refusal)
     if wanted is not None:
         picked = [s for s in scenes if s.name in wanted]
         missing = sorted(wanted - {s.name for s in picked} - {r.name for r in refusals})

@@ -88,6 +88,8 @@ def mesh_shape(data: dict, path: str, access: MeshAccess | None, uri_field: str 
     uri = data["uri"]
     if not isinstance(uri, str) or not uri.strip():
         raise SceneError(where, f"must be a file path, file:// or package:// URI, got {shown(uri)}")
+    if any(ord(c) < 32 for c in uri):  # a NUL ends a path in the OS: refused here, not deep in os.path
+        raise SceneError(where, f"{shown(uri)} holds a control character (a NUL, a newline); give the path as it is")
     scale = _scale(data.get("scale", 1.0), f"{path}.scale")
     file = _resolve(uri, where, access)
     content = _read_bounded(file, where)
@@ -203,11 +205,19 @@ def _package_file(package: str, rest: str, access: MeshAccess) -> Path | None:
 
         try:
             return Path(get_package_share_directory(package)) / rest
-        except PackageNotFoundError:
+        except (PackageNotFoundError, OSError, ValueError):  # OSError: no workspace sourced (AMENT_PREFIX_PATH)
             pass
     except ImportError:  # no ROS here: the roots are the search path
         pass
-    return next((Path(root) / package / rest for root in access.roots if (Path(root) / package).is_dir()), None)
+    return next((Path(root) / package / rest for root in access.roots if _is_folder(Path(root) / package)), None)
+
+
+def _is_folder(path: Path) -> bool:
+    """Whether ``path`` is a folder; False, not an OSError, for a name too long or otherwise unusable."""
+    try:
+        return path.is_dir()
+    except (OSError, ValueError):
+        return False
 
 
 def _read_bounded(file: Path, path: str) -> bytes:

@@ -9,6 +9,8 @@ import math
 import re
 import time
 
+import zlib
+
 import numpy as np
 import pytest
 
@@ -429,9 +431,13 @@ def test_only_16_bit_pngs_and_bounded_files_are_read_as_depth(tmp_path):
         depth_io.load_depth_image(tmp_path / "huge.npy")
     png = (tmp_path / "good.png").read_bytes()
     ihdr = png.index(b"IHDR")  # width and height follow the chunk's type; PIL reads them before the pixels
-    (tmp_path / "claims.png").write_bytes(png[:ihdr + 4] + (20000).to_bytes(4, "big") * 2 + png[ihdr + 12:])
-    with pytest.raises(ConfigError, match=r"^--depth: (claims.png: 20000 x 20000 pixels|cannot read)"):
-        depth_io.load_depth_image(tmp_path / "claims.png")
+    for side in (5000, 20000):  # under PIL's own bomb limit, and over it (a 35-line traceback, issue 76)
+        chunk = b"IHDR" + side.to_bytes(4, "big") * 2 + png[ihdr + 12:ihdr + 17]  # with its CRC: a valid header
+        (tmp_path / "claims.png").write_bytes(png[:ihdr] + chunk + zlib.crc32(chunk).to_bytes(4, "big") +
+                                              png[ihdr + 21:])
+        with pytest.raises(ConfigError) as caught:
+            depth_io.load_depth_image(tmp_path / "claims.png")
+        assert str(caught.value) == f"--depth: claims.png: {side} x {side} pixels; each side must be 1-4096"
 
 
 def test_camera_info_files_are_bounded_before_parsing(tmp_path):
@@ -442,6 +448,10 @@ def test_camera_info_files_are_bounded_before_parsing(tmp_path):
     with pytest.raises(ConfigError, match=r"^--camera-info: cannot read .*bomb.yaml: YAML aliases \(\*name\) are not "
                                           r"allowed in camera info$"):
         depth_io.load_camera_info(tmp_path / "bomb.yaml")
+    (tmp_path / "broken.yaml").write_text("image_width: 640\ncamera_matrix: {rows: 3\n  data: [1, 2]\n")
+    with pytest.raises(ConfigError) as caught:
+        depth_io.load_camera_info(tmp_path / "broken.yaml")
+    assert "\n" not in str(caught.value) and str(caught.value).startswith("--camera-info: cannot read ")
     (tmp_path / "big.yaml").write_text("k: [" + "1.0, " * 400_000 + "1.0]\n")
     with pytest.raises(ConfigError, match=r"^--camera-info: big.yaml is \d+ bytes; a camera_info YAML is a few "
                                           r"hundred \(at most 1048576\)$"):

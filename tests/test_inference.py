@@ -62,9 +62,7 @@ def edited(base: dict, edit) -> dict:
      "unknowns[2]: box's mass_kg is already unknown in unknowns[0]"),
     (lambda d: d["unknowns"].append({"object": "support", "property": "mass_kg", "prior": {"log_sd": 1}}),
      "unknowns[2].property: the support has no mass; its friction or restitution may be unknown"),
-    (lambda d: d["actions"][0].__setitem__("at_s", 0.5),
-     "actions[0].at_s: only pushes at t = 0 are simulated yet: start the observation's window (its scene and t = 0) "
-     "at the push"),
+    (lambda d: d["actions"][0].__setitem__("at_s", 1.5), "actions[0].at_s: must be a number in [0, 1], got 1.5"),
     (lambda d: d.__setitem__("position_sd_m", 0), "position_sd_m: must be a number in (0, 1], got 0"),
     (lambda d: d.__setitem__("format", "ipe_ros.observation/9"),
      "format: must be 'ipe_ros.observation/1', got 'ipe_ros.observation/9'"),
@@ -122,6 +120,18 @@ def test_a_pushed_box_gives_its_mass_and_friction_within_the_intervals(probe):
     assert priors["friction"].value(1.6449) == pytest.approx(friction.high_90, rel=0.05 * (
         friction.high_90 / friction.low_90))  # a log-normal's 95th percentile, where the interval's ends are skewed
     assert set(priors) == {"mass_kg", "friction"}
+
+
+def test_a_push_during_the_window_gives_the_mass_and_friction_too():
+    """The robot pushes at 0.4 s, while it watches: the box rests, then slides 1.2 N s / m far as a
+    push at t = 0 would make it; the push is simulated at its time (a timed push of the scene)."""
+    observation = observation_from_dict(probe_push(np.random.default_rng(3), at_s=0.4))
+    assert observation.actions[0].at_s == 0.4 and observation.window_s == pytest.approx(1.4)
+    answer = infer(observation, InferSettings(seed=1))
+    assert answer.consistent
+    mass, friction = answer.estimate("box.mass_kg"), answer.estimate("box.friction")
+    assert mass.low_90 <= 0.8 <= mass.high_90 and friction.low_90 <= 0.45 <= friction.high_90
+    assert mass.median == pytest.approx(0.8, rel=0.1) and friction.median == pytest.approx(0.45, rel=0.1)
 
 
 @pytest.mark.parametrize("family, seed", [("slide", 0), ("bounce", 1)])

@@ -35,7 +35,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
-from ipe_ros.engine.scene.bodies import Body, Box, Floor, Scene
+from ipe_ros.engine.scene.bodies import Body, Box, Floor, Scene, TimedPush
 from ipe_ros.engine.scene.shapes import Sphere
 from ipe_ros.engine.scene.turn import turned
 
@@ -177,6 +177,19 @@ def test_a_pushed_box_travels_as_far_as_its_impulse_says(name):
     ratio = float(np.linalg.norm(travel)) / (1.5 ** 2 / (2 * 0.4 * G))
     off_deg = math.degrees(math.remainder(math.atan2(travel[1], travel[0]) - heading, 2 * math.pi))
     _holds(abs(ratio - 1) <= 0.02 and abs(off_deg) <= 1.0, ("push", name), f"{ratio:.3f}x at {off_deg:+.2f} deg")
+
+
+@pytest.mark.parametrize("name", PRESETS)
+def test_a_box_pushed_while_at_rest_stays_put_until_then_and_slides_coulombs_distance(name):
+    # a known push at 0.35 s (an observation's action: Scene.pushes): at rest until it, then 1.5 m/s
+    # along an axis, stopping v^2 / (2 mu g) = 0.287 m on (mu 0.4): 2%, as a slide launched at t = 0
+    box = Box("box", (0.1, 0.1, 0.1), (0.0, 0.0, 0.05), IDENTITY, friction=0.4, restitution=0.0, mass_kg=0.5)
+    scene = replace(_scene(box), horizon_s=1.5, pushes=(TimedPush("box", 0.35, (1.5, 0.0, 0.0)),))
+    positions, _ = _end(scene, name)
+    assert positions[0, 0] == pytest.approx(1.5 ** 2 / (2 * 0.4 * G), rel=0.02)
+    assert abs(positions[0, 1]) < 1e-3
+    early = _end(replace(scene, horizon_s=0.3), name)[0]  # the same scene seen before its push
+    assert np.abs(early[0, :2]).max() < 1e-4
 
 
 # -- an incline -------------------------------------------------------------------------------------

@@ -481,3 +481,63 @@ def test_package_uris_fall_back_to_the_mesh_path_without_a_sourced_workspace(fol
         load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "mug.obj\u0000.stl"}), "nul.json"))
     assert str(caught.value) == ("objects[0].shape.uri: 'mug.obj\\x00.stl' holds a control character (a NUL, a "
                                  "newline); give the path as it is")
+
+
+def _uv_seamed_cube_obj(size_m: float = 0.05) -> str:
+    """A closed cube as OBJ exporters write textured meshes: 8 positions, each face with texture
+    coordinates of its own, so every corner is split into 3 vertices at the seams."""
+    h = size_m / 2
+    corners = [(x, y, z) for x in (-h, h) for y in (-h, h) for z in (-h, h)]
+    faces = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]  # outward
+    lines = [f"v {x} {y} {z}" for x, y, z in corners]
+    lines += [f"vt {u} {v}" for u, v in ((0, 0), (1, 0), (1, 1), (0, 1))] * 6
+    for f, quad in enumerate(faces):
+        a, b, c, d = (i + 1 for i in quad)
+        t = 4 * f
+        lines += [f"f {a}/{t + 1} {b}/{t + 2} {c}/{t + 3}", f"f {a}/{t + 1} {c}/{t + 3} {d}/{t + 4}"]
+    return "\n".join(lines) + "\n"
+
+
+def test_a_closed_mesh_split_at_its_texture_seams_is_read_as_closed(folder):
+    """8 of 22 public object models were refused as "not closed" (issue 73): OBJ splits vertices at UV
+    seams, and the reader judged closedness before merging them by position."""
+    (folder / "seamed.obj").write_text(_uv_seamed_cube_obj())
+    data = scene_with({"type": "mesh", "uri": "seamed.obj"}, ball=False)
+    data["objects"][0]["position_m"] = [0.0, 0.0, 0.025]  # the cube's origin is its centre
+    [scene] = load_scenes(_write(folder, data, "seamed.json"))
+    shape = scene.objects[0].shape
+    assert shape.volume_m3 == pytest.approx(0.05 ** 3, rel=1e-6)
+    assert scene.objects[0].resolved_mass_kg == pytest.approx(2000 * 0.05 ** 3, rel=1e-6)
+
+
+def test_a_scale_that_makes_the_mesh_no_object_is_refused_in_one_line(folder, capfd):
+    """A scale of 1e300 printed 55 overflow warnings before its refusal (issue 76)."""
+    for scale in (1e300, 1e-9):
+        across = f"{max(mug_mesh().extents) * scale:.3g}"
+        with pytest.raises(SceneError) as caught:
+            load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "mug.obj", "scale": scale}, ball=False),
+                               "scaled.json"))
+        assert str(caught.value) == (f"objects[0].shape.uri: {folder / 'mug.obj'}: {across} m across at scale "
+                                     f"[{scale}, {scale}, {scale}]; an object is 0.001-10 m: give scale in metres per "
+                                     "file unit (0.001 for millimetres)")
+    assert capfd.readouterr().err == ""
+
+
+def test_parts_over_the_compound_budget_are_thinned_not_refused():
+    """A decomposition of many rich parts was refused ("more than 4096 vertices together", 9 of 22
+    public models, issue 73): each part is thinned to its share, inside its own hull, keeping its extremes."""
+    from scipy.spatial import ConvexHull as Hull
+
+    from ipe_ros.engine.scene.meshes import within_vertex_budget
+
+    rng = np.random.default_rng(0)
+    hulls = [rng.standard_normal((64, 3)) + 5 * i for i in range(100)]  # 6400 vertices together
+    thinned = within_vertex_budget(hulls)
+    assert sum(len(h) for h in thinned) <= 4096 and all(len(h) >= 8 for h in thinned)
+    for before, after in zip(hulls, thinned):
+        assert all(any(np.array_equal(p, q) for q in before) for p in after)  # a subset of its own vertices
+        assert Hull(after).volume <= Hull(before).volume + 1e-12
+        # farthest-point sampling keeps the point farthest from the centroid: the part keeps its reach
+        centre = before.mean(axis=0)
+        assert np.linalg.norm(after - centre, axis=1).max() == np.linalg.norm(before - centre, axis=1).max()
+    assert within_vertex_budget(hulls[:10]) == hulls[:10]  # under the budget: as they were

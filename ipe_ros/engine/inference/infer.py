@@ -23,7 +23,7 @@ from .. import checks
 from ..config import DEFAULT_PRESET, CollapseSettings, SimSettings, preset
 from ..errors import ConfigError
 from ..sampling.montecarlo import MapFn, MonteCarlo, check_seed
-from ..scene.bodies import Scene
+from ..scene.bodies import Scene, TimedPush
 from ..scene.format import scene_to_dict
 from .amis import AmisResult, AmisSettings, amis, grid
 from .likelihood import CONSISTENT_WITHIN_SD, MODEL_ERROR_GRID, Track, track
@@ -203,8 +203,7 @@ def infer(observation: Observation, settings: InferSettings = InferSettings(), m
         for name in observation.unknown_velocity:
             velocities[name] = np.array(values[at:at + 3], float)
             at += 3
-        candidate_scene = with_values(scene, assigned, {})
-        return with_values(candidate_scene, {}, _pushed(candidate_scene, observation, velocities))
+        return _pushed(with_values(scene, assigned, {}), observation, velocities)
 
     def make_task(i: int, z: np.ndarray) -> ParticleTask:
         return ParticleTask(i, candidate(z), sim, tracks, observation.yaw_sd_rad, errors,
@@ -230,21 +229,27 @@ def observed_rollout_scene(observation: Observation, scene: Scene) -> Scene:
     """``scene`` (the observation's, or a refined one) as the observation rolled it out: its window as
     the horizon, the pushes applied, unknown initial velocities at the frames' estimates."""
     velocities = {name: [n.mean for n in velocity_prior(observation, name)] for name in observation.unknown_velocity}
-    scene = dataclasses.replace(scene, horizon_s=observation.window_s)
-    return with_values(scene, {}, _pushed(scene, observation, velocities))
+    return _pushed(dataclasses.replace(scene, horizon_s=observation.window_s), observation, velocities)
 
 
-def _pushed(scene: Scene, observation: Observation, velocities: dict) -> dict:
-    """Each pushed or nuisance-moving object's initial velocity: its own (given or drawn) plus its pushes."""
+def _pushed(scene: Scene, observation: Observation, velocities: dict) -> Scene:
+    """The scene with each nuisance-moving object's initial velocity (``velocities``, drawn) and the
+    robot's pushes: at t = 0 added to the initial velocity, later ones as the scene's timed pushes
+    (an impulse over the object's mass, this candidate's)."""
     out = {name: np.asarray(v, float) for name, v in velocities.items()}
     bodies = {b.name: b for b in scene.objects}
+    later = []
     for push in observation.actions:
         body = bodies[push.object]
-        base = out.get(push.object, np.asarray(body.linear_velocity_m_s, float))
         change = np.array(push.velocity_m_s if push.velocity_m_s is not None
                           else np.asarray(push.impulse_N_s) / body.resolved_mass_kg, float)
-        out[push.object] = base + np.array([change[0], change[1], 0.0])
-    return out
+        change = np.array([change[0], change[1], 0.0])
+        if push.at_s > 0:
+            later.append(TimedPush(push.object, push.at_s, tuple(float(c) for c in change)))
+        else:
+            out[push.object] = out.get(push.object, np.asarray(body.linear_velocity_m_s, float)) + change
+    scene = with_values(scene, {}, out)
+    return dataclasses.replace(scene, pushes=tuple(sorted(later, key=lambda p: p.at_s))) if later else scene
 
 
 def _tracks(observation: Observation) -> tuple[Track, ...]:

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import preset
-from ..scene.bodies import Body, Box, Floor, Scene
+from ..scene.bodies import Body, Box, Floor, Scene, TimedPush
 from ..scene.format import scene_to_dict
 from ..scene.shapes import Sphere
 from .observation import OBSERVATION_FORMAT
@@ -90,16 +90,18 @@ def heavy_light_tower(heavy: str, ratio: float, rng: np.random.Generator) -> Sce
 
 
 def probe_push(rng: np.random.Generator, mass_kg: float = 0.8, friction: float = 0.45, impulse_N_s: float = 1.2,
-               position_sd_m: float = 0.002) -> dict:
+               position_sd_m: float = 0.002, at_s: float = 0.0) -> dict:
     """The worked example: the robot pushes a box of unknown mass and friction with a known impulse
-    and watches it slide to a stop for 1 s."""
+    at ``at_s`` and watches it slide to a stop, for 1 s after the push."""
+    change = (impulse_N_s / mass_kg, 0.0, 0.0)
     box = Box("box", (0.1, 0.1, 0.1), (0.0, 0.0, 0.05), UPRIGHT, friction, 0.0, mass_kg=mass_kg,
-              linear_velocity_m_s=(impulse_N_s / mass_kg, 0.0, 0.0))
-    scene = Scene("probe-push", (box,), Floor(friction=1.0, restitution=0.0))
-    observation = observe(scene, 1.0, rng, position_sd_m=position_sd_m, unknowns=[
+              linear_velocity_m_s=change if at_s == 0 else (0.0, 0.0, 0.0))
+    scene = Scene("probe-push", (box,), Floor(friction=1.0, restitution=0.0),
+                  pushes=(TimedPush("box", at_s, change),) if at_s > 0 else ())
+    observation = observe(scene, at_s + 1.0, rng, position_sd_m=position_sd_m, unknowns=[
         {"object": "box", "property": "mass_kg", "prior": {"log_uniform": [0.05, 5.0]}},
         {"object": "box", "property": "friction", "prior": {"uniform": [0.05, 1.2]}}],
-        actions=[{"kind": "push", "object": "box", "at_s": 0.0, "impulse_N_s": [impulse_N_s, 0.0]}])
+        actions=[{"kind": "push", "object": "box", "at_s": at_s, "impulse_N_s": [impulse_N_s, 0.0]}])
     # the scene the robot knows: the box at rest before its push
     observation["scene"]["objects"][0]["linear_velocity_m_s"] = [0.0, 0.0, 0.0]
     return observation

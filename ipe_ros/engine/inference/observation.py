@@ -65,11 +65,12 @@ class Unknown:
 
 @dataclass(frozen=True)
 class Push:
-    """The robot's push on ``object`` at t = 0: an impulse (its mass then shows) or a velocity change."""
+    """The robot's push on ``object`` at ``at_s``: an impulse (its mass then shows) or a velocity change."""
 
     object: str
     impulse_N_s: tuple[float, float] | None = None  # noqa: N815 - the unit's spelling
     velocity_m_s: tuple[float, float] | None = None
+    at_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -263,12 +264,9 @@ def _actions(items, dynamic: set[str], window_s: float) -> tuple[Push, ...]:
         if item.get("object") not in dynamic:
             raise ConfigError(f"{path}.object", f"no dynamic object {shown(item.get('object'))} in the scene")
         at = _number(item.get("at_s", 0.0), f"{path}.at_s", 0.0, window_s)
-        if at != 0.0:
-            raise ConfigError(f"{path}.at_s", "only pushes at t = 0 are simulated yet: start the observation's window "
-                                              "(its scene and t = 0) at the push")
         impulse, velocity = item.get("impulse_N_s"), item.get("velocity_m_s")
         push = Push(item["object"], None if impulse is None else _vector(impulse, 2, f"{path}.impulse_N_s"),
-                    None if velocity is None else _vector(velocity, 2, f"{path}.velocity_m_s"))
+                    None if velocity is None else _vector(velocity, 2, f"{path}.velocity_m_s"), at)
         if velocity is not None and math.hypot(*push.velocity_m_s) > MAX_SPEED_M_S:
             raise ConfigError(f"{path}.velocity_m_s", f"must be at most {MAX_SPEED_M_S:g} m/s")
         out.append(push)

@@ -42,7 +42,8 @@ def observation_schema() -> dict[str, Any]:
         "additionalProperties": False}
     push = {"type": "object", "properties": {
         "kind": {"const": "push"}, "object": {"type": "string"},
-        "at_s": {"const": 0, "description": "pushes at t = 0 only, so far"},
+        "at_s": {"type": "number", "minimum": 0, "maximum": MAX_WINDOW_S,
+                 "description": "seconds after t = 0, within the frames' window (default 0)"},
         "impulse_N_s": _numbers(2, "horizontal impulse, N s (the mass then shows)"),
         "velocity_m_s": _numbers(2, "horizontal velocity change, m/s")},
         "required": ["kind", "object"], "oneOf": [{"required": ["impulse_N_s"]}, {"required": ["velocity_m_s"]}],

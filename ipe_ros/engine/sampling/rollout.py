@@ -235,6 +235,8 @@ class Apart:
         any pair may be asked about) and "will anything fall?" (one world ends at the first fall)."""
         if not settings.islands or len(world.dynamic_ids) < 2 or (decided is not None and decided.stop_at_first_fall):
             return None
+        if scene.pushes:  # a body pushed later may leave its island
+            return None
         if watches_for(scene, spec, world)[0]:
             return None
         velocities = np.array([b.linear_velocity_m_s for b in scene.dynamic_objects], float)

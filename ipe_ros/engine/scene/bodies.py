@@ -176,6 +176,16 @@ Support = Union[Floor, Table]
 
 
 @dataclass(frozen=True)
+class TimedPush:
+    """A known push during the rollout (the robot's own, watched in an observation): at ``at_s`` the
+    object ``name``'s velocity changes by ``velocity_change_m_s`` (an impulse over its mass)."""
+
+    name: str
+    at_s: float
+    velocity_change_m_s: Vec3
+
+
+@dataclass(frozen=True)
 class Scene:
     """Rigid bodies on a support under gravity.
 
@@ -189,6 +199,8 @@ class Scene:
             is set down onto it before the rollout (after overlaps are removed): for heights that are
             estimates (a detector's, a depth posterior's), which leave objects hovering millimetres
             above their supports. 0: heights as given (the paper's stacks).
+        pushes: known pushes after t = 0, in time order (``TimedPush``; engine-only: an observation's
+            actions), each applied at the first step boundary at or after its time.
     """
 
     name: str
@@ -197,6 +209,7 @@ class Scene:
     gravity_m_s2: Vec3 = (0.0, 0.0, -9.81)
     horizon_s: float | None = None
     set_down_m: float = 0.0
+    pushes: tuple[TimedPush, ...] = field(default=(), metadata={"keyed": "when set"})
 
     @property
     def dynamic_objects(self) -> tuple[Body, ...]:

@@ -40,8 +40,9 @@ MAX_MESH_VERTICES = 200_000
 #: every part's hull is kept to this many vertices (CoACD's max_ch_vertex), so that a mesh's parts
 #: stay within the compound limits (limits.MAX_COMPOUND_VERTICES)
 MAX_PART_VERTICES = 64
-#: bump when the cached decomposition's meaning changes
-_CACHE_VERSION = 3
+#: bump when the cached decomposition's meaning changes (4: hulls decimated to MAX_PART_VERTICES,
+#: and the parts together thinned to limits.MAX_COMPOUND_VERTICES)
+_CACHE_VERSION = 4
 
 
 @dataclass(frozen=True)
@@ -258,6 +259,15 @@ def _load(content: bytes, file: Path, scale: tuple[float, float, float], path: s
     if len(mesh.vertices) > MAX_MESH_VERTICES:
         raise SceneError(path, f"{file}: {len(mesh.vertices)} vertices, more than the {MAX_MESH_VERTICES} read; "
                                "simplify it")
+    with np.errstate(over="ignore", invalid="ignore"):  # judged before anything is scaled (no overflow warnings)
+        size_m = float(np.max(mesh.extents * np.asarray(scale)))
+    if not limits.MIN_SIZE_M <= size_m <= limits.MAX_SIZE_M:
+        raise SceneError(path, f"{file}: {size_m:.3g} m across at scale {list(scale)}; an object is "
+                               f"{limits.MIN_SIZE_M:g}-{limits.MAX_SIZE_M:g} m: give scale in metres per file unit "
+                               "(0.001 for millimetres)")
+    # OBJ files split a vertex where texture (UV) seams or normals meet: merged by position only, a
+    # closed surface reads as closed
+    mesh.merge_vertices(merge_tex=True, merge_norm=True)
     transform = np.diag([*scale, 1.0])
     if kind == "glb":  # glTF's up is +y: turn it to +z (x stays), then scale along the object's axes
         transform = transform @ np.array([[1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]])
@@ -275,9 +285,35 @@ def _coacd_hulls(vertices: np.ndarray, faces: np.ndarray, settings: Decompositio
 
     coacd.set_log_level("error")
     most = limits.MAX_COMPOUND_PARTS if settings.max_parts < 0 else min(settings.max_parts, limits.MAX_COMPOUND_PARTS)
+    # CoACD keeps a hull to max_ch_vertex only when it decimates
     parts = coacd.run_coacd(coacd.Mesh(vertices, faces), threshold=settings.threshold, max_convex_hull=most,
-                            max_ch_vertex=MAX_PART_VERTICES, seed=settings.seed)
-    return [np.asarray(v, float) for v, _ in parts if len(v) >= 4]
+                            decimate=True, max_ch_vertex=MAX_PART_VERTICES, seed=settings.seed)
+    return within_vertex_budget([np.asarray(v, float) for v, _ in parts if len(v) >= 4])
+
+
+def within_vertex_budget(hulls: list[np.ndarray], budget: int = limits.MAX_COMPOUND_VERTICES) -> list[np.ndarray]:
+    """The hulls, those of a decomposition over ``budget`` vertices together each thinned to its share
+    (at least 8) by farthest-point sampling of its own vertices: every part stays inside its hull and
+    keeps its extremes. The mass, centre of mass and inertia come from the mesh, not from the parts."""
+    total = sum(len(h) for h in hulls)
+    if total <= budget:
+        return hulls
+    out = []
+    for hull in hulls:
+        share = max(8, int(budget * len(hull) / total))
+        out.append(hull if len(hull) <= share else _farthest_points(hull, share))
+    return out
+
+
+def _farthest_points(points: np.ndarray, count: int) -> np.ndarray:
+    """``count`` of ``points``, each the farthest from those already taken (the first: the farthest
+    from the centroid): deterministic, and spread over the hull's extremes."""
+    taken = [int(np.argmax(np.linalg.norm(points - points.mean(axis=0), axis=1)))]
+    distance = np.linalg.norm(points - points[taken[0]], axis=1)
+    for _ in range(count - 1):
+        taken.append(int(np.argmax(distance)))
+        distance = np.minimum(distance, np.linalg.norm(points - points[taken[-1]], axis=1))
+    return points[sorted(taken)]
 
 
 def _coacd_in_process(connection, vertices: np.ndarray, faces: np.ndarray, settings: Decomposition) -> None:
@@ -327,9 +363,6 @@ def _decompose(vertices: np.ndarray, faces: np.ndarray, settings: Decomposition,
              else _coacd_within(vertices, faces, settings, within_s, path))
     if not hulls:
         raise SceneError(path, "its convex decomposition is empty (a flat or degenerate mesh)")
-    if sum(len(h) for h in hulls) > limits.MAX_COMPOUND_VERTICES:
-        raise SceneError(path, f"its {len(hulls)} convex parts have more than {limits.MAX_COMPOUND_VERTICES} vertices "
-                               "together; raise the threshold or lower max_parts")
     return hulls
 
 

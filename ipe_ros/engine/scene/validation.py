@@ -222,6 +222,13 @@ def _validate(scene: Scene, max_objects: int) -> Scene:
             raise SceneError(f"{path} ({shown(body.name)}).position_m",
                              f"the body's lowest point z = {lowest:.6g} m is below the support surface "
                              f"at z = {ground:.6g} m; raise it by at least {ground - lowest:.6g} m")
+    dynamic = {b.name for b in scene.dynamic_objects}
+    for i, push in enumerate(scene.pushes):
+        if push.name not in dynamic:
+            raise SceneError(f"pushes[{i}].name", f"no dynamic object {shown(push.name)} in the scene")
+        _check_number(push.at_s, f"pushes[{i}].at_s", "the push's time in seconds", lo=0.0, hi=MAX_HORIZON_S)
+        _check_vector(push.velocity_change_m_s, 3, f"pushes[{i}].velocity_change_m_s", "a velocity change in m/s",
+                      max_norm=limits.MAX_SPEED_M_S)
     masses = [(b.resolved_mass_kg, b.name) for b in scene.dynamic_objects]
     (heaviest, heavy_name), (lightest, light_name) = max(masses), min(masses)
     if lightest > 0 and heaviest / lightest > limits.MAX_MASS_RATIO:

@@ -153,6 +153,10 @@ class _Rollout:
         else:
             self.energy.reference(initial_energy)
         fastest_start_m_s = float(np.max(speeds_of(initial_velocities)[0], initial=0.0))
+        #: the scene's known pushes after t = 0: (tick, body handle, velocity change), in time order
+        self.kicks = _kicks(scene, world, dt)
+        if self.kicks:  # a pushed body may move as fast as its start and every push on it together
+            fastest_start_m_s += sum(float(np.linalg.norm(change)) for _, _, change in self.kicks)
         self.limit = health.speed_limit_m_s(g, horizon_s, push.acceleration_m_s2, push.duration_s) \
             + 2 * fastest_start_m_s
         self.record_every = record_every
@@ -177,8 +181,9 @@ class _Rollout:
         self.collapse_iterations = settings.iterations_for(mass_ratio(world.masses_kg),
                                                            settings.collapse.solver_iterations)
         self.steps = StepControl(settings, world)
-        self.rest = RestWatch(settings.early_stop, world.scale_m,
-                              max(self.push_ticks * dt, settings.early_stop.min_time_s), decided,
+        self.rest = RestWatch(settings.early_stop, world.scale_m,  # never at rest before the last push
+                              max(self.push_ticks * dt, settings.early_stop.min_time_s,
+                                  self.kicks[-1][0] * dt if self.kicks else 0.0), decided,
                               len(scene.dynamic_objects), self.half_diagonals_m)
         self.travel_substeps = substeps_for(fastest_start_m_s + g * self.look_every * dt, settings, world) \
             if fastest_start_m_s else 1
@@ -228,6 +233,8 @@ class _Rollout:
         """One step (of one tick or, coarse, of several) in its substeps; returns the tick it began at."""
         if self.deadline_unix_s is not None and time.time() > self.deadline_unix_s:
             raise BudgetExceeded(f"the compute budget ran out at t = {self.tick * self.dt:.3f} s of the rollout")
+        if self.kicks and self.kicks[0][0] <= self.tick:
+            self._kick()
         # the push ends exactly on its tick, and the last step ends exactly on the horizon
         step_ticks = min(self.steps.ticks, self.total_ticks - self.tick)
         if step_ticks != self.steps.ticks:  # a shorter last step (coarse steps only)
@@ -260,6 +267,19 @@ class _Rollout:
             self.steps.set(1, self.travel_substeps)
         previous, self.tick = self.tick, self.tick + step_ticks
         return previous
+
+    def _kick(self) -> None:
+        """The pushes due by now: each body's velocity changed, the energy's reference taken again
+        (the push put it in), the impact watch told to look (the bodies may close fast now)."""
+        while self.kicks and self.kicks[0][0] <= self.tick:
+            _, handle, change = self.kicks.pop(0)
+            linear, angular = self.p.getBaseVelocity(handle, physicsClientId=self.cid)
+            self.p.resetBaseVelocity(handle, (np.asarray(linear) + change).tolist(), angular,
+                                     physicsClientId=self.cid)
+        positions, orientations, velocities = read_state(self.world)
+        self.energy.reference(self.energy.energy(positions, orientations, velocities[:, 0], velocities[:, 1]))
+        if self.impacts is not None:
+            self.impacts.quiet_s = 0.0
 
     def _step_simulation(self) -> None:
         self.p.stepSimulation(physicsClientId=self.cid)
@@ -435,3 +455,12 @@ class _Rollout:
                           speeds_m_s=np.array(speeds, float), spins_rad_s=np.array(spins, float),
                           events={name: w.events() for name, w in self.watches.items()},
                           collapse_undone_s=self.undone_s)
+
+
+def _kicks(scene: Scene, world: World, dt: float) -> list[tuple[int, int, np.ndarray]]:
+    """The scene's pushes after t = 0 as (tick, body handle, velocity change), in time order; a
+    push on a body not in this world (another island's) is left to that world."""
+    handles = {body.name: handle for handle, body in zip(world.dynamic_ids, scene.dynamic_objects)}
+    return sorted(((int(math.ceil(push.at_s / dt - 1e-9)), handles[push.name], np.asarray(push.velocity_change_m_s,
+                                                                                          float))
+                   for push in scene.pushes if push.name in handles), key=lambda kick: kick[0])

@@ -43,8 +43,8 @@ def load_camera_info(path: str | Path) -> dict:
             raise ConfigError("--camera-info", f"{path.name} is {size} bytes; a camera_info YAML is a few hundred "
                                                f"(at most {MAX_CAMERA_INFO_BYTES})")
         data = yaml.load(path.read_bytes(), Loader=NoAliases)
-    except (OSError, yaml.YAMLError) as exc:
-        raise ConfigError("--camera-info", f"cannot read {path}: {clip(str(exc), 300)}") from None
+    except (OSError, yaml.YAMLError) as exc:  # a YAML error spans lines (where, what, the line): one here
+        raise ConfigError("--camera-info", f"cannot read {path}: {clip(' '.join(str(exc).split()), 300)}") from None
     if not isinstance(data, dict):
         raise ConfigError("--camera-info", f"{path.name}: must be a mapping with image_width, image_height and "
                                            "camera_matrix")
@@ -96,7 +96,15 @@ def _check_image_size(path: Path, shape: tuple) -> None:
 def _read_depth_png(path: Path) -> np.ndarray:
     from PIL import Image
 
-    with Image.open(path) as image:
+    try:
+        opened = Image.open(path)
+    except Image.DecompressionBombError:  # the header claims more pixels than PIL will read at all
+        with open(path, "rb") as handle:
+            head = handle.read(24)
+        width, height = int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+        _check_image_size(path, (height, width))
+        raise
+    with opened as image:
         if image.format != "PNG":
             raise ConfigError("--depth", f"{path.name} is a {image.format} file, not a PNG")
         _check_image_size(path, (image.height, image.width))

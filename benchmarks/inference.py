@@ -5,7 +5,8 @@ known values (engine/inference/known.py: slide, head-on, bounce, tower).
 
 Against the number of frames and unknowns: ``--every N`` keeps every N-th frame (30 Hz -> 30/N Hz),
 ``--window S`` the first S seconds, ``--also OBJ.PROPERTY=LOW,HIGH`` adds a unknown with a uniform
-prior (not scored: it costs and widens). Writes benchmarks/results/inference/inference.json.
+prior (not scored: it costs and widens). ``--observed DIR``: observations another engine made of the
+same cases (benchmarks/witness/observations.py). Writes benchmarks/results/inference/inference.json.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import numpy as np
 from ipe_ros.engine.compute.pool import WorkerPool
 from ipe_ros.engine.config import preset
 from ipe_ros.engine.inference.infer import InferSettings, infer
-from ipe_ros.engine.inference.known import CASES
+from ipe_ros.engine.inference.known import CASES, KnownCase
 from ipe_ros.engine.inference.observation import observation_from_dict
 
 OUT = Path(__file__).parent / "results" / "inference"
@@ -35,11 +36,23 @@ def thinned(observation: dict, every: int = 1, window_s: float | None = None, al
     return {**observation, "frames": frames, "unknowns": unknowns}
 
 
+def observed_cases(folder: Path, family: str) -> list[tuple[int, KnownCase]]:
+    """The observations another engine made (benchmarks/witness/mujoco_observe.py) of ``family``, by seed."""
+    out = []
+    for path in sorted(folder.glob(f"{family}_*.json"), key=lambda p: int(p.stem.rsplit("_", 1)[1])):
+        data = json.loads(path.read_text())
+        known = {k: data.pop(k) for k in ("truth", "heavier", "scored")}
+        out.append((int(path.stem.rsplit("_", 1)[1]),
+                    KnownCase(family, data, known["truth"], tuple(known["heavier"]) or None, tuple(known["scored"]))))
+    return out
+
+
 def run_family(family: str, cases: int, pool, settings: InferSettings, first_seed: int = 0, every: int = 1,
-               window_s: float | None = None, also: tuple = ()) -> dict:
+               window_s: float | None = None, also: tuple = (), observed: Path | None = None) -> dict:
     rows = []
-    for seed in range(first_seed, first_seed + cases):
-        case = CASES[family](seed)
+    made = observed_cases(observed, family)[:cases] if observed is not None else \
+        [(seed, CASES[family](seed)) for seed in range(first_seed, first_seed + cases)]
+    for seed, case in made:
         observation = thinned(case.observation, every, window_s, also)
         started = time.perf_counter()
         answer = infer(observation_from_dict(observation), settings, pool.map if pool else None)
@@ -68,7 +81,7 @@ def run_family(family: str, cases: int, pool, settings: InferSettings, first_see
         print(family, seed, f"{row['seconds']:.1f} s", row["covered"], {k: round(v, 3) for k, v in row["error"].items()},
               flush=True)
     covered = [c for r in rows for c in r["covered"].values()]
-    summary = {"family": family, "cases": cases, "frames": rows[0]["frames"], "unknowns": rows[0]["unknowns"],
+    summary = {"family": family, "cases": len(rows), "frames": rows[0]["frames"], "unknowns": rows[0]["unknowns"],
                "coverage_90": float(np.mean(covered)) if covered else None,
                "median_abs_error": float(np.median([abs(v) for r in rows for v in r["error"].values()])),
                "median_seconds": float(np.median([r["seconds"] for r in rows])),
@@ -93,6 +106,8 @@ def main() -> None:
     parser.add_argument("--window", type=float, default=None, metavar="S", help="keep the frames of the first S s")
     parser.add_argument("--also", action="append", default=[], metavar="OBJ.PROPERTY=LOW,HIGH",
                         help="another unknown, uniform prior (repeatable)")
+    parser.add_argument("--observed", type=Path, default=None, metavar="DIR",
+                        help="infer the observations another engine made (benchmarks/witness/mujoco_observe.py)")
     parser.add_argument("--out", default=str(OUT))
     args = parser.parse_args()
     also = tuple((spec.split("=")[0].rsplit(".", 1)[0], spec.split("=")[0].rsplit(".", 1)[1],
@@ -100,14 +115,15 @@ def main() -> None:
     settings = InferSettings(simulation=preset(args.preset), model_error_fraction=args.model_error, grid_points=args.grid)
     pool = WorkerPool(args.workers) if args.workers else None
     try:
-        results = {f: run_family(f, args.cases, pool, settings, args.first_seed, args.every, args.window, also)
-                   for f in args.families.split(",")}
+        results = {f: run_family(f, args.cases, pool, settings, args.first_seed, args.every, args.window, also,
+                                 args.observed) for f in args.families.split(",")}
     finally:
         if pool:
             pool.close()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "inference.json").write_text(json.dumps({"settings": vars(args), "results": results}, indent=1))
+    (out / "inference.json").write_text(json.dumps({"settings": vars(args) | {"observed": str(args.observed)},
+                                                    "results": results}, indent=1))
     for family, result in results.items():
         print(json.dumps(result["summary"]))
 

@@ -330,3 +330,32 @@ def test_inference_benchmark_scores_each_case_and_writes_its_json(tmp_path):
     assert data["results"]["slide"]["summary"]["cases"] == 2 and data["settings"]["grid"] is None
     # 30 Hz thinned to 10 Hz over 0.6 s: 6 frames; the mass added as a second (unscored) unknown
     assert all((r["frames"], r["unknowns"]) == (6, 2) for r in rows)
+
+
+def test_observations_for_another_engine_carry_the_truth_and_read_back_into_the_inference_benchmark(tmp_path):
+    """benchmarks/witness/observations.py writes what MuJoCo needs to make the frames; inference.py
+    --observed infers such files (here frames pybullet made, put where MuJoCo's would go)."""
+    from ipe_ros.engine.inference.known import CASES
+
+    cases = tmp_path / "cases.json"
+    result = subprocess.run([sys.executable, "benchmarks/witness/observations.py", str(cases), "--cases", "1",
+                             "--families", "slide,head-on"], capture_output=True, text=True, timeout=300, env=ENV,
+                            cwd=REPO)
+    assert result.returncode == 0, result.stderr[-3000:]
+    rows = json.loads(cases.read_text())["rows"]
+    assert [(r["family"], r["seed"]) for r in rows] == [("slide", 0), ("head-on", 0)]
+    slide = rows[0]
+    assert slide["truth"] == CASES["slide"](0).truth and slide["scene"]["dynamic"][0]["name"] == "box"
+    assert all(f["objects"] == {} for f in slide["observation"]["frames"])  # the other engine fills them
+    assert slide["scene"]["horizon_s"] == slide["observation"]["frames"][-1]["t_s"]
+    observed = tmp_path / "observed"
+    observed.mkdir()
+    case = CASES["slide"](0)
+    (observed / "slide_0.json").write_text(json.dumps({**case.observation, "truth": case.truth, "heavier": [],
+                                                       "scored": list(case.scored)}))
+    result = subprocess.run([sys.executable, str(REPO / "benchmarks" / "inference.py"), "--cases", "5", "--workers",
+                             "0", "--families", "slide", "--observed", str(observed), "--out", str(tmp_path)],
+                            capture_output=True, text=True, timeout=600, env=ENV)
+    assert result.returncode == 0, result.stderr[-3000:]
+    (row,) = json.loads((tmp_path / "inference.json").read_text())["results"]["slide"]["rows"]
+    assert row["seed"] == 0 and row["covered"] == {"box.friction": True}

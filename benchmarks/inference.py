@@ -42,6 +42,7 @@ def observed_cases(folder: Path, family: str) -> list[tuple[int, KnownCase]]:
     for path in sorted(folder.glob(f"{family}_*.json"), key=lambda p: int(p.stem.rsplit("_", 1)[1])):
         data = json.loads(path.read_text())
         known = {k: data.pop(k) for k in ("truth", "heavier", "scored")}
+        data.pop("nominal", None)
         out.append((int(path.stem.rsplit("_", 1)[1]),
                     KnownCase(family, data, known["truth"], tuple(known["heavier"]) or None, tuple(known["scored"]))))
     return out

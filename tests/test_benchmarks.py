@@ -359,3 +359,23 @@ def test_observations_for_another_engine_carry_the_truth_and_read_back_into_the_
     assert result.returncode == 0, result.stderr[-3000:]
     (row,) = json.loads((tmp_path / "inference.json").read_text())["results"]["slide"]["rows"]
     assert row["seed"] == 0 and row["covered"] == {"box.friction": True}
+
+
+def test_mesh_acceptance_reports_each_file_accepted_or_refused_with_its_line(tmp_path):
+    trimesh = pytest.importorskip("trimesh")
+    from tests.test_meshes import _uv_seamed_cube_obj, mug_mesh
+
+    models = tmp_path / "models"
+    models.mkdir()
+    (models / "seamed_cube.obj").write_text(_uv_seamed_cube_obj())
+    mug_mesh(closed=False).export(models / "open_mug.obj")
+    assert isinstance(trimesh.load(models / "open_mug.obj"), trimesh.Trimesh)
+    result = subprocess.run([sys.executable, str(REPO / "benchmarks" / "mesh_acceptance.py"), str(models), "--out",
+                             str(tmp_path / "out")], capture_output=True, text=True, timeout=600, env=ENV)
+    assert result.returncode == 0, result.stderr[-3000:]
+    data = json.loads((tmp_path / "out" / "mesh_acceptance.json").read_text())
+    rows = {r["file"]: r for r in data["rows"]}
+    assert rows["seamed_cube.obj"]["accepted"] and rows["seamed_cube.obj"]["fell"] is False
+    assert rows["seamed_cube.obj"]["volume_m3"] == pytest.approx(0.05 ** 3, rel=1e-6)
+    assert not rows["open_mug.obj"]["accepted"] and "is not closed" in rows["open_mug.obj"]["refusal"]
+    assert data["summary"]["files"] == 2 and data["summary"]["accepted"] == 1

@@ -63,8 +63,9 @@ def test_hull_files_are_bounded_and_a_hull_used_again_is_written_again(monkeypat
 
     from ipe_ros.engine.scene.bodies import Body, Floor, Scene
     from ipe_ros.engine.scene.shapes import Compound, CompoundPart, ConvexHull
+    from ipe_ros.engine.simulation import hull_files
 
-    monkeypatch.setattr(world, "MAX_HULL_FILES", 4)
+    monkeypatch.setattr(hull_files, "MAX_HULL_FILES", 4)
 
     def scene_with(size: float) -> Scene:
         corners = tuple((x * size, y * 0.05, z * 0.05) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1))
@@ -82,11 +83,11 @@ def test_hull_files_are_bounded_and_a_hull_used_again_is_written_again(monkeypat
 
     first = scene_with(0.05)
     build(first)
-    names = set(world._HULL_FILES.values())
+    names = set(hull_files._HULL_FILES.values())
     for i in range(12):  # 24 new hulls
         build(scene_with(0.06 + 0.01 * i))
-        assert len(world._HULL_FILES) <= 4
-    on_disk = [n for n in os.listdir(world._hull_folder()) if n.endswith(".obj")]
-    assert len(on_disk) <= 4 and not names & set(world._HULL_FILES.values())
+        assert len(hull_files._HULL_FILES) <= 4
+    on_disk = [n for n in os.listdir(hull_files.hull_folder()) if n.endswith(".obj")]
+    assert len(on_disk) <= 4 and not names & set(hull_files._HULL_FILES.values())
     build(first)  # its files went: written again, under new names
-    assert not names & set(world._HULL_FILES.values()) and all(os.path.exists(p) for p in world._HULL_FILES.values())
+    assert not names & set(hull_files._HULL_FILES.values()) and all(os.path.exists(p) for p in hull_files._HULL_FILES.values())

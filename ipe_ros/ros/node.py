@@ -31,13 +31,13 @@ from sensor_msgs.msg import CameraInfo, Image
 from visualization_msgs.msg import MarkerArray
 
 from msg_bridge.ask_json import request_id_of, string_to_question, support_graph_markers
-from msg_bridge.depth import camera_info_to_dict, image_to_depth_m, pose_to_tuples
 from msg_bridge.json_text import answer_to_string, scene_name_of, string_to_scene
 from msg_bridge.markers import markers_to_scene, prediction_to_markers, scene_to_markers
 from msg_bridge.outputs import fall_direction_msg, fall_fraction_msg, fall_probability_msg
 from msg_bridge.stamps import header_to_stamp_ns
 
 from ..engine import ConfigError
+from .depth import DepthInterface
 from .observe import ObserveInterface
 from ..engine.errors import clip
 from ..service import (Answer, NoSceneError, PredictionFailed, PredictionService, QuestionService, ServiceConfig,
@@ -67,7 +67,7 @@ DIAGNOSTICS_PERIOD_S = 1.0
 REFUSAL_LOG_LINES_PER_S = 5
 
 
-class IpeInterface(ObserveInterface):
+class IpeInterface(ObserveInterface, DepthInterface):
     """The node's topics, service and prediction service, shared by :class:`IpeNode` (starts
     answering at once) and :class:`IpeLifecycleNode` (configure starts the workers, activate starts
     answering; ros/lifecycle.py). Mixed into an rclpy ``Node``."""
@@ -260,39 +260,6 @@ class IpeInterface(ObserveInterface):
             seen.append(key)
             handler(msg)
         return deliver
-
-    def _on_camera_info(self, msg: CameraInfo) -> None:
-        self._camera_info = camera_info_to_dict(msg)
-
-    def _on_camera_pose(self, msg: PoseStamped) -> None:
-        try:
-            position, orientation, frame, _ = pose_to_tuples(msg)
-        except ValueError as exc:
-            self._log_refusal(f"refused camera pose on {self.resolve_topic_name('~/depth/camera_pose')}: {exc}")
-            return
-        self._camera_pose = (position, orientation, frame)
-
-    def _on_depth_image(self, msg: Image) -> None:
-        """A depth image for depth perception: kept (the newest) with its camera, for the next scene."""
-        from ..engine.vision.camera import camera_from_info
-        from ..engine.vision.depth import DepthObservation
-
-        topic = self.resolve_topic_name("~/depth/image")
-        fixed = params.camera_pose(self._values)
-        pose = (*fixed, str(self._values["frame_id"])) if fixed is not None else self._camera_pose
-        try:
-            if self._camera_info is None:
-                raise ConfigError("camera_info", "no CameraInfo received yet on ~/depth/camera_info")
-            if pose is None:
-                raise ConfigError("camera_pose", "no camera pose yet: publish ~/depth/camera_pose or set "
-                                                 "depth.camera_pose")
-            camera = camera_from_info(self._camera_info, pose[0], pose[1])
-            observation = DepthObservation(camera, image_to_depth_m(msg))
-        except ValueError as exc:
-            self.service.refuse_depth()
-            self._log_refusal(f"refused depth image on {topic}: {exc}")
-            return
-        self.service.set_depth(observation, header_to_stamp_ns(msg.header), pose[2])
 
     def _on_markers(self, msg: MarkerArray) -> None:
         try:

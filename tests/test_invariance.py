@@ -6,7 +6,9 @@ either way, so the turned scene's samples are other draws of the same distributi
 draws turned: the answers agree within sampling and chaos, not to the bit. Tolerances (k = 16): each
 object's |dP(falls)| at most 0.45 (two independent proportions at 0.5 differ by 0.18 SD), their mean
 over the scene at most 0.15; a decisive fall direction (decisiveness >= 0.8 both ways) turned by the
-same 37 deg within 20 deg. What they catch: with friction that knew the world's axes (the direct
+same 37 deg within 25 deg: a circular mean of 16 spread directions moves by up to ~20 deg between
+two draws (the bouncy family, seeds 3-6: 7-21 deg at k = 16, 4-10 deg at k = 64); a friction
+that knows the world's axes turns a slide by up to 45 deg. What they catch: with friction that knew the world's axes (the direct
 solver for whole rollouts, before simulation/impacts.py) the strike family's scene answered 0.33
 mean and 0.56 max |dP| turned (0.06 and 0.19 now). The issue's table, through the CLI, closes it.
 """
@@ -49,7 +51,7 @@ def test_a_zoo_scene_turned_about_the_vertical_answers_the_same(family, pool):
     if straight.direction_rad is not None and other.direction_rad is not None \
             and min(straight.direction_decisiveness, other.direction_decisiveness) >= 0.8:
         off = math.remainder(other.direction_rad - straight.direction_rad - YAW_RAD, 2 * math.pi)
-        assert abs(math.degrees(off)) <= 20.0
+        assert abs(math.degrees(off)) <= 25.0
 
 
 def test_a_turned_scene_keeps_its_bodies_poses_relative_to_each_other():

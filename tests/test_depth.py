@@ -382,15 +382,16 @@ def test_a_depth_recording_holds_the_measured_and_rendered_depth_and_the_posteri
     assert both.mean() > 0.8 and np.mean(np.abs(rendered - theirs)[both] < 0.001) > 0.99
 
 
-@pytest.mark.parametrize("dead", ["zero", "nan", "inf", "negative", "far"])
+@pytest.mark.parametrize("dead", ["zero", "nan", "inf", "negative", "far", "tiny"])
 def test_a_dead_camera_is_refused_not_answered_as_evidence(dead):
-    """What a dead or misconfigured driver sends: the answer would be the prior alone, said nowhere."""
+    """What a dead or misconfigured driver sends: the answer would be the prior alone, said nowhere
+    (1e-300 m everywhere was answered so: issue 76; no camera reads nearer than a few cm)."""
     scene = floor(cube("a", 0, 0, 0.05))
     camera = look_at((1.0, -0.7, 0.6), (0, 0, 0.1))
-    image = {"zero": 0.0, "nan": np.nan, "inf": np.inf, "negative": -1.0, "far": 1e300}[dead]
+    image = {"zero": 0.0, "nan": np.nan, "inf": np.inf, "negative": -1.0, "far": 1e300, "tiny": 1e-300}[dead]
     observation = D.DepthObservation(camera, np.full((camera.height_px, camera.width_px), image))
     with pytest.raises(ConfigError, match=r"^depth: no usable depth where the objects are: every pixel that sees "
-                                          r"them .* is 0, NaN, inf, negative or beyond 10 m"):
+                                          r"them .* is 0, NaN, inf, nearer than 0.02 m or beyond 10 m"):
         D.run_depth_chain(scene, (observation,), D.DepthSettings(), np.random.default_rng(0))
 
 

@@ -33,10 +33,15 @@ from .raycast import convex_body, pixel_box, pose_rotations, ray_depths
 from .render import body_patch, scene_mesh
 
 
+#: no depth camera reads nearer than this (structured light and stereo: 0.1-0.3 m; time of flight a
+#: few cm): a reading below it is no reading, as 0 is
+MIN_READING_M = 0.02
+
+
 @dataclass(frozen=True)
 class DepthObservation:
-    """One measured depth image (metres along the optical axis; 0, NaN or inf: no reading) and the
-    camera that took it."""
+    """One measured depth image (metres along the optical axis; below MIN_READING_M, NaN or inf: no
+    reading) and the camera that took it."""
 
     camera: PinholeCamera
     depth_m: np.ndarray
@@ -182,7 +187,7 @@ class DepthModel:
         for obs in observations:
             measured = np.asarray(obs.depth_m, float)
             with np.errstate(invalid="ignore"):  # 0, NaN, inf, negative or beyond the range: no reading
-                valid = np.isfinite(measured) & (measured > 0) & (measured < settings.max_range_m)
+                valid = np.isfinite(measured) & (measured >= MIN_READING_M) & (measured < settings.max_range_m)
             grid = np.zeros_like(valid)
             grid[::stride, ::stride] = True
             rows, columns = np.nonzero(valid & grid & _reach_mask(scene, obs.camera, settings.reach_m))
@@ -195,9 +200,10 @@ class DepthModel:
             self.support.append(np.where(np.isnan(support), np.inf, support))  # inf: the outlier density alone
         if not any(len(rows) for rows in self.rows):
             raise ConfigError("depth", "no usable depth where the objects are: every pixel that sees them (or the "
-                                       f"support within {settings.reach_m:g} m) is 0, NaN, inf, negative or beyond "
-                                       f"{settings.max_range_m:g} m, or the objects are out of view; check the camera "
-                                       "driver, the camera info and the camera pose")
+                                       f"support within {settings.reach_m:g} m) is 0, NaN, inf, nearer than "
+                                       f"{MIN_READING_M:g} m or beyond {settings.max_range_m:g} m, or the objects are "
+                                       "out of view; check the camera (depth in metres; 16UC1 in millimetres), "
+                                       "its driver, the camera info and the camera pose")
         self.offsets_m = np.zeros(len(observations))
         self.others = [np.delete(np.arange(len(self.bodies)), b) for b in range(len(self.bodies))]  # every body but b
         self._cast = None  # the last poses scored, reused by ``move`` (``_cast_at``)

@@ -54,10 +54,9 @@ def test_ninety_percent_intervals_cover_the_truth_and_say_which_is_heavier(pool)
                 right.append(heavier_right(case, answer))
     covered = [c for rows in results.values() for c, _, _ in rows]
     assert len(covered) == 50
-    # stated tolerance: nominal 90%; >= 80% (never confidently wrong) and <= 99% (the benchmark's 150
-    # cases of the three cheap families cover 98%: conservative, the physics' error and the engine's
-    # discrepancy allowed for; the issue asks <= 97%)
-    assert 0.80 <= np.mean(covered) <= 0.99
+    # stated tolerance: nominal 90%; the issue's 80-97% (never confidently wrong, nor vacuous): these
+    # 50 cover 92%, the benchmark's 175 95% (deterministic: the seeds are fixed)
+    assert 0.80 <= np.mean(covered) <= 0.97
     assert right and np.mean(right) >= 0.95
     # and the intervals are not vacuous: the median one spans under 3% of the truth for a slide's
     # friction, 15% for a bounce's restitution, 25% for a collision's mass ratio (measured: 16%, the

@@ -541,3 +541,69 @@ def test_parts_over_the_compound_budget_are_thinned_not_refused():
         centre = before.mean(axis=0)
         assert np.linalg.norm(after - centre, axis=1).max() == np.linalg.norm(before - centre, axis=1).max()
     assert within_vertex_budget(hulls[:10]) == hulls[:10]  # under the budget: as they were
+
+
+def _cube_scene(folder, cache, monkeypatch):
+    """The seamed cube (decomposed in a moment) read with a cache of its own; the cache's entry."""
+    from ipe_ros.engine.scene import mesh_cache
+
+    monkeypatch.setenv("IPE_CACHE_DIR", str(cache))
+    monkeypatch.setattr(mesh_cache, "VERIFIED", set())
+    monkeypatch.setattr("ipe_ros.engine.scene.meshes.VERIFIED", mesh_cache.VERIFIED)
+    (folder / "seamed.obj").write_text(_uv_seamed_cube_obj())
+    data = scene_with({"type": "mesh", "uri": "seamed.obj"}, ball=False)
+    data["objects"][0]["position_m"] = [0.0, 0.0, 0.025]
+    return _write(folder, data, "cube.json")
+
+
+def test_the_mesh_cache_follows_no_link_waits_on_no_fifo_and_takes_no_planted_entry(folder, tmp_path, monkeypatch,
+                                                                                      capfd):
+    """Issue 76: the decomposition cache repeated the store's old bug. Each planted thing is named and
+    the mesh decomposed again; nothing outside the cache is written or read."""
+    from ipe_ros.engine import safe_files
+    from ipe_ros.engine.scene import mesh_cache
+
+    cache = tmp_path / "cache"
+    path = _cube_scene(folder, cache, monkeypatch)
+    [first] = load_scenes(path)
+    (entry,) = (cache / "convex_parts").glob("*.json")
+    # a link at the temporary file's name: never written through
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    entry.unlink()
+    monkeypatch.setattr(safe_files.secrets, "token_hex", lambda _n: "guessed")
+    planted = entry.parent / f"{entry.name}.{os.getpid()}.guessed.part"
+    planted.symlink_to(victim)
+    mesh_cache.VERIFIED.clear()
+    assert load_scenes(path)[0].objects[0].shape == first.objects[0].shape
+    assert victim.read_text() == "precious" and not entry.exists()
+    planted.unlink()
+    # a FIFO, and a link to /dev/zero, at the entry's name: neither waited on nor read
+    for kind in ("fifo", "zero"):
+        if entry.exists() or entry.is_symlink():
+            entry.unlink()
+        os.mkfifo(entry) if kind == "fifo" else entry.symlink_to("/dev/zero")
+        mesh_cache.VERIFIED.clear()
+        assert load_scenes(path)[0].objects[0].shape == first.objects[0].shape
+        assert f"ignoring mesh cache entry {entry} and decomposing again: not a regular file" in capfd.readouterr().err
+    entry.unlink()
+    load_scenes(path)
+    # a well-formed entry planted under the mesh's key: a heavier, off-centre object
+    document = json.loads(entry.read_text())
+    document["volume_m3"] *= 8
+    document["centre_of_mass_m"] = [0.02, 0.0, 0.0]
+    entry.write_text(json.dumps(document))
+    mesh_cache.VERIFIED.clear()
+    [again] = load_scenes(path)
+    assert again.objects[0].shape == first.objects[0].shape
+    assert "its volume, centre of mass or inertia is not the mesh's" in capfd.readouterr().err
+    # the cache's folder a link elsewhere: not followed, nothing written there
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    for p in (cache / "convex_parts").iterdir():
+        p.unlink()
+    (cache / "convex_parts").rmdir()
+    (cache / "convex_parts").symlink_to(outside, target_is_directory=True)
+    mesh_cache.VERIFIED.clear()
+    assert load_scenes(path)[0].objects[0].shape == first.objects[0].shape
+    assert list(outside.iterdir()) == []

@@ -266,15 +266,15 @@ def test_the_store_writes_only_inside_itself_whatever_links_are_planted_in_it(tm
 
 
 def test_a_link_planted_at_the_temporary_file_s_name_is_never_written_through(tmp_path, monkeypatch):
-    import ipe_ros.engine.compute.store as store_module
+    import ipe_ros.engine.safe_files as safe_files
 
     _one_sample_run(tmp_path / "store")
     entry = _only_entry(tmp_path / "store")
     entry.unlink()
     victim = tmp_path / "victim.txt"
     victim.write_text("precious")
-    monkeypatch.setattr(store_module.secrets, "token_hex", lambda _n: "guessed")
-    planted = entry.parent / f"{entry.stem}.{os.getpid()}.guessed.part"
+    monkeypatch.setattr(safe_files.secrets, "token_hex", lambda _n: "guessed")
+    planted = entry.parent / f"{entry.name}.{os.getpid()}.guessed.part"
     planted.symlink_to(victim)
     lines = []
     store, _ = _one_sample_run(tmp_path / "store", report=lines.append)

@@ -27,8 +27,6 @@ import hashlib
 import json
 import math
 import os
-import secrets
-import stat
 import sys
 import types as pytypes
 import typing
@@ -38,6 +36,7 @@ from typing import Any, Callable, Iterable, TypeVar
 import numpy as np
 
 from ..errors import clip, shown
+from ..safe_files import UnsafeEntry, open_folder, read_entry, write_entry
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -130,21 +129,8 @@ class ResumableMap:
     def _open_shard(self, key: str, create: bool) -> int | None:
         """A descriptor of the entry's shard folder, opened without following a link (so that every
         file operation below stays inside the store, whatever is planted there meanwhile); None when
-        it does not exist (and ``create`` is false). StoreEntryError when it is not a real folder."""
-        shard = self.folder / key[:2]
-        if create:
-            try:
-                shard.mkdir()
-            except FileExistsError:
-                pass
-        try:
-            return os.open(shard, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW)
-        except FileNotFoundError:
-            if create:
-                raise
-            return None
-        except OSError:  # a link (ELOOP) or a file (ENOTDIR) where the shard folder belongs
-            raise StoreEntryError(f"its folder {shard} is not a folder of the store (a link or a file)") from None
+        it does not exist (and ``create`` is false). UnsafeEntry when it is not a real folder."""
+        return open_folder(self.folder / key[:2], create)
 
     def _read(self, key: str, item):
         """The stored result for ``key`` (computed for ``item``); None when there is none or it is
@@ -155,25 +141,13 @@ class ResumableMap:
             shard = self._open_shard(key, create=False)
             if shard is None:
                 return None
-            try:  # a link could point anywhere: never followed
-                fd = os.open(path.name, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK, dir_fd=shard)
-            except FileNotFoundError:
+            data = read_entry(shard, path.name, MAX_ENTRY_BYTES)
+            if data is None:
                 return None
-            except OSError:
-                raise StoreEntryError("not a regular file (a link or a folder)") from None
-            with os.fdopen(fd, "rb") as handle:
-                info = os.fstat(handle.fileno())
-                if not stat.S_ISREG(info.st_mode):
-                    raise StoreEntryError("not a regular file (a link or a folder)")
-                if info.st_size > MAX_ENTRY_BYTES:
-                    raise StoreEntryError(f"{info.st_size} bytes, more than the {MAX_ENTRY_BYTES} an entry may have")
-                data = handle.read(MAX_ENTRY_BYTES + 1)  # bounded even if it grows meanwhile
-            if len(data) > MAX_ENTRY_BYTES:
-                raise StoreEntryError(f"more than the {MAX_ENTRY_BYTES} bytes an entry may have")
             result = decode_entry(data, key)
             _check_against_task(result, item)
             return result
-        except (StoreEntryError, OSError) as exc:
+        except (StoreEntryError, UnsafeEntry, OSError) as exc:
             self.rejected += 1
             self.report(f"ipe: ignoring store entry {path} and computing it again: {exc}")
             return None
@@ -203,35 +177,20 @@ class ResumableMap:
         return results
 
     def _write(self, key: str, result) -> None:
-        """Store one result inside the store only: its shard opened without following a link, the
-        temporary file created anew (never an existing file or link), then renamed over the entry
-        (atomic: a crash leaves a .part, never a half-written result; a link planted at the entry's
-        name is replaced, not written through). A shard that is not a real folder is reported and
-        the result left unstored."""
+        """Store one result inside the store only (``safe_files.write_entry``: its shard opened
+        without following a link, the temporary file created anew, then renamed over the entry). A
+        shard that is not a real folder is reported and the result left unstored."""
         path = self._path(key)
         data = encode_entry(result, key)
         try:
             shard = self._open_shard(key, create=True)
-        except (StoreEntryError, OSError) as exc:
+        except (UnsafeEntry, OSError) as exc:
             self.report(f"ipe: not storing {path}: {exc}; remove it to store results there again")
             return
-        partial = f"{key}.{os.getpid()}.{secrets.token_hex(4)}.part"
         try:
-            try:
-                fd = os.open(partial, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o644, dir_fd=shard)
-            except OSError as exc:  # something already there (a planted link): never opened
-                self.report(f"ipe: not storing {path}: its temporary file {partial} exists already ({exc.strerror})")
-                return
-            try:
-                with os.fdopen(fd, "wb") as handle:
-                    handle.write(data)
-                os.replace(partial, path.name, src_dir_fd=shard, dst_dir_fd=shard)
-            except BaseException:
-                try:
-                    os.unlink(partial, dir_fd=shard)
-                except OSError:
-                    pass
-                raise
+            write_entry(shard, path.name, data)
+        except UnsafeEntry as exc:  # something already at the temporary name (a planted link): never opened
+            self.report(f"ipe: not storing {path}: {exc}")
         finally:
             os.close(shard)
 

@@ -18,7 +18,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import hashlib
-import json
 import math
 import os
 import stat
@@ -30,6 +29,7 @@ import numpy as np
 
 from ..errors import SceneError, shown
 from . import limits
+from .mesh_cache import VERIFIED, cached_parts, describes, mass_properties, report, store_parts
 from .shapes import Compound, CompoundPart, ConvexHull, MeshSource
 
 #: what trimesh reads without extra libraries (DAE needs pycollada; glTF with external buffers reads
@@ -147,17 +147,24 @@ def triangles_shape(points_m: np.ndarray, path: str, access: MeshAccess) -> Comp
 
 
 def _compound(key: str, load, access: MeshAccess, path: str) -> Compound:
-    """The mesh's compound from the cache under ``key``, else decomposed from ``load()`` and cached."""
-    cached = _cached_parts(access.cache(), key)
-    if cached is None:
+    """The mesh's compound from the cache under ``key``, else decomposed from ``load()`` and cached.
+    An entry is taken only once it describes the mesh (``_describes``: checked once per process)."""
+    cached = cached_parts(access.cache(), key)
+    mesh = None
+    if cached is not None and key not in VERIFIED:
         mesh = load()
-        # the solid's inertia about its centre of mass, per kg (trimesh's at density 1 weighs its volume)
-        inertia = np.diag(np.asarray(mesh.moment_inertia, float)) / float(mesh.mass)
+        why = describes(cached, mesh)
+        if why is None:
+            VERIFIED.add(key)
+        else:
+            report(f"ipe: ignoring mesh cache entry {access.cache() / (key + '.json')} and decomposing again: {why}")
+            cached = None
+    if cached is None:
+        mesh = mesh if mesh is not None else load()
         cached = (_decompose(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64), access.decomposition,
-                             path, access.decompose_within_s), float(mesh.volume),
-                  tuple(float(v) for v in mesh.center_mass),
-                  tuple(float(v) for v in inertia))
-        _store_parts(access.cache(), key, *cached)
+                             path, access.decompose_within_s), *mass_properties(mesh))
+        store_parts(access.cache(), key, *cached)
+        VERIFIED.add(key)
     parts, volume, centre, inertia = cached
     return Compound(tuple(CompoundPart(ConvexHull(tuple(tuple(map(float, v)) for v in part))) for part in parts),
                     volume_m3=volume, centre_of_mass_m=centre, inertia_diagonal_per_kg_m2=inertia)
@@ -364,33 +371,3 @@ def _decompose(vertices: np.ndarray, faces: np.ndarray, settings: Decomposition,
     if not hulls:
         raise SceneError(path, "its convex decomposition is empty (a flat or degenerate mesh)")
     return hulls
-
-
-def _cached_parts(folder: Path, key: str) -> tuple[list[np.ndarray], float, tuple, tuple] | None:
-    """The parts, volume, centre of mass and inertia per kg stored under ``key`` (JSON, never code),
-    or None when there are none usable."""
-    try:
-        data = json.loads((folder / f"{key}.json").read_text())
-        parts = [np.asarray(p, float) for p in data["parts"]]
-        volume, centre = float(data["volume_m3"]), tuple(float(v) for v in data["centre_of_mass_m"])
-        inertia = tuple(float(v) for v in data["inertia_diagonal_per_kg_m2"])
-        if data.get("key") != key or not parts or any(p.ndim != 2 or p.shape[1] != 3 or len(p) < 4 for p in parts) \
-                or len(centre) != 3 or len(inertia) != 3:
-            return None
-        return parts, volume, centre, inertia
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
-
-
-def _store_parts(folder: Path, key: str, parts: list[np.ndarray], volume_m3: float, centre_m: tuple,
-                 inertia_per_kg_m2: tuple) -> None:
-    """Written to a temporary file and renamed: a reader never sees half an entry."""
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        partial = folder / f"{key}.{os.getpid()}.part"
-        partial.write_text(json.dumps({"key": key, "parts": [p.tolist() for p in parts], "volume_m3": volume_m3,
-                                       "centre_of_mass_m": list(centre_m),
-                                       "inertia_diagonal_per_kg_m2": list(inertia_per_kg_m2)}))
-        os.replace(partial, folder / f"{key}.json")
-    except OSError:  # a read-only home: decomposed again next time, answered all the same
-        pass

@@ -1,0 +1,79 @@
+"""Files a cache keeps, read and written so that nothing planted in its folder reaches outside it:
+the result store's entries (``compute/store.py``) and the meshes' convex parts (``scene/meshes.py``).
+
+The folder is opened without following a link; each entry is opened relative to it, without
+following a link and without blocking (a FIFO), checked to be a regular file, and read bounded;
+an entry is written to a temporary file created anew (never an existing file or a link), then
+renamed over its name (atomic: a crash leaves a ``.part``, never half an entry).
+"""
+
+from __future__ import annotations
+
+import os
+import secrets
+import stat
+from pathlib import Path
+
+
+class UnsafeEntry(Exception):
+    """A cache's entry or folder is not what the cache writes (a link, a file, a FIFO, too large)."""
+
+
+def open_folder(folder: Path, create: bool, owner: str = "the store") -> int | None:
+    """A descriptor of ``folder`` opened without following a link (close it); None where it does
+    not exist and ``create`` is false. UnsafeEntry where it is a link or a file."""
+    if create:
+        try:
+            folder.mkdir(parents=True)
+        except FileExistsError:
+            pass
+    try:
+        return os.open(folder, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW)
+    except FileNotFoundError:
+        if create:
+            raise
+        return None
+    except OSError:  # a link (ELOOP) or a file (ENOTDIR) where the folder belongs
+        raise UnsafeEntry(f"its folder {folder} is not a folder of {owner} (a link or a file)") from None
+
+
+def read_entry(folder_fd: int, name: str, max_bytes: int) -> bytes | None:
+    """The entry ``name``'s bytes, or None where there is none; UnsafeEntry where it is not a
+    regular file or holds more than ``max_bytes``."""
+    try:  # a link could point anywhere: never followed; a FIFO would block: not waited on
+        fd = os.open(name, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK, dir_fd=folder_fd)
+    except FileNotFoundError:
+        return None
+    except OSError:
+        raise UnsafeEntry("not a regular file (a link or a folder)") from None
+    with os.fdopen(fd, "rb") as handle:
+        info = os.fstat(handle.fileno())
+        if not stat.S_ISREG(info.st_mode):
+            raise UnsafeEntry("not a regular file (a link or a folder)")
+        if info.st_size > max_bytes:
+            raise UnsafeEntry(f"{info.st_size} bytes, more than the {max_bytes} an entry may have")
+        data = handle.read(max_bytes + 1)  # bounded even if it grows meanwhile
+    if len(data) > max_bytes:
+        raise UnsafeEntry(f"more than the {max_bytes} bytes an entry may have")
+    return data
+
+
+def write_entry(folder_fd: int, name: str, data: bytes) -> None:
+    """``data`` as the entry ``name``, through a temporary file created anew and renamed over it (a
+    link planted at the name is replaced, not written through). UnsafeEntry where the temporary
+    name is taken already (never opened); OSError where the folder cannot be written."""
+    partial = f"{name}.{os.getpid()}.{secrets.token_hex(4)}.part"
+    try:
+        fd = os.open(partial, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o644, dir_fd=folder_fd)
+    except FileExistsError as exc:
+        raise UnsafeEntry(f"its temporary file {partial} exists already ({exc.strerror})") from None
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data)
+        os.replace(partial, name, src_dir_fd=folder_fd, dst_dir_fd=folder_fd)
+    except BaseException:
+        try:
+            os.unlink(partial, dir_fd=folder_fd)
+        except OSError:
+            pass
+        raise

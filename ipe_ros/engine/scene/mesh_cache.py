@@ -1,0 +1,107 @@
+"""The meshes' decomposition cache: each mesh's convex parts and mass properties, keyed by the file's
+content, its scale and the decomposition's settings (``meshes._compound``), in
+``$IPE_CACHE_DIR/convex_parts``. Read and written inside its folder only (``safe_files``), and an
+entry is taken only once it describes its mesh (``describes``): a link, a FIFO, a folder or a planted
+entry is named and the mesh decomposed again.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..safe_files import UnsafeEntry, open_folder, read_entry, write_entry
+
+#: cache keys whose entries were found to describe their mesh in this process
+VERIFIED: set[str] = set()
+#: a mesh cache entry holds a few hundred hull points: far under this
+MAX_CACHE_ENTRY_BYTES = 4 * 2**20
+
+
+def report(line: str) -> None:
+    print(line, file=sys.stderr)
+
+
+def mass_properties(mesh) -> tuple[float, tuple, tuple]:
+    """The solid's volume, centre of mass and inertia about it per kg (trimesh's at density 1 weighs
+    its volume)."""
+    inertia = np.diag(np.asarray(mesh.moment_inertia, float)) / float(mesh.mass)
+    return float(mesh.volume), tuple(float(v) for v in mesh.center_mass), tuple(float(v) for v in inertia)
+
+
+def describes(cached: tuple, mesh) -> str | None:
+    """Why a cache entry does not describe ``mesh`` (None: it does): its mass properties must be the
+    mesh's own, its parts within the mesh's bounds and holding about its volume. A planted entry
+    that changes the object's mass, balance or extent is caught; one that reshuffles parts within
+    them would need the decomposition again to tell."""
+    parts, volume, centre, inertia = cached
+    own_volume, own_centre, own_inertia = mass_properties(mesh)
+    if not (np.isclose(volume, own_volume, rtol=1e-6) and np.allclose(centre, own_centre, rtol=1e-6, atol=1e-9)
+            and np.allclose(inertia, own_inertia, rtol=1e-6, atol=1e-12)):
+        return "its volume, centre of mass or inertia is not the mesh's"
+    low, high = mesh.bounds
+    margin = 0.02 * float(np.max(high - low))
+    if any(np.any(p < low - margin) or np.any(p > high + margin) for p in parts):
+        return "a part reaches beyond the mesh"
+    from scipy.spatial import ConvexHull as QHull
+
+    try:
+        held = sum(QHull(p).volume for p in parts)
+    except Exception:  # noqa: BLE001 - qhull's errors: a degenerate part
+        return "a part is not a solid hull"
+    if not 0.5 * own_volume <= held <= 3.0 * own_volume:
+        return f"its parts hold {held / own_volume:.2f}x the mesh's volume"
+    return None
+
+
+def cached_parts(folder: Path, key: str) -> tuple[list[np.ndarray], float, tuple, tuple] | None:
+    """The parts, volume, centre of mass and inertia per kg stored under ``key`` (JSON, never code),
+    or None when there are none usable (a link, a FIFO or a folder at the entry's name, or at the
+    cache folder's, is never followed: named and decomposed again)."""
+    try:
+        fd = open_folder(folder, create=False, owner="the mesh cache")
+        if fd is None:
+            return None
+        try:
+            raw = read_entry(fd, f"{key}.json", MAX_CACHE_ENTRY_BYTES)
+        finally:
+            os.close(fd)
+        if raw is None:
+            return None
+        data = json.loads(raw)
+        parts = [np.asarray(p, float) for p in data["parts"]]
+        volume, centre = float(data["volume_m3"]), tuple(float(v) for v in data["centre_of_mass_m"])
+        inertia = tuple(float(v) for v in data["inertia_diagonal_per_kg_m2"])
+        if data.get("key") != key or not parts or any(p.ndim != 2 or p.shape[1] != 3 or len(p) < 4 for p in parts) \
+                or len(centre) != 3 or len(inertia) != 3:
+            return None
+        return parts, volume, centre, inertia
+    except UnsafeEntry as exc:
+        report(f"ipe: ignoring mesh cache entry {folder / (key + '.json')} and decomposing again: {exc}")
+        return None
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def store_parts(folder: Path, key: str, parts: list[np.ndarray], volume_m3: float, centre_m: tuple,
+                 inertia_per_kg_m2: tuple) -> None:
+    """Written inside the cache only (``safe_files.write_entry``: a temporary file created anew,
+    renamed over the entry), so a reader never sees half an entry and a planted link is not written
+    through."""
+    data = json.dumps({"key": key, "parts": [p.tolist() for p in parts], "volume_m3": volume_m3,
+                       "centre_of_mass_m": list(centre_m),
+                       "inertia_diagonal_per_kg_m2": list(inertia_per_kg_m2)}).encode()
+    try:
+        fd = open_folder(folder, create=True, owner="the mesh cache")
+    except (UnsafeEntry, OSError):  # a read-only home, or a link where the cache belongs: decomposed again next time
+        return
+    try:
+        write_entry(fd, f"{key}.json", data)
+    except (UnsafeEntry, OSError):
+        pass
+    finally:
+        os.close(fd)

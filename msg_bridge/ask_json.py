@@ -31,6 +31,11 @@ def request_id_of(msg: String) -> str:
         data = json.loads(msg.data)
     except (ValueError, RecursionError):
         return ""
+    return id_of(data)
+
+
+def id_of(data: Any) -> str:
+    """A parsed request's "id" as it is echoed (a string, at most 128 characters; else "")."""
     value = data.get("id", "") if isinstance(data, dict) else ""
     return value[:128] if isinstance(value, str) else ""
 

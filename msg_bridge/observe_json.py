@@ -9,6 +9,8 @@ from std_msgs.msg import String
 from ipe_ros.engine.errors import ConfigError
 from ipe_ros.engine.inference.observation import Observation, observation_from_dict, parsed_json
 
+from .ask_json import id_of
+
 #: the fields of an ``infer`` question
 INFER_FIELDS = ("question", "id", "observation")
 
@@ -16,10 +18,9 @@ INFER_FIELDS = ("question", "id", "observation")
 def string_to_observation(msg: String) -> tuple[str, Observation]:
     """(the request's id or "", the observation); ConfigError/SceneError naming the field."""
     data = parsed_json(msg.data)
-    request_id = ""
+    request_id = id_of(data)
     if isinstance(data, dict):
-        value = data.pop("id", "")
-        request_id = value[:128] if isinstance(value, str) else ""
+        data.pop("id", None)
     return request_id, observation_from_dict(data)
 
 
@@ -38,5 +39,4 @@ def string_to_infer_question(msg: String) -> tuple[str, Observation] | None:
         raise ConfigError(str(unknown[0])[:64], "unknown field of an infer question; allowed: id, observation")
     if "observation" not in data:
         raise ConfigError("observation", "required field is missing: an ipe_ros.observation/1 object")
-    value = data.get("id", "")
-    return (value[:128] if isinstance(value, str) else ""), observation_from_dict(data["observation"])
+    return id_of(data), observation_from_dict(data["observation"])

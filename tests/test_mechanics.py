@@ -286,6 +286,37 @@ def test_a_head_on_collision_keeps_momentum_and_gives_back_its_restitution(name,
     assert np.abs(sideways).max() < 1e-3
 
 
+def test_the_contact_erp_the_engine_restores_after_an_impact_is_bullets_own():
+    # simulation/world.py: an impact's step runs without penetration recovery, and the steps after
+    # get BULLET_CONTACT_ERP back: it must be what pybullet starts with (it has no getter), or every
+    # world that once bounced would settle differently. A box sunk 5 mm pushed out, both ways.
+    from ipe_ros.engine.simulation.bullet import pybullet
+    from ipe_ros.engine.simulation.world import BULLET_CONTACT_ERP
+
+    p = pybullet()
+
+    def heights(contact_erp):
+        cid = p.connect(p.DIRECT)
+        try:
+            p.setGravity(0, 0, -G, physicsClientId=cid)
+            p.createMultiBody(0, p.createCollisionShape(p.GEOM_PLANE, physicsClientId=cid), physicsClientId=cid)
+            box = p.createMultiBody(1.0, p.createCollisionShape(p.GEOM_BOX, halfExtents=[0.05] * 3, physicsClientId=cid),
+                                    basePosition=[0, 0, 0.045], useMaximalCoordinates=True, physicsClientId=cid)
+            if contact_erp is not None:
+                p.setPhysicsEngineParameter(contactERP=contact_erp, physicsClientId=cid)
+            out = []
+            for _ in range(50):
+                p.stepSimulation(physicsClientId=cid)
+                out.append(p.getBasePositionAndOrientation(box, physicsClientId=cid)[0][2])
+            return out
+        finally:
+            p.disconnect(cid)
+
+    as_it_comes = heights(None)
+    assert heights(BULLET_CONTACT_ERP) == as_it_comes
+    assert heights(BULLET_CONTACT_ERP * 1.25) != as_it_comes  # the parameter matters here
+
+
 @pytest.mark.parametrize("closing_m_s, bounces", [(0.15, False), (0.3, True)])
 def test_bullet_bounces_only_contacts_closing_faster_than_the_threshold_the_engine_assumes(closing_m_s, bounces):
     # simulation/impacts.py takes the direct solver for contacts closing faster than this: it must be

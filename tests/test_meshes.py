@@ -549,7 +549,6 @@ def _cube_scene(folder, cache, monkeypatch):
 
     monkeypatch.setenv("IPE_CACHE_DIR", str(cache))
     monkeypatch.setattr(mesh_cache, "VERIFIED", set())
-    monkeypatch.setattr("ipe_ros.engine.scene.meshes.VERIFIED", mesh_cache.VERIFIED)
     (folder / "seamed.obj").write_text(_uv_seamed_cube_obj())
     data = scene_with({"type": "mesh", "uri": "seamed.obj"}, ball=False)
     data["objects"][0]["position_m"] = [0.0, 0.0, 0.025]

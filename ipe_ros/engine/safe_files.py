@@ -15,6 +15,15 @@ import stat
 from pathlib import Path
 
 
+def is_folder(path: Path) -> bool:
+    """Whether ``path`` is a folder; False, not an OSError, for a name too long or otherwise unusable
+    (``Path.is_dir`` raises for a name past the file system's limit)."""
+    try:
+        return path.is_dir()
+    except (OSError, ValueError):
+        return False
+
+
 class UnsafeEntry(Exception):
     """A cache's entry or folder is not what the cache writes (a link, a file, a FIFO, too large)."""
 

@@ -24,6 +24,7 @@ from ..engine.config import anytime_batch_size
 from ..engine.inputs import INPUTS, Input, as_spelled, from_node, node_default
 from ..engine.perceptions import perception_names, perception_source
 from ..engine.request import build_request
+from ..engine.safe_files import is_folder
 from ..engine.query.parameters import query_parameters
 from ..engine.scene.meshes import MeshAccess
 from ..service import ServiceConfig
@@ -208,7 +209,7 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
                                             "folder itself")
     connect = str(values["rerun.connect_url"]).strip()
     roots = tuple(Path(r) for r in str(values["mesh_roots"]).split(":") if r.strip())
-    missing = [str(r) for r in roots if not r.is_absolute() or not _is_folder(r)]
+    missing = [str(r) for r in roots if not r.is_absolute() or not is_folder(r)]
     if missing:  # a scene arrives over the network: its files are read only where the operator points
         raise ConfigError("mesh_roots", f"{missing[0]!r} is not an absolute path of a folder; give folders as "
                                         "/path/a:/path/b")
@@ -219,14 +220,6 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
                          depth_max_age_s=float(values["depth.max_age_s"]),
                          meshes=MeshAccess(roots=roots, decompose_within_s=float(values["mesh_decomposition_s"]))
                          if roots else None)
-
-
-def _is_folder(path: Path) -> bool:
-    """Whether ``path`` is a folder; False, not an OSError, for a name too long or otherwise unusable."""
-    try:
-        return path.is_dir()
-    except (OSError, ValueError):
-        return False
 
 
 def camera_pose(values: Mapping[str, Any]) -> tuple[tuple, tuple] | None:

@@ -93,34 +93,34 @@ def run_variants(task: VariantTask) -> list[SampleOutcome]:
     if task.deadline_unix_s is not None and time.time() >= task.deadline_unix_s:
         return [failed(task, "BudgetExceeded: not started", budget_stopped=True) for _ in task.actions]
     scene, inputs = draw_sample(task.scene, task.model, task.seed)
-    shown_task = task
-    task = task if scene is task.scene else dataclasses.replace(task, scene=scene)  # its drawn properties
+    sample = task if scene is task.scene else dataclasses.replace(task, scene=scene)  # its drawn properties
     try:
-        world = separated_world(task.scene, task.settings, inputs)
+        world = separated_world(scene, task.settings, inputs)
         shared, shared_orn = simulation.read_poses(world)
     except PhysicsError as exc:
-        return [failed(task, f"PhysicsError: {exc}", push_direction_rad=inputs.push_direction_rad)
+        return [failed(sample, f"PhysicsError: {exc}", push_direction_rad=inputs.push_direction_rad)
                 for _ in task.actions]
     regions = task.regions or (None,) * len(task.actions)
     out: dict[int, SampleOutcome] = {}
     # the scene as it is first: a process holds one world at a time, and the next variant's replaces it
     for v, (action, region) in enumerate(zip(task.actions, regions)):
         if action is None and region is None:  # a prediction's sample, simulated on in the separated world
-            outcome = guarded(task, inputs.push_direction_rad, lambda: simulate_sample(task, inputs, world))
-            names = tuple(b.name for b in task.scene.dynamic_objects)
+            outcome = guarded(sample, inputs.push_direction_rad, lambda: simulate_sample(sample, inputs, world))
+            names = tuple(b.name for b in scene.dynamic_objects)
             out[v] = dataclasses.replace(outcome, names=names) if outcome.ok else outcome
             break
     for v, (action, region) in enumerate(zip(task.actions, regions)):
         if v not in out:
-            out[v] = guarded(task, inputs.push_direction_rad,
-                             lambda: _one_variant(task, action, shared, shared_orn, inputs, region))
-    return [_refined(shown_task, task.scene, v, out[v]) for v in range(len(task.actions))]
+            out[v] = guarded(sample, inputs.push_direction_rad,
+                             lambda: _one_variant(sample, action, shared, shared_orn, inputs, region))
+    return [_refined(task, scene, v, out[v]) for v in range(len(task.actions))]
 
 
 def _refined(task: VariantTask, scene: Scene, v: int, outcome: SampleOutcome) -> SampleOutcome:
     """Variant ``v``'s outcome as a prediction's sample is kept (``rollout.kept``: its rerun at the
     reference beside it, or in plain rigid bodies in its place), a rerun being the variant alone:
-    the very task the self-check would rerun."""
+    the very task the self-check would rerun (``task`` as given, so the rerun draws the same
+    properties; ``scene`` the sample's, with them drawn, for judging its health)."""
 
     def alone(settings) -> SampleOutcome:
         (rerun,) = run_variants(dataclasses.replace(task, actions=(task.actions[v],),

@@ -47,13 +47,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
-from ..errors import ConfigError, SceneError, json_type as _json_type, shown
+from ..errors import SceneError, json_type as _json_type, shown
 from .limits import MAX_JSON_CHARS
 from .bodies import DEFAULT_MAX_OBJECTS, Body, Box, Floor, Scene, Table
 from .meshes import MeshAccess, mesh_shape
-from .properties import PRIOR_FIELDS, PROPERTIES, SUPPORT_PROPERTIES, prior_from_dict
+from .properties import PRIOR_FIELDS, PROPERTIES, SUPPORT_PROPERTIES, priors_from_dict, priors_to_dict
 from .validation import validate_scene
-from .shapes import SHAPE_TYPES, volume_m3, BoxShape, Capsule, Compound, CompoundPart, ConvexHull, Cylinder, MeshSource, Sphere
+from .shapes import (SHAPE_TYPES, BoxShape, Capsule, Compound, CompoundPart, ConvexHull, Cylinder, MeshSource, Sphere,
+                     volume_m3)
 
 SCENE_FORMAT = "ipe_ros.scene/2"
 SCENE_FORMAT_V1 = "ipe_ros.scene/1"
@@ -122,12 +123,8 @@ def object_to_dict(body: Body) -> dict[str, Any]:
         out["position_sigma_m"] = list(sigma) if isinstance(sigma, (tuple, list)) else sigma
     if body.yaw_sigma_rad is not None:
         out["yaw_sigma_rad"] = body.yaw_sigma_rad
-    out.update(_priors_to_dict(body.priors))
+    out.update(priors_to_dict(body.priors))
     return out
-
-
-def _priors_to_dict(priors) -> dict[str, Any]:
-    return {PRIOR_FIELDS[prop]: prior.to_dict() for prop, prior in priors}
 
 
 def scene_to_dict(scene: Scene) -> dict[str, Any]:
@@ -141,7 +138,7 @@ def scene_to_dict(scene: Scene) -> dict[str, Any]:
                "friction": support.friction, "restitution": support.restitution,
                "floor_z_m": support.floor_z_m,
                "obstacles": [object_to_dict(b) for b in support.obstacles]}
-    sup.update(_priors_to_dict(support.priors))
+    sup.update(priors_to_dict(support.priors))
     out = {"format": SCENE_FORMAT, "name": scene.name, "gravity_m_s2": list(scene.gravity_m_s2)}
     if scene.horizon_s is not None:
         out["horizon_s"] = scene.horizon_s
@@ -302,25 +299,12 @@ def object_from_dict(data: Any, path: str, meshes: MeshAccess | None = None) -> 
                 angular_velocity_rad_s=_vec(data.get("angular_velocity_rad_s", [0.0, 0.0, 0.0]), 3,
                                             f"{path}.angular_velocity_rad_s"),  # type: ignore[arg-type]
                 position_sigma_m=sigma, yaw_sigma_rad=None if yaw is None else _num(yaw, f"{path}.yaw_sigma_rad"),
-                priors=_priors_from_dict(data, path, PROPERTIES, given), **fields)
+                priors=priors_from_dict(data, path, PROPERTIES, given), **fields)
 
 
-def _priors_from_dict(data: dict, path: str, properties: tuple[str, ...], given: dict) -> tuple:
-    """(property, prior) for each ``<property>_prior`` field of ``data``; ``given``: the values a
-    log-normal centres on (a mass given as a density has no value to centre on: it names its median)."""
-    out = []
-    for prop in properties:
-        key = PRIOR_FIELDS[prop]
-        if key not in data:
-            continue
-        where = f"{path}.{key}" if path else key
-        if prop == "mass_kg" and given.get("static"):
-            raise SceneError(where, "a static object does not move, so its mass plays no part; remove the prior")
-        try:
-            out.append((prop, prior_from_dict(data[key], where, prop, given.get(prop))))
-        except ConfigError as exc:
-            raise SceneError(exc.field, exc.problem) from None
-    return tuple(out)
+def _surfaces(data: dict) -> dict[str, float]:
+    """The support's friction and restitution, as given (the centres of their priors)."""
+    return {prop: _num(data[prop], f"support.{prop}") for prop in SUPPORT_PROPERTIES}
 
 
 def _support_from_dict(data: Any, read_object) -> Floor | Table:
@@ -328,27 +312,25 @@ def _support_from_dict(data: Any, read_object) -> Floor | Table:
     kind = data.get("type")
     if kind == "floor":
         _check_keys(data, FLOOR_FIELDS, SUPPORT_OPTIONAL, "support")
-        friction, restitution = _num(data["friction"], "support.friction"), _num(data["restitution"], "support.restitution")
-        return Floor(friction=friction, restitution=restitution, height_m=_num(data["height_m"], "support.height_m"),
-                     priors=_priors_from_dict(data, "support", SUPPORT_PROPERTIES,
-                                              {"friction": friction, "restitution": restitution}))
+        surfaces = _surfaces(data)
+        return Floor(**surfaces, height_m=_num(data["height_m"], "support.height_m"),
+                     priors=priors_from_dict(data, "support", SUPPORT_PROPERTIES, surfaces))
     if kind == "table":
         _check_keys(data, TABLE_FIELDS, SUPPORT_OPTIONAL, "support")
         obstacles = data["obstacles"]
         if not isinstance(obstacles, list):
             raise SceneError("support.obstacles", "must be a list of objects (may be empty)")
         floor = data["floor_z_m"]
+        top = dict(top_height_m=_num(data["top_height_m"], "support.top_height_m"),
+                   size_m=_vec(data["size_m"], 2, "support.size_m"),
+                   center_xy_m=_vec(data["center_xy_m"], 2, "support.center_xy_m"),
+                   thickness_m=_num(data["thickness_m"], "support.thickness_m"))
+        surfaces = _surfaces(data)
         return Table(
-            top_height_m=_num(data["top_height_m"], "support.top_height_m"),
-            size_m=_vec(data["size_m"], 2, "support.size_m"),  # type: ignore[arg-type]
-            center_xy_m=_vec(data["center_xy_m"], 2, "support.center_xy_m"),  # type: ignore[arg-type]
-            thickness_m=_num(data["thickness_m"], "support.thickness_m"),
-            friction=_num(data["friction"], "support.friction"),
-            restitution=_num(data["restitution"], "support.restitution"),
+            **top, **surfaces,  # type: ignore[arg-type]
             floor_z_m=None if floor is None else _num(floor, "support.floor_z_m"),
             obstacles=tuple(read_object(b, f"support.obstacles[{i}]") for i, b in enumerate(obstacles)),
-            priors=_priors_from_dict(data, "support", SUPPORT_PROPERTIES, {p: _num(data[p], f"support.{p}")
-                                                                            for p in SUPPORT_PROPERTIES}),
+            priors=priors_from_dict(data, "support", SUPPORT_PROPERTIES, surfaces),
         )
     raise SceneError("support.type", f"must be \"floor\" or \"table\", got {shown(kind)}")
 

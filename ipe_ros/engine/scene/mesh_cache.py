@@ -1,8 +1,8 @@
 """The meshes' decomposition cache: each mesh's convex parts and mass properties, keyed by the file's
 content, its scale and the decomposition's settings (``meshes._compound``), in
 ``$IPE_CACHE_DIR/convex_parts``. Read and written inside its folder only (``safe_files``), and an
-entry is taken only once it describes its mesh (``describes``): a link, a FIFO, a folder or a planted
-entry is named and the mesh decomposed again.
+entry is taken only once it describes its mesh (``verified_parts``): a link, a FIFO, a folder or a
+planted entry is named and the mesh decomposed again.
 """
 
 from __future__ import annotations
@@ -22,8 +22,26 @@ VERIFIED: set[str] = set()
 MAX_CACHE_ENTRY_BYTES = 4 * 2**20
 
 
-def report(line: str) -> None:
+def _report(line: str) -> None:
     print(line, file=sys.stderr)
+
+
+def _entry(folder: Path, key: str) -> Path:
+    return folder / f"{key}.json"
+
+
+def verified_parts(folder: Path, key: str, load) -> tuple[list[np.ndarray], float, tuple, tuple] | None:
+    """The entry under ``key`` once it describes its mesh (``load()``: the mesh, loaded to check it
+    once per process), or None where there is none usable (named where it is refused)."""
+    cached = _cached_parts(folder, key)
+    if cached is None or key in VERIFIED:
+        return cached
+    why = _describes(cached, load())
+    if why is not None:
+        _report(f"ipe: ignoring mesh cache entry {_entry(folder, key)} and decomposing again: {why}")
+        return None
+    VERIFIED.add(key)
+    return cached
 
 
 def mass_properties(mesh) -> tuple[float, tuple, tuple]:
@@ -33,7 +51,7 @@ def mass_properties(mesh) -> tuple[float, tuple, tuple]:
     return float(mesh.volume), tuple(float(v) for v in mesh.center_mass), tuple(float(v) for v in inertia)
 
 
-def describes(cached: tuple, mesh) -> str | None:
+def _describes(cached: tuple, mesh) -> str | None:
     """Why a cache entry does not describe ``mesh`` (None: it does): its mass properties must be the
     mesh's own, its parts within the mesh's bounds and holding about its volume. A planted entry
     that changes the object's mass, balance or extent is caught; one that reshuffles parts within
@@ -58,7 +76,7 @@ def describes(cached: tuple, mesh) -> str | None:
     return None
 
 
-def cached_parts(folder: Path, key: str) -> tuple[list[np.ndarray], float, tuple, tuple] | None:
+def _cached_parts(folder: Path, key: str) -> tuple[list[np.ndarray], float, tuple, tuple] | None:
     """The parts, volume, centre of mass and inertia per kg stored under ``key`` (JSON, never code),
     or None when there are none usable (a link, a FIFO or a folder at the entry's name, or at the
     cache folder's, is never followed: named and decomposed again)."""
@@ -67,7 +85,7 @@ def cached_parts(folder: Path, key: str) -> tuple[list[np.ndarray], float, tuple
         if fd is None:
             return None
         try:
-            raw = read_entry(fd, f"{key}.json", MAX_CACHE_ENTRY_BYTES)
+            raw = read_entry(fd, _entry(folder, key).name, MAX_CACHE_ENTRY_BYTES)
         finally:
             os.close(fd)
         if raw is None:
@@ -81,7 +99,7 @@ def cached_parts(folder: Path, key: str) -> tuple[list[np.ndarray], float, tuple
             return None
         return parts, volume, centre, inertia
     except UnsafeEntry as exc:
-        report(f"ipe: ignoring mesh cache entry {folder / (key + '.json')} and decomposing again: {exc}")
+        _report(f"ipe: ignoring mesh cache entry {_entry(folder, key)} and decomposing again: {exc}")
         return None
     except (OSError, ValueError, KeyError, TypeError):
         return None
@@ -91,7 +109,8 @@ def store_parts(folder: Path, key: str, parts: list[np.ndarray], volume_m3: floa
                  inertia_per_kg_m2: tuple) -> None:
     """Written inside the cache only (``safe_files.write_entry``: a temporary file created anew,
     renamed over the entry), so a reader never sees half an entry and a planted link is not written
-    through."""
+    through; once written, the entry is this process's own (``VERIFIED``), not before: what a failed
+    write left at its name is checked when read."""
     data = json.dumps({"key": key, "parts": [p.tolist() for p in parts], "volume_m3": volume_m3,
                        "centre_of_mass_m": list(centre_m),
                        "inertia_diagonal_per_kg_m2": list(inertia_per_kg_m2)}).encode()
@@ -100,7 +119,8 @@ def store_parts(folder: Path, key: str, parts: list[np.ndarray], volume_m3: floa
     except (UnsafeEntry, OSError):  # a read-only home, or a link where the cache belongs: decomposed again next time
         return
     try:
-        write_entry(fd, f"{key}.json", data)
+        write_entry(fd, _entry(folder, key).name, data)
+        VERIFIED.add(key)
     except (UnsafeEntry, OSError):
         pass
     finally:

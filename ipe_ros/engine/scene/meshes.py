@@ -29,7 +29,8 @@ import numpy as np
 
 from ..errors import SceneError, shown
 from . import limits
-from .mesh_cache import VERIFIED, cached_parts, describes, mass_properties, report, store_parts
+from ..safe_files import is_folder
+from .mesh_cache import mass_properties, store_parts, verified_parts
 from .shapes import Compound, CompoundPart, ConvexHull, MeshSource
 
 #: what trimesh reads without extra libraries (DAE needs pycollada; glTF with external buffers reads
@@ -147,24 +148,15 @@ def triangles_shape(points_m: np.ndarray, path: str, access: MeshAccess) -> Comp
 
 
 def _compound(key: str, load, access: MeshAccess, path: str) -> Compound:
-    """The mesh's compound from the cache under ``key``, else decomposed from ``load()`` and cached.
-    An entry is taken only once it describes the mesh (``_describes``: checked once per process)."""
-    cached = cached_parts(access.cache(), key)
-    mesh = None
-    if cached is not None and key not in VERIFIED:
-        mesh = load()
-        why = describes(cached, mesh)
-        if why is None:
-            VERIFIED.add(key)
-        else:
-            report(f"ipe: ignoring mesh cache entry {access.cache() / (key + '.json')} and decomposing again: {why}")
-            cached = None
+    """The mesh's compound from the cache under ``key`` (``mesh_cache.verified_parts``), else
+    decomposed from ``load()`` and cached; the mesh loaded once either way."""
+    load = functools.cache(load)
+    cached = verified_parts(access.cache(), key, load)
     if cached is None:
-        mesh = mesh if mesh is not None else load()
+        mesh = load()
         cached = (_decompose(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64), access.decomposition,
                              path, access.decompose_within_s), *mass_properties(mesh))
         store_parts(access.cache(), key, *cached)
-        VERIFIED.add(key)
     parts, volume, centre, inertia = cached
     return Compound(tuple(CompoundPart(ConvexHull(tuple(tuple(map(float, v)) for v in part))) for part in parts),
                     volume_m3=volume, centre_of_mass_m=centre, inertia_diagonal_per_kg_m2=inertia)
@@ -217,15 +209,8 @@ def _package_file(package: str, rest: str, access: MeshAccess) -> Path | None:
             pass
     except ImportError:  # no ROS here: the roots are the search path
         pass
-    return next((Path(root) / package / rest for root in access.roots if _is_folder(Path(root) / package)), None)
+    return next((Path(root) / package / rest for root in access.roots if is_folder(Path(root) / package)), None)
 
-
-def _is_folder(path: Path) -> bool:
-    """Whether ``path`` is a folder; False, not an OSError, for a name too long or otherwise unusable."""
-    try:
-        return path.is_dir()
-    except (OSError, ValueError):
-        return False
 
 
 def _read_bounded(file: Path, path: str) -> bytes:

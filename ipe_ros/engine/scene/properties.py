@@ -17,7 +17,7 @@ from typing import Mapping
 
 import numpy as np
 
-from ..errors import ConfigError, shown
+from ..errors import ConfigError, SceneError, shown
 
 #: what each property may be, whatever a prior says (the scene reader's own bounds)
 PROPERTY_BOUNDS = {"mass_kg": (1e-6, 1e6), "friction": (0.0, 10.0), "restitution": (0.0, 1.0)}
@@ -170,6 +170,30 @@ def prior_from_dict(data, field: str, prop: str, given: float | None = None) -> 
     raise ConfigError(field, f"unknown prior {shown(kind)}; choose uniform, log_uniform or log_sd")
 
 
+def priors_to_dict(priors) -> dict:
+    """An owner's priors as the scene format spells them (``mass_prior``, ...)."""
+    return {PRIOR_FIELDS[prop]: prior.to_dict() for prop, prior in priors}
+
+
+def priors_from_dict(data: dict, path: str, properties: tuple[str, ...], given: dict) -> tuple:
+    """(property, prior) for each ``<property>_prior`` field of a scene's object or support ``data``
+    (at ``path``); ``given``: its values, which a log-normal centres on (a mass given as a density:
+    the density times the shape's volume), and ``static``. A SceneError names the field."""
+    out = []
+    for prop in properties:
+        key = PRIOR_FIELDS[prop]
+        if key not in data:
+            continue
+        where = f"{path}.{key}" if path else key
+        if prop == "mass_kg" and given.get("static"):
+            raise SceneError(where, "a static object does not move, so its mass plays no part; remove the prior")
+        try:
+            out.append((prop, prior_from_dict(data[key], where, prop, given.get(prop))))
+        except ConfigError as exc:
+            raise SceneError(exc.field, exc.problem) from None
+    return tuple(out)
+
+
 def _finite(value) -> bool:
     return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
 
@@ -254,21 +278,21 @@ def with_properties(scene, assigned: Mapping[tuple[str, str], float],
         fields["priors"] = tuple(sorted(kept + list(new.items()), key=lambda item: PROPERTIES.index(item[0])))
         return dataclasses.replace(owner, **fields)
 
-    support = changed(scene.support, "support")
-    if getattr(support, "obstacles", ()):
-        support = dataclasses.replace(support, obstacles=tuple(changed(b, b.name) for b in support.obstacles))
-    return dataclasses.replace(scene, objects=tuple(changed(b, b.name) for b in scene.objects), support=support)
+    return _each_owner(scene, changed)
 
 
 def without_priors(scene):
     """The scene with every value as given, exact (no priors)."""
-    def bare(owner):
-        return dataclasses.replace(owner, priors=()) if owner.priors else owner
+    return _each_owner(scene, lambda owner, _name: dataclasses.replace(owner, priors=()) if owner.priors else owner)
 
-    support = bare(scene.support)
+
+def _each_owner(scene, change):
+    """The scene with ``change(owner, name)`` applied to everything that has surface properties:
+    its objects, the support (named "support") and a table's obstacles."""
+    support = change(scene.support, "support")
     if getattr(support, "obstacles", ()):
-        support = dataclasses.replace(support, obstacles=tuple(bare(b) for b in support.obstacles))
-    return dataclasses.replace(scene, objects=tuple(bare(b) for b in scene.objects), support=support)
+        support = dataclasses.replace(support, obstacles=tuple(change(b, b.name) for b in support.obstacles))
+    return dataclasses.replace(scene, objects=tuple(change(b, b.name) for b in scene.objects), support=support)
 
 
 def posterior_prior(prop: str, median: float, low_90: float, high_90: float) -> Prior | None:

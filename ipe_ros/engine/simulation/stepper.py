@@ -34,6 +34,7 @@ from . import health
 from .collapse import CollapseTrial, CollapseWatch
 from .impacts import ImpactWatch
 from .islands import Footprint
+from .kicks import Kicks
 from .probe import NO_PROBE, Probe
 from .settling import Settling
 from .steps import StepControl, substeps_for, ticks_allowed
@@ -154,9 +155,8 @@ class _Rollout:
             self.energy.reference(initial_energy)
         fastest_start_m_s = float(np.max(speeds_of(initial_velocities)[0], initial=0.0))
         #: the scene's known pushes after t = 0: (tick, body handle, velocity change), in time order
-        self.kicks = _kicks(scene, world, dt)
-        if self.kicks:  # a pushed body may move as fast as its start and every push on it together
-            fastest_start_m_s += sum(float(np.linalg.norm(change)) for _, _, change in self.kicks)
+        self.kicks = Kicks(scene, world, dt)
+        fastest_start_m_s += self.kicks.speed_m_s  # a pushed body may move as fast as its start and its pushes
         self.limit = health.speed_limit_m_s(g, horizon_s, push.acceleration_m_s2, push.duration_s) \
             + 2 * fastest_start_m_s
         self.record_every = record_every
@@ -183,7 +183,7 @@ class _Rollout:
         self.steps = StepControl(settings, world)
         self.rest = RestWatch(settings.early_stop, world.scale_m,  # never at rest before the last push
                               max(self.push_ticks * dt, settings.early_stop.min_time_s,
-                                  self.kicks[-1][0] * dt if self.kicks else 0.0), decided,
+                                  self.kicks.last_tick * dt), decided,
                               len(scene.dynamic_objects), self.half_diagonals_m)
         self.travel_substeps = substeps_for(fastest_start_m_s + g * self.look_every * dt, settings, world) \
             if fastest_start_m_s else 1
@@ -233,8 +233,10 @@ class _Rollout:
         """One step (of one tick or, coarse, of several) in its substeps; returns the tick it began at."""
         if self.deadline_unix_s is not None and time.time() > self.deadline_unix_s:
             raise BudgetExceeded(f"the compute budget ran out at t = {self.tick * self.dt:.3f} s of the rollout")
-        if self.kicks and self.kicks[0][0] <= self.tick:
-            self._kick()
+        if self.kicks.apply(self.tick):  # the push put energy in, and the bodies may close fast now
+            self.energy.reference(self._energy_now_j())
+            if self.impacts is not None:
+                self.impacts.quiet_s = 0.0
         # the push ends exactly on its tick, and the last step ends exactly on the horizon
         step_ticks = min(self.steps.ticks, self.total_ticks - self.tick)
         if step_ticks != self.steps.ticks:  # a shorter last step (coarse steps only)
@@ -268,18 +270,9 @@ class _Rollout:
         previous, self.tick = self.tick, self.tick + step_ticks
         return previous
 
-    def _kick(self) -> None:
-        """The pushes due by now: each body's velocity changed, the energy's reference taken again
-        (the push put it in), the impact watch told to look (the bodies may close fast now)."""
-        while self.kicks and self.kicks[0][0] <= self.tick:
-            _, handle, change = self.kicks.pop(0)
-            linear, angular = self.p.getBaseVelocity(handle, physicsClientId=self.cid)
-            self.p.resetBaseVelocity(handle, (np.asarray(linear) + change).tolist(), angular,
-                                     physicsClientId=self.cid)
+    def _energy_now_j(self) -> float:
         positions, orientations, velocities = read_state(self.world)
-        self.energy.reference(self.energy.energy(positions, orientations, velocities[:, 0], velocities[:, 1]))
-        if self.impacts is not None:
-            self.impacts.quiet_s = 0.0
+        return self.energy.energy(positions, orientations, velocities[:, 0], velocities[:, 1])
 
     def _step_simulation(self) -> None:
         self.p.stepSimulation(physicsClientId=self.cid)
@@ -307,8 +300,7 @@ class _Rollout:
         """The push's end (gravity upright again, the energy's reference taken) and the recorded frames."""
         if self.tick == self.push_ticks:
             self.p.setGravity(*self.gravity.tolist(), physicsClientId=self.cid)
-            positions, orientations, velocities = read_state(self.world)
-            self.energy.reference(self.energy.energy(positions, orientations, velocities[:, 0], velocities[:, 1]))
+            self.energy.reference(self._energy_now_j())
         if self.trajectory is not None and _crossed(self.tick, previous, self.record_every):
             self.trajectory.append((self.tick * self.dt, *read_poses(self.world)))
 
@@ -455,12 +447,3 @@ class _Rollout:
                           speeds_m_s=np.array(speeds, float), spins_rad_s=np.array(spins, float),
                           events={name: w.events() for name, w in self.watches.items()},
                           collapse_undone_s=self.undone_s)
-
-
-def _kicks(scene: Scene, world: World, dt: float) -> list[tuple[int, int, np.ndarray]]:
-    """The scene's pushes after t = 0 as (tick, body handle, velocity change), in time order; a
-    push on a body not in this world (another island's) is left to that world."""
-    handles = {body.name: handle for handle, body in zip(world.dynamic_ids, scene.dynamic_objects)}
-    return sorted(((int(math.ceil(push.at_s / dt - 1e-9)), handles[push.name], np.asarray(push.velocity_change_m_s,
-                                                                                          float))
-                   for push in scene.pushes if push.name in handles), key=lambda kick: kick[0])

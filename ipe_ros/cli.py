@@ -6,6 +6,7 @@
                 [--no-self-check] [--verify-samples N]
     ipe ask remove|support|clear|place|push PATH ...   (questions about an action: ipe_ros/cli_ask.py)
     ipe infer OBS.json [--unknown LABEL ...] [--json] ...  (properties from observed motion: ipe_ros/cli_infer.py)
+    ipe fit SCENES --responses CSV --readout R --grid NAME=V1,V2 ...  (fitted to people: ipe_ros/cli_fit.py)
     ipe generate tower --count N --seed S -o FILE [--pairs RATIO]
     ipe generate table --configurations N --seed S -o FILE
     ipe generate catalogue --count N --seed S -o FILE
@@ -31,8 +32,9 @@ from pathlib import Path
 import numpy as np
 
 from .cli_ask import add_ask_parser, cmd_ask
+from .cli_fit import add_fit_parser, cmd_fit
 from .cli_infer import add_infer_parser, cmd_infer
-from .cli_inputs import add_input_options, finite
+from .cli_inputs import add_input_options, add_inputs_from_option, finite
 from .cli_predict import EXIT_BAD_INPUT, cmd_predict, format_table, run_predictions, sample_map
 from .cli_queries import add_query_parameter_options
 from .engine import PRESETS, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError, load_scenes, preset
@@ -67,10 +69,12 @@ def build_parser() -> argparse.ArgumentParser:
     add_input_options(p, ("queries", "contact"))
     add_query_parameter_options(p)
     add_input_options(p, ("samples", "sigma_m", "phi_m_s2", "force_direction_deg", "mu", "mass_log_sd",
-                          "friction_log_sd", "restitution_half_width", "perception"), notes={
+                          "friction_log_sd", "restitution_half_width", "launch_speed_log_sd",
+                          "launch_direction_sd_deg", "perception"), notes={
         "perception": "where the k noisy scenes come from: " + "; ".join(
             f"{n}: {perception_source(n).summary}" for n in perception_names())
         + " (depth: --depth, --camera-info, --camera-pose); sigma unused but by gaussian"})
+    add_inputs_from_option(p)
     p.add_argument("--depth", default=None, metavar="IMAGE",
                    help="depth: the depth image, .npy (metres) or 16-bit .png (millimetres; 0: no reading)")
     p.add_argument("--camera-info", default=None, metavar="YAML",
@@ -100,6 +104,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_ask_parser(sub, _OneLineParser)
     add_infer_parser(sub)
+    add_fit_parser(sub)
 
     g = sub.add_parser("generate", help="write generated scenes (JSON)")
     gsub = g.add_subparsers(dest="kind", required=True, parser_class=_OneLineParser)
@@ -307,7 +312,9 @@ def glue_negative_vectors(argv: list[str]) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(glue_negative_vectors(sys.argv[1:] if argv is None else list(argv)))
+    argv = glue_negative_vectors(sys.argv[1:] if argv is None else list(argv))
+    args = build_parser().parse_args(argv)
+    args.argv = tuple(argv)  # which options were typed: --inputs-from fills the others
     try:
         if args.command == "predict":
             return cmd_predict(args)
@@ -319,6 +326,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_infer(args)
         if args.command == "experiment":
             return cmd_experiment(args)
+        if args.command == "fit":
+            return cmd_fit(args)
         return cmd_demo(args)
     except ConfigError as exc:  # named as the command line spells it (engine.inputs)
         print(f"ipe: error: {as_spelled(exc, 'cli')}", file=sys.stderr)

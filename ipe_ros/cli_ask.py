@@ -24,7 +24,7 @@ from .engine import ConfigError, WorkerPool, load_scenes
 from .engine import actions as A
 from .engine.inputs import as_spelled
 from .engine.request import build_request
-from .cli_inputs import add_input_options, finite, given_request_arguments
+from .cli_inputs import add_input_options, add_inputs_from_option, finite, given_request_arguments
 from .cli_queries import add_query_parameter_options, given_query_parameters
 from .engine.actions.answers import QUESTION_QUERIES
 from .engine.query import QUERIES, parse_queries
@@ -65,6 +65,7 @@ def add_ask_parser(sub, one_line_parser) -> None:
         q.add_argument("path", help="a JSON scene file (or a paper-format tower CSV)")
         q.add_argument("--scene", default=None, metavar="NAME", help="which scene of the file (default: the only one)")
         add_input_options(q, ("samples", "sigma_m", "mass_log_sd", "friction_log_sd", "restitution_half_width",
+                              "launch_speed_log_sd", "launch_direction_sd_deg",
                               "ground_truth", "preset_name", "seed", "workers", "budget_s", "fell_off", "self_check",
                               "verify_samples"),
                           defaults={"samples": DEFAULT_ASK_SAMPLES, "self_check": False},
@@ -78,6 +79,7 @@ def add_ask_parser(sub, one_line_parser) -> None:
                                                "'Self-checking answers'); costs 1.5-6x the question's time; without "
                                                "it each variant says fidelity: unverified",
                                  "verify_samples": "samples of each variant rerun at the reference to verify it"})
+        add_inputs_from_option(q)
         q.add_argument("--fixed-k", action="store_true",
                        help="every variant runs all --samples (default: decision questions sample until decided)")
         q.add_argument("--depth", default=None, metavar="IMAGE",

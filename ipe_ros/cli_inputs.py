@@ -93,10 +93,34 @@ def add_input_options(parser: argparse.ArgumentParser, fields: Iterable[str], *,
         parser.add_argument(found.flag, help=_help(found, default, note), **kw)
 
 
+def add_inputs_from_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--inputs-from", default=None, metavar="FILE",
+                        help="model inputs from a parameter set (ipe fit's output, engine/input_sets.py): they "
+                             "replace the defaults; an option given here wins over the file")
+
+
+def _typed(token: str, flag: str) -> bool:
+    """``token`` gives option ``flag`` (whole, with ``=value``, or abbreviated as argparse allows)."""
+    name = token.split("=", 1)[0]
+    return name.startswith("--") and len(name) > 3 and flag.startswith(name)
+
+
 def given_request_arguments(args: argparse.Namespace) -> dict[str, Any]:
     """The request's arguments (``build_request``'s keywords) from the options the command has; an
-    input given while the one it ``requires`` is off is refused naming both."""
+    input given while the one it ``requires`` is off is refused naming both. With ``--inputs-from``,
+    the file's inputs stand in for the defaults of the options not typed (``args.argv``: the command line)."""
     given = dict(vars(args))
+    if getattr(args, "inputs_from", None) is not None:
+        from .engine.input_sets import load_input_set
+
+        typed = getattr(args, "argv", ())
+        try:
+            loaded = load_input_set(args.inputs_from)
+        except ConfigError as exc:
+            raise ConfigError("--inputs-from", exc.problem) from None
+        for field, value in loaded.items():
+            if field in given and not any(_typed(t, row(field).flag) for t in typed):
+                given[field] = value
     for name, value in list(given.items()):
         found = _row_or_none(name)
         if found is None:

@@ -22,7 +22,7 @@ from std_msgs.msg import Float64, String  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 
-from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, predict, preset  # noqa: E402
+from ipe_ros.engine import ConfigError, ModelConfig, QuerySpec, WorkerPool, load_scenes, predict, preset  # noqa: E402
 from ipe_ros.engine.scene.format import scene_to_json  # noqa: E402
 from ipe_ros.ros.node import INPUT_QOS as RELIABLE_QOS, LATCHED_QOS  # noqa: E402
 from msg_bridge.markers import markers_to_scene, scene_to_markers  # noqa: E402
@@ -608,3 +608,26 @@ def test_a_mesh_marker_is_read_under_mesh_roots_and_refused_where_none_are_set(r
     assert not result.successful and "read-only" in result.reason
     assert node.service.config.meshes.roots == (tmp_path,)
     assert node.service.stats().rejected == 0
+
+
+def test_a_parameter_set_replaces_the_defaults_and_an_override_wins(ros, tmp_path):
+    """``inputs_from``: ipe fit's output loaded at start (issue 74): its inputs become the parameters'
+    values, an override given beside it wins, and the request the node answers with has them."""
+    fitted = tmp_path / "fit.json"
+    fitted.write_text(json.dumps({"format": "ipe_ros.inputs/1", "inputs": {
+        "sigma": 0.01, "launch_direction_sd_deg": 12.0, "phi": [0.0, 0.5]}, "provenance": {"made_by": "a test"}}))
+    node = ros.start_ipe_node(**{**FAST, "sigma": 0.03}, inputs_from=str(fitted))
+    assert node.get_parameter("sigma").value == 0.03  # the override
+    assert node.get_parameter("launch_direction_sd_deg").value == 12.0
+    assert list(node.get_parameter("phi").value) == [0.0, 0.5]
+    model = node.service.config.request.model
+    assert model.sigma_m == 0.03 and model.phi_m_s2 == (0.0, 0.5)
+    assert model.launch_spread.direction_sd_rad == pytest.approx(math.radians(12.0))
+
+
+def test_a_file_that_is_not_a_parameter_set_is_refused_naming_inputs_from(ros, tmp_path):
+    bad = tmp_path / "fit.json"
+    bad.write_text(json.dumps({"format": "ipe_ros.inputs/1", "inputs": {"sigma": -1}}))
+    with pytest.raises(ConfigError) as caught:
+        ros.start_ipe_node(**FAST, inputs_from=str(bad))
+    assert str(caught.value) == "inputs_from: fit.json: sigma: must be in [0, 10] m, got -1"

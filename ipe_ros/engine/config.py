@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from .scene import limits
+from .scene.launches import LaunchSpread
 from .scene.properties import PropertySpread
 from .checks import at_most, boolean, integer, non_negative, positive
 from .errors import ConfigError, shown
@@ -85,6 +86,8 @@ class ModelConfig:
     object_noise: bool = True
     #: model-wide priors over masses, frictions and restitutions (None: the scene's values, exact)
     property_spread: PropertySpread | None = field(default=None, metadata={"keyed": "when set"})
+    #: model-wide noise on the speed and direction of what moves at t = 0 (None: as given)
+    launch_spread: LaunchSpread | None = field(default=None, metadata={"keyed": "when set"})
 
     def __post_init__(self) -> None:
         non_negative(self.sigma_m, "sigma_m")
@@ -105,6 +108,8 @@ class ModelConfig:
             at_most(self.mu, "mu", limits.MAX_MASS_RATIO, "(the solver's mass-ratio limit)")
         integer(self.samples, "samples", 1, MAX_SAMPLES)
         boolean(self.object_noise, "object_noise")
+        if self.launch_spread is not None and not isinstance(self.launch_spread, LaunchSpread):
+            raise ConfigError("launch_spread", f"must be a LaunchSpread or None, got {shown(self.launch_spread)}")
         perception_source(self.perception)  # a ConfigError naming the choices
 
     @property

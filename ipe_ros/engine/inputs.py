@@ -109,6 +109,14 @@ INPUTS: tuple[Input, ...] = (
     Input("restitution_half_width", "float", 0.0, "restitution", "uncertain restitutions: every surface without a "
           "restitution_prior of its own draws its restitution per sample, uniform within +- this of the scene's, "
           "cut to [0, 1] (0: exact)", "--restitution-spread", "restitution_spread", range=(0.0, 1.0), metavar="W"),
+    Input("launch_speed_log_sd", "float", 0.0, "log SD", "uncertain launches: every object moving at t = 0 has its "
+          "initial speed (linear and angular) scaled per sample by a log-normal factor of this log SD (0: exact)",
+          "--launch-speed-log-sd", "launch_speed_log_sd", range=(0.0, 1.5), metavar="S",
+          errors_as=("speed_log_sd",)),
+    Input("launch_direction_sd_deg", "float", 0.0, "degrees", "uncertain launches: every object moving at t = 0 has "
+          "its initial velocity turned about the vertical per sample by a normal angle of this SD, degrees (0: "
+          "exact)", "--launch-direction-sd", "launch_direction_sd_deg", range=(0.0, 180.0), metavar="DEG",
+          errors_as=("direction_sd_rad",)),
     Input("ground_truth", "bool", False, "flag",
           "the ground-truth model: the scene exactly as given, one deterministic rollout (sigma and phi read as 0, "
           "and no body's own position or yaw noise)", "--ground-truth", "ground_truth"),

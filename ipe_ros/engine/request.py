@@ -21,6 +21,7 @@ from .query import QUERIES, QuerySpec
 from .query.parameters import spec_parameters
 from .sampling.montecarlo import check_budget
 from .sampling.sampler import AdaptiveStop, check_ci_width
+from .scene.launches import launch_spread
 from .scene.properties import PropertySpread
 
 
@@ -48,7 +49,8 @@ def build_request(*, samples: int = DEFAULT_SAMPLES, sigma_m: float = DEFAULT_SI
                   budget_s: float | None = DEFAULT_BUDGET_S, self_check: bool = True,
                   verify_samples: int = DEFAULT_CHECK.verify_samples, always_verify: bool = DEFAULT_CHECK.always_verify,
                   query_parameters: Mapping[str, Any] | None = None, mass_log_sd: float = 0.0,
-                  friction_log_sd: float = 0.0, restitution_half_width: float = 0.0) -> Request:
+                  friction_log_sd: float = 0.0, restitution_half_width: float = 0.0, launch_speed_log_sd: float = 0.0,
+                  launch_direction_sd_deg: float = 0.0) -> Request:
     """The request these inputs ask for, or a ConfigError naming the engine's field.
 
     ``ground_truth``: sigma = phi = 0 and no body's own noise (the scene as given, one rollout).
@@ -57,6 +59,8 @@ def build_request(*, samples: int = DEFAULT_SAMPLES, sigma_m: float = DEFAULT_SI
     queries' own parameters by name (``"<query>.<field>"``, ``query.parameters``); those of queries
     not asked are left out. ``mass_log_sd``, ``friction_log_sd``, ``restitution_half_width``: the
     model-wide priors of every value a scene gives exactly (``scene.properties.PropertySpread``; 0: off).
+    ``launch_speed_log_sd``, ``launch_direction_sd_deg``: noise on what moves at t = 0
+    (``scene.launches.LaunchSpread``; 0: off).
     """
     if ground_truth and perception_source(perception).posterior:
         raise ConfigError("ground_truth", f"takes the scene exactly as given, but perception {perception} draws it from "
@@ -71,7 +75,9 @@ def build_request(*, samples: int = DEFAULT_SAMPLES, sigma_m: float = DEFAULT_SI
                         force_direction_rad=None if force_direction_deg is None else math.radians(force_direction_deg),
                         mu=mu, samples=samples, perception=perception, vision=vision, object_noise=not ground_truth,
                         property_spread=None if ground_truth else
-                        property_spread(mass_log_sd, friction_log_sd, restitution_half_width))
+                        property_spread(mass_log_sd, friction_log_sd, restitution_half_width),
+                        launch_spread=None if ground_truth else
+                        launch_spread(launch_speed_log_sd, _radians(launch_direction_sd_deg, "launch_direction_sd_deg")))
     contact = tuple(contact)
     asked = frozenset(queries) | ({"contact"} if contact else set())
     query = QuerySpec(queries=asked, contact_pairs=contact,
@@ -89,6 +95,13 @@ def build_request(*, samples: int = DEFAULT_SAMPLES, sigma_m: float = DEFAULT_SI
     check_budget(budget_s)
     check = SelfCheck(enabled=bool(self_check), verify_samples=verify_samples, always_verify=always_verify)
     return Request(model=model, settings=settings, query=query, seed=seed, stop=stop, budget_s=budget_s, check=check)
+
+
+def _radians(degrees: float, field: str) -> float:
+    """An SD given in degrees, as radians (checked in the unit its user typed)."""
+    if isinstance(degrees, bool) or not isinstance(degrees, (int, float)) or not 0 <= degrees <= 180:
+        raise ConfigError(field, f"must be degrees in [0, 180] (0: exact), got {shown(degrees)}")
+    return math.radians(degrees)
 
 
 def property_spread(mass_log_sd: float, friction_log_sd: float, restitution_half_width: float) -> PropertySpread | None:

@@ -77,8 +77,13 @@ class IpeInterface(ObserveInterface, DepthInterface):
 
     def _declare(self) -> dict[str, Any]:
         declared = params.all_parameters()
+        first = next(spec for spec in declared if spec.name == "inputs_from")
+        self.declare_parameter(first.name, first.default, first.descriptor())
+        # a parameter set's inputs stand in for the defaults; an override still wins over them
+        defaults = params.defaults_from(self.get_parameter(first.name).value)
         for spec in declared:
-            self.declare_parameter(spec.name, spec.default, spec.descriptor())
+            if spec is not first:
+                self.declare_parameter(spec.name, defaults.get(spec.name, spec.default), spec.descriptor())
         self._values = {spec.name: self.get_parameter(spec.name).value for spec in declared}
         self._inputs: list = []  # subscriptions, service and timer of the answering state
         self._camera_info: dict | None = None  # the newest CameraInfo (depth perception)

@@ -49,6 +49,9 @@ def _node(name: str, kind, default, unit: str, text: str, **kw) -> Input:
 
 #: The node's own settings, as rows of the inputs table (no CLI spelling: the CLI has no topics).
 NODE_SETTINGS: tuple[Input, ...] = (
+    _node("inputs_from", "name", "", "path", "a parameter set (ipe fit's output, engine/input_sets.py) whose model "
+          "inputs replace the defaults of those parameters at start; a parameter given as an override wins over the "
+          "file; empty: the defaults", fixed_at_start=True),
     _node("dask_scheduler", "name", "", "address", "run the samples on a Dask cluster at this address (e.g. "
           "tcp://10.0.0.1:8786, see docs/cluster.md) instead of `workers` local processes; empty: local",
           fixed_at_start=True),
@@ -170,6 +173,19 @@ def query_parameter_specs() -> tuple[ParamSpec, ...]:
 def all_parameters() -> tuple[ParamSpec, ...]:
     """What the node declares: ``PARAMETERS`` and the queries' own."""
     return PARAMETERS + query_parameter_specs()
+
+
+def defaults_from(inputs_from: str) -> dict[str, Any]:
+    """The parameters' defaults a parameter set replaces (``inputs_from``), as node values; a
+    ConfigError naming ``inputs_from`` for a file that is not one."""
+    if not str(inputs_from).strip():
+        return {}
+    from ..engine.input_sets import load_input_set
+
+    loaded = load_input_set(str(inputs_from).strip())
+    by_field = {row.field: row for row in INPUTS}
+    return {by_field[field].parameter: list(value) if isinstance(value, tuple) else value
+            for field, value in loaded.items()}
 
 
 def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:

@@ -5,8 +5,9 @@ yaw noise, only when some body asks for them), and the first two are always draw
 scene depends on its seed and the noise SDs only: never on phi, the preset, or which queries were
 asked. Each body's noise is the model's sigma unless the body gives its own (``position_sigma_m``,
 ``yaw_sigma_rad``: 0 for a body known exactly, such as one the robot holds). Uncertain masses,
-frictions and restitutions (a scene's priors, the model's ``property_spread``) are drawn from streams
-of their own (``scene.properties.draw_uncertain``), so turning them on leaves every other draw as it was.
+frictions and restitutions (a scene's priors, the model's ``property_spread``) and the launches of what
+moves at t = 0 (the model's ``launch_spread``) are drawn from streams of their own
+(``scene.properties.draw_uncertain``, ``scene.launches``), so turning them on leaves every other draw as it was.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from scipy.spatial.transform import Rotation
 
 from ..config import MODEL_LIGHT_DENSITY_KG_M3, ModelConfig
 from ..scene.bodies import Scene
+from ..scene.launches import launched, with_drawn_launches
 from ..scene.properties import draw_uncertain, uncertain_properties, with_properties, without_priors
 from ..scene.shapes import quaternion_product
 
@@ -81,7 +83,8 @@ def is_deterministic(scene: Scene, model: ModelConfig) -> bool:
     """No noise at all for this scene: neither the model's (sigma = phi = 0, no vision) nor any body's
     own. One rollout then says everything; with a body's own noise and sigma = 0 it does not."""
     return model.is_deterministic and not position_sigmas_m(scene, model).any() and \
-        not yaw_sigmas_rad(scene, model).any() and not sample_properties(scene, model)
+        not yaw_sigmas_rad(scene, model).any() and not sample_properties(scene, model) and \
+        not launched(scene, model.launch_spread)
 
 
 def sample_properties(scene: Scene, model: ModelConfig) -> tuple:
@@ -127,16 +130,20 @@ def draw_sample_inputs(scene: Scene, model: ModelConfig, rng: np.random.Generato
 
 def draw_sample(scene: Scene, model: ModelConfig, seed: np.random.SeedSequence) -> tuple[Scene, SampleInputs]:
     """One sample's scene and inputs from its ``seed``: ``draw_sample_inputs`` on the sample's main
-    stream, then ``with_drawn_properties``."""
+    stream, then ``with_drawn_properties`` (the launches and properties, each on a stream of its own)."""
     return with_drawn_properties(scene, model, seed, draw_sample_inputs(scene, model, np.random.default_rng(seed)))
 
 
 def with_drawn_properties(scene: Scene, model: ModelConfig, seed: np.random.SeedSequence, inputs: SampleInputs,
                           owners: frozenset[str] | None = None) -> tuple[Scene, SampleInputs]:
-    """The scene and inputs with each uncertain property's value drawn from its own stream of
-    ``seed`` (``draw_uncertain``): frictions and restitutions in the scene, masses in the inputs (a
-    drawn mass over the scene's scales the body's mass, so under mu the model's mass is scaled alike).
+    """The scene and inputs with each launch (``scene.launches``) and each uncertain property's value
+    drawn from its own stream of ``seed`` (``draw_uncertain``): launches, frictions and restitutions in
+    the scene, masses in the inputs (a drawn mass over the scene's scales the body's mass, so under mu
+    the model's mass is scaled alike).
     ``owners``: only these objects' (None: every object's and the support's)."""
+    scene, launches = with_drawn_launches(scene, model.launch_spread, seed, owners)
+    if launches:
+        inputs = dataclasses.replace(inputs, properties=inputs.properties + launches)
     uncertain = tuple(u for u in sample_properties(scene, model) if owners is None or u[0] in owners)
     if not uncertain:
         return scene, inputs
@@ -148,4 +155,4 @@ def with_drawn_properties(scene: Scene, model: ModelConfig, seed: np.random.Seed
         if mass is not None:
             masses[i] *= mass / body.resolved_mass_kg
     named = tuple((f"{owner}.{prop}", value) for (owner, prop, _), value in zip(uncertain, values))
-    return with_properties(scene, drawn), dataclasses.replace(inputs, masses_kg=masses, properties=named)
+    return with_properties(scene, drawn), dataclasses.replace(inputs, masses_kg=masses, properties=named + inputs.properties)

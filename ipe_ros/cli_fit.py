@@ -29,10 +29,10 @@ def _assignment(kind):
 
 
 def _one(text: str) -> float:
-    (value,) = float_list(text) if "," not in text else (None,)
-    if value is None:
+    values = float_list(text)
+    if len(values) != 1:
         raise argparse.ArgumentTypeError(f"expected one number, got {text!r}")
-    return value
+    return values[0]
 
 
 def add_fit_parser(sub) -> None:

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from ipe_ros.analysis.fitting.crossval import folds
-from ipe_ros.analysis.fitting.fit import PARAMETER_SET_FORMAT, evaluate_grid, fit_evaluations, parameter_set
+from ipe_ros.analysis.fitting.fit import (PARAMETER_SET_FORMAT, FitSettings, evaluate_grid, fit_evaluations,
+                                         parameter_set)
 from ipe_ros.analysis.fitting.grid import evaluate
 from ipe_ros.analysis.fitting.mapping import ResponseMapping, fit_mapping
 from ipe_ros.analysis.fitting.readout import parse_readout
@@ -22,7 +23,7 @@ from ipe_ros.engine.scene.format import scene_from_dict, scene_to_dict
 READOUT = parse_readout('contact_probability["puck:zone"]')
 GRID = {"launch_speed_log_sd": (0.0, 0.2, 0.4), "launch_direction_sd_deg": (0.0, 10.0, 20.0)}
 TRUTH = {"launch_speed_log_sd": 0.2, "launch_direction_sd_deg": 10.0}
-PEOPLE = ResponseMapping(intercept=0.0, slope=5.0, lapse=0.04)
+PEOPLE = ResponseMapping(intercept=0.0, slope=1.5, lapse=0.04, samples=64)
 
 
 def _stimulus(name: str, zone_x: float, zone_y: float) -> dict:
@@ -65,8 +66,8 @@ def _people(scenes, p_yes: np.ndarray, seed: int, responders: int = 90) -> Respo
 def test_the_fit_recovers_the_inputs_of_people_made_by_the_model(synthetic, seed):
     scenes, evaluations, reference, p_yes = synthetic
     assert len({tuple(e.p_model) for e in evaluations}) > 5  # the grid's points answer differently
-    result = fit_evaluations(evaluations, reference, _people(scenes, p_yes, seed), READOUT, folds=3, seed=seed,
-                             settings={"grid": GRID, "fixed": {}, "samples": 32, "seed": 0, "folds": 3})
+    result = fit_evaluations(evaluations, reference, _people(scenes, p_yes, seed), READOUT,
+                             FitSettings.of(GRID, samples=32, seed=seed, folds=3))
     for name, value in TRUTH.items():
         low, high = result.intervals[name]
         assert low <= value <= high, (name, result.intervals, result.parameters)
@@ -80,10 +81,10 @@ def test_the_mapping_is_recovered_from_many_stimuli():
     rng = np.random.default_rng(0)
     p_model = rng.random(400)
     n = np.full(400, 90)
-    truth = ResponseMapping(0.4, 6.0, 0.1)
-    mapping, _ = fit_mapping(p_model, rng.binomial(n, truth.p_yes(p_model)), n)
+    truth = ResponseMapping(0.4, 1.5, 0.1, samples=16)
+    mapping, _ = fit_mapping(p_model, rng.binomial(n, truth.p_yes(p_model)), n, samples=16)
     assert mapping.intercept == pytest.approx(0.4, abs=0.15)
-    assert mapping.slope == pytest.approx(6.0, rel=0.15)
+    assert mapping.slope == pytest.approx(1.5, rel=0.15)
     assert mapping.lapse == pytest.approx(0.1, abs=0.03)
 
 
@@ -96,8 +97,8 @@ def test_folds_are_disjoint_and_cover_every_stimulus():
 @pytest.mark.slow
 def test_the_parameter_set_loads_as_the_model_s_inputs(synthetic, tmp_path):
     scenes, evaluations, reference, p_yes = synthetic
-    result = fit_evaluations(evaluations, reference, _people(scenes, p_yes, 5), READOUT, folds=3, seed=5,
-                             settings={"grid": GRID, "fixed": {"sigma": 0.01}, "samples": 32, "seed": 0, "folds": 3})
+    result = fit_evaluations(evaluations, reference, _people(scenes, p_yes, 5), READOUT,
+                             FitSettings.of(GRID, {"sigma": 0.01}, samples=32, seed=5, folds=3))
     path = tmp_path / "fit.json"
     content = parameter_set(result, scenes_path="s.json", responses_path="p.csv")
     path.write_text(json.dumps(content))

@@ -59,24 +59,26 @@ def score(p_yes: np.ndarray, responses: Responses, rows: np.ndarray) -> Scores:
                   float(np.mean(says == (share > 0.5))))
 
 
-def train(p_models: np.ndarray, responses: Responses, rows: np.ndarray) -> tuple[np.ndarray, list[ResponseMapping]]:
+def train(p_models: np.ndarray, responses: Responses, rows: np.ndarray,
+          samples: int) -> tuple[np.ndarray, list[ResponseMapping]]:
     """Per grid point, the training log-likelihood with its best mapping, and those mappings."""
     yes, n = responses.yes_counts[rows], responses.responders[rows]
     lls, mappings = [], []
     for p_model in p_models:
-        mapping, ll = fit_mapping(p_model[rows], yes, n)
+        mapping, ll = fit_mapping(p_model[rows], yes, n, samples)
         lls.append(ll), mappings.append(mapping)
     return np.array(lls), mappings
 
 
-def cross_validate(p_models: np.ndarray, responses: Responses, reference: int, k: int, seed: int) -> list[FoldResult]:
-    """``p_models``: (grid points, stimuli) model probabilities; ``reference``: the grid index of the
-    point the fit is held against."""
+def cross_validate(p_models: np.ndarray, responses: Responses, reference: int, k: int, seed: int,
+                   samples: int) -> list[FoldResult]:
+    """``p_models``: (grid points, stimuli) model probabilities of ``samples`` samples each;
+    ``reference``: the grid index of the point the fit is held against."""
     out = []
     everyone = np.arange(p_models.shape[1])
     for f, test in enumerate(folds(p_models.shape[1], k, seed)):
         rows = np.setdiff1d(everyone, test)
-        lls, mappings = train(p_models, responses, rows)
+        lls, mappings = train(p_models, responses, rows, samples)
         chosen = int(np.argmax(lls))
         p_yes = mappings[chosen].p_yes(p_models[chosen][test])
         reference_p_yes = mappings[reference].p_yes(p_models[reference][test])

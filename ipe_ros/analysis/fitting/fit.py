@@ -17,7 +17,7 @@ import dataclasses
 import datetime
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -37,6 +37,32 @@ CHI2_1_95 = 3.841458820694124
 
 
 @dataclass(frozen=True)
+class FitSettings:
+    """What a fit was asked: the grid (each parameter's values), the inputs held fixed, k per stimulus
+    and point, the seed (samples and folds), the folds, the preset."""
+
+    grid: tuple[tuple[str, tuple[float, ...]], ...]
+    fixed: tuple[tuple[str, float], ...] = ()
+    samples: int = 16
+    seed: int = 0
+    folds: int = 5
+    preset: str = "default"
+
+    @classmethod
+    def of(cls, grid: Mapping[str, Sequence[float]], fixed: Mapping[str, float] | None = None, **kw) -> "FitSettings":
+        return cls(tuple((k, tuple(float(v) for v in vs)) for k, vs in grid.items()),
+                   tuple((k, float(v)) for k, v in (fixed or {}).items()), **kw)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(name for name, _ in self.grid)
+
+    def to_dict(self) -> dict:
+        return {"grid": {k: list(v) for k, v in self.grid}, "fixed": dict(self.fixed), "samples": self.samples,
+                "seed": self.seed, "folds": self.folds, "preset": self.preset}
+
+
+@dataclass(frozen=True)
 class FitResult:
     readout: Readout
     responses: Responses
@@ -50,7 +76,7 @@ class FitResult:
     loglik: np.ndarray  # per grid point, every stimulus, its best mapping
     overdispersion: float
     intervals: dict[str, tuple[float, float]]
-    settings: dict = field(default_factory=dict)
+    settings: FitSettings
 
     @property
     def parameters(self) -> dict[str, float]:
@@ -105,19 +131,18 @@ def fit(scenes: Sequence[Scene], responses: Responses, readout: Readout, grid: M
         raise ValueError("fit: the responses must be matched to the scenes (responses.matched)")
     evaluations, ref = evaluate_grid(scenes, readout, grid, reference=reference, fixed=fixed, samples=samples,
                                      seed=seed, preset_name=preset_name, map_fn=map_fn)
-    return fit_evaluations(evaluations, ref, responses, readout, folds=folds, seed=seed,
-                           settings={"samples": samples, "seed": seed, "folds": folds, "preset": preset_name,
-                                     "fixed": dict(fixed or {}), "grid": {k: list(map(float, v)) for k, v in grid.items()}})
+    return fit_evaluations(evaluations, ref, responses, readout,
+                           FitSettings.of(grid, fixed, samples=samples, seed=seed, folds=folds, preset=preset_name))
 
 
-def fit_evaluations(evaluations: Sequence[Evaluation], reference: int, responses: Responses, readout: Readout, *,
-                    folds: int, seed: int, settings: dict) -> FitResult:
+def fit_evaluations(evaluations: Sequence[Evaluation], reference: int, responses: Responses, readout: Readout,
+                    settings: FitSettings) -> FitResult:
     """The fit from the grid's evaluations: cross-validated, then on every stimulus with intervals."""
     p_models = np.array([e.p_model for e in evaluations])
-    results = cross_validate(p_models, responses, reference, folds, seed)
-    lls, mappings = train(p_models, responses, np.arange(p_models.shape[1]))
+    results = cross_validate(p_models, responses, reference, settings.folds, settings.seed, settings.samples)
+    lls, mappings = train(p_models, responses, np.arange(p_models.shape[1]), settings.samples)
     chosen = int(np.argmax(lls))
-    names = list(settings["grid"])
+    names = settings.names
     dispersion = _overdispersion(mappings[chosen].p_yes(p_models[chosen]), responses, len(names) + 3)
     result = FitResult(readout, responses, tuple(evaluations), reference, tuple(results), pooled(results, responses),
                        pooled(results, responses, reference=True), chosen, mappings[chosen], lls, dispersion, {},
@@ -142,13 +167,13 @@ def parameter_set(result: FitResult, *, scenes_path: str, responses_path: str) -
     """The file ``--inputs-from`` loads: the fitted inputs, the response mapping, and where they came from."""
     return {
         "format": PARAMETER_SET_FORMAT,
-        "inputs": {**result.settings["fixed"], **result.parameters},
+        "inputs": {**dict(result.settings.fixed), **result.parameters},
         "response_mapping": result.mapping.to_dict(),
         "provenance": {
             "made_by": f"ipe fit (ipe_ros {__version__})",
             "date": datetime.date.today().isoformat(),
             "scenes": scenes_path, "responses": responses_path, "stimuli": len(result.responses.stimuli),
-            "readout": str(result.readout), **{k: v for k, v in result.settings.items() if k != "fixed"},
+            "readout": str(result.readout), **{k: v for k, v in result.settings.to_dict().items() if k != "fixed"},
             "intervals_95": {k: list(v) for k, v in result.intervals.items()},
             "overdispersion": result.overdispersion,
             "reference": result.evaluations[result.reference].values,

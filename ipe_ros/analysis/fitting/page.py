@@ -19,7 +19,7 @@ def summary_lines(result: FitResult) -> list[str]:
     """The fit in a few lines: folds, held-out scores, parameters with intervals, mapping, cost."""
     ref = result.evaluations[result.reference].values
     lines = [f"readout {result.readout}; {len(result.responses.stimuli)} stimuli, {len(result.folds)} folds, "
-             f"k = {result.settings['samples']}, reference {_point(ref)}",
+             f"k = {result.settings.samples}, reference {_point(ref)}",
              "fold  chosen                                    r (fit)  r (ref)   gain  dLL/stim vs baseline"]
     for f in result.folds:
         gain_ll = (f.fitted.loglik - f.baseline_loglik) / len(f.test)
@@ -38,7 +38,7 @@ def summary_lines(result: FitResult) -> list[str]:
         + f" (95%, profile likelihood, overdispersion {result.overdispersion:.2f})")
     m = result.mapping
     lines.append(f"mapping: P(yes) = {m.lapse:.3f}/2 + (1 - {m.lapse:.3f}) logistic({m.intercept:.2f} + "
-                 f"{m.slope:.2f} (p - 0.5))")
+                 f"{m.slope:.2f} logit((p k + 0.5) / (k + 1))), k = {m.samples}")
     total = sum(e.wall_s for e in result.evaluations)
     lines.append(f"cost: {len(result.evaluations)} grid evaluations, {sum(e.rollouts for e in result.evaluations)} "
                  f"rollouts, {total:.0f} s simulating"
@@ -99,7 +99,7 @@ def _people_figure(plt, report: Report, result: FitResult, out_dir: Path) -> Non
 
 
 def _surface_figure(plt, report: Report, result: FitResult, out_dir: Path) -> None:
-    names = list(result.settings["grid"])
+    names = list(result.settings.names)
     if len(names) == 2:
         xs, ys = (sorted({e.values[n] for e in result.evaluations}) for n in names)
         surface = np.full((len(ys), len(xs)), np.nan)

@@ -35,7 +35,7 @@ from .cli_ask import add_ask_parser, cmd_ask
 from .cli_fit import add_fit_parser, cmd_fit
 from .cli_infer import add_infer_parser, cmd_infer
 from .cli_inputs import add_input_options, add_inputs_from_option, finite
-from .cli_predict import EXIT_BAD_INPUT, cmd_predict, format_table, run_predictions, sample_map
+from .cli_predict import EXIT_BAD_INPUT, batch_map, cmd_predict, format_table, run_predictions, stored_line
 from .cli_queries import add_query_parameter_options
 from .engine import PRESETS, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError, load_scenes, preset
 from .engine.scene.catalogue import capped_tower, scene_catalogue
@@ -271,26 +271,14 @@ def cmd_experiment(args) -> int:
                    preset=args.preset, resamples=args.resamples, grid_samples=args.grid_samples, human=human,
                    human_path=args.human, vision_resolution=args.vision_resolution)
     names = list(EXPERIMENTS) if args.name == "all" else [args.name]
-    pool = sample_map(args.scheduler, args.workers)
-    map_fn = pool.map if pool else None
-    store = None
-    if args.resume is not None:
-        from .engine.compute.store import ResumableMap
-
-        store = ResumableMap(args.resume, map_fn)
-        map_fn = store.map
-    try:
+    with batch_map(args.scheduler, args.workers, args.resume) as (map_fn, store):
         for name in names:
             print(f"experiment {name}{' (quick)' if args.quick else ''} ...", file=sys.stderr, flush=True)
             report = EXPERIMENTS[name](opts, map_fn)
             if store is not None:
-                print(f"  {store.hits} results read back from {args.resume}, {store.computed} computed"
-                      + (f", {store.rejected} stored entries refused" if store.rejected else ""), file=sys.stderr)
+                print(stored_line(store, args.resume), file=sys.stderr)
             json_path, md_path = report.write(opts.out_dir)
             print(f"wrote {md_path} and {json_path}" + (f" (+{len(report.figures)} PNG)" if report.figures else ""))
-    finally:
-        if pool is not None:
-            pool.close()
     return 0
 
 

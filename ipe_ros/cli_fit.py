@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from .cli_inputs import float_list
-from .cli_predict import sample_map
+from .cli_predict import batch_map, stored_line
 from .engine import PRESETS, ConfigError, load_scenes
 from .engine.config import DEFAULT_PRESET, default_workers
 from .engine.input_sets import MODEL_INPUTS, model_input
@@ -112,22 +112,11 @@ def _fit(args) -> int:
         scenes = scenes[:args.stimuli]
         responses = responses.subset([s.name for s in scenes])
     reference = {name: float(model_input(name).default or 0.0) for name in grid} | dict(args.reference)
-    pool = sample_map(args.scheduler, args.workers)
-    map_fn = pool.map if pool else None
-    store = None
-    if args.resume is not None:
-        from .engine.compute.store import ResumableMap
-
-        store = ResumableMap(args.resume, map_fn)
-        map_fn = store.map
-    try:
+    with batch_map(args.scheduler, args.workers, args.resume) as (map_fn, store):
         result = fit(scenes, responses, readout, grid, reference=reference, fixed=dict(args.fix), samples=args.samples,
                      seed=args.seed, folds=args.folds, preset_name=args.preset, map_fn=map_fn)
-    finally:
-        if pool is not None:
-            pool.close()
     if store is not None:
-        print(f"  {store.hits} results read back from {args.resume}, {store.computed} computed", file=sys.stderr)
+        print(stored_line(store, args.resume), file=sys.stderr)
     print("\n".join(summary_lines(result)))
     write_parameter_set(args.output, parameter_set(result, scenes_path=str(args.path), responses_path=str(args.responses)))
     print(f"wrote {args.output}")

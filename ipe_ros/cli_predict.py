@@ -3,6 +3,8 @@ from sigma, vision or a depth camera's images, on local worker processes or a Da
 
 from __future__ import annotations
 
+import contextlib
+
 import dataclasses
 import functools
 import json
@@ -106,6 +108,31 @@ def sample_map(scheduler: str | None, workers: int):
     if workers < 0:
         raise ConfigError("--workers", f"must be >= 0, got {workers}")
     return WorkerPool(workers) if workers > 0 else None
+
+
+@contextlib.contextmanager
+def batch_map(scheduler: str | None, workers: int, resume: str | None):
+    """(map, store) for a batch command (``ipe experiment``, ``ipe fit``): samples on a cluster, the
+    workers here or this process (``sample_map``), kept in ``resume``'s store when given (store None
+    otherwise); the pool closed at the end."""
+    pool = sample_map(scheduler, workers)
+    map_fn = pool.map if pool else None
+    store = None
+    if resume is not None:
+        from .engine.compute.store import ResumableMap
+
+        store = ResumableMap(resume, map_fn)
+        map_fn = store.map
+    try:
+        yield map_fn, store
+    finally:
+        if pool is not None:
+            pool.close()
+
+
+def stored_line(store, resume: str) -> str:
+    return (f"  {store.hits} results read back from {resume}, {store.computed} computed"
+            + (f", {store.rejected} stored entries refused" if store.rejected else ""))
 
 
 def run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: int, workers: int, emit,

@@ -414,6 +414,7 @@ def test_many_contact_pairs_are_watched_per_contact_and_priced_up_front():
     between the estimates with and without them refuses the question before any simulation."""
     import itertools
 
+    from ipe_ros.engine.sampling.montecarlo import FAR_OVER_BUDGET
     from ipe_ros.engine.sampling.sampler import SECONDS_PER_WATCHED_PAIR, check_request, rollout_cost
 
     boxes = tuple(Box(name=f"b{i}", extents_m=(0.1, 0.1, 0.1), position_m=(0.15 * (i % 10), 0.15 * (i // 10), 0.05),
@@ -428,7 +429,8 @@ def test_many_contact_pairs_are_watched_per_contact_and_priced_up_front():
     pushed = ModelConfig(sigma_m=0.01, phi_m_s2=(1.0, 2.0), samples=2)  # two runs a sample, each watching every pair
     assert rollout_cost(scene, pushed, settings, len(pairs)).seconds == pytest.approx(
         rollout_cost(scene, pushed, settings).seconds + 2 * len(pairs) * SECONDS_PER_WATCHED_PAIR)
-    budget = (bare.seconds + watched.seconds) / 2
+    budget = watched.seconds / (1.1 * FAR_OVER_BUDGET)  # refused only far over: watched is, bare is not
+    assert bare.seconds < FAR_OVER_BUDGET * budget
     check_request(scene, QuerySpec(queries=frozenset({"fall"})), model=model, settings=settings, budget_s=budget)
     with pytest.raises(ConfigError, match=r"^budget_s: one rollout of this scene takes up to \d+ steps x 60 bodies "
                                           r"and 1830 contact pairs .* or ask fewer pairs$"):

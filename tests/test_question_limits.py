@@ -39,8 +39,8 @@ def test_a_place_question_asking_for_more_variants_than_the_limit_is_refused_at_
 
 def test_a_placement_search_beyond_the_budget_is_refused_before_any_geometry():
     region = A.Region((-0.5, 0.5), (-0.5, 0.5))
-    with pytest.raises(ConfigError, match=r"^budget_s: one sample of these 401 variants takes up to ~\S+ s, more "
-                                          r"than the budget of 1 s; ask fewer variants or raise the budget$"):
+    with pytest.raises(ConfigError, match=r"^budget_s: one sample of these 401 variants takes up to ~\S+ s, far "
+                                          r"more than the budget of 1 s; ask fewer variants or raise the budget$"):
         A.best_place(STACK, new_object_from_dict(CUBE, "object"), region, MODEL, SETTINGS, candidates=400,
                      budget_s=1.0)
 

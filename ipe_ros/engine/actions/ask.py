@@ -17,7 +17,8 @@ from ..errors import ConfigError
 from ..sampling.perturb import is_deterministic, position_sigmas_m
 from ..checking.fidelity import FidelityReport, SelfCheck, is_reference, reference_settings, refine_in_task
 from ..checking.fidelity import check_request as check_fidelity_request
-from ..sampling.montecarlo import MapFn, MonteCarlo, Plan, check_budget, check_some_sample_finished, child_seeds, mapped, together
+from ..sampling.montecarlo import (MapFn, MonteCarlo, Plan, check_budget, check_some_sample_finished, child_seeds,
+                                   far_over_budget, mapped, together)
 from ..sampling.sampler import rollout_cost
 from ..checking.self_check import checking
 from ..scene.bodies import Scene, Table
@@ -170,9 +171,9 @@ def _plan(scene: Scene, actions: list[Action], model: ModelConfig, settings: Sim
         simulated_actions.append(None)
     if budget_s is not None:
         cost = rollout_cost(scene, model, settings, len(contact))
-        if cost.seconds * max(1, len(simulated_actions)) > budget_s:
+        if far_over_budget(cost.seconds * max(1, len(simulated_actions)), budget_s):
             raise ConfigError("budget_s", f"one sample of these {len(simulated_actions)} variants takes up to "
-                                          f"~{cost.seconds * len(simulated_actions):.3g} s, more than the budget of "
+                                          f"~{cost.seconds * len(simulated_actions):.3g} s, far more than the budget of "
                                           f"{budget_s:g} s; ask fewer variants or raise the budget")
     regions = affected_regions(scene, simulated_actions, margin, scene_groups, model.pushes)
     # a removal read from "as is" needs each other object's outcome there; a direction, what fell

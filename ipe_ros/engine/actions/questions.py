@@ -16,7 +16,7 @@ from ..scene import limits
 from ..config import ModelConfig, SimSettings
 from ..sampling.decide import Ranking, SafeBelow, Sequential, Supports
 from ..errors import ConfigError
-from ..sampling.montecarlo import check_budget
+from ..sampling.montecarlo import check_budget, far_over_budget
 from ..sampling.sampler import rollout_cost
 from ..scene.bodies import Body, Scene
 from ..scene.validation import validate_body
@@ -78,15 +78,15 @@ class _Deadline:
 def _check_variants(scene: Scene, variants: int, model: ModelConfig, settings: SimSettings, budget_s: float | None,
                     what: str, field: str, placements: int = 0) -> None:
     """Refuse up front, before any geometry or simulation: more variants than a question may ask,
-    or one sample of each (plus lowering the placements) estimated beyond the budget."""
+    or one sample of each (plus lowering the placements) estimated far beyond the budget."""
     if variants > limits.MAX_QUESTION_VARIANTS:
         raise ConfigError(field, f"{what} make {variants} variants, more than the {limits.MAX_QUESTION_VARIANTS} one "
                                  "question may ask about; split the search into several questions")
     if budget_s is not None:
         seconds = rollout_cost(scene, model, settings).seconds * (variants + 1) + placements * PLACEMENT_GEOMETRY_S
-        if seconds > budget_s:
+        if far_over_budget(seconds, budget_s):
             raise ConfigError("budget_s", f"one sample of these {variants + 1} variants takes up to ~{seconds:.3g} s, "
-                                          f"more than the budget of {budget_s:g} s; ask fewer variants or raise the "
+                                          f"far more than the budget of {budget_s:g} s; ask fewer variants or raise the "
                                           "budget")
 
 

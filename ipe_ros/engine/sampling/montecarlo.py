@@ -44,6 +44,17 @@ def child_seeds(seed: int, k: int) -> list[np.random.SeedSequence]:
     return np.random.SeedSequence(seed).spawn(k)
 
 
+#: a cost projected before or early in the work refuses it only when this many times over the budget:
+#: a projection is a guess (a fixed pace per body and step, or the pace of a warming-up start on a busy
+#: machine); nearer the budget the work runs, and the deadline ends it with what it did (issue 75)
+FAR_OVER_BUDGET = 3.0
+
+
+def far_over_budget(projected_s: float, budget_s: float | None) -> bool:
+    """The projected cost is far beyond the budget (``FAR_OVER_BUDGET`` times): refuse up front."""
+    return budget_s is not None and projected_s > FAR_OVER_BUDGET * budget_s
+
+
 def check_budget(budget_s: float | None) -> None:
     if budget_s is not None and (isinstance(budget_s, bool) or not isinstance(budget_s, (int, float))
                                  or not math.isfinite(budget_s) or budget_s <= 0):

@@ -25,7 +25,7 @@ from ..checking.envelope import validated_because
 from ..checking.fidelity import (DEFAULT_CHECK, NO_CHECK, FidelityReport, SelfCheck, coverage_ahead, is_reference,
                        look_ahead_split, reference_settings, refine_in_task, verification_count)
 from .montecarlo import (MapFn, MonteCarlo, Plan, check_budget, check_seed, check_some_sample_finished, child_seeds,
-                         together)
+                         far_over_budget, together)
 from ..perceptions import perception_source
 from .perturb import is_deterministic
 from .outcome import rigid_reruns
@@ -119,16 +119,17 @@ def check_request(scene: Scene, query: QuerySpec, max_objects: int = DEFAULT_MAX
                   model: ModelConfig | None = None, settings: SimSettings | None = None,
                   budget_s: float | None = None) -> None:
     """Reject what cannot be answered before any simulation starts: a bad scene, a query it cannot
-    answer, or (given a budget) a scene whose single rollout is estimated to take longer than it."""
+    answer, or (given a budget) a scene whose single rollout is estimated to take far longer than it
+    (``montecarlo.far_over_budget``; nearer, the deadline cuts the samples off)."""
     validate_scene(scene, max_objects=max_objects)
     for name in sorted(query.queries):
         QUERIES[name].check(scene, query)
     if budget_s is not None and model is not None and settings is not None:
         cost = rollout_cost(scene, model, settings, len(query.contact_pairs) if "contact" in query.queries else 0)
-        if cost.seconds > budget_s:
+        if far_over_budget(cost.seconds, budget_s):
             watched = f" and {cost.pairs} contact pairs" if cost.pairs else ""
             raise ConfigError("budget_s", f"one rollout of this scene takes up to {cost.steps} steps x {cost.bodies} "
-                                          f"bodies{watched} (~{cost.seconds:.3g} s), more than the budget of "
+                                          f"bodies{watched} (~{cost.seconds:.3g} s), far more than the budget of "
                                           f"{budget_s:g} s; raise the budget, shorten horizon_s, or simplify the "
                                           "scene" + (" or ask fewer pairs" if cost.pairs else ""))
 

@@ -30,8 +30,8 @@ from scipy.spatial.transform import Rotation
 from ..errors import ConfigError
 from ..scene.bodies import MAX_SET_DOWN_M, Scene, lowest_z_m, support_top_below
 from ..scene.shapes import quaternion_product
-from ..sampling.montecarlo import MapFn
-from .depth_chain import ChainRun, projected_end, sample_depth_posterior
+from ..sampling.montecarlo import MapFn, far_over_budget
+from .depth_chain import ChainRun, OutOfTime, projected_end, sample_depth_posterior
 from .depth_model import (DepthModel, DepthObservation, DepthSettings, check_layer_memory, render_depth_m,
                           support_depth_m)
 from .mcmc import effective_sample_size
@@ -51,6 +51,9 @@ CHAIN_BUDGET_SHARE = 0.5
 
 #: batches of proposals between checks of the chain's projected end against its deadline
 BUDGET_CHECK_BATCHES = 10
+#: the share of its scorings a chain does before its pace may refuse it: the first ones (locating
+#: each object, caches still cold) run up to twice as slow as the rest, 2% in they are within 10%
+WARM_UP_SHARE = 0.02
 
 
 @dataclass(frozen=True)
@@ -65,6 +68,8 @@ class DepthPosterior:
     pixels: np.ndarray | None = None  # (objects,) pixels read where the object is in front at the mean pose
     chains: int = 1  # the samples are this many independent chains' states, one after the other, equally many
     tilts_rad: np.ndarray | None = None  # (samples, objects, 2): tilts about the scene's x and y axes (none: 0)
+    #: "states": every chain kept all its states; "budget": the deadline ended the chains first
+    stopped_by: str = "states"
 
     def camera_offsets(self) -> list[dict[str, float]]:
         """Per camera: posterior mean and SD of its range offset (how much longer it measures than the
@@ -127,15 +132,26 @@ def run_depth_chain(scene: Scene, observations: tuple[DepthObservation, ...], se
     ``map_fn`` (the worker pool: one chain per worker) or one after the other here, keeping at least
     ``k`` states together. The chains and their seeds never depend on the workers.
 
-    ``deadline_s`` (``time.monotonic()``): a chain is refused (ConfigError naming ``budget_s``) as
-    soon as its first batches show it cannot finish by then, and stopped if it runs past it."""
+    ``deadline_s`` (``time.monotonic()``): a chain is refused (ConfigError naming ``budget_s``) once,
+    warmed up, its pace shows it would take far more than is left; otherwise it runs,
+    and the deadline ends it with the states it kept (``stopped_by`` "budget"; the chains cut to
+    equally many), or with the same error when it comes before the first."""
     if not observations:
         raise ConfigError("depth", "depth perception needs at least one depth image")
     check_layer_memory(scene, observations)
     one_chain = dataclasses.replace(settings, kept_states=settings.kept_per_chain(k), chains=1)
     budget_s = None if deadline_s is None else deadline_s - time.monotonic()
     tasks = [_ChainTask(scene, observations, one_chain, chain_rng, budget_s) for chain_rng in rng.spawn(settings.chains)]
-    runs = map_fn(run_one_chain, tasks) if map_fn is not None and len(tasks) > 1 else [run_one_chain(t) for t in tasks]
+    if map_fn is not None and len(tasks) > 1:
+        runs = map_fn(run_one_chain, tasks)
+    else:  # one after the other: each its share of what is left, so that together they end by the deadline
+        runs = [run_one_chain(t if deadline_s is None else
+                              dataclasses.replace(t, budget_s=(deadline_s - time.monotonic()) / (len(tasks) - i)))
+                for i, t in enumerate(tasks)]
+    stopped = any(r.stopped_by_budget for r in runs)
+    if stopped:  # the chains' states, one chain after the other, equally many (the ESS splits them so)
+        states = min(len(r.positions_m) for r in runs)
+        runs = [r.first(states) for r in runs]
     dynamic = len(scene.dynamic_objects)
     positions, yaws = np.concatenate([r.positions_m for r in runs]), np.concatenate([r.yaws_rad for r in runs])
     tilts = np.concatenate([r.tilts_rad for r in runs])
@@ -144,7 +160,7 @@ def run_depth_chain(scene: Scene, observations: tuple[DepthObservation, ...], se
     return DepthPosterior(names=tuple(b.name for b in scene.dynamic_objects), positions_m=positions, yaws_rad=yaws,
                           acceptance_rate=float(np.mean([r.acceptance_rate for r in runs])),
                           offsets_m=np.concatenate([r.offsets_m for r in runs]), pixels=model.pixels_seen(dynamic),
-                          chains=len(runs), tilts_rad=tilts)
+                          chains=len(runs), tilts_rad=tilts, stopped_by="budget" if stopped else "states")
 
 
 @dataclass(frozen=True)
@@ -199,22 +215,32 @@ def run_one_chain(task: _ChainTask) -> ChainRun:
     def check(done: int, total: int) -> None:
         nonlocal batches
         batches += 1
-        if deadline_s is not None and (batches % BUDGET_CHECK_BATCHES == 0 or done == total):
-            _check_deadline(started, sampling, deadline_s, done, total, dynamic)
+        if deadline_s is None:
+            return
+        if time.monotonic() > deadline_s:
+            raise OutOfTime
+        if batches % BUDGET_CHECK_BATCHES == 0 and done >= WARM_UP_SHARE * total:
+            _refuse_far_over(started, sampling, deadline_s, done, total, dynamic)
 
     tilted = resting_on_another(scene) & (task.settings.prior_tilt_sd_rad > 0)
-    return sample_depth_posterior(model, positions, yaws, tilts, tilted, task.settings, task.rng, check)
+    try:
+        return sample_depth_posterior(model, positions, yaws, tilts, tilted, task.settings, task.rng, check)
+    except OutOfTime:  # before the chain kept a state: nothing to answer with
+        raise ConfigError("budget_s", f"the depth chain over {dynamic} objects reached the end of its "
+                                      f"{deadline_s - started:.3g} s before it kept a state; raise the budget or "
+                                      "send fewer objects") from None
 
 
-def _check_deadline(started: float, sampling: float, deadline_s: float, done: int, total: int, objects: int) -> None:
-    """Refused when the chain, at the pace of its ``done`` scorings since ``sampling`` began, would end
-    after ``deadline_s``."""
+def _refuse_far_over(started: float, sampling: float, deadline_s: float, done: int, total: int, objects: int) -> None:
+    """Refused when the chain, at the pace of its ``done`` scorings since ``sampling`` began, would
+    take far more than the budget leaves it (``montecarlo.far_over_budget``)."""
     now = time.monotonic()
     projected = projected_end(sampling, done, total)
-    if projected > deadline_s:
+    # refused only far over, once warmed up: nearer, the chain runs and the deadline ends it with fewer states
+    if far_over_budget(projected - sampling, deadline_s - sampling):
         raise ConfigError("budget_s", f"the depth chain over {objects} objects needs ~{projected - started:.3g} s "
-                                      f"({total} scorings of the image; {done} took {now - sampling:.3g} s), more than "
-                                      f"the {deadline_s - started:.3g} s the budget leaves it; raise the "
+                                      f"({total} scorings of the image; {done} took {now - sampling:.3g} s), far more "
+                                      f"than the {deadline_s - started:.3g} s the budget leaves it; raise the "
                                       "budget or send fewer objects")
 
 
@@ -278,6 +304,7 @@ class DepthPerceivedScenes:
         return {"kind": "depth", "acceptance_rate": self.acceptance_rate,
                 "effective_sample_size": self.effective_sample_size, "chain_samples": self.chain_samples,
                 "burn_in": self.burn_in, "samples": len(self.scenes),
+                "kept_states": len(self.posterior.positions_m), "stopped_by": self.posterior.stopped_by,
                 "roughly_independent": self.effective_sample_size >= 0.5 * len(self.scenes),
                 "objects": self.objects(), "camera_offsets": self.posterior.camera_offsets()}
 

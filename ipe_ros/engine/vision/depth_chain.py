@@ -33,6 +33,8 @@ Randomness from the injected Generator alone.
 
 from __future__ import annotations
 
+import dataclasses
+
 import functools
 import math
 import time
@@ -158,13 +160,24 @@ class _Proposal:
 
 @dataclass(frozen=True)
 class ChainRun:
-    """What the sampler kept (one state per sweep after burn-in) and how often proposals were taken."""
+    """What the sampler kept (one state per sweep after burn-in) and how often proposals were taken;
+    ``stopped_by_budget``: the deadline ended it before it kept all its states."""
 
     positions_m: np.ndarray  # (states, objects, 3)
     yaws_rad: np.ndarray     # (states, objects)
     offsets_m: np.ndarray    # (states, cameras)
     acceptance_rate: float   # of the objects' proposals in the sampling sweeps
     tilts_rad: np.ndarray    # (states, objects, 2): tilts about the scene's x and y axes
+    stopped_by_budget: bool = False
+
+    def first(self, states: int) -> "ChainRun":
+        """The run's first ``states`` kept states."""
+        return dataclasses.replace(self, positions_m=self.positions_m[:states], yaws_rad=self.yaws_rad[:states],
+                                   offsets_m=self.offsets_m[:states], tilts_rad=self.tilts_rad[:states])
+
+
+class OutOfTime(Exception):
+    """Raised by a chain's ``check`` when its deadline has passed: the chain ends with what it kept."""
 
 
 def sample_depth_posterior(model: DepthModel, positions: np.ndarray, yaws: np.ndarray, tilts: np.ndarray,
@@ -174,7 +187,8 @@ def sample_depth_posterior(model: DepthModel, positions: np.ndarray, yaws: np.nd
     ``settings.kept_states`` states (``settings`` are this one chain's); ``positions``,
     ``yaws`` and ``tilts`` (every body's) are moved in place; the first ``len(tilted)`` bodies are the
     objects, whose tilts are estimated where ``tilted``. ``check(done, total)`` is called after every
-    batch of proposals with the scorings done and to do (a deadline)."""
+    batch of proposals with the scorings done and to do (a deadline): raising ``OutOfTime`` ends the
+    chain with the states kept so far (at least one: before that, ``OutOfTime`` reaches the caller)."""
     s, objects = settings, len(tilted)
     poses = [_Pose(model, b, positions, yaws, tilts, s, bool(tilted[b])) for b in range(objects)]
     offsets = [_Offset(model, v, s) for v in range(len(model.offsets_m))] if s.offset_prior_sd_m > 0 else []
@@ -197,22 +211,29 @@ def sample_depth_posterior(model: DepthModel, positions: np.ndarray, yaws: np.nd
     kept_xyz, kept_yaw, kept_tilts, kept_offsets = [], [], [], []
     taken = offered = 0
     walk_scale = np.full(len(blocks), 2.38 / math.sqrt(4))
+    stopped = False
     for sweep in range(sweeps):
-        for i, (block, proposal) in enumerate(zip(blocks, proposals)):
-            accepted = _independence_steps(block, proposal, model, s.proposals_per_sweep, rng)
-            walked = _walk_steps(block, proposal, model, s.walk_steps, walk_scale[i], rng) if s.walk_steps else 0
-            if sweep < s.burn_in_sweeps and s.walk_steps:  # towards a quarter of the walk's steps taken
-                walk_scale[i] *= math.exp(0.5 * (walked / s.walk_steps - 0.25))
-            step(1 + s.walk_steps)
-            if i < objects:
-                taken, offered = taken + accepted, offered + s.proposals_per_sweep
+        try:
+            for i, (block, proposal) in enumerate(zip(blocks, proposals)):
+                accepted = _independence_steps(block, proposal, model, s.proposals_per_sweep, rng)
+                walked = _walk_steps(block, proposal, model, s.walk_steps, walk_scale[i], rng) if s.walk_steps else 0
+                if sweep < s.burn_in_sweeps and s.walk_steps:  # towards a quarter of the walk's steps taken
+                    walk_scale[i] *= math.exp(0.5 * (walked / s.walk_steps - 0.25))
+                if i < objects:
+                    taken, offered = taken + accepted, offered + s.proposals_per_sweep
+                step(1 + s.walk_steps)
+        except OutOfTime:
+            if not kept_xyz:
+                raise
+            stopped = True  # this sweep's state is half moved: not kept
+            break
         if sweep >= s.burn_in_sweeps:
             kept_xyz.append(positions[:objects].copy())
             kept_yaw.append(yaws[:objects].copy())
             kept_tilts.append(tilts[:objects].copy())
             kept_offsets.append(model.offsets_m.copy())
     return ChainRun(np.array(kept_xyz), np.array(kept_yaw), np.array(kept_offsets), taken / max(1, offered),
-                    np.array(kept_tilts))
+                    np.array(kept_tilts), stopped_by_budget=stopped)
 
 
 def _log_target(block: _Block, model: DepthModel, value: np.ndarray) -> float:

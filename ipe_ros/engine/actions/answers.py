@@ -227,3 +227,18 @@ class Alone:
         return {"any_fall_probability": self.any_fall_probability,
                 "any_fall_probability_ci95": _listed(self.any_fall_probability_ci95),
                 "samples_standing": self.samples_standing, "unstable": self.unstable}
+
+
+def caused(per_sample: list[list[SampleOutcome]], variant: int, as_is: int) -> dict[str, float] | None:
+    """Per object of the variant: the fraction of paired samples in which it fell with the action
+    and not in the scene as is (None: what falls was not asked)."""
+    pairs = [(s[variant], s[as_is]) for s in per_sample if s[variant].ok and s[as_is].ok]
+    if not pairs or any(ran(outcome).fallen is None for outcome in pairs[0]):
+        return None
+    names = pairs[0][0].names
+    counts = dict.fromkeys(names, 0)
+    for with_action, without in pairs:
+        before = dict(zip(without.names, ran(without).fallen))
+        for name, fallen in zip(with_action.names, ran(with_action).fallen):
+            counts[name] += bool(fallen) and not before.get(name, False)
+    return {n: c / len(pairs) for n, c in counts.items()}

@@ -15,8 +15,8 @@ from ..query.spec import check_names
 from ..sampling.decide import Sequential, Tally
 from ..errors import ConfigError
 from ..sampling.perturb import is_deterministic, position_sigmas_m
-from ..checking.fidelity import FidelityReport, SelfCheck, is_reference, reference_settings, refine_in_task
-from ..checking.fidelity import check_request as check_fidelity_request
+from ..checking.fidelity import (FidelityReport, SelfCheck, check_request as check_fidelity_request, is_reference,
+                                 reference_settings, refine_in_task)
 from ..sampling.montecarlo import (MapFn, MonteCarlo, Plan, check_budget, check_some_sample_finished, child_seeds,
                                    far_over_budget, mapped, together)
 from ..sampling.sampler import rollout_cost
@@ -26,7 +26,8 @@ from ..scene.validation import validate_scene
 from ..query.contact import check_pairs
 from ..sampling.outcome import SampleOutcome, rigid_reruns
 from ..sampling.rollout import take_refined
-from .answers import QUESTION_QUERIES, Alone, Answers, aggregate_variant, aggregate_given, draws_noise, stood, fell, ran
+from .answers import (QUESTION_QUERIES, Alone, Answers, aggregate_given, aggregate_variant, caused, draws_noise, fell,
+                      ran, stood)
 from .checks import check_action
 from .geometry import affected_regions, groups, reached
 from .kinds import DEFAULT_SAFE_BELOW, Action, Place, Push, Remove, label_of
@@ -215,7 +216,7 @@ def _answers(scene: Scene, actions: list[Action], plan: _Plan, per_sample, decis
         stands = [stood(s[as_is]) for s in per_sample]
         for j, a in enumerate(plan.simulated_actions):
             by_variant[label_of(a)] = dataclasses.replace(
-                by_variant[label_of(a)], caused_fall_probability=_caused(per_sample, j, as_is),
+                by_variant[label_of(a)], caused_fall_probability=caused(per_sample, j, as_is),
                 given_stands=aggregate_given(
                     [s[j] for s, ok in zip(per_sample, stands) if ok], deterministic=deterministic))
     for label, (decision, why, drawn) in decisions.items():
@@ -434,18 +435,3 @@ class _Counts:
 
     def tally(self) -> Tally:
         return Tally(self.samples, self.any_falls, dict(self.object_falls))
-
-
-def _caused(per_sample: list[list[SampleOutcome]], variant: int, as_is: int) -> dict[str, float] | None:
-    """Per object of the variant: the fraction of paired samples in which it fell with the action
-    and not in the scene as is (None: what falls was not asked)."""
-    pairs = [(s[variant], s[as_is]) for s in per_sample if s[variant].ok and s[as_is].ok]
-    if not pairs or any(ran(outcome).fallen is None for outcome in pairs[0]):
-        return None
-    names = pairs[0][0].names
-    counts = dict.fromkeys(names, 0)
-    for with_action, without in pairs:
-        before = dict(zip(without.names, ran(without).fallen))
-        for name, fallen in zip(with_action.names, ran(with_action).fallen):
-            counts[name] += bool(fallen) and not before.get(name, False)
-    return {n: c / len(pairs) for n, c in counts.items()}

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import SimSettings
-from .fidelity import (FidelityReport, SelfCheck, bias_estimates, confirmation_samples, contradicts, coverage_samples,
-                       difference, merge, outcome_flags, suspect, undecided_bias_samples, unhealthy,
+from .bias import bias_estimates, confirmation_samples, coverage_samples, undecided_bias_samples
+from .fidelity import (FidelityReport, SelfCheck, contradicts, difference, merge, outcome_flags, suspect, unhealthy,
                        verification_count)
 from ..sampling.montecarlo import Plan
 from ..sampling.outcome import SampleOutcome, energy_scale_of, rigid_reruns

@@ -29,6 +29,10 @@ MAX_MASS_RATIO = 1000.0
 MAX_SPEED_M_S = 10.0
 
 
+def _as_quat(rotation: Rotation) -> tuple[float, float, float, float]:
+    return tuple(float(v) for v in rotation.as_quat())  # type: ignore[return-value]
+
+
 def cone(radius_m: float, height_m: float, sides: int = 12) -> ConvexHull:
     """A cone (as a pyramid of ``sides`` sides) standing on its base, its apex up, origin at the base centre."""
     ring = tuple((radius_m * math.cos(a), radius_m * math.sin(a), 0.0)
@@ -40,6 +44,48 @@ def wedge(length_m: float, width_m: float, height_m: float) -> ConvexHull:
     """A right-angled wedge (a ramp) lying on its long face, origin at the middle of its base."""
     x, y, z = length_m / 2, width_m / 2, height_m
     return ConvexHull(((-x, -y, 0.0), (x, -y, 0.0), (-x, y, 0.0), (x, y, 0.0), (-x, -y, z), (-x, y, z)))
+
+
+def ring(radius_m: float, tube_radius_m: float, segments: int = 10) -> Compound:
+    """A torus lying flat (axis z) as ``segments`` capsules along its centre circle, origin at its centre."""
+    chord = 2 * radius_m * math.sin(math.pi / segments)
+    parts = []
+    for i in range(segments):
+        angle = 2 * math.pi * (i + 0.5) / segments
+        # a capsule's axis is its z: turn it onto x, then onto the circle's tangent at ``angle``
+        turn = Rotation.from_euler("z", angle + math.pi / 2) * Rotation.from_euler("y", math.pi / 2)
+        centre = radius_m * math.cos(math.pi / segments)
+        parts.append(CompoundPart(Capsule(tube_radius_m, chord), (centre * math.cos(angle), centre * math.sin(angle),
+                                                                  0.0), _as_quat(turn)))
+    return Compound(tuple(parts))
+
+
+def bowl(radius_m: float, height_m: float, wall_m: float, segments: int = 10, flare_rad: float = 0.35) -> Compound:
+    """An open bowl: a disc and ``segments`` wall plates flaring out by ``flare_rad``, origin at the
+    centre of its base's underside."""
+    parts = [CompoundPart(Cylinder(radius_m, wall_m), (0.0, 0.0, wall_m / 2))]
+    width = 2 * (radius_m + height_m * math.sin(flare_rad)) * math.tan(math.pi / segments) + wall_m
+    for i in range(segments):
+        angle = 2 * math.pi * i / segments
+        middle = radius_m + 0.5 * height_m * math.sin(flare_rad)
+        tilt = Rotation.from_euler("z", angle) * Rotation.from_euler("y", flare_rad)
+        parts.append(CompoundPart(BoxShape((wall_m, width, height_m)),
+                                  (middle * math.cos(angle), middle * math.sin(angle),
+                                   wall_m + 0.5 * height_m * math.cos(flare_rad)), _as_quat(tilt)))
+    return Compound(tuple(parts))
+
+
+def open_box(size_m: float, height_m: float, wall_m: float) -> Compound:
+    """A square box without a lid, origin at the centre of its base's underside."""
+    half = size_m / 2
+    z = wall_m + height_m / 2
+    return Compound((
+        CompoundPart(BoxShape((size_m, size_m, wall_m)), (0.0, 0.0, wall_m / 2)),
+        CompoundPart(BoxShape((wall_m, size_m, height_m)), (half - wall_m / 2, 0.0, z)),
+        CompoundPart(BoxShape((wall_m, size_m, height_m)), (-half + wall_m / 2, 0.0, z)),
+        CompoundPart(BoxShape((size_m - 2 * wall_m, wall_m, height_m)), (0.0, half - wall_m / 2, z)),
+        CompoundPart(BoxShape((size_m - 2 * wall_m, wall_m, height_m)), (0.0, -half + wall_m / 2, z)),
+    ))
 
 
 def l_bracket(size_m: float, thickness_m: float) -> Compound:

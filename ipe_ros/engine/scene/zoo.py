@@ -33,10 +33,10 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..config import DEFAULT_QUERIES
-from .catalogue import cone, wedge
+from .catalogue import bowl, cone, open_box, ring, wedge
 from .bodies import Body, Floor, Scene
 from .validation import validate_scene
-from .shapes import BoxShape, Capsule, Compound, CompoundPart, Cylinder, Sphere, surface_points
+from .shapes import BoxShape, Compound, Cylinder, Sphere, surface_points
 
 _IDENTITY = (0.0, 0.0, 0.0, 1.0)
 
@@ -51,48 +51,6 @@ def _quat(rotation: Rotation) -> tuple[float, float, float, float]:
 
 def _yaw(rad: float) -> tuple[float, float, float, float]:
     return _quat(Rotation.from_euler("z", rad))
-
-
-def ring(radius_m: float, tube_radius_m: float, segments: int = 10) -> Compound:
-    """A torus lying flat (axis z) as ``segments`` capsules along its centre circle, origin at its centre."""
-    chord = 2 * radius_m * math.sin(math.pi / segments)
-    parts = []
-    for i in range(segments):
-        angle = 2 * math.pi * (i + 0.5) / segments
-        # a capsule's axis is its z: turn it onto x, then onto the circle's tangent at ``angle``
-        turn = Rotation.from_euler("z", angle + math.pi / 2) * Rotation.from_euler("y", math.pi / 2)
-        centre = radius_m * math.cos(math.pi / segments)
-        parts.append(CompoundPart(Capsule(tube_radius_m, chord), (centre * math.cos(angle), centre * math.sin(angle),
-                                                                  0.0), _quat(turn)))
-    return Compound(tuple(parts))
-
-
-def bowl(radius_m: float, height_m: float, wall_m: float, segments: int = 10, flare_rad: float = 0.35) -> Compound:
-    """An open bowl: a disc and ``segments`` wall plates flaring out by ``flare_rad``, origin at the
-    centre of its base's underside."""
-    parts = [CompoundPart(Cylinder(radius_m, wall_m), (0.0, 0.0, wall_m / 2))]
-    width = 2 * (radius_m + height_m * math.sin(flare_rad)) * math.tan(math.pi / segments) + wall_m
-    for i in range(segments):
-        angle = 2 * math.pi * i / segments
-        middle = radius_m + 0.5 * height_m * math.sin(flare_rad)
-        tilt = Rotation.from_euler("z", angle) * Rotation.from_euler("y", flare_rad)
-        parts.append(CompoundPart(BoxShape((wall_m, width, height_m)),
-                                  (middle * math.cos(angle), middle * math.sin(angle),
-                                   wall_m + 0.5 * height_m * math.cos(flare_rad)), _quat(tilt)))
-    return Compound(tuple(parts))
-
-
-def open_box(size_m: float, height_m: float, wall_m: float) -> Compound:
-    """A square box without a lid, origin at the centre of its base's underside."""
-    half = size_m / 2
-    z = wall_m + height_m / 2
-    return Compound((
-        CompoundPart(BoxShape((size_m, size_m, wall_m)), (0.0, 0.0, wall_m / 2)),
-        CompoundPart(BoxShape((wall_m, size_m, height_m)), (half - wall_m / 2, 0.0, z)),
-        CompoundPart(BoxShape((wall_m, size_m, height_m)), (-half + wall_m / 2, 0.0, z)),
-        CompoundPart(BoxShape((size_m - 2 * wall_m, wall_m, height_m)), (0.0, half - wall_m / 2, z)),
-        CompoundPart(BoxShape((size_m - 2 * wall_m, wall_m, height_m)), (0.0, -half + wall_m / 2, z)),
-    ))
 
 
 def _body(name: str, shape, position, *, mass_kg: float, friction: float = 0.6, restitution: float = 0.1,

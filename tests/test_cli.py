@@ -220,7 +220,10 @@ def test_a_file_with_bad_scenes_answers_every_good_one_and_reports_each_refused_
 
     good = scene_to_dict(load_scenes(example_scene_path())[0])
     unreadable = dict(good, name="broken", objects=[dict(good["objects"][0], mass_kg=-1.0)])
-    too_costly = dict(good, name="too_costly", horizon_s=60.0)  # readable, but beyond the budget
+    copies = [dict(o, name=f"{o['name']}_{c}", position_m=[o["position_m"][0] + 3.0 * c, *o["position_m"][1:]])
+              for c in (1, 2) for o in good["objects"]]
+    # readable, but far beyond the budget (a third more would run, cut off by it): 3 towers for 60 s
+    too_costly = dict(good, name="too_costly", horizon_s=60.0, objects=good["objects"] + copies)
     mixed = tmp_path / "mixed.json"
     mixed.write_text(json.dumps([good, unreadable, dict(good, name="second"), too_costly]))
     out = run_cli("predict", str(mixed), "--samples", "2", "--workers", "0", "--json", "--budget", "1")

@@ -26,7 +26,8 @@ from .stamps import stamp_ns_to_header
 
 
 def request_id_of(msg: String) -> str:
-    """The request's "id" if it can be read at all ("" otherwise), to echo it with an error."""
+    """The id of a request refused before it was read (too large, not an object), if its JSON can
+    be read at all ("" otherwise), to echo it with the error; a request read is ``id_of``'s."""
     try:
         data = json.loads(msg.data)
     except (ValueError, RecursionError):
@@ -40,21 +41,32 @@ def id_of(data: Any) -> str:
     return value[:128] if isinstance(value, str) else ""
 
 
-def string_to_question(msg: String, *, max_objects: int = DEFAULT_MAX_OBJECTS,
-                       meshes: MeshAccess | None = None) -> tuple[Question, Scene | None]:
-    """A question and the scene it brings (None: ask about the node's newest scene; its mesh shapes
-    read through ``meshes``, None: refused)."""
+def parse_request(msg: String) -> dict[str, Any]:
+    """The JSON object of a request on ``~/ask``, read once (its size bounded first, NaN and
+    Infinity refused as in scenes); ConfigError naming ``data``."""
     if len(msg.data) > MAX_JSON_CHARS:  # before reading it: the reply must not wait on 100 MB of JSON
         raise ConfigError("data", f"{len(msg.data)} characters exceed the maximum of {MAX_JSON_CHARS} for a question; "
                                   "send the scene on ~/scene_json and ask about it without \"scene\"")
     try:
-        data = json.loads(msg.data)
+        data = json.loads(msg.data, parse_constant=_not_a_number)
     except RecursionError:
         raise ConfigError("data", "JSON nested too deeply to read") from None
     except json.JSONDecodeError as exc:
         raise ConfigError("data", f"not JSON ({exc.msg} at line {exc.lineno} column {exc.colno})") from None
     if not isinstance(data, dict):
         raise ConfigError("data", f"expected a JSON object, got {json_type(data)}")
+    return data
+
+
+def _not_a_number(token: str) -> None:
+    raise ConfigError("data", f"{token} is not a valid number; use finite numbers only")
+
+
+def question_from_data(data: dict[str, Any], *, max_objects: int = DEFAULT_MAX_OBJECTS,
+                       meshes: MeshAccess | None = None) -> tuple[Question, Scene | None]:
+    """A question and the scene it brings (None: ask about the node's newest scene; its mesh shapes
+    read through ``meshes``, None: refused), from its parsed JSON (``parse_request``)."""
+    data = dict(data)
     scene = None
     if "scene" in data:
         try:
@@ -62,6 +74,12 @@ def string_to_question(msg: String, *, max_objects: int = DEFAULT_MAX_OBJECTS,
         except SceneError as exc:
             raise SceneError(f"scene.{exc.field}", exc.problem) from None
     return question_from_dict(data), scene
+
+
+def string_to_question(msg: String, *, max_objects: int = DEFAULT_MAX_OBJECTS,
+                       meshes: MeshAccess | None = None) -> tuple[Question, Scene | None]:
+    """``question_from_data`` of ``parse_request``: a question read from its message."""
+    return question_from_data(parse_request(msg), max_objects=max_objects, meshes=meshes)
 
 
 def support_graph_markers(scene: Scene, answer: dict[str, Any], frame_id: str, stamp_ns: int) -> MarkerArray:

@@ -17,23 +17,20 @@ INFER_FIELDS = ("question", "id", "observation")
 
 def string_to_observation(msg: String) -> tuple[str, Observation]:
     """(the request's id or "", the observation); ConfigError/SceneError naming the field."""
-    data = parsed_json(msg.data)
+    return observation_with_id(parsed_json(msg.data))
+
+
+def observation_with_id(data) -> tuple[str, Observation]:
+    """(the request's id or "", the observation) from ``~/observe``'s parsed JSON."""
     request_id = id_of(data)
     if isinstance(data, dict):
-        data.pop("id", None)
+        data = {k: v for k, v in data.items() if k != "id"}
     return request_id, observation_from_dict(data)
 
 
-def string_to_infer_question(msg: String) -> tuple[str, Observation] | None:
-    """(the question's id or "", its observation) when ``msg`` is an ``infer`` question, else None
-    (another kind of question, or no JSON object: ``~/ask``'s own reader answers those);
-    ConfigError/SceneError naming the field."""
-    try:
-        data = parsed_json(msg.data)
-    except ConfigError:
-        return None
-    if not isinstance(data, dict) or data.get("question") != "infer":
-        return None
+def infer_question_from_data(data: dict) -> tuple[str, Observation]:
+    """(the question's id or "", its observation) from an ``infer`` question's parsed JSON
+    (``ask_json.parse_request``); ConfigError/SceneError naming the field."""
     unknown = sorted(set(data) - set(INFER_FIELDS), key=str)
     if unknown:
         raise ConfigError(str(unknown[0])[:64], "unknown field of an infer question; allowed: id, observation")

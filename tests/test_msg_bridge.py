@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import subprocess
 import sys
@@ -10,7 +11,7 @@ import pytest
 from std_msgs.msg import ColorRGBA, String
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ipe_ros.engine import Body, Floor, Prediction, Scene, SceneError, Table, load_scenes
+from ipe_ros.engine import Body, ConfigError, Floor, Prediction, Scene, SceneError, Table, load_scenes
 from ipe_ros.engine.scene.generators import generate_tables
 from ipe_ros.engine.query import ANSWER_FIELDS
 from msg_bridge.json_text import answer_to_string, scene_to_string, string_to_answer, string_to_scene
@@ -298,3 +299,26 @@ def test_depth_images_convert_both_ways_and_name_what_is_wrong():
         image_to_depth_m(Image(encoding="32FC1", width=1, height=1, step=4, data=bytes(2)))
     with pytest.raises(ValueError, match=r"^image.height: must be >= 1 pixel, got 0: an empty image$"):
         image_to_depth_m(Image(encoding="16UC1", width=4, height=0, step=8, data=b""))
+
+
+def test_a_request_on_ask_is_read_once_and_routed_by_its_question(monkeypatch):
+    """``~/ask`` reads a request's JSON once (it was read two or three times: for its id, for infer,
+    for the question), and refuses NaN as scenes do."""
+    import json as json_module
+
+    from msg_bridge import ask_json
+    from msg_bridge.ask_json import id_of, parse_request, question_from_data
+    from msg_bridge.observe_json import infer_question_from_data
+
+    reads = []
+    real = json_module.loads
+    monkeypatch.setattr(ask_json.json, "loads", lambda *a, **kw: reads.append(1) or real(*a, **kw))
+    data = parse_request(String(data=json.dumps({"question": "remove", "id": "q1", "objects": ["b"]})))
+    question, scene = question_from_data(data)
+    assert (id_of(data), question.kind, scene, len(reads)) == ("q1", "remove", None, 1)
+    assert data == {"question": "remove", "id": "q1", "objects": ["b"]}  # read, not consumed
+    with pytest.raises(ConfigError, match=r"^observations: unknown field of an infer question; allowed: id, "
+                                          r"observation$"):
+        infer_question_from_data(parse_request(String(data='{"question": "infer", "observations": {}}')))
+    with pytest.raises(ConfigError, match=r"^data: NaN is not a valid number; use finite numbers only$"):
+        parse_request(String(data='{"question": "push", "velocity": [NaN, 0]}'))

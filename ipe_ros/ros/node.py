@@ -30,7 +30,7 @@ from geometry_msgs.msg import PoseStamped, Vector3Stamped
 from sensor_msgs.msg import CameraInfo, Image
 from visualization_msgs.msg import MarkerArray
 
-from msg_bridge.ask_json import request_id_of, string_to_question, support_graph_markers
+from msg_bridge.ask_json import id_of, parse_request, question_from_data, request_id_of, support_graph_markers
 from msg_bridge.json_text import answer_to_string, scene_name_of, string_to_scene
 from msg_bridge.markers import markers_to_scene, prediction_to_markers, scene_to_markers
 from msg_bridge.outputs import fall_direction_msg, fall_fraction_msg, fall_probability_msg
@@ -76,15 +76,7 @@ class IpeInterface(ObserveInterface, DepthInterface):
     questions: QuestionService | None = None
 
     def _declare(self) -> dict[str, Any]:
-        declared = params.all_parameters()
-        first = next(spec for spec in declared if spec.name == "inputs_from")
-        self.declare_parameter(first.name, first.default, first.descriptor())
-        # a parameter set's inputs stand in for the defaults; an override still wins over them
-        defaults = params.defaults_from(self.get_parameter(first.name).value)
-        for spec in declared:
-            if spec is not first:
-                self.declare_parameter(spec.name, defaults.get(spec.name, spec.default), spec.descriptor())
-        self._values = {spec.name: self.get_parameter(spec.name).value for spec in declared}
+        self._values = params.declare_all(self)
         self._inputs: list = []  # subscriptions, service and timer of the answering state
         self._camera_info: dict | None = None  # the newest CameraInfo (depth perception)
         self._camera_pose: tuple | None = None  # (position, xyzw, frame) from ~/depth/camera_pose
@@ -295,12 +287,19 @@ class IpeInterface(ObserveInterface, DepthInterface):
         self._accept(scene, self.get_clock().now().nanoseconds, str(self._values["frame_id"]))
 
     def _on_ask(self, msg: String) -> None:
-        """A question about an action: answered on ~/answer (with its id), never blocking intake."""
-        if self._asked_to_infer(msg):
-            return
-        request_id = request_id_of(msg)
+        """A question about an action: answered on ~/answer (with its id), never blocking intake. Its
+        JSON is read once, then routed: ``infer`` to the observations, the others to the questions."""
         try:
-            question, scene = string_to_question(msg, max_objects=self.service.config.max_objects,
+            data = parse_request(msg)
+        except ValueError as exc:  # unread (too large, not JSON): its id read only to echo it
+            self._refuse_question(request_id_of(msg), str(exc))
+            return
+        request_id = id_of(data)
+        if data.get("question") == "infer":
+            self._ask_infer(data, request_id)
+            return
+        try:
+            question, scene = question_from_data(data, max_objects=self.service.config.max_objects,
                                                  meshes=self.service.config.meshes)
             source = None
             if scene is not None:
@@ -312,8 +311,11 @@ class IpeInterface(ObserveInterface, DepthInterface):
         except Exception as exc:  # noqa: BLE001 - no input may end the node
             refused = f"data: unreadable question ({type(exc).__name__})"
         if refused is not None:
-            self._log_refusal(f"question {request_id!r} refused: {refused}")
-            self._pub_answer.publish(answer_to_string({"id": request_id, "final": True, "error": clip(refused, 1000)}))
+            self._refuse_question(request_id, refused)
+
+    def _refuse_question(self, request_id: str, refused: str) -> None:
+        self._log_refusal(f"question {request_id!r} refused: {refused}")
+        self._pub_answer.publish(answer_to_string({"id": request_id, "final": True, "error": clip(refused, 1000)}))
 
     def _publish_question_answer(self, message: dict, source: StampedScene) -> None:
         self._pub_answer.publish(answer_to_string(message))

@@ -6,11 +6,12 @@ from __future__ import annotations
 
 from std_msgs.msg import String
 
-from msg_bridge.ask_json import request_id_of
+from msg_bridge.ask_json import id_of
 from msg_bridge.json_text import answer_to_string
-from msg_bridge.observe_json import string_to_infer_question, string_to_observation
+from msg_bridge.observe_json import infer_question_from_data, observation_with_id
 
 from ..engine.errors import clip
+from ..engine.inference.observation import parsed_json
 from ..service.observations import ObservationService
 
 
@@ -27,10 +28,11 @@ class ObserveInterface:
         self.observations.start()
 
     def _on_observe(self, msg: String) -> None:
-        request_id = request_id_of(msg)
+        request_id = ""
         try:
-            request_id, observation = string_to_observation(msg)
-            refused = self.observations.submit(request_id, observation)
+            data = parsed_json(msg.data)  # read once: its id, then the observation
+            request_id = id_of(data)
+            refused = self.observations.submit(*observation_with_id(data))
         except ValueError as exc:
             refused = str(exc)
         except Exception as exc:  # noqa: BLE001 - no input may end the node
@@ -39,21 +41,16 @@ class ObserveInterface:
             self._log_refusal(f"observation {request_id!r} refused: {refused}")
             self._publish_properties({"id": request_id, "error": clip(refused, 1000)})
 
-    def _asked_to_infer(self, msg: String) -> bool:
-        """Whether ``msg`` on ``~/ask`` is an ``infer`` question: then queued with the observations
-        (what it teaches is learned alike) and answered on ``~/answer`` as every question is."""
+    def _ask_infer(self, data: dict, request_id: str) -> None:
+        """An ``infer`` question on ``~/ask`` (its JSON read by ``_on_ask``): queued with the
+        observations (what it teaches is learned alike), answered on ``~/answer`` as every question is."""
         try:
-            asked = string_to_infer_question(msg)
-            if asked is None:
-                return False
-            refused = self.observations.submit(*asked, publish=self._publish_inferred)
+            refused = self.observations.submit(*infer_question_from_data(data), publish=self._publish_inferred)
         except ValueError as exc:
             refused = str(exc)
         if refused is not None:
-            request_id = request_id_of(msg)
             self._log_refusal(f"question {request_id!r} refused: {refused}")
             self._publish_inferred({"id": request_id, "error": clip(refused, 1000)})
-        return True
 
     def _publish_inferred(self, message: dict) -> None:
         self._pub_answer.publish(answer_to_string({"question": "infer", "final": True, **message}))

@@ -175,6 +175,20 @@ def all_parameters() -> tuple[ParamSpec, ...]:
     return PARAMETERS + query_parameter_specs()
 
 
+def declare_all(node) -> dict[str, Any]:
+    """Declare every parameter on ``node`` (an rclpy Node) and return their values: ``inputs_from``
+    first, whose parameter set's inputs then stand in for those parameters' defaults (an override
+    still wins over them)."""
+    declared = all_parameters()
+    first = next(spec for spec in declared if spec.name == "inputs_from")
+    node.declare_parameter(first.name, first.default, first.descriptor())
+    defaults = defaults_from(node.get_parameter(first.name).value)
+    for spec in declared:
+        if spec is not first:
+            node.declare_parameter(spec.name, defaults.get(spec.name, spec.default), spec.descriptor())
+    return {spec.name: node.get_parameter(spec.name).value for spec in declared}
+
+
 def defaults_from(inputs_from: str) -> dict[str, Any]:
     """The parameters' defaults a parameter set replaces (``inputs_from``), as node values; a
     ConfigError naming ``inputs_from`` for a file that is not one."""

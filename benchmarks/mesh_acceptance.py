@@ -7,7 +7,7 @@ Each mesh file (OBJ, STL, PLY, GLB; a folder: every one in it) is written into a
 standing on a floor (its lowest point at z = 0, as the file is oriented, density 500 kg/m^3), and
 read into a fresh decomposition cache, timed; then predicted at the ground truth (`paper`, 2 s):
 whether it stays up, and how far it moves. A refusal is recorded with its one line. The files are
-not ours: fetch them (benchmarks/README.md names the set used and its licence); nothing is copied.
+not ours: fetch them (benchmarks/HISTORY.md names the set used and its licence); nothing is copied.
 """
 
 from __future__ import annotations

@@ -22,7 +22,8 @@ from tests.ros_harness import domain_id_for_tests
 #: runs the documents' commands
 pytestmark = pytest.mark.slow
 
-DOCUMENTS = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md")), REPO / "benchmarks" / "README.md"]
+DOCUMENTS = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md")), REPO / "benchmarks" / "README.md",
+             REPO / "benchmarks" / "HISTORY.md"]
 SHELL = {"bash", "sh", "shell", "console"}
 FENCE = re.compile(r"^```(\S*)\s*$")
 SHARED = REPO.parent / "shared"

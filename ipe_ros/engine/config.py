@@ -266,7 +266,7 @@ PRESETS: dict[str, SimSettings] = {
     # their friction (SolverSettings: direct_solver_min_restitution, direct_solver_from_speed_m_s,
     # multibodies_from_aspect). Each of these is the coarsest setting
     # that keeps the hard cases (tests/test_hard_cases.py) and the authors' outcomes
-    # (tests/test_paper_data.py); speed and accuracy against `paper` in benchmarks/README.md.
+    # (tests/test_paper_data.py); speed and accuracy against `paper` in benchmarks/HISTORY.md.
     "default": SimSettings(name="default", time_step_s=1 / 180, horizon_s=2.0, max_step_fraction_of_time_scale=0.04,
                            solver=SolverSettings(iterations=100, residual_threshold=1e-5, warm_start_factor=1.0,
                                                  maximal_coordinates=True, multibodies_from_aspect=10.0,

@@ -168,7 +168,7 @@ class CollapseSettings:
     collapse still under way at the horizon is read mid-impact: at 1/180 s steps 49 of 576 tower
     rollouts run to 2 s (asked where things land) end with a body > 5% inside another, each then
     rerun at the reference by the self-check (9.8 reference samples per k = 48 tower prediction); at
-    half steps for the last 0.1 s, 2 (2.75 with the check's coverage; benchmarks/README.md, "the
+    half steps for the last 0.1 s, 2 (2.75 with the check's coverage; benchmarks/HISTORY.md, "the
     self-check's policies"). Since ``end_travel_fraction`` gives a fast end the substeps it needs,
     ``default`` uses 1: half steps for slow ends too changed no fall on the towers and cost them 1-3%.
 
@@ -190,7 +190,7 @@ class CollapseSettings:
     it happens: at a coarse step the solver's iterations cannot carry the impact down the stack, and
     pushing the cubes out of each other launched the top of a 39-cube column 0.9 m up (20-30 J, half
     the scene's energy scale) and knocked the cubes below over, which `paper` leaves standing
-    (tests/test_hard_cases.py, benchmarks/README.md). ``RolloutResult.collapse_undone`` says where.
+    (tests/test_hard_cases.py, benchmarks/HISTORY.md). ``RolloutResult.collapse_undone`` says where.
     1%, the bar the self-check holds a rollout's energy gain to: 31 of 2880 rollouts of the authors'
     60 towers (k = 48) make 1-3.3% and are undone; the landing column makes 47-52%.
 

@@ -57,7 +57,7 @@ def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSe
     each simulated variant's samples check themselves against the reference physics as a
     prediction's do (``engine.checking.fidelity``; the checks of all variants share each round's map call),
     and a contradicted variant is answered at the reference. Off by default: it costs 1.5-6x a
-    question's time (benchmarks/README.md); each variant's ``fidelity`` then says "unverified".
+    question's time (benchmarks/HISTORY.md); each variant's ``fidelity`` then says "unverified".
     ``queries``: other registered queries each variant also answers (``VariantAnswer.query_answers``;
     every variant is then simulated), their parameters by name in ``query_parameters``
     (``"<query>.<field>"``, engine/query/parameters.py). ``perceived``: scenes drawn from a perception's

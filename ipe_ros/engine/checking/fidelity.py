@@ -81,7 +81,7 @@ class SelfCheck:
 
     enabled: False answers at the fast settings alone (``fidelity: "unverified"``).
     verify_samples: samples rerun at the reference settings to verify the fast ones (the first
-        ones; at most k). Each costs about as much as 5-12 fast samples (benchmarks/README.md).
+        ones; at most k). Each costs about as much as 5-12 fast samples (benchmarks/HISTORY.md).
     confirm_samples: when a verified sample disagrees, this many more are verified a round before
         deciding (2: one round on two workers), chosen on both sides of the undecided outcome
         (``undecided_bias_samples``; by the counts rule, where the suspect difference can show:
@@ -96,7 +96,7 @@ class SelfCheck:
         same outcome the same way on one side while chaos flips either way on both): escalate once
         some outcome's bias is credibly beyond it with ``escalate_min_samples`` same-way
         differences; confirm while it is neither that nor credibly within it, looking on both sides
-        (``undecided_bias_samples``). Replayed on the zoo (benchmarks/README.md, "The check's
+        (``undecided_bias_samples``). Replayed on the zoo (benchmarks/HISTORY.md, "The check's
         luck") it misses fewer needed escalations than the counts. None decides by the counts
         instead (``escalate_share``).
     escalate_share: the counts rule (``bias_tolerance=None``) escalates when some outcome (an object

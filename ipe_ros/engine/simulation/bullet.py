@@ -19,7 +19,7 @@ _CLIENT_PID: int | None = None
 #: pybullet's software renderer, which every client loads: it turns each body's shapes into meshes
 #: as the body is created (a floor plane ~0.5 ms). These clients only simulate (images come from
 #: clients of their own, ``vision/tinyrenderer.py``), so it is unloaded: a `default` tower sample
-#: 4% faster in one process, 1-2% in the worker pool, bit for bit the same (benchmarks/README.md).
+#: 4% faster in one process, 1-2% in the worker pool, bit for bit the same (benchmarks/HISTORY.md).
 RENDERER_PLUGIN = "tinyRendererPlugin"
 
 

@@ -90,7 +90,7 @@ def _collision_shape(p, cid: int, shape, offset_m: np.ndarray) -> int:
 #: maximal coordinates) gets none. A box sliding at 3 m/s on a floor stopped at 2.03 m under `paper`
 #: and at 2.29 m under `default`, Coulomb friction's 2.294 m; on the zoo's ramps and sliding strikes
 #: `default` differed from `paper` by a mean |dP| of 0.12-0.13 per object, 0.08-0.09 without the
-#: drag (benchmarks/README.md). Every body, in either representation, is undamped.
+#: drag (benchmarks/HISTORY.md). Every body, in either representation, is undamped.
 NO_DAMPING = {"linearDamping": 0.0, "angularDamping": 0.0}
 
 

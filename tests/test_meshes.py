@@ -121,6 +121,26 @@ def test_bad_meshes_and_meshes_out_of_reach_are_refused_in_one_line_naming_the_o
                                  "file unit), got -1")
 
 
+def test_a_glb_that_places_one_mesh_many_times_is_refused_before_it_is_laid_out(folder, monkeypatch):
+    """Issue 76: a GLB whose nodes place one mesh 3000 times (332 KB) expands to 486 000 vertices; it is
+    refused from its scene graph, before the copies are made (trimesh.Scene.to_mesh never runs)."""
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=2)  # 162 vertices
+    scene = trimesh.Scene()
+    scene.add_geometry(sphere, node_name="n0", geom_name="m")
+    for i in range(1, 3000):
+        place = np.eye(4)
+        place[:3, 3] = (0.01 * i, 0.0, 0.0)
+        scene.graph.update(frame_to=f"n{i}", frame_from=scene.graph.base_frame, geometry="m", matrix=place)
+    (folder / "copies.glb").write_bytes(scene.export(file_type="glb"))
+    monkeypatch.setattr(trimesh.Scene, "to_mesh", lambda self: pytest.fail("the copies were laid out"))
+    with pytest.raises(SceneError) as caught:
+        load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "copies.glb"}, ball=False), "copies.json"))
+    assert str(caught.value) == (f"objects[0].shape.uri: {folder / 'copies.glb'}: 486000 vertices once its 3000 placed "
+                                 "parts are laid out, more than the 200000 read; simplify it")
+
+
 def test_a_scene_from_the_network_cannot_make_the_reader_open_files(folder):
     """A scene parsed without mesh access (the node's ~/scene_json, a question's scene) refuses mesh shapes."""
     with pytest.raises(SceneError) as caught:

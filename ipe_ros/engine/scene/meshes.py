@@ -242,10 +242,18 @@ def _load(content: bytes, file: Path, scale: tuple[float, float, float], path: s
 
     kind = file.suffix.lower().lstrip(".")
     try:
-        mesh = trimesh.load(io.BytesIO(content), file_type=kind, force="mesh", process=True)
+        scene = trimesh.load_scene(io.BytesIO(content), file_type=kind, process=True)
+        # counted before the copies are laid out: a GLB places one mesh at any number of nodes, so a
+        # file of a few MB can expand to millions of vertices (what trimesh.load(force="mesh") does)
+        placed = scene.graph.nodes_geometry
+        expanded = sum(len(scene.geometry[scene.graph[node][1]].vertices) for node in placed)
+        mesh = scene.to_mesh() if expanded <= MAX_MESH_VERTICES else None
     except Exception as exc:  # trimesh raises what its parsers raise
         raise SceneError(path, f"{file}: not a readable {kind.upper()} mesh ({type(exc).__name__}: "
                                f"{str(exc)[:120]})") from None
+    if mesh is None:
+        raise SceneError(path, f"{file}: {expanded} vertices once its {len(placed)} placed parts are laid out, more "
+                               f"than the {MAX_MESH_VERTICES} read; simplify it")
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise SceneError(path, f"{file}: holds no triangles")
     if len(mesh.vertices) > MAX_MESH_VERTICES:

@@ -626,3 +626,26 @@ def test_the_mesh_cache_follows_no_link_waits_on_no_fifo_and_takes_no_planted_en
     mesh_cache.VERIFIED.clear()
     assert load_scenes(path)[0].objects[0].shape == first.objects[0].shape
     assert list(outside.iterdir()) == []
+
+
+def test_the_mesh_cache_stays_within_its_disk_bound_removing_the_oldest_entries(tmp_path, monkeypatch):
+    """Issue 76: the decomposition cache grew without bound. Writing an entry removes the oldest
+    entries beyond ``MAX_CACHE_BYTES``; never the one just written, a link, or another file."""
+    from ipe_ros.engine.scene import mesh_cache
+
+    folder = tmp_path / "convex_parts"
+    part = [np.eye(3) * 0.01]
+    mesh_cache.store_parts(folder, "first", part, 1e-6, (0, 0, 0), (1e-5, 1e-5, 1e-5))
+    size = (folder / "first.json").stat().st_size
+    os.utime(folder / "first.json", ns=(1, 1))  # the oldest
+    (folder / "notes.txt").write_text("x" * 10 * size)  # not an entry: never counted or removed
+    outside = tmp_path / "outside.json"
+    outside.write_text("{}")
+    (folder / "link.json").symlink_to(outside)
+    monkeypatch.setattr(mesh_cache, "MAX_CACHE_BYTES", int(2.5 * size))
+    mesh_cache.store_parts(folder, "second", part, 1e-6, (0, 0, 0), (1e-5, 1e-5, 1e-5))
+    os.utime(folder / "second.json", ns=(2, 2))
+    assert sorted(p.name for p in folder.iterdir()) == ["first.json", "link.json", "notes.txt", "second.json"]
+    mesh_cache.store_parts(folder, "third", part, 1e-6, (0, 0, 0), (1e-5, 1e-5, 1e-5))  # 3 entries > 2.5: one goes
+    assert sorted(p.name for p in folder.iterdir()) == ["link.json", "notes.txt", "second.json", "third.json"]
+    assert outside.read_text() == "{}"

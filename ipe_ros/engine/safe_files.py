@@ -86,3 +86,37 @@ def write_entry(folder_fd: int, name: str, data: bytes) -> None:
         except OSError:
             pass
         raise
+
+
+def trim_folder(folder_fd: int, suffix: str, max_bytes: int, keep: str) -> int:
+    """Remove the oldest (by modification time) regular files ending in ``suffix`` until those left
+    hold at most ``max_bytes`` together; never ``keep`` (the entry just written), never a link, a
+    folder or any other file. The number removed."""
+    entries = []
+    with os.scandir(folder_fd) as listing:
+        for entry in listing:
+            if not entry.name.endswith(suffix) or entry.name == keep:
+                continue
+            try:
+                info = entry.stat(follow_symlinks=False)
+            except OSError:
+                continue
+            if stat.S_ISREG(info.st_mode):
+                entries.append((info.st_mtime_ns, entry.name, info.st_size))
+    total = sum(size for _, _, size in entries)
+    try:
+        total += os.stat(keep, dir_fd=folder_fd, follow_symlinks=False).st_size
+    except OSError:
+        pass
+    removed = 0
+    for _, name, size in sorted(entries):
+        if total <= max_bytes:
+            break
+        try:
+            os.unlink(name, dir_fd=folder_fd)
+        except OSError:
+            continue
+        total -= size
+        removed += 1
+    return removed
+

@@ -2,7 +2,8 @@
 content, its scale and the decomposition's settings (``meshes._compound``), in
 ``$IPE_CACHE_DIR/convex_parts``. Read and written inside its folder only (``safe_files``), and an
 entry is taken only once it describes its mesh (``verified_parts``): a link, a FIFO, a folder or a
-planted entry is named and the mesh decomposed again.
+planted entry is named and the mesh decomposed again. Its entries together hold at most
+``MAX_CACHE_BYTES``: writing one removes the oldest beyond that.
 """
 
 from __future__ import annotations
@@ -14,12 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..safe_files import UnsafeEntry, open_folder, read_entry, write_entry
+from ..safe_files import UnsafeEntry, open_folder, read_entry, trim_folder, write_entry
 
 #: cache keys whose entries were found to describe their mesh in this process
 VERIFIED: set[str] = set()
 #: a mesh cache entry holds a few hundred hull points: far under this
 MAX_CACHE_ENTRY_BYTES = 4 * 2**20
+#: the cache's entries together (thousands of meshes' parts): beyond, the oldest are removed on writing
+MAX_CACHE_BYTES = 256 * 2**20
 
 
 def _report(line: str) -> None:
@@ -121,6 +124,7 @@ def store_parts(folder: Path, key: str, parts: list[np.ndarray], volume_m3: floa
     try:
         write_entry(fd, _entry(folder, key).name, data)
         VERIFIED.add(key)
+        trim_folder(fd, ".json", MAX_CACHE_BYTES, keep=_entry(folder, key).name)  # a bounded disk
     except (UnsafeEntry, OSError):
         pass
     finally:

@@ -35,7 +35,7 @@ from .cli_ask import add_ask_parser, cmd_ask
 from .cli_fit import add_fit_parser, cmd_fit
 from .cli_infer import add_infer_parser, cmd_infer
 from .cli_inputs import add_input_options, add_inputs_from_option, finite
-from .cli_predict import EXIT_BAD_INPUT, batch_map, cmd_predict, format_table, run_predictions, stored_line
+from .cli_predict import EXIT_BAD_INPUT, add_batch_options, batch_map, cmd_predict, format_table, run_predictions, stored_line
 from .cli_queries import add_query_parameter_options
 from .engine import PRESETS, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError, load_scenes, preset
 from .engine.scene.catalogue import capped_tower, scene_catalogue
@@ -156,12 +156,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--stimuli", type=int, default=None, help="use the first N stimuli of each set")
     e.add_argument("--grid-samples", type=int, default=None, help="k per cell of fall's sigma x phi grid")
     e.add_argument("--seed", type=int, default=0)
-    e.add_argument("--workers", type=int, default=default_workers(), help="worker processes (0: in-process)")
-    e.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="run the samples on a Dask cluster (default: $IPE_DASK_SCHEDULER, else --workers here)")
-    e.add_argument("--resume", default=None, metavar="DIR",
-                   help="keep every sample's result in DIR (keyed by scene, settings and seed); a run started again "
-                        "with the same DIR computes only what is missing")
+    add_batch_options(e)
     e.add_argument("--preset", default=DEFAULT_PRESET, choices=sorted(PRESETS))
     e.add_argument("--resamples", type=int, default=10_000, help="bootstrap resamples (paper: 10 000)")
     e.add_argument("--human", default=None, help="CSV with columns stimulus,response (people's judgments)")

@@ -13,9 +13,9 @@ import sys
 from pathlib import Path
 
 from .cli_inputs import float_list
-from .cli_predict import batch_map, stored_line
+from .cli_predict import add_batch_options, batch_map, stored_line
 from .engine import PRESETS, ConfigError, load_scenes
-from .engine.config import DEFAULT_PRESET, default_workers
+from .engine.config import DEFAULT_PRESET
 from .engine.input_sets import MODEL_INPUTS, model_input
 
 
@@ -59,12 +59,7 @@ def add_fit_parser(sub) -> None:
     f.add_argument("--seed", type=int, default=0, help="the samples' and the folds' seed")
     f.add_argument("--stimuli", type=int, default=None, help="only the first N stimuli with responses")
     f.add_argument("--preset", default=DEFAULT_PRESET, choices=sorted(PRESETS))
-    f.add_argument("--workers", type=int, default=default_workers(), help="worker processes (0: in-process)")
-    f.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="run the samples on a Dask cluster (default: $IPE_DASK_SCHEDULER, else --workers here)")
-    f.add_argument("--resume", default=None, metavar="DIR",
-                   help="keep every sample's result in DIR; a fit run again with the same DIR simulates only "
-                        "what is missing")
+    add_batch_options(f)
     f.add_argument("-o", "--output", default="fit.json", help="the parameter set (default fit.json)")
     f.add_argument("--report", default=None, metavar="DIR", help="also write DIR/fit.md with its figures")
 

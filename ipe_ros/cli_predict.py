@@ -3,6 +3,7 @@ from sigma, vision or a depth camera's images, on local worker processes or a Da
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 
 import dataclasses
@@ -16,7 +17,7 @@ from .cli_ask import depth_posterior
 from .cli_inputs import given_request_arguments
 from .cli_queries import given_query_parameters
 from .engine import AdaptiveStop, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError, WorkerPool, load_scenes, predict
-from .engine.config import anytime_batch_size
+from .engine.config import anytime_batch_size, default_workers
 from .engine.checking.fidelity import DEFAULT_CHECK, SelfCheck
 from .engine.inputs import spelled
 from .engine.perceptions import perception_source
@@ -108,6 +109,16 @@ def sample_map(scheduler: str | None, workers: int):
     if workers < 0:
         raise ConfigError("--workers", f"must be >= 0, got {workers}")
     return WorkerPool(workers) if workers > 0 else None
+
+
+def add_batch_options(parser: argparse.ArgumentParser) -> None:
+    """Where a batch command's samples run, and where they are kept (``batch_map`` reads them)."""
+    parser.add_argument("--workers", type=int, default=default_workers(), help="worker processes (0: in-process)")
+    parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                        help="run the samples on a Dask cluster (default: $IPE_DASK_SCHEDULER, else --workers here)")
+    parser.add_argument("--resume", default=None, metavar="DIR",
+                        help="keep every sample's result in DIR (keyed by scene, settings and seed); a run started "
+                             "again with the same DIR computes only what is missing")
 
 
 @contextlib.contextmanager

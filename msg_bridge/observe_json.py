@@ -1,23 +1,17 @@
-"""``std_msgs/String`` JSON -> observed motion (``~/observe``): an ``ipe_ros.observation/1`` object,
-plus optionally ``"id"``, echoed in its answer on ``~/properties`` (written by ``answer_to_string``);
-or an ``infer`` question on ``~/ask``: ``{"question": "infer", "id": ..., "observation": {...}}``."""
+"""``std_msgs/String`` JSON, once read, -> observed motion (``~/observe``): an ``ipe_ros.observation/1``
+object (read with ``inference.observation.parsed_json``), plus optionally ``"id"``, echoed in its
+answer on ``~/properties`` (written by ``answer_to_string``); or an ``infer`` question on ``~/ask``
+(read with ``ask_json.parse_request``): ``{"question": "infer", "id": ..., "observation": {...}}``."""
 
 from __future__ import annotations
 
-from std_msgs.msg import String
-
 from ipe_ros.engine.errors import ConfigError
-from ipe_ros.engine.inference.observation import Observation, observation_from_dict, parsed_json
+from ipe_ros.engine.inference.observation import Observation, observation_from_dict
 
 from .ask_json import id_of
 
 #: the fields of an ``infer`` question
 INFER_FIELDS = ("question", "id", "observation")
-
-
-def string_to_observation(msg: String) -> tuple[str, Observation]:
-    """(the request's id or "", the observation); ConfigError/SceneError naming the field."""
-    return observation_with_id(parsed_json(msg.data))
 
 
 def observation_with_id(data) -> tuple[str, Observation]:

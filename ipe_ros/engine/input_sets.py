@@ -15,10 +15,10 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 from .errors import ConfigError, shown
-from .inputs import INPUTS, Input
+from .inputs import INPUTS, Input, from_node
 
 FORMAT = "ipe_ros.inputs/1"
 #: the inputs a parameter set may hold: the model's (not the simulation's, stopping or budget)
@@ -70,13 +70,20 @@ def load_input_set(path: str | Path) -> dict[str, Any]:
     inputs = data.get("inputs")
     if not isinstance(inputs, dict):
         raise ConfigError("inputs_from", f"{path.name}: 'inputs' must be an object of model inputs")
+    try:
+        return request_arguments_of(inputs)
+    except ConfigError as exc:
+        raise ConfigError("inputs_from", f"{path.name}: {exc}") from None
+
+
+def request_arguments_of(values: Mapping[str, Any]) -> dict[str, Any]:
+    """``build_request``'s keywords of model inputs named as the node's parameters, each checked
+    against its row's range (a ConfigError naming it); a value that means "not set" (mu 0: the
+    scene's own masses) left out, as the node reads its parameters (``inputs.from_node``)."""
     out: dict[str, Any] = {}
-    for name, value in inputs.items():
-        try:
-            found, checked = model_input(name), checked_value(name, value)
-        except ConfigError as exc:
-            raise ConfigError("inputs_from", f"{path.name}: {exc}") from None
-        if name == "mu" and checked == 0:
-            continue  # the node's "unset": the scene's own masses
-        out[found.field] = checked
+    for name, value in values.items():
+        found = model_input(name)
+        given = from_node(found, checked_value(name, value))
+        if given is not None:
+            out[found.field] = given
     return out

@@ -13,7 +13,6 @@ own Monte Carlo adds noise). An interval is as fine as the grid: its ends are gr
 
 from __future__ import annotations
 
-import dataclasses
 import datetime
 import json
 import math
@@ -27,7 +26,8 @@ from ... import __version__
 from ...engine import ConfigError, Scene
 from ...engine.errors import shown
 from .crossval import FoldResult, Scores, cross_validate, pooled, train
-from .grid import Evaluation, evaluate, grid_points, input_arguments
+from ...engine.input_sets import request_arguments_of
+from .grid import Evaluation, evaluate, grid_points
 from .mapping import ResponseMapping
 from .readout import Readout
 from .responses import Responses
@@ -83,8 +83,13 @@ class FitResult:
         return self.evaluations[self.chosen].values
 
     def profile(self, name: str) -> tuple[list[float], list[float]]:
-        values = sorted({e.values[name] for e in self.evaluations})
-        return values, [max(ll for e, ll in zip(self.evaluations, self.loglik) if e.values[name] == v) for v in values]
+        return _profile(self.evaluations, self.loglik, name)
+
+
+def _profile(evaluations: Sequence[Evaluation], loglik: np.ndarray, name: str) -> tuple[list[float], list[float]]:
+    """Parameter ``name``'s grid values and, at each, the best log-likelihood over the others."""
+    values = sorted({e.values[name] for e in evaluations})
+    return values, [max(ll for e, ll in zip(evaluations, loglik) if e.values[name] == v) for v in values]
 
 
 def check_grid(grid: Mapping[str, Sequence[float]], fixed: Mapping[str, float]) -> None:
@@ -96,7 +101,7 @@ def check_grid(grid: Mapping[str, Sequence[float]], fixed: Mapping[str, float]) 
         if len(values) < 2 or len(set(values)) != len(values):
             raise ConfigError("grid", f"{name}: give two or more different values, got {shown(list(values))}")
         for v in values:
-            input_arguments({name: v})
+            request_arguments_of({name: v})
 
 
 def evaluate_grid(scenes: Sequence[Scene], readout: Readout, grid: Mapping[str, Sequence[float]], *,
@@ -144,11 +149,10 @@ def fit_evaluations(evaluations: Sequence[Evaluation], reference: int, responses
     chosen = int(np.argmax(lls))
     names = settings.names
     dispersion = _overdispersion(mappings[chosen].p_yes(p_models[chosen]), responses, len(names) + 3)
-    result = FitResult(readout, responses, tuple(evaluations), reference, tuple(results), pooled(results, responses),
-                       pooled(results, responses, reference=True), chosen, mappings[chosen], lls, dispersion, {},
-                       settings)
-    intervals = {name: _interval(*result.profile(name), dispersion) for name in names}
-    return dataclasses.replace(result, intervals=intervals)
+    intervals = {name: _interval(*_profile(evaluations, lls, name), dispersion) for name in names}
+    return FitResult(readout, responses, tuple(evaluations), reference, tuple(results), pooled(results, responses),
+                     pooled(results, responses, reference=True), chosen, mappings[chosen], lls, dispersion, intervals,
+                     settings)
 
 
 def _overdispersion(p_yes: np.ndarray, responses: Responses, fitted: int) -> float:

@@ -10,28 +10,20 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any, Mapping, Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
-from ...engine import ConfigError, Scene
-from ...engine.input_sets import MODEL_INPUTS, checked_value, model_input
+from ...engine import Scene
+from ...engine.input_sets import request_arguments_of
 from ...engine.request import build_request
 from ..reporting import progress
 from ..runs import run_model
 from .readout import Readout
 
-#: the inputs a fit may vary or hold: the model's (``engine.input_sets.MODEL_INPUTS``), by their
-#: node parameter names, which the parameter set file uses too
-FITTABLE = MODEL_INPUTS
+#: a fit varies or holds the model's inputs (``engine.input_sets.MODEL_INPUTS``) by their node
+#: parameter names, which the parameter set file uses too; these two only change what moves at t = 0
 _LAUNCH = ("launch_speed_log_sd", "launch_direction_sd_deg")
-
-
-def input_arguments(values: Mapping[str, float]) -> dict[str, Any]:
-    """``build_request``'s keywords of model inputs named as node parameters, each checked against
-    its row's range (a ConfigError naming the parameter)."""
-    return {model_input(name).field: checked_value(name, value) for name, value in values.items()
-            if not (name == "mu" and value == 0)}  # mu 0: the node's "unset", the scene's own masses
 
 
 @dataclass(frozen=True)
@@ -66,7 +58,7 @@ def evaluate(scenes: Sequence[Scene], readout: Readout, point: tuple[tuple[str, 
     cache = {} if cache is None else cache
     start = time.perf_counter()
     values = {**fixed, **dict(point)}
-    request = build_request(**input_arguments(values), samples=samples, queries=(readout.query,),
+    request = build_request(**request_arguments_of(values), samples=samples, queries=(readout.query,),
                             contact=readout.contact, preset_name=preset_name, seed=seed, self_check=False)
     keys = [(s.name, _effective(s, values)) for s in scenes]
     todo = [i for i, k in enumerate(keys) if k not in cache]

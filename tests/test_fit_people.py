@@ -17,6 +17,7 @@ from ipe_ros.analysis.fitting.readout import parse_readout
 from ipe_ros.analysis.fitting.responses import Responses
 from ipe_ros.cli import build_parser
 from ipe_ros.cli_inputs import given_request_arguments
+from ipe_ros.engine.errors import ConfigError
 from ipe_ros.engine.input_sets import load_input_set
 from ipe_ros.engine.scene.format import scene_from_dict, scene_to_dict
 
@@ -113,6 +114,21 @@ def test_the_parameter_set_loads_as_the_model_s_inputs(synthetic, tmp_path):
     given = given_request_arguments(args)
     assert given["sigma_m"] == 0.03
     assert given["launch_direction_sd_deg"] == result.parameters["launch_direction_sd_deg"]
+
+
+def test_a_parameter_set_that_is_no_file_is_refused_without_waiting_on_it(tmp_path):
+    """Issue 76 (the next inputs through the same bounds): a FIFO as the node's inputs_from (or
+    --inputs-from) is refused at once, not waited on; a device is not read without end."""
+    import os
+
+    fifo = tmp_path / "fit.json"
+    os.mkfifo(fifo)
+    for path, message in ((fifo, f"inputs_from: {fifo} is not a regular file (a folder, a FIFO or a device)"),
+                          (tmp_path / "none.json", f"inputs_from: {tmp_path / 'none.json'}: no such file"),
+                          ("/dev/zero", "inputs_from: /dev/zero is not a regular file (a folder, a FIFO or a device)")):
+        with pytest.raises(ConfigError) as caught:
+            load_input_set(path)
+        assert str(caught.value) == message
 
 
 # ---- bad inputs, each refused in one line ---------------------------------------------------------

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import time
 
 import numpy as np
 import pytest
@@ -105,7 +106,7 @@ def test_bad_meshes_and_meshes_out_of_reach_are_refused_in_one_line_naming_the_o
                      "(export DAE or glTF as GLB)",
         "open.obj": f"{where}.uri: {folder / 'open.obj'}: is not closed (it has holes or loose edges), so it "
                     "encloses no volume to give a mass; close it (fill its holes) or give the object as convex parts",
-        "folder.obj": f"{where}.uri: {folder / 'folder.obj'} is not a regular file (a folder or a device)",
+        "folder.obj": f"{where}.uri: {folder / 'folder.obj'} is not a regular file (a folder, a FIFO or a device)",
         "zero.obj": f"{where}.uri: 'zero.obj' is outside the folders meshes may be read from ({folder})",
         str(outside): f"{where}.uri: '{outside}' is outside the folders meshes may be read from ({folder})",
         "https://example.com/mug.obj": f"{where}.uri: 'https://example.com/mug.obj': only file paths, file:// and "
@@ -412,8 +413,15 @@ def test_a_decomposition_over_its_time_is_ended_and_the_scene_refused_saying_so(
     with pytest.raises(SceneError, match=r"^objects\[0\]\.shape\.uri: its convex decomposition did not finish within "
                                          r"0.05 s; decompose it once ahead"):
         scenes_from_json(json.dumps(data), meshes=tight)
-    assert set(multiprocessing.active_children()) <= running and not list((tmp_path / "tight").glob("*.json"))
-    bounded = MeshAccess(roots=(folder,), base=folder, cache_dir=tmp_path / "bounded", decompose_within_s=120.0)
+    assert set(multiprocessing.active_children()) <= running
+    assert [p.name.split(".", 1)[1] for p in (tmp_path / "tight").glob("*.json")] == ["refused.json"]  # no parts
+    # asked again with no more time: refused at once from memory, naming the entry that remembers it
+    start = time.perf_counter()
+    with pytest.raises(SceneError, match=r"^objects\[0\]\.shape\.uri: its convex decomposition did not finish within "
+                                         r"0.05 s; .* \(remembered from .*; remove .*\.refused\.json to try again\)$"):
+        scenes_from_json(json.dumps(data), meshes=tight)
+    assert time.perf_counter() - start < 1.0 and set(multiprocessing.active_children()) <= running
+    bounded = MeshAccess(roots=(folder,), base=folder, cache_dir=tmp_path / "tight", decompose_within_s=120.0)
     here = MeshAccess(roots=(folder,), base=folder, cache_dir=tmp_path / "here")
     [a], [b] = scenes_from_json(json.dumps(data), meshes=bounded), scenes_from_json(json.dumps(data), meshes=here)
     assert a.objects[0].shape == b.objects[0].shape and len(a.objects[0].shape.parts) > 1
@@ -422,12 +430,14 @@ def test_a_decomposition_over_its_time_is_ended_and_the_scene_refused_saying_so(
 
 def test_a_recording_draws_the_mesh_an_object_was_read_from(folder, tmp_path):
     """Rerun shows the mug itself (every vertex of the file, as read: scaled, +z up), not its parts'
-    hulls; where the file cannot be read again (a package:// URI here) the parts are drawn."""
+    hulls; a file outside the reader's roots is never read to draw it (issue 76: a compound's source
+    was read from any path when recording, and its triangles landed in the .rrd)."""
     import dataclasses
 
     from rerun.chunk import RrdReader
 
-    from ipe_ros.engine.scene.meshes import source_triangles
+    from ipe_ros.engine.scene.format import scene_to_dict
+    from ipe_ros.engine.scene.meshes import MeshAccess, source_triangles
     from ipe_ros.viz.rerun_log import write_prediction_rrd
 
     [scene] = load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "mug.obj"}), "drawn.json"))
@@ -448,11 +458,17 @@ def test_a_recording_draws_the_mesh_an_object_was_read_from(folder, tmp_path):
         raise AssertionError("no mesh drawn for the mug")
 
     assert drawn_vertices(scene) == len(vertices)
-    packaged = dataclasses.replace(scene.objects[0].shape, source=dataclasses.replace(
-        scene.objects[0].shape.source, uri="package://nowhere/mug.obj"))
-    elsewhere = dataclasses.replace(scene, objects=(dataclasses.replace(scene.objects[0], shape=packaged),
-                                                    *scene.objects[1:]))
-    assert drawn_vertices(elsewhere) != len(vertices)  # the parts' hull faces
+    # the scene as JSON (its mug a compound naming its source): read where the file is under the
+    # reader's roots, the mug is drawn; read where it is not (the node with no mesh_roots: a sender
+    # could name any file), the source is shown but never read, and the parts are drawn
+    as_data = json.dumps(scene_to_dict(scene))
+    [within] = scenes_from_json(as_data, meshes=MeshAccess(roots=(folder.resolve(),)))
+    assert drawn_vertices(within) == len(vertices)
+    for outside in (None, MeshAccess(roots=()), MeshAccess(roots=(tmp_path / "elsewhere",))):
+        [named] = scenes_from_json(as_data, meshes=outside)
+        assert named.objects[0].shape.source == scene.objects[0].shape.source
+        assert named.objects[0].shape.source.read_from is None
+        assert drawn_vertices(named) != len(vertices)  # the parts' hull faces
 
 
 @pytest.mark.slow  # a decomposition of its own (seconds), and `paper`

@@ -600,14 +600,72 @@ def test_a_mesh_marker_is_read_under_mesh_roots_and_refused_where_none_are_set(r
     got = answers(ros)
     pub = ros.publisher(MarkerArray, "/ipe/scene")
     pub.publish(MarkerArray(markers=[mug, ball]))
-    wait_until(lambda: len(got), TIMEOUT_S, "the mug's answer")
-    assert "error" not in got[0], got[0]
-    assert got[0]["object_fall_probability"] == {"mug": 0.0, "ball": 0.0}
+    wait_until(lambda: len(got) >= 2, TIMEOUT_S, "the mug's answer")
+    # first "decomposing" (the mesh is new: decomposed off the executor), then the answer
+    assert got[0]["decomposing"]["object"] == "markers[0].mesh_resource", got[0]
+    assert got[0]["decomposing"]["mesh"] == "mug.obj" and got[0]["received_on"] == "/ipe/scene"
+    assert "error" not in got[1], got[1]
+    assert got[1]["object_fall_probability"] == {"mug": 0.0, "ball": 0.0}
     # where the node may read is fixed at start-up: no participant may point it elsewhere (issue 76)
     (result,) = set_params(ros, mesh_roots="/")
     assert not result.successful and "read-only" in result.reason
     assert node.service.config.meshes.roots == (tmp_path,)
     assert node.service.stats().rejected == 0
+
+
+def _mesh_scene(name: str, uri: str, **fields) -> str:
+    return json.dumps({"format": "ipe_ros.scene/2", "name": name, "gravity_m_s2": [0.0, 0.0, -9.81],
+                       "support": {"type": "floor", "height_m": 0.0, "friction": 0.6, "restitution": 0.0},
+                       "objects": [{"name": name, "shape": {"type": "mesh", "uri": uri}, "position_m": [0, 0, 0.016],
+                                    "orientation_xyzw": [0.0, 0.0, 0.0, 1.0], "mass_kg": 0.2, "friction": 0.6,
+                                    "restitution": 0.0, "group": "", "static": False, **fields}]})
+
+
+def test_a_new_mesh_decomposes_off_the_executor_and_its_refusal_is_remembered(ros, tmp_path, monkeypatch):
+    """Issues 73 and 76: a mesh not yet decomposed never holds up intake. Its scene is answered
+    "decomposing" at once while a question about another scene is answered; a decomposition over
+    ``mesh_decomposition_s`` is ended and the scene refused, and sent again it is refused at once
+    (remembered, not decomposed for another 8 s); a question whose own scene holds a new mesh
+    hears "decomposing" (not final), then its one final answer."""
+    trimesh = pytest.importorskip("trimesh")
+    from tests.test_actions import STACK
+
+    monkeypatch.setenv("IPE_CACHE_DIR", str(tmp_path / "cache"))
+    # ~25 s to decompose here (16 200 vertices): far over the 8 s allowed on any machine
+    trimesh.creation.torus(0.05, 0.015, major_sections=180, minor_sections=90).export(tmp_path / "slow.obj")
+    trimesh.creation.torus(0.05, 0.015, major_sections=24, minor_sections=12).export(tmp_path / "quick.obj")
+    node = ros.start_ipe_node(samples=1, ground_truth=True, mesh_roots=str(tmp_path), mesh_decomposition_s=8.0)
+    got = answers(ros)
+    replies = ros.collect(String, "/ipe/answer", LATCHED_QOS)
+    decoded = lambda: [json.loads(m.data) for m in list(replies)]  # noqa: E731
+    scenes = ros.publisher(String, "/ipe/scene_json")
+    ask = ros.publisher(String, "/ipe/ask")
+    scenes.publish(String(data=_mesh_scene("slow", str(tmp_path / "slow.obj"))))
+    wait_until(lambda: len(got), TIMEOUT_S, "the slow mesh's scene answered \"decomposing\"")
+    assert got[0]["decomposing"] == {"object": "objects[0].shape.uri", "mesh": "slow.obj", "triangles": 32400,
+                                     "meshes_ahead": 0, "within_s": 8.0}, got[0]
+    ask.publish(String(data=json.dumps({"id": "other", "question": "remove", "objects": ["top"],
+                                        "scene": json.loads(scene_to_json(STACK))})))
+    wait_until(lambda: any(r["final"] for r in decoded()), TIMEOUT_S, "the other scene's question answered")
+    assert node.decompositions.status()["decomposing"]["mesh"] == "slow.obj"  # answered meanwhile
+    assert len(got) == 1 and "answer" in decoded()[-1], decoded()[-1]
+    wait_until(lambda: len(got) >= 2, TIMEOUT_S, "the slow mesh's refusal")
+    assert got[1]["error"].startswith("objects[0].shape.uri: its convex decomposition did not finish within 8 s; "
+                                      "decompose it once ahead"), got[1]
+    assert got[1]["refused_on"] == "/ipe/scene_json" and node.decompositions.status()["decomposing"] is None
+    scenes.publish(String(data=_mesh_scene("slow", str(tmp_path / "slow.obj"))))
+    wait_until(lambda: len(got) >= 3, 5.0, "the same scene refused at once")
+    assert "decomposing" not in got[2] and "(remembered from " in got[2]["error"], got[2]
+    beside = json.loads(_mesh_scene("quick", str(tmp_path / "quick.obj")))
+    beside["objects"].append({**beside["objects"][0], "name": "block", "position_m": [0.5, 0.0, 0.05],
+                              "shape": {"type": "box", "extents_m": [0.1, 0.1, 0.1]}})
+    ask.publish(String(data=json.dumps({"id": "ring", "question": "remove", "objects": ["block"], "scene": beside})))
+    wait_until(lambda: any(r["final"] and r["id"] == "ring" for r in decoded()), TIMEOUT_S, "the ring's answer")
+    ring = [r for r in decoded() if r["id"] == "ring"]
+    assert [r["final"] for r in ring] == [False, True] and ring[0]["decomposing"]["mesh"] == "quick.obj", ring
+    assert "answer" in ring[1] and ring[1]["scene_id"] == "quick", ring[1]
+    assert node.decompositions.status() == {"decomposing": None, "meshes_waiting": 0, "inputs_waiting": 0,
+                                            "decomposed": 1, "refused": 1}
 
 
 def test_a_parameter_set_replaces_the_defaults_and_an_override_wins(ros, tmp_path):

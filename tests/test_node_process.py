@@ -194,7 +194,7 @@ def test_the_node_runs_on_its_own_dds_profiles_unless_the_environment_names_its_
     node's own profiles free each payload when its message is taken (ipe_ros/ros/fastdds_node.xml)."""
     import xml.etree.ElementTree as ElementTree
 
-    from ipe_ros.ros.node import FASTDDS_PROFILES, use_node_dds_profiles
+    from ipe_ros.ros.process_setup import FASTDDS_PROFILES, use_node_dds_profiles
 
     environ: dict[str, str] = {}
     assert use_node_dds_profiles(environ)
@@ -209,9 +209,36 @@ def test_the_node_runs_on_its_own_dds_profiles_unless_the_environment_names_its_
     assert policies == ["DYNAMIC", "DYNAMIC"]  # writers and readers
 
 
+def test_a_dds_profile_file_fast_dds_would_hang_on_ends_the_node_at_once_naming_it(tmp_path):
+    """Issue 76: a Fast DDS profiles file that is a FIFO hung start-up silently inside rclpy.init (Fast
+    DDS waits for a writer). Now the node ends at once, exit 2, naming the variable and the fix;
+    so for a device, a folder, and a FIFO at the default profile name in the working folder."""
+    from ipe_ros.ros.process_setup import unusable_dds_profile_file
+
+    fifo = tmp_path / "profiles.xml"
+    os.mkfifo(fifo)
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(domain_id_for_tests()),
+               FASTRTPS_DEFAULT_PROFILES_FILE=str(fifo))
+    result = subprocess.run([sys.executable, "-m", "ipe_ros.ros.node"], env=env, capture_output=True, text=True,
+                            timeout=60)
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.strip().splitlines()[-1] == (
+        f"ipe_node: error: FASTRTPS_DEFAULT_PROFILES_FILE: {fifo} is a FIFO, not a file (Fast DDS would wait on it "
+        "for ever at start-up); point it at a profiles XML file, or unset it")
+    assert unusable_dds_profile_file({"FASTDDS_ENVIRONMENT_FILE": "/dev/zero"}, tmp_path / "none").startswith(
+        "FASTDDS_ENVIRONMENT_FILE: /dev/zero is a device")
+    assert "is a folder" in unusable_dds_profile_file({"FASTDDS_DEFAULT_PROFILES_FILE": str(tmp_path)}, tmp_path / "none")
+    os.mkfifo(tmp_path / "DEFAULT_FASTRTPS_PROFILES.xml")
+    assert unusable_dds_profile_file({}, tmp_path).startswith("DEFAULT_FASTRTPS_PROFILES.xml in the working folder: ")
+    (tmp_path / "mine.xml").write_text("<profiles/>")
+    assert unusable_dds_profile_file({"FASTRTPS_DEFAULT_PROFILES_FILE": str(tmp_path / "mine.xml"),
+                                      "FASTDDS_DEFAULT_PROFILES_FILE": str(tmp_path / "missing.xml")},
+                                     tmp_path / "none") is None  # a file, and a missing one (Fast DDS says so)
+
+
 def test_the_node_keeps_large_buffers_out_of_the_heap_unless_told_otherwise():
     """A fixed mmap threshold (glibc): 1-2 MB messages are returned to the system when freed."""
-    from ipe_ros.ros.node import return_large_buffers_to_the_system
+    from ipe_ros.ros.process_setup import return_large_buffers_to_the_system
 
     assert return_large_buffers_to_the_system({}) is True  # glibc here
     assert return_large_buffers_to_the_system({"MALLOC_MMAP_THRESHOLD_": "65536"}) is False

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from .errors import ConfigError, shown
+from .safe_files import UnreadableFile, read_file_bounded
 from .inputs import INPUTS, Input, from_node
 
 FORMAT = "ipe_ros.inputs/1"
@@ -53,12 +54,12 @@ def checked_value(name: str, value: Any) -> Any:
 def load_input_set(path: str | Path) -> dict[str, Any]:
     """The request's arguments (``build_request``'s keywords, by input field) a parameter set holds."""
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError("inputs_from", f"no such file {str(path)!r}")
-    if path.stat().st_size > MAX_BYTES:
-        raise ConfigError("inputs_from", f"{path.name} is over {MAX_BYTES >> 10} KiB: not a parameter set")
+    try:  # never waiting on a FIFO, nor reading a device or a huge file whole
+        content = read_file_bounded(path, MAX_BYTES, "a parameter set")
+    except UnreadableFile as exc:
+        raise ConfigError("inputs_from", str(exc)) from None
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        data = json.loads(content.decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ConfigError("inputs_from", f"{path.name} is not JSON ({exc})") from None
     if not isinstance(data, dict):

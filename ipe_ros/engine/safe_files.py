@@ -24,6 +24,34 @@ def is_folder(path: Path) -> bool:
         return False
 
 
+class UnreadableFile(Exception):
+    """A file named by an input is not one to read (missing, not a regular file, too large): the
+    message says which, for the caller to name its field."""
+
+
+def read_file_bounded(path: Path, max_bytes: int, what: str = "a file") -> bytes:
+    """``path``'s bytes, never waiting on a FIFO or reading past ``max_bytes`` (a device, a file that
+    grows): UnreadableFile naming ``path`` otherwise. Links are followed (the caller decided where
+    a file may be read from)."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    except FileNotFoundError:
+        raise UnreadableFile(f"{path}: no such file") from None
+    except OSError as exc:
+        raise UnreadableFile(f"{path}: cannot be read ({exc.strerror})") from None
+    info = os.fstat(fd)
+    if not stat.S_ISREG(info.st_mode):
+        os.close(fd)
+        raise UnreadableFile(f"{path} is not a regular file (a folder, a FIFO or a device)")
+    with os.fdopen(fd, "rb") as handle:
+        if info.st_size > max_bytes:
+            raise UnreadableFile(f"{path}: {info.st_size} bytes, more than the {max_bytes} {what} may have")
+        content = handle.read(max_bytes + 1)
+    if len(content) > max_bytes:
+        raise UnreadableFile(f"{path} grew past the {max_bytes} bytes {what} may have while read")
+    return content
+
+
 class UnsafeEntry(Exception):
     """A cache's entry or folder is not what the cache writes (a link, a file, a FIFO, too large)."""
 

@@ -33,6 +33,7 @@ from ..engine import load_scenes  # noqa: E402
 from ..engine.config import DEFAULT_SAMPLES, DEFAULT_SIGMA_M, default_workers  # noqa: E402
 from ..engine.scene.examples import example_scene_path  # noqa: E402
 from .executor import SubmitOnceExecutor  # noqa: E402
+from .process_setup import unusable_dds_profile_file  # noqa: E402
 from .node import LATCHED_QOS, IpeNode  # noqa: E402
 
 
@@ -142,6 +143,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--timeout", type=float, default=300.0, help="give up after this many seconds per step")
     args = parser.parse_args(argv)
     output_dir = Path(args.output_dir).resolve()
+    unusable = unusable_dds_profile_file()
+    if unusable is not None:  # Fast DDS would wait on it for ever inside rclpy.init
+        print(f"ipe_ros_demo: error: {unusable}", file=sys.stderr)
+        return 2
     try:
         answers = run(output_dir, args.samples, args.workers, args.timeout)
     except DemoFailed as exc:

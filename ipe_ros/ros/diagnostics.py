@@ -18,7 +18,8 @@ def _diagnostic_value(value) -> str:
     return clip(str(value), 600)
 
 
-def diagnostics_msg(stats: ServiceStats, name: str, stamp_ns: int, hardware_id: str = "") -> DiagnosticArray:
+def diagnostics_msg(stats: ServiceStats, name: str, stamp_ns: int, hardware_id: str = "",
+                    meshes: dict | None = None) -> DiagnosticArray:
     """One DiagnosticStatus for the node, reflecting the recent state (not the whole history):
 
     - ERROR: shutting down, no worker process alive, or the latest prediction failed (until the
@@ -26,7 +27,8 @@ def diagnostics_msg(stats: ServiceStats, name: str, stamp_ns: int, hardware_id: 
     - WARN: one of the last RECENT_EVENTS inputs or predictions was rejected, partial (failed
       samples, cut by the budget), contradicted by the reference physics without time to escalate,
       or lost its recording; or the prediction in flight has run past the budget;
-    - OK otherwise ("predicting" / "idle"). The counters since start come as key/values.
+    - OK otherwise ("predicting" / "idle"). The counters since start come as key/values, and
+      ``meshes`` (``DecompositionService.status``): the mesh decomposing, those waiting, the counts.
     """
     recent = stats.recent
     overdue = stats.in_flight_s is not None and stats.budget_s is not None and stats.in_flight_s > stats.budget_s + 5
@@ -61,6 +63,11 @@ def diagnostics_msg(stats: ServiceStats, name: str, stamp_ns: int, hardware_id: 
         "depth_posteriors": stats.depth_posteriors,
         "last_compute_s": stats.last_compute_s, "last_error": stats.last_error,
     }
+    if meshes is not None:
+        current = meshes["decomposing"]
+        values.update({"mesh_decomposing": None if current is None else f"{current['mesh']} ({current['running_s']} s)",
+                       "meshes_waiting": meshes["meshes_waiting"], "inputs_waiting_on_meshes": meshes["inputs_waiting"],
+                       "meshes_decomposed": meshes["decomposed"], "meshes_refused": meshes["refused"]})
     status = DiagnosticStatus(level=level, name=name, message=clip(message, 1000), hardware_id=hardware_id,
                               values=[KeyValue(key=k, value=_diagnostic_value(v)) for k, v in values.items()])
     return DiagnosticArray(header=stamp_ns_to_header(stamp_ns, ""), status=[status])

@@ -8,10 +8,8 @@ processes and calls back here to publish. Topics, the service and parameters are
 from __future__ import annotations
 
 import collections
-import os
 import sys
 import time
-from pathlib import Path
 from typing import Any, Callable
 
 import rclpy
@@ -37,14 +35,18 @@ from msg_bridge.outputs import fall_direction_msg, fall_fraction_msg, fall_proba
 from msg_bridge.stamps import header_to_stamp_ns
 
 from ..engine import ConfigError
+from ..engine.scene.meshes import NotYetDecomposed
 from .depth import DepthInterface
 from .observe import ObserveInterface
 from ..engine.errors import clip
 from ..service import (Answer, NoSceneError, PredictionFailed, PredictionService, QuestionService, ServiceConfig,
                        StampedScene, error_answer, refusal_answer)
+from ..service.decompositions import DecompositionService
+from .mesh_wait import MeshWaitInterface
 from . import params
 from .diagnostics import diagnostics_msg
 from .executor import SubmitOnceExecutor
+from .process_setup import return_large_buffers_to_the_system, unusable_dds_profile_file, use_node_dds_profiles
 
 #: Outputs are "latched": reliable + transient-local, depth 1, so a late joiner gets the latest answer.
 LATCHED_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
@@ -67,7 +69,7 @@ DIAGNOSTICS_PERIOD_S = 1.0
 REFUSAL_LOG_LINES_PER_S = 5
 
 
-class IpeInterface(ObserveInterface, DepthInterface):
+class IpeInterface(ObserveInterface, DepthInterface, MeshWaitInterface):
     """The node's topics, service and prediction service, shared by :class:`IpeNode` (starts
     answering at once) and :class:`IpeLifecycleNode` (configure starts the workers, activate starts
     answering; ros/lifecycle.py). Mixed into an rclpy ``Node``."""
@@ -117,10 +119,12 @@ class IpeInterface(ObserveInterface, DepthInterface):
                                          start_method=start_method, publish_error=self._publish_error, pool=pool)
         self.questions = QuestionService(self.service, publish=self._publish_question_answer,
                                          log_error=self._log_error)
+        self.decompositions = DecompositionService(log_error=self._log_error, log_info=self._log_info)
         self._diagnostics_timer = self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics,
                                                     callback_group=MutuallyExclusiveCallbackGroup())
         self.service.start()
         self.questions.start()
+        self.decompositions.start()
         self._open_observations(LATCHED_QOS)
         return config
 
@@ -173,6 +177,9 @@ class IpeInterface(ObserveInterface, DepthInterface):
         in flight with an error naming ``reason``; False when none was open."""
         # both stop taking work first; the pool's close then ends whatever a question thread waits on,
         # so the two never wait one after the other (that took shutdown past 2 s mid-question)
+        if self.decompositions is not None:  # inputs waiting on a mesh hear why (the publishers still stand)
+            self.decompositions.close(reason=reason)
+            self.decompositions = None
         if self.questions is not None:
             self.questions.close(reason=reason, join=False)
         if self.observations is not None:
@@ -264,12 +271,16 @@ class IpeInterface(ObserveInterface, DepthInterface):
                                          meshes=self.service.config.meshes)
             self.service.check(converted.scene, converted.frame_id, "header.frame_id")
         except Exception as exc:  # noqa: BLE001 - no input may end the node; name what happened
+            header = msg.markers[0].header if msg.markers else None
+            where = (self.resolve_topic_name("~/scene"), "",
+                     header_to_stamp_ns(header) if header is not None else self.get_clock().now().nanoseconds,
+                     header.frame_id if header is not None else "")
+            if isinstance(exc, NotYetDecomposed):
+                self._scene_waits_for_mesh(exc, lambda: self._on_markers(msg), *where)
+                return
             if not isinstance(exc, ValueError):  # SceneError / ConfigError name the field
                 exc = RuntimeError(f"unreadable input ({type(exc).__name__})")
-            header = msg.markers[0].header if msg.markers else None
-            self._reject(self.resolve_topic_name("~/scene"), exc, "",
-                         header_to_stamp_ns(header) if header is not None else self.get_clock().now().nanoseconds,
-                         header.frame_id if header is not None else "")
+            self._reject(where[0], exc, *where[1:])
             return
         self._accept(converted.scene, converted.stamp_ns, converted.frame_id)
 
@@ -279,10 +290,14 @@ class IpeInterface(ObserveInterface, DepthInterface):
                                     meshes=self.service.config.meshes)
             self.service.check(scene)  # frame_id (the parameter) is checked against the frames at configuration
         except Exception as exc:  # noqa: BLE001 - no input may end the node; name what happened
+            where = (self.resolve_topic_name("~/scene_json"), scene_name_of(msg), self.get_clock().now().nanoseconds,
+                     str(self._values["frame_id"]))
+            if isinstance(exc, NotYetDecomposed):
+                self._scene_waits_for_mesh(exc, lambda: self._on_scene_json(msg), *where)
+                return
             if not isinstance(exc, ValueError):
                 exc = RuntimeError(f"data: unreadable input ({type(exc).__name__})")
-            self._reject(self.resolve_topic_name("~/scene_json"), exc, scene_name_of(msg),
-                         self.get_clock().now().nanoseconds, str(self._values["frame_id"]))
+            self._reject(where[0], exc, *where[1:])
             return
         self._accept(scene, self.get_clock().now().nanoseconds, str(self._values["frame_id"]))
 
@@ -298,6 +313,11 @@ class IpeInterface(ObserveInterface, DepthInterface):
         if data.get("question") == "infer":
             self._ask_infer(data, request_id)
             return
+        self._ask(data, request_id)
+
+    def _ask(self, data: dict, request_id: str) -> None:
+        """A question read from its JSON: queued, or refused; one whose scene holds a mesh not yet
+        decomposed hears so (``"final": false``) and is asked again once it is."""
         try:
             question, scene = question_from_data(data, max_objects=self.service.config.max_objects,
                                                  meshes=self.service.config.meshes)
@@ -306,6 +326,8 @@ class IpeInterface(ObserveInterface, DepthInterface):
                 source = StampedScene(scene=scene, stamp_ns=self.get_clock().now().nanoseconds,
                                       frame_id=str(self._values["frame_id"]), scene_id=scene.name)
             refused = self.questions.submit(question, source)
+        except NotYetDecomposed as pending:
+            refused = self._question_waits_for_mesh(pending, data, request_id)
         except ValueError as exc:
             refused = str(exc)
         except Exception as exc:  # noqa: BLE001 - no input may end the node
@@ -362,8 +384,9 @@ class IpeInterface(ObserveInterface, DepthInterface):
     def _publish_diagnostics(self) -> None:
         stats = self.service.stats()
         name = self.get_fully_qualified_name()  # namespaced: two nodes never share a status name
+        meshes = self.decompositions.status() if self.decompositions is not None else None
         self._pub_diagnostics.publish(diagnostics_msg(stats, f"{name}: IPE prediction service",
-                                                      self.get_clock().now().nanoseconds, name))
+                                                      self.get_clock().now().nanoseconds, name, meshes))
 
 
 
@@ -381,44 +404,12 @@ class IpeNode(IpeInterface, Node):
         super().destroy_node()
 
 
-#: the node's Fast DDS profiles (the file says why: payload memory that otherwise only grows)
-FASTDDS_PROFILES = Path(__file__).with_name("fastdds_node.xml")
-_PROFILE_VARIABLES = ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")  # Fast DDS 2.x, 3.x
-
-
-def use_node_dds_profiles(environ=os.environ) -> bool:
-    """Point Fast DDS at the node's profiles (before ``rclpy.init``), unless the environment chose
-    profiles of its own or another middleware; whether it did."""
-    if environ.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp") not in ("rmw_fastrtps_cpp", "rmw_fastrtps_dynamic_cpp"):
-        return False
-    if any(name in environ for name in (*_PROFILE_VARIABLES, "RMW_FASTRTPS_USE_QOS_FROM_XML")):
-        return False
-    environ.update({name: str(FASTDDS_PROFILES) for name in _PROFILE_VARIABLES})
-    environ["RMW_FASTRTPS_USE_QOS_FROM_XML"] = "1"  # else rmw_fastrtps sets its own memory policy
-    return True
-
-
-#: glibc's mallopt parameter for the size from which a buffer is mmapped (and unmapped when freed)
-_M_MMAP_THRESHOLD = -3
-
-
-def return_large_buffers_to_the_system(environ=os.environ, threshold_bytes: int = 128 * 1024) -> bool:
-    """Keep glibc's mmap threshold fixed (unless the environment sets it): glibc raises it each time
-    a large buffer is freed (up to 32 MB), after which the node's 1-2 MB messages come from the heap,
-    which fragments and does not shrink; fixed, they are mmapped and returned to the system when
-    freed. Whether it was set (False where the C library is not glibc)."""
-    if "MALLOC_MMAP_THRESHOLD_" in environ:
-        return False
-    try:
-        import ctypes
-
-        return bool(ctypes.CDLL(None).mallopt(_M_MMAP_THRESHOLD, threshold_bytes))
-    except (OSError, AttributeError):
-        return False
-
-
 def main(args: list[str] | None = None, node_class: type = IpeNode) -> int:
     """Entry point of ``ipe_node`` / ``ros2 run ipe_ros ipe_node``; SIGINT and SIGTERM end it cleanly."""
+    unusable = unusable_dds_profile_file()
+    if unusable is not None:  # Fast DDS would wait on it for ever, silently, inside rclpy.init
+        print(f"ipe_node: error: {unusable}", file=sys.stderr)
+        return 2
     use_node_dds_profiles()
     return_large_buffers_to_the_system()
     rclpy.init(args=args)  # installs SIGINT/SIGTERM handlers that shut the context down

@@ -84,8 +84,9 @@ NODE_SETTINGS: tuple[Input, ...] = (
           "not name files. Fixed at start-up: no participant on the network may point the node at other files",
           fixed_at_start=True),
     _node("mesh_decomposition_s", "float", 30.0, "s", "the most seconds a mesh not yet decomposed may take to "
-          "decompose into convex parts (in a process of its own, ended when over: the scene is refused, saying so); "
-          "cached meshes cost nothing", range=(0.1, 3600.0)),
+          "decompose into convex parts (in a process of its own, off the executor: the sender hears \"decomposing\" at "
+          "once and the answer once the parts are ready; when over, the scene is refused, saying so, and that is "
+          "remembered); cached meshes cost nothing", range=(0.1, 3600.0)),
     _node("rerun.save_dir", "name", "", "folder", "folder for one .rrd recording per prediction; empty: no rerun "
           "logging. Fixed at start-up: no participant on the network may have the node write elsewhere",
           fixed_at_start=True),
@@ -248,8 +249,10 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
                          rerun_frame_period_s=float(values["rerun.frame_period_s"]),
                          rerun_connect_url=connect or None, gravity_aligned_frames=frames,
                          depth_max_age_s=float(values["depth.max_age_s"]),
-                         meshes=MeshAccess(roots=roots, decompose_within_s=float(values["mesh_decomposition_s"]))
-                         if roots else None)
+                         # files only under the roots (none: no files); a mesh not yet decomposed, even a
+                         # marker's triangles, is decomposed off the executor, within its time (defer)
+                         meshes=MeshAccess(roots=roots, decompose_within_s=float(values["mesh_decomposition_s"]),
+                                           defer=True))
 
 
 def camera_pose(values: Mapping[str, Any]) -> tuple[tuple, tuple] | None:

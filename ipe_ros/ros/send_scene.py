@@ -29,6 +29,7 @@ from msg_bridge.json_text import scene_to_string  # noqa: E402
 
 from ..engine import load_scenes  # noqa: E402
 from .node import LATCHED_QOS  # noqa: E402
+from .process_setup import unusable_dds_profile_file  # noqa: E402
 
 EXIT_NO_ANSWER, EXIT_BAD_INPUT, EXIT_ERROR_ANSWER = 1, 2, 3
 
@@ -52,6 +53,10 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_BAD_INPUT
     scene = scenes[0]
     node_name = "/" + args.node.strip("/")
+    unusable = unusable_dds_profile_file()
+    if unusable is not None:  # Fast DDS would wait on it for ever inside rclpy.init
+        print(f"ipe_send_scene: error: {unusable}", file=sys.stderr)
+        return EXIT_BAD_INPUT
 
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=int(os.environ.get("ROS_DOMAIN_ID", "0") or 0))

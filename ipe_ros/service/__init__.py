@@ -21,8 +21,8 @@ everything that takes time happens here, off the executor:
 from .predictions import PredictionService
 from .questions import DEFAULT_QUESTION_SAMPLES, MAX_WAITING_QUESTIONS, QuestionCancelled, QuestionService
 from .values import (RECENT_EVENTS, Answer, NoSceneError, PredictionFailed, ServiceConfig, ServiceStats, StampedScene,
-                     error_answer, refusal_answer, stamp_dict)
+                     decomposing_answer, error_answer, refusal_answer, stamp_dict)
 
 __all__ = ["Answer", "DEFAULT_QUESTION_SAMPLES", "MAX_WAITING_QUESTIONS", "NoSceneError", "PredictionFailed",
            "PredictionService", "QuestionCancelled", "QuestionService", "RECENT_EVENTS", "ServiceConfig", "ServiceStats",
-           "StampedScene", "error_answer", "refusal_answer", "stamp_dict"]
+           "StampedScene", "decomposing_answer", "error_answer", "refusal_answer", "stamp_dict"]

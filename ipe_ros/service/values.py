@@ -111,6 +111,15 @@ def refusal_answer(reason: str, scene_id: str, stamp_ns: int, frame_id: str, inp
             "stamp": stamp_dict(max(0, stamp_ns)), "frame_id": frame_id, "refused_on": input_topic}
 
 
+def decomposing_answer(status: dict[str, Any], scene_id: str, stamp_ns: int, frame_id: str,
+                       input_topic: str) -> dict[str, Any]:
+    """What ~/prediction carries for a scene whose mesh is being decomposed into convex parts
+    (``status``: the object, the mesh, how many meshes are ahead, the time allowed): its answer, or
+    its refusal, follows once the parts are ready."""
+    return {"decomposing": status, "scene": scene_id or None, "scene_id": scene_id, "scene_seq": None,
+            "stamp": stamp_dict(max(0, stamp_ns)), "frame_id": frame_id, "received_on": input_topic}
+
+
 RECENT_EVENTS = 10
 
 

@@ -50,7 +50,7 @@ from typing import Any, Callable, Iterable
 from ..errors import SceneError, json_type as _json_type, shown
 from .limits import MAX_JSON_CHARS
 from .bodies import DEFAULT_MAX_OBJECTS, Body, Box, Floor, Scene, Table
-from .meshes import MeshAccess, mesh_shape
+from .meshes import MeshAccess, mesh_shape, readable_source
 from .properties import PRIOR_FIELDS, PROPERTIES, SUPPORT_PROPERTIES, priors_from_dict, priors_to_dict
 from .validation import validate_scene
 from .shapes import (SHAPE_TYPES, BoxShape, Capsule, Compound, CompoundPart, ConvexHull, Cylinder, MeshSource, Sphere,
@@ -233,11 +233,12 @@ def shape_from_dict(data: Any, path: str, *, nested: bool = False, meshes: MeshA
     return Compound(tuple(out), None if volume is None else _num(volume, f"{path}.volume_m3"),
                     None if centre is None else _vec(centre, 3, f"{path}.centre_of_mass_m"),
                     None if inertia is None else _vec(inertia, 3, f"{path}.inertia_diagonal_per_kg_m2"),
-                    None if "source" not in data else _mesh_source(data["source"], f"{path}.source"))
+                    None if "source" not in data else _mesh_source(data["source"], f"{path}.source", meshes))
 
 
-def _mesh_source(data: Any, path: str) -> MeshSource:
-    """The mesh file a compound was read from (shown, never read: the parts are the shape)."""
+def _mesh_source(data: Any, path: str, meshes: MeshAccess | None) -> MeshSource:
+    """The mesh file a compound was read from: shown; read again (to draw it) only where ``meshes``
+    would read it as a mesh shape (under its roots), never where the scene merely says so."""
     data = _require_mapping(data, path)
     _check_keys(data, ("uri", "scale"), (), path)
     uri = data["uri"]
@@ -246,7 +247,7 @@ def _mesh_source(data: Any, path: str) -> MeshSource:
     scale = _vec(data["scale"], 3, f"{path}.scale")
     if not all(math.isfinite(v) and v > 0 for v in scale):
         raise SceneError(f"{path}.scale", f"must be 3 finite numbers > 0 (metres per file unit), got {list(scale)}")
-    return MeshSource(uri, scale)
+    return MeshSource(uri, scale, read_from=readable_source(uri, meshes))
 
 
 def _common_fields(data: dict, path: str) -> dict[str, Any]:

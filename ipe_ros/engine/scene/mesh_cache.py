@@ -2,15 +2,19 @@
 content, its scale and the decomposition's settings (``meshes._compound``), in
 ``$IPE_CACHE_DIR/convex_parts``. Read and written inside its folder only (``safe_files``), and an
 entry is taken only once it describes its mesh (``verified_parts``): a link, a FIFO, a folder or a
-planted entry is named and the mesh decomposed again. Its entries together hold at most
-``MAX_CACHE_BYTES``: writing one removes the oldest beyond that.
+planted entry is named and the mesh decomposed again. A decomposition that failed or ran out of
+time is remembered beside them (``remembered_refusal``): asked again, the mesh is refused at once,
+not decomposed again for minutes. Its entries together hold at most ``MAX_CACHE_BYTES``: writing
+one removes the oldest beyond that.
 """
 
 from __future__ import annotations
 
+import collections
 import json
 import os
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +27,9 @@ VERIFIED: set[str] = set()
 MAX_CACHE_ENTRY_BYTES = 4 * 2**20
 #: the cache's entries together (thousands of meshes' parts): beyond, the oldest are removed on writing
 MAX_CACHE_BYTES = 256 * 2**20
+#: refusals remembered in this process too (where the cache folder cannot be written), newest kept
+MAX_REMEMBERED_IN_PROCESS = 256
+_REFUSED: collections.OrderedDict[str, dict] = collections.OrderedDict()
 
 
 def _report(line: str) -> None:
@@ -31,6 +38,55 @@ def _report(line: str) -> None:
 
 def _entry(folder: Path, key: str) -> Path:
     return folder / f"{key}.json"
+
+
+def _refusal_entry(folder: Path, key: str) -> Path:
+    return folder / f"{key}.refused.json"
+
+
+def remembered_refusal(folder: Path, key: str, within_s: float | None) -> str | None:
+    """Why the mesh under ``key`` was refused before, where that still holds: a failed decomposition
+    always; one that ran out of time where ``within_s`` (the time now allowed, None: no limit) is no
+    longer than the time it had. None: decompose it."""
+    refusal = _REFUSED.get(key) or _read_refusal(folder, key)
+    if refusal is None:
+        return None
+    if refusal["kind"] == "time" and (within_s is None or within_s > refusal["within_s"]):
+        return None
+    when = time.strftime("%Y-%m-%d %H:%M", time.localtime(refusal["at_s"]))
+    return (f"{refusal['reason']} (remembered from {when}; remove {_refusal_entry(folder, key)} "
+            "to try again)")
+
+
+def _read_refusal(folder: Path, key: str) -> dict | None:
+    try:
+        fd = open_folder(folder, create=False, owner="the mesh cache")
+        if fd is None:
+            return None
+        try:
+            raw = read_entry(fd, _refusal_entry(folder, key).name, 64 * 1024)
+        finally:
+            os.close(fd)
+        data = json.loads(raw) if raw is not None else None
+        if not isinstance(data, dict) or data.get("key") != key or data.get("kind") not in ("failed", "time") \
+                or not isinstance(data.get("reason"), str):
+            return None
+        return {"kind": data["kind"], "reason": data["reason"][:2000], "within_s": float(data.get("within_s") or 0.0),
+                "at_s": float(data.get("at_s") or 0.0)}
+    except (UnsafeEntry, OSError, ValueError, TypeError):
+        return None
+
+
+def remember_refusal(folder: Path, key: str, reason: str, within_s: float | None) -> None:
+    """Remember that the mesh under ``key`` was refused: ``within_s`` the time its decomposition had
+    when it ran out (None: it failed, and fails again)."""
+    refusal = {"key": key, "kind": "failed" if within_s is None else "time", "reason": reason,
+               "within_s": within_s, "at_s": time.time()}
+    _REFUSED[key] = refusal
+    _REFUSED.move_to_end(key)
+    while len(_REFUSED) > MAX_REMEMBERED_IN_PROCESS:
+        _REFUSED.popitem(last=False)
+    _write(folder, _refusal_entry(folder, key).name, json.dumps(refusal).encode())
 
 
 def verified_parts(folder: Path, key: str, load) -> tuple[list[np.ndarray], float, tuple, tuple] | None:
@@ -45,6 +101,11 @@ def verified_parts(folder: Path, key: str, load) -> tuple[list[np.ndarray], floa
         return None
     VERIFIED.add(key)
     return cached
+
+
+def has_parts(folder: Path, key: str) -> bool:
+    """Whether an entry is stored under ``key`` (checked against its mesh when read, not here)."""
+    return _cached_parts(folder, key) is not None
 
 
 def mass_properties(mesh) -> tuple[float, tuple, tuple]:
@@ -117,15 +178,22 @@ def store_parts(folder: Path, key: str, parts: list[np.ndarray], volume_m3: floa
     data = json.dumps({"key": key, "parts": [p.tolist() for p in parts], "volume_m3": volume_m3,
                        "centre_of_mass_m": list(centre_m),
                        "inertia_diagonal_per_kg_m2": list(inertia_per_kg_m2)}).encode()
+    if _write(folder, _entry(folder, key).name, data):
+        VERIFIED.add(key)
+
+
+def _write(folder: Path, name: str, data: bytes) -> bool:
+    """``data`` as the entry ``name`` (then the oldest entries beyond MAX_CACHE_BYTES removed);
+    whether it was written (a read-only home, or a link where the cache belongs: not)."""
     try:
         fd = open_folder(folder, create=True, owner="the mesh cache")
-    except (UnsafeEntry, OSError):  # a read-only home, or a link where the cache belongs: decomposed again next time
-        return
-    try:
-        write_entry(fd, _entry(folder, key).name, data)
-        VERIFIED.add(key)
-        trim_folder(fd, ".json", MAX_CACHE_BYTES, keep=_entry(folder, key).name)  # a bounded disk
     except (UnsafeEntry, OSError):
-        pass
+        return False
+    try:
+        write_entry(fd, name, data)
+        trim_folder(fd, ".json", MAX_CACHE_BYTES, keep=name)  # a bounded disk
+        return True
+    except (UnsafeEntry, OSError):
+        return False
     finally:
         os.close(fd)

@@ -11,6 +11,11 @@ beside the scene file and under folders it is given; the node only under the fol
 configured (a scene arrives over the network, and must not make the node read arbitrary files).
 Files are sized before they are read, vertices and parts are bounded, and a mesh that does not
 enclose a volume is refused with the fix.
+
+A reader that must answer at once (the node's executor) sets ``MeshAccess.defer``: a mesh not yet
+decomposed then raises :class:`NotYetDecomposed` carrying the job (``decompose``), which the
+caller runs elsewhere and then reads the input again. A decomposition that failed or ran out of
+time is remembered (``mesh_cache.remembered_refusal``), so asking again is refused at once.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ import hashlib
 import math
 import os
 import stat
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -29,8 +35,8 @@ import numpy as np
 
 from ..errors import SceneError, shown
 from . import limits
-from ..safe_files import is_folder
-from .mesh_cache import mass_properties, store_parts, verified_parts
+from ..safe_files import UnreadableFile, is_folder, read_file_bounded
+from .mesh_cache import has_parts, mass_properties, remember_refusal, remembered_refusal, store_parts, verified_parts
 from .shapes import Compound, CompoundPart, ConvexHull, MeshSource
 
 #: what trimesh reads without extra libraries (DAE needs pycollada; glTF with external buffers reads
@@ -72,6 +78,12 @@ class MeshAccess:
     #: limit it runs in a process of its own (spawned), ended when over: CoACD has no time limit of
     #: its own, and a large mesh can take minutes, which the node must not spend on one scene
     decompose_within_s: float | None = None
+    #: a mesh not yet decomposed raises NotYetDecomposed (its job) instead of being decomposed here
+    defer: bool = False
+
+    @property
+    def reads_files(self) -> bool:
+        return bool(self.roots) or self.base is not None
 
     def cache(self) -> Path:
         if self.cache_dir is not None:
@@ -83,7 +95,7 @@ def mesh_shape(data: dict, path: str, access: MeshAccess | None, uri_field: str 
     """The compound of convex parts of the mesh shape ``data`` (``uri``, ``scale``), or a SceneError
     naming ``path`` (the URI as ``uri_field``, default ``<path>.uri``) and the fix."""
     where = uri_field or f"{path}.uri"
-    if access is None:
+    if access is None or not access.reads_files:
         raise SceneError(where, "mesh shapes are read from files, which this input may not reach; give the object "
                                 "as convex parts (type compound), or send the scene where meshes are allowed (ipe "
                                 "predict reads them beside the scene file; the node under its mesh_roots)")
@@ -97,10 +109,10 @@ def mesh_shape(data: dict, path: str, access: MeshAccess | None, uri_field: str 
     content = _read_bounded(file, where)
     key = hashlib.sha256(b"%d|%s|%r|%r" % (_CACHE_VERSION, file.suffix.lower().encode(), scale,
                                            access.decomposition) + content).hexdigest()
-    compound = _compound(key, lambda: _load(content, file, scale, where), access, where)
+    compound = _compound(key, lambda: _load(content, file, scale, where), access, where, file.name)
     # a package:// URI as given (it resolves on any machine with the package); a path as the file read
     shown_uri = uri.strip() if uri.strip().startswith("package://") else FILE_URI + str(file)
-    return dataclasses.replace(compound, source=MeshSource(shown_uri, scale))
+    return dataclasses.replace(compound, source=MeshSource(shown_uri, scale, read_from=file))
 
 
 #: a file:// URI is this and the absolute path, as ROS writes it (no percent-escapes): read and
@@ -108,16 +120,32 @@ def mesh_shape(data: dict, path: str, access: MeshAccess | None, uri_field: str 
 FILE_URI = "file://"
 
 
-@functools.lru_cache(maxsize=32)
 def source_triangles(source: MeshSource) -> tuple[np.ndarray, np.ndarray] | None:
     """The mesh a compound was read from, as drawn (vertices in metres in the object frame, +z up, and
-    triangles), for recordings: read again from a ``file://`` source; None where it cannot be (a
-    ``package://`` URI, a file moved or changed into something unreadable): draw the parts then."""
-    if not source.uri.startswith(FILE_URI):
+    triangles), for recordings: read again from the file this module read it from under the
+    reader's own roots (``MeshSource.read_from``), never from a URI a scene merely names; None
+    where there is none (a source given as data, a file moved or changed into something
+    unreadable): draw the parts then."""
+    if source.read_from is None:
         return None
-    file = Path(source.uri[len(FILE_URI):])
+    return _triangles_of(Path(source.read_from), tuple(source.scale))
+
+
+def readable_source(uri: str, access: MeshAccess | None) -> Path | None:
+    """The file a compound's ``source`` URI names where ``access`` would read it as a mesh (inside its
+    roots, a known format), else None: drawn from its parts."""
+    if access is None or not access.reads_files or any(ord(c) < 32 for c in uri):
+        return None
     try:
-        mesh = _load(_read_bounded(file, "source.uri"), file, tuple(source.scale), "source.uri")
+        return _resolve(uri.strip(), "source.uri", access)
+    except (SceneError, OSError, ValueError):
+        return None
+
+
+@functools.lru_cache(maxsize=32)
+def _triangles_of(file: Path, scale: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray] | None:
+    try:
+        mesh = _load(_read_bounded(file, "source.uri"), file, scale, "source.uri")
     except (SceneError, OSError):
         return None
     return np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
@@ -144,19 +172,79 @@ def triangles_shape(points_m: np.ndarray, path: str, access: MeshAccess) -> Comp
                                    "volume to give a mass; close it, or leave out decompose to take their convex hull")
         return mesh
 
-    return _compound(key, load, access, path)
+    return _compound(key, load, access, path, "a TRIANGLE_LIST")
 
 
-def _compound(key: str, load, access: MeshAccess, path: str) -> Compound:
-    """The mesh's compound from the cache under ``key`` (``mesh_cache.verified_parts``), else
-    decomposed from ``load()`` and cached; the mesh loaded once either way."""
+class NotYetDecomposed(Exception):
+    """A mesh not yet in the cache, read where it may not be decomposed now (``MeshAccess.defer``):
+    run ``job`` (``decompose``) elsewhere, then read the input again."""
+
+    def __init__(self, job: "DecompositionJob"):
+        super().__init__(f"{job.path}: {job.what} is not decomposed into convex parts yet")
+        self.job = job
+
+
+@dataclass(frozen=True, eq=False)
+class DecompositionJob:
+    """One mesh's decomposition, taken out of the reader: the cache ``key`` it is stored under, the
+    input's field ``path``, ``what`` it is (a file name), its solid (``vertices``, ``faces``) and
+    mass properties, the settings and the time it may take."""
+
+    key: str
+    path: str
+    what: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    mass_properties: tuple
+    cache: Path
+    decomposition: Decomposition
+    within_s: float | None
+
+    @property
+    def triangles(self) -> int:
+        return len(self.faces)
+
+
+def decompose(job: DecompositionJob, stop: threading.Event | None = None) -> str | None:
+    """Run ``job`` and cache its parts, or remember why not: None when the parts are cached, else the
+    refusal (also what reading the input again will say). ``stop`` set: ended without a verdict
+    (the refusal says so, nothing is remembered)."""
+    refused = remembered_refusal(job.cache, job.key, job.within_s)
+    if refused is not None or has_parts(job.cache, job.key):  # done meanwhile (another reader's job)
+        return refused
+    try:
+        hulls = _decompose(job.vertices, job.faces, job.decomposition, job.path, job.within_s, stop)
+    except DecompositionStopped as exc:
+        return exc.problem
+    except SceneError as exc:
+        remember_refusal(job.cache, job.key, exc.problem, job.within_s if isinstance(exc, DecompositionTimeout) else None)
+        return exc.problem
+    store_parts(job.cache, job.key, hulls, *job.mass_properties)
+    return None
+
+
+def _compound(key: str, load, access: MeshAccess, path: str, what: str) -> Compound:
+    """The mesh's compound from the cache under ``key`` (``mesh_cache.verified_parts``), else refused
+    as before (``remembered_refusal``), else decomposed from ``load()`` and cached (or handed back
+    as a job: ``access.defer``); the mesh loaded once either way."""
     load = functools.cache(load)
     cached = verified_parts(access.cache(), key, load)
     if cached is None:
+        refused = remembered_refusal(access.cache(), key, access.decompose_within_s)
+        if refused is not None:
+            raise SceneError(path, refused)
         mesh = load()
-        cached = (_decompose(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64), access.decomposition,
-                             path, access.decompose_within_s), *mass_properties(mesh))
-        store_parts(access.cache(), key, *cached)
+        job = DecompositionJob(key, path, what, np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64),
+                               mass_properties(mesh), access.cache(), access.decomposition, access.decompose_within_s)
+        if access.defer:
+            raise NotYetDecomposed(job)
+        refused = decompose(job)
+        if refused is not None:
+            raise SceneError(path, refused)
+        cached = verified_parts(access.cache(), key, load)
+        if cached is None:  # the cache could not be written (a read-only home): decomposed for this answer
+            cached = (_decompose(job.vertices, job.faces, job.decomposition, path, job.within_s),
+                      *job.mass_properties)
     parts, volume, centre, inertia = cached
     return Compound(tuple(CompoundPart(ConvexHull(tuple(tuple(map(float, v)) for v in part))) for part in parts),
                     volume_m3=volume, centre_of_mass_m=centre, inertia_diagonal_per_kg_m2=inertia)
@@ -215,23 +303,9 @@ def _package_file(package: str, rest: str, access: MeshAccess) -> Path | None:
 
 def _read_bounded(file: Path, path: str) -> bytes:
     try:
-        fd = os.open(file, os.O_RDONLY | os.O_NONBLOCK)
-    except FileNotFoundError:
-        raise SceneError(path, f"{file}: no such file") from None
-    except OSError as exc:
-        raise SceneError(path, f"{file}: cannot be read ({exc.strerror})") from None
-    info = os.fstat(fd)
-    if not stat.S_ISREG(info.st_mode):
-        os.close(fd)
-        raise SceneError(path, f"{file} is not a regular file (a folder or a device)")
-    with os.fdopen(fd, "rb") as handle:
-        if info.st_size > MAX_MESH_BYTES:
-            raise SceneError(path, f"{file}: {info.st_size} bytes, more than the {MAX_MESH_BYTES} a mesh may have; "
-                                   "simplify it (fewer triangles)")
-        content = handle.read(MAX_MESH_BYTES + 1)
-    if len(content) > MAX_MESH_BYTES:
-        raise SceneError(path, f"{file} grew past {MAX_MESH_BYTES} bytes while read")
-    return content
+        return read_file_bounded(file, MAX_MESH_BYTES, "a mesh")
+    except UnreadableFile as exc:
+        raise SceneError(path, f"{exc}; simplify it (fewer triangles)" if "bytes" in str(exc) else str(exc)) from None
 
 
 def _load(content: bytes, file: Path, scale: tuple[float, float, float], path: str):
@@ -326,19 +400,35 @@ def _coacd_in_process(connection, vertices: np.ndarray, faces: np.ndarray, setti
         connection.close()
 
 
+class DecompositionTimeout(SceneError):
+    """A decomposition ran past its time (remembered with that time: more time may succeed)."""
+
+
+class DecompositionStopped(SceneError):
+    """A decomposition ended because its reader is closing (nothing remembered)."""
+
+
 def _coacd_within(vertices: np.ndarray, faces: np.ndarray, settings: Decomposition, within_s: float,
-                  path: str) -> list[np.ndarray]:
+                  path: str, stop: threading.Event | None = None) -> list[np.ndarray]:
     """``_coacd_hulls`` in a spawned process, ended (by its process id) when it takes longer than
-    ``within_s``: a SceneError naming ``path`` and the fix."""
+    ``within_s`` or ``stop`` is set: a SceneError naming ``path`` and the fix."""
     import multiprocessing
+    import time
 
     context = multiprocessing.get_context("spawn")  # never fork: the node's process holds rclpy
     receive, send = context.Pipe(duplex=False)
     worker = context.Process(target=_coacd_in_process, args=(send, vertices, faces, settings), daemon=True)
     worker.start()
     send.close()
+    deadline = time.monotonic() + within_s
+    answer = None
     try:
-        answer = receive.recv() if receive.poll(within_s) else None
+        while answer is None and (stop is None or not stop.is_set()):
+            left = deadline - time.monotonic()
+            if left <= 0:
+                break
+            if receive.poll(min(left, 0.1)):
+                answer = receive.recv()
     except EOFError:  # the process died without an answer
         answer = ("error", f"the decomposition's process ended with code {worker.exitcode}")
     finally:
@@ -346,11 +436,13 @@ def _coacd_within(vertices: np.ndarray, faces: np.ndarray, settings: Decompositi
         if worker.is_alive():
             worker.kill()
         worker.join()
+    if answer is None and stop is not None and stop.is_set():
+        raise DecompositionStopped(path, "its convex decomposition was stopped (the reader is closing)")
     if answer is None:
-        raise SceneError(path, f"its convex decomposition did not finish within {within_s:g} s; decompose it once "
-                               "ahead (`ipe predict` of a scene naming it caches the parts by the file's content, in "
-                               "$IPE_CACHE_DIR, for every later scene), simplify the mesh, or allow more time (the "
-                               "node's mesh_decomposition_s)")
+        raise DecompositionTimeout(path, f"its convex decomposition did not finish within {within_s:g} s; decompose "
+                                         "it once ahead (`ipe predict` of a scene naming it caches the parts by the "
+                                         "file's content, in $IPE_CACHE_DIR, for every later scene), simplify the "
+                                         "mesh, or allow more time (the node's mesh_decomposition_s)")
     kind, value = answer
     if kind == "error":
         raise SceneError(path, f"its convex decomposition failed ({value})")
@@ -358,9 +450,11 @@ def _coacd_within(vertices: np.ndarray, faces: np.ndarray, settings: Decompositi
 
 
 def _decompose(vertices: np.ndarray, faces: np.ndarray, settings: Decomposition, path: str,
-               within_s: float | None = None) -> list[np.ndarray]:
+               within_s: float | None = None, stop: threading.Event | None = None) -> list[np.ndarray]:
+    if within_s is None and stop is not None:  # stoppable only in a process of its own
+        within_s = math.inf
     hulls = (_coacd_hulls(vertices, faces, settings) if within_s is None
-             else _coacd_within(vertices, faces, settings, within_s, path))
+             else _coacd_within(vertices, faces, settings, within_s, path, stop))
     if not hulls:
         raise SceneError(path, "its convex decomposition is empty (a flat or degenerate mesh)")
     return hulls

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import lru_cache
+from pathlib import Path
 from typing import Union
 
 import numpy as np
@@ -80,6 +81,9 @@ class MeshSource:
 
     uri: str
     scale: Vec3 = (1.0, 1.0, 1.0)
+    #: the file the mesh reader itself read (under its roots), which a recording may read again to
+    #: draw it; None for a source a scene only names (never read: it could point anywhere)
+    read_from: Path | None = field(default=None, compare=False)
 
 
 @dataclass(frozen=True)

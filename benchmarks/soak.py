@@ -7,11 +7,13 @@ catalogue scene) on ``~/scene_json`` or ``~/scene``; a bad one (malformed or dee
 lone-surrogate name, a 1 MB list, NaN poses, 1e15 m positions, gravity 1e8, a 1e-9 m box, a marker
 of 1e-320 m); a question on ``~/ask`` (support, remove, push, place about the newest scene) or a
 hostile one (400 x 400 placements, 100,000 spots, a push 1e6 m away, 2 MB of padding, an unknown
-field, malformed JSON); or a flood (20 scenes back to back, of which only the newest should be
-answered, or 200 questions, each of which must get exactly one reply).
+field, malformed JSON); a scene or a question holding a mesh (``--meshes`` distinct procedural
+tori under the node's ``mesh_roots``, the first time new to its cache, then cached; one too slow for
+its ``mesh_decomposition_s``, refused and then remembered); or a flood (20 scenes back to back, of
+which only the newest should be answered, or 200 questions, each of which must get exactly one reply).
 Each good scene has a unique name, so its answer on ``~/prediction`` gives its latency (send to
 answer). The node's resident memory (itself and its worker processes, from /proc) is sampled every
-10 s. At the end the node gets SIGINT; the time it takes to exit and whether any process is left
+10 s, and so is the disk its mesh cache uses. At the end the node gets SIGINT; the time it takes to exit and whether any process is left
 are recorded. Results: JSON and Markdown in ``--out``. DDS stays on loopback.
 """
 
@@ -24,8 +26,10 @@ import json
 import os
 import random
 import signal
+import shutil
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -50,8 +54,44 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 #: What the driver sends each second or so: each kind up to its share of the draw.
-MIX = (("good", 0.45), ("bad", 0.65), ("questions", 0.78), ("hostile_questions", 0.9), ("flood", 0.95),
-       ("question_floods", 1.0))
+MIX = (("good", 0.40), ("meshes", 0.47), ("bad", 0.65), ("questions", 0.78), ("hostile_questions", 0.9),
+       ("flood", 0.95), ("question_floods", 1.0))
+#: the mesh too slow to decompose within the soak node's mesh_decomposition_s (~25 s here)
+SLOW_MESH_SECTIONS = 180
+MESH_DECOMPOSITION_S = 10.0
+
+
+def _mesh_files(folder: Path, count: int, rng: random.Random) -> list[tuple[Path, float]]:
+    """``count`` distinct tori (1-4 s each to decompose here) and one too slow to, as OBJ files in
+    ``folder``: (file, minor radius)."""
+    import trimesh
+
+    folder.mkdir(parents=True, exist_ok=True)
+    files = []
+    for i in range(count + 1):
+        sections = SLOW_MESH_SECTIONS if i == count else rng.randrange(16, 48, 2)
+        minor = round(rng.uniform(0.01, 0.02), 4)
+        torus = trimesh.creation.torus(round(rng.uniform(0.04, 0.08), 4), minor, major_sections=sections,
+                                       minor_sections=max(8, sections // 2))
+        file = folder / f"torus_{i}.obj"
+        torus.export(file)
+        files.append((file, minor))
+    return files
+
+
+def _mesh_scene(name: str, file: Path, minor_m: float) -> dict:
+    """A torus lying on the floor and a block beside it."""
+    body = {"position_m": [0.0, 0.0, minor_m], "orientation_xyzw": [0.0, 0.0, 0.0, 1.0], "mass_kg": 0.2,
+            "friction": 0.6, "restitution": 0.0, "group": "", "static": False}
+    return {"format": "ipe_ros.scene/2", "name": name, "gravity_m_s2": [0.0, 0.0, -9.81],
+            "support": {"type": "floor", "height_m": 0.0, "friction": 0.6, "restitution": 0.0},
+            "objects": [{"name": "torus", "shape": {"type": "mesh", "uri": str(file)}, **body},
+                        {"name": "block", "shape": {"type": "box", "extents_m": [0.1, 0.1, 0.1]},
+                         **body, "position_m": [0.3, 0.0, 0.05]}]}
+
+
+def _disk_mb(*folders: Path) -> float:
+    return sum(f.stat().st_size for folder in folders if folder.is_dir() for f in folder.rglob("*") if f.is_file()) / 2**20
 
 
 def _family(pid: int) -> list[int]:
@@ -160,6 +200,7 @@ def main() -> int:
     parser.add_argument("--question-kinds", default=None,
                         help="ask only these kinds of good question (comma-separated, of support,remove,push,place)")
     parser.add_argument("--settle-s", type=float, default=15.0, help="wait for the last answers before SIGINT")
+    parser.add_argument("--meshes", type=int, default=8, help="distinct mesh files the mesh scenes cycle through")
     parser.add_argument("--memray", default=None, metavar="FILE",
                         help="run the node under memray (native stacks) into FILE: what holds the memory it gains "
                              "(`python -m memray flamegraph --leaks FILE`; pip install memray)")
@@ -172,10 +213,16 @@ def main() -> int:
             raise SystemExit(f"--question-kinds: none of {sorted(kinds)} is a good question's kind")
     rng = random.Random(args.seed)
     domain = 150 + os.getpid() % 80
-    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(domain))
+    out = Path(args.out)
+    work = Path(tempfile.mkdtemp(prefix="ipe_soak_"))  # the node's meshes and its mesh cache, new each run
+    meshes = _mesh_files(work / "meshes", args.meshes, rng)
+    cache = work / "cache"
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(domain),
+               IPE_CACHE_DIR=str(cache))
     traced = [] if args.memray is None else ["-m", "memray", "run", "--native", "--force", "-o", args.memray]
     node = subprocess.Popen([sys.executable, *traced, "-m", "ipe_ros.ros.node", "--ros-args", "-p", "workers:=2",
-                             "-p", "samples:=8", "-p", "budget_s:=10.0", "--log-level", "warn"],
+                             "-p", "samples:=8", "-p", "budget_s:=10.0", "-p", f"mesh_roots:={work / 'meshes'}",
+                             "-p", f"mesh_decomposition_s:={MESH_DECOMPOSITION_S}", "--log-level", "warn"],
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     with _ended_on_error(node):  # the node must not outlive a driver that fails
         context = rclpy.Context()
@@ -188,15 +235,19 @@ def main() -> int:
 
         sent_at: dict[str, float] = {}
         latencies: list[float] = []
-        answers = {"ok": 0, "error": 0, "budget": 0}
+        answers = {"ok": 0, "error": 0, "budget": 0, "decomposing": 0}
         diagnostics: list[dict] = []
         lock = threading.Lock()
 
         def on_answer(msg: String) -> None:
             data = json.loads(msg.data)
             with lock:
+                if "decomposing" in data:  # its answer (or refusal) follows once the mesh is decomposed
+                    answers["decomposing"] += 1
+                    return
                 if "error" in data:
                     answers["error"] += 1
+                    sent_at.pop(data.get("scene_id"), None)
                     return
                 answers["ok"] += 1
                 answers["budget"] += data.get("stopped_by") == "budget"
@@ -242,7 +293,8 @@ def main() -> int:
         tower = load_scenes(example_scene_path())[0]
         goods = [tower, capped_tower(3.0)] + [s for s in scene_catalogue(7, 12) if len(s.objects) <= 12]
         bads = _bad_inputs(capped_tower(3.0))
-        counts = {"good": 0, "bad": 0, "flood": 0, "questions": 0, "hostile_questions": 0, "question_floods": 0}
+        counts = {"good": 0, "meshes": 0, "bad": 0, "flood": 0, "questions": 0, "hostile_questions": 0,
+                  "question_floods": 0}
         question_serial = 0
 
         def ask(question: dict) -> None:
@@ -258,6 +310,7 @@ def main() -> int:
             text = '{"id": "%s", "question": ' % key if malformed else json.dumps({"id": key, **question})
             ask_pub.publish(String(data=text))
         memory: list[tuple[float, float]] = []
+        disk: list[tuple[float, float]] = []
         start = time.monotonic()
         end = start + 60 * args.minutes
         next_memory = start
@@ -282,12 +335,24 @@ def main() -> int:
             if now >= next_memory:
                 family_now = _family(node.pid)
                 memory.append((now - start, _rss_mb(family_now), _rss_mb([node.pid])))
+                disk.append((now - start, _disk_mb(cache)))
                 next_memory += 10.0
             draw = rng.random()
             kind = args.only or next(k for k, upto in MIX if draw < upto)
             if kind == "good":
                 send_good(rng.random() < 0.3)
                 counts["good"] += 1
+            elif kind == "meshes":  # a scene, or a question bringing it, holding one of the meshes
+                file, minor = rng.choice(meshes)
+                serial += 1
+                scene = _mesh_scene(f"soak_{serial}", file, minor)
+                if rng.random() < 0.5:
+                    with lock:
+                        sent_at[scene["name"]] = time.monotonic()
+                    json_pub.publish(String(data=json.dumps(scene)))
+                else:
+                    ask({"question": "remove", "objects": ["block"], "samples": 4, "scene": scene})
+                counts["meshes"] += 1
             elif kind == "bad":
                 channel, msg = rng.choice(bads)
                 (json_pub if channel == "json" else marker_pub).publish(msg)
@@ -328,6 +393,7 @@ def main() -> int:
     spinner.join(timeout=10.0)  # the spin thread must leave rcl before the context goes (else std::terminate)
     client.destroy_node()
     rclpy.try_shutdown(context=context)
+    shutil.rmtree(work, ignore_errors=True)
 
     lat = np.array(latencies) if latencies else np.array([np.nan])
     rss = np.array([m for _, m, _ in memory])
@@ -351,6 +417,8 @@ def main() -> int:
         "rss_slope_second_half_mb_per_10_min": 10 * slope,
         "node_rss_slope_second_half_mb_per_10_min": 10 * node_slope,
         "node_rss_after_warm_up_mb": float(node_rss[warm]) if len(memory) else None,
+        "disk_mb": {"after_warm_up": disk[warm][1] if disk else None, "last": disk[-1][1] if disk else None,
+                    "samples": [[round(t, 1), round(m, 2)] for t, m in disk]},
         "latency_s": {f"p{q}": float(np.percentile(lat, q)) for q in (50, 90, 99)} | {"max": float(lat.max())},
         "rss_mb": {"first": float(rss[0]), "last": float(rss[-1]), "max": float(rss.max()),
                    "node_first": float(node_rss[0]), "node_last": float(node_rss[-1]),
@@ -358,7 +426,6 @@ def main() -> int:
         "diagnostics_at_end": diagnostics[0] if diagnostics else None,
         "sigint_exit_s": exit_s, "exit_code": code, "processes_left": left,
     }
-    out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "soak.json").write_text(json.dumps(result, indent=1) + "\n")
     d = result["diagnostics_at_end"] or {}
@@ -369,13 +436,16 @@ def main() -> int:
           f"{'' if not args.question_kinds else ' --question-kinds ' + args.question_kinds}`; 2 workers, k = 8, budget 10 s, "
           "on this project's 2-core machine.", "",
           "| what | value |", "|---|---|",
-          f"| sent | {counts['good']} good scenes, {counts['bad']} bad inputs, {counts['flood']} floods of 20; "
+          f"| sent | {counts['good']} good scenes, {counts['meshes']} scenes or questions holding one of "
+          f"{args.meshes} + 1 meshes, {counts['bad']} bad inputs, {counts['flood']} floods of 20; "
           f"{counts['questions']} questions, {counts['hostile_questions']} hostile ones, "
           f"{counts['question_floods']} floods of 200 questions |",
           f"| question replies | {len(asked)} asked: {replies['answer']} answers, {replies['error']} errors, "
           f"{replies['busy']} busy ({replies['partial']} partial replies before finals); {unanswered} without reply, {twice} replied twice; {unreadable['sent']} "
           f"unreadable (malformed JSON, no id to echo): {unreadable['replies']} replies with id \"\" |",
-          f"| answers | {answers['ok']} ({answers['budget']} cut by the budget), {answers['error']} error answers |",
+          f"| answers | {answers['ok']} ({answers['budget']} cut by the budget), {answers['error']} error answers, "
+          f"{answers['decomposing']} \"decomposing\" before an answer; meshes decomposed {d.get('meshes_decomposed', '-')}, "
+          f"refused {d.get('meshes_refused', '-')} (diagnostics) |",
           f"| scenes rejected (diagnostics) | {d.get('scenes_rejected', '-')} |",
           f"| scenes dropped by keep-latest (diagnostics) | {d.get('scenes_dropped', '-')} |",
           f"| node up the whole time | {alive_at_end} |",
@@ -385,6 +455,8 @@ def main() -> int:
           f"| resident memory (node process alone), MB | first {node_rss[0]:.0f}, after warm-up (at "
           f"{times_min[warm]:.0f} min) {node_rss[warm]:.0f}, last {node_rss[-1]:.0f} "
           f"({100 * (node_rss[-1] / node_rss[warm] - 1):+.0f}%), max {node_rss.max():.0f} |",
+          f"| disk (the mesh cache), MB | after warm-up {result['disk_mb']['after_warm_up']:.2f}, last "
+          f"{result['disk_mb']['last']:.2f} |",
           f"| memory trend over the second half, MB per 10 min | node and workers {10 * slope:+.1f}, node alone "
           f"{10 * node_slope:+.1f} |",
           f"| SIGINT -> exit | {exit_s:.2f} s, exit code {code}, processes left: {len(left)} |", ""]

@@ -195,6 +195,22 @@ def outcome_flags(outcome: SampleOutcome) -> np.ndarray:
     return np.concatenate(flags) if flags else np.zeros(0)
 
 
+def outcome_labels(outcome: SampleOutcome) -> list[str]:
+    """What each of ``outcome_flags`` is, in its order: the value's name and, per object (or pair),
+    its index in the sample's rollout (``fallen[3]``; a sample of several rollouts: ``fallen[3]@1``)."""
+    labels = []
+    for n, r in enumerate(outcome.rollouts):
+        values: dict = {}
+        for query in QUERIES.values():
+            for name, value in query.flags(r).items():
+                values.setdefault(name, value)
+        suffix = f"@{n}" if len(outcome.rollouts) > 1 else ""
+        for name, value in values.items():
+            count = np.asarray(value, float).reshape(-1).shape[0]
+            labels += [name + suffix] if count == 1 else [f"{name}[{i}]{suffix}" for i in range(count)]
+    return labels
+
+
 def difference(fast: SampleOutcome, reference: SampleOutcome) -> np.ndarray:
     """Per yes/no outcome of one sample, fast minus reference: +1 where only the fast physics says
     yes (it fell), -1 where only the reference does, 0 where they agree (both must have run)."""
@@ -234,6 +250,9 @@ class FidelityReport:
     validated: why no sample was verified (``validated``: inside the validated envelope).
     rigid_reruns: reference rollouts in multibodies that ended unhealthy and were rerun in plain
         rigid bodies (``SimSettings.rigid_when_unhealthy``).
+    escalated_strata: an escalation of the disputed samples only: per (outcome label, fast side
+        "yes"/"no") the samples on that side, all rerun at the reference (``self_check.disputed_strata``);
+        () when every sample was.
     """
 
     verdict: str
@@ -245,6 +264,7 @@ class FidelityReport:
     settings: tuple[tuple[str, str], ...] = ()
     validated: str = ""  # why no sample was verified (the scene is inside the validated envelope)
     rigid_reruns: int = 0
+    escalated_strata: tuple[tuple[str, str, int], ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         return {"verdict": self.verdict, "verified_samples": self.verified_samples,
@@ -252,7 +272,9 @@ class FidelityReport:
                 "refined_reasons": {str(i): why for i, why in self.refined_reasons},
                 "escalated_samples": self.escalated_samples, "settings": dict(self.settings),
                 **({"validated": self.validated} if self.validated else {}),
-                **({"rigid_reruns": self.rigid_reruns} if self.rigid_reruns else {})}
+                **({"rigid_reruns": self.rigid_reruns} if self.rigid_reruns else {}),
+                **({"escalated_strata": [{"outcome": label, "fast_says": side, "samples": n}
+                                         for label, side, n in self.escalated_strata]} if self.escalated_strata else {})}
 
 
 def check_request(check: SelfCheck | None) -> None:

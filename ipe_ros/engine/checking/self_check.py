@@ -7,8 +7,8 @@ import numpy as np
 
 from ..config import SimSettings
 from .bias import bias_estimates, confirmation_samples, coverage_samples, undecided_bias_samples
-from .fidelity import (FidelityReport, SelfCheck, contradicts, difference, merge, outcome_flags, suspect, unhealthy,
-                       verification_count)
+from .fidelity import (FidelityReport, SelfCheck, contradicts, difference, merge, outcome_flags, outcome_labels, suspect,
+                       unhealthy, verification_count)
 from ..sampling.montecarlo import Plan
 from ..sampling.outcome import SampleOutcome, energy_scale_of, rigid_reruns
 from ..sampling.rollout import SampleTask
@@ -103,15 +103,54 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: d
             verdict = "validated" if not unconfirmed else "unverified"
         return merge(outcomes, refined), FidelityReport(verdict, settings=tuple(parts), validated=validated,
                                                         rigid_reruns=state.rigid_reruns(), **common)
-    # 4. escalation: contradicted on this scene, so every sample at the reference
-    yield from state.rerun([i for i in range(len(outcomes)) if i not in state.checked and not outcomes[i].skipped])
+    # 4. escalation: contradicted on this scene. First only the disputed strata (``disputed_strata``)
+    # at the reference; kept where the answer, those samples replaced, is no longer contradicted
     parts.append(("escalation", reference.name))
+    strata = [] if known else disputed_strata(state, compared)
+    disputed = sorted({i for _, _, members in strata for i in members})
+    remaining = [i for i in range(len(outcomes)) if i not in state.checked and not outcomes[i].skipped]
+    if strata and len([i for i in disputed if i not in state.checked]) < len(remaining):
+        yield from state.rerun([i for i in disputed if i not in state.checked])
+        replaced = {**refined, **{i: state.checked[i] for i in disputed}}
+        if not any(state.checked[i].budget_stopped for i in disputed):
+            merged = merge(outcomes, replaced)
+            after = _Comparison(tasks, merged, dict(state.checked), check, reference)
+            if not after.contradicted(after.differences()):
+                return merged, FidelityReport(
+                    "escalated", escalated_samples=len(disputed), settings=tuple(parts),
+                    escalated_strata=tuple((label, side, len(members)) for label, side, members in strata),
+                    rigid_reruns=state.rigid_reruns(), **common)
+    yield from state.rerun([i for i in range(len(outcomes)) if i not in state.checked and not outcomes[i].skipped])
     done = state.checked
     if any(o.budget_stopped for o in done.values()):
         return merge(outcomes, refined), FidelityReport("contradicted", settings=tuple(parts),
                                                         rigid_reruns=state.rigid_reruns(), **common)
     return merge(outcomes, done), FidelityReport("escalated", escalated_samples=len(done), settings=tuple(parts),
                                                  rigid_reruns=state.rigid_reruns(), **common)
+
+
+def disputed_strata(state: _Comparison, compared: dict[int, np.ndarray]) -> list[tuple[str, str, list[int]]]:
+    """Where the fast physics is disputed: per outcome whose bias escalates (by the counts rule, or
+    found by refinement: every outcome some compared sample differs on), each fast side ("yes",
+    "no") on which a compared sample differs, with every good sample on that side. A wrong fast
+    physics can only show an outcome's bias on the side it says (``bias_estimates``): those samples
+    rerun at the reference answer exactly as it would, and the other side, compared without a
+    difference, keeps its fast outcomes. (label, side, samples) by outcome, "yes" first."""
+    tolerance = state.check.bias_tolerance
+    if tolerance is not None:
+        outcomes = [b.outcome for b in state.biases(compared) if b.beyond(tolerance) and b.same_way >= state.at_least]
+    else:
+        outcomes = []
+    if not outcomes:
+        outcomes = sorted({int(j) for d in compared.values() for j in np.flatnonzero(d)})
+    labels = outcome_labels(next(o for o in state.outcomes if o.ok)) if state.fast_flags else []
+    strata = []
+    for j in outcomes:
+        for side, name in ((1.0, "yes"), (0.0, "no")):
+            if any(d[j] != 0 and state.fast_flags[i][j] == side for i, d in compared.items() if i in state.fast_flags):
+                members = sorted(i for i, f in state.fast_flags.items() if f.shape[0] > j and f[j] == side)
+                strata.append((labels[j] if j < len(labels) else f"outcome {j}", name, members))
+    return strata
 
 
 def _confirm(state: _Comparison, repair: int, cover: int) -> Plan:

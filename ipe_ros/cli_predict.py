@@ -191,6 +191,11 @@ def cmd_predict(args) -> int:
     except SceneError:
         _report_refused(args, refused)  # none of the file's scenes read: each refusal said before the verdict
         raise
+    for scene in scenes:  # an open mesh answered as a repaired solid: said once, before the answers
+        for body in scene.objects:
+            source = getattr(body.shape, "source", None)
+            if source is not None and source.repaired:
+                print(f"ipe: note: {scene.name}: {body.name} ({source.uri}) {source.repaired}", file=sys.stderr)
     vision = _vision_settings(args)
     # one request from the options (engine.request); its errors read as the options (main: as_spelled)
     request = build_request(vision=vision, query_parameters=given_query_parameters(args), **given_request_arguments(args))

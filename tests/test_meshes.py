@@ -104,8 +104,6 @@ def test_bad_meshes_and_meshes_out_of_reach_are_refused_in_one_line_naming_the_o
         "missing.obj": f"{where}.uri: {folder / 'missing.obj'}: no such file",
         "notes.xyz": f"{where}.uri: 'notes.xyz': unknown mesh format 'xyz'; give one of obj, stl, ply, glb "
                      "(export DAE or glTF as GLB)",
-        "open.obj": f"{where}.uri: {folder / 'open.obj'}: is not closed (it has holes or loose edges), so it "
-                    "encloses no volume to give a mass; close it (fill its holes) or give the object as convex parts",
         "folder.obj": f"{where}.uri: {folder / 'folder.obj'} is not a regular file (a folder, a FIFO or a device)",
         "zero.obj": f"{where}.uri: 'zero.obj' is outside the folders meshes may be read from ({folder})",
         str(outside): f"{where}.uri: '{outside}' is outside the folders meshes may be read from ({folder})",
@@ -120,6 +118,59 @@ def test_bad_meshes_and_meshes_out_of_reach_are_refused_in_one_line_naming_the_o
         load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "mug.obj", "scale": -1}, ball=False), "bad.json"))
     assert str(caught.value) == ("objects[0].shape.scale: must be a positive number or three ([sx, sy, sz]; metres per "
                                  "file unit), got -1")
+    # an open mesh, by the shape's own choice (open: refuse; the default repairs it, below)
+    with pytest.raises(SceneError) as caught:
+        load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "open.obj", "open": "refuse"}, ball=False),
+                           "bad.json"))
+    assert str(caught.value) == (
+        f"{where}.uri: {folder / 'open.obj'} is not closed (it has holes or loose edges), so it encloses no volume to "
+        "give a mass; close it (fill its holes), give the object as convex parts, or let it be repaired (open: repair)")
+    with pytest.raises(SceneError) as caught:
+        load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "open.obj", "open": "fix"}, ball=False),
+                           "bad.json"))
+    assert str(caught.value) == (f"{where}.open: must be one of repair, refuse (what to do with a mesh that is not "
+                                 "closed), got 'fix'")
+
+
+def test_an_open_mesh_goes_down_the_repair_ladder_and_the_answer_says_how(folder, capsys):
+    """Issue 73: real scans and CAD exports are often open. A box missing one triangle has its hole
+    filled (rung 1): the box's own volume, centre and inertia. The mug without its base and floor
+    (two holes, a third of its surface) is remeshed watertight from voxels (rung 2) within its own
+    bounds, and stands; a flat sheet encloses nothing and is refused. The prediction's request and
+    the command line say how each was closed."""
+    from ipe_ros.cli import main as cli_main
+    from ipe_ros.engine.scene.mesh_cache import mass_properties
+
+    box = trimesh.creation.box((0.1, 0.06, 0.04))
+    trimesh.Trimesh(box.vertices, box.faces[1:], process=True).export(folder / "box_open.obj")
+    data = scene_with({"type": "mesh", "uri": "box_open.obj"}, ball=False)
+    data["objects"][0]["position_m"] = [0, 0, 0.02]
+    [scene] = load_scenes(_write(folder, data, "box.json"))
+    shape = scene.objects[0].shape
+    assert shape.source.repaired.startswith("open: 1 hole(s) filled, the caps ")
+    volume, centre, inertia = mass_properties(box)
+    assert shape.volume_m3 == pytest.approx(volume, rel=1e-9)
+    assert shape.centre_of_mass_m == pytest.approx(centre, abs=1e-12)
+    assert shape.inertia_diagonal_per_kg_m2 == pytest.approx(inertia, rel=1e-9)
+
+    mug_mesh(closed=False).export(folder / "open.obj")
+    path = _write(folder, scene_with({"type": "mesh", "uri": "open.obj"}, ball=False), "open.json")
+    [scene] = load_scenes(path)
+    source = scene.objects[0].shape.source
+    assert source.repaired.startswith("open: remeshed watertight from 24 voxels across (its holes too large to fill)")
+    closed = mug_mesh()
+    assert 0.6 * closed.volume < scene.objects[0].shape.volume_m3 < 1.6 * closed.volume  # its walls, a voxel or two thick
+    answer = predict(scene, ModelConfig(sigma_m=0.0, samples=1, object_noise=False), preset("default"),
+                     QuerySpec(queries=frozenset({"fall"})), check=None)
+    assert answer.object_fall_probability == {"mug": 0.0}
+    assert answer.request["repaired_meshes"] == {"mug": source.repaired}
+    assert cli_main(["predict", str(path), "--ground-truth", "--query", "fall"]) == 0
+    assert f"ipe: note: mug_and_ball: mug ({source.uri}) open: remeshed watertight" in capsys.readouterr().err
+
+    trimesh.Trimesh([[0, 0, 0], [0.1, 0, 0], [0.1, 0.1, 0], [0, 0.1, 0]], [[0, 1, 2], [0, 2, 3]]).export(
+        folder / "sheet.obj")
+    with pytest.raises(SceneError, match=r"sheet\.obj is flat \(no two sides to it\), so it encloses no volume"):
+        load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "sheet.obj"}, ball=False), "sheet.json"))
 
 
 def test_a_glb_that_places_one_mesh_many_times_is_refused_before_it_is_laid_out(folder, monkeypatch):
@@ -224,8 +275,8 @@ def test_a_mesh_object_turns_with_the_mesh_inertia_not_its_bounding_box(folder):
 def test_a_triangle_list_marker_is_decomposed_on_request(folder):
     """A TRIANGLE_LIST marker is its points' convex hull; with ``decompose=true`` in its text, the
     closed surface its triangles make, as convex parts that hold the ball (no file read, so no
-    mesh_roots needed), weighing what it encloses. An open surface and decompose on a CUBE are
-    refused naming the marker."""
+    mesh_roots needed), weighing what it encloses; an open one is repaired as a file is. Decompose on
+    a CUBE is refused naming the marker."""
     pytest.importorskip("visualization_msgs")
     from geometry_msgs.msg import Point
     from visualization_msgs.msg import Marker, MarkerArray
@@ -254,9 +305,9 @@ def test_a_triangle_list_marker_is_decomposed_on_request(folder):
     final = _finals(scene)
     assert np.hypot(*(final["ball"] - final["mug"])[:2]) < R_IN - 0.015  # still in the cup, on its floor
     assert final["ball"][2] < BOTTOM + 0.015 + 0.004 and final["mug"][2] < 0.05, final
-    open_points = triangle_points[:-6 * 32]
-    with pytest.raises(SceneError, match=r"^markers\[0\]\.points: the triangles do not close a surface"):
-        markers_to_scene(array("name=mug decompose=true", open_points))
+    open_points = triangle_points[:-6 * 32]  # without its base and floor: repaired as a mesh file is
+    opened = markers_to_scene(array("name=mug decompose=true", open_points)).scene.objects[0].shape
+    assert isinstance(opened, Compound) and opened.volume_m3 < 1.6 * mesh.volume  # walls a voxel or two thick
     with pytest.raises(SceneError, match=r"^markers\[0\]\.text: decompose=true is for TRIANGLE_LIST markers .* on a CUBE$"):
         markers_to_scene(array("name=mug decompose=true", [], Marker.CUBE))
 

@@ -305,6 +305,10 @@ def _aggregate(scene: Scene, model: ModelConfig, settings: SimSettings, query: Q
         request.update(budget_s=budget_s)
     if perception_source(model.perception).posterior:
         request.update(perception=perceived.to_dict())
+    repaired = {b.name: b.shape.source.repaired for b in scene.objects
+                if getattr(b.shape, "source", None) is not None and b.shape.source.repaired}
+    if repaired:  # open meshes the engine was given closed: how (meshes._closed)
+        request.update(repaired_meshes=repaired)
     prediction = aggregate(scene, outcomes, query=query,
                            deterministic=is_deterministic(scene, model), samples_requested=len(tasks),
                            wall_s=wall_s, request=request)

@@ -70,7 +70,7 @@ _SHAPE_FIELDS = {"box": ("extents_m",), "sphere": ("radius_m",), "cylinder": ("r
                  "capsule": ("radius_m", "length_m"), "convex": ("vertices_m",), "compound": ("parts",),
                  "mesh": ("uri",)}
 #: fields a shape may leave out
-_SHAPE_OPTIONAL = {"mesh": ("scale",), "compound": ("volume_m3", "centre_of_mass_m", "inertia_diagonal_per_kg_m2",
+_SHAPE_OPTIONAL = {"mesh": ("scale", "open"), "compound": ("volume_m3", "centre_of_mass_m", "inertia_diagonal_per_kg_m2",
                                                     "source")}
 FLOOR_FIELDS = ("type", "height_m", "friction", "restitution")
 TABLE_FIELDS = ("type", "top_height_m", "size_m", "center_xy_m", "thickness_m", "friction",
@@ -98,7 +98,8 @@ def shape_to_dict(shape) -> dict[str, Any]:
     if shape.inertia_diagonal_per_kg_m2 is not None:
         out.update(inertia_diagonal_per_kg_m2=list(shape.inertia_diagonal_per_kg_m2))
     if shape.source is not None:
-        out.update(source={"uri": shape.source.uri, "scale": list(shape.source.scale)})
+        out.update(source={"uri": shape.source.uri, "scale": list(shape.source.scale),
+                           **({"repaired": shape.source.repaired} if shape.source.repaired else {})})
     return out
 
 
@@ -240,14 +241,17 @@ def _mesh_source(data: Any, path: str, meshes: MeshAccess | None) -> MeshSource:
     """The mesh file a compound was read from: shown; read again (to draw it) only where ``meshes``
     would read it as a mesh shape (under its roots), never where the scene merely says so."""
     data = _require_mapping(data, path)
-    _check_keys(data, ("uri", "scale"), (), path)
+    _check_keys(data, ("uri", "scale"), ("repaired",), path)
+    repaired = data.get("repaired")
+    if repaired is not None and (not isinstance(repaired, str) or len(repaired) > 500):
+        raise SceneError(f"{path}.repaired", f"must be text (how an open mesh was closed), got {shown(repaired)}")
     uri = data["uri"]
     if not isinstance(uri, str) or not uri.strip():
         raise SceneError(f"{path}.uri", f"must be the mesh's path or URI, got {shown(uri)}")
     scale = _vec(data["scale"], 3, f"{path}.scale")
     if not all(math.isfinite(v) and v > 0 for v in scale):
         raise SceneError(f"{path}.scale", f"must be 3 finite numbers > 0 (metres per file unit), got {list(scale)}")
-    return MeshSource(uri, scale, read_from=readable_source(uri, meshes))
+    return MeshSource(uri, scale, read_from=readable_source(uri, meshes), repaired=repaired)
 
 
 def _common_fields(data: dict, path: str) -> dict[str, Any]:

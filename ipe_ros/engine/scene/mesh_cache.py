@@ -89,9 +89,10 @@ def remember_refusal(folder: Path, key: str, reason: str, within_s: float | None
     _write(folder, _refusal_entry(folder, key).name, json.dumps(refusal).encode())
 
 
-def verified_parts(folder: Path, key: str, load) -> tuple[list[np.ndarray], float, tuple, tuple] | None:
+def verified_parts(folder: Path, key: str, load) -> tuple[list[np.ndarray], float, tuple, tuple, str | None] | None:
     """The entry under ``key`` once it describes its mesh (``load()``: the mesh, loaded to check it
-    once per process), or None where there is none usable (named where it is refused)."""
+    once per process), or None where there is none usable (named where it is refused): parts,
+    volume, centre of mass, inertia per kg, and how an open mesh was repaired (None: closed)."""
     cached = _cached_parts(folder, key)
     if cached is None or key in VERIFIED:
         return cached
@@ -120,7 +121,7 @@ def _describes(cached: tuple, mesh) -> str | None:
     mesh's own, its parts within the mesh's bounds and holding about its volume. A planted entry
     that changes the object's mass, balance or extent is caught; one that reshuffles parts within
     them would need the decomposition again to tell."""
-    parts, volume, centre, inertia = cached
+    parts, volume, centre, inertia, _ = cached
     own_volume, own_centre, own_inertia = mass_properties(mesh)
     if not (np.isclose(volume, own_volume, rtol=1e-6) and np.allclose(centre, own_centre, rtol=1e-6, atol=1e-9)
             and np.allclose(inertia, own_inertia, rtol=1e-6, atol=1e-12)):
@@ -140,7 +141,7 @@ def _describes(cached: tuple, mesh) -> str | None:
     return None
 
 
-def _cached_parts(folder: Path, key: str) -> tuple[list[np.ndarray], float, tuple, tuple] | None:
+def _cached_parts(folder: Path, key: str) -> tuple[list[np.ndarray], float, tuple, tuple, str | None] | None:
     """The parts, volume, centre of mass and inertia per kg stored under ``key`` (JSON, never code),
     or None when there are none usable (a link, a FIFO or a folder at the entry's name, or at the
     cache folder's, is never followed: named and decomposed again)."""
@@ -158,10 +159,11 @@ def _cached_parts(folder: Path, key: str) -> tuple[list[np.ndarray], float, tupl
         parts = [np.asarray(p, float) for p in data["parts"]]
         volume, centre = float(data["volume_m3"]), tuple(float(v) for v in data["centre_of_mass_m"])
         inertia = tuple(float(v) for v in data["inertia_diagonal_per_kg_m2"])
+        repaired = data.get("repaired")
         if data.get("key") != key or not parts or any(p.ndim != 2 or p.shape[1] != 3 or len(p) < 4 for p in parts) \
-                or len(centre) != 3 or len(inertia) != 3:
+                or len(centre) != 3 or len(inertia) != 3 or not isinstance(repaired, (str, type(None))):
             return None
-        return parts, volume, centre, inertia
+        return parts, volume, centre, inertia, None if repaired is None else repaired[:500]
     except UnsafeEntry as exc:
         _report(f"ipe: ignoring mesh cache entry {_entry(folder, key)} and decomposing again: {exc}")
         return None
@@ -170,14 +172,15 @@ def _cached_parts(folder: Path, key: str) -> tuple[list[np.ndarray], float, tupl
 
 
 def store_parts(folder: Path, key: str, parts: list[np.ndarray], volume_m3: float, centre_m: tuple,
-                 inertia_per_kg_m2: tuple) -> None:
+                 inertia_per_kg_m2: tuple, repaired: str | None = None) -> None:
     """Written inside the cache only (``safe_files.write_entry``: a temporary file created anew,
     renamed over the entry), so a reader never sees half an entry and a planted link is not written
     through; once written, the entry is this process's own (``VERIFIED``), not before: what a failed
     write left at its name is checked when read."""
     data = json.dumps({"key": key, "parts": [p.tolist() for p in parts], "volume_m3": volume_m3,
                        "centre_of_mass_m": list(centre_m),
-                       "inertia_diagonal_per_kg_m2": list(inertia_per_kg_m2)}).encode()
+                       "inertia_diagonal_per_kg_m2": list(inertia_per_kg_m2),
+                       **({"repaired": repaired} if repaired is not None else {})}).encode()
     if _write(folder, _entry(folder, key).name, data):
         VERIFIED.add(key)
 

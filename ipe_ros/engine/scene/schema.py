@@ -84,7 +84,10 @@ def _shapes() -> dict[str, Any]:
                                                               "with volume_m3"),
                      "source": _closed({"uri": {"type": "string", "minLength": 1,
                                                 "description": "the mesh file as the scene named it"},
-                                        "scale": _vector(3, "metres per file unit along x, y, z", None, 0.0)},
+                                        "scale": _vector(3, "metres per file unit along x, y, z", None, 0.0),
+                                        "repaired": {"type": "string", "maxLength": 500,
+                                                     "description": "how the mesh, open, was closed before it was "
+                                                                    "decomposed (absent: it was closed)"}},
                                        ("uri", "scale"), "the mesh file these parts were read from: shown (RViz's "
                                                          "MESH_RESOURCE), never read; the parts are the shape")},
         "mesh": {"uri": {"type": "string", "minLength": 1,
@@ -93,9 +96,12 @@ def _shapes() -> dict[str, Any]:
                                         "parts (docs/scene-format.md)"},
                  "scale": {"description": "metres per file unit (0.001 for millimetres): one number or [sx, sy, sz]",
                            "oneOf": [_number("m per unit", 0.0, exclusive_minimum=True),
-                                     _vector(3, "m per unit along x, y, z", None, 0.0)]}},
+                                     _vector(3, "m per unit along x, y, z", None, 0.0)]},
+                 "open": {"enum": ["repair", "refuse"], "default": "repair",
+                          "description": "a mesh that is not closed: repaired (its holes filled where small, else a "
+                                         "watertight remesh, else its convex hull; the source says how), or refused"}},
     }
-    optional = {"mesh": ("scale",), "compound": ("volume_m3", "centre_of_mass_m", "inertia_diagonal_per_kg_m2",
+    optional = {"mesh": ("scale", "open"), "compound": ("volume_m3", "centre_of_mass_m", "inertia_diagonal_per_kg_m2",
                                                  "source")}
     return {kind: _closed({"type": {"const": kind}, **props},
                           ("type", *(p for p in props if p not in optional.get(kind, ()))), f"a {kind}")

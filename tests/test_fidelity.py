@@ -339,31 +339,33 @@ def test_a_bias_on_a_minority_of_samples_is_confirmed_where_it_shows(contradicte
     """The fast physics topples the stack in samples 0, 3 and 5 of 8: confirmation looks at 3,
     where the bias can show again, beside 1 on the standing side (the larger one), not at 1 and 2
     alone where none could; two same-way differences in three, a bias credibly beyond 0.1,
-    escalate: the disputed side only (issue 75), sample 5, the one toppled sample not yet rerun;
-    the standing side, compared clean, keeps its fast outcomes."""
+    escalate."""
     spy = _toppled_only_in(contradicted_scene, (0, 3, 5))
     p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), WRONG_HERE, QUERY, seed=0,
                 map_fn=spy)
-    assert [[t.index for t in call] for call in spy.calls[1:]] == [[1, 3], [5]]  # then the escalation
+    assert [[t.index for t in call] for call in spy.calls[1:]] == [[1, 3], [2, 4, 5, 6, 7]]  # then the escalation
     assert p.fidelity == "escalated" and p.object_fall_probability["block1"] == 0.0
-    block1 = [b.name for b in contradicted_scene.dynamic_objects].index("block1")
-    assert p.self_check["escalated_samples"] == 3
-    assert {"outcome": f"fallen[{block1}]", "fast_says": "yes", "samples": 3} in p.self_check["escalated_strata"]
 
 
 def test_an_escalation_of_the_disputed_side_answers_there_exactly_as_the_reference(contradicted_scene):
-    """Issue 75: the escalation reruns the disputed stratum only (the samples whose fast outcome says
-    block1 topples: 0, 3 and 5 of 8). Each of them in the answer is the reference's own rollout of
-    that sample, bit for bit (what `paper` run alone on the same seed gives); every other sample is
-    the fast one, unchanged; the answer is the reference's on block1, at a third of the reruns."""
+    """Issue 75: an escalation reruns the disputed side first. k = 16, the fast physics toppling the
+    stack in samples 0, 3 and 5 only, and a check comparing 8 more samples at once: every toppled
+    sample differs, the six standing ones compared do not, so the standing side is credibly clean and
+    keeps its fast outcomes; nothing more is rerun (7 reruns fewer than escalating every sample).
+    Each toppled sample in the answer is the reference's own rollout of it, bit for bit (what
+    `paper` run alone on the same seed gives); every other sample is the fast one, unchanged. At
+    k = 8 (above) the side kept could hide flips: every sample is rerun."""
+    check = SelfCheck(confirm_samples=8)
     spy = _toppled_only_in(contradicted_scene, (0, 3, 5))
-    model = _ramp_model(contradicted_scene, 8)
-    checked = predict(contradicted_scene, model, WRONG_HERE, QUERY, seed=0, map_fn=spy)
+    model = _ramp_model(contradicted_scene, 16)
+    checked = predict(contradicted_scene, model, WRONG_HERE, QUERY, seed=0, map_fn=spy, check=check)
     fast = predict(contradicted_scene, model, WRONG_HERE, QUERY, seed=0, map_fn=_toppled_only_in(contradicted_scene,
                                                                                                 (0, 3, 5)), check=None)
     reference = predict(contradicted_scene, model, reference_settings(), QUERY, seed=0, check=None)
-    reruns = sum(1 for call in spy.calls for t in call if t.settings.name == REFERENCE)
-    assert checked.fidelity == "escalated" and reruns == 4  # samples 0, 1, 3 compared, then 5
+    assert [[t.index for t in call] for call in spy.calls[1:]] == [[1, 3, 2, 5, 4, 6, 7, 8]]  # no escalation round
+    block1 = [b.name for b in contradicted_scene.dynamic_objects].index("block1")
+    assert checked.fidelity == "escalated" and checked.self_check["escalated_samples"] == 3
+    assert {"outcome": f"fallen[{block1}]", "fast_says": "yes", "samples": 3} in checked.self_check["escalated_strata"]
     for i, outcome in enumerate(checked.outcomes):
         expected = reference.outcomes[i] if i in (0, 3, 5) else fast.outcomes[i]
         for ran, want in zip(outcome.rollouts, expected.rollouts):
@@ -402,12 +404,11 @@ def test_two_same_way_differences_on_a_small_side_escalate_once_the_large_side_i
     the first round looks at both sides (1 standing, 5 toppled: a second same-way difference), and
     while the six standing samples could still hold differences the other way the bias is not
     credibly beyond 0.1; a second round finds 2 and 3 standing as the reference's, and the scene is
-    escalated (the counts, needing three, called it verified at 0.25 off). The disputed side, 0 and
-    5, was rerun already: the escalation takes their reruns and runs nothing more (issue 75)."""
+    escalated (the counts, needing three, called it verified at 0.25 off)."""
     spy = _toppled_only_in(contradicted_scene, (0, 5))
     p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), WRONG_HERE, QUERY, seed=0,
                 map_fn=spy)
-    assert [[t.index for t in call] for call in spy.calls[1:]] == [[1, 5], [2, 3]]
+    assert [[t.index for t in call] for call in spy.calls[1:]] == [[1, 5], [2, 3], [4, 6, 7]]
     assert p.fidelity == "escalated" and p.object_fall_probability["block1"] == 0.0
     assert (p.self_check["verified_samples"], p.self_check["disagreeing_samples"]) == (5, 2)
 

@@ -44,10 +44,11 @@ class Bias:
         return -tolerance <= self.low and self.high <= tolerance
 
 
-def bias_estimates(fast_flags: dict[int, np.ndarray], differences: dict[int, np.ndarray]) -> list[Bias]:
-    """Per yes/no outcome that differs in some compared sample, its ``Bias`` over the answer's
-    samples, from every good sample's fast flags (sample index -> 0/1) and the compared samples'
-    differences (fast - reference).
+def bias_estimates(fast_flags: dict[int, np.ndarray], differences: dict[int, np.ndarray],
+                   also: Sequence[int] = ()) -> list[Bias]:
+    """Per yes/no outcome that differs in some compared sample (and each of ``also``, differing or
+    not), its ``Bias`` over the answer's samples, from every good sample's fast flags (sample
+    index -> 0/1) and the compared samples' differences (fast - reference).
 
     A fast physics that is wrong says "yes" where the reference says "no" on part of the samples
     whose fast outcome is "yes" (and the other way round), so the samples are split by their fast
@@ -70,7 +71,8 @@ def bias_estimates(fast_flags: dict[int, np.ndarray], differences: dict[int, np.
     net = np.sum(list(compared.values()), axis=0)
     rng = np.random.default_rng(20131)
     out = []
-    for j in np.flatnonzero(differ.any(axis=0)):
+    width = differ.shape[1] if differ.ndim == 2 else 0
+    for j in sorted(set(np.flatnonzero(differ.any(axis=0)).tolist()) | {int(j) for j in also if j < width}):
         draws, strata = np.zeros(_BIAS_DRAWS), []
         for side, sign in ((0, -1.0), (1, 1.0)):
             weight = int(np.sum(flags[:, j] == side))

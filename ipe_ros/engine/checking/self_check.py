@@ -106,19 +106,24 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: d
     # 4. escalation: contradicted on this scene. First only the disputed strata (``disputed_strata``)
     # at the reference; kept where the answer, those samples replaced, is no longer contradicted
     parts.append(("escalation", reference.name))
-    strata = [] if known else disputed_strata(state, compared)
+    strata = [] if known or check.bias_tolerance is None else disputed_strata(state, compared)
     disputed = sorted({i for _, _, members in strata for i in members})
     remaining = [i for i in range(len(outcomes)) if i not in state.checked and not outcomes[i].skipped]
-    if strata and len([i for i in disputed if i not in state.checked]) < len(remaining):
+    hoped = {**{i: d for i, d in compared.items() if i not in disputed}, **{i: 0 * d for i, d in compared.items()
+                                                                           if i in disputed}}
+    if strata and len([i for i in disputed if i not in state.checked]) < len(remaining) and all(
+            b.within(check.bias_tolerance) for b in bias_estimates(state.fast_flags, {
+                **hoped, **{i: np.zeros_like(state.fast_flags[i]) for i in disputed}}, also=[j for j, _, _ in strata])):
+        # (what the kept side already shows could pass: else every sample, in one round)
         yield from state.rerun([i for i in disputed if i not in state.checked])
         replaced = {**refined, **{i: state.checked[i] for i in disputed}}
         if not any(state.checked[i].budget_stopped for i in disputed):
             merged = merge(outcomes, replaced)
             after = _Comparison(tasks, merged, dict(state.checked), check, reference)
-            if not after.contradicted(after.differences()):
+            if _credibly_within(after, [j for j, _, _ in strata], check.bias_tolerance):
                 return merged, FidelityReport(
                     "escalated", escalated_samples=len(disputed), settings=tuple(parts),
-                    escalated_strata=tuple((label, side, len(members)) for label, side, members in strata),
+                    escalated_strata=tuple((_label(state, j), side, len(members)) for j, side, members in strata),
                     rigid_reruns=state.rigid_reruns(), **common)
     yield from state.rerun([i for i in range(len(outcomes)) if i not in state.checked and not outcomes[i].skipped])
     done = state.checked
@@ -129,27 +134,39 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: d
                                                  rigid_reruns=state.rigid_reruns(), **common)
 
 
-def disputed_strata(state: _Comparison, compared: dict[int, np.ndarray]) -> list[tuple[str, str, list[int]]]:
-    """Where the fast physics is disputed: per outcome whose bias escalates (by the counts rule, or
-    found by refinement: every outcome some compared sample differs on), each fast side ("yes",
+def _credibly_within(after: _Comparison, escalated: list[int], tolerance: float) -> bool:
+    """Whether an answer whose disputed samples were rerun is credibly within ``tolerance`` of the
+    reference's on every outcome that differs and on every one that escalated: the side kept fast
+    was compared without a difference, but chaos flips either way, and a side looked at in few
+    samples could still hide flips that the rerun side no longer cancels (then every sample)."""
+    compared = after.differences()
+    return bool(compared) and all(b.within(tolerance) for b in bias_estimates(after.fast_flags, compared,
+                                                                               also=escalated))
+
+
+def _label(state: _Comparison, j: int) -> str:
+    labels = outcome_labels(next(o for o in state.outcomes if o.ok))
+    return labels[j] if j < len(labels) else f"outcome {j}"
+
+
+def disputed_strata(state: _Comparison, compared: dict[int, np.ndarray]) -> list[tuple[int, str, list[int]]]:
+    """Where the fast physics is disputed (the bias rule): per outcome whose bias escalates (or,
+    escalated by refinement, every outcome some compared sample differs on), each fast side ("yes",
     "no") on which a compared sample differs, with every good sample on that side. A wrong fast
     physics can only show an outcome's bias on the side it says (``bias_estimates``): those samples
     rerun at the reference answer exactly as it would, and the other side, compared without a
-    difference, keeps its fast outcomes. (label, side, samples) by outcome, "yes" first."""
+    difference, keeps its fast outcomes where that is credible (``_credibly_within``).
+    (outcome, side, samples) by outcome, "yes" first."""
     tolerance = state.check.bias_tolerance
-    if tolerance is not None:
-        outcomes = [b.outcome for b in state.biases(compared) if b.beyond(tolerance) and b.same_way >= state.at_least]
-    else:
-        outcomes = []
-    if not outcomes:
+    outcomes = [b.outcome for b in state.biases(compared) if b.beyond(tolerance) and b.same_way >= state.at_least]
+    if not outcomes:  # escalated by refinement: every outcome a compared sample differs on
         outcomes = sorted({int(j) for d in compared.values() for j in np.flatnonzero(d)})
-    labels = outcome_labels(next(o for o in state.outcomes if o.ok)) if state.fast_flags else []
     strata = []
     for j in outcomes:
         for side, name in ((1.0, "yes"), (0.0, "no")):
             if any(d[j] != 0 and state.fast_flags[i][j] == side for i, d in compared.items() if i in state.fast_flags):
                 members = sorted(i for i, f in state.fast_flags.items() if f.shape[0] > j and f[j] == side)
-                strata.append((labels[j] if j < len(labels) else f"outcome {j}", name, members))
+                strata.append((j, name, members))
     return strata
 
 

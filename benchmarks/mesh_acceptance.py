@@ -64,7 +64,7 @@ def one(path: Path, folder: Path) -> dict:
     row.update(accepted=True, seconds=time.perf_counter() - started)
     shape = scene.objects[0].shape
     row.update(parts=len(shape.parts), points=sum(len(p.shape.vertices_m) for p in shape.parts),
-               volume_m3=shape.volume_m3)
+               volume_m3=shape.volume_m3, repaired=shape.source.repaired)  # how an open one was closed
     answer = predict(scene, ModelConfig(sigma_m=0.0, samples=1, object_noise=False), preset("paper"), QUERY, check=None)
     if answer.samples:
         outcome = answer.outcomes[0]

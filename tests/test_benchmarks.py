@@ -377,5 +377,8 @@ def test_mesh_acceptance_reports_each_file_accepted_or_refused_with_its_line(tmp
     rows = {r["file"]: r for r in data["rows"]}
     assert rows["seamed_cube.obj"]["accepted"] and rows["seamed_cube.obj"]["fell"] is False
     assert rows["seamed_cube.obj"]["volume_m3"] == pytest.approx(0.05 ** 3, rel=1e-6)
-    assert not rows["open_mug.obj"]["accepted"] and "is not closed" in rows["open_mug.obj"]["refusal"]
-    assert data["summary"]["files"] == 2 and data["summary"]["accepted"] == 1
+    assert rows["seamed_cube.obj"]["repaired"] is None
+    # open (no base, no floor): repaired, saying how (issue 73's ladder), and standing
+    assert rows["open_mug.obj"]["accepted"] and rows["open_mug.obj"]["fell"] is False
+    assert rows["open_mug.obj"]["repaired"].startswith("open: remeshed watertight from 24 voxels across")
+    assert data["summary"]["files"] == 2 and data["summary"]["accepted"] == 2

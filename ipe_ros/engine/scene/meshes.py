@@ -48,8 +48,8 @@ MAX_MESH_VERTICES = 200_000
 #: stay within the compound limits (limits.MAX_COMPOUND_VERTICES)
 MAX_PART_VERTICES = 64
 #: bump when the cached decomposition's meaning changes (4: hulls decimated to MAX_PART_VERTICES,
-#: and the parts together thinned to limits.MAX_COMPOUND_VERTICES)
-_CACHE_VERSION = 4
+#: and the parts together thinned to limits.MAX_COMPOUND_VERTICES; 5: within the mesh's bounds)
+_CACHE_VERSION = 5
 
 
 @dataclass(frozen=True)
@@ -619,4 +619,21 @@ def _decompose(vertices: np.ndarray, faces: np.ndarray, settings: Decomposition,
              else _coacd_within(vertices, faces, settings, within_s, path, stop))
     if not hulls:
         raise SceneError(path, "its convex decomposition is empty (a flat or degenerate mesh)")
-    return hulls
+    # CoACD remeshes a surface that is not a manifold (a union of overlapping shells, as collision
+    # meshes are) on a grid, and its parts then reach up to a cell past the mesh: a can set on its
+    # lowest point sank 0.4-0.9 mm into the floor and was refused. The parts stay within the mesh's bounds
+    low, high = vertices.min(axis=0), vertices.max(axis=0)
+    clipped = [np.clip(hull, low, high) for hull in hulls]
+    kept = [hull for hull in clipped if _solid(hull)]  # a sliver wholly past the bounds is flat once clipped
+    if not kept:
+        raise SceneError(path, "its convex decomposition is empty (a flat or degenerate mesh)")
+    return kept
+
+
+def _solid(points: np.ndarray) -> bool:
+    from scipy.spatial import ConvexHull as QHull
+
+    try:
+        return QHull(points).volume > 0
+    except Exception:  # noqa: BLE001 - qhull's errors: coplanar points
+        return False

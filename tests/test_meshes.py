@@ -193,6 +193,37 @@ def test_a_glb_that_places_one_mesh_many_times_is_refused_before_it_is_laid_out(
                                  "parts are laid out, more than the 200000 read; simplify it")
 
 
+def test_a_glb_whose_nodes_are_nested_deep_is_refused_before_any_transform_is_resolved(folder, monkeypatch):
+    """Issue 76: trimesh resolves a node's transform along its whole chain of parents: one mesh under
+    100 000 nested nodes (2.3 MB) took 58 s to place. Nested past MAX_NODE_DEPTH, a GLB is refused
+    from its graph's parents alone; a few levels (as object models have) read as ever."""
+    import trimesh
+
+    def nested(depth: int) -> bytes:
+        scene = trimesh.Scene()
+        scene.graph.update(frame_to="n0", frame_from=scene.graph.base_frame, matrix=np.eye(4))
+        for i in range(1, depth):  # each node under the one before it, the mesh at the bottom
+            scene.graph.update(frame_to=f"n{i}", frame_from=f"n{i - 1}", matrix=np.eye(4))
+        scene.add_geometry(trimesh.creation.box((0.1, 0.1, 0.1)), node_name="leaf", geom_name="m",
+                           parent_node_name=f"n{depth - 1}")
+        return scene.export(file_type="glb")
+
+    (folder / "nested.glb").write_bytes(nested(meshes.MAX_NODE_DEPTH + 10))
+    (folder / "shallow.glb").write_bytes(nested(5))
+    monkeypatch.setattr(trimesh.Scene, "to_mesh", lambda self: pytest.fail("a transform was resolved"))
+    with pytest.raises(SceneError) as caught:
+        load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "nested.glb"}, ball=False), "nested.json"))
+    assert str(caught.value) == (f"objects[0].shape.uri: {folder / 'nested.glb'}: its nodes are nested 267 deep, more "
+                                 "than the 256 read; flatten its node hierarchy (export it with the transforms "
+                                 "applied)")
+    monkeypatch.undo()
+    assert meshes._deepest({"b": "a", "c": "b", "d": "b", "e": "d"}) == 3
+    data = scene_with({"type": "mesh", "uri": "shallow.glb"}, ball=False)
+    data["objects"][0]["position_m"] = [0, 0, 0.05]
+    [scene] = load_scenes(_write(folder, data, "shallow.json"))
+    assert scene.objects[0].shape.volume_m3 == pytest.approx(1e-3, rel=1e-6)
+
+
 def test_a_scene_from_the_network_cannot_make_the_reader_open_files(folder):
     """A scene parsed without mesh access (the node's ~/scene_json, a question's scene) refuses mesh shapes."""
     with pytest.raises(SceneError) as caught:

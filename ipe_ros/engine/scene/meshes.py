@@ -324,17 +324,22 @@ def _load(content: bytes, file: Path, scale: tuple[float, float, float], path: s
     kind = file.suffix.lower().lstrip(".")
     try:
         scene = trimesh.load_scene(io.BytesIO(content), file_type=kind, process=True)
-        # counted before the copies are laid out: a GLB places one mesh at any number of nodes, so a
-        # file of a few MB can expand to millions of vertices (what trimesh.load(force="mesh") does)
-        placed = scene.graph.nodes_geometry
-        expanded = sum(len(scene.geometry[scene.graph[node][1]].vertices) for node in placed)
-        mesh = scene.to_mesh() if expanded <= MAX_MESH_VERTICES else None
+        # counted before the copies are laid out, from the graph alone (a node's transform walks its
+        # chain of parents: a GLB of 100 000 nested nodes took 58 s for one): a GLB places one mesh at
+        # any number of nodes, so a file of a few MB can expand to millions of vertices
+        depth = _deepest(scene.graph.transforms.parents)
+        placed = {name: len(nodes) for name, nodes in scene.graph.geometry_nodes.items() if name in scene.geometry}
+        expanded = sum(len(scene.geometry[name].vertices) * count for name, count in placed.items())
+        mesh = scene.to_mesh() if expanded <= MAX_MESH_VERTICES and depth <= MAX_NODE_DEPTH else None
     except Exception as exc:  # trimesh raises what its parsers raise
         raise SceneError(path, f"{file}: not a readable {kind.upper()} mesh ({type(exc).__name__}: "
                                f"{str(exc)[:120]})") from None
+    if depth > MAX_NODE_DEPTH:
+        raise SceneError(path, f"{file}: its nodes are nested {depth} deep, more than the {MAX_NODE_DEPTH} read; "
+                               "flatten its node hierarchy (export it with the transforms applied)")
     if mesh is None:
-        raise SceneError(path, f"{file}: {expanded} vertices once its {len(placed)} placed parts are laid out, more "
-                               f"than the {MAX_MESH_VERTICES} read; simplify it")
+        raise SceneError(path, f"{file}: {expanded} vertices once its {sum(placed.values())} placed parts are laid "
+                               f"out, more than the {MAX_MESH_VERTICES} read; simplify it")
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise SceneError(path, f"{file}: holds no triangles")
     if len(mesh.vertices) > MAX_MESH_VERTICES:
@@ -356,6 +361,28 @@ def _load(content: bytes, file: Path, scale: tuple[float, float, float], path: s
     if not np.all(np.isfinite(mesh.vertices)):
         raise SceneError(path, f"{file}: has vertices that are not finite numbers")
     return _closed(mesh, path, str(file), policy)
+
+
+#: a scene graph's nodes nested deeper than this are refused before any transform is resolved (an
+#: object model's hierarchy is a few levels; trimesh resolves a node's transform along its whole chain)
+MAX_NODE_DEPTH = 256
+
+
+def _deepest(parents: dict) -> int:
+    """The longest chain of parents in a scene graph (child -> parent), in linear time."""
+    depth: dict = {}
+    for node in parents:
+        chain = []
+        while node in parents and node not in depth:
+            chain.append(node)
+            node = parents[node]
+            if len(chain) > len(parents):  # a cycle: no tree
+                return len(parents) + 1
+        known = depth.get(node, 0)
+        for n in reversed(chain):
+            known += 1
+            depth[n] = known
+    return max(depth.values(), default=0)
 
 
 #: what to do with a mesh that is not closed (a mesh shape's ``open``)

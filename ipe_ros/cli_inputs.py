@@ -105,6 +105,11 @@ def _typed(token: str, flag: str) -> bool:
     return name.startswith("--") and len(name) > 3 and flag.startswith(name)
 
 
+def typed_option(args: argparse.Namespace, flag: str) -> bool:
+    """Whether ``flag`` was typed on the command line (``args.argv``), not left at its default."""
+    return any(_typed(t, flag) for t in getattr(args, "argv", ()))
+
+
 def given_request_arguments(args: argparse.Namespace) -> dict[str, Any]:
     """The request's arguments (``build_request``'s keywords) from the options the command has; an
     input given while the one it ``requires`` is off is refused naming both. With ``--inputs-from``,

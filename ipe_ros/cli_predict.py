@@ -14,7 +14,7 @@ import sys
 import time
 
 from .cli_ask import depth_posterior
-from .cli_inputs import given_request_arguments
+from .cli_inputs import given_request_arguments, typed_option
 from .cli_queries import given_query_parameters
 from .engine import AdaptiveStop, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError, WorkerPool, load_scenes, predict
 from .engine.config import anytime_batch_size, default_workers
@@ -187,7 +187,10 @@ def _perceive_depth(args, scenes, model, map_fn=None):
 def cmd_predict(args) -> int:
     refused: list[RefusedScene] = []  # scenes of the file that cannot be answered: reported, the rest answered
     try:
-        scenes = load_scenes(args.path, towers=args.tower, on_refused=refused.append)
+        # a --budget typed bounds each mesh's first decomposition too (cached after: later runs cost
+        # nothing); without it a mesh decomposes however long it takes, once (the way to fill the cache)
+        scenes = load_scenes(args.path, towers=args.tower, on_refused=refused.append,
+                             decompose_within_s=args.budget_s if typed_option(args, "--budget") else None)
     except SceneError:
         _report_refused(args, refused)  # none of the file's scenes read: each refusal said before the verdict
         raise

@@ -510,6 +510,25 @@ def test_a_decomposition_over_its_time_is_ended_and_the_scene_refused_saying_so(
     assert set(multiprocessing.active_children()) <= running
 
 
+def test_ipe_predict_s_budget_bounds_a_mesh_s_first_decomposition(folder, tmp_path, monkeypatch, capsys):
+    """Issue 76: the CLI's --budget did not cover reading and decomposing meshes (21.5 s at --budget 5).
+    Typed, it bounds each mesh's first decomposition: over it, one line naming the object and the fix;
+    without it, the mesh decomposes however long it takes (the way to fill the cache), after which the
+    same tight budget answers from the cache."""
+    from ipe_ros.cli import main as cli_main
+
+    monkeypatch.setenv("IPE_CACHE_DIR", str(tmp_path / "cache"))
+    path = _write(folder, scene_with({"type": "mesh", "uri": "mug.obj"}), "budget.json")
+    tight = ["predict", str(path), "--ground-truth", "--query", "fall", "--budget", "0.2"]
+    assert cli_main(tight) == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1].startswith(
+        "ipe: error: objects[0].shape.uri: its convex decomposition did not finish within 0.2 s; decompose it once "
+        "ahead")
+    assert cli_main(tight[:-2]) == 0  # no budget typed: decomposed, cached
+    capsys.readouterr()
+    assert cli_main(tight) == 0  # from the cache, within the budget
+
+
 def test_a_recording_draws_the_mesh_an_object_was_read_from(folder, tmp_path):
     """Rerun shows the mug itself (every vertex of the file, as read: scaled, +z up), not its parts'
     hulls; a file outside the reader's roots is never read to draw it (issue 76: a compound's source

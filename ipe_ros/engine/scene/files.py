@@ -124,9 +124,11 @@ def _tower_scene(path: Path, scene_name: str, rows: list[dict[str, str]], max_ob
 
 
 def load_scenes(path: str | Path, towers: Iterable[str] | None = None,
-                max_objects: int = DEFAULT_MAX_OBJECTS, on_refused: OnRefused | None = None) -> list[Scene]:
+                max_objects: int = DEFAULT_MAX_OBJECTS, on_refused: OnRefused | None = None,
+                decompose_within_s: float | None = None) -> list[Scene]:
     """Load a JSON scene file or a paper-format tower CSV, by extension. ``on_refused``: see
-    ``scenes_from_json``; without it any unreadable scene ends the read."""
+    ``scenes_from_json``; without it any unreadable scene ends the read. ``decompose_within_s``: the
+    most seconds each mesh not yet cached may take to decompose (None: no limit)."""
     path = Path(path)
     if not path.exists():
         raise SceneError(str(path), "no such file")
@@ -149,7 +151,7 @@ def load_scenes(path: str | Path, towers: Iterable[str] | None = None,
     roots = (path.resolve().parent, *(Path(p).resolve() for p in os.environ.get("IPE_MESH_PATH", "").split(os.pathsep)
                                       if p))
     scenes = scenes_from_json(text, max_objects, refuse if on_refused is not None else None,
-                              MeshAccess(roots=roots, base=path.resolve().parent))
+                              MeshAccess(roots=roots, base=path.resolve().parent, decompose_within_s=decompose_within_s))
     if wanted is not None:
         picked = [s for s in scenes if s.name in wanted]
         missing = sorted(wanted - {s.name for s in picked} - {r.name for r in refusals})

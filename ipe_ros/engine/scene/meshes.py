@@ -631,7 +631,7 @@ def _coacd_within(vertices: np.ndarray, faces: np.ndarray, settings: Decompositi
         raise DecompositionTimeout(path, f"its convex decomposition did not finish within {within_s:g} s; decompose "
                                          "it once ahead (`ipe predict` of a scene naming it caches the parts by the "
                                          "file's content, in $IPE_CACHE_DIR, for every later scene), simplify the "
-                                         "mesh, or allow more time (the node's mesh_decomposition_s)")
+                                         "mesh, or allow more time (the node's mesh_decomposition_s, ipe predict's --budget)")
     kind, value = answer
     if kind == "error":
         raise SceneError(path, f"its convex decomposition failed ({value})")

@@ -545,13 +545,13 @@ def test_a_recording_draws_the_mesh_an_object_was_read_from(folder, tmp_path):
     vertices, triangles = source_triangles(scene.objects[0].shape.source)
     assert len(vertices) == len(mug_mesh().vertices) and len(triangles) == len(mug_mesh().faces)
 
-    def drawn_vertices(scene) -> int:
+    def drawn_vertices(scene, entity: str = "/world/scene/objects/mug") -> int:
         prediction = predict(scene, ModelConfig(sigma_m=0.0, samples=1, object_noise=False), preset("default"),
                              QuerySpec(queries=frozenset({"fall"})), check=None, record_every=20, record_samples=1)
         path = tmp_path / "mug.rrd"
         write_prediction_rrd(path, scene, prediction, answer=prediction.to_dict(), stamp_ns=1, rollouts_logged=1)
         for chunk in RrdReader(path).stream().to_chunks():
-            if chunk.entity_path == "/world/scene/objects/mug":
+            if chunk.entity_path == entity:
                 batch = chunk.to_record_batch()
                 for name in batch.schema.names:
                     if "vertex_positions" in name:
@@ -559,6 +559,10 @@ def test_a_recording_draws_the_mesh_an_object_was_read_from(folder, tmp_path):
         raise AssertionError("no mesh drawn for the mug")
 
     assert drawn_vertices(scene) == len(vertices)
+    # the convex parts the physics uses, a layer of their own beneath it (issue 73: toggled in the viewer)
+    from ipe_ros.engine.scene.shapes import hull_faces
+
+    assert drawn_vertices(scene, "/world/scene/objects/mug/convex_parts") == len(hull_faces(scene.objects[0].shape)[0])
     # the scene as JSON (its mug a compound naming its source): read where the file is under the
     # reader's roots, the mug is drawn; read where it is not (the node with no mesh_roots: a sender
     # could name any file), the source is shown but never read, and the parts are drawn

@@ -88,6 +88,11 @@ def _log_bodies(rec: rr.RecordingStream, base: str, bodies, colors) -> None:
         rec.log(path, rr.Transform3D(translation=body.position_m, quaternion=rr.Quaternion(xyzw=body.orientation_xyzw)),
                 static=True)
         rec.log(path, shape_archetype(body, rgb), static=True)
+        if isinstance(body.shape, shapes.Compound) and body.shape.source is not None:
+            # the convex parts the physics uses, beside the mesh drawn: a layer to switch on in the viewer
+            vertices, triangles = shapes.hull_faces(body.shape)
+            rec.log(f"{path}/convex_parts", rr.Mesh3D(vertex_positions=vertices, triangle_indices=triangles,
+                                                      albedo_factor=to_rgb8(rgb)), static=True)
 
 
 def log_scene(rec: rr.RecordingStream, scene: Scene) -> None:

@@ -669,7 +669,7 @@ def test_parts_over_the_compound_budget_are_thinned_not_refused():
     public models, issue 73): each part is thinned to its share, inside its own hull, keeping its extremes."""
     from scipy.spatial import ConvexHull as Hull
 
-    from ipe_ros.engine.scene.meshes import within_vertex_budget
+    from ipe_ros.engine.scene.convex_parts import within_vertex_budget
 
     rng = np.random.default_rng(0)
     hulls = [rng.standard_normal((64, 3)) + 5 * i for i in range(100)]  # 6400 vertices together

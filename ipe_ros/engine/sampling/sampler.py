@@ -307,7 +307,7 @@ def _aggregate(scene: Scene, model: ModelConfig, settings: SimSettings, query: Q
         request.update(perception=perceived.to_dict())
     repaired = {b.name: b.shape.source.repaired for b in scene.objects
                 if getattr(b.shape, "source", None) is not None and b.shape.source.repaired}
-    if repaired:  # open meshes the engine was given closed: how (meshes._closed)
+    if repaired:  # open meshes the engine was given closed: how (mesh_repair.closed_solid)
         request.update(repaired_meshes=repaired)
     prediction = aggregate(scene, outcomes, query=query,
                            deterministic=is_deterministic(scene, model), samples_requested=len(tasks),

@@ -36,6 +36,8 @@ import numpy as np
 from ..errors import SceneError, shown
 from . import limits
 from ..safe_files import UnreadableFile, is_folder, read_file_bounded
+from .convex_parts import DecompositionStopped, DecompositionTimeout, decompose_hulls
+from .mesh_repair import OPEN_POLICIES, REPAIRED, closed_solid
 from .mesh_cache import has_parts, mass_properties, remember_refusal, remembered_refusal, store_parts, verified_parts
 from .shapes import Compound, CompoundPart, ConvexHull, MeshSource
 
@@ -44,9 +46,6 @@ from .shapes import Compound, CompoundPart, ConvexHull, MeshSource
 MESH_FORMATS = ("obj", "stl", "ply", "glb")
 MAX_MESH_BYTES = 32 * 2**20
 MAX_MESH_VERTICES = 200_000
-#: every part's hull is kept to this many vertices (CoACD's max_ch_vertex), so that a mesh's parts
-#: stay within the compound limits (limits.MAX_COMPOUND_VERTICES)
-MAX_PART_VERTICES = 64
 #: bump when the cached decomposition's meaning changes (4: hulls decimated to MAX_PART_VERTICES,
 #: and the parts together thinned to limits.MAX_COMPOUND_VERTICES; 5: within the mesh's bounds)
 _CACHE_VERSION = 5
@@ -172,7 +171,7 @@ def triangles_shape(points_m: np.ndarray, path: str, access: MeshAccess) -> Comp
 
     def load():
         mesh = trimesh.Trimesh(points, np.arange(len(points)).reshape(-1, 3), process=True)
-        return _closed(mesh, path, "the triangles", "repair")
+        return closed_solid(mesh, path, "the triangles", "repair")
 
     compound, repaired = _compound(key, load, access, path, "a TRIANGLE_LIST")
     return compound  # a marker names no file: how it was closed is in the decomposition's log only
@@ -202,7 +201,7 @@ class DecompositionJob:
     cache: Path
     decomposition: Decomposition
     within_s: float | None
-    #: how an open mesh was closed (``_closed``), None: it was closed
+    #: how an open mesh was closed (``mesh_repair.closed_solid``), None: it was closed
     repaired: str | None = None
 
     @property
@@ -218,7 +217,7 @@ def decompose(job: DecompositionJob, stop: threading.Event | None = None) -> str
     if refused is not None or has_parts(job.cache, job.key):  # done meanwhile (another reader's job)
         return refused
     try:
-        hulls = _decompose(job.vertices, job.faces, job.decomposition, job.path, job.within_s, stop)
+        hulls = decompose_hulls(job.vertices, job.faces, job.decomposition, job.path, job.within_s, stop)
     except DecompositionStopped as exc:
         return exc.problem
     except SceneError as exc:
@@ -249,7 +248,7 @@ def _compound(key: str, load, access: MeshAccess, path: str, what: str) -> tuple
             raise SceneError(path, refused)
         cached = verified_parts(access.cache(), key, load)
         if cached is None:  # the cache could not be written (a read-only home): decomposed for this answer
-            cached = (_decompose(job.vertices, job.faces, job.decomposition, path, job.within_s),
+            cached = (decompose_hulls(job.vertices, job.faces, job.decomposition, path, job.within_s),
                       *job.mass_properties, job.repaired)
     parts, volume, centre, inertia, repaired = cached
     return Compound(tuple(CompoundPart(ConvexHull(tuple(tuple(map(float, v)) for v in part))) for part in parts),
@@ -316,7 +315,7 @@ def _read_bounded(file: Path, path: str) -> bytes:
 
 def _load(content: bytes, file: Path, scale: tuple[float, float, float], path: str, policy: str = "repair"):
     """The file's one closed mesh (a ``trimesh.Trimesh``) in metres, +z up; an open one closed by
-    ``_closed`` (``policy`` "repair"), or refused ("refuse")."""
+    ``mesh_repair.closed_solid`` (``policy`` "repair"), or refused ("refuse")."""
     import io
 
     import trimesh
@@ -360,7 +359,7 @@ def _load(content: bytes, file: Path, scale: tuple[float, float, float], path: s
     mesh.apply_transform(transform)
     if not np.all(np.isfinite(mesh.vertices)):
         raise SceneError(path, f"{file}: has vertices that are not finite numbers")
-    return _closed(mesh, path, str(file), policy)
+    return closed_solid(mesh, path, str(file), policy)
 
 
 #: a scene graph's nodes nested deeper than this are refused before any transform is resolved (an
@@ -383,284 +382,3 @@ def _deepest(parents: dict) -> int:
             known += 1
             depth[n] = known
     return max(depth.values(), default=0)
-
-
-#: what to do with a mesh that is not closed (a mesh shape's ``open``)
-OPEN_POLICIES = ("repair", "refuse")
-#: trimesh metadata key: how an open mesh was closed
-REPAIRED = "ipe_repaired"
-#: holes are filled (rung 1) where their caps add at most this share of the surface: small holes
-MAX_CAP_SHARE = 0.1
-#: the watertight remesh's voxels across the mesh's largest extent (rung 2): at 24 a mug's remesh
-#: decomposes in ~12 s here (48: 70 s; its stair steps smoothed or not), its thin walls a voxel or
-#: two thick (the open mug of tests/test_meshes.py holds 1.6x its walls' volume: the answer says it)
-REMESH_VOXELS = 24
-
-
-def _closed(mesh, path: str, what: str, policy: str):
-    """``mesh`` if closed; else, by ``policy`` "refuse", a SceneError; by "repair", the first rung of
-    the ladder that gives a closed solid: 1. its holes filled, where small (``MAX_CAP_SHARE``); 2. a
-    watertight remesh, the solid its surface encloses in voxels (``REMESH_VOXELS`` across); 3. its
-    convex hull. How (and the volume it then has) is in ``mesh.metadata[REPAIRED]``."""
-    if mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0:
-        return mesh
-    if policy == "refuse":
-        raise SceneError(path, f"{what} is not closed (it has holes or loose edges), so it encloses no volume to "
-                               "give a mass; close it (fill its holes), give the object as convex parts, or let it "
-                               "be repaired (open: repair)")
-    import trimesh
-
-    try:  # a flat surface has no hull with a volume (trimesh fails on it deep in its repairs)
-        hull = mesh.convex_hull
-    except Exception:  # noqa: BLE001
-        hull = None
-    if hull is None or not hull.volume > 0:
-        raise SceneError(path, f"{what} is flat (no two sides to it), so it encloses no volume to give a mass; give "
-                               "the object as a closed mesh or as convex parts")
-    hull_cm3 = float(hull.volume) * 1e6
-    filled = _holes_filled(mesh)
-    if filled is not None and filled[1] <= MAX_CAP_SHARE:
-        solid, share, holes = filled
-        how = f"{holes} hole(s) filled, the caps {100 * share:.1f}% of its surface"
-    else:
-        solid = _voxel_remesh(mesh)
-        how = f"remeshed watertight from {REMESH_VOXELS} voxels across (its holes too large to fill)"
-        if solid is None:
-            solid = hull
-            how = "its convex hull (the last resort: its holes too large to fill, no watertight remesh)"
-    if not isinstance(solid, trimesh.Trimesh) or not solid.is_watertight or solid.volume <= 0:
-        raise SceneError(path, f"{what} is not closed and could not be repaired; close it (fill its holes) or give "
-                               "the object as convex parts")
-    solid.metadata[REPAIRED] = (f"open: {how}; the solid holds {float(solid.volume) * 1e6:.4g} cm3, its convex hull "
-                                f"{hull_cm3:.4g} cm3")
-    return solid
-
-
-def _holes_filled(mesh):
-    """(the mesh with each hole capped by a fan about its boundary's centroid, the caps' share of the
-    surface, the holes), or None where its boundary is not simple loops (a pinched or loose edge)."""
-    import trimesh
-
-    mesh = mesh.copy()
-    try:
-        trimesh.repair.fix_winding(mesh)
-    except Exception:  # noqa: BLE001 - it walks the faces with networkx where it must: judged below instead
-        pass
-    boundary = trimesh.grouping.group_rows(mesh.edges_sorted, require_count=1)
-    if len(boundary) == 0:
-        return None
-    following: dict[int, int] = {}
-    for a, b in mesh.edges[boundary]:  # as the faces run: a cap runs each the other way
-        if a in following:
-            return None
-        following[int(a)] = int(b)
-    vertices, faces, caps_area, holes = list(mesh.vertices), [], 0.0, 0
-    while following:
-        start = next(iter(following))
-        loop = [start]
-        while True:
-            nxt = following.pop(loop[-1], None)
-            if nxt is None:
-                return None  # a chain, not a loop
-            if nxt == start:
-                break
-            loop.append(nxt)
-        centre = len(vertices)
-        vertices.append(np.mean(mesh.vertices[loop], axis=0))
-        for a, b in zip(loop, loop[1:] + loop[:1]):
-            faces.append((b, a, centre))
-        holes += 1
-    capped = trimesh.Trimesh(np.asarray(vertices), np.vstack([mesh.faces, np.asarray(faces)]), process=True)
-    caps_area = float(capped.area - mesh.area)
-    if not capped.is_watertight or not capped.is_winding_consistent:
-        return None
-    if capped.volume < 0:
-        capped.invert()
-    return capped, caps_area / float(mesh.area), holes
-
-
-def _voxel_remesh(mesh):
-    """The solid ``mesh``'s surface encloses, as the outer faces of its voxels (``REMESH_VOXELS``
-    across; its surface's voxels, and inside them what no hole opens to the outside), edge-manifold
-    (voxels touching along an edge only are joined), or None where nothing is left."""
-    import trimesh
-
-    pitch = float(np.max(mesh.extents)) / REMESH_VOXELS
-    try:
-        grid = mesh.voxelized(pitch).fill()
-    except Exception:  # noqa: BLE001 - trimesh's voxelisation of a degenerate surface
-        return None
-    filled = np.pad(np.asarray(grid.matrix, bool), 1)
-    for _ in range(8):  # two voxels meeting along an edge alone make a non-manifold edge: fill one corner
-        added = False
-        for axis in range(3):
-            a, b = [ax for ax in range(3) if ax != axis]
-            x = np.moveaxis(filled, (a, b), (0, 1))
-            diagonal = (x[:-1, :-1] & x[1:, 1:] & ~x[1:, :-1] & ~x[:-1, 1:]) | \
-                       (x[1:, :-1] & x[:-1, 1:] & ~x[:-1, :-1] & ~x[1:, 1:])
-            if diagonal.any():
-                x[:-1, :-1] |= diagonal
-                x[1:, :-1] |= diagonal
-                added = True
-        if not added:
-            break
-    if not filled.any():
-        return None
-    quads = []
-    for axis in range(3):
-        for step in (1, -1):
-            neighbour = np.roll(filled, -step, axis=axis)
-            cells = np.argwhere(filled & ~neighbour)
-            if not len(cells):
-                continue
-            quads.append(cells[:, None, :] + _face_square(axis, step)[None, :, :])
-    points = np.concatenate(quads).reshape(-1, 3)
-    faces = np.arange(len(points)).reshape(-1, 4)
-    triangles = np.vstack([faces[:, [0, 1, 2]], faces[:, [0, 2, 3]]])
-    origin = np.asarray(grid.transform)[:3, 3] - pitch * (1 + 0.5)  # the padding, and cell centres to corners
-    solid = trimesh.Trimesh(points * pitch + origin, triangles, process=True)
-    if not solid.is_watertight:
-        return None
-    trimesh.smoothing.filter_taubin(solid, iterations=20)  # stair steps are concavities the decomposition chases
-    # the surface's voxels reach up to one past it: fitted back to the mesh's own bounds (an object
-    # set down on its lowest point stays there)
-    low, high = solid.bounds
-    own_low, own_high = mesh.bounds
-    solid.vertices = own_low + (solid.vertices - low) * (own_high - own_low) / np.maximum(high - low, 1e-12)
-    if solid.volume < 0:
-        solid.invert()
-    return solid
-
-
-def _face_square(axis: int, step: int) -> np.ndarray:
-    """The corners (in cell units, from the cell's lower corner) of a cell's face towards ``step``
-    along ``axis``, counter-clockwise seen from outside."""
-    u, v = [(axis + 1) % 3, (axis + 2) % 3]
-    square = np.zeros((4, 3))
-    square[:, axis] = 1.0 if step > 0 else 0.0
-    for n, (du, dv) in enumerate(((0, 0), (1, 0), (1, 1), (0, 1))):
-        square[n, u], square[n, v] = du, dv
-    return square if step > 0 else square[::-1]
-
-
-def _coacd_hulls(vertices: np.ndarray, faces: np.ndarray, settings: Decomposition) -> list[np.ndarray]:
-    import coacd
-
-    coacd.set_log_level("error")
-    most = limits.MAX_COMPOUND_PARTS if settings.max_parts < 0 else min(settings.max_parts, limits.MAX_COMPOUND_PARTS)
-    # CoACD keeps a hull to max_ch_vertex only when it decimates
-    parts = coacd.run_coacd(coacd.Mesh(vertices, faces), threshold=settings.threshold, max_convex_hull=most,
-                            decimate=True, max_ch_vertex=MAX_PART_VERTICES, seed=settings.seed)
-    return within_vertex_budget([np.asarray(v, float) for v, _ in parts if len(v) >= 4])
-
-
-def within_vertex_budget(hulls: list[np.ndarray], budget: int = limits.MAX_COMPOUND_VERTICES) -> list[np.ndarray]:
-    """The hulls, those of a decomposition over ``budget`` vertices together each thinned to its share
-    (at least 8) by farthest-point sampling of its own vertices: every part stays inside its hull and
-    keeps its extremes. The mass, centre of mass and inertia come from the mesh, not from the parts."""
-    total = sum(len(h) for h in hulls)
-    if total <= budget:
-        return hulls
-    out = []
-    for hull in hulls:
-        share = max(8, int(budget * len(hull) / total))
-        out.append(hull if len(hull) <= share else _farthest_points(hull, share))
-    return out
-
-
-def _farthest_points(points: np.ndarray, count: int) -> np.ndarray:
-    """``count`` of ``points``, each the farthest from those already taken (the first: the farthest
-    from the centroid): deterministic, and spread over the hull's extremes."""
-    taken = [int(np.argmax(np.linalg.norm(points - points.mean(axis=0), axis=1)))]
-    distance = np.linalg.norm(points - points[taken[0]], axis=1)
-    for _ in range(count - 1):
-        taken.append(int(np.argmax(distance)))
-        distance = np.minimum(distance, np.linalg.norm(points - points[taken[-1]], axis=1))
-    return points[sorted(taken)]
-
-
-def _coacd_in_process(connection, vertices: np.ndarray, faces: np.ndarray, settings: Decomposition) -> None:
-    """A spawned process's work: the hulls, or the error, sent back."""
-    try:
-        connection.send(("hulls", _coacd_hulls(vertices, faces, settings)))
-    except Exception as exc:  # noqa: BLE001 - the parent names the object and the fix
-        connection.send(("error", f"{type(exc).__name__}: {exc}"))
-    finally:
-        connection.close()
-
-
-class DecompositionTimeout(SceneError):
-    """A decomposition ran past its time (remembered with that time: more time may succeed)."""
-
-
-class DecompositionStopped(SceneError):
-    """A decomposition ended because its reader is closing (nothing remembered)."""
-
-
-def _coacd_within(vertices: np.ndarray, faces: np.ndarray, settings: Decomposition, within_s: float,
-                  path: str, stop: threading.Event | None = None) -> list[np.ndarray]:
-    """``_coacd_hulls`` in a spawned process, ended (by its process id) when it takes longer than
-    ``within_s`` or ``stop`` is set: a SceneError naming ``path`` and the fix."""
-    import multiprocessing
-    import time
-
-    context = multiprocessing.get_context("spawn")  # never fork: the node's process holds rclpy
-    receive, send = context.Pipe(duplex=False)
-    worker = context.Process(target=_coacd_in_process, args=(send, vertices, faces, settings), daemon=True)
-    worker.start()
-    send.close()
-    deadline = time.monotonic() + within_s
-    answer = None
-    try:
-        while answer is None and (stop is None or not stop.is_set()):
-            left = deadline - time.monotonic()
-            if left <= 0:
-                break
-            if receive.poll(min(left, 0.1)):
-                answer = receive.recv()
-    except EOFError:  # the process died without an answer
-        answer = ("error", f"the decomposition's process ended with code {worker.exitcode}")
-    finally:
-        receive.close()
-        if worker.is_alive():
-            worker.kill()
-        worker.join()
-    if answer is None and stop is not None and stop.is_set():
-        raise DecompositionStopped(path, "its convex decomposition was stopped (the reader is closing)")
-    if answer is None:
-        raise DecompositionTimeout(path, f"its convex decomposition did not finish within {within_s:g} s; decompose "
-                                         "it once ahead (`ipe predict` of a scene naming it caches the parts by the "
-                                         "file's content, in $IPE_CACHE_DIR, for every later scene), simplify the "
-                                         "mesh, or allow more time (the node's mesh_decomposition_s, ipe predict's --budget)")
-    kind, value = answer
-    if kind == "error":
-        raise SceneError(path, f"its convex decomposition failed ({value})")
-    return value
-
-
-def _decompose(vertices: np.ndarray, faces: np.ndarray, settings: Decomposition, path: str,
-               within_s: float | None = None, stop: threading.Event | None = None) -> list[np.ndarray]:
-    if within_s is None and stop is not None:  # stoppable only in a process of its own
-        within_s = math.inf
-    hulls = (_coacd_hulls(vertices, faces, settings) if within_s is None
-             else _coacd_within(vertices, faces, settings, within_s, path, stop))
-    if not hulls:
-        raise SceneError(path, "its convex decomposition is empty (a flat or degenerate mesh)")
-    # CoACD remeshes a surface that is not a manifold (a union of overlapping shells, as collision
-    # meshes are) on a grid, and its parts then reach up to a cell past the mesh: a can set on its
-    # lowest point sank 0.4-0.9 mm into the floor and was refused. The parts stay within the mesh's bounds
-    low, high = vertices.min(axis=0), vertices.max(axis=0)
-    clipped = [np.clip(hull, low, high) for hull in hulls]
-    kept = [hull for hull in clipped if _solid(hull)]  # a sliver wholly past the bounds is flat once clipped
-    if not kept:
-        raise SceneError(path, "its convex decomposition is empty (a flat or degenerate mesh)")
-    return kept
-
-
-def _solid(points: np.ndarray) -> bool:
-    from scipy.spatial import ConvexHull as QHull
-
-    try:
-        return QHull(points).volume > 0
-    except Exception:  # noqa: BLE001 - qhull's errors: coplanar points
-        return False

@@ -84,7 +84,7 @@ class MeshSource:
     #: the file the mesh reader itself read (under its roots), which a recording may read again to
     #: draw it; None for a source a scene only names (never read: it could point anywhere)
     read_from: Path | None = field(default=None, compare=False)
-    #: how the mesh, open, was closed before it was decomposed (meshes._closed); None: it was closed
+    #: how the mesh, open, was closed before it was decomposed (mesh_repair.closed_solid); None: it was closed
     repaired: str | None = None
 
 

@@ -26,6 +26,7 @@ from .engine.query import QUERIES
 from .engine.request import build_request
 from .engine.sampling.sampler import check_request
 from .engine.scene.format import RefusedScene
+from .engine.scene.mesh_repair import repaired_sources
 from .progress import steps
 
 #: the exit status of a command refused for its input (argparse's own)
@@ -195,10 +196,8 @@ def cmd_predict(args) -> int:
         _report_refused(args, refused)  # none of the file's scenes read: each refusal said before the verdict
         raise
     for scene in scenes:  # an open mesh answered as a repaired solid: said once, before the answers
-        for body in scene.objects:
-            source = getattr(body.shape, "source", None)
-            if source is not None and source.repaired:
-                print(f"ipe: note: {scene.name}: {body.name} ({source.uri}) {source.repaired}", file=sys.stderr)
+        for name, source in repaired_sources(scene).items():
+            print(f"ipe: note: {scene.name}: {name} ({source.uri}) {source.repaired}", file=sys.stderr)
     vision = _vision_settings(args)
     # one request from the options (engine.request); its errors read as the options (main: as_spelled)
     request = build_request(vision=vision, query_parameters=given_query_parameters(args), **given_request_arguments(args))

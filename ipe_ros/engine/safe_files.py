@@ -25,8 +25,12 @@ def is_folder(path: Path) -> bool:
 
 
 class UnreadableFile(Exception):
-    """A file named by an input is not one to read (missing, not a regular file, too large): the
-    message says which, for the caller to name its field."""
+    """A file named by an input is not one to read (missing, not a regular file, too large: then
+    ``too_large``): the message says which, for the caller to name its field."""
+
+    def __init__(self, message: str, too_large: bool = False):
+        super().__init__(message)
+        self.too_large = too_large
 
 
 def read_file_bounded(path: Path, max_bytes: int, what: str = "a file") -> bytes:
@@ -45,10 +49,11 @@ def read_file_bounded(path: Path, max_bytes: int, what: str = "a file") -> bytes
         raise UnreadableFile(f"{path} is not a regular file (a folder, a FIFO or a device)")
     with os.fdopen(fd, "rb") as handle:
         if info.st_size > max_bytes:
-            raise UnreadableFile(f"{path}: {info.st_size} bytes, more than the {max_bytes} {what} may have")
+            raise UnreadableFile(f"{path}: {info.st_size} bytes, more than the {max_bytes} {what} may have",
+                                 too_large=True)
         content = handle.read(max_bytes + 1)
     if len(content) > max_bytes:
-        raise UnreadableFile(f"{path} grew past the {max_bytes} bytes {what} may have while read")
+        raise UnreadableFile(f"{path} grew past the {max_bytes} bytes {what} may have while read", too_large=True)
     return content
 
 

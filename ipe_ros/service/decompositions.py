@@ -68,7 +68,6 @@ class DecompositionService:
             if not known and len(self._jobs) >= MAX_WAITING_MESHES:
                 return (f"busy: {len(self._jobs)} meshes are waiting to be decomposed into convex parts; send the "
                         "scene again later, or decompose its meshes ahead (ipe predict caches them)")
-            waiting = self._waiters[job.key]
             if stream is None:
                 questions = sum(w.stream is None for ws in self._waiters.values() for w in ws)
                 if questions >= MAX_QUESTIONS_ON_MESHES:
@@ -76,7 +75,8 @@ class DecompositionService:
             else:  # keep-latest per stream: a newer scene replaces the one waiting
                 for ws in self._waiters.values():
                     ws[:] = [w for w in ws if w.stream != stream]
-            waiting.append(_Waiter(again, abandon, stream, job.path))
+            # looked up only now: a refusal above leaves no empty entry behind
+            self._waiters[job.key].append(_Waiter(again, abandon, stream, job.path))
             if not known:
                 self._jobs[job.key] = job
                 self._cond.notify_all()

@@ -104,26 +104,29 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: d
         return merge(outcomes, refined), FidelityReport(verdict, settings=tuple(parts), validated=validated,
                                                         rigid_reruns=state.rigid_reruns(), **common)
     # 4. escalation: contradicted on this scene. First only the disputed strata (``disputed_strata``)
-    # at the reference; kept where the answer, those samples replaced, is no longer contradicted
+    # at the reference, where what the side kept fast shows could pass (``_credibly_within``, judged
+    # before the rerun and again after it); else every sample, in one round
     parts.append(("escalation", reference.name))
     strata = [] if known or check.bias_tolerance is None else disputed_strata(state, compared)
+    escalated = [j for j, _, _ in strata]
     disputed = sorted({i for _, _, members in strata for i in members})
     remaining = [i for i in range(len(outcomes)) if i not in state.checked and not outcomes[i].skipped]
-    hoped = {**{i: d for i, d in compared.items() if i not in disputed}, **{i: 0 * d for i, d in compared.items()
-                                                                           if i in disputed}}
-    if strata and len([i for i in disputed if i not in state.checked]) < len(remaining) and all(
-            b.within(check.bias_tolerance) for b in bias_estimates(state.fast_flags, {
-                **hoped, **{i: np.zeros_like(state.fast_flags[i]) for i in disputed}}, also=[j for j, _, _ in strata])):
-        # (what the kept side already shows could pass: else every sample, in one round)
+    # the differences once the disputed samples are the reference's: none there, the rest as compared
+    hoped = {**{i: d for i, d in compared.items() if i not in disputed},
+             **{i: np.zeros_like(state.fast_flags[i]) for i in disputed}}
+    if strata and len([i for i in disputed if i not in state.checked]) < len(remaining) and _credibly_within(
+            state.fast_flags, hoped, escalated, check.bias_tolerance):
         yield from state.rerun([i for i in disputed if i not in state.checked])
         replaced = {**refined, **{i: state.checked[i] for i in disputed}}
         if not any(state.checked[i].budget_stopped for i in disputed):
             merged = merge(outcomes, replaced)
             after = _Comparison(tasks, merged, dict(state.checked), check, reference)
-            if _credibly_within(after, [j for j, _, _ in strata], check.bias_tolerance):
+            if _credibly_within(after.fast_flags, after.differences(), escalated, check.bias_tolerance):
+                labels = outcome_labels(next(o for o in outcomes if o.ok))
                 return merged, FidelityReport(
                     "escalated", escalated_samples=len(disputed), settings=tuple(parts),
-                    escalated_strata=tuple((_label(state, j), side, len(members)) for j, side, members in strata),
+                    escalated_strata=tuple((labels[j] if j < len(labels) else f"outcome {j}", side, len(members))
+                                           for j, side, members in strata),
                     rigid_reruns=state.rigid_reruns(), **common)
     yield from state.rerun([i for i in range(len(outcomes)) if i not in state.checked and not outcomes[i].skipped])
     done = state.checked
@@ -134,19 +137,15 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: d
                                                  rigid_reruns=state.rigid_reruns(), **common)
 
 
-def _credibly_within(after: _Comparison, escalated: list[int], tolerance: float) -> bool:
-    """Whether an answer whose disputed samples were rerun is credibly within ``tolerance`` of the
-    reference's on every outcome that differs and on every one that escalated: the side kept fast
-    was compared without a difference, but chaos flips either way, and a side looked at in few
-    samples could still hide flips that the rerun side no longer cancels (then every sample)."""
-    compared = after.differences()
-    return bool(compared) and all(b.within(tolerance) for b in bias_estimates(after.fast_flags, compared,
-                                                                               also=escalated))
-
-
-def _label(state: _Comparison, j: int) -> str:
-    labels = outcome_labels(next(o for o in state.outcomes if o.ok))
-    return labels[j] if j < len(labels) else f"outcome {j}"
+def _credibly_within(fast_flags: dict[int, np.ndarray], differences: dict[int, np.ndarray], escalated: list[int],
+                     tolerance: float) -> bool:
+    """Whether an answer whose disputed samples are the reference's (``differences``: none there) is
+    credibly within ``tolerance`` of the reference's on every outcome that differs and on every one
+    that ``escalated``: the side kept fast was compared without a difference, but chaos flips either
+    way, and a side looked at in few samples could still hide flips that the rerun side no longer
+    cancels (then every sample)."""
+    return bool(differences) and all(b.within(tolerance) for b in bias_estimates(fast_flags, differences,
+                                                                                  also=escalated))
 
 
 def disputed_strata(state: _Comparison, compared: dict[int, np.ndarray]) -> list[tuple[int, str, list[int]]]:

@@ -33,6 +33,7 @@ from .rollout import SampleOutcome, SampleTask, lost, run_sample, take_refined
 from ..checking.self_check import checking
 from ..query import QUERIES, QuerySpec
 from ..scene.bodies import DEFAULT_MAX_OBJECTS, Scene
+from ..scene.mesh_repair import repaired_sources
 from ..scene.validation import validate_scene
 
 @dataclass(frozen=True)
@@ -305,8 +306,7 @@ def _aggregate(scene: Scene, model: ModelConfig, settings: SimSettings, query: Q
         request.update(budget_s=budget_s)
     if perception_source(model.perception).posterior:
         request.update(perception=perceived.to_dict())
-    repaired = {b.name: b.shape.source.repaired for b in scene.objects
-                if getattr(b.shape, "source", None) is not None and b.shape.source.repaired}
+    repaired = {name: source.repaired for name, source in repaired_sources(scene).items()}
     if repaired:  # open meshes the engine was given closed: how (mesh_repair.closed_solid)
         request.update(repaired_meshes=repaired)
     prediction = aggregate(scene, outcomes, query=query,

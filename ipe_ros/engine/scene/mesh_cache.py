@@ -60,13 +60,7 @@ def remembered_refusal(folder: Path, key: str, within_s: float | None) -> str | 
 
 def _read_refusal(folder: Path, key: str) -> dict | None:
     try:
-        fd = open_folder(folder, create=False, owner="the mesh cache")
-        if fd is None:
-            return None
-        try:
-            raw = read_entry(fd, _refusal_entry(folder, key).name, 64 * 1024)
-        finally:
-            os.close(fd)
+        raw = _read(folder, _refusal_entry(folder, key).name, 64 * 1024)
         data = json.loads(raw) if raw is not None else None
         if not isinstance(data, dict) or data.get("key") != key or data.get("kind") not in ("failed", "time") \
                 or not isinstance(data.get("reason"), str):
@@ -146,13 +140,7 @@ def _cached_parts(folder: Path, key: str) -> tuple[list[np.ndarray], float, tupl
     or None when there are none usable (a link, a FIFO or a folder at the entry's name, or at the
     cache folder's, is never followed: named and decomposed again)."""
     try:
-        fd = open_folder(folder, create=False, owner="the mesh cache")
-        if fd is None:
-            return None
-        try:
-            raw = read_entry(fd, _entry(folder, key).name, MAX_CACHE_ENTRY_BYTES)
-        finally:
-            os.close(fd)
+        raw = _read(folder, _entry(folder, key).name, MAX_CACHE_ENTRY_BYTES)
         if raw is None:
             return None
         data = json.loads(raw)
@@ -183,6 +171,18 @@ def store_parts(folder: Path, key: str, parts: list[np.ndarray], volume_m3: floa
                        **({"repaired": repaired} if repaired is not None else {})}).encode()
     if _write(folder, _entry(folder, key).name, data):
         VERIFIED.add(key)
+
+
+def _read(folder: Path, name: str, max_bytes: int) -> bytes | None:
+    """The entry ``name``'s bytes, or None where the folder or the entry is not there; UnsafeEntry
+    where either is not what the cache writes (``safe_files``)."""
+    fd = open_folder(folder, create=False, owner="the mesh cache")
+    if fd is None:
+        return None
+    try:
+        return read_entry(fd, name, max_bytes)
+    finally:
+        os.close(fd)
 
 
 def _write(folder: Path, name: str, data: bytes) -> bool:

@@ -13,6 +13,12 @@ from ..errors import SceneError
 OPEN_POLICIES = ("repair", "refuse")
 #: trimesh metadata key: how an open mesh was closed
 REPAIRED = "ipe_repaired"
+
+
+def repaired_sources(scene) -> dict:
+    """Per object read from an open mesh file, its ``MeshSource`` (``repaired``: how it was closed)."""
+    return {b.name: b.shape.source for b in scene.objects
+            if getattr(b.shape, "source", None) is not None and b.shape.source.repaired}
 #: holes are filled (rung 1) where their caps add at most this share of the surface: small holes
 MAX_CAP_SHARE = 0.1
 #: the watertight remesh's voxels across the mesh's largest extent (rung 2): at 24 a mug's remesh
@@ -78,7 +84,7 @@ def _holes_filled(mesh):
         if a in following:
             return None
         following[int(a)] = int(b)
-    vertices, faces, caps_area, holes = list(mesh.vertices), [], 0.0, 0
+    vertices, faces, holes = list(mesh.vertices), [], 0
     while following:
         start = next(iter(following))
         loop = [start]

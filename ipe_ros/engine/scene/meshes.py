@@ -173,8 +173,8 @@ def triangles_shape(points_m: np.ndarray, path: str, access: MeshAccess) -> Comp
         mesh = trimesh.Trimesh(points, np.arange(len(points)).reshape(-1, 3), process=True)
         return closed_solid(mesh, path, "the triangles", "repair")
 
-    compound, repaired = _compound(key, load, access, path, "a TRIANGLE_LIST")
-    return compound  # a marker names no file: how it was closed is in the decomposition's log only
+    compound, _ = _compound(key, load, access, path, "a TRIANGLE_LIST")
+    return compound  # a marker names no file: its compound has no source to say how an open one was closed
 
 
 class NotYetDecomposed(Exception):
@@ -217,14 +217,24 @@ def decompose(job: DecompositionJob, stop: threading.Event | None = None) -> str
     if refused is not None or has_parts(job.cache, job.key):  # done meanwhile (another reader's job)
         return refused
     try:
-        hulls = decompose_hulls(job.vertices, job.faces, job.decomposition, job.path, job.within_s, stop)
-    except DecompositionStopped as exc:
+        _decomposed(job, stop)
+    except SceneError as exc:
         return exc.problem
+    return None
+
+
+def _decomposed(job: DecompositionJob, stop: threading.Event | None = None) -> list[np.ndarray]:
+    """The job's parts, cached (where the cache can be written); a SceneError naming the job's field
+    where it cannot be decomposed, remembered unless ``stop`` ended it."""
+    try:
+        hulls = decompose_hulls(job.vertices, job.faces, job.decomposition, job.path, job.within_s, stop)
+    except DecompositionStopped:
+        raise
     except SceneError as exc:
         remember_refusal(job.cache, job.key, exc.problem, job.within_s if isinstance(exc, DecompositionTimeout) else None)
-        return exc.problem
+        raise
     store_parts(job.cache, job.key, hulls, *job.mass_properties, repaired=job.repaired)
-    return None
+    return hulls
 
 
 def _compound(key: str, load, access: MeshAccess, path: str, what: str) -> tuple[Compound, str | None]:
@@ -243,13 +253,7 @@ def _compound(key: str, load, access: MeshAccess, path: str, what: str) -> tuple
                                mesh.metadata.get(REPAIRED))
         if access.defer:
             raise NotYetDecomposed(job)
-        refused = decompose(job)
-        if refused is not None:
-            raise SceneError(path, refused)
-        cached = verified_parts(access.cache(), key, load)
-        if cached is None:  # the cache could not be written (a read-only home): decomposed for this answer
-            cached = (decompose_hulls(job.vertices, job.faces, job.decomposition, path, job.within_s),
-                      *job.mass_properties, job.repaired)
+        cached = (_decomposed(job), *job.mass_properties, job.repaired)
     parts, volume, centre, inertia, repaired = cached
     return Compound(tuple(CompoundPart(ConvexHull(tuple(tuple(map(float, v)) for v in part))) for part in parts),
                     volume_m3=volume, centre_of_mass_m=centre, inertia_diagonal_per_kg_m2=inertia), repaired
@@ -310,7 +314,7 @@ def _read_bounded(file: Path, path: str) -> bytes:
     try:
         return read_file_bounded(file, MAX_MESH_BYTES, "a mesh")
     except UnreadableFile as exc:
-        raise SceneError(path, f"{exc}; simplify it (fewer triangles)" if "bytes" in str(exc) else str(exc)) from None
+        raise SceneError(path, f"{exc}; simplify it (fewer triangles)" if exc.too_large else str(exc)) from None
 
 
 def _load(content: bytes, file: Path, scale: tuple[float, float, float], path: str, policy: str = "repair"):

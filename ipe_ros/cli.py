@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from .cli_ask import add_ask_parser, cmd_ask
+from .cli_evidence import add_evidence_options
 from .cli_fit import add_fit_parser, cmd_fit
 from .cli_infer import add_infer_parser, cmd_infer
 from .cli_inputs import add_input_options, add_inputs_from_option, finite
@@ -73,17 +74,9 @@ def build_parser() -> argparse.ArgumentParser:
                           "launch_direction_sd_deg", "perception"), notes={
         "perception": "where the k noisy scenes come from: " + "; ".join(
             f"{n}: {perception_source(n).summary}" for n in perception_names())
-        + " (depth: --depth, --camera-info, --camera-pose); sigma unused but by gaussian"})
+        + " (each with its options below); sigma unused but by gaussian"})
     add_inputs_from_option(p)
-    p.add_argument("--depth", default=None, metavar="IMAGE",
-                   help="depth: the depth image, .npy (metres) or 16-bit .png (millimetres; 0: no reading)")
-    p.add_argument("--camera-info", default=None, metavar="YAML",
-                   help="depth: the camera's calibration, a ROS camera_info YAML (distortion ignored)")
-    p.add_argument("--camera-pose", default=None, metavar="X,Y,Z,QX,QY,QZ,QW",
-                   help="depth: the camera's optical frame (z forward, y down) in the scene frame")
-    p.add_argument("--depth-rrd", default=None, metavar="FILE",
-                   help="depth: write the measured depth, the depth rendered at the posterior mean, their residual and "
-                        "the posterior sample cloud to a rerun recording")
+    add_evidence_options(p)
     p.add_argument("--chain-samples", type=int, default=None, metavar="N",
                    help="vision: Metropolis-Hastings samples (default 5000, the SI's; a fifth is burn-in)")
     p.add_argument("--vision-resolution", type=int, default=None, metavar="PX",

@@ -18,12 +18,13 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import time
+import sys
 
 from .engine import ConfigError, WorkerPool, load_scenes
 from .engine import actions as A
 from .engine.inputs import as_spelled
 from .engine.request import build_request
+from .cli_evidence import add_evidence_options, asked_source, describe_perceived, perceive_for_question, record
 from .cli_inputs import add_input_options, add_inputs_from_option, finite, given_request_arguments
 from .cli_queries import add_query_parameter_options, given_query_parameters
 from .engine.actions.answers import QUESTION_QUERIES
@@ -82,13 +83,7 @@ def add_ask_parser(sub, one_line_parser) -> None:
         add_inputs_from_option(q)
         q.add_argument("--fixed-k", action="store_true",
                        help="every variant runs all --samples (default: decision questions sample until decided)")
-        q.add_argument("--depth", default=None, metavar="IMAGE",
-                       help="take the scene's uncertainty from this depth image instead of --sigma (with "
-                            "--camera-info and --camera-pose; as ipe predict --perception depth): every variant's "
-                            "sample i starts from the depth posterior's scene i")
-        q.add_argument("--camera-info", default=None, metavar="YAML", help="with --depth: the camera's calibration")
-        q.add_argument("--camera-pose", default=None, metavar="X,Y,Z,QX,QY,QZ,QW",
-                       help="with --depth: the camera's optical frame (z forward, y down) in the scene frame")
+        add_evidence_options(q)  # a perception's evidence: its posterior's scenes replace --sigma
         q.add_argument("--json", action="store_true", help="one JSON object per line")
         q.add_argument("--rrd", default=None, metavar="FILE",
                        help="record 4 rollouts of every variant to this rerun file (not for clear)")
@@ -193,9 +188,13 @@ def cmd_ask(args) -> int:
         raise ConfigError("--workers", f"must be >= 0, got {args.workers}")
     pool = WorkerPool(min(args.workers, args.samples)) if args.workers > 0 else None
     kw = dict(seed=args.seed, map_fn=pool.map if pool else None, budget_s=args.budget_s, check=request.check)
-    perceived = _perceived(args, scene)
-    if perceived is not None:
+    source = asked_source(args)
+    if source is not None:  # every variant's sample i starts from the posterior's scene i
+        perceived, evidence = perceive_for_question(args, scene, source)
         kw.update(perceived=perceived, budget_s=args.budget_s)  # the budget the chain left
+        written = record(args, source, scene, perceived, evidence)
+        if written is not None:
+            print(f"wrote {written}", file=sys.stderr)
     if args.rrd:
         kw.update(record_every=max(1, round(0.02 / settings.time_step_s)), record_samples=4)
     try:
@@ -205,36 +204,6 @@ def cmd_ask(args) -> int:
     finally:
         if pool is not None:
             pool.close()
-
-
-def _perceived(args, scene):
-    """With --depth: the depth posterior's --samples scenes for the scene asked about (one chain, in
-    this process, within the chain's share of the budget), else None."""
-    given = (args.depth, args.camera_info, args.camera_pose)
-    if all(v is None for v in given):
-        return None
-    if None in given:
-        raise ConfigError("--depth", "depth perception needs --depth IMAGE, --camera-info YAML and --camera-pose")
-    if args.ground_truth:
-        raise ConfigError("--ground-truth", "takes the scene exactly as given, but --depth draws it from the depth "
-                                            "posterior; drop one of them")
-    return depth_posterior(args, scene, args.samples)[0]
-
-
-def depth_posterior(args, scene, k: int, map_fn=None):
-    """The depth posterior's k scenes for ``scene`` from --depth, --camera-info and --camera-pose (its
-    chains through ``map_fn``, else in this process, within their share of --budget; --budget then
-    keeps what they left for the samples), and the depth observation (ipe predict and ipe ask)."""
-    from .engine.vision import depth, depth_io
-
-    observation = depth_io.load_observation(args.depth, args.camera_info, args.camera_pose)
-    started = time.perf_counter()
-    perceived = depth.perceive_depth_for(scene, k, (observation,), args.seed, budget_s=None
-                                         if args.budget_s is None else args.budget_s * depth.CHAIN_BUDGET_SHARE,
-                                         map_fn=map_fn)
-    if args.budget_s is not None:
-        args.budget_s = max(args.budget_s - (time.perf_counter() - started), 1e-3)
-    return perceived, observation
 
 
 def _answer(args, scene, model, settings, kw) -> int:
@@ -247,8 +216,8 @@ def _answer(args, scene, model, settings, kw) -> int:
     else:
         print(TEXT[question.kind](reply))
         if perceived is not None:
-            print(f"depth chain: acceptance {perceived.acceptance_rate:.2f}, effective sample size "
-                  f"{perceived.effective_sample_size:.0f} for {len(perceived.scenes)} samples (sigma unused)")
+            print(f"{asked_source(args).name}: {describe_perceived(asked_source(args), perceived)} "
+                  f"for {len(perceived.scenes)} samples (sigma unused)")
     if question.kind == "support" and args.png:
         draw_support_graph(scene, reply.result, args.png)
     if args.rrd and reply.answers is not None:

@@ -7,13 +7,11 @@ import argparse
 import contextlib
 
 import dataclasses
-import functools
 import json
 import math
 import sys
-import time
 
-from .cli_ask import depth_posterior
+from .cli_evidence import describe, evidence_for, record, refuse_many
 from .cli_inputs import given_request_arguments, typed_option
 from .cli_queries import given_query_parameters
 from .engine import AdaptiveStop, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError, WorkerPool, load_scenes, predict
@@ -149,9 +147,9 @@ def stored_line(store, resume: str) -> str:
 
 def run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: int, workers: int, emit,
                      stop: AdaptiveStop | None = None, budget_s: float | None = None, perceived=None,
-                     scheduler: str | None = None, check: SelfCheck = DEFAULT_CHECK, perceive=None) -> None:
-    """``perceive(map_fn)``: the perceived scenes, made with the samples' workers (the depth chains
-    run one per worker); the budget keeps what it leaves."""
+                     scheduler: str | None = None, check: SelfCheck = DEFAULT_CHECK, evidence=None) -> None:
+    """``evidence``: what the model's perception draws its scenes given (``engine.evidence``): its
+    chain runs inside ``predict``, on the samples' workers, within its share of the budget."""
     pool = sample_map(scheduler, min(workers, max(1, model.samples)) if workers > 0 else workers)
     if stop is not None:
         from .engine.compute.cluster import DaskMap
@@ -159,30 +157,12 @@ def run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: int
         parallel = pool.workers if isinstance(pool, DaskMap) else workers
         stop = dataclasses.replace(stop, batch_size=anytime_batch_size(parallel))
     try:
-        if perceive is not None:
-            started = time.perf_counter()
-            perceived = perceive(pool.map if pool else None)
-            if budget_s is not None:
-                budget_s = max(budget_s - (time.perf_counter() - started), 1e-3)
         for scene in steps(scenes, "predict") if len(scenes) > 1 else scenes:
             emit(predict(scene, model, sim, query, seed=seed, map_fn=pool.map if pool else None, stop=stop,
-                         budget_s=budget_s, perceived=perceived, check=check))
+                         budget_s=budget_s, perceived=perceived, check=check, evidence=evidence))
     finally:
         if pool is not None:
             pool.close()
-
-
-def _perceive_depth(args, scenes, model, map_fn=None):
-    """The depth posterior's k scenes for the one scene asked about (the detector's guess)."""
-    if len(scenes) != 1:
-        raise ConfigError("--depth", f"one depth image describes one scene, but {args.path} holds {len(scenes)}")
-    perceived, observation = depth_posterior(args, scenes[0], model.samples, map_fn)
-    if args.depth_rrd is not None:
-        from .viz.perception_log import write_depth_rrd
-
-        write_depth_rrd(args.depth_rrd, scenes[0], perceived, (observation,))
-        print(f"wrote {args.depth_rrd}", file=sys.stderr)
-    return perceived
 
 
 def cmd_predict(args) -> int:
@@ -211,14 +191,14 @@ def cmd_predict(args) -> int:
         from .engine.perceptions import perceive_vision
 
         perceived = perceive_vision(scenes[0], model, args.seed)
-    perceive = None
-    if args.perception == "depth":  # with the samples' workers, once they are started
-        perceive = functools.partial(_perceive_depth, args, scenes, model)
+    source = perception_source(args.perception)
+    evidence = evidence_for(args, args.perception)
+    refuse_many(source, scenes, args.path, evidence)
     collected: list[Prediction] = []
     if args.json:
         run_predictions(scenes, model, sim, query, args.seed, args.workers,
                         lambda p: (collected.append(p), print(prediction_json(p), flush=True)), stop, args.budget_s,
-                        perceived, args.scheduler, check, perceive)
+                        perceived, args.scheduler, check, evidence)
     else:
         k = 1 if all(is_deterministic(s, model) for s in scenes) else args.samples
         print(f"sigma = {model.sigma_m:g} m, phi = {','.join(f'{v:g}' for v in model.phi_m_s2)} m/s^2, mu = {args.mu}, "
@@ -228,10 +208,14 @@ def cmd_predict(args) -> int:
               + (f", perception = {args.perception} (sigma unused)"
                  if perception_source(args.perception).posterior and vision is None else ""))
         run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append, stop, args.budget_s,
-                        perceived, args.scheduler, check, perceive)
+                        perceived, args.scheduler, check, evidence)
         print(format_table(collected))
-        for line in _perception_lines(collected, args.perception, vision is not None):
+        for line in describe(collected, args.perception):
             print(line)
+    if evidence is not None:
+        written = record(args, source, scenes[0], collected[0].perceived, evidence)
+        if written is not None:
+            print(f"wrote {written}", file=sys.stderr)
     if args.vision_rrd is not None:
         from .viz.perception_log import write_vision_rrd
 
@@ -265,11 +249,6 @@ def _vision_settings(args):
             raise ConfigError(option, exc.problem) from None
     elif args.chain_samples is not None or args.vision_resolution is not None or args.vision_rrd is not None:
         raise ConfigError("--perception", "--chain-samples, --vision-resolution and --vision-rrd need --perception vision")
-    depth_inputs = (args.depth, args.camera_info, args.camera_pose, args.depth_rrd)
-    if args.perception == "depth" and None in depth_inputs[:3]:
-        raise ConfigError("--perception", "depth perception needs --depth IMAGE, --camera-info YAML and --camera-pose")
-    if args.perception != "depth" and any(v is not None for v in depth_inputs):
-        raise ConfigError("--perception", "--depth, --camera-info, --camera-pose and --depth-rrd need --perception depth")
     return vision
 
 
@@ -300,22 +279,3 @@ def _report_refused(args, refused: list[RefusedScene]) -> None:
         report = {"scene": refusal.name, "index": refusal.index, "error": str(refusal.error)}
         print(json.dumps(report) if args.json else f"ipe: refused scene {refusal.index} "
               f"({refusal.name or 'unnamed'}): {refusal.error}", file=sys.stdout if args.json else sys.stderr, flush=True)
-
-
-def _perception_lines(collected: list[Prediction], perception: str, vision: bool) -> list[str]:
-    """What the vision or depth chain did, per scene, for the text report."""
-    lines = []
-    for p in collected:
-        v = p.request.get("perception")
-        if vision:
-            lines.append(f"{p.scene}: vision chain acceptance {v['acceptance_rate']:.2f}, effective sample size "
-                         f"{v['effective_sample_size']:.0f} ({v['chain_samples']} samples, {v['burn_in']} burn-in)")
-        elif perception == "depth":
-            lines.append(f"{p.scene}: depth chain acceptance {v['acceptance_rate']:.2f}, effective sample size "
-                         f"{v['effective_sample_size']:.0f}; camera range offset "
-                         + ", ".join(f"{o['mean_m'] * 1000:+.1f} mm" for o in v["camera_offsets"])
-                         + "; posterior mean x, y (m) and SD x/y (mm), yaw (deg) per object: "
-                         + ", ".join(f"{n} {s['position_m'][0]:.4f},{s['position_m'][1]:.4f} "
-                                     f"{s['x_sd_m'] * 1000:.1f}/{s['y_sd_m'] * 1000:.1f}/"
-                                     f"{math.degrees(s['yaw_sd_rad']):.1f}" for n, s in v["objects"].items()))
-    return lines

@@ -70,3 +70,34 @@ def pose_to_tuples(msg: PoseStamped) -> tuple[tuple[float, float, float], tuple[
     if abs(math.sqrt(sum(v * v for v in orientation)) - 1) > 1e-3:
         raise ConfigError("camera_pose.pose.orientation", f"must be a unit quaternion, got {list(orientation)}")
     return position, orientation, msg.header.frame_id, header_to_stamp_ns(msg.header)
+
+
+# Depth perception's topics as the engine declares them (engine/vision/depth_source.py): each
+# message converted as it arrives, given what the other topics hold, into (value, frame id).
+
+def received_camera_info(msg: CameraInfo, held, values) -> tuple[dict, str]:
+    return camera_info_to_dict(msg), msg.header.frame_id
+
+
+def received_camera_pose(msg: PoseStamped, held, values) -> tuple[tuple, str]:
+    position, orientation, frame, _ = pose_to_tuples(msg)
+    return (position, orientation), frame
+
+
+def received_depth_image(msg: Image, held, values):
+    """A depth image made an observation with the newest camera info and the camera's pose (the
+    ``depth.camera_pose`` parameter when set, in ``frame_id``; else the newest on ~/depth/camera_pose)."""
+    from ipe_ros.engine.vision.camera import camera_from_info
+    from ipe_ros.engine.vision.depth_model import DepthObservation
+    from ipe_ros.engine.vision.depth_source import fixed_camera_pose
+
+    fixed = fixed_camera_pose(values)
+    pose = (fixed, str(values["frame_id"])) if fixed is not None else None
+    if pose is None and "~/depth/camera_pose" in held:
+        pose = (held["~/depth/camera_pose"].value, held["~/depth/camera_pose"].frame_id)
+    if "~/depth/camera_info" not in held:
+        raise ConfigError("camera_info", "no CameraInfo received yet on ~/depth/camera_info")
+    if pose is None:
+        raise ConfigError("camera_pose", "no camera pose yet: publish ~/depth/camera_pose or set depth.camera_pose")
+    camera = camera_from_info(held["~/depth/camera_info"].value, *pose[0])
+    return DepthObservation(camera, image_to_depth_m(msg)), pose[1]

@@ -333,7 +333,7 @@ def test_the_cli_predicts_from_the_built_in_depth_example(tmp_path, capsys):
     assert np.mean(errors) < 0.5 * np.mean(guess_errors)
     assert main(args[:2] + ["--perception", "depth", "--samples", "4"]) == 2
     assert capsys.readouterr().err.strip() == ("ipe: error: --perception: depth perception needs --depth IMAGE, "
-                                               "--camera-info YAML and --camera-pose")
+                                               "--camera-info YAML and --camera-pose X,Y,Z,QX,QY,QZ,QW")
 
 
 def test_ipe_ask_answers_from_the_depth_camera(tmp_path, capsys):
@@ -360,7 +360,22 @@ def test_ipe_ask_answers_from_the_depth_camera(tmp_path, capsys):
     assert [v["any_fall_probability"] for v in reply["variants"]] == [v.any_fall_probability for v in expected.variants]
     assert main(args + camera[:2]) == 2
     assert capsys.readouterr().err.strip() == ("ipe: error: --depth: depth perception needs --depth IMAGE, "
-                                               "--camera-info YAML and --camera-pose")
+                                               "--camera-info YAML and --camera-pose X,Y,Z,QX,QY,QZ,QW")
+
+
+def test_predict_given_the_evidence_runs_the_chain_the_caller_would_run():
+    """``predict(evidence=...)`` (the CLI's way, engine.evidence) draws the scenes the chain drawn
+    beforehand and passed as ``perceived`` would (the node's way, one chain per view), bit for bit."""
+    scene = floor(cube("a", 0, 0, 0.05), cube("b", 0.02, 0, 0.15))
+    observation = observe(scene, look_at((1.0, -0.7, 0.6), (0, 0, 0.1), width_px=160, height_px=120))
+    model, query = ModelConfig(perception="depth", samples=4), QuerySpec(queries=frozenset({"fall", "final_pose"}))
+    given = predict(scene, model, preset("default"), query, seed=5, check=None, evidence=(observation,))
+    before = predict(scene, model, preset("default"), query, seed=5, check=None,
+                     perceived=D.perceive_depth_for(scene, 4, (observation,), 5))
+    assert given.request["perception"] == before.request["perception"]
+    assert [r.final_positions_m.tolist() for o in given.outcomes for r in o.rollouts] == \
+        [r.final_positions_m.tolist() for o in before.outcomes for r in o.rollouts]
+    assert given.perceived.refined == before.perceived.refined
 
 
 def test_a_depth_recording_holds_the_measured_and_rendered_depth_and_the_posterior_cloud(tmp_path):

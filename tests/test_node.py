@@ -515,12 +515,13 @@ def test_depth_perception_predicts_from_the_newest_depth_image(ros):
      pose.pose.orientation.w) = camera.orientation_xyzw
     ros.publisher(CameraInfo, "/ipe/depth/camera_info", qos_profile_sensor_data).publish(info)
     ros.publisher(PoseStamped, "/ipe/depth/camera_pose", qos_profile_sensor_data).publish(pose)
-    wait_until(lambda: node._camera_info is not None and node._camera_pose is not None, TIMEOUT_S, "camera info and pose")
+    wait_until(lambda: {"~/depth/camera_info", "~/depth/camera_pose"} <= set(node.service.evidence.held("depth")),
+               TIMEOUT_S, "camera info and pose")
     images = ros.publisher(Image, "/ipe/depth/image", qos_profile_sensor_data)
     images.publish(Image(encoding="rgb8", width=2, height=1, step=6, data=bytes(6)))  # not a depth image: refused
-    wait_until(lambda: node.service.stats().depth_images_refused == 1, TIMEOUT_S, "the refusal of an rgb8 image")
+    wait_until(lambda: node.service.stats().evidence["depth_images_refused"] == 1, TIMEOUT_S, "the refusal of an rgb8 image")
     images.publish(depth_m_to_image(depth_with_pybullet(scene, camera), time.time_ns(), "camera", "16UC1"))
-    wait_until(lambda: node.service.latest_depth_stamp_ns() is not None, TIMEOUT_S, "the depth image")
+    wait_until(lambda: node.service.evidence.latest_view_stamp_ns("depth") is not None, TIMEOUT_S, "the depth image")
     scenes.publish(String(data=scene_to_json(scene)))
     wait_until(lambda: len(got) >= 2, TIMEOUT_S * 2, "the prediction with depth perception")
     perception = got[1]["request"]["perception"]
@@ -537,7 +538,7 @@ def test_depth_perception_predicts_from_the_newest_depth_image(ros):
     assert response.success, response.message
     again = json.loads(response.message)
     assert again["request"]["preset"] == "fine" and again["request"]["perception"]["objects"] == perception["objects"]
-    assert node.service.stats().depth_posteriors == 1
+    assert node.service.stats().evidence["depth_posteriors"] == 1
     # questions about the view draw from the same chain (thinned to their k), and say so
     replies = ros.collect(String, "/ipe/answer", LATCHED_QOS)
     ros.publisher(String, "/ipe/ask").publish(String(data=json.dumps({"id": "q", "question": "push", "samples": 2,
@@ -546,7 +547,7 @@ def test_depth_perception_predicts_from_the_newest_depth_image(ros):
     final = next(json.loads(m.data) for m in replies if json.loads(m.data)["final"])
     assert final["perception"]["kind"] == "depth" and final["perception"]["samples"] == 2, final
     assert final["perception"]["objects"] == perception["objects"]  # the view's posterior, not a chain of its own
-    assert "answer" in final and node.service.stats().depth_posteriors == 1
+    assert "answer" in final and node.service.stats().evidence["depth_posteriors"] == 1
 
 
 def test_a_640_x_480_depth_stream_at_10_hz_arrives_whole(ros):
@@ -568,15 +569,16 @@ def test_a_640_x_480_depth_stream_at_10_hz_arrives_whole(ros):
     reliable = QoSProfile(depth=5, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
     ros.publisher(CameraInfo, "/ipe/depth/camera_info", reliable, subscribers=2).publish(info)
     ros.publisher(PoseStamped, "/ipe/depth/camera_pose", reliable, subscribers=2).publish(pose)
-    wait_until(lambda: node._camera_info is not None and node._camera_pose is not None, TIMEOUT_S, "camera info and pose")
+    wait_until(lambda: {"~/depth/camera_info", "~/depth/camera_pose"} <= set(node.service.evidence.held("depth")),
+               TIMEOUT_S, "camera info and pose")
     images = ros.publisher(Image, "/ipe/depth/image", reliable, subscribers=2)  # both subscriptions match
     depth = np.full((480, 640), 1.5)
     for i in range(10):
         images.publish(depth_m_to_image(depth, time.time_ns(), "camera", "16UC1"))
         time.sleep(0.1)  # the camera's 10 Hz
-    wait_until(lambda: node.service.stats().depth_images == 10, TIMEOUT_S, "all 10 depth images")
+    wait_until(lambda: node.service.stats().evidence["depth_images"] == 10, TIMEOUT_S, "all 10 depth images")
     stats = node.service.stats()
-    assert stats.depth_images == 10 and stats.depth_images_refused == 0  # each once, though both subscriptions match
+    assert stats.evidence["depth_images"] == 10 and stats.evidence["depth_images_refused"] == 0  # each once, though both subscriptions match
 
 
 def test_a_mesh_marker_is_read_under_mesh_roots_and_refused_where_none_are_set(ros, tmp_path, monkeypatch):

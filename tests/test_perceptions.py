@@ -31,7 +31,7 @@ class Jittered:
 def jitter_from(path: Path) -> PerceptionSource:
     sd_m = json.loads(path.read_text())
 
-    def run(scene, model, seed, map_fn):
+    def run(scene, model, seed, map_fn, evidence, budget_s):
         rng = np.random.default_rng([seed, 0x717])
         scenes = []
         for _ in range(model.samples):
@@ -107,5 +107,102 @@ def test_the_node_predicts_from_a_registered_perception(jitter):
         answer = json.loads(got[-1].data)
         assert answer["request"]["perception"]["kind"] == "jitter", answer
         assert node.get_parameter("perception").value == "jitter"
+    finally:
+        ros.close()
+
+
+# A source that needs evidence (tests/perception_plugin_detections.py): the detector's list, from a
+# file through the CLI and from a topic through the node, drawn on two workers. No door names it.
+
+#: block9 where the tower has it, uncertain by 5 cm along x (1 cm along y); block8 all but certain
+DETECTIONS = {"frame_id": "world", "detections": [
+    {"object": name, "position_m": [list(b.position_m[:2]) for b in TOWER.objects if b.name == name][0], "covariance_m2": cov}
+    for name, cov in (("block9", [[25e-4, 0.0], [0.0, 1e-4]]), ("block8", [[1e-6, 0.0], [0.0, 1e-6]]))]}
+
+
+@pytest.fixture
+def detections():
+    from tests import perception_plugin_detections as plugin
+
+    source = register_perception(plugin.SOURCE)
+    yield source
+    unregister_perception("detections")
+
+
+def _cli_prediction(tmp_path, capsys, workers: int) -> dict:
+    path = tmp_path / "detections.json"
+    path.write_text(json.dumps(DETECTIONS))
+    assert main(["predict", str(example_scene_path()), "--perception", "detections", "--detections", str(path),
+                 "--samples", "8", "--workers", str(workers), "--json", "--no-self-check", "--query", "fall"]) == 0
+    return json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+
+
+def test_a_source_that_needs_evidence_reads_it_from_its_own_cli_option_and_draws_on_the_workers(detections, tmp_path,
+                                                                                               capsys):
+    on_two = _cli_prediction(tmp_path, capsys, workers=2)
+    assert on_two["request"]["perception"] == {"kind": "detections", "samples": 8, "objects": {
+        d["object"]: {"position_m": d["position_m"], "covariance_m2": d["covariance_m2"]}
+        for d in DETECTIONS["detections"]}}
+    falls = on_two["object_fall_probability"]
+    # block9, uncertain by 5 cm, falls in some samples, not all; the blocks below it stand
+    assert 0.0 < falls["block9"] < 1.0 and all(falls[f"block{i}"] == 0.0 for i in range(5)), falls
+    on_none = _cli_prediction(tmp_path, capsys, workers=0)  # the same draws however many workers
+    assert on_none["object_fall_probability"] == falls
+    # its options belong to it: given without it, refused by name; it without them, refused too
+    path = tmp_path / "detections.json"
+    assert main(["predict", str(example_scene_path()), "--detections", str(path)]) == 2
+    assert capsys.readouterr().err.strip() == "ipe: error: --perception: --detections need --perception detections"
+    assert main(["predict", str(example_scene_path()), "--perception", "detections"]) == 2
+    assert capsys.readouterr().err.strip() == ("ipe: error: --perception: detections perception needs "
+                                               "--detections FILE")
+    with pytest.raises(ConfigError, match=r"^perception: detections perception needs the detections: give them to "
+                                          r"predict as its evidence \(ipe predict's --detections; the node's "
+                                          r"~/detections\)$"):
+        predict(TOWER, ModelConfig(perception="detections", samples=4), preset("default"), QuerySpec(), check=None)
+
+
+def test_no_door_names_a_source_that_needs_evidence():
+    """The CLI, the node and the service reach sources only through the protocol (engine.evidence)."""
+    import re
+
+    root = Path(__file__).resolve().parents[1] / "ipe_ros"
+    doors = [*root.glob("cli*.py"), *(root / "service").glob("*.py"), *(root / "ros").glob("*.py")]
+    names = [n for n in perception_names() if perception_source(n).needs is not None]
+    assert "depth" in names
+    pattern = re.compile(r"""perception\s*[!=]=\s*["'](%s)["']""" % "|".join(names))
+    offending = [f"{p.name}:{i}" for p in doors for i, line in enumerate(p.read_text().splitlines(), 1)
+                 if pattern.search(line) or re.search(r"\bdepth_(posterior|perceive|images?)\b", line)]
+    assert not offending, offending
+
+
+@pytest.mark.ros
+def test_the_node_takes_a_sources_evidence_from_its_declared_topic_and_answers_as_the_cli(detections, tmp_path, capsys):
+    from std_msgs.msg import String
+
+    from ipe_ros.engine.scene.format import scene_to_json
+    from ipe_ros.ros.node import LATCHED_QOS
+    from tests.ros_harness import RosHarness, wait_until
+
+    expected = _cli_prediction(tmp_path, capsys, workers=2)
+    ros = RosHarness()
+    try:
+        node = ros.start_ipe_node(samples=8, perception="detections", self_check=False, workers=2, queries=["fall"])
+        got = ros.collect(String, "/ipe/prediction", LATCHED_QOS)
+        scenes = ros.publisher(String, "/ipe/scene_json")
+        scenes.publish(String(data=scene_to_json(TOWER)))  # before any detections: answered with the reason
+        wait_until(lambda: got, 60.0, "the refusal of a scene without detections")
+        assert json.loads(got[-1].data)["error"] == ("perception: detections: no detections received yet; publish "
+                                                     "them on ~/detections")
+        detector = ros.publisher(String, "/ipe/detections")
+        detector.publish(String(data="{not json"))  # refused, counted, the node goes on
+        wait_until(lambda: node.service.stats().evidence.get("detections_refused") == 1, 30.0, "the refusal")
+        detector.publish(String(data=json.dumps(DETECTIONS)))
+        wait_until(lambda: node.service.stats().evidence.get("detections") == 1, 30.0, "the detections")
+        scenes.publish(String(data=scene_to_json(TOWER)))
+        wait_until(lambda: len(got) >= 2 and "error" not in json.loads(got[-1].data), 120.0, "the prediction")
+        answer = json.loads(got[-1].data)
+        assert answer["request"]["perception"] == expected["request"]["perception"]
+        assert answer["object_fall_probability"] == expected["object_fall_probability"]  # one seed, one answer
+        assert node.service.stats().evidence["detections_posteriors"] == 1
     finally:
         ros.close()

@@ -1,13 +1,16 @@
 """Where a prediction's k noisy scenes come from: perception sources, registered as the queries are.
 
 A source either leaves the scene as given to the model's own noise (``gaussian``: sigma, the paper's
-IPE) or draws the k scenes from a posterior given evidence (``vision``: the SI's images of the scene;
-``depth``: a robot's depth images, which the caller brings as ``perceived``). ``predict`` asks the
-source, never the name: a new source is one ``register_perception`` call, and the CLI's
-``--perception`` and the node's ``perception`` parameter offer it.
+IPE) or draws the k scenes from a posterior (``vision``: the SI's images of the scene, rendered from
+it; ``depth``: a robot's depth images). A source that needs evidence declares it
+(``engine.evidence.Evidence``): the CLI's options and the node's topics that fill it. ``predict``
+asks the source, never the name: a new source is one ``register_perception`` call, and the CLI's
+``--perception`` and the node's ``perception`` parameter offer it, with its options and topics.
 
-A source's perceived scenes are any object with ``scenes`` (at least k) and ``to_dict()`` (what the
-answer reports under ``request.perception``, with a ``kind``).
+A source's perceived scenes are any object with ``scenes`` (at least k), ``with_samples(k)`` (the
+first k, for a question's smaller k) and ``to_dict()`` (what the answer reports under
+``request.perception``, with a ``kind``); ``refined`` (the scene at the posterior's mean, or None)
+is published on the node's ``~/perceived_scene``.
 """
 
 from __future__ import annotations
@@ -16,9 +19,12 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 from .errors import ConfigError, shown
+from .evidence import Evidence
+from .vision.depth_source import DEPTH_EVIDENCE, describe_depth, run_depth
 
-#: run(scene, model, seed, map_fn) -> perceived scenes
-PerceiveFn = Callable[[Any, Any, int, Any], Any]
+#: run(scene, model, seed, map_fn, evidence, budget_s) -> perceived scenes: the chain, through
+#: ``map_fn`` when given (the prediction's workers), within ``budget_s`` wall seconds when given
+PerceiveFn = Callable[[Any, Any, int, Any, Any, "float | None"], Any]
 
 
 @dataclass(frozen=True)
@@ -27,23 +33,29 @@ class PerceptionSource:
 
     posterior: the k scenes are drawn from a posterior (the model's sigma is unused, and a prediction
       with it is never deterministic); False: the model's own noise applies to the scene as given.
-    run: draws the perceived scenes for ``predict`` when the caller passes none (in a worker when a
-      map is given); None: the caller must bring them, and ``evidence`` says what they are.
+    run: draws the perceived scenes (a ``PerceiveFn``); None with ``posterior`` False.
+    needs: the evidence it draws them given, and how the doors fill it (None: the scene alone).
     on_node: the node can feed it (a source needing evidence the node does not subscribe to cannot).
+    describe: the text report's line from the answer's ``request.perception`` (None: no line).
     """
 
     name: str
     summary: str
     posterior: bool
     run: PerceiveFn | None = None
-    evidence: str = ""
+    needs: Evidence | None = None
     on_node: bool = True
+    describe: Callable[[dict], str] | None = None
 
-    def perceive(self, scene, model, seed: int, map_fn=None):
+    def perceive(self, scene, model, seed: int, map_fn=None, evidence=None, budget_s: float | None = None):
+        """The perceived scenes for ``scene``: its chain, within ``budget_s`` (the share of a
+        prediction's budget the caller gives it)."""
         if self.run is None:
-            raise ConfigError("perception", f"{self.name} perception needs {self.evidence}: pass its perceived scenes "
-                                            "to predict as perceived")
-        return self.run(scene, model, seed, map_fn)
+            raise ConfigError("perception", f"{self.name} perception draws no scenes of its own")
+        if self.needs is not None and evidence is None:
+            raise ConfigError("perception", f"{self.name} perception needs {self.needs.what}: give them to predict as "
+                                            f"its evidence ({self.needs.where()})")
+        return self.run(scene, model, seed, map_fn, evidence, budget_s)
 
 
 _SOURCES: dict[str, PerceptionSource] = {}
@@ -83,21 +95,28 @@ def perception_source(name) -> PerceptionSource:
 VISION_STREAM = 0x5EE
 
 
-def perceive_vision(scene, model, seed: int, map_fn=None):
-    """The vision chain ``predict`` runs for this scene, model and seed (``vision.PerceivedScenes``)."""
+def perceive_vision(scene, model, seed: int, map_fn=None, evidence=None, budget_s: float | None = None):
+    """The vision chain ``predict`` runs for this scene, model and seed (``vision.PerceivedScenes``);
+    its images are rendered from the scene (the SI's stimuli), so it needs no evidence; it has no
+    deadline (the SI's chain runs its length)."""
     from .vision.perception import PerceptionTask, perceive_task
 
     task = PerceptionTask(scene=scene, k=model.samples, settings=model.vision, seed=(seed, VISION_STREAM))
     return map_fn(perceive_task, [task])[0] if map_fn is not None else perceive_task(task)
 
 
+def _describe_vision(v: dict) -> str:
+    return (f"vision chain acceptance {v['acceptance_rate']:.2f}, effective sample size "
+            f"{v['effective_sample_size']:.0f} ({v['chain_samples']} samples, {v['burn_in']} burn-in)")
+
+
 GAUSSIAN = register_perception(PerceptionSource(
     "gaussian", "horizontal Gaussian noise of SD sigma on every object (the paper's IPE)", posterior=False))
 VISION = register_perception(PerceptionSource(
     "vision", "the SI's Bayesian vision system: samples of the posterior given images of the scene",
-    posterior=True, run=perceive_vision, on_node=False))
+    posterior=True, run=perceive_vision, on_node=False, describe=_describe_vision))
 DEPTH = register_perception(PerceptionSource(
-    "depth", "samples of the posterior given the robot's depth images", posterior=True,
-    evidence="the depth images (vision.depth.perceive_depth; the CLI's --depth, the node's depth topics)"))
+    "depth", "samples of the posterior given the robot's depth images", posterior=True, run=run_depth,
+    needs=DEPTH_EVIDENCE, describe=describe_depth))
 
 BUILT_IN = frozenset(_SOURCES)

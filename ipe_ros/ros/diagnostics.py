@@ -58,9 +58,7 @@ def diagnostics_msg(stats: ServiceStats, name: str, stamp_ns: int, hardware_id: 
         "predictions_failed": stats.failed_predictions, "samples_failed": stats.failed_samples,
         "budget_stops": stats.budget_stops, "rrd_failures": stats.rrd_failures,
         "samples_refined": stats.refined_samples, "predictions_escalated": stats.escalated,
-        "predictions_contradicted": stats.contradicted, "predictions_validated": stats.validated, "depth_images": stats.depth_images,
-        "depth_images_refused": stats.depth_images_refused, "depth_images_stale": stats.depth_images_stale,
-        "depth_posteriors": stats.depth_posteriors,
+        "predictions_contradicted": stats.contradicted, "predictions_validated": stats.validated, **stats.evidence,
         "last_compute_s": stats.last_compute_s, "last_error": stats.last_error,
     }
     if meshes is not None:

@@ -21,11 +21,10 @@ from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValu
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.service import Service as RclpyService
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
-from geometry_msgs.msg import PoseStamped, Vector3Stamped
-from sensor_msgs.msg import CameraInfo, Image
+from geometry_msgs.msg import Vector3Stamped
 from visualization_msgs.msg import MarkerArray
 
 from msg_bridge.ask_json import id_of, parse_request, question_from_data, request_id_of, support_graph_markers
@@ -36,7 +35,7 @@ from msg_bridge.stamps import header_to_stamp_ns
 
 from ..engine import ConfigError
 from ..engine.scene.meshes import NotYetDecomposed
-from .depth import DepthInterface
+from .evidence import EvidenceInterface
 from .observe import ObserveInterface
 from ..engine.errors import clip
 from ..service import (Answer, NoSceneError, PredictionFailed, PredictionService, QuestionService, ServiceConfig,
@@ -69,7 +68,7 @@ DIAGNOSTICS_PERIOD_S = 1.0
 REFUSAL_LOG_LINES_PER_S = 5
 
 
-class IpeInterface(ObserveInterface, DepthInterface, MeshWaitInterface):
+class IpeInterface(ObserveInterface, EvidenceInterface, MeshWaitInterface):
     """The node's topics, service and prediction service, shared by :class:`IpeNode` (starts
     answering at once) and :class:`IpeLifecycleNode` (configure starts the workers, activate starts
     answering; ros/lifecycle.py). Mixed into an rclpy ``Node``."""
@@ -80,8 +79,6 @@ class IpeInterface(ObserveInterface, DepthInterface, MeshWaitInterface):
     def _declare(self) -> dict[str, Any]:
         self._values = params.declare_all(self)
         self._inputs: list = []  # subscriptions, service and timer of the answering state
-        self._camera_info: dict | None = None  # the newest CameraInfo (depth perception)
-        self._camera_pose: tuple | None = None  # (position, xyzw, frame) from ~/depth/camera_pose
         # per input (handler name): the samples delivered lately, so that the other reliability's copy is skipped
         self._recently_seen: dict[str, collections.deque] = collections.defaultdict(
             lambda: collections.deque(maxlen=DUPLICATE_WINDOW))
@@ -138,12 +135,7 @@ class IpeInterface(ObserveInterface, DepthInterface, MeshWaitInterface):
         self._inputs.append(self.create_subscription(String, "~/ask", self._on_ask, ASK_QOS, callback_group=inputs))
         self._inputs.append(self.create_subscription(String, "~/observe", self._on_observe, ASK_QOS,
                                                      callback_group=inputs))
-        # camera streams: a best-effort subscription turns a reliable publisher's images best effort,
-        # and Fast DDS loses most best-effort messages over ~500 KB (a 640 x 480 depth image) in their
-        # fragments: with "both" a reliable publisher's images come whole through the reliable one
-        self._subscribe_per_reliability("depth.reliability", qos_profile_sensor_data.depth, inputs, (
-            (Image, "~/depth/image", self._on_depth_image), (CameraInfo, "~/depth/camera_info", self._on_camera_info),
-            (PoseStamped, "~/depth/camera_pose", self._on_camera_pose)))
+        self._subscribe_evidence(inputs)  # the perception sources' topics (depth's camera)
         self._inputs.append(self.create_service(Trigger, "~/predict", self._on_predict,
                                                 callback_group=MutuallyExclusiveCallbackGroup()))
         config = self.service.config

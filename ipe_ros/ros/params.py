@@ -248,24 +248,24 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
                          rerun_save_dir=save_dir or None, rerun_rollouts_logged=int(values["rerun.rollouts_logged"]),
                          rerun_frame_period_s=float(values["rerun.frame_period_s"]),
                          rerun_connect_url=connect or None, gravity_aligned_frames=frames,
-                         depth_max_age_s=float(values["depth.max_age_s"]),
+                         evidence_settings=tuple((n, values[n]) for n in evidence_parameters() if n in values),
                          # files only under the roots (none: no files); a mesh not yet decomposed, even a
                          # marker's triangles, is decomposed off the executor, within its time (defer)
                          meshes=MeshAccess(roots=roots, decompose_within_s=float(values["mesh_decomposition_s"]),
                                            defer=True))
 
 
+def evidence_parameters() -> tuple[str, ...]:
+    """The node parameters perception sources read when a scene is predicted (``engine.evidence``)."""
+    needs = [perception_source(n).needs for n in perception_names()]
+    return tuple(e.max_age_parameter for e in needs if e is not None and e.max_age_parameter)
+
+
 def camera_pose(values: Mapping[str, Any]) -> tuple[tuple, tuple] | None:
     """The fixed camera pose of ``depth.camera_pose`` as (position, xyzw), or None (from the topic)."""
-    from ..engine.vision.depth_io import parse_pose
+    from ..engine.vision.depth_source import fixed_camera_pose
 
-    text = str(values["depth.camera_pose"]).strip()
-    if not text:
-        return None
-    try:
-        return parse_pose(text)
-    except ConfigError as exc:
-        raise ConfigError("depth.camera_pose", exc.problem) from None
+    return fixed_camera_pose(values)
 
 
 _YAML_HEAD = """# Parameters of ipe_node with their defaults. Use: ros2 run ipe_ros ipe_node --ros-args --params-file config/ipe.yaml

@@ -14,7 +14,9 @@ from typing import Callable
 from ..engine import ConfigError, Scene, WorkerPool, predict
 from ..engine.errors import SceneError, clip, shown
 from ..engine.inputs import as_spelled
+from ..engine.perceptions import perception_source
 from ..engine.sampling.sampler import check_request
+from .evidence import EvidenceViews
 from .recording import load_rerun_if_recording, record_prediction
 from .values import RECENT_EVENTS, Answer, NoSceneError, PredictionFailed, ServiceConfig, ServiceStats, StampedScene
 
@@ -51,8 +53,7 @@ class PredictionService:
         self._pool = pool if pool is not None else WorkerPool(workers, start_method=start_method) if workers > 0 else None
         self.workers = len(pool.worker_pids()) if pool is not None else workers
         self._cond = threading.Condition()
-        self._depth = None  # (vision.depth.DepthObservation, stamp ns, frame, its number): the newest depth image
-        self._posterior = None  # (key, vision.depth.DepthPerceivedScenes): the latest view's posterior
+        self.evidence = EvidenceViews()  # perception sources' newest views, and the latest view's posterior
         self._pending: StampedScene | None = None
         self._latest: StampedScene | None = None
         self._latest_rejected: str | None = None  # why the newest input was refused, if it was
@@ -64,8 +65,7 @@ class PredictionService:
         self._seq = 0
         self._counts = dict(received=0, predicted=0, predictions=0, dropped=0, rejected=0, failed_predictions=0,
                             failed_samples=0, budget_stops=0, rrd_failures=0, refined_samples=0, escalated=0,
-                            contradicted=0, validated=0, depth_images=0, depth_images_refused=0, depth_images_stale=0,
-                            depth_posteriors=0)
+                            contradicted=0, validated=0)
         self._recent: collections.deque[str] = collections.deque(maxlen=RECENT_EVENTS)
         self._last_predicted_seq = 0
         self._in_flight_since: float | None = None
@@ -209,7 +209,7 @@ class PredictionService:
         with self._cond:
             pids = self._pool.worker_pids() if self._pool is not None else []
             since = self._in_flight_since
-            return ServiceStats(**self._counts, waiting=int(self._pending is not None),
+            return ServiceStats(**self._counts, evidence=self.evidence.counts(), waiting=int(self._pending is not None),
                                 in_flight=self._in_flight is not None,
                                 in_flight_s=None if since is None else time.monotonic() - since,
                                 recent=tuple(self._recent), budget_s=self._config.request.budget_s, workers=self.workers,
@@ -311,59 +311,17 @@ class PredictionService:
         else:
             self._report_failure(item, error or "unknown error")
 
-    def set_depth(self, observation, stamp_ns: int, frame_id: str) -> None:
-        """The newest depth image (``vision.depth.DepthObservation``), when it was taken, and the frame
-        its camera pose is in (scenes in another frame cannot use it)."""
-        with self._cond:
-            self._counts["depth_images"] += 1
-            self._depth = (observation, int(stamp_ns), frame_id, self._counts["depth_images"])
-
-    def refuse_depth(self) -> None:
-        """Count a depth image that could not be used (the node logs why)."""
-        with self._cond:
-            self._counts["depth_images_refused"] += 1
-
-    def latest_depth_stamp_ns(self) -> int | None:
-        with self._cond:
-            return None if self._depth is None else self._depth[1]
-
-    def perceived(self, item: StampedScene, config: ServiceConfig):
-        """The depth posterior's scenes for this scene, from the newest depth image (one chain per view:
-        predictions and robot questions about it share it)."""
-        from ..engine.vision import depth
-
-        with self._cond:
-            latest = self._depth
-        if latest is None:
-            raise ConfigError("perception", "depth: no depth image received yet; publish ~/depth/image with "
-                                            "~/depth/camera_info and the camera pose (~/depth/camera_pose or the "
-                                            "depth.camera_pose parameter)")
-        observation, stamp_ns, frame_id, number = latest
-        if frame_id != item.frame_id:
-            raise ConfigError("perception", f"depth: the camera pose is in {frame_id!r} but the scene in "
-                                            f"{item.frame_id!r}; give both in one frame")
-        age = abs(stamp_ns - item.stamp_ns) / 1e9
-        if age > config.depth_max_age_s:
-            with self._cond:
-                self._counts["depth_images_stale"] += 1
-            raise ConfigError("perception", f"depth: the newest depth image is {age:.3g} s from the scene's stamp, more "
-                                            f"than depth.max_age_s = {config.depth_max_age_s:g} s")
-        # one posterior per view: the same image and scene predicted again (a parameter changed, ~/predict
-        # called) reuse it, as long as the chain would be the same (its samples, seed and settings)
-        key = (number, item.scene, config.request.model.samples, config.request.seed)
-        with self._cond:
-            cached = self._posterior if self._posterior is not None and self._posterior[0] == key else None
-        if cached is not None:
-            return cached[1]
-        budget_s = config.request.budget_s
-        perceived = depth.perceive_depth_for(item.scene, config.request.model.samples, (observation,),
-                                             config.request.seed,
-                                             budget_s=None if budget_s is None else budget_s * depth.CHAIN_BUDGET_SHARE,
-                                             map_fn=self._pool.map if self._pool is not None else None)
-        with self._cond:
-            self._posterior = (key, perceived)
-            self._counts["depth_posteriors"] += 1
-        return perceived
+    def perceived(self, item: StampedScene, config: ServiceConfig, samples: int | None = None):
+        """The perception's posterior scenes for this scene from its newest evidence (``service.evidence``),
+        or None when the perception needs none. ``samples``: the first so many (a question's k)."""
+        source = perception_source(config.request.model.perception)
+        if source.needs is None:
+            return None
+        perceived = self.evidence.perceived(source, item.scene, item.stamp_ns, item.frame_id, config.request.model,
+                                            config.request.seed, config.request.budget_s,
+                                            dict(config.evidence_settings),
+                                            map_fn=self._pool.map if self._pool is not None else None)
+        return perceived if samples is None else perceived.with_samples(samples)
 
     def _predict(self, item: StampedScene, config: ServiceConfig, version: int) -> tuple[Answer | None, str | None]:
         start = time.perf_counter()
@@ -372,8 +330,8 @@ class PredictionService:
         if config.rerun_save_dir and config.rerun_rollouts_logged > 0:
             record_every = max(1, round(config.rerun_frame_period_s / request.settings.time_step_s))
         try:
-            perceived = self.perceived(item, config) if request.model.perception == "depth" else None
-            budget_s = request.budget_s  # what the depth chain left of it
+            perceived = self.perceived(item, config)
+            budget_s = request.budget_s  # what the perception's chain left of it
             if budget_s is not None and perceived is not None:
                 budget_s = max(budget_s - (time.perf_counter() - start), 1e-3)
             prediction = predict(item.scene, request.model, request.settings, request.query, seed=request.seed,
@@ -389,7 +347,7 @@ class PredictionService:
             return None, "the node is shutting down"
         answer = Answer(source=item, prediction=prediction, compute_s=time.perf_counter() - start,
                         latency_s=0.0, config_version=version,
-                        perceived_scene=perceived.refined if perceived is not None else None)
+                        perceived_scene=getattr(perceived, "refined", None))
         if record_every:
             with self._cond:
                 self._recordings += 1  # one file per prediction, also when a scene is predicted again

@@ -136,13 +136,11 @@ class QuestionService:
                                "compute_s": time.perf_counter() - start}, source, question)
 
             try:
-                # with depth perception, every variant's sample i starts from the posterior's scene i: the
-                # chain the view's predictions use, thinned to the question's k (no chain of its own)
+                # with a perception that needs evidence, every variant's sample i starts from the posterior's
+                # scene i: the chain the view's predictions use, thinned to the question's k (no chain of its own)
                 model = dataclasses.replace(request.model, samples=DEFAULT_QUESTION_SAMPLES, perception="gaussian")
-                perceived = None
-                if request.model.perception == "depth":
-                    k = question.samples if question.samples is not None else DEFAULT_QUESTION_SAMPLES
-                    perceived = self._predictions.perceived(source, config).with_samples(k)
+                k = question.samples if question.samples is not None else DEFAULT_QUESTION_SAMPLES
+                perceived = self._predictions.perceived(source, config, samples=k)
                 pool = self._predictions.pool
                 record = {}
                 if config.rerun_save_dir and config.rerun_rollouts_logged > 0:

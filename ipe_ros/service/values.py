@@ -4,8 +4,8 @@ counters diagnostics read, and the errors a caller may catch."""
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, field
+from typing import Any, Mapping
 
 from ..engine import Prediction, Scene
 from ..engine.request import Request
@@ -35,9 +35,9 @@ class ServiceConfig:
     rerun_frame_period_s: float = 0.02
     rerun_connect_url: str | None = None
     gravity_aligned_frames: tuple[str, ...] = ()  # frames whose -z is gravity; () trusts every frame
-    #: ``request.model.perception == "depth"``: a scene is predicted from the newest depth image taken
-    #: at most this many seconds before or after its stamp
-    depth_max_age_s: float = 0.5
+    #: the node's parameters that perception sources declared (``engine.evidence.Evidence``: how far a
+    #: view may be from the scene's stamp), as (name, value)
+    evidence_settings: tuple[tuple[str, Any], ...] = ()
     #: where scenes' mesh files may be read from (``mesh_roots``); None: scenes may not name meshes
     meshes: MeshAccess | None = None
 
@@ -137,7 +137,9 @@ class ServiceStats:
     recent: the last RECENT_EVENTS inputs and predictions, oldest first: "ok", "rejected",
     "failed", "partial" (some samples failed or were cut by the budget), "contradicted" or "rrd_failed".
     in_flight_s: how long the prediction in flight has run (None: none in flight).
-    depth_images, depth_images_refused, depth_images_stale: depth perception's input (the fields' comments).
+    evidence: the perception sources' input counters (``service.evidence.counter_names``): per
+      counted topic its messages held, refused and (a view) the scenes refused as too far from it,
+      per source its chains run (a view predicted again reuses its posterior).
     """
 
     received: int
@@ -164,10 +166,7 @@ class ServiceStats:
     escalated: int = 0
     contradicted: int = 0
     validated: int = 0
-    depth_images: int = 0  # depth images kept (the newest replaces the one before)
-    depth_images_refused: int = 0  # unreadable, or no camera info or pose yet
-    depth_images_stale: int = 0  # scenes refused because the newest image was too far from their stamp
-    depth_posteriors: int = 0  # depth chains run (a view predicted again reuses its posterior)
+    evidence: Mapping[str, int] = field(default_factory=dict)
 
 
 class NoSceneError(RuntimeError):

@@ -109,3 +109,12 @@ def write_depth_rrd(path: str | Path, scene: Scene, perceived, observations) -> 
         rec.flush()
     finally:
         rec.disconnect()
+
+
+def record_depth(values, scene: Scene, perceived, observations) -> str | None:
+    """Depth perception's recording (its ``--depth-rrd`` option, engine/vision/depth_source.py): the
+    file written, or None when not asked."""
+    if values.get("depth_rrd") is None:
+        return None
+    write_depth_rrd(values["depth_rrd"], scene, perceived, observations)
+    return values["depth_rrd"]

@@ -73,6 +73,9 @@ class Prediction:
     #: above its median differ from those below (``sampling.influence``); None: none uncertain
     property_influence: tuple[dict, ...] | None = None
     outcomes: tuple[SampleOutcome, ...] = field(default=(), repr=False, compare=False)
+    #: the perception's posterior the samples started from (``engine.perceptions``; None: the
+    #: model's own noise); summarised in ``request["perception"]``, kept whole for recordings
+    perceived: Any = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         unknown = sorted(set(self.answers) - set(answer_fields()))
@@ -86,7 +89,7 @@ class Prediction:
         raise AttributeError(f"'Prediction' object has no attribute '{name}'")
 
     def to_dict(self) -> dict[str, Any]:
-        """The JSON-ready fields (everything but the raw outcomes; every query's fields, None where
+        """The JSON-ready fields (everything but the raw outcomes and the perceived scenes; every query's fields, None where
         it was not asked)."""
         out: dict[str, Any] = {}
         for name in self.__dataclass_fields__:
@@ -94,7 +97,7 @@ class Prediction:
                 for key in answer_fields():
                     value = self.answers.get(key)
                     out[key] = list(value) if isinstance(value, tuple) else value
-            elif name != "outcomes":
+            elif name not in ("outcomes", "perceived"):
                 out[name] = getattr(self, name)
         out["failure_reasons"] = list(out["failure_reasons"])
         if self.property_influence is None:  # a scene with every property exact answers as it always did

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -136,17 +137,26 @@ def check_request(scene: Scene, query: QuerySpec, max_objects: int = DEFAULT_MAX
 
 
 def _from_perception(tasks: list[SampleTask], scene: Scene, model: ModelConfig, seed: int, map_fn: MapFn | None,
-                     perceived) -> tuple[list[SampleTask], object]:
-    """With a perception that draws from a posterior (vision, depth), each sample's scene is a state
-    of it (and the model's sigma 0: the posterior is the noise); the tasks and the perceived scenes used."""
+                     perceived, evidence, budget_s: float | None) -> tuple[list[SampleTask], object, float | None]:
+    """With a perception that draws from a posterior (vision, depth, a registered one), each
+    sample's scene is a state of it (and the model's sigma 0: the posterior is the noise); the
+    tasks, the perceived scenes used, and the budget the chain left. The chain runs here unless
+    ``perceived`` is given, on the samples' workers; one that needs evidence within its share of
+    the budget (``evidence.Evidence.budget_share``)."""
     source = perception_source(model.perception)
     if not source.posterior:
-        return tasks, perceived
-    perceived = perceived or source.perceive(scene, model, seed, map_fn)
+        return tasks, perceived, budget_s
+    if perceived is None:
+        share = None if budget_s is None or source.needs is None else budget_s * source.needs.budget_share
+        started = time.perf_counter()
+        perceived = source.perceive(scene, model, seed, map_fn, evidence, share)
+        if share is not None:
+            budget_s = max(budget_s - (time.perf_counter() - started), 1e-3)
     if len(perceived.scenes) < len(tasks):
         raise ConfigError("samples", f"{len(perceived.scenes)} perceived scenes for {len(tasks)} samples")
     sampled = dataclasses.replace(model, sigma_m=0.0)
-    return [dataclasses.replace(t, scene=perceived.scenes[t.index], model=sampled) for t in tasks], perceived
+    return ([dataclasses.replace(t, scene=perceived.scenes[t.index], model=sampled) for t in tasks], perceived,
+            budget_s)
 
 
 def check_ci_width(ci_width: float | None, query: QuerySpec) -> None:
@@ -159,7 +169,8 @@ def check_ci_width(ci_width: float | None, query: QuerySpec) -> None:
 def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: QuerySpec, seed: int = 0,
             map_fn: MapFn | None = None, record_every: int = 0, record_samples: int | None = None,
             max_objects: int = DEFAULT_MAX_OBJECTS, stop: AdaptiveStop | None = None,
-            budget_s: float | None = None, perceived=None, check: SelfCheck | None = DEFAULT_CHECK) -> Prediction:
+            budget_s: float | None = None, perceived=None, check: SelfCheck | None = DEFAULT_CHECK,
+            evidence=None) -> Prediction:
     """Run the IPE on one scene and aggregate (failed rollouts are counted in ``failed_samples``).
 
     ``record_every``/``record_samples``: record trajectories (for rerun) every N simulation steps
@@ -170,9 +181,10 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
     off and the answer uses the rest (``stopped_by: "budget"``). Which samples finish in time is
     the one thing here that depends on timing.
 
-    ``model.perception == "vision"``: the k noisy scenes are states of the vision posterior
-    (``engine.vision``), from a chain run here (in a worker when ``map_fn`` is given, seeded from
-    ``seed`` on a stream of its own) or taken from ``perceived`` (``vision.PerceivedScenes``).
+    A perception that draws from a posterior (``model.perception``: vision, depth, a registered
+    one; ``engine.perceptions``): the k noisy scenes are states of it, from its chain run here (in a
+    worker when ``map_fn`` is given, seeded from ``seed`` on a stream of its own; given ``evidence``
+    when the source needs it, within its share of ``budget_s``) or taken from ``perceived``.
 
     ``check``: how the answer checks its fast physics against the reference (``engine.checking.fidelity``):
     unhealthy rollouts refined, ``check.verify_samples`` samples verified in the same map as the
@@ -185,7 +197,7 @@ def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: Quer
     check_request(scene, query, max_objects, model=model, settings=settings, budget_s=budget_s)
     check_ci_width(None if stop is None else stop.ci_width, query)
     tasks = make_tasks(scene, model, settings, query, seed, record_every, record_samples)
-    tasks, perceived = _from_perception(tasks, scene, model, seed, map_fn, perceived)
+    tasks, perceived, budget_s = _from_perception(tasks, scene, model, seed, map_fn, perceived, evidence, budget_s)
     check = NO_CHECK if check is None or is_reference(settings) else check
     validated = _validated(tasks, model, settings, check, stop)
     if validated:  # nothing verified or covered: only unhealthy rollouts are rerun
@@ -315,6 +327,8 @@ def _aggregate(scene: Scene, model: ModelConfig, settings: SimSettings, query: Q
     if fidelity is not None:
         prediction = dataclasses.replace(prediction, fidelity=fidelity.verdict, refined_samples=fidelity.refined_samples,
                                          self_check=fidelity.to_dict())
+    if perceived is not None:
+        prediction = dataclasses.replace(prediction, perceived=perceived)
     if prediction.stopped_by == "budget":
         return prediction
     return dataclasses.replace(prediction, stopped_by=stopped_by)

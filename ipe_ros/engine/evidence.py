@@ -1,0 +1,126 @@
+"""What a perception source needs to see, declared once, so that every door can fill it unedited.
+
+A source that draws the k scenes from a posterior given evidence (depth images, detections, a
+second camera) says here what that evidence is and how each door gets it:
+- the command line: ``options`` (added to ``ipe predict`` and ``ipe ask`` for every registered
+  source), which ``read`` turns into the evidence (files read, checked, errors naming the option);
+- the node: ``topics`` it subscribes to for every registered source. Each message is converted when
+  it arrives by ``receive`` (a ``"module:function"`` path, since the engine never imports message
+  classes: the node resolves it, msg_bridge-style code does the conversion) and held, the newest per
+  topic; ``assemble`` turns what is held into the evidence when a scene is predicted.
+
+The source then runs its own chain inside ``predict``, on the prediction's workers, within
+``budget_share`` of its budget (``perceptions.PerceptionSource.run``). No door branches on a
+perception's name.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping
+
+
+@dataclass(frozen=True)
+class EvidenceOption:
+    """A command-line option that fills the evidence. ``required``: the perception cannot run
+    without it (the others, e.g. a recording to write, are optional)."""
+
+    flag: str
+    metavar: str
+    help: str
+    required: bool = True
+
+    @property
+    def dest(self) -> str:
+        """The option's name in ``argparse``'s namespace and in ``read``'s mapping."""
+        return self.flag.lstrip("-").replace("-", "_")
+
+
+@dataclass(frozen=True)
+class Held:
+    """One topic's newest message as received: its converted value, its header's stamp and frame,
+    and how many were held on that topic so far (the view's number)."""
+
+    value: Any
+    stamp_ns: int
+    frame_id: str
+    number: int
+
+
+#: receive(msg, held, node_values) -> (value, frame_id): a message converted as it arrives, given
+#: what the source's other topics hold (a depth image needs the camera's calibration and pose);
+#: ValueError refuses it (counted, logged; nothing held)
+Receive = Callable[[Any, Mapping[str, Held], Mapping[str, Any]], tuple[Any, str]]
+
+
+@dataclass(frozen=True)
+class EvidenceTopic:
+    """A node topic (relative name, e.g. ``~/depth/image``) of message type ``message_type``
+    (``"sensor_msgs/msg/Image"``), converted by ``receive`` (``"module:function"``, a ``Receive``).
+    ``what``: a message, as errors name it ("depth image"). ``counted_as``: its counter in
+    /diagnostics (``<counted_as>``, ``<counted_as>_refused``; empty: not counted). ``view``: the
+    evidence is this topic's newest message (its stamp and frame must match the scene's; a new one
+    is a new view); the other topics only help receive it (a camera's calibration)."""
+
+    name: str
+    message_type: str
+    receive: str
+    what: str
+    counted_as: str = ""
+    view: bool = False
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """What a source needs and how each door fills it (the module docstring).
+
+    what: the evidence, as errors name it ("the depth images").
+    describes: what one piece of evidence is of ("one depth image describes one scene").
+    read: the CLI's option values (by ``EvidenceOption.dest``) -> the evidence.
+    assemble: the views' held values (by topic name) -> the evidence.
+    missing: what to publish, said when a scene comes before any view.
+    frame_named: what the view's frame is the frame of ("the camera pose").
+    max_age_parameter: the node parameter bounding a view's distance from the scene's stamp (s).
+    reliability_parameter: the node parameter choosing the subscriptions' reliability
+      (``scene_reliability`` when empty).
+    budget_share: of a prediction's budget, what its chain may use (the samples get the rest).
+    record: the CLI's optional recording of the chain, ``"module:function"`` (recordings import the
+      viewer's library, which the engine does not), called with (option values, scene, perceived,
+      evidence) -> the file written or None.
+    """
+
+    what: str
+    describes: str
+    options: tuple[EvidenceOption, ...] = ()
+    read: Callable[[Mapping[str, Any]], Any] | None = None
+    topics: tuple[EvidenceTopic, ...] = ()
+    assemble: Callable[[Mapping[str, Any]], Any] | None = None
+    missing: str = ""
+    frame_named: str = "the view"
+    max_age_parameter: str = ""
+    reliability_parameter: str = ""
+    budget_share: float = 0.5
+    record: str = ""
+
+    def views(self) -> tuple[EvidenceTopic, ...]:
+        return tuple(t for t in self.topics if t.view)
+
+    def where(self) -> str:
+        """Where the doors take it from, for errors."""
+        doors = []
+        if self.options:
+            doors.append("ipe predict's " + ", ".join(o.flag for o in self.options if o.required))
+        if self.topics:
+            doors.append("the node's " + ", ".join(t.name for t in self.topics))
+        return "; ".join(doors) or "no door fills it"
+
+
+def resolve(path: str) -> Callable:
+    """``"module:function"`` -> the function (imported when first needed: the engine names message
+    converters it must not import)."""
+    import importlib
+
+    module, _, name = path.partition(":")
+    if not module or not name:
+        raise ValueError(f"a converter is named 'module:function', got {path!r}")
+    return getattr(importlib.import_module(module), name)

@@ -8,6 +8,7 @@ import argparse
 import time
 from typing import Any, Mapping
 
+from .cli_inputs import add_rows
 from .engine import ConfigError, ModelConfig
 from .engine.evidence import resolve
 from .engine.perceptions import PerceptionSource, perception_names, perception_source
@@ -21,12 +22,11 @@ def add_evidence_options(parser: argparse.ArgumentParser) -> None:
     """Each source's options, in a group of its own."""
     for source in _needing():
         group = parser.add_argument_group(f"{source.name} perception")
-        for option in source.needs.options:
-            group.add_argument(option.flag, default=None, metavar=option.metavar, help=option.help)
+        add_rows(group, source.needs.options)
 
 
 def _given(args, source: PerceptionSource) -> list[str]:
-    return [o.flag for o in source.needs.options if getattr(args, o.dest, None) is not None]
+    return [o.flag for o in source.needs.options if getattr(args, o.field, None) is not None]
 
 
 def _flags(source: PerceptionSource) -> str:
@@ -35,14 +35,14 @@ def _flags(source: PerceptionSource) -> str:
 
 
 def option_values(args, source: PerceptionSource) -> dict[str, Any]:
-    return {o.dest: getattr(args, o.dest, None) for o in source.needs.options}
+    return {o.field: getattr(args, o.field, None) for o in source.needs.options}
 
 
 def _read(args, source: PerceptionSource, field: str) -> Any:
     values = option_values(args, source)
-    lacking = [o for o in source.needs.options if o.required and values[o.dest] is None]
+    lacking = [o for o in source.needs.required() if values[o.field] is None]
     if lacking:
-        required = [f"{o.flag} {o.metavar}" for o in source.needs.options if o.required]
+        required = [f"{o.flag} {o.metavar}" for o in source.needs.required()]
         listed = required[0] if len(required) == 1 else f"{', '.join(required[:-1])} and {required[-1]}"
         raise ConfigError(field, f"{source.name} perception needs {listed}")
     return source.needs.read(values)

@@ -74,23 +74,31 @@ def add_input_options(parser: argparse.ArgumentParser, fields: Iterable[str], *,
     defaults, notes = defaults or {}, notes or {}
     for field in fields:
         found = row(field)
-        default = defaults.get(field, found.default)
-        note = notes.get(field)
-        if found.kind == "bool":
-            parser.add_argument(found.flag, dest=field, default=default, action=argparse.BooleanOptionalAction,
-                                help=(note or found.help).replace("%", "%%") + (" (default: on)" if default else ""))
-            continue
-        kw: dict[str, Any] = dict(dest=field, metavar=found.metavar or found.flag[2:].upper(),
-                                  type=_TYPES.get(found.kind))
-        if found.choices is not None and found.kind == "name":
-            kw.update(choices=list(found.choices()), metavar=None)
-        elif found.choices is not None:  # several names: their type checks each
-            note = f"{note or found.help}; comma-separated, from {','.join(found.choices())}"
-        if found.kind == "pairs":
-            kw.update(action="append", default=None)
-        else:
-            kw["default"] = None if found.requires else default
-        parser.add_argument(found.flag, help=_help(found, default, note), **kw)
+        _add_row(parser, found, defaults.get(field, found.default), notes.get(field))
+
+
+def add_rows(parser, rows: Iterable[Input]) -> None:
+    """An option per row not in the table (a perception source's own, engine/evidence.py)."""
+    for found in rows:
+        _add_row(parser, found, found.default, None)
+
+
+def _add_row(parser, found: Input, default: Any, note: str | None) -> None:
+    field = found.field
+    if found.kind == "bool":
+        parser.add_argument(found.flag, dest=field, default=default, action=argparse.BooleanOptionalAction,
+                            help=(note or found.help).replace("%", "%%") + (" (default: on)" if default else ""))
+        return
+    kw: dict[str, Any] = dict(dest=field, metavar=found.metavar or found.flag[2:].upper(), type=_TYPES.get(found.kind))
+    if found.choices is not None and found.kind == "name":
+        kw.update(choices=list(found.choices()), metavar=None)
+    elif found.choices is not None:  # several names: their type checks each
+        note = f"{note or found.help}; comma-separated, from {','.join(found.choices())}"
+    if found.kind == "pairs":
+        kw.update(action="append", default=None)
+    else:
+        kw["default"] = None if found.requires else default
+    parser.add_argument(found.flag, help=_help(found, default, note), **kw)
 
 
 def add_inputs_from_option(parser: argparse.ArgumentParser) -> None:

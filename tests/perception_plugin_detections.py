@@ -2,7 +2,7 @@
 detector's list of objects, each with its position's mean and covariance, read from a file
 (``--detections FILE``) or from a topic (``~/detections``, std_msgs/String holding the same JSON).
 This module is all it takes: ``SOURCE`` registered, ``ipe predict`` and the node offer it with its
-option and topic, and its draws run on the prediction's workers (which import this module to run
+option, topic and parameter, and its draws run on the prediction's workers (which import this module to run
 ``draw_sample``).
 
 The evidence: ``{"frame_id": "world", "detections": [{"object": NAME, "position_m": [x, y],
@@ -21,7 +21,8 @@ from typing import Any
 import numpy as np
 
 from ipe_ros.engine import ConfigError
-from ipe_ros.engine.evidence import Evidence, EvidenceOption, EvidenceTopic
+from ipe_ros.engine.evidence import Evidence, EvidenceTopic
+from ipe_ros.engine.input_row import Input
 from ipe_ros.engine.perceptions import PerceptionSource
 
 STREAM = 0xDE7
@@ -112,10 +113,14 @@ SOURCE = PerceptionSource(
     "detections", "each detected object drawn from its position's Gaussian (a detector's mean and covariance)",
     posterior=True, run=run, describe=lambda v: f"{len(v['objects'])} objects detected",
     needs=Evidence(what="the detections", describes="one list of detections describes one scene",
-                   options=(EvidenceOption("--detections", "FILE", "detections: a JSON list of objects' positions "
-                                                                   "with their covariances"),),
+                   options=(Input("detections", "name", None, "path", "a JSON list of objects' positions with their "
+                                  "covariances", flag="--detections", in_request=False, unset_means="none",
+                                  metavar="FILE"),),
                    read=read_file,
                    topics=(EvidenceTopic("~/detections", "std_msgs/msg/String",
-                                         "tests.perception_plugin_detections:received", "detections",
+                                         "tests.perception_plugin_detections:received", "detection list",
                                          counted_as="detections", view=True),),
-                   assemble=assemble, missing="publish them on ~/detections"))
+                   assemble=assemble, missing="publish one on ~/detections", max_age_parameter="detections.max_age_s",
+                   parameters=(Input("detections.max_age_s", "float", 60.0, "s", "the detections may be at most this "
+                                     "many seconds from the scene's stamp", parameter="detections.max_age_s",
+                                     in_request=False, range=(0.001, 3600.0)),)))

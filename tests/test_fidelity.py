@@ -550,9 +550,9 @@ def test_self_check_settings_are_validated_with_the_field_named():
 
 
 def test_the_node_parameters_set_the_check():
-    from ipe_ros.ros.params import PARAMETERS, config_from_values
+    from ipe_ros.ros.params import all_parameters, config_from_values
 
-    values = {spec.name: spec.default for spec in PARAMETERS}
+    values = {spec.name: spec.default for spec in all_parameters()}
     assert config_from_values(values).request.check == SelfCheck()
     values.update({"self_check": False, "verify_samples": 3})
     assert config_from_values(values).request.check == SelfCheck(enabled=False, verify_samples=3)

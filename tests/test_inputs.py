@@ -15,12 +15,12 @@ def _option(parser, flag: str):
 
 
 def test_every_option_and_node_parameter_is_made_from_its_row():
-    from ipe_ros.ros.params import PARAMETERS
+    from ipe_ros.ros.params import all_parameters
 
     predict = build_parser()._subparsers._group_actions[0].choices["predict"]  # noqa: SLF001
     ask = build_parser()._subparsers._group_actions[0].choices["ask"]  # noqa: SLF001
     remove = ask._subparsers._group_actions[0].choices["remove"]  # noqa: SLF001
-    declared = {p.name: p for p in PARAMETERS}
+    declared = {p.name: p for p in all_parameters()}
     for row in INPUTS:
         if row.flag is not None:
             parser = remove if row.field == "fell_off" else predict
@@ -63,9 +63,9 @@ def test_the_cli_and_the_node_build_the_same_request_from_the_same_intent():
 
     from ipe_ros.cli_inputs import given_request_arguments
     from ipe_ros.engine.request import build_request
-    from ipe_ros.ros.params import PARAMETERS, config_from_values
+    from ipe_ros.ros.params import all_parameters, config_from_values
 
-    defaults = {spec.name: spec.default for spec in PARAMETERS}
+    defaults = {spec.name: spec.default for spec in all_parameters()}
     parse = build_parser().parse_args
     cases = [([], {}),
              (["--phi", "0,2", "--mu", "3", "--horizon", "1.5", "--force-direction", "30", "--ci-width", "0.2",
@@ -141,9 +141,9 @@ def test_the_ground_truth_refuses_a_perception_that_draws_the_scene():
 def test_node_settings_no_scene_could_answer_are_refused_when_set_naming_the_parameter(changes, reason):
     """Accepted, they made every later scene fail, with errors naming the CLI's --contact."""
     from ipe_ros.engine import ConfigError
-    from ipe_ros.ros.params import PARAMETERS, config_from_values
+    from ipe_ros.ros.params import all_parameters, config_from_values
 
-    values = {spec.name: spec.default for spec in PARAMETERS} | changes
+    values = {spec.name: spec.default for spec in all_parameters()} | changes
     with pytest.raises(ConfigError) as info:
         config_from_values(values)
     assert str(info.value) == reason

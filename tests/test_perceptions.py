@@ -23,6 +23,10 @@ from ipe_ros.engine.perceptions import (PerceptionSource, perception_names, perc
 class Jittered:
     scenes: tuple
     sd_m: dict
+    refined = None
+
+    def with_samples(self, k: int) -> "Jittered":
+        return dataclasses.replace(self, scenes=self.scenes[:k])
 
     def to_dict(self) -> dict:
         return {"kind": "jitter", "sd_m": self.sd_m, "samples": len(self.scenes)}
@@ -71,6 +75,18 @@ def test_a_registered_perception_is_drawn_from_by_predict(jitter):
     assert 0.0 < falls["block9"] < 1.0 and all(falls[f"block{i}"] == 0.0 for i in range(5))
     with pytest.raises(ValueError, match="^a perception named 'jitter' is registered already$"):
         register_perception(jitter)
+
+
+def test_a_chain_that_returns_no_perceived_scenes_is_named():
+    source = register_perception(PerceptionSource("listed", "a list", posterior=True,
+                                                  run=lambda *_: [TOWER] * 4))
+    try:
+        with pytest.raises(TypeError, match=r"^perception listed's run returned a list, which is not Perceived "
+                                            r"\(engine.perceptions\): give it scenes, refined, with_samples\(k\) and "
+                                            r"to_dict\(\)$"):
+            predict(TOWER, ModelConfig(perception="listed", samples=4), preset("default"), QuerySpec(), check=None)
+    finally:
+        unregister_perception(source.name)
 
 
 def test_the_cli_offers_a_registered_perception(jitter, capsys):
@@ -179,9 +195,14 @@ def test_no_door_names_a_source_that_needs_evidence():
 def test_the_node_takes_a_sources_evidence_from_its_declared_topic_and_answers_as_the_cli(detections, tmp_path, capsys):
     from std_msgs.msg import String
 
+    import re
+
+    from std_srvs.srv import Trigger
+
     from ipe_ros.engine.scene.format import scene_to_json
     from ipe_ros.ros.node import LATCHED_QOS
     from tests.ros_harness import RosHarness, wait_until
+    from tests.test_node import set_params
 
     expected = _cli_prediction(tmp_path, capsys, workers=2)
     ros = RosHarness()
@@ -191,8 +212,8 @@ def test_the_node_takes_a_sources_evidence_from_its_declared_topic_and_answers_a
         scenes = ros.publisher(String, "/ipe/scene_json")
         scenes.publish(String(data=scene_to_json(TOWER)))  # before any detections: answered with the reason
         wait_until(lambda: got, 60.0, "the refusal of a scene without detections")
-        assert json.loads(got[-1].data)["error"] == ("perception: detections: no detections received yet; publish "
-                                                     "them on ~/detections")
+        assert json.loads(got[-1].data)["error"] == ("perception: detections: no detection list received yet; "
+                                                     "publish one on ~/detections")
         detector = ros.publisher(String, "/ipe/detections")
         detector.publish(String(data="{not json"))  # refused, counted, the node goes on
         wait_until(lambda: node.service.stats().evidence.get("detections_refused") == 1, 30.0, "the refusal")
@@ -204,5 +225,13 @@ def test_the_node_takes_a_sources_evidence_from_its_declared_topic_and_answers_a
         assert answer["request"]["perception"] == expected["request"]["perception"]
         assert answer["object_fall_probability"] == expected["object_fall_probability"]  # one seed, one answer
         assert node.service.stats().evidence["detections_posteriors"] == 1
+        # its own parameter, declared with the node's: a view too old for it is refused, and counted
+        assert node.get_parameter("detections.max_age_s").value == 60.0
+        assert all(r.successful for r in set_params(ros, **{"detections.max_age_s": 0.001}))
+        response = ros.call(Trigger, "/ipe/predict", Trigger.Request())
+        assert not response.success
+        assert re.search(r"perception: detections: the newest detection list is [0-9.e-]+ s from the scene's stamp, "
+                         r"more than detections.max_age_s = 0.001 s", response.message), response.message
+        assert node.service.stats().evidence["detections_stale"] == 1
     finally:
         ros.close()

@@ -129,9 +129,9 @@ def test_a_clearing_order_spends_one_budget_over_all_its_steps(monkeypatch):
                                                 "'/tmp/rec/../../root'; give the folder itself"),
 ])
 def test_node_parameters_that_would_trust_every_frame_or_write_anywhere_are_refused(changes, message):
-    from ipe_ros.ros.params import PARAMETERS, config_from_values
+    from ipe_ros.ros.params import all_parameters, config_from_values
 
-    values = {spec.name: spec.default for spec in PARAMETERS} | changes
+    values = {spec.name: spec.default for spec in all_parameters()} | changes
     with pytest.raises(ConfigError) as caught:
         config_from_values(values)
     assert str(caught.value) == message

@@ -1,13 +1,17 @@
 """What a perception source needs to see, declared once, so that every door can fill it unedited.
 
 A source that draws the k scenes from a posterior given evidence (depth images, detections, a
-second camera) says here what that evidence is and how each door gets it:
-- the command line: ``options`` (added to ``ipe predict`` and ``ipe ask`` for every registered
-  source), which ``read`` turns into the evidence (files read, checked, errors naming the option);
+second camera) says here what that evidence is and how each door gets it, its inputs rows of the
+table of inputs as every other input is (``engine.input_row.Input``):
+- the command line: ``options`` (rows with a flag; added to ``ipe predict`` and ``ipe ask`` for
+  every registered source), which ``read`` turns into the evidence (files read, checked, errors
+  naming the option);
 - the node: ``topics`` it subscribes to for every registered source. Each message is converted when
   it arrives by ``receive`` (a ``"module:function"`` path, since the engine never imports message
   classes: the node resolves it, msg_bridge-style code does the conversion) and held, the newest per
-  topic; ``assemble`` turns what is held into the evidence when a scene is predicted.
+  topic; ``assemble`` turns what is held into the evidence when a scene is predicted. Its own node
+  parameters (``parameters``: rows with a parameter name) are declared with the node's, in
+  config/ipe.yaml and ``ros2 param``, and ``check`` refuses bad values of them by name.
 
 The source then runs its own chain inside ``predict``, on the prediction's workers, within
 ``budget_share`` of its budget (``perceptions.PerceptionSource.run``). No door branches on a
@@ -19,21 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping
 
-
-@dataclass(frozen=True)
-class EvidenceOption:
-    """A command-line option that fills the evidence. ``required``: the perception cannot run
-    without it (the others, e.g. a recording to write, are optional)."""
-
-    flag: str
-    metavar: str
-    help: str
-    required: bool = True
-
-    @property
-    def dest(self) -> str:
-        """The option's name in ``argparse``'s namespace and in ``read``'s mapping."""
-        return self.flag.lstrip("-").replace("-", "_")
+from .input_row import Input
 
 
 @dataclass(frozen=True)
@@ -76,13 +66,19 @@ class Evidence:
 
     what: the evidence, as errors name it ("the depth images").
     describes: what one piece of evidence is of ("one depth image describes one scene").
-    read: the CLI's option values (by ``EvidenceOption.dest``) -> the evidence.
+    options: the CLI's options (``Input`` rows with a flag, kind "name", default None).
+    optional: the fields of options the chain can go without (a recording to write); the others
+      are required.
+    read: the CLI's option values (by field) -> the evidence.
     assemble: the views' held values (by topic name) -> the evidence.
     missing: what to publish, said when a scene comes before any view.
     frame_named: what the view's frame is the frame of ("the camera pose").
     max_age_parameter: the node parameter bounding a view's distance from the scene's stamp (s).
     reliability_parameter: the node parameter choosing the subscriptions' reliability
       (``scene_reliability`` when empty).
+    parameters: the source's own node parameters (``Input`` rows with a parameter name).
+    check: the node's parameter values -> None, or a ConfigError naming the parameter (run
+      whenever parameters are set).
     budget_share: of a prediction's budget, what its chain may use (the samples get the rest).
     record: the CLI's optional recording of the chain, ``"module:function"`` (recordings import the
       viewer's library, which the engine does not), called with (option values, scene, perceived,
@@ -91,7 +87,8 @@ class Evidence:
 
     what: str
     describes: str
-    options: tuple[EvidenceOption, ...] = ()
+    options: tuple[Input, ...] = ()
+    optional: frozenset[str] = frozenset()
     read: Callable[[Mapping[str, Any]], Any] | None = None
     topics: tuple[EvidenceTopic, ...] = ()
     assemble: Callable[[Mapping[str, Any]], Any] | None = None
@@ -99,8 +96,13 @@ class Evidence:
     frame_named: str = "the view"
     max_age_parameter: str = ""
     reliability_parameter: str = ""
+    parameters: tuple[Input, ...] = ()
+    check: Callable[[Mapping[str, Any]], None] | None = None
     budget_share: float = 0.5
     record: str = ""
+
+    def required(self) -> tuple[Input, ...]:
+        return tuple(o for o in self.options if o.field not in self.optional)
 
     def views(self) -> tuple[EvidenceTopic, ...]:
         return tuple(t for t in self.topics if t.view)
@@ -109,7 +111,7 @@ class Evidence:
         """Where the doors take it from, for errors."""
         doors = []
         if self.options:
-            doors.append("ipe predict's " + ", ".join(o.flag for o in self.options if o.required))
+            doors.append("ipe predict's " + ", ".join(o.flag for o in self.required()))
         if self.topics:
             doors.append("the node's " + ", ".join(t.name for t in self.topics))
         return "; ".join(doors) or "no door fills it"

@@ -22,8 +22,7 @@ from __future__ import annotations
 
 import array
 import math
-from dataclasses import dataclass
-from typing import Any, Callable, Literal, Mapping, Sequence
+from typing import Any, Mapping
 
 from .config import (MAX_SAMPLES, DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M, PRESETS,
                      default_workers)
@@ -36,44 +35,7 @@ from .query.parameters import query_parameters
 from .scene import limits
 from .scene.bodies import DEFAULT_MAX_OBJECTS
 
-Caller = Literal["cli", "ros"]
-#: int, float, bool; ``floats``: one or more numbers; ``name``: one of ``choices`` (or any text
-#: without them); ``names``: several; ``pairs``: (A, B) object-name pairs
-Kind = Literal["int", "float", "floats", "bool", "name", "names", "pairs"]
-
-
-@dataclass(frozen=True)
-class Input:
-    """One input. ``field``: the request's argument (``build_request``) or, with ``in_request``
-    False, the door's own setting; ``default`` None: not set (the engine chooses); ``range``:
-    inclusive bounds of a number; ``choices``: what a name may be (called when the option or
-    descriptor is made, so registered plugins count); ``unset_means``: what not setting it
-    does; ``requires``: a bool input that must be on
-    for this one to mean anything (the CLI refuses it given without)."""
-
-    field: str
-    kind: Kind
-    default: Any
-    unit: str
-    help: str
-    flag: str | None = None
-    parameter: str | None = None
-    range: tuple[float, float] | None = None
-    choices: Callable[[], Sequence[str]] | None = None
-    unset: Any = None
-    unset_means: str = ""
-    errors_as: tuple[str, ...] = ()
-    in_request: bool = True
-    fixed_at_start: bool = False
-    requires: str | None = None
-    metavar: str | None = None
-    constraints: str = ""
-
-    def __post_init__(self) -> None:
-        if self.default is None and self.parameter is not None and self.unset is None:
-            raise TypeError(f"input {self.field}: a node parameter cannot be None; give the value meaning unset")
-        if self.default is None and not self.unset_means:
-            raise TypeError(f"input {self.field}: say what leaving it unset does (unset_means)")
+from .input_row import Caller, Input, Kind  # noqa: F401 - the row, re-exported
 
 
 def _presets() -> tuple[str, ...]:

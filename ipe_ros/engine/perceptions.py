@@ -7,16 +7,14 @@ it; ``depth``: a robot's depth images). A source that needs evidence declares it
 asks the source, never the name: a new source is one ``register_perception`` call, and the CLI's
 ``--perception`` and the node's ``perception`` parameter offer it, with its options and topics.
 
-A source's perceived scenes are any object with ``scenes`` (at least k), ``with_samples(k)`` (the
-first k, for a question's smaller k) and ``to_dict()`` (what the answer reports under
-``request.perception``, with a ``kind``); ``refined`` (the scene at the posterior's mean, or None)
-is published on the node's ``~/perceived_scene``.
+A source's chain returns ``Perceived`` scenes (the protocol below; vision's ``PerceivedScenes``,
+depth's ``DepthPerceivedScenes``, a plugin's own type).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, Protocol, runtime_checkable
 
 from .errors import ConfigError, shown
 from .evidence import Evidence
@@ -25,6 +23,21 @@ from .vision.depth_source import DEPTH_EVIDENCE, describe_depth, run_depth
 #: run(scene, model, seed, map_fn, evidence, budget_s) -> perceived scenes: the chain, through
 #: ``map_fn`` when given (the prediction's workers), within ``budget_s`` wall seconds when given
 PerceiveFn = Callable[[Any, Any, int, Any, Any, "float | None"], Any]
+
+
+@runtime_checkable
+class Perceived(Protocol):
+    """What a source's chain returns: ``scenes`` (at least k, sample i starts from scene i),
+    ``refined`` (the scene at the posterior's mean, published on the node's ``~/perceived_scene``;
+    None: none), ``with_samples(k)`` (k of them for a question's smaller k, no new chain) and
+    ``to_dict()`` (what the answer reports under ``request.perception``, with a ``kind``)."""
+
+    scenes: tuple
+    refined: Any
+
+    def with_samples(self, k: int) -> "Perceived": ...
+
+    def to_dict(self) -> dict: ...
 
 
 @dataclass(frozen=True)
@@ -55,7 +68,11 @@ class PerceptionSource:
         if self.needs is not None and evidence is None:
             raise ConfigError("perception", f"{self.name} perception needs {self.needs.what}: give them to predict as "
                                             f"its evidence ({self.needs.where()})")
-        return self.run(scene, model, seed, map_fn, evidence, budget_s)
+        perceived = self.run(scene, model, seed, map_fn, evidence, budget_s)
+        if not isinstance(perceived, Perceived):
+            raise TypeError(f"perception {self.name}'s run returned a {type(perceived).__name__}, which is not "
+                            "Perceived (engine.perceptions): give it scenes, refined, with_samples(k) and to_dict()")
+        return perceived
 
 
 _SOURCES: dict[str, PerceptionSource] = {}

@@ -1,8 +1,9 @@
 """The node's ROS parameters: descriptors made from the table of inputs, and their mapping to the engine.
 
 The prediction's inputs are rows of ``engine.inputs.INPUTS`` (the CLI's options are made from the
-same rows); the node's own settings (frames, QoS, recordings, the camera) are rows of the same kind in
-``NODE_SETTINGS``; the queries' own parameters come from the query registry. ``all_parameters`` is what
+same rows); the node's own settings (frames, QoS, recordings) are rows of the same kind in
+``NODE_SETTINGS``; the perception sources' own (depth's camera) and the queries' own parameters come
+from their registries. ``all_parameters`` is what
 the node declares, ``config/ipe.yaml`` is written from it (``python -m ipe_ros.ros.params``; a test
 keeps the file equal) and docs/node.md documents it. ``config_from_values`` is pure (no rclpy): it
 turns a {name: value} mapping into :class:`~ipe_ros.service.ServiceConfig` or raises ``ConfigError``
@@ -55,16 +56,6 @@ NODE_SETTINGS: tuple[Input, ...] = (
     _node("dask_scheduler", "name", "", "address", "run the samples on a Dask cluster at this address (e.g. "
           "tcp://10.0.0.1:8786, see docs/cluster.md) instead of `workers` local processes; empty: local",
           fixed_at_start=True),
-    _node("depth.max_age_s", "float", 0.5, "s", "depth perception: the depth image may be at most this many seconds "
-          "from the scene's stamp", range=(0.001, 3600.0)),
-    _node("depth.reliability", "name", "both", "name",
-          "QoS reliability of the ~/depth/* subscriptions: both (a reliable and a best-effort subscription, each "
-          "message used once: a reliable publisher's images arrive whole; best-effort images over ~500 KB mostly "
-          "get lost in Fast DDS's fragments), reliable, or best_effort", fixed_at_start=True, choices=_reliability),
-    _node("depth.camera_pose", "name", "", "x,y,z,qx,qy,qz,qw",
-          "depth perception: the camera's optical frame (z forward, y down) in frame_id as 'x,y,z,qx,qy,qz,qw' for "
-          "a fixed camera; empty (default): from ~/depth/camera_pose",
-          constraints="empty, or 7 comma-separated numbers with a unit quaternion"),
     _node("frame_id", "name", "world", "frame", "frame of scenes received on ~/scene_json and ~/ask (JSON carries no "
           "header); must be one of gravity_aligned_frames", constraints="a non-empty frame name"),
     _node("gravity_aligned_frames", "names", DEFAULT_GRAVITY_ALIGNED_FRAMES, "frames",
@@ -171,9 +162,16 @@ def query_parameter_specs() -> tuple[ParamSpec, ...]:
                  for row in query_parameters())
 
 
+def perception_parameter_specs() -> tuple[ParamSpec, ...]:
+    """The perception sources' own parameters (``engine.evidence.Evidence.parameters``: depth's
+    ``depth.*``), declared beside ``PARAMETERS``; a source registered before the node starts counts."""
+    return tuple(ParamSpec.of(row) for name in perception_names() if perception_source(name).needs is not None
+                 for row in perception_source(name).needs.parameters)
+
+
 def all_parameters() -> tuple[ParamSpec, ...]:
-    """What the node declares: ``PARAMETERS`` and the queries' own."""
-    return PARAMETERS + query_parameter_specs()
+    """What the node declares: ``PARAMETERS``, the perception sources' and the queries' own."""
+    return PARAMETERS + perception_parameter_specs() + query_parameter_specs()
 
 
 def declare_all(node) -> dict[str, Any]:
@@ -218,13 +216,16 @@ def config_from_values(values: Mapping[str, Any]) -> ServiceConfig:
     if frames and frame not in frames:
         raise ConfigError("frame_id", f"{frame!r} is not in gravity_aligned_frames {list(frames)!r}; add it there "
                                       "if its -z axis is gravity, or publish scenes in one of those frames")
-    for name in ("scene_reliability", "depth.reliability"):
-        if values[name] not in SCENE_RELIABILITY:
-            raise ConfigError(name, f"must be one of {', '.join(SCENE_RELIABILITY)}, got {values[name]!r}")
+    if values["scene_reliability"] not in SCENE_RELIABILITY:
+        raise ConfigError("scene_reliability", f"must be one of {', '.join(SCENE_RELIABILITY)}, got "
+                                               f"{values['scene_reliability']!r}")
     if not perception_source(values["perception"]).on_node:
         fed = ", ".join(_fed_perceptions())
         raise ConfigError("perception", f"must be a perception the node can feed ({fed}), got {values['perception']!r}")
-    camera_pose(values)  # checked now, used by the node
+    for name in perception_names():  # each source's own parameters (depth's camera pose: checked now, used later)
+        needs = perception_source(name).needs
+        if needs is not None and needs.check is not None:
+            needs.check(values)
     try:  # one request from the parameters (engine.request), its errors named as the parameters
         given = {row.field: from_node(row, values[row.parameter]) for row in INPUTS
                  if row.in_request and row.parameter is not None}
@@ -259,13 +260,6 @@ def evidence_parameters() -> tuple[str, ...]:
     """The node parameters perception sources read when a scene is predicted (``engine.evidence``)."""
     needs = [perception_source(n).needs for n in perception_names()]
     return tuple(e.max_age_parameter for e in needs if e is not None and e.max_age_parameter)
-
-
-def camera_pose(values: Mapping[str, Any]) -> tuple[tuple, tuple] | None:
-    """The fixed camera pose of ``depth.camera_pose`` as (position, xyzw), or None (from the topic)."""
-    from ..engine.vision.depth_source import fixed_camera_pose
-
-    return fixed_camera_pose(values)
 
 
 _YAML_HEAD = """# Parameters of ipe_node with their defaults. Use: ros2 run ipe_ros ipe_node --ros-args --params-file config/ipe.yaml

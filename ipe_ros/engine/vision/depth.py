@@ -19,22 +19,20 @@ mean) and covariance. Reading a robot's files is ``depth_io.py``.
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ..errors import ConfigError
 from ..scene.bodies import MAX_SET_DOWN_M, Scene, lowest_z_m, support_top_below
-from ..scene.shapes import quaternion_product
 from ..sampling.montecarlo import MapFn, far_over_budget
 from .depth_chain import ChainRun, OutOfTime, projected_end, sample_depth_posterior
 from .depth_model import (DepthModel, DepthObservation, DepthSettings, check_layer_memory, render_depth_m,
                           support_depth_m)
 from .mcmc import effective_sample_size
+from .scene_pose import scene_at_pose
 from .metropolis import thinned_index
 
 __all__ = ["CHAIN_BUDGET_SHARE", "DEPTH_STREAM", "DepthObservation", "DepthPerceivedScenes", "DepthPosterior",
@@ -242,32 +240,6 @@ def _refuse_far_over(started: float, sampling: float, deadline_s: float, done: i
                                       f"({total} scorings of the image; {done} took {now - sampling:.3g} s), far more "
                                       f"than the {deadline_s - started:.3g} s the budget leaves it; raise the "
                                       "budget or send fewer objects")
-
-
-def scene_at_pose(scene: Scene, positions_m: np.ndarray, yaws_rad: np.ndarray,
-                  tilts_rad: np.ndarray | None = None) -> Scene:
-    """The scene with its dynamic objects at these positions (frame origins), turned by these yaws from
-    their published orientation and then tilted by these tilts (rotation vectors (a, b, 0) about the
-    scene's axes; none: as published), their own noise removed (the posterior stands in for it)."""
-    dynamic = [body for body in scene.objects if not body.static]
-    tilts = np.zeros((len(dynamic), 2)) if tilts_rad is None else np.asarray(tilts_rad, float)
-    # every object's turn and tilt composed in one call each (per object, scipy's overhead was most of
-    # a 10-block posterior's 48 scenes' 0.12 s)
-    turns = [(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)) for yaw in yaws_rad]
-    tilt_quats = Rotation.from_rotvec(np.column_stack([tilts, np.zeros(len(dynamic))])).as_quat()
-    orientations = iter(quaternion_product(tilt_quats, quaternion_product(
-        np.array(turns).reshape(-1, 4), np.array([body.orientation_xyzw for body in dynamic]).reshape(-1, 4))))
-    positions = iter(positions_m)
-    objects = []
-    for body in scene.objects:
-        if body.static:
-            objects.append(body)
-            continue
-        position, orientation = next(positions), next(orientations)
-        objects.append(dataclasses.replace(body, position_m=tuple(float(v) for v in position),
-                                           orientation_xyzw=tuple(float(v) for v in orientation),
-                                           position_sigma_m=0.0, yaw_sigma_rad=None))
-    return dataclasses.replace(scene, objects=tuple(objects))
 
 
 @dataclass(frozen=True)

@@ -10,9 +10,21 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping
 
-from ..evidence import Evidence, EvidenceOption, EvidenceTopic
+from ..evidence import Evidence, EvidenceTopic
+from ..input_row import Input
 
 IMAGE_TOPIC = "~/depth/image"
+#: the node's subscriptions' reliabilities (as its scene_reliability's)
+RELIABILITY = ("both", "reliable", "best_effort")
+
+
+def _option(field: str, metavar: str, text: str) -> Input:
+    return Input(field, "name", None, "path", f"depth: {text}", flag="--" + field.replace("_", "-"), in_request=False,
+                 unset_means="none", metavar=metavar)
+
+
+def _parameter(name: str, kind, default, unit: str, text: str, **kw) -> Input:
+    return Input(name, kind, default, unit, text, parameter=name, in_request=False, **kw)
 
 
 def _read(values: Mapping[str, Any]) -> tuple:
@@ -41,18 +53,40 @@ def describe_depth(v: dict) -> str:
                         f"{math.degrees(s['yaw_sd_rad']):.1f}" for n, s in v["objects"].items()))
 
 
+def fixed_camera_pose(values: Mapping[str, Any]) -> tuple[tuple, tuple] | None:
+    """The fixed camera pose of the node's ``depth.camera_pose`` as (position, xyzw), or None (from
+    the topic)."""
+    from ..errors import ConfigError
+    from .depth_io import parse_pose
+
+    text = str(values["depth.camera_pose"]).strip()
+    if not text:
+        return None
+    try:
+        return parse_pose(text)
+    except ConfigError as exc:
+        raise ConfigError("depth.camera_pose", exc.problem) from None
+
+
+def _check_parameters(values: Mapping[str, Any]) -> None:
+    from ..errors import ConfigError
+
+    if values["depth.reliability"] not in RELIABILITY:
+        raise ConfigError("depth.reliability", f"must be one of {', '.join(RELIABILITY)}, got "
+                                               f"{values['depth.reliability']!r}")
+    fixed_camera_pose(values)
+
+
 DEPTH_EVIDENCE = Evidence(
     what="the depth images",
     describes="one depth image describes one scene",
-    options=(EvidenceOption("--depth", "IMAGE", "depth: the depth image, .npy (metres) or 16-bit .png (millimetres; "
-                                                "0: no reading)"),
-             EvidenceOption("--camera-info", "YAML", "depth: the camera's calibration, a ROS camera_info YAML "
-                                                     "(distortion ignored)"),
-             EvidenceOption("--camera-pose", "X,Y,Z,QX,QY,QZ,QW", "depth: the camera's optical frame (z forward, y "
-                                                                  "down) in the scene frame"),
-             EvidenceOption("--depth-rrd", "FILE", "depth: write the measured depth, the depth rendered at the "
-                                                   "posterior mean, their residual and the posterior sample cloud to "
-                                                   "a rerun recording", required=False)),
+    options=(_option("depth", "IMAGE", "the depth image, .npy (metres) or 16-bit .png (millimetres; 0: no reading)"),
+             _option("camera_info", "YAML", "the camera's calibration, a ROS camera_info YAML (distortion ignored)"),
+             _option("camera_pose", "X,Y,Z,QX,QY,QZ,QW", "the camera's optical frame (z forward, y down) in the "
+                                                         "scene frame"),
+             _option("depth_rrd", "FILE", "write the measured depth, the depth rendered at the posterior mean, their "
+                                          "residual and the posterior sample cloud to a rerun recording")),
+    optional=frozenset({"depth_rrd"}),
     read=_read,
     # the calibration and the pose first: an image is made an observation with the newest of them
     topics=(EvidenceTopic("~/depth/camera_info", "sensor_msgs/msg/CameraInfo", "msg_bridge.depth:received_camera_info",
@@ -68,19 +102,17 @@ DEPTH_EVIDENCE = Evidence(
     max_age_parameter="depth.max_age_s",
     reliability_parameter="depth.reliability",
     record="ipe_ros.viz.perception_log:record_depth",
+    parameters=(
+        _parameter("depth.max_age_s", "float", 0.5, "s", "depth perception: the depth image may be at most this many "
+                   "seconds from the scene's stamp", range=(0.001, 3600.0)),
+        _parameter("depth.reliability", "name", "both", "name",
+                   "QoS reliability of the ~/depth/* subscriptions: both (a reliable and a best-effort subscription, "
+                   "each message used once: a reliable publisher's images arrive whole; best-effort images over ~500 "
+                   "KB mostly get lost in Fast DDS's fragments), reliable, or best_effort", fixed_at_start=True,
+                   choices=lambda: RELIABILITY),
+        _parameter("depth.camera_pose", "name", "", "x,y,z,qx,qy,qz,qw",
+                   "depth perception: the camera's optical frame (z forward, y down) in frame_id as "
+                   "'x,y,z,qx,qy,qz,qw' for a fixed camera; empty (default): from ~/depth/camera_pose",
+                   constraints="empty, or 7 comma-separated numbers with a unit quaternion")),
+    check=_check_parameters,
 )
-
-
-def fixed_camera_pose(values: Mapping[str, Any]) -> tuple[tuple, tuple] | None:
-    """The fixed camera pose of the node's ``depth.camera_pose`` as (position, xyzw), or None (from
-    the topic)."""
-    from ..errors import ConfigError
-    from .depth_io import parse_pose
-
-    text = str(values["depth.camera_pose"]).strip()
-    if not text:
-        return None
-    try:
-        return parse_pose(text)
-    except ConfigError as exc:
-        raise ConfigError("depth.camera_pose", exc.problem) from None

@@ -19,6 +19,7 @@ from .camera import PinholeCamera, cameras_for
 from .likelihood import VisionSettings
 from .mcmc import Chain, ImageModel, run_chain
 from .render import render_views, scene_mesh
+from .scene_pose import scene_at_pose
 
 #: A chain must give at least this many effective samples per IPE sample asked ("roughly independent").
 MIN_ESS_PER_SAMPLE = 0.5
@@ -34,20 +35,19 @@ class PerceivedScenes:
     chain_samples: int
     burn_in: int
     chain: Chain
+    refined: Scene | None = None  # the SI's vision system reports no single refined scene
+
+    def with_samples(self, k: int) -> "PerceivedScenes":
+        """k of the scenes, spread evenly over those kept (no new chain)."""
+        if not 1 <= k <= len(self.scenes):
+            raise ConfigError("samples", f"the vision chain keeps {len(self.scenes)} scenes, fewer than the {k} "
+                                         "samples asked; ask for fewer")
+        return dataclasses.replace(self, scenes=tuple(self.scenes[i * len(self.scenes) // k] for i in range(k)))
 
     def to_dict(self) -> dict[str, Any]:
         return {"kind": "vision", "acceptance_rate": self.acceptance_rate,
                 "effective_sample_size": self.effective_sample_size, "chain_samples": self.chain_samples,
                 "burn_in": self.burn_in, "samples": len(self.scenes)}
-
-
-def scene_at(scene: Scene, positions_m: np.ndarray) -> Scene:
-    """The scene with its dynamic bodies moved to ``positions_m`` (object origins), their own noise
-    removed: the vision posterior stands in for it."""
-    moved = iter(positions_m)
-    objects = tuple(dataclasses.replace(b, position_m=tuple(float(v) for v in next(moved)), position_sigma_m=0.0,
-                                        yaw_sigma_rad=None) if not b.static else b for b in scene.objects)
-    return dataclasses.replace(scene, objects=objects)
 
 
 def perceive(scene: Scene, k: int, settings: VisionSettings, rng: np.random.Generator,
@@ -71,7 +71,7 @@ def perceive(scene: Scene, k: int, settings: VisionSettings, rng: np.random.Gene
                           f"the chain of {settings.chain_samples} samples ({kept} after burn-in) gave an effective "
                           f"sample size of {ess:.0f}, too few for {k} roughly independent scene samples (needs "
                           f">= {MIN_ESS_PER_SAMPLE * k:g}); lengthen the chain or ask for fewer samples")
-    scenes = tuple(scene_at(scene, state) for state in chain.thinned(k))
+    scenes = tuple(scene_at_pose(scene, state) for state in chain.thinned(k))
     return PerceivedScenes(scenes=scenes, acceptance_rate=chain.acceptance_rate, effective_sample_size=ess,
                            chain_samples=settings.chain_samples, burn_in=settings.burn_in, chain=chain)
 

@@ -45,6 +45,7 @@ from .engine.scene.examples import example_scene_path
 from .engine.scene.generators import generate_tables, generate_towers, state_pair
 from .engine.inputs import as_spelled
 from .engine.perceptions import perception_names, perception_source
+from .engine.plugins import load_plugins
 from .engine.scene.format import write_scenes
 from .engine.scene.zoo import FAMILIES, scene_zoo
 
@@ -289,6 +290,8 @@ def glue_negative_vectors(argv: list[str]) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     argv = glue_negative_vectors(sys.argv[1:] if argv is None else list(argv))
+    # installed packages' queries and perceptions, before the options that offer them are made
+    load_plugins(lambda problem: print(f"ipe: warning: {problem}", file=sys.stderr))
     args = build_parser().parse_args(argv)
     args.argv = tuple(argv)  # which options were typed: --inputs-from fills the others
     try:

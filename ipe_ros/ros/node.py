@@ -34,6 +34,7 @@ from msg_bridge.outputs import fall_direction_msg, fall_fraction_msg, fall_proba
 from msg_bridge.stamps import header_to_stamp_ns
 
 from ..engine import ConfigError
+from ..engine.plugins import load_plugins
 from ..engine.scene.meshes import NotYetDecomposed
 from .evidence import EvidenceInterface
 from .observe import ObserveInterface
@@ -404,6 +405,8 @@ def main(args: list[str] | None = None, node_class: type = IpeNode) -> int:
         return 2
     use_node_dds_profiles()
     return_large_buffers_to_the_system()
+    # installed packages' queries and perceptions, before the parameters that offer them are declared
+    load_plugins(lambda problem: print(f"ipe_node: warning: {problem}", file=sys.stderr))
     rclpy.init(args=args)  # installs SIGINT/SIGTERM handlers that shut the context down
     node = None
     code = 0

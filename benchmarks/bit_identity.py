@@ -27,7 +27,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 from ipe_ros.analysis.paper_data import shared_data_dir  # noqa: E402
 from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes, predict, predict_many, preset  # noqa: E402
-from ipe_ros.engine.sampling.sampler import AdaptiveStop  # noqa: E402
+from ipe_ros.engine.predict import AdaptiveStop  # noqa: E402
 from ipe_ros.engine.checking.fidelity import DEFAULT_CHECK  # noqa: E402
 from ipe_ros.engine.scene.generators import generate_tables, generate_towers  # noqa: E402
 

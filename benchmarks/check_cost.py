@@ -31,7 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from accuracy_vs_time import REPO, SIGMA_M, load_towers  # noqa: E402 - the same towers and noise
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, preset  # noqa: E402
 from ipe_ros.engine.checking.fidelity import DEFAULT_CHECK, NO_CHECK  # noqa: E402
-from ipe_ros.engine.sampling.sampler import predict  # noqa: E402
+from ipe_ros.engine.predict import predict  # noqa: E402
 from ipe_ros.engine.scene.zoo import FAMILIES, family_of, family_queries, scene_zoo, zoo_sigma_m  # noqa: E402
 
 PARTS = ("fast + verification", "last quarter + coverage", "confirmation or coverage round", "escalation")

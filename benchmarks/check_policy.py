@@ -41,7 +41,7 @@ from ipe_ros.engine.checking.fidelity import (DEFAULT_CHECK, SelfCheck, coverage
 from ipe_ros.engine.scene.generators import generate_towers  # noqa: E402
 from ipe_ros.engine.sampling.montecarlo import MonteCarlo, drive  # noqa: E402
 from ipe_ros.engine.sampling.rollout import lost, run_sample  # noqa: E402
-from ipe_ros.engine.sampling.sampler import make_tasks  # noqa: E402
+from ipe_ros.engine.predict import make_tasks  # noqa: E402
 from ipe_ros.engine.checking.self_check import checking  # noqa: E402
 from ipe_ros.engine.scene.zoo import FAMILIES, scene_zoo, zoo_sigma_m  # noqa: E402
 

@@ -34,7 +34,7 @@ from ipe_ros.engine import PRESETS, ModelConfig, QuerySpec, WorkerPool, load_sce
 from ipe_ros.engine.checking.fidelity import outcome_flags, reference_settings  # noqa: E402
 from ipe_ros.engine.sampling.montecarlo import MonteCarlo  # noqa: E402
 from ipe_ros.engine.sampling.rollout import lost, run_sample  # noqa: E402
-from ipe_ros.engine.sampling.sampler import make_tasks  # noqa: E402
+from ipe_ros.engine.predict import make_tasks  # noqa: E402
 from ipe_ros.engine.scene.generators import generate_towers  # noqa: E402
 from ipe_ros.engine.scene.zoo import family_of, scene_zoo, zoo_sigma_m  # noqa: E402
 

@@ -39,7 +39,7 @@ import numpy as np  # noqa: E402
 from accuracy_vs_time import REPO, SIGMA_M, load_towers  # noqa: E402 - the same towers and noise
 from ipe_ros.engine import ModelConfig, QuerySpec, preset  # noqa: E402
 from ipe_ros.engine.sampling import rollout  # noqa: E402
-from ipe_ros.engine.sampling.sampler import make_tasks  # noqa: E402
+from ipe_ros.engine.predict import make_tasks  # noqa: E402
 from ipe_ros.engine.simulation import PHASES, Probe  # noqa: E402
 
 

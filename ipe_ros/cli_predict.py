@@ -22,7 +22,7 @@ from .engine.perceptions import perception_source
 from .engine.sampling.perturb import is_deterministic
 from .engine.query import QUERIES
 from .engine.request import build_request
-from .engine.sampling.sampler import check_request
+from .engine.predict import check_request
 from .engine.scene.format import RefusedScene
 from .engine.scene.mesh_repair import repaired_sources
 from .progress import steps
@@ -188,7 +188,7 @@ def cmd_predict(args) -> int:
     scenes = _answerable(args, scenes, refused, request)
     perceived = None
     if args.vision_rrd is not None:  # the chain the prediction would run, kept for the recording
-        from .engine.perceptions import perceive_vision
+        from .engine.vision.sources import perceive_vision
 
         perceived = perceive_vision(scenes[0], model, args.seed)
     source = perception_source(args.perception)

@@ -1,4 +1,5 @@
-"""``visualization_msgs/MarkerArray`` <-> :class:`~ipe_ros.engine.Scene`, and predictions as markers.
+"""``visualization_msgs/MarkerArray`` <-> :class:`~ipe_ros.engine.Scene` (predictions as markers:
+``prediction_markers``).
 
 The mapping (MarkerArray has no notion of mass, friction or support, so some of it rides in
 ``Marker.text``):
@@ -53,11 +54,11 @@ from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ipe_ros.engine import (Body, Box, BoxShape, ConvexHull, Cylinder, Floor, Prediction, Scene, SceneError, Sphere, Table,
+from ipe_ros.engine import (Body, Box, BoxShape, ConvexHull, Cylinder, Floor, Scene, SceneError, Sphere, Table,
                             validate_scene)
 from ipe_ros.engine.scene import shapes
 from ipe_ros.engine.config import MODEL_LIGHT_DENSITY_KG_M3
-from ipe_ros.viz.palette import SUPPORT_RGB, group_rgb, nearest_group_name, risk_rgb
+from ipe_ros.viz.palette import SUPPORT_RGB, group_rgb, nearest_group_name
 from ipe_ros.engine.errors import shown
 from ipe_ros.engine.scene.bodies import DEFAULT_MAX_OBJECTS
 from ipe_ros.engine.scene.meshes import MeshAccess, mesh_shape, triangles_shape
@@ -182,7 +183,47 @@ def _is_identity(q: tuple[float, float, float, float]) -> bool:
 def markers_to_scene(msg: MarkerArray, *, max_objects: int = DEFAULT_MAX_OBJECTS,
                      meshes: MeshAccess | None = None) -> MarkerScene:
     """Read a scene from a MarkerArray (see the module docstring for the mapping) and validate it;
-    MESH_RESOURCE markers read through ``meshes`` (None: refused)."""
+    MESH_RESOURCE markers read through ``meshes`` (None: refused). In three parts: the array's markers
+    checked (``_body_markers``), each read as the support, an obstacle or a body (``_support_part``,
+    ``_dynamic_body``), and the scene assembled from them."""
+    adds, frame_id = _body_markers(msg, max_objects)
+    dynamic: list[Body] = []
+    obstacles: list[Body] = []
+    support: Floor | Table | None = None
+    gravity_z, scene_name = DEFAULT_GRAVITY_M_S2, DEFAULT_SCENE_NAME
+    for i, m in adds:
+        field = f"markers[{i}]"
+        position, extents = _vectors(m, field)
+        orientation = _orientation(m)
+        if m.ns != SUPPORT_NAMESPACE:
+            dynamic.append(_dynamic_body(m, field, position, extents, orientation, meshes))
+            continue
+        part = _support_part(m, field, position, extents, orientation)
+        if isinstance(part, Body):
+            obstacles.append(part)
+            continue
+        if support is not None:
+            raise SceneError(f"{field}.text.role", f"a second {part[3]}: a scene has one floor or one table")
+        support, gravity_z = part[0], part[1]
+        scene_name = part[2] if part[2] is not None else scene_name
+    if not dynamic:
+        raise SceneError("markers", "no dynamic bodies: every marker is in the 'support' namespace; "
+                                    "put the objects that may fall in another namespace")
+    if support is None:
+        support = Floor(friction=DEFAULT_FRICTION, restitution=DEFAULT_RESTITUTION, height_m=0.0)
+    if isinstance(support, Table):
+        support = dataclasses.replace(support, obstacles=tuple(obstacles))
+        boxes = tuple(dynamic)
+    else:
+        boxes = tuple(dynamic) + tuple(obstacles)
+    scene = Scene(name=scene_name, objects=boxes, support=support, gravity_m_s2=(0.0, 0.0, gravity_z))
+    validate_scene(scene, max_objects=max_objects)
+    return MarkerScene(scene=scene, frame_id=frame_id, stamp_ns=header_to_stamp_ns(adds[0][1].header))
+
+
+def _body_markers(msg: MarkerArray, max_objects: int) -> tuple[list[tuple[int, Marker]], str]:
+    """The ADD markers with their indices, and their one frame: each an ADD of a type that describes
+    a body, in the first one's frame, its (ns, id) unique."""
     adds = [(i, m) for i, m in enumerate(msg.markers) if m.action not in (Marker.DELETE, Marker.DELETEALL)]
     if not adds:
         raise SceneError("markers", "the array holds no ADD markers; publish one CUBE, SPHERE, CYLINDER or "
@@ -195,10 +236,6 @@ def markers_to_scene(msg: MarkerArray, *, max_objects: int = DEFAULT_MAX_OBJECTS
     if not frame_id:
         raise SceneError(f"markers[{adds[0][0]}].header.frame_id", "is empty; set the frame the poses are in")
     seen: dict[tuple[str, int], int] = {}
-    dynamic: list[Body] = []
-    obstacles: list[Body] = []
-    support: Floor | Table | None = None
-    gravity_z, scene_name = DEFAULT_GRAVITY_M_S2, DEFAULT_SCENE_NAME
     for i, m in adds:
         field = f"markers[{i}]"
         if m.action != Marker.ADD:
@@ -216,84 +253,72 @@ def markers_to_scene(msg: MarkerArray, *, max_objects: int = DEFAULT_MAX_OBJECTS
             raise SceneError(field, f"ns {shown(m.ns)} id {m.id} repeats markers[{seen[key]}]; "
                                     "give each marker a unique (ns, id)")
         seen[key] = i
-        position, extents = _vectors(m, field)
-        orientation = _orientation(m)
-        if m.ns == SUPPORT_NAMESPACE:
-            every_key = tuple(dict.fromkeys(_TABLE_KEYS + _OBSTACLE_KEYS))
-            role = parse_properties(m.text, every_key, f"{field}.text").get("role", "obstacle")
-            if role not in _ROLES:
-                raise SceneError(f"{field}.text.role", f"must be one of {', '.join(_ROLES)}, got {shown(role)}")
-            allowed = {"floor": _FLOOR_KEYS, "table": _TABLE_KEYS, "obstacle": _OBSTACLE_KEYS}[role]
-            props = parse_properties(m.text, allowed, f"{field}.text")
-            friction = _number(props, "friction", f"{field}.text", DEFAULT_FRICTION)
-            restitution = _number(props, "restitution", f"{field}.text", DEFAULT_RESTITUTION)
-            if role == "obstacle":
-                obstacles.append(Box(name=props.get("name", f"{m.ns}/{m.id}"), extents_m=extents,
-                                     position_m=position, orientation_xyzw=orientation, friction=friction,
-                                     restitution=restitution, group=props.get("group", ""), static=True))
-                continue
-            if support is not None:
-                raise SceneError(f"{field}.text.role", f"a second {role}: a scene has one floor or one table")
-            if not _is_identity(orientation) and role == "table":
-                raise SceneError(f"{field}.pose.orientation", "a table must be axis-aligned in the scene frame "
-                                                              "(identity orientation); rotate the frame instead")
-            if role == "floor" and not _is_identity(orientation):
-                raise SceneError(f"{field}.pose.orientation", "a floor must be horizontal (identity orientation)")
-            gravity_z = _number(props, "gravity", f"{field}.text", DEFAULT_GRAVITY_M_S2)
-            scene_name = props.get("scene", scene_name)
-            top = position[2] + extents[2] / 2
-            if role == "floor":
-                support = Floor(friction=friction, restitution=restitution, height_m=top)
-            else:
-                underside = position[2] - extents[2] / 2
-                if props.get("floor_z", "").lower() == "none":
-                    floor_z = None
-                else:
-                    floor_z = _number(props, "floor_z", f"{field}.text", 0.0 if underside >= 0 else None)
-                support = Table(top_height_m=top, size_m=extents[:2], center_xy_m=position[:2],
-                                thickness_m=extents[2], friction=friction, restitution=restitution,
-                                floor_z_m=floor_z)
-            continue
-        props = parse_properties(m.text, _DYNAMIC_KEYS, f"{field}.text")
-        decompose = props.get("decompose", "false").lower()
-        if decompose not in ("true", "false") or (decompose == "true" and m.type != Marker.TRIANGLE_LIST):
-            raise SceneError(f"{field}.text", f"decompose=true is for TRIANGLE_LIST markers (their closed surface as "
-                                              f"convex parts, not their hull), got decompose={props['decompose']} on a "
-                                              f"{_TYPE_NAMES.get(m.type, m.type)}")
-        shape = _shape(m, extents, field, meshes, decompose == "true")
-        if "mass" in props and "density" in props:
-            raise SceneError(f"{field}.text", "give mass or density, not both")
-        mass = _number(props, "mass", f"{field}.text", None)
-        density = _number(props, "density", f"{field}.text", None)
-        if mass is None and density is None:
-            density = DEFAULT_DENSITY_KG_M3
-        group = props.get("group")
-        if group is None:
-            c = m.color
-            group = "" if (c.r, c.g, c.b) == (0.0, 0.0, 0.0) and c.a == 0.0 else nearest_group_name(c.r, c.g, c.b)
-        velocity = tuple(_number(props, k, f"{field}.text", 0.0) for k in ("vx", "vy", "vz"))
-        spin = tuple(_number(props, k, f"{field}.text", 0.0) for k in ("wx", "wy", "wz"))
-        dynamic.append(Body(name=props.get("name", f"{m.ns}/{m.id}"), shape=shape, position_m=position,
-                            orientation_xyzw=orientation,
-                            friction=_number(props, "friction", f"{field}.text", DEFAULT_FRICTION),
-                            restitution=_number(props, "restitution", f"{field}.text", DEFAULT_RESTITUTION),
-                            mass_kg=mass, density_kg_m3=None if mass is not None else density, group=group,
-                            linear_velocity_m_s=velocity, angular_velocity_rad_s=spin,
-                            position_sigma_m=_number(props, "sigma", f"{field}.text", None),
-                            yaw_sigma_rad=_number(props, "yaw_sigma", f"{field}.text", None)))
-    if not dynamic:
-        raise SceneError("markers", "no dynamic bodies: every marker is in the 'support' namespace; "
-                                    "put the objects that may fall in another namespace")
-    if support is None:
-        support = Floor(friction=DEFAULT_FRICTION, restitution=DEFAULT_RESTITUTION, height_m=0.0)
-    if isinstance(support, Table):
-        support = dataclasses.replace(support, obstacles=tuple(obstacles))
-        boxes = tuple(dynamic)
+    return adds, frame_id
+
+
+def _support_part(m: Marker, field: str, position, extents, orientation):
+    """A 'support' marker: an obstacle (a static Box), or (the floor or table, gravity, the scene's
+    name or None, its role)."""
+    every_key = tuple(dict.fromkeys(_TABLE_KEYS + _OBSTACLE_KEYS))
+    role = parse_properties(m.text, every_key, f"{field}.text").get("role", "obstacle")
+    if role not in _ROLES:
+        raise SceneError(f"{field}.text.role", f"must be one of {', '.join(_ROLES)}, got {shown(role)}")
+    allowed = {"floor": _FLOOR_KEYS, "table": _TABLE_KEYS, "obstacle": _OBSTACLE_KEYS}[role]
+    props = parse_properties(m.text, allowed, f"{field}.text")
+    friction = _number(props, "friction", f"{field}.text", DEFAULT_FRICTION)
+    restitution = _number(props, "restitution", f"{field}.text", DEFAULT_RESTITUTION)
+    if role == "obstacle":
+        return Box(name=props.get("name", f"{m.ns}/{m.id}"), extents_m=extents, position_m=position,
+                   orientation_xyzw=orientation, friction=friction, restitution=restitution,
+                   group=props.get("group", ""), static=True)
+    if not _is_identity(orientation) and role == "table":
+        raise SceneError(f"{field}.pose.orientation", "a table must be axis-aligned in the scene frame "
+                                                      "(identity orientation); rotate the frame instead")
+    if role == "floor" and not _is_identity(orientation):
+        raise SceneError(f"{field}.pose.orientation", "a floor must be horizontal (identity orientation)")
+    gravity_z = _number(props, "gravity", f"{field}.text", DEFAULT_GRAVITY_M_S2)
+    top = position[2] + extents[2] / 2
+    if role == "floor":
+        return Floor(friction=friction, restitution=restitution, height_m=top), gravity_z, props.get("scene"), role
+    underside = position[2] - extents[2] / 2
+    if props.get("floor_z", "").lower() == "none":
+        floor_z = None
     else:
-        boxes = tuple(dynamic) + tuple(obstacles)
-    scene = Scene(name=scene_name, objects=boxes, support=support, gravity_m_s2=(0.0, 0.0, gravity_z))
-    validate_scene(scene, max_objects=max_objects)
-    return MarkerScene(scene=scene, frame_id=frame_id, stamp_ns=header_to_stamp_ns(adds[0][1].header))
+        floor_z = _number(props, "floor_z", f"{field}.text", 0.0 if underside >= 0 else None)
+    table = Table(top_height_m=top, size_m=extents[:2], center_xy_m=position[:2], thickness_m=extents[2],
+                  friction=friction, restitution=restitution, floor_z_m=floor_z)
+    return table, gravity_z, props.get("scene"), role
+
+
+def _dynamic_body(m: Marker, field: str, position, extents, orientation, meshes: MeshAccess | None) -> Body:
+    """A body that may move: its shape, and its mass, surface, group, velocity and noise from the text."""
+    props = parse_properties(m.text, _DYNAMIC_KEYS, f"{field}.text")
+    decompose = props.get("decompose", "false").lower()
+    if decompose not in ("true", "false") or (decompose == "true" and m.type != Marker.TRIANGLE_LIST):
+        raise SceneError(f"{field}.text", f"decompose=true is for TRIANGLE_LIST markers (their closed surface as "
+                                          f"convex parts, not their hull), got decompose={props['decompose']} on a "
+                                          f"{_TYPE_NAMES.get(m.type, m.type)}")
+    shape = _shape(m, extents, field, meshes, decompose == "true")
+    if "mass" in props and "density" in props:
+        raise SceneError(f"{field}.text", "give mass or density, not both")
+    mass = _number(props, "mass", f"{field}.text", None)
+    density = _number(props, "density", f"{field}.text", None)
+    if mass is None and density is None:
+        density = DEFAULT_DENSITY_KG_M3
+    group = props.get("group")
+    if group is None:
+        c = m.color
+        group = "" if (c.r, c.g, c.b) == (0.0, 0.0, 0.0) and c.a == 0.0 else nearest_group_name(c.r, c.g, c.b)
+    velocity = tuple(_number(props, k, f"{field}.text", 0.0) for k in ("vx", "vy", "vz"))
+    spin = tuple(_number(props, k, f"{field}.text", 0.0) for k in ("wx", "wy", "wz"))
+    return Body(name=props.get("name", f"{m.ns}/{m.id}"), shape=shape, position_m=position,
+                orientation_xyzw=orientation,
+                friction=_number(props, "friction", f"{field}.text", DEFAULT_FRICTION),
+                restitution=_number(props, "restitution", f"{field}.text", DEFAULT_RESTITUTION),
+                mass_kg=mass, density_kg_m3=None if mass is not None else density, group=group,
+                linear_velocity_m_s=velocity, angular_velocity_rad_s=spin,
+                position_sigma_m=_number(props, "sigma", f"{field}.text", None),
+                yaw_sigma_rad=_number(props, "yaw_sigma", f"{field}.text", None))
 
 
 def _fmt(value: float) -> str:
@@ -311,7 +336,7 @@ def _cube(header, ns: str, marker_id: int, position, extents, orientation, rgb, 
     return m
 
 
-def _body_marker(header, ns: str, marker_id: int, body: Body, rgb, alpha: float, text: str, *,
+def body_marker(header, ns: str, marker_id: int, body: Body, rgb, alpha: float, text: str, *,
                  exact: bool = True) -> Marker:
     """A marker in the body's own shape. ``exact``: refuse shapes no marker carries (capsules,
     compounds), else draw them as triangles."""
@@ -388,52 +413,10 @@ def scene_to_markers(scene: Scene, frame_id: str, stamp_ns: int = 0) -> MarkerAr
             text += f" sigma={_fmt(body.position_sigma_m)}"
         if body.yaw_sigma_rad is not None:
             text += f" yaw_sigma={_fmt(body.yaw_sigma_rad)}"
-        markers.append(_body_marker(header, "objects", j, body, group_rgb(body.group), 1.0, text))
+        markers.append(body_marker(header, "objects", j, body, group_rgb(body.group), 1.0, text))
     for m in markers:
         for value in re.split(r"[\s,;]+", m.text):
             if value.count("=") != 1:
                 raise ValueError(f"name: {shown(m.text)} cannot ride in Marker.text; scene and box names "
                                  "must not contain spaces, '=', ',' or ';'")
-    return MarkerArray(markers=markers)
-
-
-def prediction_to_markers(scene: Scene, prediction: Prediction, frame_id: str, stamp_ns: int) -> MarkerArray:
-    """Each dynamic body in its own shape, coloured by its fall probability (green 0 .. red 1), an arrow for the fall
-    direction (length grows with decisiveness) and a text label; starts with a DELETEALL so stale
-    markers of a previous scene disappear in RViz/Foxglove."""
-    header = stamp_ns_to_header(stamp_ns, frame_id)
-    markers = [Marker(header=header, ns="", id=0, action=Marker.DELETEALL)]
-    probabilities = prediction.object_fall_probability or {}
-    dynamic = scene.dynamic_objects
-    for j, body in enumerate(dynamic):
-        p = probabilities.get(body.name)
-        rgb = risk_rgb(p) if p is not None else group_rgb(body.group)
-        text = f"{body.name}: P(fall) = {p:.2f}" if p is not None else body.name
-        markers.append(_body_marker(header, "ipe/objects", j, body, rgb, 0.9, text, exact=False))
-    if not dynamic:
-        return MarkerArray(markers=markers)
-    top = max(b.position_m[2] + max(b.extents_m) / 2 for b in dynamic)
-    cx = sum(b.position_m[0] for b in dynamic) / len(dynamic)
-    cy = sum(b.position_m[1] for b in dynamic) / len(dynamic)
-    scale = max(max(b.extents_m) for b in dynamic)
-    if prediction.fall_fraction is not None:
-        label = Marker(header=header, ns="ipe/label", id=0, type=Marker.TEXT_VIEW_FACING, action=Marker.ADD,
-                       text=f"P(fall) = {prediction.fall_fraction:.2f} (k = {prediction.samples})")
-        label.pose.position.x, label.pose.position.y, label.pose.position.z = cx, cy, top + 0.5 * scale
-        label.pose.orientation.w = 1.0
-        label.scale.z = 0.25 * scale
-        label.color = ColorRGBA(r=1.0, g=1.0, b=1.0, a=1.0)
-        markers.append(label)
-    if prediction.direction_rad is not None:
-        length = 2.0 * scale * (prediction.direction_decisiveness or 0.0)
-        arrow = Marker(header=header, ns="ipe/direction", id=0, type=Marker.ARROW, action=Marker.ADD,
-                       text=f"fall direction {math.degrees(prediction.direction_rad):.0f} deg")
-        arrow.pose.orientation.w = 1.0
-        start = Point(x=cx, y=cy, z=top)
-        end = Point(x=cx + length * math.cos(prediction.direction_rad),
-                    y=cy + length * math.sin(prediction.direction_rad), z=top)
-        arrow.points = [start, end]
-        arrow.scale.x, arrow.scale.y, arrow.scale.z = 0.1 * scale, 0.2 * scale, 0.3 * scale
-        arrow.color = ColorRGBA(r=0.95, g=0.1, b=0.1, a=1.0)
-        markers.append(arrow)
     return MarkerArray(markers=markers)

@@ -107,7 +107,7 @@ def test_a_heavy_bouncy_hull_ends_out_of_the_floor_under_a_heavier_one():
     # the floor at the horizon, its normal force swinging 0.1-16.5 kN from step to step; the last
     # 0.1 s on the sequential-impulse solver pushes it out (paper: 0.1%)
     from ipe_ros.engine.sampling.rollout import run_sample
-    from ipe_ros.engine.sampling.sampler import make_tasks
+    from ipe_ros.engine.predict import make_tasks
 
     scene = scene_catalogue(2026, SCENES)[27]
     model = ModelConfig(sigma_m=0.05 * min(b.smallest_extent_m for b in scene.objects), samples=16)

@@ -30,7 +30,7 @@ def test_same_seed_same_json_whatever_the_worker_count(pool):
 def test_sample_order_does_not_matter():
     # running sample 5 first (a world that saw no other sample) gives what it gave after samples 0..4
     from ipe_ros.engine.sampling.rollout import run_sample
-    from ipe_ros.engine.sampling.sampler import make_tasks
+    from ipe_ros.engine.predict import make_tasks
 
     scene = load_scenes(example_scene_path())[0]
     tasks = make_tasks(scene, MODEL, preset("default"), QUERY, seed=5)
@@ -82,7 +82,7 @@ def test_blocks_created_together_simulate_as_blocks_created_one_by_one(monkeypat
     # creating them one at a time gives, bit for bit, also with blocks turned 90 degrees in between
     from ipe_ros.engine.scene.generators import generate_towers
     from ipe_ros.engine.sampling.rollout import run_sample
-    from ipe_ros.engine.sampling.sampler import make_tasks
+    from ipe_ros.engine.predict import make_tasks
     from ipe_ros.engine.simulation import world
 
     def one_by_one(p, cid, bodies, positions, masses, orientations, maximal):
@@ -109,7 +109,7 @@ def test_the_simulation_clients_carry_no_renderer_and_simulate_as_a_client_with_
 
     from ipe_ros.engine.scene.generators import generate_towers
     from ipe_ros.engine.sampling.rollout import run_sample
-    from ipe_ros.engine.sampling.sampler import make_tasks
+    from ipe_ros.engine.predict import make_tasks
     from ipe_ros.engine.simulation import bullet
 
     cid = bullet.client()

@@ -559,7 +559,7 @@ def test_the_node_parameters_set_the_check():
 
 
 def test_anytime_sampling_is_checked_on_the_samples_it_drew(tower):
-    from ipe_ros.engine.sampling.sampler import AdaptiveStop
+    from ipe_ros.engine.predict import AdaptiveStop
 
     stop = AdaptiveStop(deadline_s=1e-6, batch_size=2)  # stops after the first batch
     # k = 16 would be inside the validated envelope; anytime sampling is not (it may stop after two)

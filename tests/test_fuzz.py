@@ -56,7 +56,7 @@ def _check_error(exc: ValueError) -> None:
 
 def _through_the_node(read):
     """Read, check, predict: the invariant above. Returns the prediction, or None for a refusal."""
-    from ipe_ros.engine.sampling.sampler import check_request
+    from ipe_ros.engine.predict import check_request
 
     try:
         scene = read()
@@ -254,7 +254,7 @@ def test_mutated_questions_are_answered_within_budget_or_refused_by_name(questio
 # -- the result store --------------------------------------------------------------------------------------
 def _store_entry() -> tuple[str, dict]:
     from ipe_ros.engine.sampling.rollout import run_sample
-    from ipe_ros.engine.sampling.sampler import make_tasks
+    from ipe_ros.engine.predict import make_tasks
     from ipe_ros.engine.compute.store import encode_entry
 
     # the contact and final_pose values ride in the entry too (mappings of arrays and numbers)

@@ -94,7 +94,7 @@ def test_an_engine_error_reads_as_each_user_spelled_the_input():
 def test_a_scene_is_checked_once_however_often_a_request_validates_it(monkeypatch):
     from ipe_ros.engine import QuerySpec, preset, predict
     from ipe_ros.engine.scene import validation as scene_module
-    from ipe_ros.engine.sampling.sampler import check_request
+    from ipe_ros.engine.predict import check_request
     from tests.helpers import block, floor_scene
 
     calls = []

@@ -290,3 +290,105 @@ def test_the_circle_and_private_name_checkers_are_not_blind(tmp_path):
         assert found == ["ipe_ros.c reads _hidden of ipe_ros.a", "ipe_ros.d imports _secret from ipe_ros.a"]
     finally:
         REPO = saved
+
+
+ROOM_LIST = re.compile(r"^\d+\. (\w+): (.*)$")
+
+
+def engine_rooms() -> dict[str, int]:
+    """docs/architecture.md's rooms of the engine, bottom first: a room's name (a package of
+    ipe_ros/engine, or at the foundation its modules) -> its level."""
+    text = (REPO / "docs" / "architecture.md").read_text()
+    block = text[text.index("<!-- rooms: tests/test_layers.py reads this list -->"):].split("\n\n")[0]
+    levels: dict[str, int] = {}
+    for level, line in enumerate(m for m in map(ROOM_LIST.match, block.splitlines()[1:]) if m):
+        room, rest = line.group(1), line.group(2)
+        names = [n.strip() for n in rest.split("(")[0].split(",")] if room in ("foundation", "front") else [room]
+        levels.update({n.strip("`"): level for n in names})
+    return levels
+
+
+def _room_of(module: str) -> str | None:
+    parts = module.split(".")
+    if parts[:2] != ["ipe_ros", "engine"]:
+        return None
+    return "__init__" if len(parts) == 2 else parts[2]
+
+
+def room_imports(path: Path) -> set[str]:
+    """The engine modules a file imports, as rooms see them: ``from .. import simulation`` imports
+    the simulation package, not the engine's ``__init__``."""
+    found = set()
+    for name in imports_of(path):
+        found.add(name)
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.ImportFrom) and node.level and not node.module:
+            package = _module_name(path) if path.name == "__init__.py" else _module_name(path).rpartition(".")[0]
+            base = ".".join(package.split(".")[:len(package.split(".")) - (node.level - 1)])
+            if all((REPO / Path(*f"{base}.{a.name}".split("."))).is_dir()
+                   or (REPO / Path(*f"{base}.{a.name}".split("."))).with_suffix(".py").is_file() for a in node.names):
+                found.discard(base)  # every name imported is a module of that package
+    return found
+
+
+def upward_room_imports(levels: dict[str, int], root: Path = REPO / "ipe_ros" / "engine") -> list[str]:
+    found = []
+    for path in sorted(root.rglob("*.py")):
+        parts = path.relative_to(root).with_suffix("").parts
+        room = "__init__" if parts == ("__init__",) else parts[0]
+        if room not in levels:
+            found.append(f"{path.relative_to(REPO)}: room {room!r} is not in docs/architecture.md's list")
+            continue
+        for module in sorted(room_imports(path)):
+            other = _room_of(module)
+            if other is not None and other != room and levels.get(other, -1) > levels[room]:
+                found.append(f"{path.relative_to(REPO)} ({room}) imports {module} ({other}, above it)")
+    return found
+
+
+def test_the_engines_rooms_import_only_rooms_below_them():
+    levels = engine_rooms()
+    assert levels["errors"] == 0 and levels["scene"] == 1 and levels["__init__"] == max(levels.values())
+    assert upward_room_imports(levels) == []
+
+
+def test_the_rooms_check_sees_an_upward_import():
+    levels = engine_rooms()
+    planted = {**levels, "scene": levels["predict"] + 1}  # scene moved above the rooms that read scenes
+    found = upward_room_imports(planted)
+    assert any(line.startswith("ipe_ros/engine/predict.py (predict) imports ipe_ros.engine.scene") for line in found), \
+        found[:5]
+
+
+#: Functions allowed past FUNCTION_MAX_LINES: tables of arguments, read as tables
+LONG_TABLES = {"ipe_ros/cli.py:build_parser"}
+MODULE_MAX_LINES, FUNCTION_MAX_LINES = 450, 80
+
+
+def oversized(paths) -> list[str]:
+    found = []
+    for path in paths:
+        text = path.read_text()
+        where = str(path.relative_to(REPO))
+        if text.count("\n") > MODULE_MAX_LINES:
+            found.append(f"{where}: {text.count(chr(10))} lines")
+        for node in ast.walk(ast.parse(text, where)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                length = node.end_lineno - node.lineno + 1
+                if length > FUNCTION_MAX_LINES and f"{where}:{node.name}" not in LONG_TABLES:
+                    found.append(f"{where}:{node.name}: {length} lines")
+    return found
+
+
+def test_modules_and_functions_stay_readable_sizes():
+    """Size as a guarded habit: a module over 450 lines or a function over 80 is split (argument
+    tables listed by name in LONG_TABLES)."""
+    paths = [p for d in ("ipe_ros", "msg_bridge") for p in (REPO / d).rglob("*.py")]
+    assert oversized(paths) == []
+
+
+def test_the_size_check_sees_an_oversized_module_and_function(tmp_path, monkeypatch):
+    monkeypatch.setattr(sys.modules[__name__], "REPO", tmp_path)
+    big = tmp_path / "big.py"
+    big.write_text("def long():\n" + "    x = 1\n" * 90 + "\n" * 400)
+    assert oversized([big]) == ["big.py: 491 lines", "big.py:long: 91 lines"]

@@ -15,8 +15,8 @@ from ipe_ros.engine import Body, ConfigError, Floor, Prediction, Scene, SceneErr
 from ipe_ros.engine.scene.generators import generate_tables
 from ipe_ros.engine.query import ANSWER_FIELDS
 from msg_bridge.json_text import answer_to_string, scene_to_string, string_to_answer, string_to_scene
-from msg_bridge.markers import (DEFAULT_DENSITY_KG_M3, markers_to_scene, prediction_to_markers,
-                                scene_to_markers)
+from msg_bridge.markers import DEFAULT_DENSITY_KG_M3, markers_to_scene, scene_to_markers
+from msg_bridge.prediction_markers import prediction_to_markers
 from msg_bridge.outputs import fall_direction_msg, fall_fraction_msg, fall_probability_msg
 from msg_bridge.stamps import header_to_stamp_ns, stamp_ns_to_header
 from tests.helpers import IDENTITY, block, floor_scene

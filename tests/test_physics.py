@@ -298,7 +298,7 @@ def test_collapse_steps_that_make_energy_go_back_to_the_trials_latest_anchor_not
     on the sequential-impulse solver its collapse steps make no energy to undo."""
     from ipe_ros.engine.config import DEFAULT_QUERIES
     from ipe_ros.engine.sampling.rollout import run_sample
-    from ipe_ros.engine.sampling.sampler import make_tasks
+    from ipe_ros.engine.predict import make_tasks
     from ipe_ros.engine.scene.zoo import zoo_scene, zoo_sigma_m
 
     scene = zoo_scene("dominoes", 2026, 2)
@@ -413,7 +413,7 @@ def test_end_substeps_read_a_collapse_at_the_horizon_at_a_finer_step():
     """A tower collapsing at the horizon: with half steps for the last 0.1 s nothing ends inside
     another by more than the default's own end (and the setting changes only that last part)."""
     from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes
-    from ipe_ros.engine.sampling.sampler import predict
+    from ipe_ros.engine.predict import predict
 
     tower = load_scenes("ipe_ros/data/example_tower.json")[0]
     query = QuerySpec(queries=frozenset({"fall", "direction"}))  # run to the horizon, every pose read
@@ -433,7 +433,7 @@ def test_the_end_phase_takes_as_many_substeps_as_keep_a_landing_within_the_healt
     (``collapse.end_substeps`` 1). On the fine steps' residual the case was found at (3e-6)."""
     from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes
     from ipe_ros.engine.config import DEFAULT_QUERIES
-    from ipe_ros.engine.sampling.sampler import predict
+    from ipe_ros.engine.predict import predict
 
     tower = load_scenes("ipe_ros/data/example_tower.json")[0]
     model, query = ModelConfig(sigma_m=0.01, samples=3), QuerySpec(queries=DEFAULT_QUERIES)
@@ -502,7 +502,7 @@ def test_thin_boxes_on_the_direct_solver_are_built_in_multibodies_which_hold_the
     multibodies, and in `default`'s now, it rests in about half (k = 64: 0.50, 0.41 and 1.00).
     Samples 1 and 7 rest in `paper`."""
     from ipe_ros.engine.sampling import rollout
-    from ipe_ros.engine.sampling.sampler import make_tasks
+    from ipe_ros.engine.predict import make_tasks
     from ipe_ros.engine.scene.zoo import scene_zoo, zoo_sigma_m
 
     plates = scene_zoo(2026, 4, ("plates",))[3]

@@ -18,7 +18,7 @@ from ipe_ros.engine import PRESETS, Body, Box, ConfigError, Floor, ModelConfig, 
 from ipe_ros.engine.sampling.estimate import Prediction
 from ipe_ros.engine.query import ALL_QUERIES, ANSWER_FIELDS, QUERIES
 from ipe_ros.engine.query.contact import parse_pair
-from ipe_ros.engine.sampling.sampler import predict
+from ipe_ros.engine.predict import predict
 from tests.helpers import IDENTITY, block, floor_scene
 
 GROUND_TRUTH = ModelConfig(sigma_m=0.0, samples=1)
@@ -365,7 +365,7 @@ def test_event_values_survive_the_result_store():
     """Resumable runs store each sample's outcome: the new queries' values (mappings of times,
     flags and arrays) come back equal."""
     from ipe_ros.engine.sampling.rollout import run_sample
-    from ipe_ros.engine.sampling.sampler import make_tasks
+    from ipe_ros.engine.predict import make_tasks
     from ipe_ros.engine.compute.store import decode_entry, encode_entry
 
     spec = QuerySpec(queries=frozenset({"contact", "rest", "final_pose"}), contact_pairs=(("drop", "target"),))
@@ -415,7 +415,7 @@ def test_many_contact_pairs_are_watched_per_contact_and_priced_up_front():
     import itertools
 
     from ipe_ros.engine.sampling.montecarlo import FAR_OVER_BUDGET
-    from ipe_ros.engine.sampling.sampler import SECONDS_PER_WATCHED_PAIR, check_request, rollout_cost
+    from ipe_ros.engine.predict import SECONDS_PER_WATCHED_PAIR, check_request, rollout_cost
 
     boxes = tuple(Box(name=f"b{i}", extents_m=(0.1, 0.1, 0.1), position_m=(0.15 * (i % 10), 0.15 * (i // 10), 0.05),
                       orientation_xyzw=(0, 0, 0, 1), friction=0.6, restitution=0.0, mass_kg=1.0) for i in range(60))

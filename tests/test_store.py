@@ -53,7 +53,7 @@ def test_samples_lost_with_their_worker_are_not_kept_and_come_out_in_the_next_ru
 
 def test_keys_follow_what_a_result_depends_on_and_not_when_it_ran():
     from ipe_ros.engine.sampling.rollout import run_sample
-    from ipe_ros.engine.sampling.sampler import make_tasks
+    from ipe_ros.engine.predict import make_tasks
 
     [a, b] = make_tasks(TOWER, ModelConfig(sigma_m=0.04, samples=2), preset("default"), QUERY, 0)
     [c, _] = make_tasks(TOWER, ModelConfig(sigma_m=0.05, samples=2), preset("default"), QUERY, 0)
@@ -69,7 +69,7 @@ def test_a_task_field_keyed_when_set_keeps_older_runs_keys_until_it_is_set():
     from ipe_ros.engine.checking.fidelity import reference_settings
     from ipe_ros.engine.compute.store import _canonical
     from ipe_ros.engine.sampling.rollout import Refine, run_sample
-    from ipe_ros.engine.sampling.sampler import make_tasks
+    from ipe_ros.engine.predict import make_tasks
 
     [a] = make_tasks(TOWER, ModelConfig(sigma_m=0.04, samples=1), preset("default"), QUERY, 0)
     assert "refine" not in [name for name, _ in _canonical(a)[1]]
@@ -205,7 +205,7 @@ def test_links_and_oversized_entries_are_refused_unread(tmp_path, monkeypatch):
 
 def test_every_stored_result_type_reads_back_equal():
     from ipe_ros.engine.sampling.rollout import run_sample
-    from ipe_ros.engine.sampling.sampler import make_tasks
+    from ipe_ros.engine.predict import make_tasks
     from ipe_ros.engine.scene.format import scene_to_dict
     from ipe_ros.engine.compute.store import decode_entry, encode_entry
     from ipe_ros.engine.vision.likelihood import VisionSettings

@@ -23,7 +23,7 @@ from ipe_ros.engine.scene.format import scene_from_dict, scene_to_dict
 from ipe_ros.engine.scene.shapes import Capsule, Compound, ConvexHull, Cylinder
 from ipe_ros.engine.sampling.perturb import draw_sample_inputs
 from ipe_ros.engine.sampling.rollout import run_sample
-from ipe_ros.engine.sampling.sampler import make_tasks
+from ipe_ros.engine.predict import make_tasks
 from ipe_ros.engine.simulation import build_world
 from ipe_ros.engine.simulation.health import deepest_penetration_fraction, energy_scale_j
 from ipe_ros.engine.checking.envelope import outside
@@ -70,6 +70,7 @@ def family_query(family: str) -> QuerySpec:
 
 def test_every_family_has_a_promise_and_scenes_depend_on_seed_family_and_index_only():
     assert set(PROMISES) == set(FAMILIES)
+    assert Z.ZOO_QUERIES == DEFAULT_QUERIES  # the zoo asks what the node asks by default
     assert scene_to_dict(zoo_scene("ramp", SEED, 2)) == scene_to_dict(scene_zoo(SEED, 3, ("ramp",))[2])
     assert scene_to_dict(zoo_scene("ramp", SEED, 2)) != scene_to_dict(zoo_scene("ramp", SEED + 1, 2))
     assert [family_of(s) for s in scene_zoo(SEED, 1)] == list(FAMILIES)

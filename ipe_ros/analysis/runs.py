@@ -31,7 +31,7 @@ from ..engine import ModelConfig, Prediction, QuerySpec, Scene, SimSettings, pre
 from ..engine.sampling.estimate import sample_fall_fraction, sample_far_m
 from ..engine.scene.generators import generate_towers
 from ..engine.sampling.perturb import is_deterministic
-from ..engine.sampling.outcome import SampleOutcome
+from ..engine.results.outcome import SampleOutcome
 from ..engine.scene.files import scenes_from_tower_csv
 from ..engine.compute.store import ResumableMap
 from .reporting import steps

@@ -10,11 +10,12 @@ caller needs. Importing this package never imports rclpy or any ROS message pack
 """
 
 from .config import PRESETS, ModelConfig, SimSettings, preset
+from .vision import sources as _vision_sources  # noqa: F401 - registers vision and depth perception
 from .query import ALL_QUERIES, QuerySpec, parse_queries
 from .errors import ConfigError, PhysicsError, SceneError
 from .sampling.estimate import Prediction
 from .compute.pool import WorkerPool
-from .sampling.sampler import AdaptiveStop, predict, predict_many
+from .predict import AdaptiveStop, predict, predict_many
 from .scene.bodies import Body, Box, Floor, Scene, Table
 from .scene.validation import validate_scene
 from .scene.shapes import BoxShape, Capsule, Compound, CompoundPart, ConvexHull, Cylinder, Sphere

@@ -18,7 +18,6 @@ from typing import Any, Callable, Protocol, runtime_checkable
 
 from .errors import ConfigError, shown
 from .evidence import Evidence
-from .vision.depth_source import DEPTH_EVIDENCE, describe_depth, run_depth
 
 #: run(scene, model, seed, map_fn, evidence, budget_s) -> perceived scenes: the chain, through
 #: ``map_fn`` when given (the prediction's workers), within ``budget_s`` wall seconds when given
@@ -76,10 +75,11 @@ class PerceptionSource:
 
 
 _SOURCES: dict[str, PerceptionSource] = {}
+BUILT_IN: set[str] = set()
 
 
-def register_perception(source: PerceptionSource) -> PerceptionSource:
-    """Add a source (a name not taken yet)."""
+def register_perception(source: PerceptionSource, built_in: bool = False) -> PerceptionSource:
+    """Add a source (a name not taken yet); ``built_in``: the engine's own, never unregistered."""
     if not isinstance(source, PerceptionSource):
         raise TypeError(f"register_perception takes a PerceptionSource, got {type(source).__name__}")
     if source.name in _SOURCES:
@@ -87,6 +87,8 @@ def register_perception(source: PerceptionSource) -> PerceptionSource:
     if not source.name.isidentifier():
         raise ValueError(f"a perception's name must be an identifier, got {source.name!r}")
     _SOURCES[source.name] = source
+    if built_in:
+        BUILT_IN.add(source.name)
     return source
 
 
@@ -108,32 +110,7 @@ def perception_source(name) -> PerceptionSource:
     return _SOURCES[name]
 
 
-#: The vision chain's random stream, apart from the samples' (SeedSequence(seed).spawn(k)).
-VISION_STREAM = 0x5EE
-
-
-def perceive_vision(scene, model, seed: int, map_fn=None, evidence=None, budget_s: float | None = None):
-    """The vision chain ``predict`` runs for this scene, model and seed (``vision.PerceivedScenes``);
-    its images are rendered from the scene (the SI's stimuli), so it needs no evidence; it has no
-    deadline (the SI's chain runs its length)."""
-    from .vision.perception import PerceptionTask, perceive_task
-
-    task = PerceptionTask(scene=scene, k=model.samples, settings=model.vision, seed=(seed, VISION_STREAM))
-    return map_fn(perceive_task, [task])[0] if map_fn is not None else perceive_task(task)
-
-
-def _describe_vision(v: dict) -> str:
-    return (f"vision chain acceptance {v['acceptance_rate']:.2f}, effective sample size "
-            f"{v['effective_sample_size']:.0f} ({v['chain_samples']} samples, {v['burn_in']} burn-in)")
-
-
 GAUSSIAN = register_perception(PerceptionSource(
-    "gaussian", "horizontal Gaussian noise of SD sigma on every object (the paper's IPE)", posterior=False))
-VISION = register_perception(PerceptionSource(
-    "vision", "the SI's Bayesian vision system: samples of the posterior given images of the scene",
-    posterior=True, run=perceive_vision, on_node=False, describe=_describe_vision))
-DEPTH = register_perception(PerceptionSource(
-    "depth", "samples of the posterior given the robot's depth images", posterior=True, run=run_depth,
-    needs=DEPTH_EVIDENCE, describe=describe_depth))
-
-BUILT_IN = frozenset(_SOURCES)
+    "gaussian", "horizontal Gaussian noise of SD sigma on every object (the paper's IPE)", posterior=False),
+    built_in=True)
+# vision and depth are registered by their room (vision/sources.py), which the engine's package imports

@@ -20,7 +20,7 @@ from .checking.fidelity import DEFAULT_CHECK, SelfCheck
 from .query import QUERIES, QuerySpec
 from .query.parameters import spec_parameters
 from .sampling.montecarlo import check_budget
-from .sampling.sampler import AdaptiveStop, check_ci_width
+from .predict import AdaptiveStop, check_ci_width
 from .scene.launches import launch_spread
 from .scene.properties import PropertySpread
 

@@ -29,7 +29,8 @@ from visualization_msgs.msg import MarkerArray
 
 from msg_bridge.ask_json import id_of, parse_request, question_from_data, request_id_of, support_graph_markers
 from msg_bridge.json_text import answer_to_string, scene_name_of, string_to_scene
-from msg_bridge.markers import markers_to_scene, prediction_to_markers, scene_to_markers
+from msg_bridge.markers import markers_to_scene, scene_to_markers
+from msg_bridge.prediction_markers import prediction_to_markers
 from msg_bridge.outputs import fall_direction_msg, fall_fraction_msg, fall_probability_msg
 from msg_bridge.stamps import header_to_stamp_ns
 

@@ -15,7 +15,7 @@ from ..engine import ConfigError, Scene, WorkerPool, predict
 from ..engine.errors import SceneError, clip, shown
 from ..engine.inputs import as_spelled
 from ..engine.perceptions import perception_source
-from ..engine.sampling.sampler import check_request
+from ..engine.predict import check_request
 from .evidence import EvidenceViews
 from .recording import load_rerun_if_recording, record_prediction
 from .values import RECENT_EVENTS, Answer, NoSceneError, PredictionFailed, ServiceConfig, ServiceStats, StampedScene

@@ -15,7 +15,7 @@ from ..sampling.perturb import is_deterministic
 from ..query import QUERIES, QuerySpec, Samples
 from ..scene.bodies import Scene
 from .kinds import Action, Place, Push
-from ..sampling.outcome import RolloutResult, SampleOutcome
+from ..results.outcome import RolloutResult, SampleOutcome
 
 
 # -- the answers ----------------------------------------------------------------------------------------

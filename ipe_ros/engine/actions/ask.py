@@ -19,12 +19,12 @@ from ..checking.fidelity import (FidelityReport, SelfCheck, check_request as che
                                  reference_settings, refine_in_task)
 from ..sampling.montecarlo import (MapFn, MonteCarlo, Plan, check_budget, check_some_sample_finished, child_seeds,
                                    far_over_budget, mapped, together)
-from ..sampling.sampler import rollout_cost
+from ..predict import rollout_cost
 from ..checking.self_check import checking
 from ..scene.bodies import Scene, Table
 from ..scene.validation import validate_scene
 from ..query.contact import check_pairs
-from ..sampling.outcome import SampleOutcome, rigid_reruns
+from ..results.outcome import SampleOutcome, rigid_reruns
 from ..sampling.rollout import take_refined
 from .answers import (QUESTION_QUERIES, Alone, Answers, aggregate_given, aggregate_variant, caused, draws_noise, fell,
                       ran, stood)

@@ -17,7 +17,7 @@ from ..config import ModelConfig, SimSettings
 from ..sampling.decide import Ranking, SafeBelow, Sequential, Supports
 from ..errors import ConfigError
 from ..sampling.montecarlo import check_budget, far_over_budget
-from ..sampling.sampler import rollout_cost
+from ..predict import rollout_cost
 from ..scene.bodies import Body, Scene
 from ..scene.validation import validate_body
 from .answers import Answers, VariantAnswer

@@ -56,7 +56,7 @@ from ..checks import boolean, integer, positive
 from ..config import PRESETS, SimSettings
 from ..errors import ConfigError, shown
 from ..query import QUERIES
-from ..sampling.outcome import HEALTHY_END_PENETRATION_FRACTION, HEALTHY_ENERGY_GAIN_FRACTION, SampleOutcome
+from ..results.outcome import HEALTHY_END_PENETRATION_FRACTION, HEALTHY_ENERGY_GAIN_FRACTION, SampleOutcome
 from ..sampling.rollout import Refine
 from .bias import (BIAS_TAIL, Bias, bias_estimates, confirmation_samples, coverage_samples,  # noqa: F401
                    undecided_bias_samples)

@@ -10,7 +10,7 @@ from .bias import bias_estimates, confirmation_samples, coverage_samples, undeci
 from .fidelity import (FidelityReport, SelfCheck, contradicts, difference, merge, outcome_flags, outcome_labels, suspect,
                        unhealthy, verification_count)
 from ..sampling.montecarlo import Plan
-from ..sampling.outcome import SampleOutcome, energy_scale_of, rigid_reruns
+from ..results.outcome import SampleOutcome, energy_scale_of, rigid_reruns
 from ..sampling.rollout import SampleTask
 
 
@@ -107,7 +107,26 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: d
     # at the reference, where what the side kept fast shows could pass (``_credibly_within``, judged
     # before the rerun and again after it); else every sample, in one round
     parts.append(("escalation", reference.name))
-    strata = [] if known or check.bias_tolerance is None else disputed_strata(state, compared)
+    if not known and check.bias_tolerance is not None:
+        answered = yield from _escalate_disputed(state, compared, refined, parts, common)
+        if answered is not None:
+            return answered
+    yield from state.rerun([i for i in range(len(outcomes)) if i not in state.checked and not outcomes[i].skipped])
+    done = state.checked
+    if any(o.budget_stopped for o in done.values()):
+        return merge(outcomes, refined), FidelityReport("contradicted", settings=tuple(parts),
+                                                        rigid_reruns=state.rigid_reruns(), **common)
+    return merge(outcomes, done), FidelityReport("escalated", escalated_samples=len(done), settings=tuple(parts),
+                                                 rigid_reruns=state.rigid_reruns(), **common)
+
+
+def _escalate_disputed(state: "_Comparison", compared: dict[int, np.ndarray], refined: dict[int, SampleOutcome],
+                       parts: list, common: dict) -> Plan:
+    """The disputed strata alone rerun at the reference (``disputed_strata``), where what each side
+    kept fast shows could pass (``_credibly_within``, judged before the rerun and again after it):
+    the answer so made and its report, or None (then every sample is rerun)."""
+    tasks, outcomes, check, reference = state.tasks, state.outcomes, state.check, state.reference
+    strata = disputed_strata(state, compared)
     escalated = [j for j, _, _ in strata]
     disputed = sorted({i for _, _, members in strata for i in members})
     remaining = [i for i in range(len(outcomes)) if i not in state.checked and not outcomes[i].skipped]
@@ -128,13 +147,7 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: d
                     escalated_strata=tuple((labels[j] if j < len(labels) else f"outcome {j}", side, len(members))
                                            for j, side, members in strata),
                     rigid_reruns=state.rigid_reruns(), **common)
-    yield from state.rerun([i for i in range(len(outcomes)) if i not in state.checked and not outcomes[i].skipped])
-    done = state.checked
-    if any(o.budget_stopped for o in done.values()):
-        return merge(outcomes, refined), FidelityReport("contradicted", settings=tuple(parts),
-                                                        rigid_reruns=state.rigid_reruns(), **common)
-    return merge(outcomes, done), FidelityReport("escalated", escalated_samples=len(done), settings=tuple(parts),
-                                                 rigid_reruns=state.rigid_reruns(), **common)
+    return None
 
 
 def _credibly_within(fast_flags: dict[int, np.ndarray], differences: dict[int, np.ndarray], escalated: list[int],

@@ -200,7 +200,7 @@ class ResumableMap:
 @functools.cache
 def _result_types() -> dict[str, type]:
     """The dataclasses an entry may hold, by name (imported here: the vision package imports the engine)."""
-    from ..sampling.outcome import RolloutResult, SampleOutcome
+    from ..results.outcome import RolloutResult, SampleOutcome
     from ..vision.mcmc import Chain
     from ..vision.perception import PerceivedScenes
 
@@ -383,7 +383,7 @@ def _fits(value, hint) -> bool:
 def _check_against_task(result, task) -> None:
     """A sample's stored outcome answers the task it is read for: its index, and a value per body
     of the task's scene (a well-formed entry for another scene would be aggregated as this one's)."""
-    from ..sampling.outcome import SampleOutcome
+    from ..results.outcome import SampleOutcome
 
     scene = getattr(task, "scene", None)
     if not isinstance(result, SampleOutcome) or scene is None:
@@ -398,7 +398,7 @@ def _check_against_task(result, task) -> None:
 
 def _check_shapes(result) -> None:
     """The arrays of a sample's outcome agree with each other (code reading it indexes them together)."""
-    from ..sampling.outcome import SampleOutcome
+    from ..results.outcome import SampleOutcome
 
     if not isinstance(result, SampleOutcome) or result.initial_positions_m is None:
         return

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..config import ModelConfig, SimSettings
 from ..query import QuerySpec
-from ..sampling.outcome import SampleOutcome
+from ..results.outcome import SampleOutcome
 from ..sampling.rollout import SampleTask, run_sample
 from ..scene import shapes
 from ..scene.bodies import Scene

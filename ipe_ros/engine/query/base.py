@@ -32,13 +32,13 @@ import numpy as np
 
 from . import predicates
 from ..scene.bodies import Scene
-from ..sampling.stats import wilson_interval
+from ..results.stats import wilson_interval
 
 from .spec import QuerySpec
 
 if TYPE_CHECKING:
     from ..config import EarlyStopSettings
-    from ..sampling.outcome import RolloutResult, SampleOutcome
+    from ..results.outcome import RolloutResult, SampleOutcome
 
 
 def smallest_extents_m(scene: Scene) -> np.ndarray:

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from . import predicates
-from ..sampling.stats import circular_mean, half_circle_decisiveness
+from ..results.stats import circular_mean, half_circle_decisiveness
 from .base import Query, Reading, Samples
 from .fall import fallen_flags
 

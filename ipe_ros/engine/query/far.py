@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from . import predicates
-from ..sampling.stats import mean_interval
+from ..results.stats import mean_interval
 from .base import Query, Reading, Samples
 from .fall import fallen_flags
 

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from ..sampling.stats import circular_mean
+from ..results.stats import circular_mean
 from .base import Query, Reading, Samples
 
 

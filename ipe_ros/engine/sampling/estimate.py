@@ -14,9 +14,9 @@ from ..query.any_fall import sample_any_fall  # noqa: F401 - re-exported
 from ..query.fall import sample_fall_fraction  # noqa: F401 - re-exported
 from ..query.far import sample_far_m  # noqa: F401 - re-exported
 from .influence import property_influence
-from .outcome import SampleOutcome
+from ..results.outcome import SampleOutcome
 from ..scene.bodies import Scene
-from .stats import Z95, circular_mean, half_circle_decisiveness, mean_interval, wilson_interval  # noqa: F401
+from ..results.stats import Z95, circular_mean, half_circle_decisiveness, mean_interval, wilson_interval  # noqa: F401
 
 # kept importable from here: the per-sample values and the statistics the answers are made of
 __all__ = ["Prediction", "Z95", "aggregate", "circular_mean", "half_circle_decisiveness", "mean_interval",

@@ -14,7 +14,7 @@ from typing import Sequence
 import numpy as np
 
 from ..scene.bodies import Scene
-from .outcome import SampleOutcome
+from ..results.outcome import SampleOutcome
 
 #: the fewest samples on each side of the median for a difference to be reported
 MIN_SAMPLES_PER_SIDE = 2

@@ -24,7 +24,7 @@ from ..query import QUERIES, QuerySpec, Reading
 from ..query.base import smallest_extents_m
 from ..config import ModelConfig, SimSettings
 from ..errors import BudgetExceeded, ConfigError, PhysicsError
-from .outcome import (HEALTHY_END_PENETRATION_FRACTION, HEALTHY_ENERGY_GAIN_FRACTION, RolloutResult, SampleOutcome,
+from ..results.outcome import (HEALTHY_END_PENETRATION_FRACTION, HEALTHY_ENERGY_GAIN_FRACTION, RolloutResult, SampleOutcome,
                       energy_scale_of)
 from .perturb import draw_sample
 from ..scene.bodies import Floor, Scene

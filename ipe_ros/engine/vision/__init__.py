@@ -9,7 +9,10 @@
 - perception.py: the IPE's k scene samples drawn from that posterior (``perception="vision"``);
 - depth.py: the same idea for a robot's depth camera: the posterior over objects' x, y, yaw (and
   each camera's range offset) given depth images (``perception="depth"``); its likelihood in
-  depth_model.py, a robot's files (image, camera_info, pose) read in depth_io.py.
+  depth_model.py, a robot's files (image, camera_info, pose) read in depth_io.py;
+- sources.py: vision and depth registered as perception sources (engine.perceptions), depth's
+  evidence (options, topics, parameters) in depth_source.py; scene_pose.py: a posterior's state as
+  a scene, for both chains.
 
 ROS-free, like the rest of the engine.
 """

@@ -18,24 +18,24 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..config import ModelConfig, SimSettings
-from ..errors import ConfigError, shown
-from .estimate import Prediction, aggregate, sample_any_fall, sample_fall_fraction, wilson_interval
-from ..checking.fidelity import check_request as check_fidelity_request
-from ..checking.envelope import validated_because
-from ..checking.fidelity import (DEFAULT_CHECK, NO_CHECK, FidelityReport, SelfCheck, coverage_ahead, is_reference,
+from .config import ModelConfig, SimSettings
+from .errors import ConfigError, shown
+from .sampling.estimate import Prediction, aggregate, sample_any_fall, sample_fall_fraction, wilson_interval
+from .checking.fidelity import check_request as check_fidelity_request
+from .checking.envelope import validated_because
+from .checking.fidelity import (DEFAULT_CHECK, NO_CHECK, FidelityReport, SelfCheck, coverage_ahead, is_reference,
                        look_ahead_split, reference_settings, refine_in_task, verification_count)
-from .montecarlo import (MapFn, MonteCarlo, Plan, check_budget, check_seed, check_some_sample_finished, child_seeds,
+from .sampling.montecarlo import (MapFn, MonteCarlo, Plan, check_budget, check_seed, check_some_sample_finished, child_seeds,
                          far_over_budget, together)
-from ..perceptions import perception_source
-from .perturb import is_deterministic
-from .outcome import rigid_reruns
-from .rollout import SampleOutcome, SampleTask, lost, run_sample, take_refined
-from ..checking.self_check import checking
-from ..query import QUERIES, QuerySpec
-from ..scene.bodies import DEFAULT_MAX_OBJECTS, Scene
-from ..scene.mesh_repair import repaired_sources
-from ..scene.validation import validate_scene
+from .perceptions import perception_source
+from .sampling.perturb import is_deterministic
+from .results.outcome import rigid_reruns
+from .sampling.rollout import SampleOutcome, SampleTask, lost, run_sample, take_refined
+from .checking.self_check import checking
+from .query import QUERIES, QuerySpec
+from .scene.bodies import DEFAULT_MAX_OBJECTS, Scene
+from .scene.mesh_repair import repaired_sources
+from .scene.validation import validate_scene
 
 @dataclass(frozen=True)
 class AdaptiveStop:
@@ -103,7 +103,7 @@ class RolloutCost:
 def rollout_cost(scene: Scene, model: ModelConfig, settings: SimSettings, pairs: int = 0) -> RolloutCost:
     """Steps x bodies of one sample (every phi value) at the step the scene gets, and ``pairs`` watched
     contact pairs, and its estimated time."""
-    from ..simulation.world import fastest_initial_speed_m_s
+    from .simulation.world import fastest_initial_speed_m_s
 
     g = math.sqrt(sum(v * v for v in scene.gravity_m_s2))
     scale = min(b.smallest_extent_m for b in scene.dynamic_objects)

@@ -418,7 +418,7 @@ def test_a_mesh_object_goes_out_as_its_mesh_to_rviz_and_back_in_the_json(folder)
     from ipe_ros.engine.scene.meshes import MeshAccess
     from ipe_ros.engine.scene.shapes import MeshSource
     from msg_bridge.markers import markers_to_scene, scene_to_markers
-from msg_bridge.prediction_markers import prediction_to_markers
+    from msg_bridge.prediction_markers import prediction_to_markers
     from visualization_msgs.msg import Marker
 
     [scene] = load_scenes(_write(folder, scene_with({"type": "mesh", "uri": "mug.obj", "scale": 1.5}), "scaled.json"))

@@ -275,7 +275,7 @@ def test_every_query_is_registered_with_its_fields_and_none_when_not_asked():
         for field in query.fields:
             assert field in data
             if name != "contact":
-                assert data[field] is None and getattr(answer, field) is None
+                assert data[field] is None and answer.value(field) is None
     assert data["request"]["contact"] == ["ball:box"]
     with pytest.raises(AttributeError):
         answer.not_a_field  # noqa: B018
@@ -440,3 +440,17 @@ def test_many_contact_pairs_are_watched_per_contact_and_priced_up_front():
                      check=None)
     probability = answer.to_dict()["contact_probability"]
     assert probability["b0:support"] == 1.0 and probability["b0:b1"] == 0.0  # resting on the floor, 5 cm apart
+
+
+def test_every_built_in_query_field_is_a_typed_attribute_of_the_prediction():
+    """Prediction's typed access (estimate.QueryValue) covers every built-in query's fields; any
+    query's, a plugin's too, reads through value(), and a name no query answers is refused."""
+    from ipe_ros.engine.query.spec import BUILT_IN_PACKAGE
+    from ipe_ros.engine.sampling.estimate import Prediction, QueryValue
+
+    built_in = [f for q in QUERIES.values() if type(q).__module__.startswith(BUILT_IN_PACKAGE) for f in q.fields]
+    assert sorted(n for n, v in vars(Prediction).items() if isinstance(v, QueryValue)) == sorted(built_in)
+    answer = Prediction("s", 1, 1, 0, (), True, answers={"fall_fraction": 0.25})
+    assert answer.fall_fraction == answer.value("fall_fraction") == 0.25 and answer.far_m is None
+    with pytest.raises(ValueError, match="^'fall_fractoin' is not a field of any registered query"):
+        answer.value("fall_fractoin")

@@ -42,12 +42,14 @@ def test_a_registered_query_answers_with_its_own_parameter_here_and_in_workers(t
     # the same rollouts (same seed): only the threshold differs, and what fell lies tilted (a block
     # landing upside down, within a degree, is all that passes 179)
     assert strict.fall_fraction == loose.fall_fraction > 0
-    assert strict.tilt_probability >= 0.5 > 0.2 >= loose.tilt_probability
-    assert set(strict.tilted_object_probability) == {b.name for b in TOWER.dynamic_objects}
-    assert strict.to_dict()["tilt_probability"] == strict.tilt_probability
+    assert strict.value("tilt_probability") >= 0.5 > 0.2 >= loose.value("tilt_probability")
+    assert set(strict.value("tilted_object_probability")) == {b.name for b in TOWER.dynamic_objects}
+    assert strict.to_dict()["tilt_probability"] == strict.value("tilt_probability")
     with WorkerPool(2, start_method="spawn") as pool:  # workers import the plugin to know the query
         there = predict(TOWER, MODEL, preset("default"), _spec(tilt, 5.0), seed=3, map_fn=pool.map, check=None)
-    assert there.tilted_object_probability == strict.tilted_object_probability and there.failed_samples == 0
+    assert there.value("tilted_object_probability") == strict.value("tilted_object_probability") and there.failed_samples == 0
+    with pytest.raises(AttributeError):  # a plugin's fields are values, not typed attributes
+        strict.tilt_probability  # noqa: B018
     # a worker that does not know the query says so in every sample, never answers without it
     def unaware_map(fn, tasks, on_lost=None):
         unregister("tilt")
@@ -76,7 +78,7 @@ def test_the_cli_sets_a_registered_querys_parameter_by_its_own_option(tilt, caps
     assert main(common + ["--tilt-threshold-deg", "5"]) == 0
     record = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     expected = predict(TOWER, MODEL, preset("default"), _spec(tilt, 5.0), seed=3, check=None)
-    assert record["tilt_probability"] == expected.tilt_probability > 0
+    assert record["tilt_probability"] == expected.value("tilt_probability") > 0
     assert main(common + ["--tilt-threshold-deg", "0"]) == 2
     assert capsys.readouterr().err.strip().splitlines()[-1] == \
         "ipe: error: --tilt-threshold-deg: must be in (0, 180) degrees, got 0.0"
@@ -126,7 +128,7 @@ def test_the_node_declares_a_registered_querys_parameter_and_publishes_its_answe
         wait_until(lambda: got, 60.0, "the prediction")
         answer = json.loads(got[-1].data)
         expected = predict(TOWER, MODEL, preset("default"), _spec(tilt, 5.0), seed=3, check=None)
-        assert answer["tilt_probability"] == expected.tilt_probability > 0, answer
+        assert answer["tilt_probability"] == expected.value("tilt_probability") > 0, answer
         refused = node.set_parameters([Parameter("tilt.threshold_deg", value=0.0)])[0]
         assert not refused.successful
         assert refused.reason == "tilt.threshold_deg: must be in (0, 180) degrees, got 0.0"

@@ -7,7 +7,7 @@ results are averaged within the sample first (each query's ``aggregate``, engine
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any, Generic, Optional, Sequence, TypeVar
 
 from ..query import QUERIES, QuerySpec, Samples, answer_fields
 from ..query.any_fall import sample_any_fall  # noqa: F401 - re-exported
@@ -23,12 +23,31 @@ __all__ = ["Prediction", "Z95", "aggregate", "circular_mean", "half_circle_decis
            "sample_any_fall", "sample_fall_fraction", "sample_far_m", "wilson_interval"]
 
 
+T = TypeVar("T")
+Interval = Optional[tuple[float, float]]
+PerObject = Optional[dict[str, float]]
+
+
+class QueryValue(Generic[T]):
+    """A built-in query's answer field on ``Prediction``, typed: its value in ``answers`` (None when
+    its query was not asked). A plugin query's fields are read with ``Prediction.value``."""
+
+    def __set_name__(self, owner, name: str) -> None:
+        self.name = name
+
+    def __get__(self, prediction, owner=None) -> T:
+        if prediction is None:
+            return self  # type: ignore[return-value] - the class's own attribute
+        return prediction.answers.get(self.name)
+
+
 @dataclass(frozen=True)
 class Prediction:
     """The IPE's answer for one scene: what every answer has, and one answer per asked query.
 
     ``answers`` holds the asked queries' fields (engine/query: one module per query, each listing
-    its fields); every query field reads as an attribute, None when its query was not asked, e.g.
+    its fields); each built-in query's field is a typed attribute (``QueryValue``), None when its
+    query was not asked; a plugin query's, ``value(field)``. The built-in ones:
 
     fall_fraction: expected fraction of dynamic boxes that fall (Exps. 1, 3), with its 95% interval
         ``fall_fraction_ci95`` (Wilson; a point for the deterministic ground truth) and
@@ -77,16 +96,45 @@ class Prediction:
     #: model's own noise); summarised in ``request["perception"]``, kept whole for recordings
     perceived: Any = field(default=None, repr=False, compare=False)
 
+    # the built-in queries' answers (engine/query/*.py, ``fields``), typed; a test keeps them complete
+    fall_fraction = QueryValue[Optional[float]]()
+    fall_fraction_ci95 = QueryValue[Interval]()
+    object_fall_probability = QueryValue[PerObject]()
+    any_fall_probability = QueryValue[Optional[float]]()
+    any_fall_probability_ci95 = QueryValue[Interval]()
+    direction_rad = QueryValue[Optional[float]]()
+    direction_decisiveness = QueryValue[Optional[float]]()
+    direction_rollouts = QueryValue[Optional[int]]()
+    far_m = QueryValue[Optional[float]]()
+    far_m_ci95 = QueryValue[Interval]()
+    fell_off_fraction_by_group = QueryValue[PerObject]()
+    bump_group = QueryValue[Optional[str]]()
+    bump_ratio = QueryValue[Optional[float]]()
+    bump_rollouts = QueryValue[Optional[int]]()
+    contact_probability = QueryValue[PerObject]()
+    contact_probability_ci95 = QueryValue[Optional[dict[str, list[float]]]]()
+    contact_time_s = QueryValue[Optional[dict[str, Optional[float]]]]()
+    contact_at_start = QueryValue[Optional[list[str]]]()
+    rest_probability = QueryValue[Optional[float]]()
+    rest_probability_ci95 = QueryValue[Interval]()
+    max_final_speed_m_s = QueryValue[Optional[float]]()
+    final_pose = QueryValue[Optional[dict[str, dict[str, Any]]]]()
+    tipped_probability = QueryValue[Optional[float]]()
+    tipped_probability_ci95 = QueryValue[Interval]()
+    tipped_object_probability = QueryValue[PerObject]()
+
     def __post_init__(self) -> None:
         unknown = sorted(set(self.answers) - set(answer_fields()))
         if unknown:
             raise TypeError(f"{unknown[0]}: not a field of any query (engine/query)")
 
-    def __getattr__(self, name: str) -> Any:
-        # only for query fields: everything else is a real attribute (or a real AttributeError)
-        if name in answer_fields():
-            return self.__dict__.get("answers", {}).get(name)
-        raise AttributeError(f"'Prediction' object has no attribute '{name}'")
+    def value(self, name: str) -> Any:
+        """The answer field ``name`` of any registered query (a plugin's too), None when its query was
+        not asked; a ValueError for a name no query answers."""
+        if name not in answer_fields():
+            raise ValueError(f"{name!r} is not a field of any registered query (engine/query); ask one of "
+                             f"{', '.join(answer_fields())}")
+        return self.answers.get(name)
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON-ready fields (everything but the raw outcomes and the perceived scenes; every query's fields, None where

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from .cli_ask import add_ask_parser, cmd_ask
-from .cli_evidence import add_evidence_options
+from .cli_evidence import add_perception_options
 from .cli_fit import add_fit_parser, cmd_fit
 from .cli_infer import add_infer_parser, cmd_infer
 from .cli_inputs import add_input_options, add_inputs_from_option, finite
@@ -77,14 +77,7 @@ def build_parser() -> argparse.ArgumentParser:
             f"{n}: {perception_source(n).summary}" for n in perception_names())
         + " (each with its options below); sigma unused but by gaussian"})
     add_inputs_from_option(p)
-    add_evidence_options(p)
-    p.add_argument("--chain-samples", type=int, default=None, metavar="N",
-                   help="vision: Metropolis-Hastings samples (default 5000, the SI's; a fifth is burn-in)")
-    p.add_argument("--vision-resolution", type=int, default=None, metavar="PX",
-                   help="vision: rendered image size (default 256, the SI's; blur and SD scale with it)")
-    p.add_argument("--vision-rrd", default=None, metavar="FILE",
-                   help="vision: write the observed images, the posterior sample cloud and the acceptance trace "
-                        "to a rerun recording (one scene only)")
+    add_perception_options(p)
     add_input_options(p, ("preset_name", "seed", "workers", "ground_truth", "ci_width", "deadline_s", "horizon_s",
                           "until_rest", "budget_s", "self_check", "verify_samples",
                           "always_verify"))

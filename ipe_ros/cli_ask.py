@@ -24,7 +24,7 @@ from .engine import ConfigError, WorkerPool, load_scenes
 from .engine import actions as A
 from .engine.inputs import as_spelled
 from .engine.request import build_request
-from .cli_evidence import add_evidence_options, asked_source, describe_perceived, perceive_for_question, record
+from .cli_evidence import add_perception_options, asked_source, describe_perceived, perceive_for_question
 from .cli_inputs import add_input_options, add_inputs_from_option, finite, given_request_arguments
 from .cli_queries import add_query_parameter_options, given_query_parameters
 from .engine.actions.answers import QUESTION_QUERIES
@@ -83,7 +83,7 @@ def add_ask_parser(sub, one_line_parser) -> None:
         add_inputs_from_option(q)
         q.add_argument("--fixed-k", action="store_true",
                        help="every variant runs all --samples (default: decision questions sample until decided)")
-        add_evidence_options(q)  # a perception's evidence: its posterior's scenes replace --sigma
+        add_perception_options(q, evidence_only=True)  # a perception's evidence: its posterior's scenes replace --sigma
         q.add_argument("--json", action="store_true", help="one JSON object per line")
         q.add_argument("--rrd", default=None, metavar="FILE",
                        help="record 4 rollouts of every variant to this rerun file (not for clear)")
@@ -190,9 +190,9 @@ def cmd_ask(args) -> int:
     kw = dict(seed=args.seed, map_fn=pool.map if pool else None, budget_s=args.budget_s, check=request.check)
     source = asked_source(args)
     if source is not None:  # every variant's sample i starts from the posterior's scene i
-        perceived, evidence = perceive_for_question(args, scene, source)
+        perceived, chosen = perceive_for_question(args, scene, source)
         kw.update(perceived=perceived, budget_s=args.budget_s)  # the budget the chain left
-        written = record(args, source, scene, perceived, evidence)
+        written = chosen.record(scene, perceived, model)
         if written is not None:
             print(f"wrote {written}", file=sys.stderr)
     if args.rrd:

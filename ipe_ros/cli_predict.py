@@ -11,14 +11,13 @@ import json
 import math
 import sys
 
-from .cli_evidence import describe, evidence_for, record, refuse_many
+from .cli_evidence import chosen_perception, describe
 from .cli_inputs import given_request_arguments, typed_option
 from .cli_queries import given_query_parameters
 from .engine import AdaptiveStop, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError, WorkerPool, load_scenes, predict
 from .engine.config import anytime_batch_size, default_workers
 from .engine.checking.fidelity import DEFAULT_CHECK, SelfCheck
 from .engine.inputs import spelled
-from .engine.perceptions import perception_source
 from .engine.sampling.perturb import is_deterministic
 from .engine.query import QUERIES
 from .engine.request import build_request
@@ -178,78 +177,38 @@ def cmd_predict(args) -> int:
     for scene in scenes:  # an open mesh answered as a repaired solid: said once, before the answers
         for name, source in repaired_sources(scene).items():
             print(f"ipe: note: {scene.name}: {name} ({source.uri}) {source.repaired}", file=sys.stderr)
-    vision = _vision_settings(args)
+    chosen = chosen_perception(args, args.perception)  # its options: evidence, request arguments, a recording
     # one request from the options (engine.request); its errors read as the options (main: as_spelled)
-    request = build_request(vision=vision, query_parameters=given_query_parameters(args), **given_request_arguments(args))
+    request = build_request(query_parameters=given_query_parameters(args), **chosen.request_arguments,
+                            **given_request_arguments(args))
     model, sim, query, stop, check = request.model, request.settings, request.query, request.stop, request.check
-    for option, value, what in (("--vision-rrd", args.vision_rrd, "records"), ("--png", args.png, "draws")):
-        if value is not None and len(scenes) != 1:
-            raise ConfigError(option, f"{what} one scene, but {args.path} holds {len(scenes)}; choose one with --tower")
+    if args.png is not None and len(scenes) != 1:
+        raise ConfigError("--png", f"draws one scene, but {args.path} holds {len(scenes)}; choose one with --tower")
+    chosen.refuse_many(scenes, args.path)
     scenes = _answerable(args, scenes, refused, request)
-    perceived = None
-    if args.vision_rrd is not None:  # the chain the prediction would run, kept for the recording
-        from .engine.vision.sources import perceive_vision
-
-        perceived = perceive_vision(scenes[0], model, args.seed)
-    source = perception_source(args.perception)
-    evidence = evidence_for(args, args.perception)
-    refuse_many(source, scenes, args.path, evidence)
     collected: list[Prediction] = []
     if args.json:
         run_predictions(scenes, model, sim, query, args.seed, args.workers,
                         lambda p: (collected.append(p), print(prediction_json(p), flush=True)), stop, args.budget_s,
-                        perceived, args.scheduler, check, evidence)
+                        None, args.scheduler, check, chosen.evidence)
     else:
         k = 1 if all(is_deterministic(s, model) for s in scenes) else args.samples
         print(f"sigma = {model.sigma_m:g} m, phi = {','.join(f'{v:g}' for v in model.phi_m_s2)} m/s^2, mu = {args.mu}, "
-              f"k = {k}, preset = {sim.name}, seed = {args.seed}"
-              + (f", perception = vision ({vision.chain_samples} MH samples, {vision.resolution_px} px)"
-                 if vision is not None else "")
-              + (f", perception = {args.perception} (sigma unused)"
-                 if perception_source(args.perception).posterior and vision is None else ""))
+              f"k = {k}, preset = {sim.name}, seed = {args.seed}" + chosen.heading(model))
         run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append, stop, args.budget_s,
-                        perceived, args.scheduler, check, evidence)
+                        None, args.scheduler, check, chosen.evidence)
         print(format_table(collected))
         for line in describe(collected, args.perception):
             print(line)
-    if evidence is not None:
-        written = record(args, source, scenes[0], collected[0].perceived, evidence)
-        if written is not None:
-            print(f"wrote {written}", file=sys.stderr)
-    if args.vision_rrd is not None:
-        from .viz.perception_log import write_vision_rrd
-
-        write_vision_rrd(args.vision_rrd, scenes[0], perceived, vision)
-        print(f"wrote {args.vision_rrd}", file=sys.stderr)
+    written = chosen.record(scenes[0], collected[0].perceived, model)
+    if written is not None:
+        print(f"wrote {written}", file=sys.stderr)
     if args.png is not None:
         from .viz.figure import draw_prediction
 
         draw_prediction(args.png, scenes[0], collected[0])
         print(f"wrote {args.png}", file=sys.stderr)
     return EXIT_BAD_INPUT if refused else 0  # the others answered; the status says not all could be
-
-
-def _vision_settings(args):
-    """The vision chain's settings from its options (None without vision perception), and the
-    perception options that belong to another perception refused."""
-    vision = None
-    if args.perception == "vision":
-        from .engine.vision import VisionSettings
-
-        changes = {}
-        if args.chain_samples is not None:
-            changes.update(chain_samples=args.chain_samples, burn_in=args.chain_samples // 5)
-        if args.vision_resolution is not None:
-            changes.update(resolution_px=args.vision_resolution)
-        try:
-            vision = VisionSettings(**changes)
-        except ConfigError as exc:
-            option = {"vision.chain_samples": "--chain-samples", "vision.burn_in": "--chain-samples",
-                      "vision.resolution_px": "--vision-resolution"}.get(exc.field, exc.field)
-            raise ConfigError(option, exc.problem) from None
-    elif args.chain_samples is not None or args.vision_resolution is not None or args.vision_rrd is not None:
-        raise ConfigError("--perception", "--chain-samples, --vision-resolution and --vision-rrd need --perception vision")
-    return vision
 
 
 def _answerable(args, scenes: list, refused: list[RefusedScene], request) -> list:

@@ -112,10 +112,9 @@ def run(scene, model, seed: int, map_fn, evidence, budget_s):
 SOURCE = PerceptionSource(
     "detections", "each detected object drawn from its position's Gaussian (a detector's mean and covariance)",
     posterior=True, run=run, describe=lambda v: f"{len(v['objects'])} objects detected",
+    options=(Input("detections", "name", None, "path", "a JSON list of objects' positions with their covariances",
+                   flag="--detections", in_request=False, unset_means="none", metavar="FILE"),),
     needs=Evidence(what="the detections", describes="one list of detections describes one scene",
-                   options=(Input("detections", "name", None, "path", "a JSON list of objects' positions with their "
-                                  "covariances", flag="--detections", in_request=False, unset_means="none",
-                                  metavar="FILE"),),
                    read=read_file,
                    topics=(EvidenceTopic("~/detections", "std_msgs/msg/String",
                                          "tests.perception_plugin_detections:received", "detection list",

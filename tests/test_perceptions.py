@@ -177,17 +177,20 @@ def test_a_source_that_needs_evidence_reads_it_from_its_own_cli_option_and_draws
         predict(TOWER, ModelConfig(perception="detections", samples=4), preset("default"), QuerySpec(), check=None)
 
 
-def test_no_door_names_a_source_that_needs_evidence():
-    """The CLI, the node and the service reach sources only through the protocol (engine.evidence)."""
+def test_no_door_names_a_perception():
+    """The CLI, the node and the service reach sources only through the protocol (engine.perceptions,
+    engine.evidence): no branch on a source's name, no depth-only or vision-only code."""
     import re
 
     root = Path(__file__).resolve().parents[1] / "ipe_ros"
     doors = [*root.glob("cli*.py"), *(root / "service").glob("*.py"), *(root / "ros").glob("*.py")]
-    names = [n for n in perception_names() if perception_source(n).needs is not None]
-    assert "depth" in names
-    pattern = re.compile(r"""perception\s*[!=]=\s*["'](%s)["']""" % "|".join(names))
+    names = perception_names()
+    assert {"gaussian", "vision", "depth"} <= set(names)
+    named = "|".join(names)
+    pattern = re.compile(rf"""(==|!=)\s*["']({named})["']|["']({named})["']\s*(==|!=)""")
     offending = [f"{p.name}:{i}" for p in doors for i, line in enumerate(p.read_text().splitlines(), 1)
-                 if pattern.search(line) or re.search(r"\bdepth_(posterior|perceive|images?)\b", line)]
+                 if pattern.search(line) or re.search(r"\b(depth|vision)_(posterior|perceive|images?|settings|rrd)\b",
+                                                      line)]
     assert not offending, offending
 
 

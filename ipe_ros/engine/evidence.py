@@ -3,9 +3,9 @@
 A source that draws the k scenes from a posterior given evidence (depth images, detections, a
 second camera) says here what that evidence is and how each door gets it, its inputs rows of the
 table of inputs as every other input is (``engine.input_row.Input``):
-- the command line: ``options`` (rows with a flag; added to ``ipe predict`` and ``ipe ask`` for
-  every registered source), which ``read`` turns into the evidence (files read, checked, errors
-  naming the option);
+- the command line: the source's options (``PerceptionSource.options``, rows with a flag; added
+  to ``ipe predict`` and ``ipe ask``), which ``read`` turns into the evidence (files read, checked,
+  errors naming the option);
 - the node: ``topics`` it subscribes to for every registered source. Each message is converted when
   it arrives by ``receive`` (a ``"module:function"`` path, since the engine never imports message
   classes: the node resolves it, msg_bridge-style code does the conversion) and held, the newest per
@@ -66,10 +66,7 @@ class Evidence:
 
     what: the evidence, as errors name it ("the depth images").
     describes: what one piece of evidence is of ("one depth image describes one scene").
-    options: the CLI's options (``Input`` rows with a flag, kind "name", default None).
-    optional: the fields of options the chain can go without (a recording to write); the others
-      are required.
-    read: the CLI's option values (by field) -> the evidence.
+    read: the source's CLI option values (by field) -> the evidence.
     assemble: the views' held values (by topic name) -> the evidence.
     missing: what to publish, said when a scene comes before any view.
     frame_named: what the view's frame is the frame of ("the camera pose").
@@ -80,15 +77,10 @@ class Evidence:
     check: the node's parameter values -> None, or a ConfigError naming the parameter (run
       whenever parameters are set).
     budget_share: of a prediction's budget, what its chain may use (the samples get the rest).
-    record: the CLI's optional recording of the chain, ``"module:function"`` (recordings import the
-      viewer's library, which the engine does not), called with (option values, scene, perceived,
-      evidence) -> the file written or None.
     """
 
     what: str
     describes: str
-    options: tuple[Input, ...] = ()
-    optional: frozenset[str] = frozenset()
     read: Callable[[Mapping[str, Any]], Any] | None = None
     topics: tuple[EvidenceTopic, ...] = ()
     assemble: Callable[[Mapping[str, Any]], Any] | None = None
@@ -99,22 +91,9 @@ class Evidence:
     parameters: tuple[Input, ...] = ()
     check: Callable[[Mapping[str, Any]], None] | None = None
     budget_share: float = 0.5
-    record: str = ""
-
-    def required(self) -> tuple[Input, ...]:
-        return tuple(o for o in self.options if o.field not in self.optional)
 
     def views(self) -> tuple[EvidenceTopic, ...]:
         return tuple(t for t in self.topics if t.view)
-
-    def where(self) -> str:
-        """Where the doors take it from, for errors."""
-        doors = []
-        if self.options:
-            doors.append("ipe predict's " + ", ".join(o.flag for o in self.required()))
-        if self.topics:
-            doors.append("the node's " + ", ".join(t.name for t in self.topics))
-        return "; ".join(doors) or "no door fills it"
 
 
 def resolve(path: str) -> Callable:

@@ -14,10 +14,11 @@ depth's ``DepthPerceivedScenes``, a plugin's own type).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable, Protocol, runtime_checkable
+from typing import Any, Callable, Mapping, Protocol, runtime_checkable
 
 from .errors import ConfigError, shown
 from .evidence import Evidence
+from .input_row import Input
 
 #: run(scene, model, seed, map_fn, evidence, budget_s) -> perceived scenes: the chain, through
 #: ``map_fn`` when given (the prediction's workers), within ``budget_s`` wall seconds when given
@@ -49,6 +50,16 @@ class PerceptionSource:
     needs: the evidence it draws them given, and how the doors fill it (None: the scene alone).
     on_node: the node can feed it (a source needing evidence the node does not subscribe to cannot).
     describe: the text report's line from the answer's ``request.perception`` (None: no line).
+    options: its command-line options (``Input`` rows with a flag, default None), offered by
+      ``ipe predict`` (and, for a source that needs evidence, ``ipe ask``) and refused without
+      ``--perception <name>``; those not in ``optional`` are required.
+    configure: the option values -> the request's arguments they set (``build_request``: vision's
+      chain settings); None: none.
+    recording, record: the option naming a recording of the chain, and the ``"module:function"``
+      that writes it (recordings import the viewer's library, which the engine does not), called
+      with (option values, scene, perceived, evidence, model) -> the file written or None.
+    heading: the text report's first line's perception part for a model (None: "<name> (sigma
+      unused)").
     """
 
     name: str
@@ -58,6 +69,24 @@ class PerceptionSource:
     needs: Evidence | None = None
     on_node: bool = True
     describe: Callable[[dict], str] | None = None
+    options: tuple[Input, ...] = ()
+    optional: frozenset[str] = frozenset()
+    configure: Callable[[Mapping[str, Any]], dict] | None = None
+    recording: str = ""
+    record: str = ""
+    heading: Callable[[Any], str] | None = None
+
+    def required(self) -> tuple[Input, ...]:
+        return tuple(o for o in self.options if o.field not in self.optional)
+
+    def where(self) -> str:
+        """Where the doors take its evidence from, for errors."""
+        doors = []
+        if self.required():
+            doors.append("ipe predict's " + ", ".join(o.flag for o in self.required()))
+        if self.needs is not None and self.needs.topics:
+            doors.append("the node's " + ", ".join(t.name for t in self.needs.topics))
+        return "; ".join(doors) or "no door fills it"
 
     def perceive(self, scene, model, seed: int, map_fn=None, evidence=None, budget_s: float | None = None):
         """The perceived scenes for ``scene``: its chain, within ``budget_s`` (the share of a
@@ -66,7 +95,7 @@ class PerceptionSource:
             raise ConfigError("perception", f"{self.name} perception draws no scenes of its own")
         if self.needs is not None and evidence is None:
             raise ConfigError("perception", f"{self.name} perception needs {self.needs.what}: give them to predict as "
-                                            f"its evidence ({self.needs.where()})")
+                                            f"its evidence ({self.where()})")
         perceived = self.run(scene, model, seed, map_fn, evidence, budget_s)
         if not isinstance(perceived, Perceived):
             raise TypeError(f"perception {self.name}'s run returned a {type(perceived).__name__}, which is not "

@@ -111,7 +111,16 @@ def write_depth_rrd(path: str | Path, scene: Scene, perceived, observations) -> 
         rec.disconnect()
 
 
-def record_depth(values, scene: Scene, perceived, observations) -> str | None:
+def record_vision(values, scene: Scene, perceived, evidence, model) -> str | None:
+    """Vision perception's recording (its ``--vision-rrd`` option, engine/vision/sources.py): the
+    file written, or None when not asked."""
+    if values.get("vision_rrd") is None:
+        return None
+    write_vision_rrd(values["vision_rrd"], scene, perceived, model.vision)
+    return values["vision_rrd"]
+
+
+def record_depth(values, scene: Scene, perceived, observations, model) -> str | None:
     """Depth perception's recording (its ``--depth-rrd`` option, engine/vision/depth_source.py): the
     file written, or None when not asked."""
     if values.get("depth_rrd") is None:

@@ -77,16 +77,17 @@ def _check_parameters(values: Mapping[str, Any]) -> None:
     fixed_camera_pose(values)
 
 
+#: the command line's depth options: the image and its camera, and a recording of the chain
+DEPTH_OPTIONS = (_option("depth", "IMAGE", "the depth image, .npy (metres) or 16-bit .png (millimetres; 0: no reading)"),
+                 _option("camera_info", "YAML", "the camera's calibration, a ROS camera_info YAML (distortion ignored)"),
+                 _option("camera_pose", "X,Y,Z,QX,QY,QZ,QW", "the camera's optical frame (z forward, y down) in "
+                                                             "the scene frame"),
+                 _option("depth_rrd", "FILE", "write the measured depth, the depth rendered at the posterior mean, "
+                                              "their residual and the posterior sample cloud to a rerun recording"))
+
 DEPTH_EVIDENCE = Evidence(
     what="the depth images",
     describes="one depth image describes one scene",
-    options=(_option("depth", "IMAGE", "the depth image, .npy (metres) or 16-bit .png (millimetres; 0: no reading)"),
-             _option("camera_info", "YAML", "the camera's calibration, a ROS camera_info YAML (distortion ignored)"),
-             _option("camera_pose", "X,Y,Z,QX,QY,QZ,QW", "the camera's optical frame (z forward, y down) in the "
-                                                         "scene frame"),
-             _option("depth_rrd", "FILE", "write the measured depth, the depth rendered at the posterior mean, their "
-                                          "residual and the posterior sample cloud to a rerun recording")),
-    optional=frozenset({"depth_rrd"}),
     read=_read,
     # the calibration and the pose first: an image is made an observation with the newest of them
     topics=(EvidenceTopic("~/depth/camera_info", "sensor_msgs/msg/CameraInfo", "msg_bridge.depth:received_camera_info",
@@ -101,7 +102,6 @@ DEPTH_EVIDENCE = Evidence(
     frame_named="the camera pose",
     max_age_parameter="depth.max_age_s",
     reliability_parameter="depth.reliability",
-    record="ipe_ros.viz.perception_log:record_depth",
     parameters=(
         _parameter("depth.max_age_s", "float", 0.5, "s", "depth perception: the depth image may be at most this many "
                    "seconds from the scene's stamp", range=(0.001, 3600.0)),

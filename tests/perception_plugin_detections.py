@@ -58,7 +58,8 @@ def read_file(values: dict[str, Any]) -> tuple[Detection, ...]:
 
 
 def received(msg, held, node_values) -> tuple[tuple[Detection, ...], str]:
-    """``~/detections``: the detections and their frame (the node's frame_id when the JSON names none)."""
+    """``~/detections``: the detections and their frame (the node's frame_id when the JSON names none).
+    Written as a careless plugin might be: a JSON list instead of an object raises AttributeError."""
     frame = json.loads(msg.data).get("frame_id") or str(node_values["frame_id"])
     return parse(msg.data, "detections"), frame
 

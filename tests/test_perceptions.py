@@ -220,6 +220,8 @@ def test_the_node_takes_a_sources_evidence_from_its_declared_topic_and_answers_a
         detector = ros.publisher(String, "/ipe/detections")
         detector.publish(String(data="{not json"))  # refused, counted, the node goes on
         wait_until(lambda: node.service.stats().evidence.get("detections_refused") == 1, 30.0, "the refusal")
+        detector.publish(String(data="[]"))  # the plugin's own bug (an AttributeError): refused too
+        wait_until(lambda: node.service.stats().evidence.get("detections_refused") == 2, 30.0, "the plugin's error")
         detector.publish(String(data=json.dumps(DETECTIONS)))
         wait_until(lambda: node.service.stats().evidence.get("detections") == 1, 30.0, "the detections")
         scenes.publish(String(data=scene_to_json(TOWER)))

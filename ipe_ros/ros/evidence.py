@@ -46,9 +46,10 @@ class EvidenceInterface:
             views = self.service.evidence
             try:
                 value, frame_id = receive(msg, views.held(source), self._values)
-            except ValueError as exc:
+            except Exception as exc:  # noqa: BLE001 - a plugin's converter may raise anything: the node goes on
+                why = str(exc) if isinstance(exc, ValueError) else f"{type(exc).__name__}: {exc}"
                 views.refuse(topic)
-                self._log_refusal(f"refused {topic.what} on {self.resolve_topic_name(topic.name)}: {exc}")
+                self._log_refusal(f"refused {topic.what} on {self.resolve_topic_name(topic.name)}: {why}")
                 return
             header = getattr(msg, "header", None)  # a message without one is stamped as it arrives
             stamp_ns = header_to_stamp_ns(header) if header is not None else self.get_clock().now().nanoseconds

@@ -35,7 +35,7 @@ from .mcmc import effective_sample_size
 from .scene_pose import scene_at_pose
 from .metropolis import thinned_index
 
-__all__ = ["CHAIN_BUDGET_SHARE", "DEPTH_STREAM", "DepthObservation", "DepthPerceivedScenes", "DepthPosterior",
+__all__ = ["DEPTH_STREAM", "DepthObservation", "DepthPerceivedScenes", "DepthPosterior",
            "DepthSettings", "perceive_depth", "perceive_depth_for", "render_depth_m", "run_depth_chain",
            "scene_at_pose", "support_depth_m"]
 
@@ -43,8 +43,6 @@ __all__ = ["CHAIN_BUDGET_SHARE", "DEPTH_STREAM", "DepthObservation", "DepthPerce
 #: the depth chain's random stream, apart from the samples' (SeedSequence(seed).spawn(k))
 DEPTH_STREAM = 0xDE9
 
-#: the share of a prediction's budget the depth chain may take; the samples get what it leaves
-CHAIN_BUDGET_SHARE = 0.5
 
 
 #: batches of proposals between checks of the chain's projected end against its deadline

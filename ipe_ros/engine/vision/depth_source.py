@@ -115,4 +115,5 @@ DEPTH_EVIDENCE = Evidence(
                    "'x,y,z,qx,qy,qz,qw' for a fixed camera; empty (default): from ~/depth/camera_pose",
                    constraints="empty, or 7 comma-separated numbers with a unit quaternion")),
     check=_check_parameters,
+    budget_share=0.5,  # half a prediction's budget for the chain, the rest for the samples
 )

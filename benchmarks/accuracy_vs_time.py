@@ -31,6 +31,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 import numpy as np  # noqa: E402
 
 from ipe_ros.engine import PRESETS, ModelConfig, QuerySpec, SimSettings, WorkerPool, predict  # noqa: E402
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.checking.fidelity import DEFAULT_CHECK, SelfCheck  # noqa: E402
 from ipe_ros.engine.scene.generators import generate_towers  # noqa: E402
 from ipe_ros.engine.scene.files import scenes_from_tower_csv  # noqa: E402
@@ -152,8 +153,10 @@ def run_configs(scenes, configs: list[SimSettings], model: ModelConfig, query: Q
     for i, scene in enumerate(scenes):
         for c, settings in enumerate(configs):
             start = time.perf_counter()
-            predictions[c].append(predict(scene, model, settings, query, seed=i, map_fn=pool.map,
-                                          check=_check_for(settings.name)))
+            predictions[c].append(predict(scene,
+                                          Request(model=model, settings=settings, query=query, seed=i,
+                                                  check=_check_for(settings.name), budget_s=None),
+                                          Context(map_fn=pool.map)))
             walls[c] += time.perf_counter() - start
     return [{"wall_s": wall, "predictions": preds, "rollouts": sum(p.samples for p in preds)}
             for wall, preds in zip(walls, predictions)]
@@ -222,7 +225,9 @@ def ground_truth_agreement(scenes, settings: SimSettings, truth: dict[str, bool]
 def _ground_truth(item) -> bool:
     scene, settings = item
     # the ground truth: the scene exactly as given (no noise of the model's, none of any body's own)
-    p = predict(scene, ModelConfig(object_noise=False), settings, QuerySpec(queries=frozenset({"fall"})), seed=0)
+    p = predict(scene,
+                Request(model=ModelConfig(object_noise=False), settings=settings,
+                        query=QuerySpec(queries=frozenset({"fall"})), seed=0, budget_s=None))
     return p.fall_fraction > 0
 
 

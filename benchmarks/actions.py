@@ -35,6 +35,7 @@ from pathlib import Path
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 from ipe_ros.engine import Box, Floor, ModelConfig, Scene, WorkerPool, preset  # noqa: E402
+from ipe_ros.engine import Request
 from ipe_ros.engine import actions as A  # noqa: E402
 from ipe_ros.engine.config import DEFAULT_SIGMA_M  # noqa: E402
 from ipe_ros.engine.sampling.decide import Ranking, SafeBelow, Supports, Tally  # noqa: E402
@@ -202,8 +203,9 @@ def main() -> int:
         shelves = []
         for copies in map(int, args.shelves.split(",")):
             scene = shelf(tower, copies)
-            seconds, _ = timed(lambda: A.ask(scene, [A.Remove((f"t0_{tower.dynamic_objects[0].name}",))], model(16),
-                                             settings, check=None, **kw), args.repeats)
+            seconds, _ = timed(lambda: A.ask(scene, [A.Remove((f"t0_{tower.dynamic_objects[0].name}",))],
+                                             Request(model=model(16), settings=settings, query=A.question_spec(),
+                                                     check=None, budget_s=None)), args.repeats)
             shelves.append({"towers": copies, "seconds": seconds})
     report = {"date": time.strftime("%Y-%m-%d"), "workers": args.workers, "tower": tower.name, "questions": rows,
               "unrelated_towers": shelves}

@@ -27,6 +27,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 from ipe_ros.analysis.paper_data import shared_data_dir  # noqa: E402
 from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes, predict, predict_many, preset  # noqa: E402
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.predict import AdaptiveStop  # noqa: E402
 from ipe_ros.engine.checking.fidelity import DEFAULT_CHECK  # noqa: E402
 from ipe_ros.engine.scene.generators import generate_tables, generate_towers  # noqa: E402
@@ -170,13 +171,17 @@ def main() -> int:
     result = {}
     for key, scene, model, preset_name, queries, record_every in cases():
         # the physics itself: the self-check would rerun unhealthy rollouts at `paper` (engine.checking.fidelity)
-        p = predict(scene, model, preset(preset_name), QuerySpec(queries=frozenset(queries)), seed=7,
-                    record_every=record_every, check=None)
+        p = predict(scene,
+                    Request(model=model, settings=preset(preset_name), query=QuerySpec(queries=frozenset(queries)),
+                            seed=7, check=None, budget_s=None),
+                    Context(record_every=record_every))
         result[key] = digest(p)
         print(key, result[key], flush=True)
     for key, scene, model, stop in checked_cases():
-        p = predict(scene, model, preset("default"), QuerySpec(queries=frozenset({"fall", "any_fall"})), seed=7,
-                    stop=stop, check=DEFAULT_CHECK)
+        p = predict(scene,
+                    Request(model=model, settings=preset("default"),
+                            query=QuerySpec(queries=frozenset({"fall", "any_fall"})), seed=7, stop=stop,
+                            check=DEFAULT_CHECK, budget_s=None))
         h = hashlib.sha256(digest(p).encode())
         h.update(json.dumps([p.self_check, p.stopped_by, p.samples_requested], sort_keys=True, default=list).encode())
         result[key] = h.hexdigest()[:16]
@@ -187,8 +192,11 @@ def main() -> int:
         result[f"many/{i}"] = digest(p)
         print(f"many/{i}", result[f"many/{i}"], flush=True)
     for key, scene, model, perceived in perception_cases():
-        p = predict(scene, model, preset("default"), QuerySpec(queries=frozenset({"fall", "any_fall"})), seed=7,
-                    perceived=perceived, check=None)
+        p = predict(scene,
+                    Request(model=model, settings=preset("default"),
+                            query=QuerySpec(queries=frozenset({"fall", "any_fall"})), seed=7, check=None,
+                            budget_s=None),
+                    Context(perceived=perceived))
         h = hashlib.sha256(digest(p).encode())
         h.update(json.dumps(p.request.get("perception"), sort_keys=True, default=list).encode())
         result[key] = h.hexdigest()[:16]

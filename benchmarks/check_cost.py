@@ -32,6 +32,7 @@ from accuracy_vs_time import REPO, SIGMA_M, load_towers  # noqa: E402 - the same
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, preset  # noqa: E402
 from ipe_ros.engine.checking.fidelity import DEFAULT_CHECK, NO_CHECK  # noqa: E402
 from ipe_ros.engine.predict import predict  # noqa: E402
+from ipe_ros.engine.predict import Context, Request
 from ipe_ros.engine.scene.zoo import FAMILIES, family_of, family_queries, scene_zoo, zoo_sigma_m  # noqa: E402
 
 PARTS = ("fast + verification", "last quarter + coverage", "confirmation or coverage round", "escalation")
@@ -87,15 +88,20 @@ def main() -> int:
                           time.perf_counter() - start))
             return out
 
-        predict(towers[0], model_for(towers[0], args.zoo, 2), settings, queries_for(towers[0], args.zoo),
-                map_fn=timed_map)  # imports, caches
+        predict(towers[0],
+                Request(model=model_for(towers[0], args.zoo, 2), settings=settings,
+                        query=queries_for(towers[0], args.zoo), budget_s=None),
+                Context(map_fn=timed_map))  # imports, caches
         for i, tower in enumerate(towers):
             model, query = model_for(tower, args.zoo, args.samples), queries_for(tower, args.zoo)
             walls = {}
             for name, check in (("unchecked", NO_CHECK), ("checked", DEFAULT_CHECK)):
                 calls.clear()
                 start = time.perf_counter()
-                prediction = predict(tower, model, settings, query, seed=i, map_fn=timed_map, check=check)
+                prediction = predict(tower,
+                                     Request(model=model, settings=settings, query=query, seed=i, check=check,
+                                             budget_s=None),
+                                     Context(map_fn=timed_map))
                 walls[name] = time.perf_counter() - start
             parts = Counter()
             for n, (tasks, references, wall) in enumerate(calls):

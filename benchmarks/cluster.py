@@ -21,6 +21,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 from ipe_ros.analysis.paper_data import shared_data_dir  # noqa: E402
 from ipe_ros.analysis.runs import load_tower_stimuli  # noqa: E402
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, predict, predict_many, preset  # noqa: E402
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.compute.cluster import DaskMap, local_cluster  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -41,7 +42,8 @@ def rollouts_per_s(scenes, k: int, map_fn, together: bool = False) -> float:
         predict_many([(scene, model, i) for i, scene in enumerate(scenes)], preset("default"), QUERY, map_fn)
     else:
         for i, scene in enumerate(scenes):
-            predict(scene, model, preset("default"), QUERY, seed=i, map_fn=map_fn)
+            predict(scene, Request(model=model, settings=preset("default"), query=QUERY, seed=i, budget_s=None),
+                    Context(map_fn=map_fn))
     return len(scenes) * k / (time.perf_counter() - start)
 
 

@@ -34,6 +34,7 @@ import numpy as np  # noqa: E402
 
 from actions import column  # noqa: E402 - the robot-question benchmark's column of 10 cm cubes
 from ipe_ros.engine import ModelConfig, QuerySpec, Scene, WorkerPool, predict, preset, scenes_from_tower_csv  # noqa: E402
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.config import DEFAULT_QUERIES, DEFAULT_SIGMA_M  # noqa: E402
 from ipe_ros.engine.scene.zoo import zoo_scene, zoo_sigma_m  # noqa: E402
 
@@ -67,8 +68,11 @@ def columns(pool, names, spec: str) -> list[dict]:
         scene = column_with_a_gap(count, gap)
         row = {"scene": scene.name}
         for name in ["paper", *names]:
-            p = predict(scene, ModelConfig(sigma_m=0.005, samples=8), preset("paper") if name == "paper" else
-                        settings(name), query, seed=0, map_fn=pool.map, check=None)
+            p = predict(scene,
+                        Request(model=ModelConfig(sigma_m=0.005, samples=8),
+                                settings=preset("paper") if name == "paper" else settings(name), query=query, seed=0,
+                                check=None, budget_s=None),
+                        Context(map_fn=pool.map))
             below = [v for k, v in p.object_fall_probability.items() if int(k[1:]) < gap]
             row[name] = max(below)
         rows.append(row)
@@ -88,11 +92,16 @@ def zoo(pool, names, families: str, per_family: int, samples: int) -> list[dict]
             scene = zoo_scene(family, 2026, i)
             model = ModelConfig(sigma_m=zoo_sigma_m(scene), samples=samples)
             start = time.perf_counter()
-            ref = predict(scene, model, preset("paper"), query, seed=0, map_fn=pool.map, check=None)
+            ref = predict(scene,
+                          Request(model=model, settings=preset("paper"), query=query, seed=0, check=None,
+                                  budget_s=None),
+                          Context(map_fn=pool.map))
             walls["paper"] += time.perf_counter() - start
             for n in names:
                 start = time.perf_counter()
-                p = predict(scene, model, settings(n), query, seed=0, map_fn=pool.map, check=None)
+                p = predict(scene,
+                            Request(model=model, settings=settings(n), query=query, seed=0, check=None, budget_s=None),
+                            Context(map_fn=pool.map))
                 walls[n] += time.perf_counter() - start
                 d = [abs(p.object_fall_probability[o] - ref.object_fall_probability[o])
                      for o in ref.object_fall_probability]
@@ -119,8 +128,10 @@ def towers(pool, count: int) -> dict:
         answers = {}
         for n in (["both", "neither"] if i % 2 == 0 else ["neither", "both"]):
             start = time.perf_counter()
-            answers[n] = predict(scene, ModelConfig(sigma_m=DEFAULT_SIGMA_M, samples=48), settings(n), query,
-                                 seed=3, map_fn=pool.map, check=None)
+            answers[n] = predict(scene,
+                                 Request(model=ModelConfig(sigma_m=DEFAULT_SIGMA_M, samples=48), settings=settings(n),
+                                         query=query, seed=3, check=None, budget_s=None),
+                                 Context(map_fn=pool.map))
             walls[n] += time.perf_counter() - start
         d = abs(answers["both"].fall_fraction - answers["neither"].fall_fraction)
         moved += d > 1e-12

@@ -142,6 +142,7 @@ def tower_cost(workers: int = 2, k: int = 48, repeats: int = 3) -> dict:
     import tempfile
 
     from ipe_ros.engine import QuerySpec, WorkerPool, load_scenes, predict
+    from ipe_ros.engine import Context, Request
     from ipe_ros.engine.config import DEFAULT_QUERIES
     from ipe_ros.engine.scene.examples import example_scene_path
 
@@ -160,9 +161,10 @@ def tower_cost(workers: int = 2, k: int = 48, repeats: int = 3) -> dict:
             times = {}
             for checked in (True, False):
                 start = time.perf_counter()
-                prediction = predict(guess, ModelConfig(perception="depth", samples=k), preset("default"),
-                                     QuerySpec(queries=DEFAULT_QUERIES), map_fn=pool.map, perceived=perceived,
-                                     **({} if checked else {"check": None}))
+                prediction = predict(guess, Request(model=ModelConfig(perception="depth", samples=k),
+                                                    settings=preset("default"), query=QuerySpec(queries=DEFAULT_QUERIES),
+                                                    budget_s=None, check=DEFAULT_CHECK if checked else None),
+                                     Context(map_fn=pool.map, perceived=perceived))
                 times[checked] = time.perf_counter() - start
             runs.append((chain_s, times[True], times[False]))
     chain_s, checked_s, unchecked_s = (float(np.median(column)) for column in zip(*runs))

@@ -157,6 +157,7 @@ def one_scene(rng: np.random.Generator, chain_seed: int, settings: D.DepthSettin
     predict_s, outcome = None, {}
     if pool is not None:  # end to end: the prediction from the posterior's scenes, self-checked
         from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
+        from ipe_ros.engine import Context, Request
         from ipe_ros.engine.config import DEFAULT_QUERIES
 
         # the guess's heights are 5 mm off: one that sinks a box into the floor is refused as a scene, as
@@ -166,17 +167,23 @@ def one_scene(rng: np.random.Generator, chain_seed: int, settings: D.DepthSettin
             if i == 0 else b for i, b in enumerate(guess.objects)))
         queries = QuerySpec(queries=DEFAULT_QUERIES)
         start = time.perf_counter()
-        answer = predict(on_floor, ModelConfig(perception="depth", samples=PREDICTION_K), preset("default"), queries,
-                         map_fn=pool.map, perceived=perceived)
+        answer = predict(on_floor,
+                         Request(model=ModelConfig(perception="depth", samples=PREDICTION_K),
+                                 settings=preset("default"), query=queries, budget_s=None),
+                         Context(map_fn=pool.map, perceived=perceived))
         predict_s = time.perf_counter() - start
         # what the tower does (its true poses, simulated as given), against the answer, and against the
         # same posterior's samples with their heights as drawn (no set-down): the benchmark's own truth
         truth = predict(scene_of(boxes, board) if tilt_sd_rad == 0 else _tilted_scene(boxes, board),
-                        ModelConfig(samples=1, object_noise=False), preset("default"), queries, map_fn=pool.map)
+                        Request(model=ModelConfig(samples=1, object_noise=False), settings=preset("default"),
+                                query=queries, budget_s=None),
+                        Context(map_fn=pool.map))
         as_drawn = dataclasses.replace(perceived, scenes=tuple(dataclasses.replace(s, set_down_m=0.0)
                                                                for s in perceived.scenes))
-        unset = predict(on_floor, ModelConfig(perception="depth", samples=PREDICTION_K), preset("default"), queries,
-                        map_fn=pool.map, perceived=as_drawn)
+        unset = predict(on_floor,
+                        Request(model=ModelConfig(perception="depth", samples=PREDICTION_K),
+                                settings=preset("default"), query=queries, budget_s=None),
+                        Context(map_fn=pool.map, perceived=as_drawn))
         outcome = {"fell": truth.any_fall_probability, "p_any_falls": answer.any_fall_probability,
                    "p_any_falls_as_drawn": unset.any_fall_probability}
     low, high = posterior.interval95()

@@ -26,6 +26,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 import numpy as np  # noqa: E402
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset  # noqa: E402
+from ipe_ros.engine import Request
 from ipe_ros.engine.config import DEFAULT_QUERIES  # noqa: E402
 from ipe_ros.engine.scene.zoo import FAMILIES, zoo_scene, zoo_sigma_m  # noqa: E402
 from ipe_ros.engine.simulation import impacts, uses_direct_solver  # noqa: E402
@@ -74,7 +75,9 @@ def main() -> None:
                 answers = {}
                 for label, settings in (("impacts", impacts_only), ("whole", whole)):
                     start = time.perf_counter()
-                    answers[label] = predict(scene, model, settings, query, seed=1, check=None)
+                    answers[label] = predict(scene,
+                                             Request(model=model, settings=settings, query=query, seed=1, check=None,
+                                                     budget_s=None))
                     seconds[label] += time.perf_counter() - start
                 a, b = answers["impacts"].object_fall_probability, answers["whole"].object_fall_probability
                 differences.extend(abs(a[k] - b[k]) for k in a)

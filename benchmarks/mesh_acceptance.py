@@ -25,6 +25,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 import numpy as np  # noqa: E402
 
 from ipe_ros.engine import ModelConfig, QuerySpec, SceneError, load_scenes, predict, preset  # noqa: E402
+from ipe_ros.engine import Request
 
 FORMATS = (".obj", ".stl", ".ply", ".glb")
 QUERY = QuerySpec(queries=frozenset({"fall", "final_pose"}))
@@ -65,7 +66,9 @@ def one(path: Path, folder: Path) -> dict:
     shape = scene.objects[0].shape
     row.update(parts=len(shape.parts), points=sum(len(p.shape.vertices_m) for p in shape.parts),
                volume_m3=shape.volume_m3, repaired=shape.source.repaired)  # how an open one was closed
-    answer = predict(scene, ModelConfig(sigma_m=0.0, samples=1, object_noise=False), preset("paper"), QUERY, check=None)
+    answer = predict(scene,
+                     Request(model=ModelConfig(sigma_m=0.0, samples=1, object_noise=False), settings=preset("paper"),
+                             query=QUERY, check=None, budget_s=None))
     if answer.samples:
         outcome = answer.outcomes[0]
         moved = np.linalg.norm(outcome.rollouts[0].final_positions_m[0] - outcome.initial_positions_m[0])

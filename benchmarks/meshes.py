@@ -26,6 +26,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 import numpy as np  # noqa: E402
 
 from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes, predict, preset  # noqa: E402
+from ipe_ros.engine import Request
 from ipe_ros.engine.scene import household, shapes  # noqa: E402
 
 OBJECTS = {"cup": household.cup(), "bowl": household.bowl()}
@@ -52,8 +53,9 @@ def load(folder: Path, data: dict):
 
 def timed_prediction(s, settings: str, samples: int, seed: int = 0):
     started = time.perf_counter()
-    answer = predict(s, ModelConfig(sigma_m=0.01, samples=samples), preset(settings),
-                     QuerySpec(queries=frozenset({"fall"})), seed=seed, check=None)
+    answer = predict(s,
+                     Request(model=ModelConfig(sigma_m=0.01, samples=samples), settings=preset(settings),
+                             query=QuerySpec(queries=frozenset({"fall"})), seed=seed, check=None, budget_s=None))
     return time.perf_counter() - started, answer.object_fall_probability
 
 

@@ -29,6 +29,7 @@ from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from ipe_ros.engine.scene.examples import example_scene_path  # noqa: E402
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, predict, preset  # noqa: E402
+from ipe_ros.engine import Context, Request
 from ipe_ros.ros.node import LATCHED_QOS, IpeNode  # noqa: E402
 from msg_bridge.markers import scene_to_markers  # noqa: E402
 
@@ -55,7 +56,9 @@ def engine_times(scene, k: int, workers: int, repeats: int) -> list[float]:
         times = []
         for i in range(repeats):
             start = time.perf_counter()
-            predict(shifted(scene, i), model, preset("default"), query, seed=0, map_fn=pool.map)
+            predict(shifted(scene, i),
+                    Request(model=model, settings=preset("default"), query=query, seed=0, budget_s=None),
+                    Context(map_fn=pool.map))
             times.append(time.perf_counter() - start)
     return times
 

@@ -30,6 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import accuracy_vs_time as A  # noqa: E402
 
 from ipe_ros.engine import PRESETS, ModelConfig, QuerySpec, SimSettings, WorkerPool, predict  # noqa: E402
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.checking import envelope  # noqa: E402
 from ipe_ros.engine.checking.fidelity import DEFAULT_CHECK  # noqa: E402
 
@@ -76,8 +77,10 @@ def run(scenes, configs: dict[str, SimSettings], model: ModelConfig, query: Quer
         for name, settings in configs.items():
             start = time.perf_counter()
             with as_the_preset(None if name == "paper" else settings):
-                prediction = predict(scene, model, settings, query, seed=i, map_fn=pool.map,
-                                     check=None if name == "paper" else DEFAULT_CHECK)
+                prediction = predict(scene,
+                                     Request(model=model, settings=settings, query=query, seed=i,
+                                             check=None if name == "paper" else DEFAULT_CHECK, budget_s=None),
+                                     Context(map_fn=pool.map))
             results[name]["wall_s"] += time.perf_counter() - start
             results[name]["predictions"].append(prediction)
             results[name]["rollouts"] += prediction.samples

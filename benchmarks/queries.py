@@ -26,6 +26,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, predict, preset  # noqa: E402
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.scene.zoo import scene_zoo, zoo_sigma_m  # noqa: E402
 
 #: the pair asked of each family's scenes
@@ -49,8 +50,10 @@ def main() -> int:
     rows = []
     with WorkerPool(2) as pool:
         warm = scene_zoo(args.seed, 1, ("drop",))[0]  # workers started and imports done before any timing
-        predict(warm, ModelConfig(sigma_m=zoo_sigma_m(warm), samples=4), settings, QuerySpec(), map_fn=pool.map,
-                check=None)
+        predict(warm,
+                Request(model=ModelConfig(sigma_m=zoo_sigma_m(warm), samples=4), settings=settings, query=QuerySpec(),
+                        check=None, budget_s=None),
+                Context(map_fn=pool.map))
         for family, pair_of in PAIRS.items():
             times = {"final_pose": 0.0, "final_pose+contact": 0.0, "contact": 0.0}
             same = simulated_alone = simulated_rest = 0
@@ -64,7 +67,10 @@ def main() -> int:
                 for name, queries in runs[asked % 3:] + runs[:asked % 3]:  # the order turns scene by scene
                     spec = QuerySpec(queries=frozenset(queries), contact_pairs=(pair,) if "contact" in queries else ())
                     start = time.perf_counter()
-                    answers[name] = predict(scene, model, settings, spec, seed=1, map_fn=pool.map, check=None)
+                    answers[name] = predict(scene,
+                                            Request(model=model, settings=settings, query=spec, seed=1, check=None,
+                                                    budget_s=None),
+                                            Context(map_fn=pool.map))
                     times[name] += time.perf_counter() - start
                 same += answers["contact"].contact_probability == answers["final_pose+contact"].contact_probability
                 simulated_alone += sum(r.simulated_s for o in answers["contact"].outcomes for r in o.rollouts)

@@ -40,6 +40,7 @@ import numpy as np  # noqa: E402
 
 from accuracy_vs_time import _anything_fell  # noqa: E402 - the towers' "did anything fall?"
 from ipe_ros.engine import PRESETS, ModelConfig, QuerySpec, WorkerPool, predict  # noqa: E402
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.config import DEFAULT_QUERIES  # noqa: E402
 from ipe_ros.engine.simulation.health import energy_scale_j  # noqa: E402
 from ipe_ros.engine.scene.zoo import EXTRA_QUERIES, FAMILIES, family_of, family_queries, scene_zoo, zoo_sigma_m  # noqa: E402
@@ -228,8 +229,12 @@ def main(argv: list[str] | None = None) -> None:
             for name, (settings, check) in configs.items():
                 t0 = time.perf_counter()
                 with as_the_preset(settings if name.startswith(TRIAL) else None):
-                    prediction = predict(scene, model, settings, QuerySpec(queries=family_queries(family_of(scene))),
-                                         seed=sample_seed(scene, args.sample_seed), map_fn=pool.map, check=check)
+                    prediction = predict(scene,
+                                         Request(model=model, settings=settings,
+                                                 query=QuerySpec(queries=family_queries(family_of(scene))),
+                                                 seed=sample_seed(scene, args.sample_seed), check=check,
+                                                 budget_s=None),
+                                         Context(map_fn=pool.map))
                 wall = time.perf_counter() - t0
                 results[name].append({"family": family_of(scene), "prediction": prediction, "wall_s": wall,
                                       "energy_scale_j": energy_scale_j(scene)})

@@ -38,7 +38,7 @@ from .cli_infer import add_infer_parser, cmd_infer
 from .cli_inputs import add_input_options, add_inputs_from_option, finite
 from .cli_predict import EXIT_BAD_INPUT, add_batch_options, batch_map, cmd_predict, format_table, run_predictions, stored_line
 from .cli_queries import add_query_parameter_options
-from .engine import PRESETS, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError, load_scenes, preset
+from .engine import PRESETS, ConfigError, ModelConfig, Prediction, QuerySpec, Request, SceneError, load_scenes, preset
 from .engine.scene.catalogue import capped_tower, scene_catalogue
 from .engine.config import DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES, default_workers
 from .engine.scene.examples import example_scene_path
@@ -214,7 +214,8 @@ def cmd_demo(_args) -> int:
     for title, model in (("Ground truth (sigma = phi = 0, one deterministic rollout):", ModelConfig(object_noise=False)),
                          (ipe_title, DEFAULT_MODEL)):
         rows: list[Prediction] = []
-        run_predictions(scenes, model, preset(DEFAULT_PRESET), query, 0, workers, rows.append)
+        run_predictions(scenes, Request(model=model, settings=preset(DEFAULT_PRESET), query=query, budget_s=None),
+                        workers, rows.append)
         print(title)
         print(format_table(rows))
         p = rows[0]

@@ -14,9 +14,8 @@ import sys
 from .cli_evidence import chosen_perception, describe
 from .cli_inputs import given_request_arguments, typed_option
 from .cli_queries import given_query_parameters
-from .engine import AdaptiveStop, ConfigError, ModelConfig, Prediction, QuerySpec, SceneError, WorkerPool, load_scenes, predict
+from .engine import ConfigError, Context, Prediction, Request, SceneError, WorkerPool, load_scenes, predict
 from .engine.config import anytime_batch_size, default_workers
-from .engine.checking.fidelity import DEFAULT_CHECK, SelfCheck
 from .engine.inputs import spelled
 from .engine.sampling.perturb import is_deterministic
 from .engine.query import QUERIES
@@ -144,21 +143,20 @@ def stored_line(store, resume: str) -> str:
             + (f", {store.rejected} stored entries refused" if store.rejected else ""))
 
 
-def run_predictions(scenes, model: ModelConfig, sim, query: QuerySpec, seed: int, workers: int, emit,
-                     stop: AdaptiveStop | None = None, budget_s: float | None = None, perceived=None,
-                     scheduler: str | None = None, check: SelfCheck = DEFAULT_CHECK, evidence=None) -> None:
-    """``evidence``: what the model's perception draws its scenes given (``engine.evidence``): its
+def run_predictions(scenes, request: Request, workers: int, emit, scheduler: str | None = None, evidence=None) -> None:
+    """``request`` of every scene, on ``workers`` local processes or the Dask ``scheduler``'s;
+    ``evidence``: what the model's perception draws its scenes given (``engine.evidence``): its
     chain runs inside ``predict``, on the samples' workers, within its share of the budget."""
-    pool = sample_map(scheduler, min(workers, max(1, model.samples)) if workers > 0 else workers)
-    if stop is not None:
+    pool = sample_map(scheduler, min(workers, max(1, request.model.samples)) if workers > 0 else workers)
+    if request.stop is not None:  # anytime batches as wide as the workers
         from .engine.compute.cluster import DaskMap
 
         parallel = pool.workers if isinstance(pool, DaskMap) else workers
-        stop = dataclasses.replace(stop, batch_size=anytime_batch_size(parallel))
+        request = dataclasses.replace(request, stop=dataclasses.replace(request.stop,
+                                                                        batch_size=anytime_batch_size(parallel)))
     try:
         for scene in steps(scenes, "predict") if len(scenes) > 1 else scenes:
-            emit(predict(scene, model, sim, query, seed=seed, map_fn=pool.map if pool else None, stop=stop,
-                         budget_s=budget_s, perceived=perceived, check=check, evidence=evidence))
+            emit(predict(scene, request, Context(map_fn=pool.map if pool else None, evidence=evidence)))
     finally:
         if pool is not None:
             pool.close()
@@ -181,22 +179,21 @@ def cmd_predict(args) -> int:
     # one request from the options (engine.request); its errors read as the options (main: as_spelled)
     request = build_request(query_parameters=given_query_parameters(args), **chosen.request_arguments,
                             **given_request_arguments(args))
-    model, sim, query, stop, check = request.model, request.settings, request.query, request.stop, request.check
+    model, sim = request.model, request.settings
     if args.png is not None and len(scenes) != 1:
         raise ConfigError("--png", f"draws one scene, but {args.path} holds {len(scenes)}; choose one with --tower")
     chosen.refuse_many(scenes, args.path)
     scenes = _answerable(args, scenes, refused, request)
     collected: list[Prediction] = []
     if args.json:
-        run_predictions(scenes, model, sim, query, args.seed, args.workers,
-                        lambda p: (collected.append(p), print(prediction_json(p), flush=True)), stop, args.budget_s,
-                        None, args.scheduler, check, chosen.evidence)
+        run_predictions(scenes, request, args.workers,
+                        lambda p: (collected.append(p), print(prediction_json(p), flush=True)), args.scheduler,
+                        chosen.evidence)
     else:
         k = 1 if all(is_deterministic(s, model) for s in scenes) else args.samples
         print(f"sigma = {model.sigma_m:g} m, phi = {','.join(f'{v:g}' for v in model.phi_m_s2)} m/s^2, mu = {args.mu}, "
               f"k = {k}, preset = {sim.name}, seed = {args.seed}" + chosen.heading(model))
-        run_predictions(scenes, model, sim, query, args.seed, args.workers, collected.append, stop, args.budget_s,
-                        None, args.scheduler, check, chosen.evidence)
+        run_predictions(scenes, request, args.workers, collected.append, args.scheduler, chosen.evidence)
         print(format_table(collected))
         for line in describe(collected, args.perception):
             print(line)

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import Box, ConfigError, Floor, ModelConfig, Scene, Sphere, preset
+from ipe_ros.engine import Request
 from ipe_ros.engine import actions as A
 from ipe_ros.engine.actions.answers import fell, ran
 from ipe_ros.engine.sampling.decide import Ranking, SafeBelow, Tally
@@ -114,9 +115,11 @@ def test_towers_close_enough_to_topple_onto_each_other_are_one_group():
 
 
 def test_common_random_numbers_make_answers_independent_of_the_other_variants():
-    alone = A.ask(ARCH, [A.Remove(("pillar_r",))], MODEL, SETTINGS, seed=3)
-    together = A.ask(ARCH, [A.Remove(("keystone",)), None, A.Remove(("pillar_r",)), A.Remove(("cap_l",))], MODEL,
-                     SETTINGS, seed=3)
+    alone = A.ask(ARCH, [A.Remove(("pillar_r",))],
+                  Request(model=MODEL, settings=SETTINGS, query=A.question_spec(), seed=3, budget_s=None, check=None))
+    together = A.ask(ARCH, [A.Remove(("keystone",)), None, A.Remove(("pillar_r",)), A.Remove(("cap_l",))],
+                     Request(model=MODEL, settings=SETTINGS, query=A.question_spec(), seed=3, budget_s=None,
+                             check=None))
     paired = _by_label(together)["remove/pillar_r"]
     assert _by_label(alone)["remove/pillar_r"] == dataclasses.replace(paired, caused_fall_probability=None,
                                                                     given_stands=None)
@@ -125,10 +128,15 @@ def test_common_random_numbers_make_answers_independent_of_the_other_variants():
     # a placement's own noise is keyed by the placement, not by its place in the list
     cap = box("cap", 0.0, 0.0, 0.85)
     wobbly = ModelConfig(sigma_m=0.05, samples=8)
-    first = A.ask(ARCH, [A.Place(cap)], wobbly, SETTINGS, seed=3).variants[0]
-    later = _by_label(A.ask(ARCH, [A.Remove(("cap_l",)), A.Place(cap)], wobbly, SETTINGS, seed=3))[A.Place(cap).label]
+    first = A.ask(ARCH, [A.Place(cap)],
+                  Request(model=wobbly, settings=SETTINGS, query=A.question_spec(), seed=3, budget_s=None, check=None)).variants[0]
+    later = _by_label(A.ask(ARCH, [A.Remove(("cap_l",)), A.Place(cap)],
+                            Request(model=wobbly, settings=SETTINGS, query=A.question_spec(), seed=3, budget_s=None,
+                                    check=None)))[A.Place(cap).label]
     assert first == later
-    other_seed = A.ask(ARCH, [A.Remove(("pillar_r",))], MODEL, SETTINGS, seed=4)
+    other_seed = A.ask(ARCH, [A.Remove(("pillar_r",))],
+                       Request(model=MODEL, settings=SETTINGS, query=A.question_spec(), seed=4, budget_s=None,
+                               check=None))
     assert other_seed.variants[0].samples == 8
 
 
@@ -153,13 +161,17 @@ def test_the_scene_as_it_is_is_exactly_a_prediction(settings):
     """A question's "as is" variant is a prediction's sample, bit for bit (the same task, the same
     separated world simulated on): its answer is the prediction's, whatever else is asked beside it."""
     from ipe_ros.engine import QuerySpec, predict
+    from ipe_ros.engine import Request
     from ipe_ros.engine.sampling.rollout import SampleTask, run_sample
 
     model = ModelConfig(sigma_m=0.03, samples=6)
     query = QuerySpec(queries=frozenset({"fall"}))
-    prediction = predict(LINTEL, model, settings, query, seed=7, check=None)
+    prediction = predict(LINTEL,
+                         Request(model=model, settings=settings, query=query, seed=7, check=None, budget_s=None))
     for actions in ([None], [None, A.Remove(("left",))]):
-        (as_is, *_) = A.ask(LINTEL, actions, model, settings, seed=7, check=None).variants
+        (as_is, *_) = A.ask(LINTEL, actions,
+                            Request(model=model, settings=settings, query=A.question_spec(), seed=7, check=None,
+                                    budget_s=None)).variants
         assert as_is.object_fall_probability == prediction.object_fall_probability
     seed = np.random.SeedSequence(7).spawn(6)[2]
     alone = run_sample(SampleTask(scene=LINTEL, model=model, settings=settings, query=query, index=2, seed=seed))
@@ -273,11 +285,14 @@ def test_pushing_the_bottom_block_drops_the_top_in_the_push_direction():
 
 def test_bad_questions_name_the_field():
     with pytest.raises(ConfigError, match=r"^actions\[0\]\.names: no object named 'nope' in 'stack'$"):
-        A.ask(STACK, [A.Remove(("nope",))], MODEL, SETTINGS)
+        A.ask(STACK, [A.Remove(("nope",))],
+              Request(model=MODEL, settings=SETTINGS, query=A.question_spec(), budget_s=None, check=None))
     with pytest.raises(ConfigError, match=r"^actions\[0\]\.body\.name: 'top' is already in the scene"):
-        A.ask(STACK, [A.Place(box("top", 0, 0, 0.5))], MODEL, SETTINGS)
+        A.ask(STACK, [A.Place(box("top", 0, 0, 0.5))],
+              Request(model=MODEL, settings=SETTINGS, query=A.question_spec(), budget_s=None, check=None))
     with pytest.raises(ConfigError, match=r"^actions\[0\]\.velocity_m_s: must be a finite horizontal velocity"):
-        A.ask(STACK, [A.Push("top", (0.0, 0.0, 1.0))], MODEL, SETTINGS)
+        A.ask(STACK, [A.Push("top", (0.0, 0.0, 1.0))],
+              Request(model=MODEL, settings=SETTINGS, query=A.question_spec(), budget_s=None, check=None))
     with pytest.raises(ConfigError, match=r"^target: no dynamic object named 'x' in 'stack'$"):
         A.clear_order(STACK, MODEL, SETTINGS, target="x")
 
@@ -560,3 +575,17 @@ def test_ipe_ask_asks_the_very_question_the_node_reads_from_json(argv, data):
 def test_a_question_of_no_known_kind_is_refused_by_name(kind):
     with pytest.raises(ConfigError, match=r"^question: must be one of remove, support, clear, place, push, got "):
         question_from_dict({"question": kind})
+
+
+def test_a_question_and_a_prediction_each_refuse_the_others_stopping_rule():
+    from ipe_ros.engine import AdaptiveStop, QuerySpec, predict
+    from ipe_ros.engine.sampling.decide import Ranking, Sequential
+
+    with pytest.raises(ConfigError, match=r"^stop: a question stops by a Sequential rule \(engine.sampling.decide\); "
+                                          r"anytime sampling \(AdaptiveStop\) is for predictions$"):
+        A.ask(STACK, [None], Request(model=MODEL, settings=SETTINGS, query=A.question_spec(),
+                                     stop=AdaptiveStop(ci_width=0.2), budget_s=None, check=None))
+    with pytest.raises(ConfigError, match=r"^stop: a prediction stops by an AdaptiveStop \(a deadline or an interval "
+                                          r"width\); a Sequential rule decides robot questions$"):
+        predict(STACK, Request(model=MODEL, settings=SETTINGS, query=QuerySpec(), stop=Sequential(Ranking()),
+                               budget_s=None))

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.scene.catalogue import scene_catalogue
 from ipe_ros.engine.simulation.health import energy_scale_j
 
@@ -39,7 +40,10 @@ def catalogue():
 
 @pytest.fixture(scope="module")
 def answers(catalogue, pool):
-    return {name: [predict(s, _model(s), preset(name), QUERY, seed=3, map_fn=pool.map, check=None) for s in catalogue]
+    return {name: [predict(s,
+                           Request(model=_model(s), settings=preset(name), query=QUERY, seed=3, check=None,
+                                   budget_s=None),
+                           Context(map_fn=pool.map)) for s in catalogue]
             for name in ("paper", "accurate", "fine", "default")}
 
 
@@ -87,10 +91,11 @@ def test_a_ball_wedged_under_a_heavier_cylinder_gains_no_energy(name):
     # The sequential-impulse solver, giving each contact its restitution in turn, added energy by the
     # joule (paper +5.5 J of a 12 J scale, default more); the direct solver adds none.
     scene = scene_catalogue(1, 2)[1]
-    prediction = predict(scene, ModelConfig(), preset(name), QUERY, check=None)
+    prediction = predict(scene,
+                         Request(model=ModelConfig(), settings=preset(name), query=QUERY, check=None, budget_s=None))
     assert prediction.max_energy_gain_j <= MAX_ENERGY_GAIN * energy_scale_j(scene)
     sequential = preset(name).changed(solver={"direct_solver_for_restitution": False})
-    assert predict(scene, ModelConfig(), sequential, QUERY, check=None).max_energy_gain_j > energy_scale_j(scene) / 3
+    assert predict(scene, Request(model=ModelConfig(), settings=sequential, query=QUERY, check=None, budget_s=None)).max_energy_gain_j > energy_scale_j(scene) / 3
 
 
 def test_a_heavy_bouncy_cylinder_on_a_light_one_gains_no_energy():
@@ -98,7 +103,8 @@ def test_a_heavy_bouncy_cylinder_on_a_light_one_gains_no_energy():
     # time (not only as far as bodies travel) the direct solver gave it 2% of the scene's energy
     scene = scene_catalogue(2, 13)[12]
     model = ModelConfig(sigma_m=0.05 * min(b.smallest_extent_m for b in scene.objects), samples=4)
-    prediction = predict(scene, model, preset("default"), QUERY, check=None)
+    prediction = predict(scene,
+                         Request(model=model, settings=preset("default"), query=QUERY, check=None, budget_s=None))
     assert prediction.max_energy_gain_j <= MAX_ENERGY_GAIN * energy_scale_j(scene)
 
 

@@ -10,6 +10,7 @@ import pytest
 distributed = pytest.importorskip("distributed", reason="dask/distributed are pinned in requirements.txt")
 
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, predict, preset  # noqa: E402
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.compute.cluster import DaskMap, local_cluster, scheduler_address  # noqa: E402
 
 #: a Dask LocalCluster per test
@@ -27,8 +28,10 @@ def test_a_prediction_on_the_cluster_is_bit_identical_to_the_local_pool(cluster)
     tower = load_scenes("ipe_ros/data/example_tower.json")[0]
     model, query = ModelConfig(sigma_m=0.04, samples=12), QuerySpec(queries=frozenset({"fall", "any_fall", "direction"}))
     with WorkerPool(2) as pool:
-        local = predict(tower, model, preset("default"), query, seed=5, map_fn=pool.map)
-    remote = predict(tower, model, preset("default"), query, seed=5, map_fn=DaskMap(cluster, batch_size=5).map)
+        local = predict(tower, Request(model=model, settings=preset("default"), query=query, seed=5, budget_s=None),
+                        Context(map_fn=pool.map))
+    remote = predict(tower, Request(model=model, settings=preset("default"), query=query, seed=5, budget_s=None),
+                     Context(map_fn=DaskMap(cluster, batch_size=5).map))
     strip = lambda p: {k: v for k, v in p.to_dict().items() if k != "wall_s"}  # noqa: E731
     assert strip(remote) == strip(local)
     for a, b in zip(local.outcomes, remote.outcomes):
@@ -99,7 +102,10 @@ def test_a_node_offloads_its_samples_to_the_cluster(cluster):
     finally:
         ros.close()
     with WorkerPool(2) as pool:
-        local = predict(tower, ModelConfig(sigma_m=0.04, samples=6), preset("default"),
-                        QuerySpec(queries=frozenset({"fall", "any_fall", "direction", "far"})), seed=4, map_fn=pool.map)
+        local = predict(tower,
+                        Request(model=ModelConfig(sigma_m=0.04, samples=6), settings=preset("default"),
+                                query=QuerySpec(queries=frozenset({"fall", "any_fall", "direction", "far"})), seed=4,
+                                budget_s=None),
+                        Context(map_fn=pool.map))
     answer = json.loads(answers[0].data)
     assert answer["fall_fraction"] == local.fall_fraction and answer["direction_rad"] == local.direction_rad

@@ -16,6 +16,7 @@ import pytest
 
 from ipe_ros.cli import main
 from ipe_ros.engine import Body, Box, ConfigError, Floor, ModelConfig, QuerySpec, Scene, load_scenes, preset, predict
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.scene.shapes import BoxShape
 from ipe_ros.engine.vision import depth as D
 from ipe_ros.engine.vision import depth_io
@@ -241,8 +242,10 @@ def test_a_tower_with_a_hidden_block_gets_a_less_certain_answer():
     answers = {}
     for view, scene in (("seen", floor(*stack)), ("hidden", floor(*stack, wall()))):
         perceived = D.perceive_depth(scene, 16, (observe(scene, SIDE),), D.DepthSettings(), np.random.default_rng(2))
-        answers[view] = predict(scene, ModelConfig(perception="depth", samples=16), preset("default"),
-                                QuerySpec(queries=frozenset({"any_fall"})), perceived=perceived, check=None)
+        answers[view] = predict(scene,
+                                Request(model=ModelConfig(perception="depth", samples=16), settings=preset("default"),
+                                        query=QuerySpec(queries=frozenset({"any_fall"})), check=None, budget_s=None),
+                                Context(perceived=perceived))
     seen, hidden = (answers[v].any_fall_probability for v in ("seen", "hidden"))
     assert seen == 0.0 and hidden >= 0.15
     assert answers["hidden"].request["perception"]["kind"] == "depth"
@@ -257,8 +260,10 @@ def test_the_posteriors_samples_start_resting_on_their_supports():
     for sds in (0.0, D.DepthSettings().set_down_sds):
         settings = D.DepthSettings(set_down_sds=sds)
         perceived = D.perceive_depth(truth, 8, (observe(truth, camera),), settings, np.random.default_rng(0))
-        prediction = predict(truth, ModelConfig(perception="depth", samples=8), preset("default"),
-                             QuerySpec(queries=frozenset({"any_fall"})), perceived=perceived, check=None)
+        prediction = predict(truth,
+                             Request(model=ModelConfig(perception="depth", samples=8), settings=preset("default"),
+                                     query=QuerySpec(queries=frozenset({"any_fall"})), check=None, budget_s=None),
+                             Context(perceived=perceived))
         starts[sds] = np.array([o.initial_positions_m[:, 2] for o in prediction.outcomes])
         assert all(s.set_down_m == (0.0 if sds == 0 else perceived.scenes[0].set_down_m) for s in perceived.scenes)
     assert perceived.scenes[0].set_down_m >= D.SET_DOWN_FLOOR_M
@@ -279,8 +284,11 @@ def test_a_robot_question_draws_its_samples_from_the_depth_posterior():
     for view, scene in (("seen", floor(*stack)), ("hidden", floor(*stack, wall()))):
         perceived = D.perceive_depth(scene, 24, (observe(scene, SIDE),), D.DepthSettings(), np.random.default_rng(2))
         fewer = perceived.with_samples(16)  # the question's k from the same chain
-        prediction = predict(scene, dataclasses.replace(model, perception="depth"), preset("default"),
-                             QuerySpec(queries=frozenset({"any_fall", "fall"})), perceived=fewer, seed=5, check=None)
+        prediction = predict(scene,
+                             Request(model=dataclasses.replace(model, perception="depth"), settings=preset("default"),
+                                     query=QuerySpec(queries=frozenset({"any_fall", "fall"})), seed=5, check=None,
+                                     budget_s=None),
+                             Context(perceived=fewer))
         answers = remove(scene, ["top"], model, preset("default"), seed=5, sequential=False, perceived=fewer)
         as_is = answers.variants[0]
         assert as_is.label == "as_is" and as_is.any_fall_probability == prediction.any_fall_probability
@@ -295,7 +303,9 @@ def test_a_robot_question_draws_its_samples_from_the_depth_posterior():
 def test_depth_perception_needs_its_images_and_names_what_is_wrong():
     scene = floor(cube("a", 0, 0, 0.05))
     with pytest.raises(ConfigError, match="^perception: depth perception needs the depth images"):
-        predict(scene, ModelConfig(perception="depth", samples=2), preset("default"), QuerySpec())
+        predict(scene,
+                Request(model=ModelConfig(perception="depth", samples=2), settings=preset("default"),
+                        query=QuerySpec(), budget_s=None))
     camera = look_at((1, 0, 0.5), (0, 0, 0))
     with pytest.raises(ConfigError, match=r"^depth: the image is 10 x 5 pixels but the camera info says 320 x 240$"):
         D.DepthObservation(camera, np.zeros((5, 10)))
@@ -369,9 +379,12 @@ def test_predict_given_the_evidence_runs_the_chain_the_caller_would_run():
     scene = floor(cube("a", 0, 0, 0.05), cube("b", 0.02, 0, 0.15))
     observation = observe(scene, look_at((1.0, -0.7, 0.6), (0, 0, 0.1), width_px=160, height_px=120))
     model, query = ModelConfig(perception="depth", samples=4), QuerySpec(queries=frozenset({"fall", "final_pose"}))
-    given = predict(scene, model, preset("default"), query, seed=5, check=None, evidence=(observation,))
-    before = predict(scene, model, preset("default"), query, seed=5, check=None,
-                     perceived=D.perceive_depth_for(scene, 4, (observation,), 5))
+    given = predict(scene,
+                    Request(model=model, settings=preset("default"), query=query, seed=5, check=None, budget_s=None),
+                    Context(evidence=(observation,)))
+    before = predict(scene,
+                     Request(model=model, settings=preset("default"), query=query, seed=5, check=None, budget_s=None),
+                     Context(perceived=D.perceive_depth_for(scene, 4, (observation,), 5)))
     assert given.request["perception"] == before.request["perception"]
     assert [r.final_positions_m.tolist() for o in given.outcomes for r in o.rollouts] == \
         [r.final_positions_m.tolist() for o in before.outcomes for r in o.rollouts]

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, WorkerPool, load_scenes, predict, preset
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.scene.examples import example_scene_path
 
 from .helpers import without_timing
@@ -17,13 +18,16 @@ QUERY = QuerySpec(queries=frozenset({"fall", "direction", "far"}))
 @pytest.mark.slow
 def test_same_seed_same_json_whatever_the_worker_count(pool):
     scene = load_scenes(example_scene_path())[0]
-    serial = predict(scene, MODEL, preset("default"), QUERY, seed=11)
-    two = predict(scene, MODEL, preset("default"), QUERY, seed=11, map_fn=pool.map)
+    serial = predict(scene, Request(model=MODEL, settings=preset("default"), query=QUERY, seed=11, budget_s=None))
+    two = predict(scene, Request(model=MODEL, settings=preset("default"), query=QUERY, seed=11, budget_s=None),
+                  Context(map_fn=pool.map))
     with WorkerPool(1, start_method="spawn") as one_worker:
-        one = predict(scene, MODEL, preset("default"), QUERY, seed=11, map_fn=one_worker.map)
+        one = predict(scene, Request(model=MODEL, settings=preset("default"), query=QUERY, seed=11, budget_s=None),
+                      Context(map_fn=one_worker.map))
     texts = {json.dumps(without_timing(p.to_dict()), sort_keys=True) for p in (serial, one, two)}
     assert len(texts) == 1
-    other_seed = predict(scene, MODEL, preset("default"), QUERY, seed=12, map_fn=pool.map)
+    other_seed = predict(scene, Request(model=MODEL, settings=preset("default"), query=QUERY, seed=12, budget_s=None),
+                         Context(map_fn=pool.map))
     assert without_timing(other_seed.to_dict()) != without_timing(serial.to_dict())
 
 
@@ -44,9 +48,9 @@ def test_noisy_initial_scenes_are_the_same_whatever_the_preset_and_phi():
     scene = load_scenes(example_scene_path())[0]
     model = ModelConfig(sigma_m=0.04, samples=3)
     pushed = ModelConfig(sigma_m=0.04, samples=3, phi_m_s2=(1.0,))
-    a = predict(scene, model, preset("default"), QUERY, seed=2)
-    b = predict(scene, model, preset("paper"), QUERY, seed=2)
-    c = predict(scene, pushed, preset("default"), QUERY, seed=2)
+    a = predict(scene, Request(model=model, settings=preset("default"), query=QUERY, seed=2, budget_s=None))
+    b = predict(scene, Request(model=model, settings=preset("paper"), query=QUERY, seed=2, budget_s=None))
+    c = predict(scene, Request(model=pushed, settings=preset("default"), query=QUERY, seed=2, budget_s=None))
     for x, y, z in zip(a.outcomes, b.outcomes, c.outcomes):
         assert np.array_equal(x.initial_positions_m, y.initial_positions_m)
         assert np.array_equal(x.initial_positions_m, z.initial_positions_m)
@@ -61,7 +65,9 @@ def test_predict_many_answers_as_predict_does(pool):
     requests = [(towers[0], MODEL, 3), (towers[1], MODEL, 4), (towers[0], ModelConfig(), 0),
                 (towers[1], ModelConfig(sigma_m=0.04, samples=2, phi_m_s2=(1.0,)), 9)]
     # batch answers are not self-checked (the paper's analyses reproduce fixed settings)
-    one_by_one = [predict(scene, model, preset("default"), QUERY, seed=seed, check=None)
+    one_by_one = [predict(scene,
+                          Request(model=model, settings=preset("default"), query=QUERY, seed=seed, check=None,
+                                  budget_s=None))
                   for scene, model, seed in requests]
     for answers in (predict_many(requests, preset("default"), QUERY),
                     predict_many(requests, preset("default"), QUERY, map_fn=pool.map)):

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine import actions as A
 from ipe_ros.engine.config import DEFAULT_QUERIES
 from ipe_ros.engine.errors import ConfigError
@@ -81,7 +82,10 @@ def _ramp_model(scene, samples=4):
 
 def test_the_verification_runs_first_in_the_same_map_as_the_fast_samples(tower):
     spy = CountingMap()
-    p = predict(tower, ModelConfig(sigma_m=0.01, samples=3), preset("default"), QUERY, seed=4, map_fn=spy, check=ALWAYS)
+    p = predict(tower,
+                Request(model=ModelConfig(sigma_m=0.01, samples=3), settings=preset("default"), query=QUERY, seed=4,
+                        check=ALWAYS, budget_s=None),
+                Context(map_fn=spy))
     assert len(spy.calls) == 1
     assert [t.settings.name for t in spy.calls[0]] == [REFERENCE, "default", "default", "default"]
     assert [t.index for t in spy.calls[0]] == [0, 0, 1, 2]
@@ -92,8 +96,12 @@ def test_the_verification_runs_first_in_the_same_map_as_the_fast_samples(tower):
 def test_a_verified_answer_is_the_fast_answer_unchanged(tower):
     """The check never changes an answer it agrees with (seed 4: no rollout ends unhealthy)."""
     model = ModelConfig(sigma_m=0.01, samples=3)
-    checked = predict(tower, model, preset("default"), QUERY, seed=4, check=ALWAYS)
-    unchecked = predict(tower, model, preset("default"), QUERY, seed=4, check=None)
+    checked = predict(tower,
+                      Request(model=model, settings=preset("default"), query=QUERY, seed=4, check=ALWAYS,
+                              budget_s=None))
+    unchecked = predict(tower,
+                        Request(model=model, settings=preset("default"), query=QUERY, seed=4, check=None,
+                                budget_s=None))
     assert (checked.fidelity, unchecked.fidelity, checked.refined_samples) == ("verified", "unverified", 0)
     assert _answer(checked) == _answer(unchecked)
 
@@ -101,18 +109,26 @@ def test_a_verified_answer_is_the_fast_answer_unchanged(tower):
 def test_reference_settings_are_not_checked_and_no_check_runs_nothing_more(tower):
     spy = CountingMap()
     model = ModelConfig(sigma_m=0.01, samples=2)
-    p = predict(tower, model, preset("paper"), QUERY, seed=1, map_fn=spy)
+    p = predict(tower, Request(model=model, settings=preset("paper"), query=QUERY, seed=1, budget_s=None),
+                Context(map_fn=spy))
     assert p.fidelity == "reference" and [len(c) for c in spy.calls] == [2]
     spy = CountingMap()
-    p = predict(tower, model, preset("default"), QUERY, seed=1, map_fn=spy, check=SelfCheck(enabled=False))
+    p = predict(tower,
+                Request(model=model, settings=preset("default"), query=QUERY, seed=1, check=SelfCheck(enabled=False),
+                        budget_s=None),
+                Context(map_fn=spy))
     assert p.fidelity == "unverified" and [len(c) for c in spy.calls] == [2]
 
 
 def test_a_contradicted_scene_is_escalated_to_the_reference_answer(contradicted_scene):
     model = _ramp_model(contradicted_scene)
-    unchecked = predict(contradicted_scene, model, WRONG_HERE, QUERY, seed=0, check=None)
-    checked = predict(contradicted_scene, model, WRONG_HERE, QUERY, seed=0)
-    reference = predict(contradicted_scene, model, reference_settings(), QUERY, seed=0, check=None)
+    unchecked = predict(contradicted_scene,
+                        Request(model=model, settings=WRONG_HERE, query=QUERY, seed=0, check=None, budget_s=None))
+    checked = predict(contradicted_scene,
+                      Request(model=model, settings=WRONG_HERE, query=QUERY, seed=0, budget_s=None))
+    reference = predict(contradicted_scene,
+                        Request(model=model, settings=reference_settings(), query=QUERY, seed=0, check=None,
+                                budget_s=None))
     assert unchecked.object_fall_probability["block1"] - reference.object_fall_probability["block1"] >= 0.5
     assert checked.fidelity == "escalated"
     # the first verified sample disagreed; two more confirmed it
@@ -140,8 +156,10 @@ def _spent_from_call(calls: int):
 def test_contradicted_when_the_budget_ends_before_the_escalation(contradicted_scene):
     model = _ramp_model(contradicted_scene)
     spy = _spent_from_call(3)  # verification and confirmation run; the escalation is cut off
-    p = predict(contradicted_scene, model, WRONG_HERE, QUERY, seed=0, map_fn=spy)
-    unchecked = predict(contradicted_scene, model, WRONG_HERE, QUERY, seed=0, check=None)
+    p = predict(contradicted_scene, Request(model=model, settings=WRONG_HERE, query=QUERY, seed=0, budget_s=None),
+                Context(map_fn=spy))
+    unchecked = predict(contradicted_scene,
+                        Request(model=model, settings=WRONG_HERE, query=QUERY, seed=0, check=None, budget_s=None))
     assert p.fidelity == "contradicted" and len(spy.calls) == 3
     assert _answer(p) == _answer(unchecked)  # the fast answer, flagged: the robot must not act on it
 
@@ -150,7 +168,8 @@ def test_unverified_when_the_budget_ends_before_a_disagreement_is_confirmed(cont
     """One verified sample disagrees and the budget cuts its confirmation off: neither verified
     nor contradicted."""
     model = _ramp_model(contradicted_scene)
-    p = predict(contradicted_scene, model, WRONG_HERE, QUERY, seed=0, map_fn=_spent_from_call(2))
+    p = predict(contradicted_scene, Request(model=model, settings=WRONG_HERE, query=QUERY, seed=0, budget_s=None),
+                Context(map_fn=_spent_from_call(2)))
     assert p.fidelity == "unverified"
     assert (p.self_check["verified_samples"], p.self_check["disagreeing_samples"]) == (1, 1)
 
@@ -177,14 +196,18 @@ def test_one_disagreement_that_more_samples_do_not_confirm_is_chaos_not_a_verdic
     answer is the fast one unchanged."""
     spy = _flipped_first_verification()
     model = ModelConfig(sigma_m=0.01, samples=16)
-    p = predict(tower, model, preset("default"), QUERY, seed=4, map_fn=spy, check=ALWAYS)
+    p = predict(tower,
+                Request(model=model, settings=preset("default"), query=QUERY, seed=4, check=ALWAYS, budget_s=None),
+                Context(map_fn=spy))
     assert len(spy.calls) == 1 + DEFAULT_CHECK.confirm_rounds
     # the flip says block0 fell where the fast physics kept it, as every fast sample does: the one
     # side there is to look at, in index order
     assert [(t.settings.name, t.index) for t in spy.calls[1]] == [(REFERENCE, 1), (REFERENCE, 2)]
     assert p.fidelity == "verified"
     assert (p.self_check["verified_samples"], p.self_check["disagreeing_samples"]) == (7, 2)
-    assert _answer(p) == _answer(predict(tower, model, preset("default"), QUERY, seed=4, check=None))
+    assert _answer(p) == _answer(predict(tower,
+                                         Request(model=model, settings=preset("default"), query=QUERY, seed=4,
+                                                 check=None, budget_s=None)))
 
 
 def _flags_of(*values):
@@ -264,8 +287,10 @@ def test_the_stratified_bias_weighs_each_fast_side_by_its_samples():
 
 def test_the_counts_rule_escalates_a_contradicted_scene_as_the_stratified_one_does(contradicted_scene):
     model = _ramp_model(contradicted_scene, 8)
-    p = predict(contradicted_scene, model, WRONG_HERE, QUERY, seed=0, check=COUNTS)
-    reference = predict(contradicted_scene, model, reference_settings(), QUERY, seed=0)
+    p = predict(contradicted_scene,
+                Request(model=model, settings=WRONG_HERE, query=QUERY, seed=0, check=COUNTS, budget_s=None))
+    reference = predict(contradicted_scene,
+                        Request(model=model, settings=reference_settings(), query=QUERY, seed=0, budget_s=None))
     assert p.fidelity == "escalated" and p.object_fall_probability == reference.object_fall_probability
     with pytest.raises(ConfigError, match=r"^self_check.bias_tolerance: must be in \(0, 1\) or None, got 1.5$"):
         SelfCheck(bias_tolerance=1.5)
@@ -278,14 +303,18 @@ def test_a_bias_the_verified_sample_could_not_show_is_found_by_coverage(contradi
     1 (standing, as the reference's) and 5 (a second same-way difference), and the scene is
     escalated instead of being called verified."""
     spy = _toppled_only_in(contradicted_scene, (3, 5, 6))
-    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), WRONG_HERE, QUERY, seed=0,
-                map_fn=spy)
+    p = predict(contradicted_scene,
+                Request(model=_ramp_model(contradicted_scene, 8), settings=WRONG_HERE, query=QUERY, seed=0,
+                        budget_s=None),
+                Context(map_fn=spy))
     assert [[t.index for t in call] for call in spy.calls[1:3]] == [[3], [1, 5]]
     assert p.fidelity == "escalated" and p.object_fall_probability["block1"] == 0.0
     no_coverage = dataclasses.replace(SelfCheck(), cover_samples=0)
     spy = _toppled_only_in(contradicted_scene, (3, 5, 6))
-    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), WRONG_HERE, QUERY, seed=0,
-                map_fn=spy, check=no_coverage)
+    p = predict(contradicted_scene,
+                Request(model=_ramp_model(contradicted_scene, 8), settings=WRONG_HERE, query=QUERY, seed=0,
+                        check=no_coverage, budget_s=None),
+                Context(map_fn=spy))
     assert p.fidelity == "verified" and p.object_fall_probability["block1"] == 3 / 8  # what it was
 
 
@@ -298,8 +327,10 @@ def test_the_coverage_sample_is_picked_ahead_and_runs_beside_the_last_fast_sampl
     once three standing samples agree it is credibly within the tolerance (0.1): verified, the
     answer the fast one. Where the split falls depends on k alone."""
     spy = _toppled_only_in(contradicted_scene, (2, 3, 5))
-    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 32), WRONG_HERE, QUERY, seed=0,
-                map_fn=spy)
+    p = predict(contradicted_scene,
+                Request(model=_ramp_model(contradicted_scene, 32), settings=WRONG_HERE, query=QUERY, seed=0,
+                        budget_s=None),
+                Context(map_fn=spy))
     calls = [[(t.index, t.settings.name) for t in call] for call in spy.calls]
     assert calls[0] == [(0, REFERENCE)] + [(i, "default") for i in range(24)]
     assert calls[1] == [(2, REFERENCE)] + [(i, "default") for i in range(24, 32)]
@@ -315,7 +346,9 @@ def _toppled_only_in(scene, kept: tuple[int, ...], unhealthy: bool = False):
     ``kept`` only, and keeps it standing in the others, as every one of the reference's does: each
     fast sample is a real fast outcome, toppled or standing, under its own index. ``unhealthy``:
     the toppled ones end with a body half its size inside another."""
-    unchecked = predict(scene, _ramp_model(scene, 8), WRONG_HERE, QUERY, seed=0, check=None)
+    unchecked = predict(scene,
+                        Request(model=_ramp_model(scene, 8), settings=WRONG_HERE, query=QUERY, seed=0, check=None,
+                                budget_s=None))
     block1 = [b.name for b in scene.dynamic_objects].index("block1")
     standing = [o for o in unchecked.outcomes if not o.rollouts[0].fallen[block1]]
     toppled = [o for o in unchecked.outcomes if o.rollouts[0].fallen[block1]]
@@ -341,8 +374,10 @@ def test_a_bias_on_a_minority_of_samples_is_confirmed_where_it_shows(contradicte
     alone where none could; two same-way differences in three, a bias credibly beyond 0.1,
     escalate."""
     spy = _toppled_only_in(contradicted_scene, (0, 3, 5))
-    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), WRONG_HERE, QUERY, seed=0,
-                map_fn=spy)
+    p = predict(contradicted_scene,
+                Request(model=_ramp_model(contradicted_scene, 8), settings=WRONG_HERE, query=QUERY, seed=0,
+                        budget_s=None),
+                Context(map_fn=spy))
     assert [[t.index for t in call] for call in spy.calls[1:]] == [[1, 3], [2, 4, 5, 6, 7]]  # then the escalation
     assert p.fidelity == "escalated" and p.object_fall_probability["block1"] == 0.0
 
@@ -358,10 +393,15 @@ def test_an_escalation_of_the_disputed_side_answers_there_exactly_as_the_referen
     check = SelfCheck(confirm_samples=8)
     spy = _toppled_only_in(contradicted_scene, (0, 3, 5))
     model = _ramp_model(contradicted_scene, 16)
-    checked = predict(contradicted_scene, model, WRONG_HERE, QUERY, seed=0, map_fn=spy, check=check)
-    fast = predict(contradicted_scene, model, WRONG_HERE, QUERY, seed=0, map_fn=_toppled_only_in(contradicted_scene,
-                                                                                                (0, 3, 5)), check=None)
-    reference = predict(contradicted_scene, model, reference_settings(), QUERY, seed=0, check=None)
+    checked = predict(contradicted_scene,
+                      Request(model=model, settings=WRONG_HERE, query=QUERY, seed=0, check=check, budget_s=None),
+                      Context(map_fn=spy))
+    fast = predict(contradicted_scene,
+                   Request(model=model, settings=WRONG_HERE, query=QUERY, seed=0, check=None, budget_s=None),
+                   Context(map_fn=_toppled_only_in(contradicted_scene, (0, 3, 5))))
+    reference = predict(contradicted_scene,
+                        Request(model=model, settings=reference_settings(), query=QUERY, seed=0, check=None,
+                                budget_s=None))
     assert [[t.index for t in call] for call in spy.calls[1:]] == [[1, 3, 2, 5, 4, 6, 7, 8]]  # no escalation round
     block1 = [b.name for b in contradicted_scene.dynamic_objects].index("block1")
     assert checked.fidelity == "escalated" and checked.self_check["escalated_samples"] == 3
@@ -380,8 +420,10 @@ def test_refined_rollouts_that_differ_the_same_way_are_evidence_too(contradicted
     escalated instead of three samples being quietly replaced (which, where the reference's
     outcomes are chaotic, would bias the answer towards whatever the healthy rollouts said)."""
     spy = _toppled_only_in(contradicted_scene, (2, 3, 5), unhealthy=True)
-    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), WRONG_HERE, QUERY, seed=0,
-                map_fn=spy)
+    p = predict(contradicted_scene,
+                Request(model=_ramp_model(contradicted_scene, 8), settings=WRONG_HERE, query=QUERY, seed=0,
+                        budget_s=None),
+                Context(map_fn=spy))
     assert [t.index for t in spy.calls[1]] == [2, 3, 5]  # the refinement; sample 0 agreed
     assert p.self_check["refined_reasons"] == {"2": "penetration", "3": "penetration", "5": "penetration"}
     assert p.fidelity == "escalated" and p.self_check["disagreeing_samples"] == 3
@@ -392,8 +434,10 @@ def test_the_counts_rule_looks_again_at_two_same_way_differences_in_three_sample
     sample where it can show) confirms, two of three are suspicious, not proof; a second round
     verifies two more, and two of five do not escalate."""
     spy = _toppled_only_in(contradicted_scene, (0, 5))
-    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), WRONG_HERE, QUERY, seed=0,
-                map_fn=spy, check=COUNTS)
+    p = predict(contradicted_scene,
+                Request(model=_ramp_model(contradicted_scene, 8), settings=WRONG_HERE, query=QUERY, seed=0,
+                        check=COUNTS, budget_s=None),
+                Context(map_fn=spy))
     assert [[t.index for t in call] for call in spy.calls[1:]] == [[5, 1], [2, 3]]
     assert p.fidelity == "verified"
     assert (p.self_check["verified_samples"], p.self_check["disagreeing_samples"]) == (5, 2)
@@ -406,8 +450,10 @@ def test_two_same_way_differences_on_a_small_side_escalate_once_the_large_side_i
     credibly beyond 0.1; a second round finds 2 and 3 standing as the reference's, and the scene is
     escalated (the counts, needing three, called it verified at 0.25 off)."""
     spy = _toppled_only_in(contradicted_scene, (0, 5))
-    p = predict(contradicted_scene, _ramp_model(contradicted_scene, 8), WRONG_HERE, QUERY, seed=0,
-                map_fn=spy)
+    p = predict(contradicted_scene,
+                Request(model=_ramp_model(contradicted_scene, 8), settings=WRONG_HERE, query=QUERY, seed=0,
+                        budget_s=None),
+                Context(map_fn=spy))
     assert [[t.index for t in call] for call in spy.calls[1:]] == [[1, 5], [2, 3], [4, 6, 7]]
     assert p.fidelity == "escalated" and p.object_fall_probability["block1"] == 0.0
     assert (p.self_check["verified_samples"], p.self_check["disagreeing_samples"]) == (5, 2)
@@ -420,11 +466,15 @@ def test_an_answer_whose_every_sample_was_rerun_is_the_reference_answer(tower):
     escalation would give, the flip included), not the fast one's."""
     spy = _flipped_first_verification()
     model = ModelConfig(sigma_m=0.01, samples=6)
-    p = predict(tower, model, preset("default"), QUERY, seed=4, map_fn=spy, check=ALWAYS)
+    p = predict(tower,
+                Request(model=model, settings=preset("default"), query=QUERY, seed=4, check=ALWAYS, budget_s=None),
+                Context(map_fn=spy))
     assert [[t.index for t in call] for call in spy.calls[1:]] == [[1, 2], [3, 4], [5]]
     assert p.fidelity == "escalated"
     assert p.self_check["verified_samples"] == 6 and p.self_check["disagreeing_samples"] == 1
-    reference = predict(tower, model, reference_settings(), QUERY, seed=4, check=None)
+    reference = predict(tower,
+                        Request(model=model, settings=reference_settings(), query=QUERY, seed=4, check=None,
+                                budget_s=None))
     first = reference.outcomes[0].rollouts[0].fallen
     for n, body in enumerate(b.name for b in tower.dynamic_objects):
         flip = (1.0 - 2.0 * first[n]) / 6  # sample 0's answer, flipped
@@ -439,7 +489,9 @@ def test_a_failed_fast_sample_is_rerun_at_the_reference(tower):
 
     model = ModelConfig(sigma_m=0.01, samples=3)
     spy = CountingMap(fail_second)
-    p = predict(tower, model, preset("default"), QUERY, seed=4, map_fn=spy, check=ALWAYS)
+    p = predict(tower,
+                Request(model=model, settings=preset("default"), query=QUERY, seed=4, check=ALWAYS, budget_s=None),
+                Context(map_fn=spy))
     assert (p.samples, p.failed_samples, p.refined_samples) == (3, 0, 1)
     assert p.self_check["refined_reasons"] == {"1": "failed"} and p.fidelity == "verified"
     assert [(t.settings.name, t.index) for t in spy.calls[1]] == [(REFERENCE, 1)]
@@ -454,8 +506,9 @@ def test_a_rollout_ending_inside_another_body_is_refined(tower):
     model = ModelConfig(sigma_m=0.01, samples=3)
     coarse_end = preset("default").changed("default-coarse-end",
                                            collapse={"end_substeps": 1, "end_travel_fraction": None})
-    unchecked = predict(tower, model, coarse_end, QUERY, seed=2, check=None)
-    checked = predict(tower, model, coarse_end, QUERY, seed=2)
+    unchecked = predict(tower,
+                        Request(model=model, settings=coarse_end, query=QUERY, seed=2, check=None, budget_s=None))
+    checked = predict(tower, Request(model=model, settings=coarse_end, query=QUERY, seed=2, budget_s=None))
     assert unchecked.max_penetration_fraction > 0.05
     assert checked.max_penetration_fraction <= 0.05
     assert checked.self_check["refined_reasons"] == {"2": "penetration"}
@@ -476,8 +529,10 @@ def test_an_unhealthy_rollout_is_rerun_in_its_own_task_and_the_answer_is_as_from
     coarse_end = preset("default").changed("default-coarse-end",
                                            collapse={"end_substeps": 1, "end_travel_fraction": None})
     inline, rounds = CountingMap(), RoundsOnly()
-    fast = predict(tower, model, coarse_end, QUERY, seed=2, map_fn=inline)
-    slow = predict(tower, model, coarse_end, QUERY, seed=2, map_fn=rounds)
+    fast = predict(tower, Request(model=model, settings=coarse_end, query=QUERY, seed=2, budget_s=None),
+                   Context(map_fn=inline))
+    slow = predict(tower, Request(model=model, settings=coarse_end, query=QUERY, seed=2, budget_s=None),
+                   Context(map_fn=rounds))
     assert fast.self_check["refined_reasons"] == slow.self_check["refined_reasons"] == {"2": "penetration"}
     reruns = [[(t.settings.name, t.index) for t in call if t.settings.name == REFERENCE] for call in rounds.calls]
     assert [(REFERENCE, 2)] in reruns  # a round of its own
@@ -498,8 +553,14 @@ def test_a_questions_unhealthy_variant_is_rerun_in_its_sample_task_as_it_would_b
                                            collapse={"end_substeps": 1, "end_travel_fraction": None})
     actions = [None, A.Remove((tower.dynamic_objects[-1].name,))]
     inline, rounds = CountingMap(), RoundsOnly()
-    fast = A.ask(tower, actions, model, coarse_end, seed=2, map_fn=inline, check=DEFAULT_CHECK, queries=("far",))
-    slow = A.ask(tower, actions, model, coarse_end, seed=2, map_fn=rounds, check=DEFAULT_CHECK, queries=("far",))
+    fast = A.ask(tower, actions,
+                 Request(model=model, settings=coarse_end, query=A.question_spec(queries=("far",)), seed=2,
+                         check=DEFAULT_CHECK, budget_s=None),
+                 Context(map_fn=inline))
+    slow = A.ask(tower, actions,
+                 Request(model=model, settings=coarse_end, query=A.question_spec(queries=("far",)), seed=2,
+                         check=DEFAULT_CHECK, budget_s=None),
+                 Context(map_fn=rounds))
     assert [v.self_check["refined_reasons"] for v in fast.variants] == [{"2": "penetration"}] * 2
     ran_alone = [(t.settings.name, t.index, t.actions) for call in rounds.calls for t in call if len(t.actions) == 1]
     assert (REFERENCE, 2, (None,)) in ran_alone and (REFERENCE, 2, (actions[1],)) in ran_alone  # rounds of their own
@@ -512,7 +573,10 @@ def test_a_questions_unhealthy_variant_is_rerun_in_its_sample_task_as_it_would_b
 def test_a_sample_verified_beside_its_fast_run_is_not_rerun_again_when_unhealthy(tower):
     """Sample 0 is verified in the first map: its fast run carries no ``refine``, since its rerun is at hand."""
     spy = CountingMap()
-    predict(tower, ModelConfig(sigma_m=0.01, samples=3), preset("default"), QUERY, seed=4, map_fn=spy, check=ALWAYS)
+    predict(tower,
+            Request(model=ModelConfig(sigma_m=0.01, samples=3), settings=preset("default"), query=QUERY, seed=4,
+                    check=ALWAYS, budget_s=None),
+            Context(map_fn=spy))
     assert [(t.settings.name, t.index, t.refine is None) for t in spy.calls[0]] == [
         (REFERENCE, 0, True), ("default", 0, True), ("default", 1, False), ("default", 2, False)]
 
@@ -522,8 +586,12 @@ def test_every_unhealthy_rollout_is_replaced_by_its_reference_rerun(tower):
     then the reference's, sample for sample."""
     model = ModelConfig(sigma_m=0.01, samples=3)
     strict = SelfCheck(max_end_penetration_fraction=1e-12)
-    checked = predict(tower, model, preset("default"), QUERY, seed=4, check=strict)
-    reference = predict(tower, model, reference_settings(), QUERY, seed=4, check=None)
+    checked = predict(tower,
+                      Request(model=model, settings=preset("default"), query=QUERY, seed=4, check=strict,
+                              budget_s=None))
+    reference = predict(tower,
+                        Request(model=model, settings=reference_settings(), query=QUERY, seed=4, check=None,
+                                budget_s=None))
     assert checked.refined_samples == 3 and set(checked.self_check["refined_reasons"]) == {"0", "1", "2"}
     for mine, theirs in zip(checked.outcomes, reference.outcomes):
         assert (mine.rollouts[0].final_positions_m == theirs.rollouts[0].final_positions_m).all()
@@ -531,7 +599,10 @@ def test_every_unhealthy_rollout_is_replaced_by_its_reference_rerun(tower):
 
 def test_ground_truth_is_verified_too(tower):
     spy = CountingMap()
-    p = predict(tower, ModelConfig(sigma_m=0.0, samples=48), preset("default"), QUERY, map_fn=spy, check=ALWAYS)
+    p = predict(tower,
+                Request(model=ModelConfig(sigma_m=0.0, samples=48), settings=preset("default"), query=QUERY,
+                        check=ALWAYS, budget_s=None),
+                Context(map_fn=spy))
     assert p.deterministic and p.fidelity in VERDICTS and p.fidelity != "unverified"
     assert [t.settings.name for t in spy.calls[0]] == [REFERENCE, "default"]
 
@@ -546,7 +617,9 @@ def test_self_check_settings_are_validated_with_the_field_named():
     with pytest.raises(ConfigError, match=r"^self_check.enabled: must be true or false, got 'yes'$"):
         SelfCheck(enabled="yes")
     with pytest.raises(ConfigError, match=r"^self_check: must be a SelfCheck or None"):
-        predict(zoo_scene("drop", 1, 0), ModelConfig(samples=1), preset("default"), QUERY, check="on")
+        predict(zoo_scene("drop", 1, 0),
+                Request(model=ModelConfig(samples=1), settings=preset("default"), query=QUERY, check="on",
+                        budget_s=None))
 
 
 def test_the_node_parameters_set_the_check():
@@ -563,8 +636,9 @@ def test_anytime_sampling_is_checked_on_the_samples_it_drew(tower):
 
     stop = AdaptiveStop(deadline_s=1e-6, batch_size=2)  # stops after the first batch
     # k = 16 would be inside the validated envelope; anytime sampling is not (it may stop after two)
-    p = predict(tower, ModelConfig(sigma_m=0.01, samples=16), preset("default"), QUERY, seed=4, stop=stop,
-                check=SelfCheck(verify_samples=3))
+    p = predict(tower,
+                Request(model=ModelConfig(sigma_m=0.01, samples=16), settings=preset("default"), query=QUERY, seed=4,
+                        stop=stop, check=SelfCheck(verify_samples=3), budget_s=None))
     assert (p.samples, p.stopped_by) == (2, "deadline")
     assert p.fidelity == "verified" and p.self_check["verified_samples"] == 2
 
@@ -584,8 +658,13 @@ def test_a_question_checks_every_variant_and_answers_a_contradicted_one_at_the_r
     model = _ramp_model(ramp_4, 8)
     actions = [None, A.Remove(("mover",))]
     spy = CountingMap()
-    as_is, without = A.ask(ramp_4, actions, model, WRONG_HERE, seed=0, map_fn=spy, check=DEFAULT_CHECK).variants
-    reference = A.ask(ramp_4, actions, model, reference_settings(), seed=0).variants
+    as_is, without = A.ask(ramp_4, actions,
+                           Request(model=model, settings=WRONG_HERE, query=A.question_spec(), seed=0,
+                                   check=DEFAULT_CHECK, budget_s=None),
+                           Context(map_fn=spy)).variants
+    reference = A.ask(ramp_4, actions,
+                      Request(model=model, settings=reference_settings(), query=A.question_spec(), seed=0,
+                              budget_s=None, check=None)).variants
     assert as_is.fidelity == "escalated" and as_is.self_check["escalated_samples"] == 8
     assert as_is.object_fall_probability == reference[0].object_fall_probability
     assert as_is.object_fall_probability["block1"] == 0.0
@@ -595,7 +674,9 @@ def test_a_question_checks_every_variant_and_answers_a_contradicted_one_at_the_r
     assert len(spy.calls[0]) == 8 and all(t.settings.name == WRONG_HERE.name for t in spy.calls[0])
     assert [(t.settings.name, t.index, t.actions) for t in spy.calls[1]] == [
         (REFERENCE, 0, (None,)), (REFERENCE, 0, (A.Remove(("mover",)),))]
-    unchecked = A.ask(ramp_4, actions, model, WRONG_HERE, seed=0)  # questions' default: not checked
+    unchecked = A.ask(ramp_4, actions,
+                      Request(model=model, settings=WRONG_HERE, query=A.question_spec(), seed=0, budget_s=None,
+                              check=None))  # questions' default: not checked
     assert unchecked.variants[0].fidelity == unchecked.variants[0].to_dict()["fidelity"] == "unverified"
     assert unchecked.variants[0].object_fall_probability["block1"] >= 0.75  # the fast physics alone
 
@@ -648,12 +729,16 @@ def test_a_scene_inside_the_validated_envelope_answers_validated_without_referen
     answer is the fast one, in one map of fast samples, and says why nothing was verified."""
     spy = CountingMap()
     model = ModelConfig(sigma_m=0.01, samples=16)
-    p = predict(tower, model, preset("default"), QUERY, seed=4, map_fn=spy)
+    p = predict(tower, Request(model=model, settings=preset("default"), query=QUERY, seed=4, budget_s=None),
+                Context(map_fn=spy))
     assert [[t.settings.name for t in call] for call in spy.calls] == [["default"] * 16]
     assert p.fidelity == "validated" and p.self_check["verified_samples"] == 0
     assert p.self_check["validated"].startswith("boxes at rest on a floor within the envelope `default` was validated")
-    assert _answer(p) == _answer(predict(tower, model, preset("default"), QUERY, seed=4, check=None))
-    assert predict(tower, model, preset("default"), QUERY, seed=4, check=ALWAYS).fidelity == "verified"
+    assert _answer(p) == _answer(predict(tower,
+                                         Request(model=model, settings=preset("default"), query=QUERY, seed=4,
+                                                 check=None, budget_s=None)))
+    assert predict(tower,
+                   Request(model=model, settings=preset("default"), query=QUERY, seed=4, check=ALWAYS, budget_s=None)).fidelity == "verified"
 
 
 def test_inside_the_envelope_an_unhealthy_rollout_is_still_refined(tower):
@@ -663,7 +748,10 @@ def test_inside_the_envelope_an_unhealthy_rollout_is_still_refined(tower):
         return outcome
 
     spy = CountingMap(fail_second)
-    p = predict(tower, ModelConfig(sigma_m=0.01, samples=16), preset("default"), QUERY, seed=4, map_fn=spy)
+    p = predict(tower,
+                Request(model=ModelConfig(sigma_m=0.01, samples=16), settings=preset("default"), query=QUERY, seed=4,
+                        budget_s=None),
+                Context(map_fn=spy))
     assert (p.fidelity, p.refined_samples, p.self_check["refined_reasons"]) == ("validated", 1, {"1": "failed"})
     assert [(t.settings.name, t.index) for t in spy.calls[1]] == [(REFERENCE, 1)]
 
@@ -703,7 +791,7 @@ def test_the_envelope_names_why_a_scene_lies_outside_it(tower, change, why):
     scene, changed, name = change(tower, model)
     assert outside(scene, changed, preset(name)) == why
     if name == "default" and not changed.pushes:  # answered, checked as before
-        assert predict(scene, changed, preset(name), QUERY).fidelity in ("verified", "escalated")
+        assert predict(scene, Request(model=changed, settings=preset(name), query=QUERY, budget_s=None)).fidelity in ("verified", "escalated")
 
 
 def test_the_authors_towers_lie_inside_the_validated_envelope_and_their_dropped_box_does_not():
@@ -740,6 +828,8 @@ def test_a_posterior_sample_outside_the_envelope_has_the_answer_verified(tower):
     top = max(flat[0].objects, key=lambda b: b.position_m[2])
     tilted = dataclasses.replace(top, orientation_xyzw=(float(np.sin(0.05)), 0.0, 0.0, float(np.cos(0.05))))
     model = ModelConfig(perception="depth", samples=16)
-    assert predict(tower, model, preset("default"), QUERY, perceived=Perceived(flat)).fidelity == "validated"
+    assert predict(tower, Request(model=model, settings=preset("default"), query=QUERY, budget_s=None),
+                   Context(perceived=Perceived(flat))).fidelity == "validated"
     flat[5] = dataclasses.replace(flat[5], objects=tuple(tilted if b.name == top.name else b for b in flat[5].objects))
-    assert predict(tower, model, preset("default"), QUERY, perceived=Perceived(flat)).fidelity in ("verified", "escalated")
+    assert predict(tower, Request(model=model, settings=preset("default"), query=QUERY, budget_s=None),
+                   Context(perceived=Perceived(flat))).fidelity in ("verified", "escalated")

@@ -25,6 +25,7 @@ from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ipe_ros.engine import ModelConfig, QuerySpec, SceneError, ConfigError, predict, preset
+from ipe_ros.engine import Context
 from ipe_ros.engine.scene.catalogue import capped_tower
 from ipe_ros.engine.errors import MAX_PROBLEM_CHARS, MAX_SHOWN_CHARS
 from ipe_ros.engine.scene.format import scene_to_dict
@@ -66,8 +67,10 @@ def _through_the_node(read):
         _check_error(exc)
         return None
     start = time.monotonic()
-    prediction = predict(scene, REQUEST.model, REQUEST.settings, REQUEST.query, seed=1, budget_s=REQUEST.budget_s,
-                         max_objects=CONFIG.max_objects)
+    prediction = predict(scene,
+                         Request(model=REQUEST.model, settings=REQUEST.settings, query=REQUEST.query, seed=1,
+                                 budget_s=REQUEST.budget_s),
+                         Context(max_objects=CONFIG.max_objects))
     assert time.monotonic() - start <= BUDGET_S + BUDGET_SLACK_S
     assert prediction.samples + prediction.failed_samples + prediction.budget_skipped_samples == \
         prediction.samples_requested

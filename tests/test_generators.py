@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
+from ipe_ros.engine import Request
 from ipe_ros.engine import simulation
 from ipe_ros.engine.scene.generators import generate_tables, generate_towers, state_pair
 
@@ -32,7 +33,8 @@ def test_each_block_stands_on_its_own_support_when_placed():
         for i in range(1, len(tower.objects)):
             total += 1
             prefix = replace(tower, objects=tower.objects[:i + 1])
-            fell = predict(prefix, ModelConfig(), preset("default"), QuerySpec()).object_fall_probability
+            fell = predict(prefix,
+                           Request(model=ModelConfig(), settings=preset("default"), query=QuerySpec(), budget_s=None)).object_fall_probability
             if all(fell[b.name] == 0 for b in tower.objects[:i]):
                 assert fell[tower.objects[i].name] == 0.0, (tower.name, i)
                 checked += 1

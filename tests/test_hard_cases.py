@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import Box, Floor, ModelConfig, QuerySpec, Scene, Table, load_scenes, predict, preset
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.scene.generators import generate_tables
 from ipe_ros.engine.scene.bodies import half_heights_m
 from tests.helpers import IDENTITY
@@ -164,7 +165,9 @@ def assert_still_standing_at_the_horizon(case: Case, settings, query: QuerySpec,
     fall threshold. (Without settling, `default` had the delicately balanced tower 2 cm down, 80%
     of the way to "fallen", at 2 s, and toppled it at 3 s, while `paper` keeps it within 0.1 mm.)"""
     if settings.early_stop.enabled:
-        prediction = predict(case.scene, case.model, settings.changed(early_stop={"enabled": False}), query, seed=11, check=None)
+        prediction = predict(case.scene,
+                             Request(model=case.model, settings=settings.changed(early_stop={"enabled": False}),
+                                     query=query, seed=11, check=None, budget_s=None))
     smallest = np.array([min(b.extents_m) for b in case.scene.dynamic_objects])
     allowed = 0.25 * query.fall_threshold_fraction * smallest
     for outcome in prediction.outcomes:
@@ -184,7 +187,9 @@ def test_hard_case_stays_numerically_stable(name, preset_name, pool):
     if case.horizon_s is not None:
         settings = settings.changed(horizon_s=case.horizon_s)
     query = QuerySpec(queries=frozenset({"fall", "bump"} if isinstance(case.scene.support, Table) else {"fall"}))
-    prediction = predict(case.scene, case.model, settings, query, seed=11, map_fn=pool.map, record_every=1, check=None)
+    prediction = predict(case.scene,
+                         Request(model=case.model, settings=settings, query=query, seed=11, check=None, budget_s=None),
+                         Context(map_fn=pool.map, record_every=1))
     assert prediction.failed_samples == 0, prediction.failure_reasons
     for outcome in prediction.outcomes:
         for rollout in outcome.rollouts:
@@ -220,7 +225,9 @@ def test_a_stack_landing_on_a_column_leaves_the_column_standing(preset_name, cou
     model = ModelConfig(sigma_m=0.005, samples=8)
     query = QuerySpec(queries=frozenset({"fall"}))
     settings = preset(preset_name)
-    prediction = predict(scene, model, settings, query, seed=0, map_fn=pool.map, check=None)
+    prediction = predict(scene,
+                         Request(model=model, settings=settings, query=query, seed=0, check=None, budget_s=None),
+                         Context(map_fn=pool.map))
     assert prediction.failed_samples == 0, prediction.failure_reasons
     falls = prediction.object_fall_probability
     assert {name: p for name, p in falls.items() if int(name[1:]) < gap and p > 0} == {}
@@ -229,8 +236,10 @@ def test_a_stack_landing_on_a_column_leaves_the_column_standing(preset_name, cou
         # a stack landing makes half the scene's energy scale at collapse steps and is undone; one cube
         # landing makes none (not even 0.1%, measured) and is ended at quiet instead
         assert (prediction.collapse_undone_rollouts > 0) == (count - gap > 2)
-        without = predict(scene, model, settings.changed(collapse={"step_factor": 1}), query, seed=0,
-                          map_fn=pool.map, check=None)
+        without = predict(scene,
+                          Request(model=model, settings=settings.changed(collapse={"step_factor": 1}), query=query,
+                                  seed=0, check=None, budget_s=None),
+                          Context(map_fn=pool.map))
         assert without.collapse_undone_rollouts == 0
         assert falls == without.object_fall_probability
 
@@ -250,13 +259,20 @@ def test_the_collapse_steps_do_not_throw_a_small_box_out_from_under_larger_ones(
     model = ModelConfig(sigma_m=zoo_sigma_m(scene), samples=32)
     query = QuerySpec(queries=frozenset({"fall"}))
     settings = preset("default")
-    coarse = predict(scene, model, settings, query, seed=0, map_fn=pool.map, check=None)
-    fine = predict(scene, model, settings.changed(collapse={"step_factor": 1}), query, seed=0, map_fn=pool.map,
-                   check=None)
+    coarse = predict(scene, Request(model=model, settings=settings, query=query, seed=0, check=None, budget_s=None),
+                     Context(map_fn=pool.map))
+    fine = predict(scene,
+                   Request(model=model, settings=settings.changed(collapse={"step_factor": 1}), query=query, seed=0,
+                           check=None, budget_s=None),
+                   Context(map_fn=pool.map))
     assert abs(coarse.object_fall_probability["s0b1"] - fine.object_fall_probability["s0b1"]) <= 0.1
-    loose = predict(scene, model, settings.changed(collapse={"max_travel_fraction": 0.5}), query, seed=0,
-                    map_fn=pool.map, check=None)
+    loose = predict(scene,
+                    Request(model=model, settings=settings.changed(collapse={"max_travel_fraction": 0.5}),
+                            query=query, seed=0, check=None, budget_s=None),
+                    Context(map_fn=pool.map))
     assert loose.object_fall_probability["s0b1"] - fine.object_fall_probability["s0b1"] > 0.15  # the case bites
-    loosely_solved = predict(scene, model, settings.changed(collapse={"residual_threshold": None}), query, seed=0,
-                             map_fn=pool.map, check=None)
+    loosely_solved = predict(scene,
+                             Request(model=model, settings=settings.changed(collapse={"residual_threshold": None}),
+                                     query=query, seed=0, check=None, budget_s=None),
+                             Context(map_fn=pool.map))
     assert loosely_solved.object_fall_probability["s0b1"] - fine.object_fall_probability["s0b1"] > 0.1

@@ -20,6 +20,7 @@ import pytest
 
 from ipe_ros.cli import main
 from ipe_ros.engine import ConfigError, ModelConfig, QuerySpec, SceneError, predict, preset
+from ipe_ros.engine import Context
 from ipe_ros.engine.sampling.estimate import mean_interval
 from ipe_ros.engine.scene.examples import example_scene_path
 from ipe_ros.engine.scene.files import scenes_from_tower_csv
@@ -162,13 +163,17 @@ def test_model_values_outside_their_ranges_are_refused():
 def test_a_scene_whose_one_rollout_cannot_fit_the_budget_is_refused_up_front():
     scene = dataclasses.replace(scenes_from_json(json.dumps(TOWER))[0], horizon_s=60.0)
     with pytest.raises(ConfigError, match=r"^budget_s: one rollout of this scene takes up to 60000 steps x 10 bodies"):
-        predict(scene, ModelConfig(sigma_m=0.04, samples=2), preset("paper"), QuerySpec(), budget_s=1.0)
+        predict(scene,
+                Request(model=ModelConfig(sigma_m=0.04, samples=2), settings=preset("paper"), query=QuerySpec(),
+                        budget_s=1.0))
 
 
 def test_a_prediction_stops_at_its_budget_and_answers_with_what_it_has():
     scene = scenes_from_json(json.dumps(TOWER))[0]
     start = time.monotonic()
-    p = predict(scene, ModelConfig(sigma_m=0.04, samples=200), preset("paper"), QuerySpec(), budget_s=1.5)
+    p = predict(scene,
+                Request(model=ModelConfig(sigma_m=0.04, samples=200), settings=preset("paper"), query=QuerySpec(),
+                        budget_s=1.5))
     took = time.monotonic() - start
     assert took < 1.5 + 1.0
     assert p.stopped_by == "budget" and p.budget_skipped_samples > 0 and p.failed_samples == 0
@@ -191,7 +196,7 @@ def test_a_budget_that_no_sample_finished_in_is_an_error_never_an_empty_answer(a
     model = ModelConfig(sigma_m=0.04, samples=4)
     with pytest.raises(ConfigError) as info:
         if asked == "prediction":
-            predict(scene, model, preset("default"), QuerySpec(), budget_s=2.0)
+            predict(scene, Request(model=model, settings=preset("default"), query=QuerySpec(), budget_s=2.0))
         else:
             actions.remove(scene, ["block9"], model, preset("default"), budget_s=2.0)
     cut = 4 if asked == "prediction" else 8
@@ -346,8 +351,10 @@ def test_a_viewer_that_accepts_and_stays_silent_is_left_to_a_helper_that_ends_it
         silent.listen(8)
         path = tmp_path / "x.rrd"
         scene = floor_scene(block("a", 0, 0, 0.1))
-        prediction = predict(scene, ModelConfig(sigma_m=0.01, samples=1), preset("default"),
-                             QuerySpec(queries=frozenset({"fall"})), record_every=10, record_samples=1, check=None)
+        prediction = predict(scene,
+                             Request(model=ModelConfig(sigma_m=0.01, samples=1), settings=preset("default"),
+                                     query=QuerySpec(queries=frozenset({"fall"})), check=None, budget_s=None),
+                             Context(record_every=10, record_samples=1))
         started = time.monotonic()
         rerun_log.write_prediction_rrd(path, scene, prediction, answer=prediction.to_dict(), stamp_ns=0,
                                        rollouts_logged=1, connect_url=f"rerun+http://127.0.0.1:{silent.getsockname()[1]}")

@@ -93,6 +93,7 @@ def test_an_engine_error_reads_as_each_user_spelled_the_input():
 
 def test_a_scene_is_checked_once_however_often_a_request_validates_it(monkeypatch):
     from ipe_ros.engine import QuerySpec, preset, predict
+    from ipe_ros.engine import Request
     from ipe_ros.engine.scene import validation as scene_module
     from ipe_ros.engine.predict import check_request
     from tests.helpers import block, floor_scene
@@ -103,7 +104,7 @@ def test_a_scene_is_checked_once_however_often_a_request_validates_it(monkeypatc
     scene = floor_scene(block("b", 0.0, 0.0, 0.1), name="checked_once")
     model, settings, query = ModelConfig(sigma_m=0.0, samples=1), preset("default"), QuerySpec()
     check_request(scene, query, model=model, settings=settings, budget_s=10.0)  # where the CLI costs it
-    predict(scene, model, settings, query, check=None)  # and where it is predicted
+    predict(scene, Request(model=model, settings=settings, query=query, check=None, budget_s=None))  # and where it is predicted
     assert calls == ["checked_once"]
     broken = floor_scene(block("b", 0.0, 0.0, -1.0), name="broken")
     for _ in range(2):  # an invalid scene is never remembered as valid

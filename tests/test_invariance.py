@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.config import DEFAULT_QUERIES
 from ipe_ros.engine.errors import SceneError
 from ipe_ros.engine.scene.generators import make_table
@@ -41,7 +42,10 @@ QUERY = QuerySpec(queries=DEFAULT_QUERIES)
 def test_a_zoo_scene_turned_about_the_vertical_answers_the_same(family, pool):
     scene = zoo_scene(family, 2026, 0)
     model = ModelConfig(sigma_m=zoo_sigma_m(scene), samples=16)
-    straight, other = (predict(s, model, preset("default"), QUERY, seed=3, map_fn=pool.map, check=None)
+    straight, other = (predict(s,
+                               Request(model=model, settings=preset("default"), query=QUERY, seed=3, check=None,
+                                       budget_s=None),
+                               Context(map_fn=pool.map))
                        for s in (scene, turned(scene, YAW_RAD, SHIFT_M)))
     assert straight.failed_samples == other.failed_samples == 0
     differences = np.array([abs(straight.object_fall_probability[k] - other.object_fall_probability[k])

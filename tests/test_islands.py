@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import Box, ModelConfig, QuerySpec, predict, preset
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine import simulation
 from ipe_ros.engine.sampling import rollout
 from ipe_ros.engine.sampling.perturb import draw_sample_inputs
@@ -62,8 +63,9 @@ def test_each_island_is_answered_as_it_would_be_alone_at_its_own_step():
     process, again before it steps on (``StepControl.reapply``)."""
     scene = _tipping_tower()
     model = ModelConfig(sigma_m=0.01, samples=2)
-    p = predict(scene, model, ISLANDS, FAR, seed=3, check=None)
-    whole = predict(scene, model, preset("default"), FAR, seed=3, check=None)
+    p = predict(scene, Request(model=model, settings=ISLANDS, query=FAR, seed=3, check=None, budget_s=None))
+    whole = predict(scene,
+                    Request(model=model, settings=preset("default"), query=FAR, seed=3, check=None, budget_s=None))
     assert p.fall_fraction == whole.fall_fraction == pytest.approx(1 / 3)  # the top block, in both
     assert _separated(scene).time_step_s < 0.003
     outcome = p.outcomes[0]
@@ -104,7 +106,9 @@ def test_islands_that_could_meet_are_simulated_as_one_world():
 
     rollout.Apart.simulate = spy
     try:
-        p = predict(scene, ModelConfig(sigma_m=0.0, samples=1), ISLANDS, FAR, seed=0, check=None)
+        p = predict(scene,
+                    Request(model=ModelConfig(sigma_m=0.0, samples=1), settings=ISLANDS, query=FAR, seed=0,
+                            check=None, budget_s=None))
     finally:
         rollout.Apart.simulate = original
     assert len(met) == 1 and met[0].startswith("two islands could have met between t = ")
@@ -116,8 +120,9 @@ def test_islands_that_could_meet_are_simulated_as_one_world():
 def test_recording_islands_changes_nothing_and_shows_every_body_on_one_clock():
     scene = _tipping_tower()
     model = ModelConfig(sigma_m=0.01, samples=1)
-    plain = predict(scene, model, ISLANDS, FAR, seed=3, check=None)
-    recorded = predict(scene, model, ISLANDS, FAR, seed=3, check=None, record_every=5, record_samples=1)
+    plain = predict(scene, Request(model=model, settings=ISLANDS, query=FAR, seed=3, check=None, budget_s=None))
+    recorded = predict(scene, Request(model=model, settings=ISLANDS, query=FAR, seed=3, check=None, budget_s=None),
+                       Context(record_every=5, record_samples=1))
     a, b = plain.outcomes[0].rollouts[0], recorded.outcomes[0].rollouts[0]
     np.testing.assert_array_equal(a.final_positions_m, b.final_positions_m)
     frames = b.trajectory

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import predict
+from ipe_ros.engine import Request
 from ipe_ros.engine.errors import ConfigError
 from ipe_ros.engine.request import build_request
 from ipe_ros.engine.sampling.perturb import draw_sample, is_deterministic
@@ -83,7 +84,9 @@ def test_the_slides_spread_as_the_launches_do():
     scene = _scene(_box("box", 0.0) | {"angular_velocity_rad_s": [0, 0, 0]})
     request = build_request(samples=64, sigma_m=0.0, queries=("final_pose",), self_check=False,
                             launch_speed_log_sd=0.1, launch_direction_sd_deg=10.0, seed=5)
-    prediction = predict(scene, request.model, request.settings, request.query, request.seed, check=None)
+    prediction = predict(scene,
+                         Request(model=request.model, settings=request.settings, query=request.query,
+                                 seed=request.seed, check=None, budget_s=None))
     moved = np.array([o.rollouts[0].final_positions_m[0, :2] - o.initial_positions_m[0, :2]
                       for o in prediction.outcomes if o.ok])
     assert len(moved) == 64

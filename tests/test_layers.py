@@ -106,11 +106,11 @@ def test_the_rule_reader_sees_relative_and_nested_imports():
 
 RUNTIME_CHECK = r"""
 import json, sys
-from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes, predict, preset
+from ipe_ros.engine import ModelConfig, QuerySpec, Request, load_scenes, predict, preset
 from ipe_ros.engine.scene.examples import example_scene_path
 import ipe_ros.analysis.experiments, ipe_ros.cli, ipe_ros.service, ipe_ros.viz.palette
 scene = load_scenes(example_scene_path())[0]
-p = predict(scene, ModelConfig(sigma_m=0.04, samples=2), preset("default"), QuerySpec())
+p = predict(scene, Request(model=ModelConfig(sigma_m=0.04, samples=2), settings=preset("default"), query=QuerySpec()))
 ros = sorted(m for m in sys.modules if m.split(".")[0] in {"rclpy", "rosidl_runtime_py", "rpyutils"}
              or m.split(".")[0].endswith("_msgs") or m.split(".")[0].endswith("_srvs")
              or m.split(".")[0] in {"msg_bridge", "rcl_interfaces", "builtin_interfaces"})
@@ -392,3 +392,15 @@ def test_the_size_check_sees_an_oversized_module_and_function(tmp_path, monkeypa
     big = tmp_path / "big.py"
     big.write_text("def long():\n" + "    x = 1\n" * 90 + "\n" * 400)
     assert oversized([big]) == ["big.py: 491 lines", "big.py:long: 91 lines"]
+
+
+def test_predict_and_ask_take_a_request_and_a_context():
+    """The Request is the currency (issue 71): a prediction and a robot question are asked with one
+    request (what is asked) and one context (where it runs, what it records, what it draws from)."""
+    import inspect
+
+    from ipe_ros.engine import predict
+    from ipe_ros.engine.actions import ask
+
+    assert list(inspect.signature(predict).parameters) == ["scene", "request", "context"]
+    assert list(inspect.signature(ask).parameters) == ["scene", "actions", "request", "context"]

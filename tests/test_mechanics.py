@@ -35,6 +35,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
+from ipe_ros.engine import Request
 from ipe_ros.engine.scene.bodies import Body, Box, Floor, Scene, TimedPush
 from ipe_ros.engine.scene.shapes import Sphere
 from ipe_ros.engine.scene.turn import turned
@@ -116,7 +117,9 @@ def _end(scene: Scene, name):
     """The ground-truth rollout's end in preset ``name`` (or settings): (n, 3) centres of mass, (n, 4)
     orientations."""
     settings = preset(name) if isinstance(name, str) else name
-    prediction = predict(scene, ModelConfig(sigma_m=0.0, samples=1), settings, FINAL, check=None)
+    prediction = predict(scene,
+                         Request(model=ModelConfig(sigma_m=0.0, samples=1), settings=settings, query=FINAL,
+                                 check=None, budget_s=None))
     assert prediction.failed_samples == 0, prediction.failure_reasons
     rollout = prediction.outcomes[0].rollouts[0]
     return rollout.final_positions_m, rollout.final_orientations_xyzw

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, SceneError, load_scenes, predict, preset
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.scene import household, meshes
 from ipe_ros.engine.scene.format import scenes_from_json
 from ipe_ros.engine.scene.shapes import Compound, ConvexHull
@@ -58,8 +59,10 @@ def _write(folder, data: dict, name: str = "scene.json"):
 
 def _finals(scene, preset_name: str = "paper") -> dict[str, np.ndarray]:
     """Where each object ends, the scene as given (default: converged physics)."""
-    answer = predict(scene, ModelConfig(sigma_m=0.0, samples=1, object_noise=False), preset(preset_name),
-                     QuerySpec(queries=frozenset({"final_pose"})), check=None)
+    answer = predict(scene,
+                     Request(model=ModelConfig(sigma_m=0.0, samples=1, object_noise=False),
+                             settings=preset(preset_name), query=QuerySpec(queries=frozenset({"final_pose"})),
+                             check=None, budget_s=None))
     return {name: np.array(pose["position_m"]) for name, pose in answer.to_dict()["final_pose"].items()}
 
 
@@ -160,8 +163,10 @@ def test_an_open_mesh_goes_down_the_repair_ladder_and_the_answer_says_how(folder
     assert source.repaired.startswith("open: remeshed watertight from 24 voxels across (its holes too large to fill)")
     closed = mug_mesh()
     assert 0.6 * closed.volume < scene.objects[0].shape.volume_m3 < 1.6 * closed.volume  # its walls, a voxel or two thick
-    answer = predict(scene, ModelConfig(sigma_m=0.0, samples=1, object_noise=False), preset("default"),
-                     QuerySpec(queries=frozenset({"fall"})), check=None)
+    answer = predict(scene,
+                     Request(model=ModelConfig(sigma_m=0.0, samples=1, object_noise=False),
+                             settings=preset("default"), query=QuerySpec(queries=frozenset({"fall"})), check=None,
+                             budget_s=None))
     assert answer.object_fall_probability == {"mug": 0.0}
     assert answer.request["repaired_meshes"] == {"mug": source.repaired}
     assert cli_main(["predict", str(path), "--ground-truth", "--query", "fall"]) == 0
@@ -292,8 +297,9 @@ def test_a_mesh_object_turns_with_the_mesh_inertia_not_its_bounding_box(folder):
     # every preset steps it: under maximal coordinates (default, fine) pybullet needs the mass beside the
     # inertia, or every rollout went NaN
     for name in ("default", "fine", "paper"):
-        answer = predict(scene, ModelConfig(sigma_m=0.01, samples=2), preset(name), QuerySpec(queries=frozenset({"fall"})),
-                         check=None)
+        answer = predict(scene,
+                         Request(model=ModelConfig(sigma_m=0.01, samples=2), settings=preset(name),
+                                 query=QuerySpec(queries=frozenset({"fall"})), check=None, budget_s=None))
         assert answer.failed_samples == 0 and answer.object_fall_probability == {"mug": 0.0}, (name, answer.to_dict())
     for value, problem in (((0.1, 0.1, 0.3), "each moment at most the sum of the other two"),
                            ((1.0, 1.0, 1.0), "the parts' reach squared"), ((0.0, 1e-3, 1e-3), "finite numbers > 0")):
@@ -387,8 +393,11 @@ def _mug_tilt_deg(scene, preset_name: str) -> tuple[float, float, float]:
     """The mug's final tilt (degrees), and the tipped and the fall query's answer for it."""
     from ipe_ros.engine.scene.shapes import rotation_matrix
 
-    answer = predict(scene, ModelConfig(sigma_m=0.0, samples=1, object_noise=False), preset(preset_name),
-                     QuerySpec(queries=frozenset({"final_pose", "tipped", "fall"})), check=None)
+    answer = predict(scene,
+                     Request(model=ModelConfig(sigma_m=0.0, samples=1, object_noise=False),
+                             settings=preset(preset_name),
+                             query=QuerySpec(queries=frozenset({"final_pose", "tipped", "fall"})), check=None,
+                             budget_s=None))
     up = rotation_matrix(answer.outcomes[0].rollouts[0].final_orientations_xyzw[0])[2, 2]
     mug = scene.objects[0].name
     return (float(np.degrees(np.arccos(min(1.0, abs(up))))), answer.tipped_object_probability[mug],
@@ -438,8 +447,10 @@ def test_a_mesh_object_goes_out_as_its_mesh_to_rviz_and_back_in_the_json(folder)
     access = MeshAccess(roots=(folder.resolve(),))
     back = markers_to_scene(markers, meshes=access).scene.objects[0]
     assert (back.shape, back.position_m, back.density_kg_m3) == (mug, (0.0, 0.0, 0.0), 2000.0)
-    answer = predict(scene, ModelConfig(sigma_m=0.0, samples=1, object_noise=False), preset("default"),
-                     QuerySpec(queries=frozenset({"fall"})), check=None)
+    answer = predict(scene,
+                     Request(model=ModelConfig(sigma_m=0.0, samples=1, object_noise=False),
+                             settings=preset("default"), query=QuerySpec(queries=frozenset({"fall"})), check=None,
+                             budget_s=None))
     shown = [m for m in prediction_to_markers(scene, answer, "world", 0).markers if m.ns == "ipe/objects"]
     assert [(m.type, m.mesh_resource) for m in shown] == [(Marker.MESH_RESOURCE, mug.source.uri), (Marker.SPHERE, "")]
 
@@ -474,8 +485,10 @@ def test_a_robot_asks_whether_placing_a_spoon_in_the_mug_tips_it(folder):
     alone = dataclasses.replace(scene, objects=(mug,))
     for factor, tips in ((0.8, False), (1.25, True)):
         placed = A.Place(dataclasses.replace(spoon, mass_kg=factor * heaviest))
-        answers = A.ask(alone, [placed], ModelConfig(sigma_m=0.0, samples=1, object_noise=False), preset("default"),
-                        queries=("tipped",))
+        answers = A.ask(alone, [placed],
+                        Request(model=ModelConfig(sigma_m=0.0, samples=1, object_noise=False),
+                                settings=preset("default"), query=A.question_spec(queries=("tipped",)), budget_s=None,
+                                check=None))
         [variant] = [v for v in answers.variants if v.to_dict()["tipped_object_probability"] is not None
                      and "spoon" in v.to_dict()["tipped_object_probability"]]
         assert variant.to_dict()["tipped_object_probability"]["mug"] == float(tips), factor
@@ -547,8 +560,11 @@ def test_a_recording_draws_the_mesh_an_object_was_read_from(folder, tmp_path):
     assert len(vertices) == len(mug_mesh().vertices) and len(triangles) == len(mug_mesh().faces)
 
     def drawn_vertices(scene, entity: str = "/world/scene/objects/mug") -> int:
-        prediction = predict(scene, ModelConfig(sigma_m=0.0, samples=1, object_noise=False), preset("default"),
-                             QuerySpec(queries=frozenset({"fall"})), check=None, record_every=20, record_samples=1)
+        prediction = predict(scene,
+                             Request(model=ModelConfig(sigma_m=0.0, samples=1, object_noise=False),
+                                     settings=preset("default"), query=QuerySpec(queries=frozenset({"fall"})),
+                                     check=None, budget_s=None),
+                             Context(record_every=20, record_samples=1))
         path = tmp_path / "mug.rrd"
         write_prediction_rrd(path, scene, prediction, answer=prediction.to_dict(), stamp_ns=1, rollouts_logged=1)
         for chunk in RrdReader(path).stream().to_chunks():
@@ -595,8 +611,10 @@ def test_a_mug_with_a_handle_holds_a_ball_in_default_as_in_paper(folder):
     tensor = trimesh.Trimesh(*mug()).moment_inertia
     assert abs(tensor[0, 2]) < 0.02 * np.diag(tensor).min()
     for name in ("default", "paper"):
-        answer = predict(scene, ModelConfig(sigma_m=0.0, samples=1, object_noise=False), preset(name),
-                         QuerySpec(queries=frozenset({"final_pose", "tipped", "fall"})), check=None)
+        answer = predict(scene,
+                         Request(model=ModelConfig(sigma_m=0.0, samples=1, object_noise=False), settings=preset(name),
+                                 query=QuerySpec(queries=frozenset({"final_pose", "tipped", "fall"})), check=None,
+                                 budget_s=None))
         final = {n: np.array(p["position_m"]) for n, p in answer.to_dict()["final_pose"].items()}
         assert np.hypot(*(final["ball"] - final["mug"])[:2]) < R_IN - 0.015, (name, final)  # still in the cup
         assert final["ball"][2] < BOTTOM + 0.015 + 0.004, (name, final)  # on its floor

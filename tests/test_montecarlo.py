@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import ConfigError, ModelConfig, QuerySpec, predict, predict_many, preset
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.actions import remove
 from ipe_ros.engine.scene.generators import generate_towers
 from ipe_ros.engine.sampling.montecarlo import MonteCarlo, child_seeds, drive, mapped, together
@@ -125,7 +126,9 @@ def test_unchecked_predictions_run_in_one_map_call_alone_or_many_together():
     towers = generate_towers(5, 3)
     model = ModelConfig(sigma_m=0.03, samples=6)
     counting = CountingMap()
-    alone = predict(towers[0], model, preset("default"), QUERY, seed=1, map_fn=counting, check=None)
+    alone = predict(towers[0],
+                    Request(model=model, settings=preset("default"), query=QUERY, seed=1, check=None, budget_s=None),
+                    Context(map_fn=counting))
     assert counting.calls == [6]
     counting = CountingMap()
     answers = predict_many([(t, model, i + 1) for i, t in enumerate(towers)], preset("default"), QUERY, counting)
@@ -136,7 +139,9 @@ def test_unchecked_predictions_run_in_one_map_call_alone_or_many_together():
 def test_a_lost_worker_is_a_counted_failure_in_predictions_and_questions_alike():
     tower = generate_towers(5, 1)[0]
     model = ModelConfig(sigma_m=0.03, samples=6)
-    p = predict(tower, model, preset("default"), QUERY, seed=1, map_fn=CountingMap(lose_index=2), check=None)
+    p = predict(tower,
+                Request(model=model, settings=preset("default"), query=QUERY, seed=1, check=None, budget_s=None),
+                Context(map_fn=CountingMap(lose_index=2)))
     assert (p.samples, p.failed_samples) == (5, 1)
     assert p.failure_reasons == ("WorkerLost: test: worker gone",)
     answers = remove(tower, [tower.objects[-1].name], model, preset("default"), seed=1, sequential=False,

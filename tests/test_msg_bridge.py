@@ -261,6 +261,7 @@ def test_an_ellipsoid_and_an_elliptic_cylinder_are_refused_with_the_fix():
 
 def test_prediction_markers_draw_capsules_and_compounds_as_triangles():
     from ipe_ros.engine import Capsule, ModelConfig, QuerySpec, predict, preset
+    from ipe_ros.engine import Request
     from ipe_ros.engine.scene.catalogue import l_bracket
 
     pill = Body(name="pill", shape=Capsule(0.03, 0.1), position_m=(0.0, 0.0, 0.03),
@@ -272,7 +273,8 @@ def test_prediction_markers_draw_capsules_and_compounds_as_triangles():
     with pytest.raises(ValueError, match=r"^objects \('pill'\)\.shape: a capsule has no marker; publish the scene on "
                                          r"~/scene_json"):
         scene_to_markers(scene, "odom")
-    prediction = predict(scene, ModelConfig(), preset("default"), QuerySpec())
+    prediction = predict(scene,
+                         Request(model=ModelConfig(), settings=preset("default"), query=QuerySpec(), budget_s=None))
     drawn = [m for m in prediction_to_markers(scene, prediction, "odom", 0).markers if m.ns == "ipe/objects"]
     assert [m.type for m in drawn] == [Marker.TRIANGLE_LIST] * 2
     assert all(len(m.points) % 3 == 0 and len(m.points) >= 12 for m in drawn)

@@ -23,6 +23,7 @@ from std_srvs.srv import Trigger  # noqa: E402
 from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 
 from ipe_ros.engine import ConfigError, ModelConfig, QuerySpec, WorkerPool, load_scenes, predict, preset  # noqa: E402
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.scene.format import scene_to_json  # noqa: E402
 from ipe_ros.ros.node import INPUT_QOS as RELIABLE_QOS, LATCHED_QOS  # noqa: E402
 from msg_bridge.markers import markers_to_scene, scene_to_markers  # noqa: E402
@@ -84,8 +85,10 @@ def test_will_anything_fall_is_published_on_its_own_topic(ros, tower):
     # direction was not asked: no zero vector that would read as "nothing falls"
     assert len(directions) == 0
     with WorkerPool(1) as pool:
-        expected = predict(tower, ModelConfig(sigma_m=0.04, samples=6), preset("default"),
-                           QuerySpec(queries=frozenset({"any_fall"})), seed=7, map_fn=pool.map)
+        expected = predict(tower,
+                           Request(model=ModelConfig(sigma_m=0.04, samples=6), settings=preset("default"),
+                                   query=QuerySpec(queries=frozenset({"any_fall"})), seed=7, budget_s=None),
+                           Context(map_fn=pool.map))
     assert anything[0].data == got[0]["any_fall_probability"] == expected.any_fall_probability
     assert got[0]["fall_fraction"] is None and len(fractions) == 0  # the fraction was not asked
 
@@ -110,9 +113,11 @@ def test_marker_tower_in_stamped_prediction_out_matching_the_engine(ros, tower):
 
     # Same scene, settings and seed through the engine API: the same numbers.
     with WorkerPool(1) as pool:
-        expected = predict(tower, ModelConfig(sigma_m=0.04, samples=6), preset("default"),
-                           QuerySpec(queries=frozenset({"fall", "any_fall", "direction", "far"})), seed=7,
-                           map_fn=pool.map).to_dict()
+        expected = predict(tower,
+                           Request(model=ModelConfig(sigma_m=0.04, samples=6), settings=preset("default"),
+                                   query=QuerySpec(queries=frozenset({"fall", "any_fall", "direction", "far"})),
+                                   seed=7, budget_s=None),
+                           Context(map_fn=pool.map)).to_dict()
     for key in ("fall_fraction", "fall_fraction_ci95", "object_fall_probability", "any_fall_probability",
                 "direction_rad", "direction_decisiveness", "far_m", "samples", "failed_samples"):
         assert answer[key] == expected[key], key

@@ -9,6 +9,7 @@ import pytest
 
 from ipe_ros.analysis import paper_data
 from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes, predict, preset
+from ipe_ros.engine import Context, Request
 
 from .conftest import shared_file
 
@@ -32,7 +33,8 @@ def test_ground_truth_model_agrees_with_the_authors_on_exp1_towers(pool, preset_
     truth = authors_outcomes("stability_original_fall")
     agree, ours_moved, theirs_moved = 0, [], []
     for scene in scenes:
-        p = predict(scene, ModelConfig(), preset(preset_name), FALL, map_fn=pool.map)
+        p = predict(scene, Request(model=ModelConfig(), settings=preset(preset_name), query=FALL, budget_s=None),
+                    Context(map_fn=pool.map))
         assert p.deterministic and p.samples == 1 and p.failed_samples == 0
         outcome = p.outcomes[0]
         moved = int((np.linalg.norm(outcome.rollouts[0].final_positions_m - outcome.initial_positions_m, axis=1)
@@ -60,7 +62,7 @@ def test_early_termination_waits_out_a_slow_tip(preset_name, rest_threshold):
     settings = preset(preset_name)
     if rest_threshold is not None:
         settings = settings.changed(early_stop={"speed_sizes_per_s": rest_threshold, "angular_rad_s": rest_threshold})
-    p = predict(scene, ModelConfig(), settings, FALL)
+    p = predict(scene, Request(model=ModelConfig(), settings=settings, query=FALL, budget_s=None))
     rollout = p.outcomes[0].rollouts[0]
     assert rollout.fallen.tolist() == [False] * 8 + [True, False]
     assert rollout.simulated_s > 1.0
@@ -74,8 +76,9 @@ def test_ipe_finds_towers_that_are_stable_but_look_likely_to_fall(pool):
     model = ModelConfig(sigma_m=0.04, samples=16)
     illusions = []
     for scene in scenes:
-        assert predict(scene, ModelConfig(), preset("default"), FALL).fall_fraction == 0.0
-        p = predict(scene, model, preset("default"), FALL, seed=0, map_fn=pool.map)
+        assert predict(scene, Request(model=ModelConfig(), settings=preset("default"), query=FALL, budget_s=None)).fall_fraction == 0.0
+        p = predict(scene, Request(model=model, settings=preset("default"), query=FALL, seed=0, budget_s=None),
+                    Context(map_fn=pool.map))
         if p.fall_fraction_ci95[0] > 0.1:  # even the interval's lower end says blocks fall
             illusions.append((scene.name, round(p.fall_fraction, 3)))
     print(f"\nstable towers the IPE expects to fall: {illusions}")
@@ -96,10 +99,13 @@ def test_mass_state_pairs_get_different_predictions(pool):
     insensitive = ModelConfig(sigma_m=0.04, samples=16, mu=1.0)
     differences = []
     for a, b in pairs:
-        pa, pb = (predict(s, model, preset("default"), FALL, seed=4, map_fn=pool.map) for s in (a, b))
+        pa, pb = (predict(s, Request(model=model, settings=preset("default"), query=FALL, seed=4, budget_s=None),
+                          Context(map_fn=pool.map)) for s in (a, b))
         differences.append(abs(pa.fall_fraction - pb.fall_fraction))
         # the mass-insensitive model (mu = 1) cannot tell the pair apart: same seeds, same geometry
-        qa, qb = (predict(s, insensitive, preset("default"), FALL, seed=4, map_fn=pool.map) for s in (a, b))
+        qa, qb = (predict(s,
+                          Request(model=insensitive, settings=preset("default"), query=FALL, seed=4, budget_s=None),
+                          Context(map_fn=pool.map)) for s in (a, b))
         assert qa.fall_fraction == qb.fall_fraction
     print(f"\nwithin-pair |delta fall fraction| at ratio 10: {np.round(differences, 3).tolist()}")
     assert np.mean(differences) > 0.05
@@ -117,5 +123,5 @@ def test_the_self_checks_reference_waits_out_a_slow_tip_as_paper_does(tower):
     (scene,) = load_scenes(shared_file("willitfall.csv"), towers=[tower])
     assert authors_outcomes("stability_original_fall")[scene.name][1] == 0  # the authors': falls
     for settings in (reference_settings(), preset("paper")):
-        assert predict(scene, ModelConfig(), settings, FALL, check=None).fall_fraction == 0.1, settings.name
-    assert predict(scene, ModelConfig(), preset("default"), FALL).fall_fraction == 0.1
+        assert predict(scene, Request(model=ModelConfig(), settings=settings, query=FALL, check=None, budget_s=None)).fall_fraction == 0.1, settings.name
+    assert predict(scene, Request(model=ModelConfig(), settings=preset("default"), query=FALL, budget_s=None)).fall_fraction == 0.1

@@ -14,6 +14,7 @@ import pytest
 
 from ipe_ros.cli import main
 from ipe_ros.engine import ConfigError, ModelConfig, QuerySpec, load_scenes, predict, preset
+from ipe_ros.engine import Request
 from ipe_ros.engine.scene.examples import example_scene_path
 from ipe_ros.engine.perceptions import (PerceptionSource, perception_names, perception_source, register_perception,
                                         unregister_perception)
@@ -66,8 +67,10 @@ def jitter(tmp_path):
 
 def test_a_registered_perception_is_drawn_from_by_predict(jitter):
     assert "jitter" in perception_names() and perception_source("jitter") is jitter
-    answer = predict(TOWER, ModelConfig(perception="jitter", samples=16, sigma_m=0.04), preset("default"),
-                     QuerySpec(queries=frozenset({"fall"})), seed=3, check=None)
+    answer = predict(TOWER,
+                     Request(model=ModelConfig(perception="jitter", samples=16, sigma_m=0.04),
+                             settings=preset("default"), query=QuerySpec(queries=frozenset({"fall"})), seed=3,
+                             check=None, budget_s=None))
     assert answer.request["perception"] == {"kind": "jitter", "sd_m": {"block9": 0.05}, "samples": 16}
     falls = answer.object_fall_probability
     # sigma unused (the posterior is the noise): the tower as given stands, and only the top block moves
@@ -84,7 +87,9 @@ def test_a_chain_that_returns_no_perceived_scenes_is_named():
         with pytest.raises(TypeError, match=r"^perception listed's run returned a list, which is not Perceived "
                                             r"\(engine.perceptions\): give it scenes, refined, with_samples\(k\) and "
                                             r"to_dict\(\)$"):
-            predict(TOWER, ModelConfig(perception="listed", samples=4), preset("default"), QuerySpec(), check=None)
+            predict(TOWER,
+                    Request(model=ModelConfig(perception="listed", samples=4), settings=preset("default"),
+                            query=QuerySpec(), check=None, budget_s=None))
     finally:
         unregister_perception(source.name)
 
@@ -174,7 +179,9 @@ def test_a_source_that_needs_evidence_reads_it_from_its_own_cli_option_and_draws
     with pytest.raises(ConfigError, match=r"^perception: detections perception needs the detections: give them to "
                                           r"predict as its evidence \(ipe predict's --detections; the node's "
                                           r"~/detections\)$"):
-        predict(TOWER, ModelConfig(perception="detections", samples=4), preset("default"), QuerySpec(), check=None)
+        predict(TOWER,
+                Request(model=ModelConfig(perception="detections", samples=4), settings=preset("default"),
+                        query=QuerySpec(), check=None, budget_s=None))
 
 
 def test_no_door_names_a_perception():

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import Box, ModelConfig, QuerySpec, predict, preset
+from ipe_ros.engine import Request
 from ipe_ros.engine import simulation
 from ipe_ros.engine.config import DEFAULT_QUERIES
 from ipe_ros.engine.scene.generators import make_table
@@ -21,7 +22,7 @@ ALL = QuerySpec(queries=frozenset({"fall", "direction", "far"}))
 @pytest.mark.parametrize("name", ["paper", "default"])
 def test_resting_box_stays_put_for_two_seconds(name):
     scene = floor_scene(block("a", 0.3, -0.2, 0.1))
-    p = predict(scene, ModelConfig(), preset(name), ALL)
+    p = predict(scene, Request(model=ModelConfig(), settings=preset(name), query=ALL, budget_s=None))
     assert p.deterministic and p.samples == 1 and p.failed_samples == 0
     rollout = p.outcomes[0].rollouts[0]
     assert np.allclose(rollout.final_positions_m, [[0.3, -0.2, 0.1]], atol=1e-4)
@@ -31,17 +32,18 @@ def test_resting_box_stays_put_for_two_seconds(name):
 def test_the_answer_reports_the_horizon_that_was_simulated():
     """A scene's own horizon_s replaces the preset's; the request says which one ran."""
     scene = replace(floor_scene(block("a", 0.3, -0.2, 0.1)), horizon_s=0.5)
-    p = predict(scene, ModelConfig(), preset("paper"), ALL)
+    p = predict(scene, Request(model=ModelConfig(), settings=preset("paper"), query=ALL, budget_s=None))
     assert p.outcomes[0].rollouts[0].simulated_s == pytest.approx(0.5)
     assert p.request["horizon_s"] == 0.5
-    assert predict(floor_scene(block("a", 0.3, -0.2, 0.1)), ModelConfig(), preset("paper"), ALL).request[
+    assert predict(floor_scene(block("a", 0.3, -0.2, 0.1)),
+                   Request(model=ModelConfig(), settings=preset("paper"), query=ALL, budget_s=None)).request[
         "horizon_s"] == preset("paper").horizon_s
 
 
 def test_block_overhanging_more_than_half_its_length_falls_towards_the_overhang():
     # bottom block lies along y (0.6 long); the top block sticks out 0.35 m (> half of 0.6) towards +y
     scene = floor_scene(block("base", 0, 0, 0.1), block("top", 0, 0.35, 0.3))
-    p = predict(scene, ModelConfig(), preset("default"), ALL)
+    p = predict(scene, Request(model=ModelConfig(), settings=preset("default"), query=ALL, budget_s=None))
     assert p.object_fall_probability == {"base": 0.0, "top": 1.0}
     assert p.direction_rad == pytest.approx(math.pi / 2, abs=0.3)
     assert p.far_m > 0.3
@@ -49,7 +51,7 @@ def test_block_overhanging_more_than_half_its_length_falls_towards_the_overhang(
 
 def test_block_overhanging_less_than_half_stays():
     scene = floor_scene(block("base", 0, 0, 0.1), block("top", 0, 0.25, 0.3))
-    p = predict(scene, ModelConfig(), preset("default"), ALL)
+    p = predict(scene, Request(model=ModelConfig(), settings=preset("default"), query=ALL, budget_s=None))
     assert p.fall_fraction == 0.0
 
 
@@ -73,7 +75,9 @@ def test_large_noise_on_a_stack_separates_and_rolls_out_without_divergence():
     # sigma = 0.1 m on 0.2 m blocks; failed_samples counts any rollout whose speed exceeded the
     # physical bound (free fall plus push), i.e. any energy the separation or solver injected
     scene = floor_scene(block("a", 0, 0, 0.1), block("b", 0.0, 0.0, 0.3), block("c", 0.0, 0.0, 0.5))
-    p = predict(scene, ModelConfig(sigma_m=0.1, samples=6), preset("default"), ALL, seed=3)
+    p = predict(scene,
+                Request(model=ModelConfig(sigma_m=0.1, samples=6), settings=preset("default"), query=ALL, seed=3,
+                        budget_s=None))
     assert p.failed_samples == 0
     for outcome in p.outcomes:
         assert np.all(np.isfinite(outcome.initial_positions_m))
@@ -96,8 +100,10 @@ def test_cued_bump_on_a_walled_table_changes_which_colour_falls_off():
     # over the -y edge when the slide has enough -y in it; on T1 a wall along the -x edge holds the reds.
     model = ModelConfig(sigma_m=0.01, phi_m_s2=(10.0,), force_direction_rad=0.0, samples=16)
     query = QuerySpec(queries=frozenset({"bump"}))
-    flat = predict(table_scene("T0"), model, preset("default"), query, seed=1)
-    walled = predict(table_scene("T1"), model, preset("default"), query, seed=1)  # walls on the +-x edges
+    flat = predict(table_scene("T0"),
+                   Request(model=model, settings=preset("default"), query=query, seed=1, budget_s=None))
+    walled = predict(table_scene("T1"),
+                     Request(model=model, settings=preset("default"), query=query, seed=1, budget_s=None))  # walls on the +-x edges
     assert flat.failed_samples == walled.failed_samples == 0
     assert flat.fell_off_fraction_by_group["red"] > 0.9
     assert walled.fell_off_fraction_by_group["red"] < 0.1
@@ -107,9 +113,10 @@ def test_cued_bump_on_a_walled_table_changes_which_colour_falls_off():
 
 def test_no_push_machinery_without_phi_and_push_with_phi():
     scene = floor_scene(block("a", 0, 0, 0.4, extents=(0.2, 0.2, 0.8)))
-    still = predict(scene, ModelConfig(), preset("default"), ALL)
-    pushed = predict(scene, ModelConfig(phi_m_s2=(15.0,), force_direction_rad=0.0, cue_half_width_rad=0.0,
-                                        samples=1), preset("default"), ALL)
+    still = predict(scene, Request(model=ModelConfig(), settings=preset("default"), query=ALL, budget_s=None))
+    pushed = predict(scene,
+                     Request(model=ModelConfig(phi_m_s2=(15.0,), force_direction_rad=0.0, cue_half_width_rad=0.0, samples=1),
+                             settings=preset("default"), query=ALL, budget_s=None))
     assert still.fall_fraction == 0.0
     # a tall narrow box on a floor jerked towards +x topples backwards, towards -x
     assert pushed.fall_fraction == 1.0
@@ -120,19 +127,24 @@ def test_bump_query_needs_a_table():
     from ipe_ros.engine import ConfigError
 
     with pytest.raises(ConfigError, match="^queries: the bump query needs a table support"):
-        predict(floor_scene(block("a", 0, 0, 0.1)), ModelConfig(), preset("default"),
-                QuerySpec(queries=frozenset({"bump"})))
+        predict(floor_scene(block("a", 0, 0, 0.1)),
+                Request(model=ModelConfig(), settings=preset("default"), query=QuerySpec(queries=frozenset({"bump"})),
+                        budget_s=None))
 
 
 def test_failed_rollouts_are_counted_not_raised():
     scene = floor_scene(block("a", 0, 0, 0.1), block("b", 0.001, 0.0, 0.1))
     settings = preset("default").changed(depenetration={"max_iterations": 1})
-    p = predict(scene, ModelConfig(sigma_m=0.001, samples=3), settings, ALL, check=None)
+    p = predict(scene,
+                Request(model=ModelConfig(sigma_m=0.001, samples=3), settings=settings, query=ALL, check=None,
+                        budget_s=None))
     assert p.samples == 0 and p.failed_samples == 3 and p.fall_fraction is None
     assert p.failure_reasons == ("PhysicsError: boxes still overlap after 1 depenetration rounds; lower sigma or "
                                  "raise depenetration.max_iterations",)
     # the self-check reruns failed samples at the reference, whose separation has its 200 rounds
-    checked = predict(scene, ModelConfig(sigma_m=0.001, samples=3), settings, ALL)
+    checked = predict(scene,
+                      Request(model=ModelConfig(sigma_m=0.001, samples=3), settings=settings, query=ALL,
+                              budget_s=None))
     assert (checked.samples, checked.failed_samples, checked.refined_samples) == (3, 0, 3)
     assert checked.self_check["refined_reasons"] == {"0": "failed", "1": "failed", "2": "failed"}
 
@@ -150,7 +162,7 @@ def test_mu_sets_the_models_own_densities():
 
 def test_early_termination_ends_a_resting_stack_before_the_horizon():
     scene = floor_scene(block("b0", 0, 0, 0.1), block("b1", 0, 0, 0.3))
-    p = predict(scene, ModelConfig(), preset("default"), QuerySpec())
+    p = predict(scene, Request(model=ModelConfig(), settings=preset("default"), query=QuerySpec(), budget_s=None))
     assert p.fall_fraction == 0.0
     assert p.outcomes[0].rollouts[0].simulated_s < 1.0  # rest from 0.3 s on, confirmed over 0.2 s
 
@@ -162,8 +174,12 @@ def test_early_termination_does_not_wait_for_a_box_that_cannot_fall():
     slab = replace(block("slab", 0, 0, 0.05, extents=(0.4, 0.4, 0.1)), friction=0.02)
     scene = floor_scene(slab)
     model = ModelConfig(phi_m_s2=(3.0,), force_direction_rad=0.0, cue_half_width_rad=0.0, samples=1)
-    fall_only = predict(scene, model, preset("default"), QuerySpec(queries=frozenset({"fall"})))
-    where_to = predict(scene, model, preset("default"), QuerySpec(queries=frozenset({"fall", "direction"})))
+    fall_only = predict(scene,
+                        Request(model=model, settings=preset("default"), query=QuerySpec(queries=frozenset({"fall"})),
+                                budget_s=None))
+    where_to = predict(scene,
+                       Request(model=model, settings=preset("default"),
+                               query=QuerySpec(queries=frozenset({"fall", "direction"})), budget_s=None))
     assert fall_only.fall_fraction == where_to.fall_fraction == 0.0
     # the push until 0.2 s, then the 0.15 s rest window, on the ~0.05 s grid of rest checks
     assert fall_only.outcomes[0].rollouts[0].simulated_s < 0.5
@@ -182,8 +198,11 @@ def test_a_fallen_body_that_moves_on_holds_up_the_end_of_a_fall_only_question():
 
     scene = zoo_scene("drop", 2026, 0)
     model = ModelConfig(sigma_m=zoo_sigma_m(scene), samples=4)
-    fall_only, to_rest = ([bool(o.rollouts[0].fallen[1]) for o in predict(
-        scene, model, preset("default"), QuerySpec(queries=frozenset(asked)), check=NO_CHECK).outcomes]
+    fall_only, to_rest = ([bool(o.rollouts[0].fallen[1]) for o in predict(scene,
+                                                                          Request(model=model,
+                                                                                  settings=preset("default"),
+                                                                                  query=QuerySpec(queries=frozenset(asked)),
+                                                                                  check=NO_CHECK, budget_s=None)).outcomes]
         for asked in ({"fall"}, {"fall", "far"}))
     assert any(to_rest)
     assert all(alone for alone, waited in zip(fall_only, to_rest) if waited)
@@ -202,8 +221,12 @@ def test_what_falls_off_is_decided_once_below_the_table_top_and_agrees_with_wait
     # asked with direction (which waits for every block to rest), the same blocks are off the table
     model = ModelConfig(sigma_m=0.01, phi_m_s2=(10.0, 30.0), force_direction_rad=0.0, samples=6)
     scene = table_scene("T0")
-    alone = predict(scene, model, preset("default"), QuerySpec(queries=frozenset({"bump"})), seed=4)
-    waiting = predict(scene, model, preset("default"), QuerySpec(queries=frozenset({"bump", "direction"})), seed=4)
+    alone = predict(scene,
+                    Request(model=model, settings=preset("default"), query=QuerySpec(queries=frozenset({"bump"})),
+                            seed=4, budget_s=None))
+    waiting = predict(scene,
+                      Request(model=model, settings=preset("default"),
+                              query=QuerySpec(queries=frozenset({"bump", "direction"})), seed=4, budget_s=None))
     assert alone.failed_samples == waiting.failed_samples == 0
     ended_sooner = 0
     for quick, slow in zip(alone.outcomes, waiting.outcomes):
@@ -218,8 +241,12 @@ def test_what_falls_off_is_decided_once_below_the_table_top_and_agrees_with_wait
 def test_will_anything_fall_stops_at_the_first_fall_and_agrees_with_the_full_rollout():
     scene = _three_block_tower_with_a_borderline_top()
     model = ModelConfig(sigma_m=0.02, samples=12)
-    yes_no = predict(scene, model, preset("default"), QuerySpec(queries=frozenset({"any_fall"})), seed=3)
-    full = predict(scene, model, preset("default"), QuerySpec(queries=frozenset({"fall", "any_fall"})), seed=3)
+    yes_no = predict(scene,
+                     Request(model=model, settings=preset("default"),
+                             query=QuerySpec(queries=frozenset({"any_fall"})), seed=3, budget_s=None))
+    full = predict(scene,
+                   Request(model=model, settings=preset("default"),
+                           query=QuerySpec(queries=frozenset({"fall", "any_fall"})), seed=3, budget_s=None))
     fell_any = [o.rollouts[0].value("any_fell") for o in yes_no.outcomes]
     assert fell_any == [bool(o.rollouts[0].fallen.any()) for o in full.outcomes]  # same noisy scenes, same answers
     assert 0 < sum(fell_any) < len(fell_any), "the scene should be uncertain under this seed"
@@ -242,8 +269,12 @@ def test_collapse_steps_change_nothing_while_nothing_falls():
     # a stable stack never triggers the switch: bit-identical to the fine step throughout
     scene = floor_scene(block("b0", 0, 0, 0.1), block("b1", 0, 0.05, 0.3), block("b2", 0, 0, 0.5))
     model = ModelConfig(sigma_m=0.005, samples=4)
-    fine = predict(scene, model, _collapsing(preset("default"), 1), QuerySpec(), seed=1)
-    coarse = predict(scene, model, _collapsing(preset("default"), 4, 30), QuerySpec(), seed=1)
+    fine = predict(scene,
+                   Request(model=model, settings=_collapsing(preset("default"), 1), query=QuerySpec(), seed=1,
+                           budget_s=None))
+    coarse = predict(scene,
+                     Request(model=model, settings=_collapsing(preset("default"), 4, 30), query=QuerySpec(), seed=1,
+                             budget_s=None))
     assert fine.fall_fraction == coarse.fall_fraction == 0.0
     for a, b in zip(fine.outcomes, coarse.outcomes):
         assert np.array_equal(a.rollouts[0].final_positions_m, b.rollouts[0].final_positions_m)
@@ -404,7 +435,9 @@ def test_a_sliding_box_stops_where_coulomb_friction_says_under_every_preset(name
     box = Body("box", BoxShape((0.2, 0.2, 0.2)), (0.0, 0.0, 0.1), (0.0, 0.0, 0.0, 1.0), friction=friction,
                restitution=0.0, mass_kg=8.0, linear_velocity_m_s=(speed, 0.0, 0.0))
     scene = Scene(name="slide", objects=(box,), support=Floor(friction=1.0, restitution=0.0))
-    p = predict(scene, ModelConfig(sigma_m=0.0), preset(name), QuerySpec(queries=frozenset({"far"})), check=None)
+    p = predict(scene,
+                Request(model=ModelConfig(sigma_m=0.0), settings=preset(name),
+                        query=QuerySpec(queries=frozenset({"far"})), check=None, budget_s=None))
     coulomb_m = speed ** 2 / (2 * friction * 9.81)
     assert p.outcomes[0].rollouts[0].final_positions_m[0, 0] == pytest.approx(coulomb_m, rel=0.01)
 
@@ -414,12 +447,16 @@ def test_end_substeps_read_a_collapse_at_the_horizon_at_a_finer_step():
     another by more than the default's own end (and the setting changes only that last part)."""
     from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes
     from ipe_ros.engine.predict import predict
+    from ipe_ros.engine.predict import Request
 
     tower = load_scenes("ipe_ros/data/example_tower.json")[0]
     query = QuerySpec(queries=frozenset({"fall", "direction"}))  # run to the horizon, every pose read
     model = ModelConfig(sigma_m=0.04, samples=6)
-    plain = predict(tower, model, preset("default"), query, seed=2, check=None)
-    halved = predict(tower, model, preset("default").changed(collapse={"end_substeps": 2}), query, seed=2, check=None)
+    plain = predict(tower,
+                    Request(model=model, settings=preset("default"), query=query, seed=2, check=None, budget_s=None))
+    halved = predict(tower,
+                     Request(model=model, settings=preset("default").changed(collapse={"end_substeps": 2}),
+                             query=query, seed=2, check=None, budget_s=None))
     assert halved.max_penetration_fraction <= max(plain.max_penetration_fraction, 0.05)
     for a, b in zip(plain.outcomes, halved.outcomes):  # the same noisy scenes
         np.testing.assert_array_equal(a.initial_positions_m, b.initial_positions_m)
@@ -434,14 +471,17 @@ def test_the_end_phase_takes_as_many_substeps_as_keep_a_landing_within_the_healt
     from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes
     from ipe_ros.engine.config import DEFAULT_QUERIES
     from ipe_ros.engine.predict import predict
+    from ipe_ros.engine.predict import Request
 
     tower = load_scenes("ipe_ros/data/example_tower.json")[0]
     model, query = ModelConfig(sigma_m=0.01, samples=3), QuerySpec(queries=DEFAULT_QUERIES)
     assert preset("default").collapse.end_travel_fraction == 0.05
     then = preset("default").changed(solver={"residual_threshold": 3e-6})
-    halves = predict(tower, model, then.changed(collapse={"end_travel_fraction": None, "end_substeps": 2}),
-                     query, seed=8, check=None)
-    limited = predict(tower, model, then, query, seed=8, check=None)
+    halves = predict(tower,
+                     Request(model=model,
+                             settings=then.changed(collapse={"end_travel_fraction": None, "end_substeps": 2}),
+                             query=query, seed=8, check=None, budget_s=None))
+    limited = predict(tower, Request(model=model, settings=then, query=query, seed=8, check=None, budget_s=None))
     assert halves.outcomes[0].rollouts[0].penetration_fraction > 0.1
     assert limited.max_penetration_fraction < 0.05
     for a, b in zip(halves.outcomes, limited.outcomes):
@@ -491,9 +531,10 @@ def test_a_tower_with_estimated_heights_stands_only_when_set_down():
     truth = floor_scene(*(block(f"b{i}", x, 0, 0.1 + 0.2 * i) for i, x in enumerate(offsets)))
     estimated = floor_scene(*(block(f"b{i}", x, 0, 0.1 + 0.2 * i + 0.002 * (i + 1)) for i, x in enumerate(offsets)))
     model, queries = ModelConfig(samples=1, object_noise=False), QuerySpec(queries=DEFAULT_QUERIES)
-    assert predict(truth, model, preset("default"), queries).any_fall_probability == 0
-    assert predict(estimated, model, preset("default"), queries).any_fall_probability == 1
-    assert predict(replace(estimated, set_down_m=0.01), model, preset("default"), queries).any_fall_probability == 0
+    assert predict(truth, Request(model=model, settings=preset("default"), query=queries, budget_s=None)).any_fall_probability == 0
+    assert predict(estimated, Request(model=model, settings=preset("default"), query=queries, budget_s=None)).any_fall_probability == 1
+    assert predict(replace(estimated, set_down_m=0.01),
+                   Request(model=model, settings=preset("default"), query=queries, budget_s=None)).any_fall_probability == 0
 
 
 def test_thin_boxes_on_the_direct_solver_are_built_in_multibodies_which_hold_their_friction():

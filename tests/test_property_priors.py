@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import predict
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.errors import ConfigError, SceneError
 from ipe_ros.engine.request import build_request
 from ipe_ros.engine.sampling.perturb import draw_sample, dynamic_masses, is_deterministic, sample_properties
@@ -94,7 +95,9 @@ def test_exact_scenes_draw_nothing_and_stay_deterministic():
     assert sample_properties(scene, request.model) == ()
     assert is_deterministic(scene, request.model)
     assert request.model.property_spread is None  # so a stored result's key is what it always was
-    assert "property_influence" not in predict(scene, request.model, request.settings, request.query).to_dict()
+    assert "property_influence" not in predict(scene,
+                                               Request(model=request.model, settings=request.settings,
+                                                       query=request.query, budget_s=None)).to_dict()
 
 
 def test_each_value_is_a_function_of_the_sample_seed_and_its_owner_only():
@@ -163,7 +166,9 @@ def test_each_sample_slides_its_own_friction_s_distance():
     a slide in every preset)."""
     scene = scene_from_dict(_scene({"friction_prior": {"uniform": list(FRICTION)}}))
     request = _request(12)
-    prediction = predict(scene, request.model, request.settings, request.query, seed=4)
+    prediction = predict(scene,
+                         Request(model=request.model, settings=request.settings, query=request.query, seed=4,
+                                 budget_s=None))
     assert prediction.samples == 12 and not prediction.deterministic
     for outcome in prediction.outcomes:
         mu = dict(outcome.properties)["box.friction"] * 1.0
@@ -177,15 +182,20 @@ def test_the_influence_names_friction_not_a_mass_that_cannot_matter():
     slides 0.52 m on average, above it 0.34 m (v^2 / (2 g) E[1/mu] over each half of the prior)."""
     scene = scene_from_dict(_scene({"friction_prior": {"uniform": list(FRICTION)}, "mass_prior": {"log_sd": 0.7}}))
     request = build_request(samples=32, sigma_m=0.0, queries=("final_pose",), self_check=False)
-    answer = predict(scene, request.model, request.settings, request.query, seed=9).to_dict()
+    answer = predict(scene,
+                     Request(model=request.model, settings=request.settings, query=request.query, seed=9,
+                             budget_s=None)).to_dict()
     first, second = answer["property_influence"]
     assert first["property"] == "box.friction" and first["object"] == "box" and first["outcome"] == "travel_m"
     assert first["below_median"] > first["above_median"] and first["difference"] == pytest.approx(-0.18, abs=0.06)
     assert second["property"] == "box.mass_kg"
     assert abs(second["difference"]) < 3 * second["difference_se"] + 1e-3
     assert math.isclose(first["median"], np.median([dict(o.properties)["box.friction"]
-                                                    for o in predict(scene, request.model, request.settings,
-                                                                     request.query, seed=9).outcomes]))
+                                                    for o in predict(scene,
+                                                                     Request(model=request.model,
+                                                                             settings=request.settings,
+                                                                             query=request.query, seed=9,
+                                                                             budget_s=None)).outcomes]))
 
 
 def test_the_fall_probability_follows_the_friction_prior():
@@ -199,7 +209,9 @@ def test_the_fall_probability_follows_the_friction_prior():
     del data["support"]["height_m"]
     scene = scene_from_dict(data)
     request = build_request(samples=48, sigma_m=0.0, queries=("fall",), self_check=False)
-    prediction = predict(scene, request.model, request.settings, request.query, seed=2)
+    prediction = predict(scene,
+                         Request(model=request.model, settings=request.settings, query=request.query, seed=2,
+                                 budget_s=None))
     threshold = 1.8 ** 2 / (2 * G * 0.4)
     expected = (threshold - 0.2) / 0.6
     assert prediction.object_fall_probability["box"] == pytest.approx(expected, abs=3 * math.sqrt(
@@ -216,8 +228,13 @@ def test_the_fall_probability_follows_the_friction_prior():
 def test_the_draws_do_not_depend_on_the_worker_count(pool):
     scene = scene_from_dict(_scene({"friction_prior": {"uniform": list(FRICTION)}, "mass_prior": {"log_sd": 0.3}}))
     request = _request(6, restitution_half_width=0.1)
-    serial = predict(scene, request.model, request.settings, request.query, seed=3)
-    pooled = predict(scene, request.model, request.settings, request.query, seed=3, map_fn=pool.map)
+    serial = predict(scene,
+                     Request(model=request.model, settings=request.settings, query=request.query, seed=3,
+                             budget_s=None))
+    pooled = predict(scene,
+                     Request(model=request.model, settings=request.settings, query=request.query, seed=3,
+                             budget_s=None),
+                     Context(map_fn=pool.map))
     assert [o.properties for o in serial.outcomes] == [o.properties for o in pooled.outcomes]
     assert [o.properties[0][0] for o in serial.outcomes] == ["box.mass_kg"] * 6
     assert serial.property_influence == pooled.property_influence

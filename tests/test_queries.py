@@ -19,6 +19,7 @@ from ipe_ros.engine.sampling.estimate import Prediction
 from ipe_ros.engine.query import ALL_QUERIES, ANSWER_FIELDS, QUERIES
 from ipe_ros.engine.query.contact import parse_pair
 from ipe_ros.engine.predict import predict
+from ipe_ros.engine.predict import Context, Request
 from tests.helpers import IDENTITY, block, floor_scene
 
 GROUND_TRUTH = ModelConfig(sigma_m=0.0, samples=1)
@@ -26,7 +27,8 @@ GROUND_TRUTH = ModelConfig(sigma_m=0.0, samples=1)
 
 def _ask(scene: Scene, *pairs: str, queries=("contact",), settings="default", model=GROUND_TRUTH, **kw) -> Prediction:
     spec = QuerySpec(queries=frozenset(queries), contact_pairs=tuple(parse_pair(p) for p in pairs))
-    return predict(scene, model, preset(settings), spec, seed=3, check=None, **kw)
+    return predict(scene, Request(model=model, settings=preset(settings), query=spec, seed=3, budget_s=None, check=None),
+                   Context(**kw))
 
 
 def _ball(name: str, x: float, speed_m_s: float, radius: float = 0.05) -> Body:
@@ -152,8 +154,9 @@ def test_contact_with_noise_counts_samples_and_gives_an_interval():
 ])
 def test_contact_questions_that_cannot_be_answered_are_refused(pairs, message):
     with pytest.raises(ConfigError, match=message):  # refused by QuerySpec where no scene could answer it
-        predict(_rolled(1.0), GROUND_TRUTH, preset("default"), QuerySpec(queries=frozenset({"contact"}),
-                                                                         contact_pairs=pairs))
+        predict(_rolled(1.0),
+                Request(model=GROUND_TRUTH, settings=preset("default"),
+                        query=QuerySpec(queries=frozenset({"contact"}), contact_pairs=pairs), budget_s=None))
 
 
 def test_contact_pairs_without_the_query_and_badly_written_pairs_are_refused():
@@ -189,7 +192,8 @@ def test_rests_own_parameters_set_its_reading_of_rest_and_the_rollouts_end():
 
     rolling = _rolled(0.5)  # still rolling at 5/7 of 0.5 m/s at the horizon: at rest only by a loose reading
     loose = QuerySpec(queries=frozenset({"rest"}), parameters=(("rest", RestParameters(100.0, 100.0)),))
-    assert predict(rolling, GROUND_TRUTH, preset("default"), loose, check=None).rest_probability == 1.0
+    assert predict(rolling,
+                   Request(model=GROUND_TRUTH, settings=preset("default"), query=loose, check=None, budget_s=None)).rest_probability == 1.0
     strict = QuerySpec(queries=frozenset({"rest"}), parameters=(("rest", RestParameters(spin_rad_s=0.01)),))
     assert query_settings(preset("default"), strict).early_stop.angular_rad_s == 0.01
     with pytest.raises(ConfigError) as info:
@@ -390,7 +394,9 @@ def test_bump_counts_only_what_started_on_the_table_as_fallen_off():
     on_table = block("on_table", 0.0, 0.0, 0.55, extents=(0.1, 0.1, 0.1), group="red")
     beside = block("beside", 0.6, 0.0, 0.05, extents=(0.1, 0.1, 0.1), group="yellow")
     scene = Scene(name="beside_table", objects=(on_table, beside), support=table, gravity_m_s2=(0.0, 0.0, -9.81))
-    answer = predict(scene, GROUND_TRUTH, preset("default"), QuerySpec(queries=frozenset({"bump"})), check=None)
+    answer = predict(scene,
+                     Request(model=GROUND_TRUTH, settings=preset("default"),
+                             query=QuerySpec(queries=frozenset({"bump"})), check=None, budget_s=None))
     assert answer.fell_off_fraction_by_group == {"red": 0.0, "yellow": 0.0}
     assert answer.bump_rollouts == 0  # nothing fell off: no share to report
 
@@ -436,8 +442,10 @@ def test_many_contact_pairs_are_watched_per_contact_and_priced_up_front():
                                           r"and 1830 contact pairs .* or ask fewer pairs$"):
         check_request(scene, QuerySpec(queries=frozenset({"contact"}), contact_pairs=pairs), model=model,
                       settings=settings, budget_s=budget)
-    answer = predict(scene, model, settings, QuerySpec(queries=frozenset({"contact"}), contact_pairs=pairs), seed=1,
-                     check=None)
+    answer = predict(scene,
+                     Request(model=model, settings=settings,
+                             query=QuerySpec(queries=frozenset({"contact"}), contact_pairs=pairs), seed=1, check=None,
+                             budget_s=None))
     probability = answer.to_dict()["contact_probability"]
     assert probability["b0:support"] == 1.0 and probability["b0:b1"] == 0.0  # resting on the floor, 5 cm apart
 

@@ -12,6 +12,7 @@ import pytest
 
 from ipe_ros.cli import main
 from ipe_ros.engine import ConfigError, ModelConfig, QuerySpec, WorkerPool, load_scenes, predict, preset
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.actions.question import question_from_dict
 from ipe_ros.engine.scene.examples import example_scene_path
 from ipe_ros.engine.query import QUERIES, register
@@ -37,8 +38,12 @@ def _spec(module, threshold_deg: float) -> QuerySpec:
 
 def test_a_registered_query_answers_with_its_own_parameter_here_and_in_workers(tilt):
     assert plugin_modules() == ("tests.query_plugin_tilt",)
-    strict = predict(TOWER, MODEL, preset("default"), _spec(tilt, 5.0), seed=3, check=None)
-    loose = predict(TOWER, MODEL, preset("default"), _spec(tilt, 179.0), seed=3, check=None)
+    strict = predict(TOWER,
+                     Request(model=MODEL, settings=preset("default"), query=_spec(tilt, 5.0), seed=3, check=None,
+                             budget_s=None))
+    loose = predict(TOWER,
+                    Request(model=MODEL, settings=preset("default"), query=_spec(tilt, 179.0), seed=3, check=None,
+                            budget_s=None))
     # the same rollouts (same seed): only the threshold differs, and what fell lies tilted (a block
     # landing upside down, within a degree, is all that passes 179)
     assert strict.fall_fraction == loose.fall_fraction > 0
@@ -46,7 +51,10 @@ def test_a_registered_query_answers_with_its_own_parameter_here_and_in_workers(t
     assert set(strict.value("tilted_object_probability")) == {b.name for b in TOWER.dynamic_objects}
     assert strict.to_dict()["tilt_probability"] == strict.value("tilt_probability")
     with WorkerPool(2, start_method="spawn") as pool:  # workers import the plugin to know the query
-        there = predict(TOWER, MODEL, preset("default"), _spec(tilt, 5.0), seed=3, map_fn=pool.map, check=None)
+        there = predict(TOWER,
+                        Request(model=MODEL, settings=preset("default"), query=_spec(tilt, 5.0), seed=3, check=None,
+                                budget_s=None),
+                        Context(map_fn=pool.map))
     assert there.value("tilted_object_probability") == strict.value("tilted_object_probability") and there.failed_samples == 0
     with pytest.raises(AttributeError):  # a plugin's fields are values, not typed attributes
         strict.tilt_probability  # noqa: B018
@@ -58,7 +66,10 @@ def test_a_registered_query_answers_with_its_own_parameter_here_and_in_workers(t
         finally:
             register(tilt.QUERY)
 
-    unaware = predict(TOWER, MODEL, preset("default"), _spec(tilt, 5.0), seed=3, map_fn=unaware_map, check=None)
+    unaware = predict(TOWER,
+                      Request(model=MODEL, settings=preset("default"), query=_spec(tilt, 5.0), seed=3, check=None,
+                              budget_s=None),
+                      Context(map_fn=unaware_map))
     assert unaware.samples == 0 and unaware.failed_samples == 8
     assert "ConfigError: queries: query 'tilt' is not registered in this process" in unaware.failure_reasons[0]
     # the default when no parameters are given, and the query's own check of its values
@@ -77,7 +88,9 @@ def test_the_cli_sets_a_registered_querys_parameter_by_its_own_option(tilt, caps
               "--no-self-check"]
     assert main(common + ["--tilt-threshold-deg", "5"]) == 0
     record = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
-    expected = predict(TOWER, MODEL, preset("default"), _spec(tilt, 5.0), seed=3, check=None)
+    expected = predict(TOWER,
+                       Request(model=MODEL, settings=preset("default"), query=_spec(tilt, 5.0), seed=3, check=None,
+                               budget_s=None))
     assert record["tilt_probability"] == expected.value("tilt_probability") > 0
     assert main(common + ["--tilt-threshold-deg", "0"]) == 2
     assert capsys.readouterr().err.strip().splitlines()[-1] == \
@@ -127,7 +140,9 @@ def test_the_node_declares_a_registered_querys_parameter_and_publishes_its_answe
         ros.publisher(String, "/ipe/scene_json").publish(String(data=scene_to_json(TOWER)))
         wait_until(lambda: got, 60.0, "the prediction")
         answer = json.loads(got[-1].data)
-        expected = predict(TOWER, MODEL, preset("default"), _spec(tilt, 5.0), seed=3, check=None)
+        expected = predict(TOWER,
+                           Request(model=MODEL, settings=preset("default"), query=_spec(tilt, 5.0), seed=3,
+                                   check=None, budget_s=None))
         assert answer["tilt_probability"] == expected.value("tilt_probability") > 0, answer
         refused = node.set_parameters([Parameter("tilt.threshold_deg", value=0.0)])[0]
         assert not refused.successful

@@ -6,6 +6,7 @@ import numpy as np
 from rerun.chunk import RrdReader
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
+from ipe_ros.engine import Context, Request
 from ipe_ros.viz.rerun_log import write_prediction_rrd, write_question_rrd
 from tests.helpers import block, floor_scene, without_timing
 
@@ -15,8 +16,9 @@ SCENE = floor_scene(block("base block", 0, 0, 0.1), block("top/overhang", 0.08, 
 
 
 def test_only_the_logged_samples_record_and_recording_changes_no_outcome():
-    plain = predict(SCENE, MODEL, preset("default"), QUERY, seed=5)
-    recorded = predict(SCENE, MODEL, preset("default"), QUERY, seed=5, record_every=50, record_samples=2)
+    plain = predict(SCENE, Request(model=MODEL, settings=preset("default"), query=QUERY, seed=5, budget_s=None))
+    recorded = predict(SCENE, Request(model=MODEL, settings=preset("default"), query=QUERY, seed=5, budget_s=None),
+                       Context(record_every=50, record_samples=2))
     assert without_timing(plain.to_dict()) == without_timing(recorded.to_dict())
     trajectories = [o.rollouts[0].trajectory for o in recorded.outcomes]
     assert [t is not None for t in trajectories] == [True, True, False, False]
@@ -27,7 +29,8 @@ def test_only_the_logged_samples_record_and_recording_changes_no_outcome():
 
 
 def test_recording_holds_scene_rollouts_outcomes_and_answer(tmp_path):
-    prediction = predict(SCENE, MODEL, preset("default"), QUERY, seed=5, record_every=100, record_samples=4)
+    prediction = predict(SCENE, Request(model=MODEL, settings=preset("default"), query=QUERY, seed=5, budget_s=None),
+                         Context(record_every=100, record_samples=4))
     path = tmp_path / "p.rrd"
     logged = write_prediction_rrd(path, SCENE, prediction, answer={"fall_fraction": prediction.fall_fraction},
                                   stamp_ns=1_700_000_000_000_000_000, rollouts_logged=3)
@@ -50,7 +53,8 @@ def test_recording_holds_scene_rollouts_outcomes_and_answer(tmp_path):
 
 def test_will_anything_fall_is_recorded_per_sample(tmp_path):
     query = QuerySpec(queries=frozenset({"any_fall"}))
-    prediction = predict(SCENE, MODEL, preset("default"), query, seed=5, record_every=100, record_samples=2)
+    prediction = predict(SCENE, Request(model=MODEL, settings=preset("default"), query=query, seed=5, budget_s=None),
+                         Context(record_every=100, record_samples=2))
     path = tmp_path / "any.rrd"
     write_prediction_rrd(path, SCENE, prediction, answer=prediction.to_dict(),
                          stamp_ns=1_700_000_000_000_000_000, rollouts_logged=2)
@@ -62,8 +66,10 @@ def test_recordings_draw_every_body_in_its_own_shape(tmp_path):
     from ipe_ros.engine.scene.catalogue import capped_tower
 
     scene = capped_tower()
-    prediction = predict(scene, ModelConfig(sigma_m=0.02, samples=2), preset("default"), QUERY, seed=1,
-                         record_every=20, record_samples=1)
+    prediction = predict(scene,
+                         Request(model=ModelConfig(sigma_m=0.02, samples=2), settings=preset("default"), query=QUERY,
+                                 seed=1, budget_s=None),
+                         Context(record_every=20, record_samples=1))
     path = tmp_path / "capped.rrd"
     write_prediction_rrd(path, scene, prediction, answer=prediction.to_dict(), stamp_ns=1, rollouts_logged=1)
     columns: dict[str, set] = {}
@@ -112,7 +118,8 @@ def _blueprint_views(path) -> dict[str, dict]:
 
 
 def test_recordings_open_on_a_blueprint_with_the_answer_the_rollouts_and_the_outcomes(tmp_path):
-    prediction = predict(SCENE, MODEL, preset("default"), QUERY, seed=5, record_every=100, record_samples=4)
+    prediction = predict(SCENE, Request(model=MODEL, settings=preset("default"), query=QUERY, seed=5, budget_s=None),
+                         Context(record_every=100, record_samples=4))
     path = tmp_path / "p.rrd"
     write_prediction_rrd(path, SCENE, prediction, answer=prediction.to_dict(), stamp_ns=1, rollouts_logged=3)
     views = _blueprint_views(path)

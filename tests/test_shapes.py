@@ -12,6 +12,7 @@ import pytest
 from ipe_ros.engine import (Body, BoxShape, Capsule, ConvexHull, Cylinder, Floor, ModelConfig,
                             QuerySpec, Scene, SceneError, Sphere, load_scenes, predict, preset, scene_from_dict,
                             scene_to_dict)
+from ipe_ros.engine import Request
 from ipe_ros.engine.scene import shapes
 from ipe_ros.engine.scene.catalogue import capped_tower, cone, l_bracket, wedge
 from ipe_ros.engine.scene.examples import example_scene_path
@@ -132,7 +133,7 @@ def test_a_nan_velocity_and_a_moving_static_body_are_refused():
 @pytest.mark.parametrize("preset_name", ["default", "paper"])
 def test_every_shape_rests_on_the_floor(name, preset_name):
     scene = on_floor(resting(EVERY_SHAPE[name]))
-    p = predict(scene, ModelConfig(), preset(preset_name), FALL)
+    p = predict(scene, Request(model=ModelConfig(), settings=preset(preset_name), query=FALL, budget_s=None))
     end = p.outcomes[0].rollouts[0]
     assert p.failed_samples == 0 and p.fall_fraction == 0.0
     assert np.allclose(end.final_positions_m, p.outcomes[0].initial_positions_m, atol=1e-3)
@@ -144,16 +145,20 @@ def test_a_cone_on_its_apex_falls_and_on_its_base_stands():
     flipped_shape = ConvexHull(tuple((x, y, -z) for x, y, z in cone(0.15, 0.3).vertices_m))
     tilt = (math.sin(0.02), 0.0, 0.0, math.cos(0.02))  # 2.3 degrees: no body balances on a point
     on_apex = on_floor(dataclasses.replace(resting(flipped_shape), position_m=(0.0, 0.0, 0.3), orientation_xyzw=tilt))
-    assert predict(upright, ModelConfig(sigma_m=0.01, samples=4), preset("default"), FALL).fall_fraction == 0.0
-    assert predict(on_apex, ModelConfig(sigma_m=0.01, samples=4), preset("default"), FALL).fall_fraction == 1.0
+    assert predict(upright,
+                   Request(model=ModelConfig(sigma_m=0.01, samples=4), settings=preset("default"), query=FALL,
+                           budget_s=None)).fall_fraction == 0.0
+    assert predict(on_apex,
+                   Request(model=ModelConfig(sigma_m=0.01, samples=4), settings=preset("default"), query=FALL,
+                           budget_s=None)).fall_fraction == 1.0
 
 
 def test_a_ball_rolled_into_a_capped_tower_knocks_it_over():
     still = capped_tower(ball_speed_m_s=0.0)
     rolled = capped_tower(ball_speed_m_s=5.0)
     for preset_name in ("default", "paper"):
-        assert predict(still, ModelConfig(), preset(preset_name), FALL).fall_fraction == 0.0
-        hit = predict(rolled, ModelConfig(), preset(preset_name), FALL)
+        assert predict(still, Request(model=ModelConfig(), settings=preset(preset_name), query=FALL, budget_s=None)).fall_fraction == 0.0
+        hit = predict(rolled, Request(model=ModelConfig(), settings=preset(preset_name), query=FALL, budget_s=None))
         assert hit.object_fall_probability["cone"] == 1.0 and hit.failed_samples == 0
         assert hit.max_penetration_fraction < 0.05
 
@@ -180,7 +185,7 @@ def test_yaw_and_vertical_noise_where_a_body_asks_for_them():
 
 def test_the_scene_horizon_bounds_the_rollout():
     scene = on_floor(resting(Sphere(0.1), "ball", linear_velocity_m_s=(1.0, 0.0, 0.0)), horizon_s=0.5)
-    p = predict(scene, ModelConfig(), preset("paper"), FALL)
+    p = predict(scene, Request(model=ModelConfig(), settings=preset("paper"), query=FALL, budget_s=None))
     assert p.outcomes[0].rollouts[0].simulated_s == pytest.approx(0.5)
     assert p.outcomes[0].rollouts[0].final_positions_m[0, 0] == pytest.approx(0.5 * 5 / 7, rel=0.1)  # rolling
 
@@ -190,7 +195,7 @@ def test_a_1000_to_1_stack_gets_the_same_ground_truth_from_default_and_paper(rat
     light = resting(BoxShape((0.2, 0.2, 0.2)), "bottom", mass_kg=1.0)
     top = dataclasses.replace(resting(BoxShape((0.2, 0.2, 0.2)), "top", mass_kg=ratio), position_m=(0.0, 0.0, 0.3))
     scene = on_floor(light, top)
-    answers = {name: predict(scene, ModelConfig(), preset(name), FALL) for name in ("default", "paper")}
+    answers = {name: predict(scene, Request(model=ModelConfig(), settings=preset(name), query=FALL, budget_s=None)) for name in ("default", "paper")}
     assert answers["default"].fall_fraction == answers["paper"].fall_fraction == 0.0
     for p in answers.values():
         assert p.max_penetration_fraction < 0.05
@@ -200,7 +205,7 @@ def test_energy_is_measured_and_a_bouncing_ball_gains_none():
     bouncy = dataclasses.replace(resting(Sphere(0.05), "ball", mass_kg=2.0), position_m=(0.0, 0.0, 0.5),
                                  restitution=0.9)
     scene = Scene(name="bounce", objects=(bouncy,), support=Floor(friction=0.5, restitution=0.9))
-    p = predict(scene, ModelConfig(), preset("default"), FALL)
+    p = predict(scene, Request(model=ModelConfig(), settings=preset("default"), query=FALL, budget_s=None))
     potential_j = 2.0 * 9.81 * 0.5
     assert 0.0 <= p.max_energy_gain_j < 0.01 * potential_j
     from ipe_ros.engine.simulation.health import energy_j

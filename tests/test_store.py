@@ -14,27 +14,35 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes, predict, preset
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.compute.store import STORE_VERSION, ResumableMap, result_key
 from tests.conftest import REPO
 
 TOWER = load_scenes("ipe_ros/data/example_tower.json")[0]
 MODEL, QUERY = ModelConfig(sigma_m=0.04, samples=6), QuerySpec(queries=frozenset({"fall", "direction"}))
-#: resumable runs serve the batch analyses, which are not self-checked: the maps here see only the k samples
-UNCHECKED = {"check": None}
+# resumable runs serve the batch analyses, which are not self-checked (check=None): the maps here
+# see only the k samples
 
 
 def test_a_run_started_again_reads_back_what_it_has_and_computes_the_rest(tmp_path):
-    fresh = predict(TOWER, MODEL, preset("default"), QUERY, seed=1, **UNCHECKED)
+    fresh = predict(TOWER,
+                    Request(model=MODEL, settings=preset("default"), query=QUERY, seed=1, check=None, budget_s=None))
     half = ResumableMap(tmp_path)
-    predict(TOWER, ModelConfig(sigma_m=0.04, samples=3), preset("default"), QUERY, seed=1, map_fn=half.map, **UNCHECKED)
+    predict(TOWER,
+            Request(model=ModelConfig(sigma_m=0.04, samples=3), settings=preset("default"), query=QUERY, seed=1,
+                    check=None, budget_s=None),
+            Context(map_fn=half.map))
     assert (half.hits, half.computed) == (0, 3)  # an "interrupted" run: the first 3 samples of seed 1
     again = ResumableMap(tmp_path)
-    resumed = predict(TOWER, MODEL, preset("default"), QUERY, seed=1, map_fn=again.map, **UNCHECKED)
+    resumed = predict(TOWER,
+                      Request(model=MODEL, settings=preset("default"), query=QUERY, seed=1, check=None, budget_s=None),
+                      Context(map_fn=again.map))
     assert (again.hits, again.computed) == (3, 3)
     strip = lambda p: {k: v for k, v in p.to_dict().items() if k not in ("wall_s", "samples_requested")}  # noqa: E731
     assert strip(resumed) == strip(fresh)
     other = ResumableMap(tmp_path)
-    predict(TOWER, MODEL, preset("default"), QUERY, seed=2, map_fn=other.map, **UNCHECKED)  # another seed: nothing to reuse
+    predict(TOWER, Request(model=MODEL, settings=preset("default"), query=QUERY, seed=2, check=None, budget_s=None),
+            Context(map_fn=other.map))  # another seed: nothing to reuse
     assert other.hits == 0
 
 
@@ -43,11 +51,15 @@ def test_samples_lost_with_their_worker_are_not_kept_and_come_out_in_the_next_ru
         return [on_lost(item, "the worker running it died twice") for item in items]
 
     lost_run = ResumableMap(tmp_path, inner=every_worker_dies)
-    answer = predict(TOWER, MODEL, preset("default"), QUERY, seed=1, map_fn=lost_run.map, **UNCHECKED)
+    answer = predict(TOWER,
+                     Request(model=MODEL, settings=preset("default"), query=QUERY, seed=1, check=None, budget_s=None),
+                     Context(map_fn=lost_run.map))
     assert answer.failed_samples == MODEL.samples
     assert answer.failure_reasons == ("WorkerLost: the worker running it died twice",)
     again = ResumableMap(tmp_path)
-    resumed = predict(TOWER, MODEL, preset("default"), QUERY, seed=1, map_fn=again.map, **UNCHECKED)
+    resumed = predict(TOWER,
+                      Request(model=MODEL, settings=preset("default"), query=QUERY, seed=1, check=None, budget_s=None),
+                      Context(map_fn=again.map))
     assert (again.hits, again.computed, resumed.failed_samples) == (0, MODEL.samples, 0)
 
 
@@ -96,8 +108,10 @@ def test_ipe_experiment_resume_reads_everything_back_the_second_time(tmp_path):
 
 def _one_sample_run(folder, **kwargs):
     store = ResumableMap(folder, **kwargs)
-    answer = predict(TOWER, ModelConfig(sigma_m=0.04, samples=1), preset("default"), QUERY, seed=1, map_fn=store.map,
-                     **UNCHECKED)
+    answer = predict(TOWER,
+                     Request(model=ModelConfig(sigma_m=0.04, samples=1), settings=preset("default"), query=QUERY,
+                             seed=1, check=None, budget_s=None),
+                     Context(map_fn=store.map))
     return store, answer
 
 
@@ -173,8 +187,10 @@ def test_a_well_formed_entry_of_another_scene_is_refused_naming_both_counts(tmp_
     entry = _only_entry(tmp_path / "store")
     shorter = dataclasses.replace(TOWER, objects=TOWER.objects[:-1])
     other = ResumableMap(tmp_path / "other")
-    predict(shorter, ModelConfig(sigma_m=0.04, samples=1), preset("default"), QUERY, seed=1, map_fn=other.map,
-            **UNCHECKED)
+    predict(shorter,
+            Request(model=ModelConfig(sigma_m=0.04, samples=1), settings=preset("default"), query=QUERY, seed=1,
+                    check=None, budget_s=None),
+            Context(map_fn=other.map))
     poisoned = json.loads(_only_entry(tmp_path / "other").read_text())
     poisoned["key"] = json.loads(entry.read_text())["key"]
     entry.write_text(json.dumps(poisoned))

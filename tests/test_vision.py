@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import ConfigError, ModelConfig, QuerySpec, WorkerPool, load_scenes, predict, preset
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.vision import VisionSettings, default_cameras, effective_sample_size, perceive
 from ipe_ros.engine.vision.camera import look_at
 from ipe_ros.engine.vision.likelihood import blur, log_likelihood
@@ -130,9 +131,10 @@ def test_chains_and_vision_predictions_are_determined_by_the_seed_whatever_the_w
     model = ModelConfig(samples=4, perception="vision", vision=VisionSettings(resolution_px=64, chain_samples=600,
                                                                               burn_in=100))
     query = QuerySpec(queries=frozenset({"fall", "direction"}))
-    alone = predict(TOWER, model, preset("default"), query, seed=2)
+    alone = predict(TOWER, Request(model=model, settings=preset("default"), query=query, seed=2, budget_s=None))
     with WorkerPool(2) as pool:
-        pooled = predict(TOWER, model, preset("default"), query, seed=2, map_fn=pool.map)
+        pooled = predict(TOWER, Request(model=model, settings=preset("default"), query=query, seed=2, budget_s=None),
+                         Context(map_fn=pool.map))
     strip = lambda p: {k: v for k, v in p.to_dict().items() if k != "wall_s"}  # noqa: E731
     assert strip(alone) == strip(pooled)
     perception = alone.request["perception"]

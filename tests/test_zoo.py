@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.config import DEFAULT_QUERIES
 from ipe_ros.engine.scene.format import scene_from_dict, scene_to_dict
 from ipe_ros.engine.scene.shapes import Capsule, Compound, ConvexHull, Cylinder
@@ -135,8 +136,13 @@ def zoo_answers(pool):
         scene = zoo_scene(family, SEED, 0)
         model = ModelConfig(sigma_m=zoo_sigma_m(scene), samples=SAMPLES)
         query = family_query(family)
-        out[family] = (scene, predict(scene, model, preset("default"), query, seed=i, map_fn=pool.map),
-                       predict(scene, model, preset("paper"), query, seed=i, map_fn=pool.map))
+        out[family] = (scene, predict(scene,
+                                      Request(model=model, settings=preset("default"), query=query, seed=i,
+                                              budget_s=None),
+                                      Context(map_fn=pool.map)),
+                       predict(scene,
+                               Request(model=model, settings=preset("paper"), query=query, seed=i, budget_s=None),
+                               Context(map_fn=pool.map)))
     return out
 
 
@@ -155,9 +161,11 @@ def test_zoo_family_self_checking_default_against_paper(family, zoo_answers):
         worst = max(abs(fast.tipped_object_probability[n] - p) for n, p in paper.tipped_object_probability.items())
         assert worst <= 0.25 + 1e-9, (scene.name, fast.tipped_object_probability, paper.tipped_object_probability)
     if fast.fidelity == "escalated":  # then the answer is the reference's own
-        assert fast.object_fall_probability == predict(
-            scene, ModelConfig(sigma_m=zoo_sigma_m(scene), samples=SAMPLES), fast_reference(), family_query(family),
-            seed=list(FAMILIES).index(family), check=None).object_fall_probability
+        assert fast.object_fall_probability == predict(scene,
+                                                       Request(model=ModelConfig(sigma_m=zoo_sigma_m(scene), samples=SAMPLES),
+                                                               settings=fast_reference(), query=family_query(family),
+                                                               seed=list(FAMILIES).index(family), check=None,
+                                                               budget_s=None)).object_fall_probability
 
 
 def fast_reference():
@@ -194,11 +202,16 @@ def test_the_reference_reruns_its_unhealthy_multibody_rollouts_in_plain_rigid_bo
     they ran."""
     scene = zoo_scene("household", 2026, 4)
     model, spec = ModelConfig(sigma_m=zoo_sigma_m(scene), samples=4), QuerySpec(queries=frozenset({"fall", "tipped"}))
-    multibody = predict(scene, model, preset("paper").changed("paper-multibody", rigid_when_unhealthy=False), spec,
-                        seed=4, map_fn=pool.map, check=None)
+    multibody = predict(scene,
+                        Request(model=model,
+                                settings=preset("paper").changed("paper-multibody", rigid_when_unhealthy=False),
+                                query=spec, seed=4, check=None, budget_s=None),
+                        Context(map_fn=pool.map))
     gains = [o.rollouts[0].energy_gain_j / energy_scale_j(scene) for o in multibody.outcomes]
     assert max(gains) > 1.0, gains  # the failure is real here
-    answer = predict(scene, model, preset("paper"), spec, seed=4, map_fn=pool.map, check=None)
+    answer = predict(scene,
+                     Request(model=model, settings=preset("paper"), query=spec, seed=4, check=None, budget_s=None),
+                     Context(map_fn=pool.map))
     assert [o.rerun_rigid for o in answer.outcomes] == ["energy" if g > 0.01 else None for g in gains]
     assert answer.self_check["rigid_reruns"] == sum(g > 0.01 for g in gains)
     assert answer.max_energy_gain_j <= 0.01 * energy_scale_j(scene)

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 from ipe_ros.engine import ModelConfig, QuerySpec, load_scenes, predict, preset
+from ipe_ros.engine import Request
 from ipe_ros.engine.scene import household, shapes as S
 from ipe_ros.engine.scene.shapes import rotation_matrix
 from ipe_ros.engine.sampling.perturb import draw_sample_inputs
@@ -37,8 +38,9 @@ def scene(folder, kg, yaw_deg):
     return load_scenes(Path(folder) / "s.json")[0]
 
 def tilt(scene, name):
-    a = predict(scene, ModelConfig(sigma_m=0.0, samples=1, object_noise=False), preset(name),
-                QuerySpec(queries=frozenset({"final_pose", "tipped"})), check=None)
+    a = predict(scene,
+                Request(model=ModelConfig(sigma_m=0.0, samples=1, object_noise=False), settings=preset(name),
+                        query=QuerySpec(queries=frozenset({"final_pose", "tipped"})), check=None, budget_s=None))
     up = rotation_matrix(a.outcomes[0].rollouts[0].final_orientations_xyzw[0])[2, 2]
     return round(float(np.degrees(np.arccos(min(1.0, abs(up))))), 1)
 

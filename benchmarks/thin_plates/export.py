@@ -18,6 +18,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 import numpy as np  # noqa: E402
 
 from ipe_ros.engine import PRESETS, ModelConfig, QuerySpec, WorkerPool, predict  # noqa: E402
+from ipe_ros.engine import Context, Request
 from ipe_ros.engine.sampling.perturb import dynamic_masses  # noqa: E402
 from ipe_ros.engine.scene.zoo import family_queries, scene_zoo, zoo_sigma_m  # noqa: E402
 
@@ -59,7 +60,10 @@ def main() -> None:
         for i in args.scenes:
             scene = scenes[i]
             model = ModelConfig(sigma_m=zoo_sigma_m(scene), samples=args.samples)
-            predictions = {name: predict(scene, model, settings, query, seed=i, map_fn=pool.map, check=None)
+            predictions = {name: predict(scene,
+                                         Request(model=model, settings=settings, query=query, seed=i, check=None,
+                                                 budget_s=None),
+                                         Context(map_fn=pool.map))
                            for name, settings in PHYSICS.items()}
             fallen = {name: [[bool(x) for x in o.rollouts[0].fallen] for o in p.outcomes]
                       for name, p in predictions.items()}

@@ -31,6 +31,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 import numpy as np  # noqa: E402
 
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset  # noqa: E402
+from ipe_ros.engine import Request
 from ipe_ros.engine.scene import shapes as shapes_module  # noqa: E402
 from ipe_ros.engine.scene.bodies import Body, Box, Floor, Scene  # noqa: E402
 from ipe_ros.engine.scene.shapes import BoxShape, Capsule, Compound, ConvexHull, Cylinder, Sphere  # noqa: E402
@@ -152,7 +153,8 @@ def scene_dict(scene: Scene, settings) -> dict:
 
 def export_row(kind: str, label: str, scene: Scene, model: ModelConfig, settings, seed: int,
                closed_form: dict | None = None) -> dict:
-    prediction = predict(scene, model, settings, QUERY, seed=seed, check=None)
+    prediction = predict(scene,
+                         Request(model=model, settings=settings, query=QUERY, seed=seed, check=None, budget_s=None))
     samples = []
     for outcome in prediction.outcomes:
         if not outcome.ok:

@@ -15,7 +15,7 @@ from .query import ALL_QUERIES, QuerySpec, parse_queries
 from .errors import ConfigError, PhysicsError, SceneError
 from .sampling.estimate import Prediction
 from .compute.pool import WorkerPool
-from .predict import AdaptiveStop, predict, predict_many
+from .predict import AdaptiveStop, Context, Request, predict, predict_many
 from .scene.bodies import Body, Box, Floor, Scene, Table
 from .scene.validation import validate_scene
 from .scene.shapes import BoxShape, Capsule, Compound, CompoundPart, ConvexHull, Cylinder, Sphere
@@ -24,6 +24,7 @@ from .scene.format import scene_from_dict, scene_to_dict, scenes_from_json
 
 __all__ = [
     "ALL_QUERIES", "PRESETS", "AdaptiveStop", "Body", "Box", "BoxShape", "Capsule", "Compound", "CompoundPart",
+    "Context", "Request",
     "ConvexHull", "Cylinder", "Sphere", "ConfigError", "Floor", "ModelConfig", "PhysicsError", "Prediction",
     "QuerySpec", "Scene", "SceneError", "SimSettings", "Table", "WorkerPool", "load_scenes",
     "parse_queries", "predict", "predict_many", "preset", "scene_from_dict", "scene_to_dict", "scenes_from_json",

@@ -14,11 +14,11 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .config import ModelConfig, SimSettings
+from .config import DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES, ModelConfig, SimSettings, preset
 from .errors import ConfigError, shown
 from .sampling.estimate import Prediction, aggregate, sample_any_fall, sample_fall_fraction, wilson_interval
 from .checking.fidelity import check_request as check_fidelity_request
@@ -28,6 +28,7 @@ from .checking.fidelity import (DEFAULT_CHECK, NO_CHECK, FidelityReport, SelfChe
 from .sampling.montecarlo import (MapFn, MonteCarlo, Plan, check_budget, check_seed, check_some_sample_finished, child_seeds,
                          far_over_budget, together)
 from .perceptions import perception_source
+from .sampling.decide import Sequential
 from .sampling.perturb import is_deterministic
 from .results.outcome import rigid_reruns
 from .sampling.rollout import SampleOutcome, SampleTask, lost, run_sample, take_refined
@@ -166,38 +167,79 @@ def check_ci_width(ci_width: float | None, query: QuerySpec) -> None:
                                       "queries or drop the target width")
 
 
-def predict(scene: Scene, model: ModelConfig, settings: SimSettings, query: QuerySpec, seed: int = 0,
-            map_fn: MapFn | None = None, record_every: int = 0, record_samples: int | None = None,
-            max_objects: int = DEFAULT_MAX_OBJECTS, stop: AdaptiveStop | None = None,
-            budget_s: float | None = None, perceived=None, check: SelfCheck | None = DEFAULT_CHECK,
-            evidence=None) -> Prediction:
+@dataclass(frozen=True)
+class Request:
+    """What a prediction (``predict``) or a robot question (``actions.ask``) is asked: with ``model``,
+    ``settings``, ``query`` and ``seed``, stopping by ``stop`` (None: all k samples; a prediction's
+    ``AdaptiveStop``, a question's ``Sequential`` rule), within ``budget_s`` wall seconds (None: no
+    budget), checked by ``check`` (None or ``SelfCheck(enabled=False)``: the fast physics alone).
+    The defaults are the CLI's and the node's (``request.build_request`` makes one from their
+    inputs, checked once)."""
+
+    model: ModelConfig = DEFAULT_MODEL
+    settings: SimSettings = preset(DEFAULT_PRESET)
+    query: QuerySpec = QuerySpec(queries=DEFAULT_QUERIES)
+    seed: int = 0
+    stop: AdaptiveStop | Sequential | None = None
+    budget_s: float | None = DEFAULT_BUDGET_S
+    check: SelfCheck | None = DEFAULT_CHECK
+
+
+@dataclass(frozen=True)
+class Context:
+    """What a prediction needs that is not the question: where its samples run (``map_fn``, e.g.
+    ``WorkerPool.map``; None: in this process), what it records (trajectories every ``record_every``
+    steps of the first ``record_samples`` samples, for rerun), the largest scene it takes
+    (``max_objects``), and what its perception draws from: the ``evidence`` its chain is given, or
+    the ``perceived`` scenes of a chain already run (the node's one posterior per view). A question
+    also reports its progress to ``on_progress``; whatever that raises ends it (a cancellation)."""
+
+    map_fn: MapFn | None = None
+    record_every: int = 0
+    record_samples: int | None = None
+    max_objects: int = DEFAULT_MAX_OBJECTS
+    perceived: Any = None
+    evidence: Any = None
+    on_progress: Callable[[dict], None] | None = None
+
+
+def predict(scene: Scene, request: Request, context: Context | None = None) -> Prediction:
     """Run the IPE on one scene and aggregate (failed rollouts are counted in ``failed_samples``).
 
-    ``record_every``/``record_samples``: record trajectories (for rerun) every N simulation steps
-    for the first M samples; recording never changes the outcome. ``stop``: anytime sampling
+    ``context.record_every``/``record_samples``: record trajectories (for rerun) every N simulation steps
+    for the first M samples; recording never changes the outcome. ``request.stop``: anytime sampling
     (a deadline or a target interval width); ``Prediction.stopped_by`` says which rule ended it.
-    ``budget_s``: the most wall seconds the prediction may take. A scene whose one rollout cannot
+    ``request.budget_s``: the most wall seconds the prediction may take. A scene whose one rollout cannot
     fit is refused (ConfigError naming budget_s); samples still running when it runs out are cut
     off and the answer uses the rest (``stopped_by: "budget"``). Which samples finish in time is
     the one thing here that depends on timing.
 
     A perception that draws from a posterior (``model.perception``: vision, depth, a registered
     one; ``engine.perceptions``): the k noisy scenes are states of it, from its chain run here (in a
-    worker when ``map_fn`` is given, seeded from ``seed`` on a stream of its own; given ``evidence``
-    when the source needs it, within its share of ``budget_s``) or taken from ``perceived``.
+    worker when ``context.map_fn`` is given, seeded from ``seed`` on a stream of its own; given
+    ``context.evidence`` when the source needs it, within its share of ``budget_s``) or taken from
+    ``context.perceived``.
 
-    ``check``: how the answer checks its fast physics against the reference (``engine.checking.fidelity``):
-    unhealthy rollouts refined, ``check.verify_samples`` samples verified in the same map as the
-    fast ones, everything rerun at the reference on disagreement; ``Prediction.fidelity`` says what
-    happened. None or ``SelfCheck(enabled=False)``: the fast physics alone.
+    ``request.check``: how the answer checks its fast physics against the reference
+    (``engine.checking.fidelity``): unhealthy rollouts refined, ``check.verify_samples`` samples
+    verified in the same map as the fast ones, everything rerun at the reference on disagreement;
+    ``Prediction.fidelity`` says what happened. None or ``SelfCheck(enabled=False)``: the fast
+    physics alone.
     """
+    context = context or Context()
+    model, settings, query, seed = request.model, request.settings, request.query, request.seed
+    stop, budget_s, check, map_fn = request.stop, request.budget_s, request.check, context.map_fn
+    if stop is not None and not isinstance(stop, AdaptiveStop):
+        raise ConfigError("stop", "a prediction stops by an AdaptiveStop (a deadline or an interval width); a "
+                                  "Sequential rule decides robot questions")
     check_seed(seed)
     check_budget(budget_s)
     check_fidelity_request(check)
-    check_request(scene, query, max_objects, model=model, settings=settings, budget_s=budget_s)
+    check_request(scene, query, context.max_objects, model=model, settings=settings, budget_s=budget_s)
     check_ci_width(None if stop is None else stop.ci_width, query)
-    tasks = make_tasks(scene, model, settings, query, seed, record_every, record_samples)
-    tasks, perceived, budget_s = _from_perception(tasks, scene, model, seed, map_fn, perceived, evidence, budget_s)
+    tasks = make_tasks(scene, model, settings, query, seed, context.record_every, context.record_samples)
+    tasks, perceived, budget_s = _from_perception(tasks, scene, model, seed, map_fn, context.perceived,
+                                                  context.evidence, budget_s)
     check = NO_CHECK if check is None or is_reference(settings) else check
     validated = _validated(tasks, model, settings, check, stop)
     if validated:  # nothing verified or covered: only unhealthy rollouts are rerun
@@ -336,7 +378,7 @@ def _aggregate(scene: Scene, model: ModelConfig, settings: SimSettings, query: Q
 
 def predict_many(requests: Sequence[tuple[Scene, ModelConfig, int]], settings: SimSettings, query: QuerySpec,
                  map_fn: MapFn | None = None, max_objects: int = DEFAULT_MAX_OBJECTS) -> list[Prediction]:
-    """``[predict(scene, model, settings, query, seed, map_fn) for scene, model, seed in requests]``,
+    """``[predict(scene, Request(model, settings, query, seed), Context(map_fn)) for scene, model, seed in requests]``,
     with every sample of every request in one ``map_fn`` call: equal answers (each request keeps its
     own seeds), but no worker waits for a prediction's last sample before the next one starts, and a
     cluster's round trip is paid once instead of per prediction. For batch work (the paper's
@@ -351,7 +393,8 @@ def predict_many(requests: Sequence[tuple[Scene, ModelConfig, int]], settings: S
     batched: list[tuple[int, list[SampleTask]]] = []
     for i, (scene, model, seed) in enumerate(requests):
         if perception_source(model.perception).posterior:  # its chain first, then its samples
-            answers[i] = predict(scene, model, settings, query, seed, map_fn, max_objects=max_objects, check=None)
+            answers[i] = predict(scene, Request(model=model, settings=settings, query=query, seed=seed, budget_s=None,
+                                                check=None), Context(map_fn=map_fn, max_objects=max_objects))
             continue
         check_seed(seed)
         check_request(scene, query, max_objects)

@@ -9,35 +9,19 @@ name the engine's fields; ``inputs.as_spelled`` renames them for the caller's us
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any, Iterable, Mapping
 
-from .config import (DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M,
-                     ModelConfig, SimSettings, preset)
+from .config import (DEFAULT_BUDGET_S, DEFAULT_PRESET, DEFAULT_QUERIES, DEFAULT_SAMPLES, DEFAULT_SIGMA_M, ModelConfig,
+                     preset)
 from .errors import ConfigError, shown
 from .perceptions import perception_source
 from .checking.fidelity import DEFAULT_CHECK, SelfCheck
 from .query import QUERIES, QuerySpec
 from .query.parameters import spec_parameters
 from .sampling.montecarlo import check_budget
-from .predict import AdaptiveStop, check_ci_width
+from .predict import AdaptiveStop, Request, check_ci_width  # noqa: F401 - Request re-exported
 from .scene.launches import launch_spread
 from .scene.properties import PropertySpread
-
-
-@dataclass(frozen=True)
-class Request:
-    """A validated request: predict with ``model``, ``settings``, ``query`` and ``seed``, stopping by
-    ``stop`` (None: all k samples), within ``budget_s`` wall seconds (None: no budget), checked by
-    ``check``. The defaults are the CLI's and the node's."""
-
-    model: ModelConfig = DEFAULT_MODEL
-    settings: SimSettings = preset(DEFAULT_PRESET)
-    query: QuerySpec = QuerySpec(queries=DEFAULT_QUERIES)
-    seed: int = 0
-    stop: AdaptiveStop | None = None
-    budget_s: float | None = DEFAULT_BUDGET_S
-    check: SelfCheck = DEFAULT_CHECK
 
 
 def build_request(*, samples: int = DEFAULT_SAMPLES, sigma_m: float = DEFAULT_SIGMA_M,

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 from ..engine import ConfigError, Scene, WorkerPool, predict
+from ..engine import Context
 from ..engine.errors import SceneError, clip, shown
 from ..engine.inputs import as_spelled
 from ..engine.perceptions import perception_source
@@ -334,11 +335,10 @@ class PredictionService:
             budget_s = request.budget_s  # what the perception's chain left of it
             if budget_s is not None and perceived is not None:
                 budget_s = max(budget_s - (time.perf_counter() - start), 1e-3)
-            prediction = predict(item.scene, request.model, request.settings, request.query, seed=request.seed,
-                                 map_fn=self._pool.map if self._pool is not None else None,
-                                 record_every=record_every, record_samples=config.rerun_rollouts_logged,
-                                 max_objects=config.max_objects, stop=request.stop, budget_s=budget_s,
-                                 check=request.check, perceived=perceived)
+            prediction = predict(item.scene, dataclasses.replace(request, budget_s=budget_s),
+                                 Context(map_fn=self._pool.map if self._pool is not None else None,
+                                         record_every=record_every, record_samples=config.rerun_rollouts_logged,
+                                         max_objects=config.max_objects, perceived=perceived))
         except ValueError as exc:  # SceneError / ConfigError: the scene no longer fits a new config
             return None, str(exc)
         except Exception as exc:  # noqa: BLE001 - report, keep serving

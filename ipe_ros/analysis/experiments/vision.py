@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...engine import ModelConfig, predict, preset
+from ...engine import Context, Request
 from ...engine.vision import VisionSettings, perceive
 from ...engine.vision.camera import cameras_for
 from ...engine.vision.perception import PerceivedScenes
@@ -93,8 +94,10 @@ def _part(label: str, filename: str, query, opts: Options, settings: VisionSetti
     sigma_run = run_model(f"{label}: sigma-based IPE", stim.scenes, ipe_model(opts.k), preset(opts.preset), query,
                           opts.seed, map_fn)
     vision_model = ModelConfig(phi_m_s2=(phi_m_s2(PAPER_PHI),), samples=opts.k, perception="vision", vision=settings)
-    vision_predictions = [predict(s, vision_model, preset(opts.preset), query, seed=stimulus_seed(opts.seed, s.name),
-                                  map_fn=map_fn, perceived=p)
+    vision_predictions = [predict(s,
+                                  Request(model=vision_model, settings=preset(opts.preset), query=query,
+                                          seed=stimulus_seed(opts.seed, s.name), budget_s=None),
+                                  Context(map_fn=map_fn, perceived=p))
                           for s, p in steps(list(zip(stim.scenes, perceived)), f"{label}: IPE on vision samples")]
     key = "direction_rad" if "direction" in query.queries else "fall_fraction"
     vision_answer = np.array([math.nan if getattr(p, key) is None else getattr(p, key) for p in vision_predictions])

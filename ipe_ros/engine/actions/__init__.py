@@ -28,7 +28,8 @@ from .ask import VARIANTS_PER_TASK, ask, progress_dict
 from .geometry import Contacts, contacts, dependents, groups, reach_m, resting_on
 from .kinds import DEFAULT_SAFE_BELOW, DEFAULT_SUPPORT_THRESHOLD, Action, Place, Push, Region, Remove
 from .questions import (PLACEMENT_GEOMETRY_S, ClearOrder, ClearStep, SupportGraph, best_place,
-                        clear_order, place, place_at, placements_to_dict, push, remove, resting_height_m, support_graph)
+                        clear_order, place, place_at, placements_to_dict, push, question_spec, remove, resting_height_m,
+                        support_graph)
 from .question import (QUESTION_KINDS, QUESTIONS, ClearQuestion, PlaceQuestion, PushQuestion, Question, RemoveQuestion,
                        Reply, SupportQuestion, new_object_from_dict, question_from_dict)
 from .variants import VariantTask, run_variants
@@ -37,7 +38,7 @@ __all__ = ["Action", "Alone", "Answers", "ClearOrder", "ClearQuestion", "ClearSt
            "DEFAULT_SAFE_BELOW", "DEFAULT_SUPPORT_THRESHOLD", "GivenStands", "PLACEMENT_GEOMETRY_S", "Place",
            "PlaceQuestion", "Push", "PushQuestion", "QUESTIONS", "QUESTION_KINDS", "Question", "Region", "Remove",
            "RemoveQuestion", "Reply", "SupportGraph", "SupportQuestion", "VARIANTS_PER_TASK", "VariantAnswer",
-           "VariantTask", "ask", "best_place", "clear_order", "contacts", "dependents", "groups",
+           "VariantTask", "ask", "question_spec", "best_place", "clear_order", "contacts", "dependents", "groups",
            "new_object_from_dict", "place", "place_at", "placements_to_dict", "progress_dict", "push",
            "question_from_dict", "reach_m", "remove", "resting_height_m", "resting_on", "run_variants",
            "support_graph"]

@@ -10,8 +10,6 @@ from typing import Any, Callable, Mapping
 
 from ..config import ModelConfig, SimSettings
 from ..query import QUERIES, QuerySpec
-from ..query.parameters import spec_parameters
-from ..query.spec import check_names
 from ..sampling.decide import Sequential, Tally
 from ..errors import ConfigError
 from ..sampling.perturb import is_deterministic, position_sigmas_m
@@ -19,7 +17,7 @@ from ..checking.fidelity import (FidelityReport, SelfCheck, check_request as che
                                  reference_settings, refine_in_task)
 from ..sampling.montecarlo import (MapFn, MonteCarlo, Plan, check_budget, check_some_sample_finished, child_seeds,
                                    far_over_budget, mapped, together)
-from ..predict import rollout_cost
+from ..predict import Context, Request, rollout_cost
 from ..checking.self_check import checking
 from ..scene.bodies import Scene, Table
 from ..scene.validation import validate_scene
@@ -34,41 +32,46 @@ from .kinds import DEFAULT_SAFE_BELOW, Action, Place, Push, Remove, label_of
 from .variants import VariantTask, lost, run_variants, skipped
 
 
-def ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSettings, seed: int = 0,
-        map_fn: MapFn | None = None, budget_s: float | None = None,
-        fall_threshold_fraction: float = 0.125, record_every: int = 0, record_samples: int = 0,
-        directions: bool = False, fell_off: bool = False, sequential: Sequential | None = None,
-        on_progress: Callable[[dict], None] | None = None, contact: tuple[tuple[str, str], ...] = (),
-        check: SelfCheck | None = None, what_falls: bool = True, queries: tuple[str, ...] = (),
-        query_parameters: Mapping[str, Any] | None = None, perceived=None) -> Answers:
-    """Answer every variant with common random numbers (see the module docstring). Removals that
-    cannot change anything are answered from the scene's own samples (a variant "as is" is added
-    for them when it is not asked). ``record_every`` / ``record_samples``: keep the trajectories of
-    the first samples of every simulated variant (for rerun), in ``Answers.recorded``.
-    ``directions``: also where things fall (rollouts then run until everything rests; without it a
-    rollout ends as soon as what falls is decided). ``fell_off``: also which objects end off the
-    table (their centre below its top; the scene must stand on a table). ``sequential``: answer
-    in batches until its rule decides each variant, simulating variants only in samples where the
-    scene as it is stands (``decide``); needs an "as is" variant, ignored without noise.
-    ``on_progress``: called after each batch of a sequential answer with what is decided so far
-    (``progress_dict``); whatever it raises ends the question there (a cancellation). ``contact``:
-    also, per variant, P(A touches B) for these (A, B) pairs (B may be "support"); every variant is
-    then simulated (none is read from the scene as it is). ``check`` (e.g. ``fidelity.DEFAULT_CHECK``):
-    each simulated variant's samples check themselves against the reference physics as a
-    prediction's do (``engine.checking.fidelity``; the checks of all variants share each round's map call),
-    and a contradicted variant is answered at the reference. Off by default: it costs 1.5-6x a
-    question's time (benchmarks/HISTORY.md); each variant's ``fidelity`` then says "unverified".
-    ``queries``: other registered queries each variant also answers (``VariantAnswer.query_answers``;
-    every variant is then simulated), their parameters by name in ``query_parameters``
-    (``"<query>.<field>"``, engine/query/parameters.py). ``perceived``: scenes drawn from a perception's
-    posterior (e.g. ``vision.depth.DepthPerceivedScenes``): sample i of every variant starts from
-    ``perceived.scenes[i]`` and the model's sigma is not drawn (the posterior is the noise), as in a
-    prediction from that perception."""
+def ask(scene: Scene, actions: list[Action], request: Request, context: Context | None = None) -> Answers:
+    """Answer every variant with common random numbers (see the module docstring), as ``request``
+    asks (its model, settings, seed, budget and check) where ``context`` says (its map, its
+    recording, its progress callback, the perceived scenes). Removals that cannot change anything are
+    answered from the scene's own samples (a variant "as is" is added for them when it is not asked).
+
+    The question's queries ride in ``request.query`` (``questions.question_spec`` makes one):
+    ``fall``: what falls (without it, ``any_fall``: a rollout ends at the first fall); ``direction``:
+    also where things fall (rollouts then run until everything rests); ``bump``: also which objects
+    end off the table (the scene must stand on one); ``contact`` with its pairs: P(A touches B) per
+    variant (every variant is then simulated); any other registered query, with its parameters
+    (``VariantAnswer.query_answers``; every variant simulated).
+
+    ``request.stop``: a ``Sequential`` rule answers in batches until it decides each variant,
+    simulating variants only in samples where the scene as it is stands (``decide``); it needs an
+    "as is" variant and is ignored without noise. ``context.on_progress`` is called after each batch
+    with what is decided so far (``progress_dict``); whatever it raises ends the question there.
+    ``request.check`` (e.g. ``fidelity.DEFAULT_CHECK``): each simulated variant's samples check
+    themselves against the reference physics as a prediction's do (the checks of all variants share
+    each round's map call), and a contradicted variant is answered at the reference; None: each
+    variant says "unverified" (it costs 1.5-6x a question's time, benchmarks/HISTORY.md).
+    ``context.record_every`` / ``record_samples``: keep the trajectories of the first samples of every
+    simulated variant (for rerun), in ``Answers.recorded``. ``context.perceived``: scenes drawn from a
+    perception's posterior: sample i of every variant starts from ``perceived.scenes[i]`` and the
+    model's sigma is not drawn (the posterior is the noise), as in a prediction from that perception."""
+    context = context or Context()
+    spec, model, settings, seed = request.query, request.model, request.settings, request.seed
+    budget_s, check, sequential = request.budget_s, request.check, request.stop
+    if sequential is not None and not isinstance(sequential, Sequential):
+        raise ConfigError("stop", "a question stops by a Sequential rule (engine.sampling.decide); anytime sampling "
+                                  "(AdaptiveStop) is for predictions")
+    map_fn, on_progress, perceived, record_every = context.map_fn, context.on_progress, context.perceived, \
+        context.record_every
+    record_samples = math.inf if context.record_samples is None else context.record_samples
+    directions, fell_off, contact = "direction" in spec.queries, "bump" in spec.queries, spec.contact_pairs
+    queries = tuple(q for q in QUERIES if q in spec.queries and q not in QUESTION_QUERIES)
     _check_question(scene, actions, model, budget_s, check, fell_off, contact, queries)
     if perceived is not None:
         model = dataclasses.replace(model, sigma_m=0.0)
-    plan = _plan(scene, actions, model, settings, budget_s, fall_threshold_fraction, directions, fell_off, contact,
-                 what_falls, queries, query_parameters or {}, perceived)
+    plan = _plan(scene, actions, model, settings, budget_s, spec, perceived)
     loop = MonteCarlo(run_variants, lost, map_fn, budget_s)  # the budget counts from here
     seeds = child_seeds(seed, plan.samples)
     refine = refine_in_task(check, settings)  # an unhealthy variant's rerun runs in its sample's task
@@ -112,14 +115,7 @@ def _question(plan: "_Plan", tasks, settings: SimSettings, sequential: Sequentia
 def _check_question(scene: Scene, actions: list[Action], model: ModelConfig, budget_s: float | None,
                     check: SelfCheck | None, fell_off: bool, contact, queries: tuple[str, ...]) -> None:
     """Everything a question asks, checked before anything is simulated."""
-    validate_scene(scene)
-    for name in queries:
-        if name in QUESTION_QUERIES:
-            raise ConfigError("queries", f"{name} is answered by the question itself (fell_off, contact, what_falls "
-                                         "ask for it); list other queries: "
-                              + ", ".join(q for q in QUERIES if q not in QUESTION_QUERIES))
-    if queries:
-        check_names(frozenset(queries))
+    validate_scene(scene)  # the queries checked themselves (QuerySpec; questions.question_spec)
     check_budget(budget_s)
     check_fidelity_request(check)
     for i, action in enumerate(actions):
@@ -154,8 +150,9 @@ class _Plan:
 
 
 def _plan(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSettings, budget_s: float | None,
-          fall_threshold_fraction: float, directions: bool, fell_off: bool, contact, what_falls: bool,
-          queries: tuple[str, ...], query_parameters: Mapping[str, Any], perceived=None) -> _Plan:
+          spec: QuerySpec, perceived=None) -> _Plan:
+    directions, fell_off, contact = "direction" in spec.queries, "bump" in spec.queries, spec.contact_pairs
+    queries = tuple(q for q in QUERIES if q in spec.queries and q not in QUESTION_QUERIES)
     margin = 3 * float(position_sigmas_m(scene, model).max(initial=0.0))  # noise can close gaps this wide
     if perceived is not None:  # and the posterior's samples by how far they moved two objects apart
         margin += 2 * _farthest_moved_m(scene, perceived.scenes)
@@ -178,11 +175,10 @@ def _plan(scene: Scene, actions: list[Action], model: ModelConfig, settings: Sim
                                           f"{budget_s:g} s; ask fewer variants or raise the budget")
     regions = affected_regions(scene, simulated_actions, margin, scene_groups, model.pushes)
     # a removal read from "as is" needs each other object's outcome there; a direction, what fell
-    what_falls = what_falls or any(trivial) or directions
-    asked = {"fall" if what_falls else "any_fall"} | ({"direction"} if directions else set()) \
-        | ({"bump"} if fell_off else set()) | ({"contact"} if contact else set()) | set(queries)
-    query = QuerySpec(queries=frozenset(asked), fall_threshold_fraction=fall_threshold_fraction,
-                      contact_pairs=tuple(contact), parameters=spec_parameters(frozenset(asked), query_parameters))
+    what_falls = "fall" in spec.queries or any(trivial) or directions
+    asked = (spec.queries - {"fall", "any_fall"}) | {"fall" if what_falls else "any_fall"}
+    query = QuerySpec(queries=frozenset(asked), fall_threshold_fraction=spec.fall_threshold_fraction,
+                      contact_pairs=spec.contact_pairs, parameters=tuple(p for p in spec.parameters if p[0] in asked))
     for name in queries:
         QUERIES[name].check(scene, query)
     # no noise anywhere (scene, model, nor an action's own): one rollout per variant says everything

@@ -9,6 +9,7 @@ import itertools
 import math
 import time
 from dataclasses import dataclass
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -17,11 +18,15 @@ from ..config import ModelConfig, SimSettings
 from ..sampling.decide import Ranking, SafeBelow, Sequential, Supports
 from ..errors import ConfigError
 from ..sampling.montecarlo import check_budget, far_over_budget
-from ..predict import rollout_cost
+from ..predict import Context, Request, rollout_cost
+from ..query import QUERIES, QuerySpec
+from ..query.parameters import spec_parameters
+from ..query.spec import check_names
 from ..scene.bodies import Body, Scene
 from ..scene.validation import validate_body
 from .answers import Answers, VariantAnswer
 from .ask import ask
+from .answers import QUESTION_QUERIES
 from .geometry import geometry_world, dependents, resting_on
 from .kinds import (DEFAULT_SAFE_BELOW, DEFAULT_SUPPORT_THRESHOLD, NO_OBJECTS, Action, Place, Push, Region, Remove,
                     check_level)
@@ -44,7 +49,51 @@ def remove(scene: Scene, names: list[str] | None, model: ModelConfig, settings: 
         rule = Sequential(SafeBelow(safe_below)) if sequential else None
     if what_falls is None:
         what_falls = safe_below is None
-    return ask(scene, _removals(scene, names), model, settings, sequential=rule, what_falls=what_falls, **kw)
+    return _ask(scene, _removals(scene, names), model, settings, sequential=rule, what_falls=what_falls, **kw)
+
+
+def check_extra_queries(queries: tuple[str, ...]) -> None:
+    """A question's other queries: registered ones, none of those the question answers itself."""
+    for name in queries:
+        if name in QUESTION_QUERIES:
+            raise ConfigError("queries", f"{name} is answered by the question itself (fell_off, contact, what_falls "
+                                         "ask for it); list other queries: "
+                              + ", ".join(q for q in QUERIES if q not in QUESTION_QUERIES))
+    if queries:
+        check_names(frozenset(queries))
+
+
+def question_spec(*, what_falls: bool = True, directions: bool = False, fell_off: bool = False,
+                  contact: tuple[tuple[str, str], ...] = (), queries: tuple[str, ...] = (),
+                  query_parameters: Mapping[str, Any] | None = None,
+                  fall_threshold_fraction: float = 0.125) -> QuerySpec:
+    """The ``QuerySpec`` a question asks (``ask``'s ``request.query``): what falls (``fall``) or only
+    whether anything does (``any_fall``), where (``direction``), what falls off the table (``bump``),
+    contacts, and other registered queries with their parameters (``"<query>.<field>"``)."""
+    check_extra_queries(tuple(queries))
+    asked = frozenset({"fall" if what_falls else "any_fall"} | ({"direction"} if directions else set())
+                      | ({"bump"} if fell_off else set()) | ({"contact"} if contact else set()) | set(queries))
+    return QuerySpec(queries=asked, fall_threshold_fraction=fall_threshold_fraction, contact_pairs=tuple(contact),
+                     parameters=spec_parameters(asked, query_parameters or {}))
+
+
+def _ask(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSettings, *, seed: int = 0,
+         map_fn=None, budget_s: float | None = None, fall_threshold_fraction: float = 0.125, record_every: int = 0,
+         record_samples: int = 0, directions: bool = False, fell_off: bool = False,
+         sequential: Sequential | None = None, on_progress=None, contact: tuple[tuple[str, str], ...] = (),
+         check=None, what_falls: bool = True, queries: tuple[str, ...] = (), query_parameters=None,
+         perceived=None) -> Answers:
+    """The questions' keywords (``ipe ask``'s options, ``~/ask``'s fields) as ``ask``'s request and
+    context: the question's queries in its QuerySpec (``question_spec``), unchecked and unbudgeted
+    unless asked."""
+    spec = question_spec(what_falls=what_falls, directions=directions, fell_off=fell_off, contact=tuple(contact),
+                         queries=tuple(queries), query_parameters=query_parameters,
+                         fall_threshold_fraction=fall_threshold_fraction)
+    request = Request(model=model, settings=settings, query=spec, seed=seed, stop=sequential, budget_s=budget_s,
+                      check=check)
+    return ask(scene, actions, request, Context(map_fn=map_fn, record_every=record_every,
+                                                record_samples=record_samples, on_progress=on_progress,
+                                                perceived=perceived))
 
 
 def _removals(scene: Scene, names: list[str] | None) -> list[Action]:
@@ -119,7 +168,7 @@ def support_graph(scene: Scene, model: ModelConfig, settings: SimSettings, thres
     full k for every removal)."""
     for name, value in (("threshold", threshold), ("safe_below", safe_below)):
         check_level(name, value)
-    answers = ask(scene, _removals(scene, None), model, settings,
+    answers = _ask(scene, _removals(scene, None), model, settings,
                   sequential=Sequential(Supports(threshold, safe_below)) if sequential else None, **kw)
     edges, safe = [], []
     for variant in answers.variants[1:]:
@@ -186,7 +235,7 @@ def clear_order(scene: Scene, model: ModelConfig, settings: SimSettings, target:
             break
         try:
             # each step is ranked on "does anything fall?" alone
-            answers = ask(current, _removals(current, candidates), model, settings, budget_s=deadline.remaining_s(),
+            answers = _ask(current, _removals(current, candidates), model, settings, budget_s=deadline.remaining_s(),
                           sequential=Sequential(Ranking()) if sequential else None, what_falls=False, **kw)
         except ConfigError as exc:
             if exc.field != "budget_s" or not steps:  # the first step must fit: refused as any question
@@ -227,7 +276,7 @@ def place(scene: Scene, bodies: list[Body], model: ModelConfig, settings: SimSet
     risky are ranked out (ties run until no further sample could separate them, at most k).
     ``what_falls``: also which objects fall (the ranking reads "does anything fall?" alone; without
     it every rollout ends at its first fall, ``ask``)."""
-    return ask(scene, [None] + [Place(b) for b in bodies], model, settings,
+    return _ask(scene, [None] + [Place(b) for b in bodies], model, settings,
                sequential=Sequential(Ranking()) if sequential else None, what_falls=what_falls, **kw)
 
 
@@ -322,7 +371,7 @@ def _rank_key(variant: VariantAnswer) -> tuple:
 
 def push(scene: Scene, pushes: list[Push], model: ModelConfig, settings: SimSettings, **kw) -> Answers:
     """What falls, and in which direction, when each push is made; the scene as it is comes first."""
-    return ask(scene, [None] + list(pushes), model, settings, directions=True, **kw)
+    return _ask(scene, [None] + list(pushes), model, settings, directions=True, **kw)
 
 
 def place_at(scene: Scene, body: Body, spots, model: ModelConfig, settings: SimSettings,

@@ -27,6 +27,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 import numpy as np  # noqa: E402
 
 from ipe_ros.engine import Box, Floor, ModelConfig, Scene, preset  # noqa: E402
+from ipe_ros.engine.checking.fidelity import DEFAULT_CHECK  # noqa: E402
 from ipe_ros.engine.vision import depth as D  # noqa: E402
 from ipe_ros.engine.vision import depth_io  # noqa: E402
 from ipe_ros.engine.vision.camera import PinholeCamera, look_at  # noqa: E402

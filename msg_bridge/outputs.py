@@ -34,6 +34,10 @@ def fall_direction_vector(prediction: Prediction) -> tuple[float, float, float]:
     return (scale * math.cos(prediction.direction_rad), scale * math.sin(prediction.direction_rad), 0.0)
 
 
-def fall_direction_msg(prediction: Prediction, frame_id: str, stamp_ns: int) -> Vector3Stamped:
+def fall_direction_msg(prediction: Prediction, frame_id: str, stamp_ns: int) -> Vector3Stamped | None:
+    """The fall direction (a zero vector: nothing fell); None when the ``direction`` query was not
+    asked (its ``direction_rollouts`` counts the rollouts it read, 0 included)."""
+    if prediction.direction_rollouts is None:
+        return None
     x, y, z = fall_direction_vector(prediction)
     return Vector3Stamped(header=stamp_ns_to_header(stamp_ns, frame_id), vector=Vector3(x=x, y=y, z=z))

@@ -194,11 +194,13 @@ def _prediction(**kw) -> Prediction:
 
 
 def test_direction_vector_is_scaled_by_decisiveness_and_zero_when_nothing_falls():
-    msg = fall_direction_msg(_prediction(direction_rad=math.pi / 2, direction_decisiveness=0.75), "map", 5)
+    msg = fall_direction_msg(_prediction(direction_rad=math.pi / 2, direction_decisiveness=0.75, direction_rollouts=4),
+                             "map", 5)
     assert (msg.vector.x, msg.vector.y, msg.vector.z) == (pytest.approx(0.0), pytest.approx(0.75), 0.0)
     assert (msg.header.frame_id, msg.header.stamp.nanosec) == ("map", 5)
-    still = fall_direction_msg(_prediction(direction_rad=None), "map", 5)
+    still = fall_direction_msg(_prediction(direction_rad=None, direction_rollouts=0), "map", 5)
     assert (still.vector.x, still.vector.y, still.vector.z) == (0.0, 0.0, 0.0)
+    assert fall_direction_msg(_prediction(), "map", 5) is None  # the direction query was not asked
     assert fall_fraction_msg(_prediction()) is None
     assert fall_fraction_msg(_prediction(fall_fraction=0.5)).data == 0.5
     assert fall_probability_msg(_prediction()) is None

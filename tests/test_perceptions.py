@@ -184,17 +184,20 @@ def test_a_source_that_needs_evidence_reads_it_from_its_own_cli_option_and_draws
                         query=QuerySpec(), check=None, budget_s=None))
 
 
-def test_no_door_names_a_perception():
-    """The CLI, the node and the service reach sources only through the protocol (engine.perceptions,
-    engine.evidence): no branch on a source's name, no depth-only or vision-only code."""
+def test_no_door_names_a_perception_or_a_query():
+    """The CLI, the node and the service reach sources and queries only through their protocols
+    (engine.perceptions, engine.evidence, engine.query): no branch on a source's or a query's name,
+    no depth-only or vision-only code."""
+    from ipe_ros.engine.query import QUERIES
+
     import re
 
     root = Path(__file__).resolve().parents[1] / "ipe_ros"
     doors = [*root.glob("cli*.py"), *(root / "service").glob("*.py"), *(root / "ros").glob("*.py")]
-    names = perception_names()
-    assert {"gaussian", "vision", "depth"} <= set(names)
+    names = (*perception_names(), *QUERIES)
+    assert {"gaussian", "vision", "depth", "fall", "direction"} <= set(names)
     named = "|".join(names)
-    pattern = re.compile(rf"""(==|!=)\s*["']({named})["']|["']({named})["']\s*(==|!=)""")
+    pattern = re.compile(rf"""(==|!=|\bin)\s*["']({named})["']|["']({named})["']\s*(==|!=|\bin\b)|wants\(["']""")
     offending = [f"{p.name}:{i}" for p in doors for i, line in enumerate(p.read_text().splitlines(), 1)
                  if pattern.search(line) or re.search(r"\b(depth|vision)_(posterior|perceive|images?|settings|rrd)\b",
                                                       line)]

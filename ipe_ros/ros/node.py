@@ -359,8 +359,9 @@ class IpeInterface(ObserveInterface, EvidenceInterface, MeshWaitInterface):
         probability = fall_probability_msg(prediction)
         if probability is not None:
             self._pub_probability.publish(probability)
-        if "direction" in prediction.request.get("queries", ()):  # a zero vector means "nothing falls"
-            self._pub_direction.publish(fall_direction_msg(prediction, source.frame_id, source.stamp_ns))
+        direction = fall_direction_msg(prediction, source.frame_id, source.stamp_ns)
+        if direction is not None:  # a zero vector means "nothing falls"
+            self._pub_direction.publish(direction)
         self._pub_markers.publish(prediction_to_markers(source.scene, prediction, source.frame_id, source.stamp_ns))
         if answer.perceived_scene is not None:  # in ~/scene's own format: a robot can re-publish it
             self._pub_perceived.publish(scene_to_markers(answer.perceived_scene, source.frame_id, source.stamp_ns))

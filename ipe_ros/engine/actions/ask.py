@@ -6,7 +6,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping
+from typing import Callable
 
 from ..config import ModelConfig, SimSettings
 from ..query import QUERIES, QuerySpec
@@ -15,7 +15,7 @@ from ..errors import ConfigError
 from ..sampling.perturb import is_deterministic, position_sigmas_m
 from ..checking.fidelity import (FidelityReport, SelfCheck, check_request as check_fidelity_request, is_reference,
                                  reference_settings, refine_in_task)
-from ..sampling.montecarlo import (MapFn, MonteCarlo, Plan, check_budget, check_some_sample_finished, child_seeds,
+from ..sampling.montecarlo import (MonteCarlo, Plan, check_budget, check_some_sample_finished, child_seeds,
                                    far_over_budget, mapped, together)
 from ..predict import Context, Request, rollout_cost
 from ..checking.self_check import checking
@@ -66,7 +66,7 @@ def ask(scene: Scene, actions: list[Action], request: Request, context: Context 
     map_fn, on_progress, perceived, record_every = context.map_fn, context.on_progress, context.perceived, \
         context.record_every
     record_samples = math.inf if context.record_samples is None else context.record_samples
-    directions, fell_off, contact = "direction" in spec.queries, "bump" in spec.queries, spec.contact_pairs
+    fell_off, contact = "bump" in spec.queries, spec.contact_pairs
     queries = tuple(q for q in QUERIES if q in spec.queries and q not in QUESTION_QUERIES)
     _check_question(scene, actions, model, budget_s, check, fell_off, contact, queries)
     if perceived is not None:
@@ -151,7 +151,7 @@ class _Plan:
 
 def _plan(scene: Scene, actions: list[Action], model: ModelConfig, settings: SimSettings, budget_s: float | None,
           spec: QuerySpec, perceived=None) -> _Plan:
-    directions, fell_off, contact = "direction" in spec.queries, "bump" in spec.queries, spec.contact_pairs
+    directions, contact = "direction" in spec.queries, spec.contact_pairs
     queries = tuple(q for q in QUERIES if q in spec.queries and q not in QUESTION_QUERIES)
     margin = 3 * float(position_sigmas_m(scene, model).max(initial=0.0))  # noise can close gaps this wide
     if perceived is not None:  # and the posterior's samples by how far they moved two objects apart

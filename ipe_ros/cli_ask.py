@@ -216,8 +216,9 @@ def _answer(args, scene, model, settings, kw) -> int:
     else:
         print(TEXT[question.kind](reply))
         if perceived is not None:
-            print(f"{asked_source(args).name}: {describe_perceived(asked_source(args), perceived)} "
-                  f"for {len(perceived.scenes)} samples (sigma unused)")
+            source = asked_source(args)
+            print(f"{source.name}: {describe_perceived(source, perceived)} for {len(perceived.scenes)} samples "
+                  "(sigma unused)")
     if question.kind == "support" and args.png:
         draw_support_graph(scene, reply.result, args.png)
     if args.rrd and reply.answers is not None:

@@ -6,7 +6,6 @@ source by name."""
 from __future__ import annotations
 
 import argparse
-import time
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
@@ -73,8 +72,9 @@ class Chosen:
         return f", perception = {shown}"
 
 
-def _read(args, source: PerceptionSource, field_name: str) -> Any:
-    values = option_values(args, source)
+def _read(source: PerceptionSource, values: Mapping[str, Any], field_name: str) -> Any:
+    """The evidence from the source's option values, or a ConfigError naming ``field_name`` when a
+    required option is missing."""
     lacking = [o for o in source.required() if values[o.field] is None]
     if lacking:
         listed = _listed([f"{o.flag} {o.metavar}" for o in source.required()])
@@ -91,8 +91,8 @@ def chosen_perception(args, perception: str) -> Chosen:
     source = perception_source(perception)
     if not source.options:
         return Chosen(source, {})
-    evidence = _read(args, source, "--perception")
     values = option_values(args, source)
+    evidence = _read(source, values, "--perception")
     return Chosen(source, values, evidence, source.configure(values) if source.configure is not None else {})
 
 
@@ -112,14 +112,11 @@ def perceive_for_question(args, scene, source: PerceptionSource) -> tuple[Any, C
     if args.ground_truth:
         raise ConfigError("--ground-truth", f"takes the scene exactly as given, but {flag} draws it from the "
                                             f"{source.name} posterior; drop one of them")
-    evidence = _read(args, source, flag)  # read first: a missing option is said before anything runs
+    values = option_values(args, source)
+    evidence = _read(source, values, flag)  # read first: a missing option is said before anything runs
     model = ModelConfig(samples=args.samples, perception=source.name)
-    share = None if args.budget_s is None else args.budget_s * source.needs.budget_share
-    started = time.perf_counter()
-    perceived = source.perceive(scene, model, args.seed, None, evidence, share)
-    if args.budget_s is not None:
-        args.budget_s = max(args.budget_s - (time.perf_counter() - started), 1e-3)
-    return perceived, Chosen(source, option_values(args, source), evidence)
+    perceived, args.budget_s = source.perceive_within(scene, model, args.seed, None, evidence, args.budget_s)
+    return perceived, Chosen(source, values, evidence)
 
 
 def describe_perceived(source: PerceptionSource, perceived) -> str:

@@ -39,7 +39,7 @@ class Held:
 
 #: receive(msg, held, node_values) -> (value, frame_id): a message converted as it arrives, given
 #: what the source's other topics hold (a depth image needs the camera's calibration and pose);
-#: ValueError refuses it (counted, logged; nothing held)
+#: an error refuses it (counted, logged in one line; nothing held; the node goes on)
 Receive = Callable[[Any, Mapping[str, Held], Mapping[str, Any]], tuple[Any, str]]
 
 

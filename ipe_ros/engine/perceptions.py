@@ -13,6 +13,7 @@ depth's ``DepthPerceivedScenes``, a plugin's own type).
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Protocol, runtime_checkable
 
@@ -89,18 +90,29 @@ class PerceptionSource:
         return "; ".join(doors) or "no door fills it"
 
     def perceive(self, scene, model, seed: int, map_fn=None, evidence=None, budget_s: float | None = None):
-        """The perceived scenes for ``scene``: its chain, within ``budget_s`` (the share of a
-        prediction's budget the caller gives it)."""
+        """The perceived scenes for ``scene``: its chain, within its share of ``budget_s`` (a
+        prediction's whole budget; ``Evidence.budget_share``; a source that needs no evidence runs
+        its length)."""
         if self.run is None:
             raise ConfigError("perception", f"{self.name} perception draws no scenes of its own")
         if self.needs is not None and evidence is None:
             raise ConfigError("perception", f"{self.name} perception needs {self.needs.what}: give them to predict as "
                                             f"its evidence ({self.where()})")
-        perceived = self.run(scene, model, seed, map_fn, evidence, budget_s)
+        share = None if budget_s is None or self.needs is None else budget_s * self.needs.budget_share
+        perceived = self.run(scene, model, seed, map_fn, evidence, share)
         if not isinstance(perceived, Perceived):
             raise TypeError(f"perception {self.name}'s run returned a {type(perceived).__name__}, which is not "
                             "Perceived (engine.perceptions): give it scenes, refined, with_samples(k) and to_dict()")
         return perceived
+
+    def perceive_within(self, scene, model, seed: int, map_fn, evidence, budget_s: float | None):
+        """``perceive``, and what its chain left of ``budget_s`` for the samples (at least 1 ms; all
+        of it for a source whose chain has no deadline)."""
+        started = time.perf_counter()
+        perceived = self.perceive(scene, model, seed, map_fn, evidence, budget_s)
+        if budget_s is None or self.needs is None:
+            return perceived, budget_s
+        return perceived, max(budget_s - (time.perf_counter() - started), 1e-3)
 
 
 _SOURCES: dict[str, PerceptionSource] = {}

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
@@ -148,11 +147,7 @@ def _from_perception(tasks: list[SampleTask], scene: Scene, model: ModelConfig, 
     if not source.posterior:
         return tasks, perceived, budget_s
     if perceived is None:
-        share = None if budget_s is None or source.needs is None else budget_s * source.needs.budget_share
-        started = time.perf_counter()
-        perceived = source.perceive(scene, model, seed, map_fn, evidence, share)
-        if share is not None:
-            budget_s = max(budget_s - (time.perf_counter() - started), 1e-3)
+        perceived, budget_s = source.perceive_within(scene, model, seed, map_fn, evidence, budget_s)
     if len(perceived.scenes) < len(tasks):
         raise ConfigError("samples", f"{len(perceived.scenes)} perceived scenes for {len(tasks)} samples")
     sampled = dataclasses.replace(model, sigma_m=0.0)

@@ -10,6 +10,7 @@ Nothing here knows a source by name.
 
 from __future__ import annotations
 
+import collections
 import threading
 from typing import Any, Mapping
 
@@ -42,7 +43,7 @@ class EvidenceViews:
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._held: dict[str, dict[str, Held]] = {}
-        self._counts = dict.fromkeys(counter_names(), 0)
+        self._counts = collections.Counter(dict.fromkeys(counter_names(), 0))  # zeros shown from the start
         self._posterior: tuple[tuple, Any] | None = None  # (key, perceived scenes) of the latest view
 
     def held(self, source: str) -> dict[str, Held]:
@@ -56,14 +57,13 @@ class EvidenceViews:
             number = held[topic.name].number + 1 if topic.name in held else 1
             held[topic.name] = Held(value, int(stamp_ns), frame_id, number)
             if topic.counted_as:
-                self._counts[topic.counted_as] = self._counts.get(topic.counted_as, 0) + 1
+                self._counts[topic.counted_as] += 1
 
     def refuse(self, topic: EvidenceTopic) -> None:
         """Count a message that could not be used (the node logs why)."""
         if topic.counted_as:
             with self._lock:
-                key = f"{topic.counted_as}_refused"
-                self._counts[key] = self._counts.get(key, 0) + 1
+                self._counts[f"{topic.counted_as}_refused"] += 1
 
     def counts(self) -> dict[str, int]:
         with self._lock:
@@ -112,9 +112,8 @@ class EvidenceViews:
         with self._lock:
             if self._posterior is not None and self._posterior[0] == key:
                 return self._posterior[1]
-        share = None if budget_s is None else budget_s * source.needs.budget_share
-        perceived = source.perceive(scene, model, seed, map_fn, evidence, share)
+        perceived = source.perceive(scene, model, seed, map_fn, evidence, budget_s)
         with self._lock:
             self._posterior = (key, perceived)
-            self._counts[f"{source.name}_posteriors"] = self._counts.get(f"{source.name}_posteriors", 0) + 1
+            self._counts[f"{source.name}_posteriors"] += 1
         return perceived

@@ -66,9 +66,7 @@ def ask(scene: Scene, actions: list[Action], request: Request, context: Context 
     map_fn, on_progress, perceived, record_every = context.map_fn, context.on_progress, context.perceived, \
         context.record_every
     record_samples = math.inf if context.record_samples is None else context.record_samples
-    fell_off, contact = "bump" in spec.queries, spec.contact_pairs
-    queries = tuple(q for q in QUERIES if q in spec.queries and q not in QUESTION_QUERIES)
-    _check_question(scene, actions, model, budget_s, check, fell_off, contact, queries)
+    _check_question(scene, actions, model, budget_s, check, spec)
     if perceived is not None:
         model = dataclasses.replace(model, sigma_m=0.0)
     plan = _plan(scene, actions, model, settings, budget_s, spec, perceived)
@@ -113,7 +111,7 @@ def _question(plan: "_Plan", tasks, settings: SimSettings, sequential: Sequentia
 
 
 def _check_question(scene: Scene, actions: list[Action], model: ModelConfig, budget_s: float | None,
-                    check: SelfCheck | None, fell_off: bool, contact, queries: tuple[str, ...]) -> None:
+                    check: SelfCheck | None, spec: QuerySpec) -> None:
     """Everything a question asks, checked before anything is simulated."""
     validate_scene(scene)  # the queries checked themselves (QuerySpec; questions.question_spec)
     check_budget(budget_s)
@@ -124,10 +122,10 @@ def _check_question(scene: Scene, actions: list[Action], model: ModelConfig, bud
             raise ConfigError(f"actions[{i}]", "the ground truth takes a push exactly as given, but this one has "
                                                "noise of its own (a direction or speed sigma); drop it, or ask "
                                                "without the ground truth")
-    if fell_off and not isinstance(scene.support, Table):
+    if "bump" in spec.queries and not isinstance(scene.support, Table):
         raise ConfigError("fell_off", f"{scene.name!r} stands on a floor: nothing can fall off it (ask it of a "
                                       "scene on a table)")
-    _check_contact(scene, actions, contact)
+    _check_contact(scene, actions, spec.contact_pairs)
 
 
 @dataclass(frozen=True)

@@ -741,6 +741,34 @@ def test_a_scene_inside_the_validated_envelope_answers_validated_without_referen
                    Request(model=model, settings=preset("default"), query=QUERY, seed=4, check=ALWAYS, budget_s=None)).fidelity == "verified"
 
 
+def test_a_questions_variant_inside_the_validated_envelope_answers_validated_and_only_the_others_are_rerun(tower):
+    """A variant is the scene its action leaves: the tower without its top block is boxes at rest
+    on a floor (validated, nothing rerun at the reference), without its bottom block it leaves blocks
+    hanging (verified against the reference); a placed block lowered onto a box lies inside the
+    envelope, a pushed one does not (it moves)."""
+    from ipe_ros.engine.actions.kinds import applied
+    from ipe_ros.engine.checking.envelope import outside
+
+    spy = CountingMap()
+    model = ModelConfig(sigma_m=0.005, samples=16)
+    answers = A.remove(tower, ["block7", "block0"], model, preset("default"), map_fn=spy, check=DEFAULT_CHECK,
+                       sequential=False, seed=0)
+    verdicts = {v.label: v.fidelity for v in answers.variants}
+    assert verdicts["as_is"] == verdicts["remove/block7"] == "validated"
+    assert verdicts["remove/block0"] in {"verified", "escalated"}
+    assert answers.variants[1].self_check["validated"].startswith("boxes at rest on a floor")
+    reruns = [t for call in spy.calls for t in call if t.settings.name == REFERENCE]
+    assert reruns and {t.actions for t in reruns} == {(A.Remove(("block0",)),)}
+    unchecked = A.remove(tower, ["block7", "block0"], model, preset("default"), check=None, sequential=False, seed=0)
+    assert answers.variants[1].object_fall_probability == unchecked.variants[1].object_fall_probability
+
+    top = max(tower.dynamic_objects, key=lambda b: b.position_m[2])
+    on_top = dataclasses.replace(top, name="new", position_m=(*top.position_m[:2], top.position_m[2] + 0.2))
+    assert outside(applied(tower, A.Place(on_top)), model, preset("default")) is None
+    assert outside(applied(tower, A.Push(top.name, (0.5, 0.0, 0.0))), model, preset("default")) == \
+        f"{top.name} is moving"
+
+
 def test_inside_the_envelope_an_unhealthy_rollout_is_still_refined(tower):
     def fail_second(task, outcome: SampleOutcome):
         if task.settings.name == "default" and task.index == 1:

@@ -141,9 +141,14 @@ _GROUPS = {"solver": SolverSettings, "depenetration": DepenetrationSettings, "se
 class SimSettings:
     """How each rollout is integrated: the step, the horizon, and one group per concern.
 
-    time_step_s: the fine step; never more than ``max_step_fraction_of_time_scale`` of the boxes'
-        time scale sqrt(size / g), so small boxes get finer steps (3 mm cubes sank through each
+    time_step_s: the fine step; never more than ``max_step_fraction_of_time_scale`` of the bodies'
+        time scale sqrt(size / g), so small bodies get finer steps (3 mm cubes sank through each
         other at 1/240 s; 0.03 leaves 0.2 m blocks at 1/240 s and gives 3 mm cubes ~0.5 ms).
+    step_time_scale: which size that is. "thickness": each body's smallest extent (the time to fall
+        its own thickness). "tipping": its middle extent, the shortest lever it can tip or roll about
+        (a plate tips about its width whether it lies flat or stands on edge; a rod rolls about its
+        width): a thin plate or a ladle no longer sets a whole scene's step by its thickness, whose
+        tunnelling the travel limit's substeps guard already (they still follow the smallest extent).
     horizon_s: simulated time of a rollout (the paper's 2 s), unless early termination ends it or
         the scene asks for its own.
     max_travel_fraction: the travel limit: no body may move more than this fraction of the smallest
@@ -186,6 +191,7 @@ class SimSettings:
     #: part of a stored result's key only when set, so that results stored before it keep their keys
     rigid_when_unhealthy: bool = field(default=False, metadata={"keyed": "when set"})
     islands: bool = field(default=False, metadata={"keyed": "when set"})
+    step_time_scale: str = field(default="thickness", metadata={"keyed": "when set"})
 
     def __post_init__(self) -> None:
         positive(self.time_step_s, "time_step_s")
@@ -196,16 +202,28 @@ class SimSettings:
         positive(self.max_travel_fraction, "max_travel_fraction")
         positive(self.min_contact_fraction, "min_contact_fraction")
         integer(self.max_substeps, "max_substeps", 1, 1000)
+        if self.step_time_scale not in STEP_TIME_SCALES:
+            raise ConfigError("step_time_scale", f"unknown {shown(self.step_time_scale)}; choose one of "
+                                                 f"{', '.join(STEP_TIME_SCALES)}")
         if self.time_step_s > self.horizon_s:
             raise ConfigError("time_step_s", "must not exceed horizon_s")
         for group, kind in _GROUPS.items():
             if not isinstance(getattr(self, group), kind):
                 raise ConfigError(group, f"must be a {kind.__name__}, got {shown(getattr(self, group))}")
 
-    def time_step_for(self, scale_m: float, gravity_m_s2: float, fastest_m_s: float = 0.0) -> float:
+    def time_scale_extent_m(self, extents_m) -> float:
+        """The size whose fall time bounds the step, among bodies of ``extents_m`` (each body's
+        three; see ``step_time_scale``)."""
+        which = 0 if self.step_time_scale == "thickness" else 1
+        return min(sorted(e)[which] for e in extents_m)
+
+    def time_step_for(self, scale_m: float, gravity_m_s2: float, fastest_m_s: float = 0.0,
+                      time_scale_m: float | None = None) -> float:
         """The step for a scene whose smallest extent is ``scale_m`` and whose fastest body starts
-        at ``fastest_m_s`` (see ``time_step_s`` and ``max_travel_fraction``)."""
-        step = min(self.time_step_s, self.max_step_fraction_of_time_scale * math.sqrt(scale_m / gravity_m_s2))
+        at ``fastest_m_s`` (see ``time_step_s`` and ``max_travel_fraction``); ``time_scale_m``: the
+        size of ``time_scale_extent_m`` (default ``scale_m``)."""
+        size = scale_m if time_scale_m is None else time_scale_m
+        step = min(self.time_step_s, self.max_step_fraction_of_time_scale * math.sqrt(size / gravity_m_s2))
         if fastest_m_s > 0:
             step = min(step, self.max_travel_fraction * scale_m / fastest_m_s)
         return step
@@ -237,6 +255,10 @@ class SimSettings:
                 raise ConfigError(key, "not a field of SimSettings")
             top[key] = value
         return dataclasses.replace(self, **top)
+
+
+#: what ``SimSettings.step_time_scale`` may name
+STEP_TIME_SCALES = ("thickness", "tipping")
 
 
 PRESETS: dict[str, SimSettings] = {

@@ -103,11 +103,9 @@ class RolloutCost:
 def rollout_cost(scene: Scene, model: ModelConfig, settings: SimSettings, pairs: int = 0) -> RolloutCost:
     """Steps x bodies of one sample (every phi value) at the step the scene gets, and ``pairs`` watched
     contact pairs, and its estimated time."""
-    from .simulation.world import fastest_initial_speed_m_s
+    from .simulation.world import time_step_of
 
-    g = math.sqrt(sum(v * v for v in scene.gravity_m_s2))
-    scale = min(b.smallest_extent_m for b in scene.dynamic_objects)
-    dt = settings.time_step_for(scale, g, fastest_initial_speed_m_s(scene))
+    dt = time_step_of(scene, settings)
     ticks = math.ceil(settings.horizon_for(scene.horizon_s) / dt)
     settle_ticks = math.ceil(settings.settling.duration_s / dt)
     steps = (ticks + settle_ticks * (settings.settling.substeps - 1)) * len(model.phi_m_s2)

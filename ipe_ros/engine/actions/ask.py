@@ -18,6 +18,7 @@ from ..checking.fidelity import (FidelityReport, SelfCheck, check_request as che
 from ..sampling.montecarlo import (MonteCarlo, Plan, check_budget, check_some_sample_finished, child_seeds,
                                    far_over_budget, mapped, together)
 from ..predict import Context, Request, rollout_cost
+from ..checking.envelope import validated_because
 from ..checking.self_check import checking
 from ..scene.bodies import Scene, Table
 from ..scene.validation import validate_scene
@@ -28,7 +29,7 @@ from .answers import (QUESTION_QUERIES, Alone, Answers, aggregate_given, aggrega
                       ran, stood)
 from .checks import check_action
 from .geometry import affected_regions, groups, reached
-from .kinds import DEFAULT_SAFE_BELOW, Action, Place, Push, Remove, label_of
+from .kinds import DEFAULT_SAFE_BELOW, Action, Place, Push, Remove, applied, label_of
 from .variants import VariantTask, lost, run_variants, skipped
 
 
@@ -82,8 +83,10 @@ def ask(scene: Scene, actions: list[Action], request: Request, context: Context 
                             record_every=record_every if i < record_samples else 0, refine=refine)
                 for i in indices]
 
+    validated = _variants_validated([scene] if perceived is None else perceived.scenes, plan.simulated_actions,
+                                    model, settings, check)
     per_sample, decisions, reports = loop.drive(_question(plan, tasks, settings, sequential, check, budget_s, scene,
-                                                          on_progress))
+                                                          on_progress, validated))
     answers, scene_alone = _answers(scene, actions, plan, per_sample, decisions, reports)
     stopped = "budget" if any(r.budget_stopped for s in per_sample for r in s) else "samples"
     recorded = {label_of(a): [(i, s[j]) for i, s in enumerate(per_sample) if s[j].ok and ran(s[j]).trajectory is not None]
@@ -92,10 +95,11 @@ def ask(scene: Scene, actions: list[Action], request: Request, context: Context 
 
 
 def _question(plan: "_Plan", tasks, settings: SimSettings, sequential: Sequential | None, check: SelfCheck | None,
-              budget_s: float | None, scene: Scene, on_progress) -> Plan:
+              budget_s: float | None, scene: Scene, on_progress, validated: list[str]) -> Plan:
     """A question's samples, then every simulated variant's self-check, as a plan (``montecarlo``):
     returns per sample every variant's outcome, the sequential decisions (label -> (decision, why it
-    stopped, samples drawn)) and each variant's check report."""
+    stopped, samples drawn)) and each variant's check report. ``validated[j]``: why variant j needs
+    no verification (``_variants_validated``), or ""."""
     k, simulated_actions, as_is = plan.samples, plan.simulated_actions, plan.as_is
     decisions: dict[str, tuple[str | None, str, int]] = {}
     if sequential is None or plan.deterministic or as_is is None:
@@ -104,7 +108,7 @@ def _question(plan: "_Plan", tasks, settings: SimSettings, sequential: Sequentia
         per_sample, decisions = yield from _sequentially(tasks, simulated_actions, as_is, k, sequential, scene,
                                                          on_progress)
     check_some_sample_finished([r for s in per_sample for r in s], budget_s)
-    reports = yield from _check_variants(per_sample, simulated_actions, tasks, settings, check)
+    reports = yield from _check_variants(per_sample, simulated_actions, tasks, settings, check, validated)
     if sequential is not None and any(r.verdict == "escalated" or r.refined_samples for r in reports.values()):
         decisions = _decide_again(decisions, per_sample, simulated_actions, as_is, sequential)
     return per_sample, decisions, reports
@@ -243,11 +247,28 @@ def _check_contact(scene: Scene, actions: list[Action], pairs) -> None:
     check_pairs(pairs, scene, tuple(a.body.name for a in actions if isinstance(a, Place)))
 
 
+def _variants_validated(scenes: list[Scene], actions: list[Action], model: ModelConfig, settings: SimSettings,
+                        check: SelfCheck | None) -> list[str]:
+    """Per simulated variant, why it needs no verification, or "": every scene its samples start from
+    (the scene, or each perceived one), with the action applied (``kinds.applied``), lies inside the
+    validated envelope (``checking.envelope``), as a prediction's scene would. A block placed on a
+    standing tower, lowered onto it, or the top block taken off it, leaves boxes at rest; a removal
+    that leaves a block hanging, or a push, does not."""
+    if check is None or not check.enabled or check.always_verify:
+        return [""] * len(actions)
+    out = []
+    for action in actions:
+        reasons = [validated_because(applied(s, action), model, settings) for s in {id(s): s for s in scenes}.values()]
+        out.append(reasons[0] if reasons and all(reasons) else "")
+    return out
+
+
 def _check_variants(per_sample: list[list[SampleOutcome]], actions: list[Action], tasks, settings: SimSettings,
-                    check: SelfCheck | None) -> Plan:
+                    check: SelfCheck | None, validated: list[str]) -> Plan:
     """Each simulated variant's self-check (``self_check.checking``), all in the same rounds; the
-    checked outcomes replace the fast ones in ``per_sample``. Returns variant index -> what its
-    check did."""
+    checked outcomes replace the fast ones in ``per_sample``. A variant inside the validated envelope
+    (``validated[j]``) verifies and covers nothing: only its unhealthy rollouts are rerun. Returns
+    variant index -> what its check did."""
     if is_reference(settings):
         return {j: FidelityReport("reference", settings=(("samples", settings.name),),
                                   rigid_reruns=rigid_reruns(row[j] for row in per_sample)) for j in range(len(actions))}
@@ -263,8 +284,10 @@ def _check_variants(per_sample: list[list[SampleOutcome]], actions: list[Action]
         reruns.append(taken)
         for row, outcome in zip(per_sample, outcomes):
             row[j] = outcome
-    checks = [mapped(checking(tasks(samples, [j]), [row[j] for row in per_sample], {}, check, reference,
-                              settings.name, rerun=reruns[j]), _only)
+    unverified = dataclasses.replace(check, verify_samples=0, cover_samples=0)
+    checks = [mapped(checking(tasks(samples, [j]), [row[j] for row in per_sample], {},
+                              unverified if validated[j] else check, reference, settings.name, validated[j],
+                              rerun=reruns[j]), _only)
               for j in range(len(actions))]
     reports = {}
     for j, (outcomes, report) in enumerate((yield from together(checks))):

@@ -3,11 +3,12 @@ checked against the scene in ``checks.py`` before anything is simulated)."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Union
 
 from ..errors import ConfigError
-from ..scene.bodies import Body
+from ..scene.bodies import Body, Scene
 
 
 #: P(anything else falls) below this makes an object safe to remove now.
@@ -80,3 +81,18 @@ class Region:
     x_m: tuple[float, float]
     y_m: tuple[float, float]
     yaw_rad: tuple[float, float] = (0.0, 0.0)
+
+
+def applied(scene: Scene, action: Action) -> Scene:
+    """The scene the action leaves at t = 0, before any noise: removed objects gone, a placed one
+    added at its pose, a pushed one moving at the push's velocity (what the validated envelope is
+    asked about a variant: ``ask``)."""
+    if isinstance(action, Remove):
+        return dataclasses.replace(scene, objects=tuple(b for b in scene.objects if b.name not in action.names))
+    if isinstance(action, Place):
+        return dataclasses.replace(scene, objects=scene.objects + (action.body,))
+    if isinstance(action, Push):
+        return dataclasses.replace(scene, objects=tuple(
+            dataclasses.replace(b, linear_velocity_m_s=action.velocity_m_s) if b.name == action.name else b
+            for b in scene.objects))
+    return scene

@@ -363,10 +363,12 @@ def mass_ratio(masses_kg) -> float:
 
 
 def time_step_of(scene: Scene, settings: SimSettings) -> float:
-    """The step a world of ``scene`` takes (``SimSettings.time_step_for`` its smallest body and its
+    """The step a world of ``scene`` takes (``SimSettings.time_step_for`` its bodies' sizes and its
     fastest start)."""
-    return settings.time_step_for(min(b.smallest_extent_m for b in scene.dynamic_objects),
-                                  float(np.linalg.norm(scene.gravity_m_s2)), fastest_initial_speed_m_s(scene))
+    bodies = scene.dynamic_objects
+    return settings.time_step_for(min(b.smallest_extent_m for b in bodies),
+                                  float(np.linalg.norm(scene.gravity_m_s2)), fastest_initial_speed_m_s(scene),
+                                  settings.time_scale_extent_m(b.extents_m for b in bodies))
 
 
 def fastest_initial_speed_m_s(scene: Scene) -> float:

@@ -19,15 +19,15 @@ ISLANDS = preset("default").changed("default-islands", islands=True)
 FAR = QuerySpec(queries=frozenset({"far", "fall"}))  # rollouts run to rest: every pose read
 
 
-def _plate(name: str, x: float, **kw) -> Box:
-    """A 1 cm plate: the size cap gives it (and any world it is in) 2.6 ms steps against 1/180 s."""
-    return Box(name=name, extents_m=(0.1, 0.1, 0.01), position_m=(x, 0.0, 0.005), orientation_xyzw=(0, 0, 0, 1),
+def _tile(name: str, x: float, **kw) -> Box:
+    """A 3 x 3 x 1 cm tile: the size cap gives it (and any world it is in) 2.2 ms steps against 1/180 s."""
+    return Box(name=name, extents_m=(0.03, 0.03, 0.01), position_m=(x, 0.0, 0.005), orientation_xyzw=(0, 0, 0, 1),
                friction=0.9, restitution=0.0, mass_kg=0.1, **kw)
 
 
 def _tipping_tower():
-    """Two blocks, the top one over the edge (it falls), and a plate 2 m away."""
-    return floor_scene(block("b0", 0.0, 0.0, 0.1), block("b1", 0.13, 0.0, 0.3), _plate("plate", 2.0))
+    """Two blocks, the top one over the edge (it falls), and a tile 2 m away."""
+    return floor_scene(block("b0", 0.0, 0.0, 0.1), block("b1", 0.13, 0.0, 0.3), _tile("tile", 2.0))
 
 
 def _separated(scene, settings=ISLANDS):
@@ -43,22 +43,22 @@ def _groups(scene, horizon_s=2.0, gap_m=0.002):
 
 
 def test_bodies_that_touch_or_could_fall_or_be_thrown_onto_each_other_are_one_island():
-    assert _groups(_tipping_tower()) == [["b0", "b1"], ["plate"]]
-    # a block 5 cm above the plate falls onto it: one island
-    hovering = floor_scene(_plate("plate", 0.0), block("above", 0.0, 0.0, 0.16, extents=(0.2, 0.2, 0.2)))
-    assert _groups(hovering) == [["plate", "above"]]
-    # a block thrown at the plate from 1.5 m away reaches it within the horizon; thrown away from it, never
-    thrown = floor_scene(_plate("plate", 0.0), block("thrown", 1.5, 0.0, 0.1, extents=(0.2, 0.2, 0.2),
+    assert _groups(_tipping_tower()) == [["b0", "b1"], ["tile"]]
+    # a block 5 cm above the tile falls onto it: one island
+    hovering = floor_scene(_tile("tile", 0.0), block("above", 0.0, 0.0, 0.16, extents=(0.2, 0.2, 0.2)))
+    assert _groups(hovering) == [["tile", "above"]]
+    # a block thrown at the tile from 1.5 m away reaches it within the horizon; thrown away from it, never
+    thrown = floor_scene(_tile("tile", 0.0), block("thrown", 1.5, 0.0, 0.1, extents=(0.2, 0.2, 0.2),
                                                      linear_velocity_m_s=(-1.0, 0.0, 0.0)))
-    assert _groups(thrown) == [["plate", "thrown"]]
-    away = floor_scene(_plate("plate", 0.0), block("thrown", 1.5, 0.0, 0.1, extents=(0.2, 0.2, 0.2),
+    assert _groups(thrown) == [["tile", "thrown"]]
+    away = floor_scene(_tile("tile", 0.0), block("thrown", 1.5, 0.0, 0.1, extents=(0.2, 0.2, 0.2),
                                                    linear_velocity_m_s=(1.0, 0.0, 0.0)))
-    assert _groups(away) == [["plate"], ["thrown"]]
+    assert _groups(away) == [["tile"], ["thrown"]]
 
 
 def test_each_island_is_answered_as_it_would_be_alone_at_its_own_step():
-    """The tower apart from a plate 2 m away: its rollout is, bit for bit, the tower's world alone
-    (built from the same start, at 1/180 s), where the whole scene steps at the plate's 2.6 ms. Bit
+    """The tower apart from a tile 2 m away: its rollout is, bit for bit, the tower's world alone
+    (built from the same start, at 1/180 s), where the whole scene steps at the tile's 2.2 ms. Bit
     for bit because each island sets Bullet's contact distance, one global for every client of the
     process, again before it steps on (``StepControl.reapply``)."""
     scene = _tipping_tower()
@@ -78,7 +78,7 @@ def test_each_island_is_answered_as_it_would_be_alone_at_its_own_step():
                                 collapse_below_z_m=rollout.collapse_heights(tower, ISLANDS,
                                                                             outcome.initial_positions_m[:2]))
     np.testing.assert_array_equal(outcome.rollouts[0].final_positions_m[:2], alone.positions_m)
-    # the plate never moved
+    # the tile never moved
     np.testing.assert_allclose(outcome.rollouts[0].final_positions_m[2], outcome.initial_positions_m[2], atol=1e-4)
 
 
@@ -87,8 +87,9 @@ def test_islands_that_could_meet_are_simulated_as_one_world():
     footprints meet, and the sample is simulated as one world, where the domino ends leaning on the
     box (apart, it would have fallen flat through where the box is)."""
     tilt = math.radians(12)
-    lowest = 0.2 * math.cos(tilt) + 0.02 * math.sin(tilt)  # of the tilted domino's corners, below its centre
-    domino = Box(name="domino", extents_m=(0.04, 0.2, 0.4), position_m=(0.0, 0.0, lowest + 0.001),
+    lowest = 0.2 * math.cos(tilt) + 0.01 * math.sin(tilt)  # of the tilted domino's corners, below its centre
+    # 4 cm wide: its 2.6 ms steps are finer than half the box's, so the two are kept apart
+    domino = Box(name="domino", extents_m=(0.02, 0.04, 0.4), position_m=(0.0, 0.0, lowest + 0.001),
                  orientation_xyzw=(0.0, math.sin(tilt / 2), 0.0, math.cos(tilt / 2)), friction=0.9, restitution=0.0,
                  mass_kg=1.0, position_sigma_m=0.0)
     box = block("box", 0.2 + 0.1 + 0.1, 0.0, 0.1, extents=(0.2, 0.2, 0.2), mass_kg=5.0, position_sigma_m=0.0)
@@ -140,7 +141,7 @@ def test_questions_about_contacts_and_whether_anything_falls_keep_one_world():
     decided = rollout.decided_heights(scene, ISLANDS, any_fall, initial)
     assert decided.stop_at_first_fall
     assert rollout.Apart.of(scene, ISLANDS, any_fall, world, decided, 0) is None
-    contact = QuerySpec(queries=frozenset({"contact"}), contact_pairs=(("b0", "plate"),))
+    contact = QuerySpec(queries=frozenset({"contact"}), contact_pairs=(("b0", "tile"),))
     assert rollout.Apart.of(scene, ISLANDS, contact, world, None, 0) is None
     assert rollout.Apart.of(scene, ISLANDS, FAR, world, None, 0) is not None
     assert rollout.Apart.of(scene, preset("paper"), FAR, world, None, 0) is None  # off unless asked for
@@ -155,7 +156,7 @@ def test_scattered_bodies_make_at_most_eight_groups():
 
 def test_groups_are_simulated_apart_only_where_they_step_at_least_twice_as_coarse():
     """Twelve scattered blocks of one size would step alike apart: one world, no islands to pay for.
-    A tower beside a plate that sets the whole world's 2.6 ms steps takes 1/180 s apart: two."""
+    A tower beside a tile that sets the whole world's 2.2 ms steps takes 1/180 s apart: two."""
     by_step = simulation.islands.by_step
     a, b, c, d = (np.array([i]) for i in range(4))
     assert [g.tolist() for g in by_step([a, b, c, d], [0.0026, 0.0055, 0.0030, 0.0052])] == [[0, 2], [1, 3]]
@@ -164,7 +165,7 @@ def test_groups_are_simulated_apart_only_where_they_step_at_least_twice_as_coars
     assert rollout.Apart.of(scattered, ISLANDS, FAR, _separated(scattered), None, 0) is None
     tower = _tipping_tower()
     apart = rollout.Apart.of(tower, ISLANDS, FAR, _separated(tower), None, 0)
-    assert [g.tolist() for g in apart.groups] == [[2], [0, 1]]  # the plate's finer step first
+    assert [g.tolist() for g in apart.groups] == [[2], [0, 1]]  # the tile's finer step first
 
 
 def test_a_footprint_back_in_time_goes_on_from_there():

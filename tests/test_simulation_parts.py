@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
+import math
+
 import numpy as np
 import pytest
 
@@ -164,3 +167,32 @@ def test_the_quick_depth_test_agrees_with_the_deepest_penetration():
                     (sunk_m, among, fraction, deepest)
         if sunk_m >= 0.03:
             assert health.deepest_penetration_fraction(world, smallest) > 0.2  # the small cube, mostly
+
+
+def test_the_step_follows_each_bodys_thickness_unless_asked_to_follow_its_tipping_lever():
+    """``SimSettings.step_time_scale``: a 4 mm plate sets a world's step by its thickness (the
+    presets' rule); "tipping" reads its middle extent instead, the shortest lever it can tip or roll
+    about (a rod's width, not its length). Measured on the zoo and rejected for `default`
+    (benchmarks/HISTORY.md), it stays a setting a trial can name."""
+    from ipe_ros.engine import Box, Floor, Scene
+    from ipe_ros.engine.errors import ConfigError
+    from ipe_ros.engine.simulation import time_step_of
+
+    def alone(extents):
+        body = Box(name="b", extents_m=extents, position_m=(0.0, 0.0, 0.1), orientation_xyzw=(0, 0, 0, 1),
+                   friction=0.5, restitution=0.0, mass_kg=1.0)
+        return Scene(name="one", objects=(body,), support=Floor(friction=0.5, restitution=0.0))
+
+    fraction = DEFAULT.max_step_fraction_of_time_scale
+    tipping = DEFAULT.changed(step_time_scale="tipping")
+    plate, rod = alone((0.2, 0.1, 0.004)), alone((0.4, 0.012, 0.004))
+    assert time_step_of(plate, DEFAULT) == pytest.approx(fraction * math.sqrt(0.004 / 9.81))
+    assert time_step_of(plate, tipping) == pytest.approx(min(1 / 180, fraction * math.sqrt(0.1 / 9.81)))
+    assert time_step_of(rod, tipping) == pytest.approx(fraction * math.sqrt(0.012 / 9.81))
+    # the travel limit still follows the smallest extent: a plate thrown at 5 m/s moves 1 mm a step
+    thrown = Scene(name="thrown", objects=(dataclasses.replace(plate.objects[0], linear_velocity_m_s=(5.0, 0, 0)),),
+                   support=plate.support)
+    assert time_step_of(thrown, tipping) == pytest.approx(DEFAULT.max_travel_fraction * 0.004 / 5.0)
+    with pytest.raises(ConfigError, match=r"^step_time_scale: unknown 'length'; choose one of thickness, tipping$"):
+        DEFAULT.changed(step_time_scale="length")
+

@@ -1,7 +1,7 @@
 """pybullet's side of the cross-engine witness: the scenes, their noisy starts and pybullet's ends.
 
     .venv/bin/python benchmarks/witness/export.py OUT.json [--per-family 2] [--samples 8] [--seed 2026]
-                                                  [--families launch,drop] [--preset paper]
+                                                  [--families launch,drop] [--preset paper] [--removals]
 
 Then, in a venv of its own (MuJoCo is a witness, not a dependency):
 
@@ -169,6 +169,23 @@ def export_row(kind: str, label: str, scene: Scene, model: ModelConfig, settings
             "failed_samples": prediction.failed_samples, "samples": samples}
 
 
+def removal_rows(settings, samples: int) -> list[dict]:
+    """The tower without each of its blocks in turn (the blocks above it hang and land on what is
+    below), at sigma 5 mm: where a dropped block's impact runs down the stack."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from actions import stable_tower
+    from ipe_ros.engine.actions.kinds import Remove, applied
+
+    tower = stable_tower()
+    rows = []
+    for body in tower.dynamic_objects:
+        variant = applied(tower, Remove((body.name,)))
+        rows.append(export_row("removal", f"{tower.name} without {body.name}", variant,
+                               ModelConfig(sigma_m=0.005, samples=samples), settings, 1))
+        print(rows[-1]["label"], file=sys.stderr, flush=True)
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("out", type=Path)
@@ -178,9 +195,14 @@ def main() -> None:
     parser.add_argument("--families", default=None, help="comma-separated (default: every family)")
     parser.add_argument("--preset", default="paper")
     parser.add_argument("--no-mechanics", action="store_true")
+    parser.add_argument("--removals", action="store_true",
+                        help="also each removal variant of the robot questions' 10-block tower (benchmarks/actions.py) "
+                             "at a robot's 5 mm noise: what a support graph simulates")
     args = parser.parse_args()
     settings = preset(args.preset)
     rows = []
+    if args.removals:
+        rows += removal_rows(settings, args.samples)
     if not args.no_mechanics:
         for label, scene, closed_form in mechanics_cases():
             rows.append(export_row("mechanics", label, scene, ModelConfig(sigma_m=0.0, samples=1), settings, 0,

@@ -382,3 +382,18 @@ def test_mesh_acceptance_reports_each_file_accepted_or_refused_with_its_line(tmp
     assert rows["open_mug.obj"]["accepted"] and rows["open_mug.obj"]["fell"] is False
     assert rows["open_mug.obj"]["repaired"].startswith("open: remeshed watertight from 24 voxels across")
     assert data["summary"]["files"] == 2 and data["summary"]["accepted"] == 2
+
+
+def test_robot_time_runs_its_steps_one_after_another_and_sets_each_figure_beside_its_target(tmp_path):
+    command = [sys.executable, str(REPO / "benchmarks" / "robot_time.py"), "--steps", "zoo_2026", "--per-family", "1",
+               "--families", "launch", "--busy", "--out", str(tmp_path)]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=600, env=ENV, cwd=REPO)
+    assert result.returncode == 0, result.stderr[-3000:]
+    report = (tmp_path / "busy" / "robot_time.md").read_text()
+    assert "beside a process spinning on one core" in report
+    assert "| zoo, seed 2026: `default` checked / unchecked vs `paper` | " in report and "| >= 5x checked, every bar met |" in report
+    assert json.loads((tmp_path / "busy" / "zoo_2026" / "zoo.json").read_text())["families"].keys() == {"launch"}
+    wrong = subprocess.run(command[:2] + ["--steps", "zoo", "--out", str(tmp_path)], capture_output=True, text=True,
+                           timeout=60, env=ENV, cwd=REPO)
+    assert wrong.returncode != 0 and wrong.stderr.strip().endswith(
+        "--steps: unknown 'zoo'; choose from zoo_2026, zoo_2027, towers, questions, depth")

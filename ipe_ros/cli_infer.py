@@ -23,6 +23,7 @@ from .engine.inference.infer import Inference, InferSettings, infer
 from .engine.inference.likelihood import MODEL_ERROR_GRID
 from .engine.inference.observation import Observation, observation_from_json
 from .engine.scene.format import scene_to_json
+from .engine.safe_files import UnreadableFile, read_file_bounded
 from .engine.scene.limits import MAX_JSON_CHARS
 
 
@@ -52,10 +53,16 @@ def add_infer_parser(sub) -> None:
 
 
 def read_observation(path: str, only: list[str] | None) -> Observation:
+    """The observation file's, read bounded (a link to a device, a FIFO, a folder or a file past
+    ``MAX_JSON_CHARS`` refused in one line naming it), with only the ``only`` unknowns."""
     file = Path(path)
-    if file.stat().st_size > MAX_JSON_CHARS:
-        raise ConfigError("observation", f"{file}: larger than {MAX_JSON_CHARS} bytes; send fewer frames")
-    observation = observation_from_json(file.read_text())
+    try:
+        text = read_file_bounded(file, MAX_JSON_CHARS, "an observation").decode("utf-8")
+    except UnreadableFile as exc:
+        raise ConfigError("observation", f"{exc}{'; send fewer frames' if exc.too_large else ''}") from None
+    except UnicodeDecodeError:
+        raise ConfigError("observation", f"{file}: not UTF-8 text; write the observation as JSON") from None
+    observation = observation_from_json(text)
     if only:
         labels = [u.label for u in observation.unknowns]
         missing = [label for label in only if label not in labels]

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import copy
 import json
+import re
 import subprocess
 import sys
 
@@ -245,3 +246,22 @@ def test_an_unknown_initial_velocity_is_a_nuisance_estimated_from_the_frames():
     answer = infer(observation, InferSettings(seed=3))
     friction = answer.estimate("box.friction")
     assert friction.low_90 <= 0.5 <= friction.high_90 and friction.median == pytest.approx(0.5, rel=0.05)
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda d: (d / "zero.json").symlink_to("/dev/zero") or d / "zero.json",
+     r"observation: .*zero\.json is not a regular file \(a folder, a FIFO or a device\)"),
+    (lambda d: d, r"observation: .* is not a regular file \(a folder, a FIFO or a device\)"),
+    (lambda d: d / "missing.json", r"observation: .*missing\.json: no such file"),
+    (lambda d: (d / "latin.json").write_bytes(b'{"scene": "\xe9"}') and d / "latin.json",
+     r"observation: .*latin\.json: not UTF-8 text; write the observation as JSON"),
+])
+def test_an_observation_file_that_is_no_file_to_read_is_refused_in_one_line(tmp_path, make, message):
+    """A link to /dev/zero was read until memory ran out; a folder or a missing file ended in an
+    OSError's words without the field."""
+    path = make(tmp_path)
+    bad = subprocess.run([sys.executable, "-m", "ipe_ros.cli", "infer", str(path)], capture_output=True, text=True,
+                         timeout=60)
+    assert bad.returncode == 2, bad.stderr
+    (line,) = bad.stderr.strip().splitlines()
+    assert re.fullmatch(r"ipe: error: " + message, line), line

@@ -253,7 +253,9 @@ def _variants_validated(scenes: list[Scene], actions: list[Action], model: Model
     (the scene, or each perceived one), with the action applied (``kinds.applied``), lies inside the
     validated envelope (``checking.envelope``), as a prediction's scene would. A block placed on a
     standing tower, lowered onto it, or the top block taken off it, leaves boxes at rest; a removal
-    that leaves a block hanging, or a push, does not."""
+    that leaves a block hanging, or a push, does not. A sequential question is judged by the k it
+    asks, as a prediction at a fixed k: its decisions read intervals over the samples drawn, and the
+    fast physics' bias on such a scene is what the envelope's evidence rules out."""
     if check is None or not check.enabled or check.always_verify:
         return [""] * len(actions)
     out = []

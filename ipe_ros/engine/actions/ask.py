@@ -18,7 +18,6 @@ from ..checking.fidelity import (FidelityReport, SelfCheck, check_request as che
 from ..sampling.montecarlo import (MonteCarlo, Plan, check_budget, check_some_sample_finished, child_seeds,
                                    far_over_budget, mapped, together)
 from ..predict import Context, Request, rollout_cost
-from ..checking.envelope import validated_because
 from ..checking.self_check import checking
 from ..scene.bodies import Scene, Table
 from ..scene.validation import validate_scene
@@ -27,9 +26,9 @@ from ..results.outcome import SampleOutcome, rigid_reruns
 from ..sampling.rollout import take_refined
 from .answers import (QUESTION_QUERIES, Alone, Answers, aggregate_given, aggregate_variant, caused, draws_noise, fell,
                       ran, stood)
-from .checks import check_action
+from .checks import check_action, validated_variants
 from .geometry import affected_regions, groups, reached
-from .kinds import DEFAULT_SAFE_BELOW, Action, Place, Push, Remove, applied, label_of
+from .kinds import DEFAULT_SAFE_BELOW, Action, Place, Push, Remove, label_of
 from .variants import VariantTask, lost, run_variants, skipped
 
 
@@ -83,8 +82,8 @@ def ask(scene: Scene, actions: list[Action], request: Request, context: Context 
                             record_every=record_every if i < record_samples else 0, refine=refine)
                 for i in indices]
 
-    validated = _variants_validated([scene] if perceived is None else perceived.scenes, plan.simulated_actions,
-                                    model, settings, check)
+    validated = validated_variants([scene] if perceived is None else perceived.scenes, plan.simulated_actions,
+                                   model, settings, check)
     per_sample, decisions, reports = loop.drive(_question(plan, tasks, settings, sequential, check, budget_s, scene,
                                                           on_progress, validated))
     answers, scene_alone = _answers(scene, actions, plan, per_sample, decisions, reports)
@@ -99,7 +98,7 @@ def _question(plan: "_Plan", tasks, settings: SimSettings, sequential: Sequentia
     """A question's samples, then every simulated variant's self-check, as a plan (``montecarlo``):
     returns per sample every variant's outcome, the sequential decisions (label -> (decision, why it
     stopped, samples drawn)) and each variant's check report. ``validated[j]``: why variant j needs
-    no verification (``_variants_validated``), or ""."""
+    no verification (``checks.validated_variants``), or ""."""
     k, simulated_actions, as_is = plan.samples, plan.simulated_actions, plan.as_is
     decisions: dict[str, tuple[str | None, str, int]] = {}
     if sequential is None or plan.deterministic or as_is is None:
@@ -245,24 +244,6 @@ def _answers(scene: Scene, actions: list[Action], plan: _Plan, per_sample, decis
 def _check_contact(scene: Scene, actions: list[Action], pairs) -> None:
     """Contact pairs name objects of the scene, placed objects, or the support."""
     check_pairs(pairs, scene, tuple(a.body.name for a in actions if isinstance(a, Place)))
-
-
-def _variants_validated(scenes: list[Scene], actions: list[Action], model: ModelConfig, settings: SimSettings,
-                        check: SelfCheck | None) -> list[str]:
-    """Per simulated variant, why it needs no verification, or "": every scene its samples start from
-    (the scene, or each perceived one), with the action applied (``kinds.applied``), lies inside the
-    validated envelope (``checking.envelope``), as a prediction's scene would. A block placed on a
-    standing tower, lowered onto it, or the top block taken off it, leaves boxes at rest; a removal
-    that leaves a block hanging, or a push, does not. A sequential question is judged by the k it
-    asks, as a prediction at a fixed k: its decisions read intervals over the samples drawn, and the
-    fast physics' bias on such a scene is what the envelope's evidence rules out."""
-    if check is None or not check.enabled or check.always_verify:
-        return [""] * len(actions)
-    out = []
-    for action in actions:
-        reasons = [validated_because(applied(s, action), model, settings) for s in {id(s): s for s in scenes}.values()]
-        out.append(reasons[0] if reasons and all(reasons) else "")
-    return out
 
 
 def _check_variants(per_sample: list[list[SampleOutcome]], actions: list[Action], tasks, settings: SimSettings,

@@ -1,6 +1,7 @@
 """Each action checked against the scene before anything is simulated: the objects it names exist
 and may be moved, a placed body fits the scene's rules, a push is horizontal, lands on the object
-and gives it no more spin than a scene may start with (pybullet's own inertia, as the rollout uses)."""
+and gives it no more spin than a scene may start with (pybullet's own inertia, as the rollout uses);
+and which variants the validated envelope covers (``validated_variants``)."""
 
 from __future__ import annotations
 
@@ -9,12 +10,15 @@ import math
 
 import numpy as np
 
+from ..checking.envelope import validated_because
+from ..checking.fidelity import SelfCheck
+from ..config import ModelConfig, SimSettings
 from ..scene import limits
 from ..errors import ConfigError
 from ..scene.bodies import Scene
 from ..scene.validation import validate_scene
 from .geometry import geometry_world
-from .kinds import Action, Place, Push, Remove
+from .kinds import Action, Place, Push, Remove, applied
 from .variants import push_velocities
 
 
@@ -75,3 +79,21 @@ def _check_push_point(scene: Scene, push: Push, path: str) -> None:
         raise ConfigError(path, f"pushed there at this speed {push.name!r} would spin at up to {worst:.4g} rad/s, more "
                                 f"than the {limits.MAX_SPIN_RAD_S:g} rad/s a scene may start with; push nearer its "
                                 "centre of mass or slower")
+
+
+def validated_variants(scenes: list[Scene], actions: list[Action], model: ModelConfig, settings: SimSettings,
+                       check: SelfCheck | None) -> list[str]:
+    """Per simulated variant, why it needs no verification, or "": every scene its samples start from
+    (the scene, or each perceived one), with the action applied (``kinds.applied``), lies inside the
+    validated envelope (``checking.envelope``), as a prediction's scene would. A block placed on a
+    standing tower, lowered onto it, or the top block taken off it, leaves boxes at rest; a removal
+    that leaves a block hanging, or a push, does not. A sequential question is judged by the k it
+    asks, as a prediction at a fixed k: its decisions read intervals over the samples drawn, and the
+    fast physics' bias on such a scene is what the envelope's evidence rules out."""
+    if check is None or not check.enabled or check.always_verify:
+        return [""] * len(actions)
+    out = []
+    for action in actions:
+        reasons = [validated_because(applied(s, action), model, settings) for s in {id(s): s for s in scenes}.values()]
+        out.append(reasons[0] if reasons and all(reasons) else "")
+    return out

@@ -190,11 +190,11 @@ def main() -> int:
     print(json.dumps(report["calibration"], indent=1), flush=True)
     report["tower"] = tower_cost(k=args.tower_k, repeats=args.tower_repeats)
     print(json.dumps(report["tower"], indent=1), flush=True)
-    if report["calibration"] is None:  # --scenes 0: the 10-block tower's time alone, printed, no files
-        return 0
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "depth.json").write_text(json.dumps(report, indent=1) + "\n")
+    if report["calibration"] is None:  # --scenes 0: the 10-block tower's time alone, no report
+        return 0
     c, t = report["calibration"], report["tower"]
     lines = [f"# Depth perception ({report['date']})", "", "`.venv/bin/python benchmarks/depth.py`", "",
              f"- 95% intervals cover the truth in {c['coverage']:.1%} of {c['coordinates']} coordinates over "

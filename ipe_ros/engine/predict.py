@@ -21,7 +21,7 @@ from .config import DEFAULT_BUDGET_S, DEFAULT_MODEL, DEFAULT_PRESET, DEFAULT_QUE
 from .errors import ConfigError, shown
 from .sampling.estimate import Prediction, aggregate, sample_any_fall, sample_fall_fraction, wilson_interval
 from .checking.fidelity import check_request as check_fidelity_request
-from .checking.envelope import validated_because
+from .checking.envelope import validated_for_all
 from .checking.fidelity import (DEFAULT_CHECK, NO_CHECK, FidelityReport, SelfCheck, coverage_ahead, is_reference,
                        look_ahead_split, reference_settings, refine_in_task, verification_count)
 from .sampling.montecarlo import (MapFn, MonteCarlo, Plan, check_budget, check_seed, check_some_sample_finished, child_seeds,
@@ -253,8 +253,7 @@ def _validated(tasks: list[SampleTask], model: ModelConfig, settings: SimSetting
     few samples)."""
     if not check.enabled or check.always_verify or stop is not None:
         return ""
-    reasons = [validated_because(scene, model, settings) for scene in {id(t.scene): t.scene for t in tasks}.values()]
-    return reasons[0] if reasons and all(reasons) else ""
+    return validated_for_all((t.scene for t in tasks), model, settings)
 
 
 def _prediction(tasks: list[SampleTask], query: QuerySpec, settings: SimSettings, check: SelfCheck,

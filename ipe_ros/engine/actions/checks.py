@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from ..checking.envelope import validated_because
+from ..checking.envelope import validated_for_all
 from ..checking.fidelity import SelfCheck
 from ..config import ModelConfig, SimSettings
 from ..scene import limits
@@ -92,8 +92,5 @@ def validated_variants(scenes: list[Scene], actions: list[Action], model: ModelC
     fast physics' bias on such a scene is what the envelope's evidence rules out."""
     if check is None or not check.enabled or check.always_verify:
         return [""] * len(actions)
-    out = []
-    for action in actions:
-        reasons = [validated_because(applied(s, action), model, settings) for s in {id(s): s for s in scenes}.values()]
-        out.append(reasons[0] if reasons and all(reasons) else "")
-    return out
+    starts = list({id(s): s for s in scenes}.values())  # a posterior's scenes, each once
+    return [validated_for_all([applied(s, action) for s in starts], model, settings) for action in actions]

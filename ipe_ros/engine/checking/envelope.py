@@ -148,3 +148,15 @@ def validated_because(scene: Scene, model: ModelConfig, settings: SimSettings) -
     return (f"boxes at rest on a floor within the envelope `{settings.name}` was validated over against the "
             "reference (docs/model.md, 'Self-checking answers'): not rerun at the reference; unhealthy rollouts "
             "refined")
+
+
+def validated_for_all(scenes, model: ModelConfig, settings: SimSettings) -> str:
+    """``validated_because`` when every scene an answer's samples start from (each distinct one once)
+    lies inside the envelope; "" when one does not, or none is given."""
+    reason = ""
+    for scene in {id(s): s for s in scenes}.values():
+        why = validated_because(scene, model, settings)
+        if why is None:
+            return ""
+        reason = why
+    return reason

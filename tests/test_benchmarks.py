@@ -318,6 +318,31 @@ def test_the_witness_export_writes_every_shape_and_start_the_other_engine_needs(
         assert all(b["mass_kg"] > 0 and min(b["inertia_kg_m2"]) > 0 for b in row["scene"]["dynamic"])
 
 
+def test_the_witness_compares_runs_of_the_same_starts_sample_for_sample(tmp_path):
+    # two pybullet runs (the second with its solver changed) and a MuJoCo result, side by side
+    first, second = tmp_path / "paper.json", tmp_path / "paper200.json"
+    for out, extra in ((first, []), (second, ["--solver-iterations", "200", "--warm-start", "0.5"])):
+        result = subprocess.run([sys.executable, "benchmarks/witness/export.py", str(out), "--per-family", "1",
+                                 "--samples", "2", "--families", "drop", "--no-mechanics", *extra],
+                                cwd=REPO, capture_output=True, text=True, timeout=600)
+        assert result.returncode == 0, result.stderr
+    rows = json.loads(second.read_text())["rows"]
+    assert rows[0]["preset"] == "paper-iterations=200-warm_start_factor=0.5"
+    label = rows[0]["label"]
+    mujoco = tmp_path / "mujoco.json"
+    mujoco.write_text(json.dumps({"p_fall": {label: {"mujoco": [1.0] * len(rows[0]["scene"]["dynamic"])}}}))
+    md = tmp_path / "compare.md"
+    result = subprocess.run([sys.executable, "benchmarks/witness/compare.py", "--pybullet", f"a={first}",
+                             "--pybullet", f"b={second}", "--mujoco", f"m={mujoco}", "--md", str(md)],
+                            cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    table = md.read_text()
+    assert f"| {label} |" in table and "| a | b | m |" in table and "Mean |dP(falls)|" in table
+    result = subprocess.run([sys.executable, "benchmarks/witness/compare.py", "--pybullet", str(first)],
+                            cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert result.returncode != 0 and "NAME=FILE" in result.stderr
+
+
 def test_inference_benchmark_scores_each_case_and_writes_its_json(tmp_path):
     result = subprocess.run(
         [sys.executable, str(REPO / "benchmarks" / "inference.py"), "--cases", "2", "--workers", "0", "--families",

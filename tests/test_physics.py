@@ -324,8 +324,8 @@ def test_collapse_steps_that_make_energy_go_back_to_the_trials_latest_anchor_not
     energy begins again at its next look, so the undo reruns only what follows the latest anchor
     (1330 steps) and what fell is the same. A rollout whose collapse steps make no energy is bit for
     bit the same: saving the world at an anchor changes nothing in it. On the direct solver, as
-    `default` solved the chain before ``direct_solver_min_restitution`` and ``direct_solver_for_impacts_only``
-    (and to its residual of then):
+    `default` solved the chain before ``direct_solver_min_restitution``, ``direct_solver_for_impacts_only``
+    and ``bounce_from_touch`` (and to its residual of then):
     on the sequential-impulse solver its collapse steps make no energy to undo."""
     from ipe_ros.engine.config import DEFAULT_QUERIES
     from ipe_ros.engine.sampling.rollout import run_sample
@@ -336,7 +336,8 @@ def test_collapse_steps_that_make_energy_go_back_to_the_trials_latest_anchor_not
     model, query = ModelConfig(sigma_m=zoo_sigma_m(scene), samples=3), QuerySpec(queries=DEFAULT_QUERIES)
     assert preset("default").collapse.anchor_after_steps == 300
     direct = preset("default").changed(solver={"direct_solver_min_restitution": 0.0, "residual_threshold": 3e-6,
-                                               "direct_solver_for_impacts_only": False})
+                                               "direct_solver_for_impacts_only": False,
+                                               "bounce_from_touch": False})
     runs = {}
     for name, settings in {"start": direct.changed(collapse={"anchor_after_steps": None}), "anchor": direct}.items():
         for index in (1, 2):

@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/witness/export.py OUT.json [--per-family 2] [--samples 8] [--seed 2026]
                                                   [--families launch,drop] [--preset paper] [--removals]
+                                                  [--solver-iterations N] [--warm-start F]
 
 Then, in a venv of its own (MuJoCo is a witness, not a dependency):
 
@@ -198,8 +199,15 @@ def main() -> None:
     parser.add_argument("--removals", action="store_true",
                         help="also each removal variant of the robot questions' 10-block tower (benchmarks/actions.py) "
                              "at a robot's 5 mm noise: what a support graph simulates")
+    parser.add_argument("--solver-iterations", type=int, default=None,
+                        help="the preset's solver with this many iterations (how far from converged its answer is)")
+    parser.add_argument("--warm-start", type=float, default=None, help="the preset's solver with this warm start factor")
     args = parser.parse_args()
     settings = preset(args.preset)
+    solver = {key: value for key, value in (("iterations", args.solver_iterations),
+                                            ("warm_start_factor", args.warm_start)) if value is not None}
+    if solver:
+        settings = settings.changed(settings.name + "".join(f"-{k}={v}" for k, v in solver.items()), solver=solver)
     rows = []
     if args.removals:
         rows += removal_rows(settings, args.samples)

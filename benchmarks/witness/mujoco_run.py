@@ -1,6 +1,7 @@
 """MuJoCo's side of the cross-engine witness: the exported starts run in MuJoCo, held against pybullet.
 
     /tmp/mj/bin/python benchmarks/witness/mujoco_run.py OUT.json [--md REPORT.md] [--json RESULT.json]
+                                                        [--timeconst-s 0.002] [--step-s 0.00025]
 
 (see export.py for the venv and the export). MuJoCo runs every sample from pybullet's start: each
 body at its centre of mass with pybullet's mass and principal inertia, its shape as geoms (a hull as
@@ -154,15 +155,21 @@ def _mechanics_line(row: dict, mujoco_final: np.ndarray) -> str:
 
 
 def main() -> None:
+    global TIMECONST_S, TIME_STEP_S
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("exported")
     parser.add_argument("--md", default=None)
     parser.add_argument("--json", default=None)
+    parser.add_argument("--timeconst-s", type=float, default=TIMECONST_S,
+                        help="the contacts' time constant (smaller: harder; whether an answer depends on it)")
+    parser.add_argument("--step-s", type=float, default=TIME_STEP_S, help="MuJoCo's step (at most a quarter of the time constant)")
     args = parser.parse_args()
+    TIMECONST_S, TIME_STEP_S = args.timeconst_s, args.step_s
     data = json.load(open(args.exported))
     lines = ["## Mechanics: closed form, pybullet (`%s`), MuJoCo" % data["args"]["preset"], "",
              "| case | closed form | pybullet | MuJoCo |", "|---|---|---|---|"]
     families: dict[str, dict] = {}
+    rows_fallen: dict[str, dict] = {}
     for row in data["rows"]:
         scene = row["scene"]
         finals = [run_sample(scene, sample) for sample in row["samples"]]
@@ -187,6 +194,8 @@ def main() -> None:
                 apart = np.linalg.norm(final - np.asarray(sample["pybullet_final_m"]), axis=1) / sizes
                 tally["apart"].extend(apart[both_stand].tolist())
         tally["dp"].extend(np.abs(np.mean(fell_pb, axis=0) - np.mean(fell_mj, axis=0)).tolist())
+        rows_fallen[row["label"]] = {"pybullet": np.mean(fell_pb, axis=0).tolist(),
+                                     "mujoco": np.mean(fell_mj, axis=0).tolist()}
         print(f"{row['label']}: P(fall) pybullet {np.round(np.mean(fell_pb, axis=0), 2).tolist()} "
               f"MuJoCo {np.round(np.mean(fell_mj, axis=0), 2).tolist()}", flush=True)
     if families:
@@ -204,7 +213,9 @@ def main() -> None:
     if args.json:
         json.dump({"families": {k: {"agree": v["agree"], "count": v["count"], "mean_abs_dP": float(np.mean(v["dp"])),
                                     "median_apart": float(np.median(v["apart"])) if v["apart"] else None}
-                                for k, v in families.items()}}, open(args.json, "w"), indent=1)
+                                for k, v in families.items()},
+                   "p_fall": rows_fallen, "preset": data["rows"][0]["preset"] if data["rows"] else None,
+                   "timeconst_s": TIMECONST_S, "step_s": TIME_STEP_S}, open(args.json, "w"), indent=1)
 
 
 if __name__ == "__main__":

@@ -266,10 +266,10 @@ STEP_TIME_SCALES = ("thickness", "tipping")
 
 PRESETS: dict[str, SimSettings] = {
     # The paper's settings: 1 ms steps for the full 2 s, a fully converged solver, no shortcuts.
-    "paper": SimSettings(name="paper", time_step_s=0.001, horizon_s=2.0, solver=SolverSettings(iterations=50, direct_solver_for_impacts_only=True),
+    "paper": SimSettings(name="paper", time_step_s=0.001, horizon_s=2.0, solver=SolverSettings(iterations=50, direct_solver_for_impacts_only=True, bounce_from_touch=True),
                          rigid_when_unhealthy=True),
     # 1 ms / 2 s with 20 solver iterations: close to `paper` (mean |dFF| ~0.006) at ~1.8x its speed.
-    "accurate": SimSettings(name="accurate", time_step_s=0.001, horizon_s=2.0, solver=SolverSettings(iterations=20, direct_solver_for_impacts_only=True),
+    "accurate": SimSettings(name="accurate", time_step_s=0.001, horizon_s=2.0, solver=SolverSettings(iterations=20, direct_solver_for_impacts_only=True, bounce_from_touch=True),
                             rigid_when_unhealthy=True),
     # 1/240 s steps (1/233 s for 0.2 m blocks, by the size cap), plain rigid bodies with a full warm
     # start, up to 100 solver iterations to a residual of 3e-6 (a looser 1e-5 topples a delicately
@@ -277,7 +277,7 @@ PRESETS: dict[str, SimSettings] = {
     # everything has been at rest (and slowing down) for 0.2 s.
     "fine": SimSettings(name="fine", time_step_s=1 / 240, horizon_s=2.0,
                         solver=SolverSettings(iterations=100, residual_threshold=3e-6, warm_start_factor=1.0,
-                                              maximal_coordinates=True, direct_solver_for_impacts_only=True),
+                                              maximal_coordinates=True, direct_solver_for_impacts_only=True, bounce_from_touch=True),
                         settling=SettlingSettings(duration_s=0.1, substeps=2),
                         early_stop=EarlyStopSettings(enabled=True)),
     # The default: `fine`'s solver at 1/180 s steps, to a residual of 1e-5 (at these steps the
@@ -296,7 +296,7 @@ PRESETS: dict[str, SimSettings] = {
                            solver=SolverSettings(iterations=100, residual_threshold=1e-5, warm_start_factor=1.0,
                                                  maximal_coordinates=True, multibodies_from_aspect=10.0,
                                                  direct_solver_min_restitution=0.1, direct_solver_from_speed_m_s=1.0,
-                                                 direct_solver_for_impacts_only=True),
+                                                 direct_solver_for_impacts_only=True, bounce_from_touch=True),
                            settling=SettlingSettings(duration_s=0.1, substeps=2),
                            collapse=CollapseSettings(step_factor=4, solver_iterations=50, end_substeps=1,
                                                      max_travel_fraction=0.25, end_travel_fraction=0.05,

@@ -239,6 +239,10 @@ def build_world(scene: Scene, positions_m: np.ndarray, masses_kg: np.ndarray,
         else orientations_xyzw
     dynamic_ids = _add_dynamic_bodies(p, cid, scene.dynamic_objects, positions_m, masses_kg, orientations,
                                       _plain_rigid_bodies(scene, settings, direct))
+    if direct and settings.solver.bounce_from_touch:
+        for handle, body in zip(dynamic_ids, scene.dynamic_objects):
+            if body.restitution > 0:
+                p.changeDynamics(handle, -1, contactProcessingThreshold=0.0, physicsClientId=cid)
     inertia = np.array([p.getDynamicsInfo(h, -1, physicsClientId=cid)[2] for h in dynamic_ids], float)
     return World(client=cid, dynamic_ids=dynamic_ids, scale_m=scale, time_step_s=time_step,
                  contact_distance_m=contact_distance,

@@ -61,13 +61,13 @@ def tower():
 
 #: `default` as it was before its collapse steps were checked (never undone for the energy they
 #: make, never ended once everything is slow, travelling half the smallest extent a step; on the
-#: direct solver for whole rollouts, as it then solved any bounce; solved to its residual of then): the fast physics that
+#: direct solver for whole rollouts, as it then solved any bounce, its contacts found ahead; solved to its residual of then): the fast physics that
 #: topples the stack on this ramp. `default` itself now agrees with the reference here; the check's
 #: paths are tested against this one.
 WRONG_HERE = preset("default").changed(collapse={"max_created_energy_fraction": 1e9, "quiet_sizes_per_s": 1e-9,
                                                  "max_travel_fraction": None},
                                        solver={"direct_solver_min_restitution": 0.0, "residual_threshold": 3e-6,
-                                               "direct_solver_for_impacts_only": False})
+                                               "direct_solver_for_impacts_only": False, "bounce_from_touch": False})
 
 
 @pytest.fixture(scope="module")

@@ -82,9 +82,13 @@ def _ball(name: str, position_m, radius_m: float = 0.05, **fields) -> Body:
 #:   pybullet's implicit cone friction solves a contact's two friction rows (along the world's axes)
 #:   one by one and then scales their sum into the cone, which leans off the slide where the rows'
 #:   effective masses differ (a turned box's corners). MuJoCo meets the closed form here.
-#: - "bounce": a landing at 2.0 m/s gives back 0.94-1.11x e^2 h in `default`: at its 1/180 s
-#:   steps the ball lands up to 11 mm (a step's travel) into the floor, and where in a step it
-#:   lands moves the rebound by about that much. (`paper` and `accurate` gave back none of it until
+#: - "bounce": a landing at 2.0 m/s gives back 0.94-1.11x e^2 h in `default`. Its steps, not its
+#:   impacts: the ball's 4 ms step (its size's cap) lands it up to a step's travel (12 mm) into the
+#:   floor, from where it rises, and whence it is pushed out after the rebound (higher); and the
+#:   flight itself, integrated by semi-implicit Euler, tops out about v dt / 2 short (collapse steps,
+#:   three ticks long in flight: 9 mm of a 125 mm apex). Cutting the impact's step into pieces
+#:   (tried, session 51: the landing within 5% of the ball's size) gave 0.995-0.998x at 0.2 m and
+#:   0.945-0.962x at 0.5 m, where it had met the bar. (`paper` and `accurate` gave back none of it until
 #:   bouncing bodies' contacts were solved from the touch, not from when they are found ahead:
 #:   Bullet solves a contact found ahead to the normal speed e v - d / dt, which slowed the ball a
 #:   step before it landed; ``SolverSettings.bounce_from_touch``. Landings at 3.1 m/s, and `fine` at

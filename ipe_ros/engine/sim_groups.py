@@ -98,7 +98,8 @@ class SolverSettings:
     #: contactProcessingThreshold 0 for that body) it lands at its speed and gives back e of it. The
     #: travel limit, not contacts found ahead, keeps it from passing through what it meets; the
     #: impact's step removes no overlap by velocity (``use_direct_solver``), and the steps after it
-    #: push out what is left.
+    #: push out what is left. Its contact shows (simulation/impacts.py) once it touches: the step
+    #: that solves it takes the direct solver.
     bounce_from_touch: bool = field(default=False, metadata={"keyed": "when set"})
 
     def __post_init__(self) -> None:

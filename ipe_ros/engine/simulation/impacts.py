@@ -71,7 +71,9 @@ class ImpactWatch:
 
     def impact_ahead(self, step_s: float) -> bool:
         """Whether a contact between surfaces that can bounce closes faster than the restitution
-        threshold within ``CLOSING_STEPS`` steps of ``step_s``, at the bodies' present poses."""
+        threshold within ``CLOSING_STEPS`` steps of ``step_s``, at the bodies' present poses. Bullet
+        keeps no contact ahead of a body solved from the touch (``SolverSettings.bounce_from_touch``):
+        its impact shows here once it touches, which is the step that solves it."""
         p, cid = self.p, self.world.client
         velocities = {handle: p.getBaseVelocity(handle, physicsClientId=cid) for handle in self.world.dynamic_ids}
         # no point of a body moves faster than this; no contact closes faster than its two bodies' sum

@@ -95,15 +95,20 @@ def test_the_stacks_family_spans_the_envelope_the_check_trusts():
     from ipe_ros.engine.checking.envelope import VALIDATED as E
 
     assert (Z.STACK_SIDES_M, Z.STACK_MAX_ASPECT, Z.STACK_MAX_OBJECTS, Z.STACK_FRICTION, Z.STACK_MAX_RESTITUTION,
-            Z.STACK_MAX_MASS_RATIO) == ((E.min_extent_m, E.max_extent_m), E.max_aspect, E.max_objects,
-                                        (E.min_friction, E.max_friction), E.max_restitution, E.max_mass_ratio)
+            Z.STACK_MAX_MASS_RATIO, Z.STACK_MAX_CARRIED_RATIO) == (
+        (E.min_extent_m, E.max_extent_m), E.max_aspect, E.max_objects, (E.min_friction, E.max_friction),
+        E.max_restitution, E.max_mass_ratio, E.max_carried_ratio)
     scenes = [zoo_scene("stacks", SEED, i) for i in range(60)]
     boxes = [b for s in scenes for b in s.dynamic_objects]
     sides = [e for b in boxes for e in b.extents_m]
     masses = [max(b.mass_kg for b in s.objects) / min(b.mass_kg for b in s.objects) for s in scenes]
     assert min(sides) < 1.5 * E.min_extent_m and max(sides) > 0.7 * E.max_extent_m
     assert max(max(b.extents_m) / min(b.extents_m) for b in boxes) > 0.95 * E.max_aspect
-    assert max(len(s.objects) for s in scenes) == E.max_objects and max(masses) > 0.99 * E.max_mass_ratio
+    assert max(len(s.objects) for s in scenes) == E.max_objects and max(masses) > 0.95 * E.max_mass_ratio
+    # a box on one lighter than itself, up to the edge, and light boxes on heavier ones far past it
+    carried = [upper.mass_kg / lower.mass_kg for s in scenes for i, lower in enumerate(s.objects)
+               for upper in s.objects[i + 1:] if upper.name[:upper.name.index("b")] == lower.name[:lower.name.index("b")]]
+    assert max(carried) > 0.99 * E.max_carried_ratio and min(carried) < 1 / E.max_carried_ratio
     frictions = [b.friction for b in boxes] + [s.support.friction for s in scenes]
     assert min(frictions) < E.min_friction + 0.05 and max(frictions) > E.max_friction - 0.05
     assert max(b.restitution for b in boxes) >= 0.9 * E.max_restitution

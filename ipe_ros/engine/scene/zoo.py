@@ -280,14 +280,16 @@ STACK_MAX_ASPECT = 3.0
 STACK_MAX_OBJECTS = 12
 STACK_FRICTION = (0.4, 1.0)
 STACK_MAX_RESTITUTION = 0.0
-STACK_MAX_MASS_RATIO = 3.0
+STACK_MAX_MASS_RATIO = 10.0
+STACK_MAX_CARRIED_RATIO = 3.0
 
 
 def stacks(rng: np.random.Generator, name: str) -> Scene:
     """1-3 stacks of 1-6 boxes at rest side by side (12 at most), over the whole validated envelope:
     sides 2 cm-1 m (a third of the boxes long, up to 3:1), friction 0.4-1, no restitution, masses
-    up to 3x apart, each box shifted by 15% of the scene's size and turned: some stacks stand, some
-    topple into their neighbours, which stand within reach."""
+    up to 10x apart but no box more than 3x as heavy as any box under it (a light box on a heavy
+    one, not under it; a heavy stack beside a light one), each box shifted by 15% of the scene's
+    size and turned: some stacks stand, some topple into their neighbours, which stand within reach."""
     size = float(np.exp(rng.uniform(math.log(0.04), math.log(0.5))))
     counts = [int(rng.integers(1, 7)) for _ in range(int(rng.integers(1, 4)))]
     lo, hi = STACK_SIDES_M
@@ -302,12 +304,17 @@ def stacks(rng: np.random.Generator, name: str) -> Scene:
             ext = np.minimum(ext, STACK_MAX_ASPECT * ext.min())
             offset = rng.normal(0.0, 0.15 * size, 2)
             column.append((ext, (float(offset[0]), float(offset[1]), z + float(ext[2]) / 2), float(rng.normal(0.0, 0.3)),
-                           500.0 * float(np.exp(rng.uniform(0.0, math.log(3.0)))) * float(np.prod(ext))))
+                           500.0 * float(np.exp(rng.uniform(0.0, math.log(STACK_MAX_MASS_RATIO)))) * float(np.prod(ext))))
             z += float(ext[2])
         columns.append(column)
     heaviest = max(mass for column in columns for *_, mass in column)
     bodies, right = [], None
     for c, column in enumerate(columns):
+        lightest_below = math.inf
+        for i, (ext, centre, yaw, mass) in enumerate(column):  # bottom up: none far heavier than a box under it
+            mass = min(max(mass, heaviest / STACK_MAX_MASS_RATIO), STACK_MAX_CARRIED_RATIO * lightest_below)
+            column[i] = (ext, centre, yaw, mass)
+            lightest_below = min(lightest_below, mass)
         # each stack clear of the last by up to half the size (footprints bounded by their diagonals)
         reach = [(centre[0] - math.hypot(*ext[:2]) / 2, centre[0] + math.hypot(*ext[:2]) / 2)
                  for ext, centre, _, _ in column]
@@ -317,7 +324,7 @@ def stacks(rng: np.random.Generator, name: str) -> Scene:
             if len(bodies) == STACK_MAX_OBJECTS:
                 break
             bodies.append(_body(f"s{c}b{i}", BoxShape(tuple(float(v) for v in ext)), (x + shift, y, z),
-                                mass_kg=max(mass, heaviest / STACK_MAX_MASS_RATIO),
+                                mass_kg=mass,
                                 friction=float(rng.uniform(*STACK_FRICTION)),
                                 restitution=float(rng.uniform(0.0, STACK_MAX_RESTITUTION)), orientation=_yaw(yaw)))
     floor = Floor(friction=float(rng.uniform(*STACK_FRICTION)), restitution=float(rng.uniform(0.0, STACK_MAX_RESTITUTION)))

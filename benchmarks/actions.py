@@ -10,7 +10,7 @@ and the checked run's cost and escalations reported:
 - the support graph of a 10-block paper tower at k = 16 per variant (target <= 1 s);
 - "safe to remove?" for the top block at k = 48 (target <= 0.4 s);
 - best place on a 20 x 20 cm region, 16 candidates, k = 16 (target <= 2 s), and at a robot's noise the
-  same for a block of the tower's own kind (each candidate inside the validated envelope: target <= 3 s);
+  same for a block of the tower's own kind (target <= 3 s; each candidate of both lies inside the validated envelope);
   these three at the paper's noise (sigma 4 cm), at which the tower falls by itself in most samples
   and the variants run only in the few where it stands, and at a robot's (``--robot-sigma``, 5 mm),
   at which it stands in most;
@@ -198,7 +198,7 @@ def main() -> int:
                              Ranking(), args.repeats, first=lambda result: result[0][0][0].position_m))
             if sigma != DEFAULT_SIGMA_M:
                 # a block of the tower's own kind: each candidate lowered onto the top is boxes at rest,
-                # inside the validated envelope (the 1 kg cube is 4x lighter than the blocks: outside)
+                # inside the validated envelope (so is the 1 kg cube, 4x lighter than the blocks it rests on)
                 rows.append(both(f"best place of a block like the tower's own, 16 candidates, k = 16, {noise}", 3.0,
                                  lambda seq, check, sigma=sigma: A.best_place(tower, own_kind, region,
                                                                               model(16, sigma), settings,

@@ -104,7 +104,7 @@ def test_the_stacks_family_spans_the_envelope_the_check_trusts():
     masses = [max(b.mass_kg for b in s.objects) / min(b.mass_kg for b in s.objects) for s in scenes]
     assert min(sides) < 1.5 * E.min_extent_m and max(sides) > 0.7 * E.max_extent_m
     assert max(max(b.extents_m) / min(b.extents_m) for b in boxes) > 0.95 * E.max_aspect
-    assert max(len(s.objects) for s in scenes) == E.max_objects and max(masses) > 0.95 * E.max_mass_ratio
+    assert max(len(s.objects) for s in scenes) == E.max_objects and max(masses) > 0.99 * E.max_mass_ratio
     # a box on one lighter than itself, up to the edge, and light boxes on heavier ones far past it
     carried = [upper.mass_kg / lower.mass_kg for s in scenes for i, lower in enumerate(s.objects)
                for upper in s.objects[i + 1:] if upper.name[:upper.name.index("b")] == lower.name[:lower.name.index("b")]]

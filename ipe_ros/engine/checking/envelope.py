@@ -53,10 +53,10 @@ class Envelope:
     #: stack beside a light one; benchmarks/results/zoo_stacks/carried.md)
     max_mass_ratio: float = 10.0
     #: a box over any box that carries it (directly or through others), under the model's mu: where
-    #: a stack collapses, the collapse
-    #: steps knock a light box out from under heavier ones more often than `paper` does (zoo stacks
-    #: 2026/0, a 29 g box under 108-216 g ones: 0.34-0.41 more often at 7.5x, 0.13-0.38 at 4.8x,
-    #: 0.13-0.22 at 2-3x, as chaos does at 1x; benchmarks/results/zoo_stacks/mass_ratio.md)
+    #: a stack collapses, the collapse steps knock a light box out from under heavier ones more
+    #: often than `paper` does (zoo stacks 2026/0, a 29 g box under 108-216 g ones: 0.34-0.41 more
+    #: often at 7.5x, 0.13-0.38 at 4.8x, 0.13-0.22 at 2-3x, as chaos does at 1x;
+    #: benchmarks/results/zoo_stacks/mass_ratio.md)
     max_carried_ratio: float = 3.0
     max_sigma_fraction: float = 0.25  # horizontal position noise, of the smallest box side
     max_tilt_rad: float = 0.05  # each box lies on a face: one of its axes this close to vertical

@@ -58,6 +58,12 @@ POLICIES = {
     # the rule before issue 52's stratified estimate of the bias: counts of same-way differences
     "counts": dataclasses.replace(DEFAULT_CHECK, bias_tolerance=None, escalate_min_samples=3, confirm_rounds=2),
     "unchecked": SelfCheck(enabled=False),
+    # how the bias rule counts differences, and what an undecided bias does once the rounds are spent
+    # (issue 75's replay: strike 2027/4 was verified 0.375 off); "current" counts on the side and escalates
+    "net, verify (before)": dataclasses.replace(DEFAULT_CHECK, same_way="net", when_undecided="verify"),
+    "net, escalate": dataclasses.replace(DEFAULT_CHECK, same_way="net", when_undecided="escalate"),
+    "side, verify": dataclasses.replace(DEFAULT_CHECK, when_undecided="verify"),
+    "side, confirm": dataclasses.replace(DEFAULT_CHECK, when_undecided="confirm"),
 }
 
 
@@ -67,7 +73,7 @@ def _scenes(args) -> list[tuple[str, object, ModelConfig]]:
     towers = load_scenes(towers_csv)[::5][:args.towers] if towers_csv.exists() else generate_towers(2013, args.towers)
     out = [("towers", t, ModelConfig(sigma_m=0.04, samples=args.samples)) for t in towers]
     for family in FAMILIES:
-        for scene in scene_zoo(2026, args.zoo, (family,)):
+        for scene in scene_zoo(args.zoo_seed, args.zoo, (family,)):
             out.append((f"zoo/{family}", scene, ModelConfig(sigma_m=zoo_sigma_m(scene), samples=args.zoo_samples)))
     return out
 
@@ -84,6 +90,7 @@ def main() -> int:
     parser.add_argument("--towers", type=int, default=12)
     parser.add_argument("--zoo", type=int, default=2, help="scenes per zoo family")
     parser.add_argument("--samples", type=int, default=48)
+    parser.add_argument("--zoo-seed", type=int, default=2026, help="the zoo's scenes (2027: the held-out seed)")
     parser.add_argument("--zoo-samples", type=int, default=16, help="samples per zoo scene (the zoo's own k: 16)")
     parser.add_argument("--draws", type=int, default=1,
                         help="replay each policy on this many random draws of --draw-samples of a scene's samples "
@@ -99,6 +106,8 @@ def main() -> int:
     parser.add_argument("--reference-from", type=Path, default=None,
                         help="take the reference samples from this cache (same scenes, seeds and queries) instead "
                              "of simulating them again")
+    parser.add_argument("--policies", type=lambda s: s.split(","), default=None,
+                        help="replay only these policies (comma-separated names, default: all)")
     parser.add_argument("--out", default="benchmarks/results/check_policy")
     args = parser.parse_args()
     fast_settings, reference = preset("default"), reference_settings()
@@ -112,7 +121,8 @@ def main() -> int:
         stored = _simulate(args, fast_settings, reference, query)
         if args.cache is not None:
             args.cache.write_bytes(pickle.dumps(stored))
-    rows, scenes = _replay(stored, reference, args.draws, args.draw_samples)
+    rows, scenes = _replay(stored, reference, args.draws, args.draw_samples,
+                           None if args.policies is None else {n: POLICIES[n] for n in args.policies})
     tasks = stored[0][2]
     title = (f"# Self-check policies replayed on the same samples ({time.strftime('%Y-%m-%d')}): fast "
              f"`{tasks[0].settings.name}` (collapse.end_substeps {tasks[0].settings.collapse.end_substeps}), "
@@ -169,11 +179,12 @@ def _worst_dp(answer, ref) -> float:
     return float(max(np.max(np.abs(p)), abs(np.mean(fell) - np.mean(ref_fell))))
 
 
-def _replay(stored: list, reference, draws: int = 1, draw_samples: int | None = None) -> list[dict]:
+def _replay(stored: list, reference, draws: int = 1, draw_samples: int | None = None,
+            policies: dict | None = None) -> list[dict]:
     """Each policy's self-check on the stored samples (on each draw of them), the reference outcomes
     handed back as reruns."""
     rows, scenes = [], []
-    for name, check in POLICIES.items():
+    for name, check in (POLICIES if policies is None else policies).items():
         per_group: dict[str, dict] = {}
         for group, scene_name, all_tasks, all_fast, all_ref, fast_s, ref_s in stored:
             for picked in _draws(len(all_tasks), draws, draw_samples):

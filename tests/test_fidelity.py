@@ -285,6 +285,27 @@ def test_the_stratified_bias_weighs_each_fast_side_by_its_samples():
     assert bias.strata[1] == (5, 5, 2) and bias.high <= 2 / 16 and bias.low < 0
 
 
+def test_differences_on_the_side_of_a_bias_are_counted_without_those_the_other_way():
+    """Zoo strike 2027/4 as the check saw it: the fast physics drops the struck block in 11 of 16
+    samples; 2 of the 3 compared there differ (the reference keeps it), and 3 of 4 on the small
+    "no" side differ the other way. Weighed by the samples each side stands for the bias is about
+    +0.2 (the reference over all 16 samples: +0.375), but the net count of same-way differences is
+    -1: netting discounts the small side's differences a second time. ``on_side`` counts the 2."""
+    fast = {i: _flags_of(1.0 if i < 11 else 0.0) for i in range(16)}
+    looked = {0: _flags_of(1), 1: _flags_of(1), 2: _flags_of(0), 11: _flags_of(-1), 12: _flags_of(-1),
+              13: _flags_of(-1), 14: _flags_of(0)}
+    (bias,) = bias_estimates(fast, looked)
+    assert bias.strata == ((5, 4, 3), (11, 3, 2)) and 0.15 < bias.estimate < 0.25
+    assert (bias.same_way, bias.on_side) == (-1, 2)
+    assert (bias.differing("net"), bias.differing("side")) == (-1, 2)
+    assert not bias.within(0.1) and not bias.beyond(0.1)  # undecided: more looks, or escalation
+    with pytest.raises(ConfigError, match=r"^self_check.same_way: must be 'net' or 'side', got 'both'$"):
+        SelfCheck(same_way="both")
+    with pytest.raises(ConfigError, match=r"^self_check.when_undecided: must be one of verify, escalate, confirm, "
+                                          r"got 'ask'$"):
+        SelfCheck(when_undecided="ask")
+
+
 def test_the_counts_rule_escalates_a_contradicted_scene_as_the_stratified_one_does(contradicted_scene):
     model = _ramp_model(contradicted_scene, 8)
     p = predict(contradicted_scene,
@@ -341,11 +362,12 @@ def test_the_coverage_sample_is_picked_ahead_and_runs_beside_the_last_fast_sampl
     assert look_ahead_split(SelfCheck(cover_samples=0), 48) == 48
 
 
-def _toppled_only_in(scene, kept: tuple[int, ...], unhealthy: bool = False):
+def _toppled_only_in(scene, kept: tuple[int, ...], unhealthy: bool = False, reference_topples: tuple[int, ...] = ()):
     """A map under which the fast physics topples the stack at the ramp's foot in the samples
-    ``kept`` only, and keeps it standing in the others, as every one of the reference's does: each
-    fast sample is a real fast outcome, toppled or standing, under its own index. ``unhealthy``:
-    the toppled ones end with a body half its size inside another."""
+    ``kept`` only, and keeps it standing in the others, as every one of the reference's does (but
+    those in ``reference_topples``, where the reference's rerun is a toppled outcome): each sample
+    is a real outcome, toppled or standing, under its own index. ``unhealthy``: the fast toppled
+    ones end with a body half its size inside another."""
     unchecked = predict(scene,
                         Request(model=_ramp_model(scene, 8), settings=WRONG_HERE, query=QUERY, seed=0, check=None,
                                 budget_s=None))
@@ -356,7 +378,7 @@ def _toppled_only_in(scene, kept: tuple[int, ...], unhealthy: bool = False):
 
     def topple_only_kept(task, outcome):
         if task.settings.name != "default":
-            return outcome
+            return dataclasses.replace(toppled[0], index=task.index) if task.index in reference_topples else outcome
         if task.index not in kept:
             return dataclasses.replace(standing[0], index=task.index)
         made = dataclasses.replace(toppled[0], index=task.index)
@@ -457,6 +479,28 @@ def test_two_same_way_differences_on_a_small_side_escalate_once_the_large_side_i
     assert [[t.index for t in call] for call in spy.calls[1:]] == [[1, 5], [2, 3], [4, 6, 7]]
     assert p.fidelity == "escalated" and p.object_fall_probability["block1"] == 0.0
     assert (p.self_check["verified_samples"], p.self_check["disagreeing_samples"]) == (5, 2)
+
+
+def test_differences_both_ways_on_sides_of_unequal_size_escalate(contradicted_scene):
+    """Zoo strike 2027/4's pattern: the fast physics topples the stack in 11 of 16 samples, the
+    reference in 5 (2 of the fast 11, 3 of the other 5): a bias of 6/16. Each side's compared samples
+    differ, so the differences net out; the check used to count them net (``same_way="net"``) and
+    call the answer verified with 6 of 7 compared samples differing. Counted on the bias's side, and
+    escalated when the rounds end undecided, the answer is the reference's."""
+    block1 = [b.name for b in contradicted_scene.dynamic_objects].index("block1")
+    model = _ramp_model(contradicted_scene, 16)
+
+    def checked(check):
+        spy = _toppled_only_in(contradicted_scene, tuple(range(11)), reference_topples=(2, 4, 11, 12, 13))
+        return predict(contradicted_scene, Request(model=model, settings=WRONG_HERE, query=QUERY, seed=0, check=check,
+                                                   budget_s=None), Context(map_fn=spy))
+
+    before = checked(SelfCheck(same_way="net", when_undecided="verify"))
+    assert before.fidelity == "verified" and before.object_fall_probability["block1"] == 11 / 16
+    assert (before.self_check["verified_samples"], before.self_check["disagreeing_samples"]) == (7, 6)
+    now = checked(DEFAULT_CHECK)
+    assert now.fidelity == "escalated" and now.object_fall_probability["block1"] == 5 / 16
+    assert [o.rollouts[0].fallen[block1] for o in now.outcomes] == [i in (2, 4, 11, 12, 13) for i in range(16)]
 
 
 def test_an_answer_whose_every_sample_was_rerun_is_the_reference_answer(tower):

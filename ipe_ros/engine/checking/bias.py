@@ -25,8 +25,11 @@ class Bias:
 
     outcome: its index in ``outcome_flags``; estimate, low, high: the posterior mean and the credible
     interval (``BIAS_TAIL`` left out on each side); same_way: compared samples differing in the
-    estimate's direction, net of those differing the other way; strata: per fast side (0: "no",
-    1: "yes") the fast samples there, the compared ones among them and how many of those differ."""
+    estimate's direction, net of those differing the other way; on_side: compared samples differing in
+    the estimate's direction (all on the fast side that says it: "yes" for a positive bias), not net
+    (the interval already weighs the other side's differences by the samples they stand for);
+    strata: per fast side (0: "no", 1: "yes") the fast samples there, the compared ones among them
+    and how many of those differ."""
 
     outcome: int
     estimate: float
@@ -34,10 +37,16 @@ class Bias:
     high: float
     same_way: int
     strata: tuple[tuple[int, int, int], tuple[int, int, int]]
+    on_side: int = 0
 
     def beyond(self, tolerance: float) -> bool:
         """Credibly larger than ``tolerance`` (either way)."""
         return self.low > tolerance or self.high < -tolerance
+
+    def differing(self, counted: str = "net") -> int:
+        """Compared samples that differ in the estimate's direction: ``same_way`` ("net") or
+        ``on_side`` ("side"; ``SelfCheck.same_way``)."""
+        return self.on_side if counted == "side" else self.same_way
 
     def within(self, tolerance: float) -> bool:
         """Credibly no larger than ``tolerance``."""
@@ -84,12 +93,12 @@ def bias_estimates(fast_flags: dict[int, np.ndarray], differences: dict[int, np.
         low, high = np.quantile(draws, [BIAS_TAIL, 1 - BIAS_TAIL])
         estimate = float(draws.mean())
         out.append(Bias(int(j), estimate, float(low), float(high), int(net[j] if estimate >= 0 else -net[j]),
-                        (strata[0], strata[1])))
+                        (strata[0], strata[1]), strata[1 if estimate >= 0 else 0][2]))
     return out
 
 
 def undecided_bias_samples(fast_flags: dict[int, np.ndarray], candidates: list[int], biases: list[Bias],
-                           tolerance: float, count: int, at_least: int = 1) -> list[int]:
+                           tolerance: float, count: int, at_least: int = 1, counted: str = "net") -> list[int]:
     """Which ``count`` of ``candidates`` (samples not yet rerun) to compare next where some
     outcome's bias is neither credibly beyond ``tolerance`` (with ``at_least`` same-way
     differences) nor credibly within it: for the widest such outcome, one sample from each fast side
@@ -97,7 +106,8 @@ def undecided_bias_samples(fast_flags: dict[int, np.ndarray], candidates: list[i
     bias most uncertain first (the predictive variance of how many of them differ), then any others.
     Both sides, not the more uncertain one alone: a bias on a small side escalates only once a second
     sample there differs, and a clean large side alone can never show it. [] when every bias is decided."""
-    open_ = [b for b in biases if not (b.beyond(tolerance) and b.same_way >= at_least) and not b.within(tolerance)]
+    open_ = [b for b in biases if not (b.beyond(tolerance) and b.differing(counted) >= at_least)
+             and not b.within(tolerance)]
     rest = sorted(i for i in candidates if i in fast_flags)
     if not open_ or not rest or count <= 0:
         return []

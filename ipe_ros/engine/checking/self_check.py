@@ -38,7 +38,17 @@ class _Comparison:
         tolerance = self.check.bias_tolerance
         if tolerance is None:
             return contradicts(list(compared.values()), self.check.escalate_share, self.at_least)
-        return any(b.beyond(tolerance) and b.same_way >= self.at_least for b in self.biases(compared))
+        return any(b.beyond(tolerance) and b.differing(self.check.same_way) >= self.at_least
+                   for b in self.biases(compared))
+
+    def undecided(self, compared: dict[int, np.ndarray]) -> list:
+        """The outcomes whose bias is neither credibly within the tolerance nor (with enough same-way
+        differences) credibly beyond it."""
+        tolerance, counted = self.check.bias_tolerance, self.check.same_way
+        if tolerance is None:
+            return []
+        return [b for b in self.biases(compared) if not b.within(tolerance)
+                and not (b.beyond(tolerance) and b.differing(counted) >= self.at_least)]
 
     def biases(self, compared: dict[int, np.ndarray]) -> list:
         """``bias_estimates`` of these compared samples (a round asks twice: to decide, then to pick)."""
@@ -95,7 +105,11 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: d
                   refined_samples=len(refined), refined_reasons=tuple((i, reasons[i]) for i in sorted(refined)))
     # every sample already has its reference rerun and some differ: the reference's answer is at hand
     known = bool(disagreeing) and len(compared) == len(outcomes)
-    if not state.contradicted(compared) and repair < state.at_least and not known:
+    # the rounds are spent and some bias is still open, on the differences that would escalate it
+    # were it credibly beyond the tolerance: not verified (``SelfCheck.when_undecided``)
+    open_bias = check.when_undecided == "escalate" and any(
+        b.differing(check.same_way) >= state.at_least for b in state.undecided(compared))
+    if not state.contradicted(compared) and repair < state.at_least and not known and not open_bias:
         # a confirmation or a coverage rerun the budget cut off neither confirmed nor dismissed a bias
         unconfirmed = any(o.budget_stopped for o in state.checked.values())
         verdict = "verified" if first and all(i in compared for i in first) and not unconfirmed else "unverified"
@@ -170,7 +184,8 @@ def disputed_strata(state: _Comparison, compared: dict[int, np.ndarray]) -> list
     difference, keeps its fast outcomes where that is credible (``_credibly_within``).
     (outcome, side, samples) by outcome, "yes" first."""
     tolerance = state.check.bias_tolerance
-    outcomes = [b.outcome for b in state.biases(compared) if b.beyond(tolerance) and b.same_way >= state.at_least]
+    outcomes = [b.outcome for b in state.biases(compared)
+                if b.beyond(tolerance) and b.differing(state.check.same_way) >= state.at_least]
     if not outcomes:  # escalated by refinement: every outcome a compared sample differs on
         outcomes = sorted({int(j) for d in compared.values() for j in np.flatnonzero(d)})
     strata = []
@@ -198,9 +213,12 @@ def _confirm(state: _Comparison, repair: int, cover: int) -> Plan:
         fast = {i: f for i, f in state.fast_flags.items() if i not in state.checked}
         if check.bias_tolerance is not None and any(d.any() for d in compared.values()):
             # some outcome differs: compare more where its bias is still undecided
-            picked = [] if confirmations >= check.confirm_rounds else undecided_bias_samples(
+            # past its rounds, "confirm" goes on while an undecided bias has the differences to escalate
+            more = confirmations < check.confirm_rounds or (check.when_undecided == "confirm" and any(
+                b.differing(check.same_way) >= state.at_least for b in state.undecided(compared)))
+            picked = [] if not more else undecided_bias_samples(
                 state.fast_flags, list(fast), state.biases(compared), check.bias_tolerance,
-                check.confirm_samples, state.at_least)
+                check.confirm_samples, state.at_least, check.same_way)
             confirmations += 1
         # a second confirmation round only while something is suspicious
         elif found and confirmations < check.confirm_rounds and not (confirmations and found < 2):

@@ -505,11 +505,15 @@ def test_the_chain_stays_within_its_budget_and_memory():
     camera = look_at((1.5, -1.2, 1.2), (0, 0, 0.05))
     observation = D.DepthObservation(camera, D.render_depth_m(scene, camera))
     start = time.monotonic()
-    # refused by its warmed-up pace, or by the deadline before it kept a state (each chain has half)
-    with pytest.raises(ConfigError, match=r"^budget_s: the depth chain over 50 objects (needs ~[\d.e+]+ s \(\d+ "
+    # refused by its warmed-up pace, or by the deadline before it kept a state (each chain has half),
+    # or, on a busy machine, once reading the image has used what the budget leaves the chain (seen
+    # with a benchmark beside the suite: 0.18 s)
+    with pytest.raises(ConfigError, match=r"^budget_s: (the depth chain over 50 objects (needs ~[\d.e+]+ s \(\d+ "
                                           r"scorings of the image; \d+ took [\d.e+-]+ s\), far more than the [\d.]+ s "
                                           r"the budget leaves it|reached the end of its [\d.]+ s before it kept a state); "
-                                          r"raise the budget or send fewer objects$"):
+                                          r"raise the budget or send fewer objects|reading the depth image for 50 objects "
+                                          r"took [\d.e+-]+ s, all the budget leaves the depth chain; raise the budget, bin "
+                                          r"or crop the image, or send fewer objects)$"):
         D.perceive_depth_for(scene, 4, (observation,), seed=0, budget_s=0.3)
     assert time.monotonic() - start < 3.0  # the reading, the first ten batches and the refusal
     big = camera_from_info({"width": 4096, "height": 4096, "k": [3000, 0, 2047.5, 0, 3000, 2047.5, 0, 0, 1]},

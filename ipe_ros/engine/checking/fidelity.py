@@ -22,15 +22,16 @@ settings starts from the bit-identical state):
    on both sides (up to ``confirm_rounds``) while the bias is neither credibly beyond nor within.
    While nothing differs, ``cover_samples`` look where a bias could hide from the samples compared.
 3. **Escalation**: when some outcome's bias is credibly beyond the tolerance with at least
-   ``escalate_min_samples`` same-way differences, the fast physics is contradicted on this scene
-   and every sample is rerun at the reference settings: the answer is then exactly the
-   reference's. Escalation may be spent on a scene the fast physics had right; it never leaves a
+   ``escalate_min_samples`` same-way differences (counted on the side that says it: ``same_way``),
+   or is still undecided on as many once the rounds are spent (``when_undecided``), the fast
+   physics is contradicted on this scene and the disputed samples, else every sample, are rerun at
+   the reference settings: the answer is then exactly the reference's there. Escalation may be spent on a scene the fast physics had right; it never leaves a
    contradicted answer unflagged.
 
 The verdict (``Prediction.fidelity``) a robot can act on:
 
-- ``verified``: the compared samples agree, or differ by less than the tolerance; unhealthy rollouts
-  (if any) were refined.
+- ``verified``: the compared samples agree, or differ credibly by less than the tolerance (or by
+  fewer than ``escalate_min_samples`` samples); unhealthy rollouts (if any) were refined.
 - ``validated``: the scene lies inside the envelope where the fast physics was validated against the
   reference (``envelope.py``: boxes at rest on a floor, ...), so no sample was rerun to verify it;
   unhealthy rollouts were refined, and a refinement that moved an outcome confirmed as anywhere.

@@ -503,6 +503,31 @@ def test_differences_both_ways_on_sides_of_unequal_size_escalate(contradicted_sc
     assert [o.rollouts[0].fallen[block1] for o in now.outcomes] == [i in (2, 4, 11, 12, 13) for i in range(16)]
 
 
+def test_a_bias_undecided_when_the_rounds_are_spent_is_verified_escalated_or_confirmed_on(contradicted_scene):
+    """``when_undecided`` with one round: the fast physics topples the stack in 8 of 16 samples, the
+    reference in 6 (2 of the fast 8, 4 of the other 8), a bias of 2/16. After the round, 3 compared
+    samples differ, 2 on the "yes" side and 1 on the "no" side: not credibly beyond 0.1, not within
+    it. "verify" answers the fast 0.5; "escalate" reruns the answer at once; "confirm" looks on, two
+    samples a round, until every sample is compared: both answer the reference's 0.375."""
+    model = _ramp_model(contradicted_scene, 16)
+
+    def checked(when):
+        spy = _toppled_only_in(contradicted_scene, tuple(range(8)), reference_topples=(2, 4, 8, 9, 10, 11))
+        p = predict(contradicted_scene, Request(model=model, settings=WRONG_HERE, query=QUERY, seed=0,
+                                                check=SelfCheck(confirm_rounds=1, when_undecided=when),
+                                                budget_s=None), Context(map_fn=spy))
+        return p, [[t.index for t in call] for call in spy.calls[1:]]
+
+    verified, rounds = checked("verify")
+    assert verified.fidelity == "verified" and rounds == [[8, 1]]
+    assert verified.object_fall_probability["block1"] == 0.5
+    escalated, rounds = checked("escalate")
+    assert escalated.fidelity == "escalated" and rounds == [[8, 1], [2, 3, 4, 5, 6, 7, 9, 10, 11, 12, 13, 14, 15]]
+    confirmed, rounds = checked("confirm")
+    assert confirmed.fidelity == "escalated" and rounds[:4] == [[8, 1], [9, 2], [3, 10], [4, 11]]
+    assert escalated.object_fall_probability["block1"] == confirmed.object_fall_probability["block1"] == 6 / 16
+
+
 def test_an_answer_whose_every_sample_was_rerun_is_the_reference_answer(tower):
     """k = 6: one flipped verification is a bias of 1/6, beyond the tolerance (0.1) unless a
     difference the other way cancels it, so the confirmation rounds look through every sample; none

@@ -25,8 +25,8 @@ settings starts from the bit-identical state):
    ``escalate_min_samples`` same-way differences (counted on the side that says it: ``same_way``),
    or is still undecided on as many once the rounds are spent (``when_undecided``), the fast
    physics is contradicted on this scene and the disputed samples, else every sample, are rerun at
-   the reference settings: the answer is then exactly the reference's there. Escalation may be spent on a scene the fast physics had right; it never leaves a
-   contradicted answer unflagged.
+   the reference settings: the answer is then exactly the reference's there. Escalation may be
+   spent on a scene the fast physics had right; it never leaves a contradicted answer unflagged.
 
 The verdict (``Prediction.fidelity``) a robot can act on:
 

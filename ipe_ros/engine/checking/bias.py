@@ -48,6 +48,11 @@ class Bias:
         ``on_side`` ("side"; ``SelfCheck.same_way``)."""
         return self.on_side if counted == "side" else self.same_way
 
+    def escalates(self, tolerance: float, at_least: int, counted: str = "net") -> bool:
+        """Credibly beyond ``tolerance`` on at least ``at_least`` differences in its direction
+        (counted as ``differing`` counts them): the fast physics is contradicted."""
+        return self.beyond(tolerance) and self.differing(counted) >= at_least
+
     def within(self, tolerance: float) -> bool:
         """Credibly no larger than ``tolerance``."""
         return -tolerance <= self.low and self.high <= tolerance
@@ -106,8 +111,7 @@ def undecided_bias_samples(fast_flags: dict[int, np.ndarray], candidates: list[i
     bias most uncertain first (the predictive variance of how many of them differ), then any others.
     Both sides, not the more uncertain one alone: a bias on a small side escalates only once a second
     sample there differs, and a clean large side alone can never show it. [] when every bias is decided."""
-    open_ = [b for b in biases if not (b.beyond(tolerance) and b.differing(counted) >= at_least)
-             and not b.within(tolerance)]
+    open_ = [b for b in biases if not b.escalates(tolerance, at_least, counted) and not b.within(tolerance)]
     rest = sorted(i for i in candidates if i in fast_flags)
     if not open_ or not rest or count <= 0:
         return []

@@ -38,17 +38,15 @@ class _Comparison:
         tolerance = self.check.bias_tolerance
         if tolerance is None:
             return contradicts(list(compared.values()), self.check.escalate_share, self.at_least)
-        return any(b.beyond(tolerance) and b.differing(self.check.same_way) >= self.at_least
-                   for b in self.biases(compared))
+        return any(b.escalates(tolerance, self.at_least, self.check.same_way) for b in self.biases(compared))
 
-    def undecided(self, compared: dict[int, np.ndarray]) -> list:
-        """The outcomes whose bias is neither credibly within the tolerance nor (with enough same-way
-        differences) credibly beyond it."""
+    def undecided(self, compared: dict[int, np.ndarray]) -> bool:
+        """Some outcome's bias is neither credibly within the tolerance nor credibly beyond it, on
+        the same-way differences that would escalate it if it were (``SelfCheck.when_undecided``)."""
         tolerance, counted = self.check.bias_tolerance, self.check.same_way
-        if tolerance is None:
-            return []
-        return [b for b in self.biases(compared) if not b.within(tolerance)
-                and not (b.beyond(tolerance) and b.differing(counted) >= self.at_least)]
+        return tolerance is not None and any(not b.within(tolerance) and not b.beyond(tolerance)
+                                             and b.differing(counted) >= self.at_least
+                                             for b in self.biases(compared))
 
     def biases(self, compared: dict[int, np.ndarray]) -> list:
         """``bias_estimates`` of these compared samples (a round asks twice: to decide, then to pick)."""
@@ -107,8 +105,7 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: d
     known = bool(disagreeing) and len(compared) == len(outcomes)
     # the rounds are spent and some bias is still open, on the differences that would escalate it
     # were it credibly beyond the tolerance: not verified (``SelfCheck.when_undecided``)
-    open_bias = check.when_undecided == "escalate" and any(
-        b.differing(check.same_way) >= state.at_least for b in state.undecided(compared))
+    open_bias = check.when_undecided == "escalate" and state.undecided(compared)
     if not state.contradicted(compared) and repair < state.at_least and not known and not open_bias:
         # a confirmation or a coverage rerun the budget cut off neither confirmed nor dismissed a bias
         unconfirmed = any(o.budget_stopped for o in state.checked.values())
@@ -185,7 +182,7 @@ def disputed_strata(state: _Comparison, compared: dict[int, np.ndarray]) -> list
     (outcome, side, samples) by outcome, "yes" first."""
     tolerance = state.check.bias_tolerance
     outcomes = [b.outcome for b in state.biases(compared)
-                if b.beyond(tolerance) and b.differing(state.check.same_way) >= state.at_least]
+                if b.escalates(tolerance, state.at_least, state.check.same_way)]
     if not outcomes:  # escalated by refinement: every outcome a compared sample differs on
         outcomes = sorted({int(j) for d in compared.values() for j in np.flatnonzero(d)})
     strata = []
@@ -214,8 +211,8 @@ def _confirm(state: _Comparison, repair: int, cover: int) -> Plan:
         if check.bias_tolerance is not None and any(d.any() for d in compared.values()):
             # some outcome differs: compare more where its bias is still undecided
             # past its rounds, "confirm" goes on while an undecided bias has the differences to escalate
-            more = confirmations < check.confirm_rounds or (check.when_undecided == "confirm" and any(
-                b.differing(check.same_way) >= state.at_least for b in state.undecided(compared)))
+            more = confirmations < check.confirm_rounds or (check.when_undecided == "confirm"
+                                                            and state.undecided(compared))
             picked = [] if not more else undecided_bias_samples(
                 state.fast_flags, list(fast), state.biases(compared), check.bias_tolerance,
                 check.confirm_samples, state.at_least, check.same_way)

@@ -289,6 +289,21 @@ def test_reference_tier_benchmark_compares_each_tier_with_the_reference_and_the_
     assert "| towers | 1 |" in (tmp_path / "reference_tier.md").read_text()
 
 
+def test_friction_routes_measures_every_route_and_the_one_corner_prediction(tmp_path):
+    result = subprocess.run([sys.executable, "benchmarks/friction_routes.py", "--out", str(tmp_path)],
+                            cwd=REPO, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    answer = json.loads((tmp_path / "friction_routes.json").read_text())
+    assert [(r["route"], r["step"]) for r in answer["rows"]] == [
+        (route, step) for route in ("as built", "cone off", "anchors", "plain floor") for step in ("paper", "default")]
+    # unturned, the route the engine builds stays within the 2% of Coulomb's distance
+    assert all(abs(r["slide"]["0"]["travel_ratio"] - 1) <= 0.02 for r in answer["rows"] if r["route"] == "as built")
+    # the prediction is mechanics of the box alone: 1 unturned, the same for 30 and 120 deg (a quarter turn apart)
+    prediction = answer["one_corner_prediction"]
+    assert prediction["0"] == pytest.approx(1.0) and prediction["30"] == pytest.approx(prediction["120"])
+    assert "| as built | paper |" in (tmp_path / "friction_routes.md").read_text()
+
+
 def test_impacts_compares_the_direct_solver_for_impacts_only_with_it_for_whole_rollouts(tmp_path):
     result = subprocess.run([sys.executable, "benchmarks/impacts.py", "--per-family", "1", "--samples", "2",
                              "--presets", "default", "--families", "bouncy,drop", "--out", str(tmp_path)],

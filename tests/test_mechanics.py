@@ -78,10 +78,13 @@ def _ball(name: str, position_m, radius_m: float = 0.05, **fields) -> Body:
 #: Each is checked still to miss: a fix shows as a failure here, and its entry goes.
 #: - "cone": a box sliding along its own axis while that axis is turned from the world's slides 6%
 #:   (30 deg) to 11% (45 deg) too far, veering up to 2-4 deg; on a slope, `fine` and `default` (plain
-#:   rigid bodies, coarser steps) slide 17-23% too far when the slope faces an axis. Every solver alike:
-#:   pybullet's implicit cone friction solves a contact's two friction rows (along the world's axes)
-#:   one by one and then scales their sum into the cone, which leans off the slide where the rows'
-#:   effective masses differ (a turned box's corners). MuJoCo meets the closed form here.
+#:   rigid bodies, coarser steps) slide 17-23% too far when the slope faces an axis. Every preset
+#:   alike: the floor is a multibody, so its contacts go to pybullet's multibody solver, whose friction
+#:   rows lie along the world's axes and whose implicit cone settles the friction along -M v, not -v
+#:   (M: the rows' effective masses, unequal at a turned box's corner; for one corner at a time that
+#:   predicts 1.071x and 1.111x). No pybullet route meets it (benchmarks/friction_routes.py: a plain
+#:   rigid floor reaches the sequential-impulse solver, turn-invariant but clipping each row on its
+#:   own, 2% short and 0.48-0.84x down a slope). MuJoCo meets the closed form here.
 #: - "bounce": a landing at 2.0 m/s gives back 0.94-1.11x e^2 h in `default`. Its steps, not its
 #:   impacts: the ball's 4 ms step (its size's cap) lands it up to a step's travel (12 mm) into the
 #:   floor, from where it rises, and whence it is pushed out after the rebound (higher); and the

@@ -4,9 +4,9 @@
 
 Writes friction_routes.md and friction_routes.json there.
 
-tests/test_mechanics.py keeps 24 "cone" known misses: a box sliding along its own axis, turned from the
-world's, slides 6-11% too far in every preset, and a block on a slope facing an axis slides 17-23% too
-far in `fine` and `default`. This measures, in plain pybullet (no engine code: the question is which of
+tests/test_mechanics.py keeps 16 "cone" known misses (a box sliding along its own axis, turned from the
+world's, slides 6-11% too far in every preset) and 8 "plane" ones (a block on a slope facing an axis
+slides 17-23% too far in `fine` and `default`). This measures, in plain pybullet (no engine code: the question is which of
 pybullet's own routes could serve), the issue's box (10 x 10 x 5 cm, 1 kg, friction 0.5 on a 1.0 floor,
 2 m/s: Coulomb stops it at v^2 / (2 mu g) = 0.408 m) turned 0-120 deg and launched along its own axis,
 and a 10 cm cube on a 29 deg slope (friction 0.5: g (sin - mu cos) / 2 = 0.233 m in 1 s) facing
@@ -21,6 +21,8 @@ and a 10 cm cube on a 29 deg slope (friction 0.5: g (sin - mu cos) / 2 = 0.233 m
 - ``plain floor``: the floor (and the box) plain rigid bodies, so their contacts reach Bullet's
   sequential-impulse solver, whose first row follows the slip and whose two rows are each clipped on
   their own.
+- ``box floor``: the floor a 100 m box instead of pybullet's plane: box-on-box contacts give the
+  whole face every step (a plane gives one point a step, the others kept only until they drift).
 
 Besides each route's answers it prints the share of sliding steps on which the box stood on a single
 contact point (the manifold's others break as it slides), and what the implicit cone's update
@@ -51,7 +53,7 @@ SLOPE_DEG = 29.0
 SLOPE_M = 0.5 * G * (math.sin(math.radians(SLOPE_DEG)) - 0.5 * math.cos(math.radians(SLOPE_DEG)))
 STEPS = {"paper": dict(step_s=1e-3, iterations=50, warm_start=0.85, residual=1e-7),
          "default": dict(step_s=1 / 180, iterations=100, warm_start=1.0, residual=2.5e-6)}
-ROUTES = ("as built", "cone off", "anchors", "plain floor")
+ROUTES = ("as built", "cone off", "anchors", "plain floor", "box floor")
 
 
 def _world(route: str, step: dict, gravity, half_extents, yaw_rad: float, box_multibody: bool):
@@ -62,8 +64,12 @@ def _world(route: str, step: dict, gravity, half_extents, yaw_rad: float, box_mu
                                 solverResidualThreshold=step["residual"], deterministicOverlappingPairs=1,
                                 enableConeFriction=int(route != "cone off"), physicsClientId=cid)
     plain = route == "plain floor"
-    floor = p.createMultiBody(0, p.createCollisionShape(p.GEOM_PLANE, physicsClientId=cid),
-                              useMaximalCoordinates=plain, physicsClientId=cid)
+    if route == "box floor":
+        floor = p.createMultiBody(0, p.createCollisionShape(p.GEOM_BOX, halfExtents=[50, 50, 0.5], physicsClientId=cid),
+                                  basePosition=[0, 0, -0.5], physicsClientId=cid)
+    else:
+        floor = p.createMultiBody(0, p.createCollisionShape(p.GEOM_PLANE, physicsClientId=cid),
+                                  useMaximalCoordinates=plain, physicsClientId=cid)
     p.changeDynamics(floor, -1, lateralFriction=1.0, physicsClientId=cid)
     shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=list(half_extents), physicsClientId=cid)
     box = p.createMultiBody(1.0, shape, basePosition=[0, 0, half_extents[2]],

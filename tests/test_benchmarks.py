@@ -295,7 +295,8 @@ def test_friction_routes_measures_every_route_and_the_one_corner_prediction(tmp_
     assert result.returncode == 0, result.stderr
     answer = json.loads((tmp_path / "friction_routes.json").read_text())
     assert [(r["route"], r["step"]) for r in answer["rows"]] == [
-        (route, step) for route in ("as built", "cone off", "anchors", "plain floor") for step in ("paper", "default")]
+        (route, step) for route in ("as built", "cone off", "anchors", "plain floor", "box floor")
+        for step in ("paper", "default")]
     # unturned, the route the engine builds stays within the 2% of Coulomb's distance
     assert all(abs(r["slide"]["0"]["travel_ratio"] - 1) <= 0.02 for r in answer["rows"] if r["route"] == "as built")
     # the prediction is mechanics of the box alone: 1 unturned, the same for 30 and 120 deg (a quarter turn apart)

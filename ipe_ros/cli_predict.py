@@ -74,13 +74,25 @@ def describe_influence(row: dict) -> str:
             f"below it, {row['above_median']:.2f} above (+-{2 * row['difference_se']:.2f}); measure it first")
 
 
+#: ``FidelityReport.escalated_because``, in words
+ESCALATED_BECAUSE = {"beyond_tolerance": "a bias beyond the tolerance",
+                     "undecided": "a bias still undecided when the check's rounds were spent",
+                     "refined": "the reruns of unhealthy rollouts alone moved an outcome",
+                     "every_sample_compared": "every sample compared"}
+
+
 def describe_fidelity(p: Prediction) -> str:
     """One line on what the self-check did (engine.checking.fidelity)."""
+    report = p.self_check or {}
+    because = ", ".join(ESCALATED_BECAUSE.get(r, r) for r in report.get("escalated_because", ()))
+    disagreed = f"the reference physics disagreed with the fast one{f' ({because})' if because else ''}"
+    strata = report.get("escalated_strata")
+    rerun = (f"the {report.get('escalated_samples', 0)} disputed samples rerun at the reference, the others kept"
+             if strata else "every sample rerun at the reference")
     text = {"verified": "verified against the reference physics",
             "validated": "inside the envelope where the fast physics was validated: not rerun at the reference",
-            "escalated": "the reference physics disagreed with the fast one: every sample rerun at the reference",
-            "contradicted": "the reference physics disagreed and the budget ran out before it could answer: "
-                            "do not act on this answer",
+            "escalated": f"{disagreed}: {rerun}",
+            "contradicted": f"{disagreed} and the budget ran out before it could answer: do not act on this answer",
             "unverified": "not checked against the reference physics",
             "reference": "computed at the reference settings"}.get(p.fidelity or "", str(p.fidelity))
     if p.refined_samples:

@@ -14,14 +14,15 @@ import dataclasses
 import numpy as np
 import pytest
 
+from ipe_ros.cli_predict import ESCALATED_BECAUSE, describe_fidelity
 from ipe_ros.engine import ModelConfig, QuerySpec, predict, preset
 from ipe_ros.engine import Context, Request
 from ipe_ros.engine import actions as A
 from ipe_ros.engine.config import DEFAULT_QUERIES
 from ipe_ros.engine.errors import ConfigError
-from ipe_ros.engine.checking.fidelity import (DEFAULT_CHECK, VERDICTS, SelfCheck, bias_estimates, confirmation_samples,
-                                              coverage_samples, look_ahead_split, reference_settings,
-                                              undecided_bias_samples)
+from ipe_ros.engine.checking.fidelity import (DEFAULT_CHECK, ESCALATION_REASONS, VERDICTS, SelfCheck, bias_estimates,
+                                              confirmation_samples, coverage_samples, look_ahead_split,
+                                              reference_settings, undecided_bias_samples)
 from ipe_ros.engine.sampling.rollout import SampleOutcome, run_sample
 from ipe_ros.engine.scene.files import load_scenes
 from ipe_ros.engine.scene.examples import example_scene_path
@@ -130,7 +131,7 @@ def test_a_contradicted_scene_is_escalated_to_the_reference_answer(contradicted_
                         Request(model=model, settings=reference_settings(), query=QUERY, seed=0, check=None,
                                 budget_s=None))
     assert unchecked.object_fall_probability["block1"] - reference.object_fall_probability["block1"] >= 0.5
-    assert checked.fidelity == "escalated"
+    assert checked.fidelity == "escalated" and checked.self_check["escalated_because"] == ["beyond_tolerance"]
     # the first verified sample disagreed; two more confirmed it
     assert (checked.self_check["verified_samples"], checked.self_check["disagreeing_samples"]) == (3, 3)
     assert checked.self_check["escalated_samples"] == 4
@@ -428,6 +429,8 @@ def test_an_escalation_of_the_disputed_side_answers_there_exactly_as_the_referen
     block1 = [b.name for b in contradicted_scene.dynamic_objects].index("block1")
     assert checked.fidelity == "escalated" and checked.self_check["escalated_samples"] == 3
     assert {"outcome": f"fallen[{block1}]", "fast_says": "yes", "samples": 3} in checked.self_check["escalated_strata"]
+    assert describe_fidelity(checked) == ("the reference physics disagreed with the fast one (a bias beyond the "
+                                          "tolerance): the 3 disputed samples rerun at the reference, the others kept")
     for i, outcome in enumerate(checked.outcomes):
         expected = reference.outcomes[i] if i in (0, 3, 5) else fast.outcomes[i]
         for ran, want in zip(outcome.rollouts, expected.rollouts):
@@ -449,6 +452,7 @@ def test_refined_rollouts_that_differ_the_same_way_are_evidence_too(contradicted
     assert [t.index for t in spy.calls[1]] == [2, 3, 5]  # the refinement; sample 0 agreed
     assert p.self_check["refined_reasons"] == {"2": "penetration", "3": "penetration", "5": "penetration"}
     assert p.fidelity == "escalated" and p.self_check["disagreeing_samples"] == 3
+    assert p.self_check["escalated_because"] == ["beyond_tolerance", "refined"]
 
 
 def test_the_counts_rule_looks_again_at_two_same_way_differences_in_three_samples(contradicted_scene):
@@ -523,6 +527,7 @@ def test_a_bias_undecided_when_the_rounds_are_spent_is_verified_escalated_or_con
     assert verified.object_fall_probability["block1"] == 0.5
     escalated, rounds = checked("escalate")
     assert escalated.fidelity == "escalated" and rounds == [[8, 1], [2, 3, 4, 5, 6, 7, 9, 10, 11, 12, 13, 14, 15]]
+    assert escalated.self_check["escalated_because"] == ["undecided"]
     confirmed, rounds = checked("confirm")
     assert confirmed.fidelity == "escalated" and rounds[:4] == [[8, 1], [9, 2], [3, 10], [4, 11]]
     assert escalated.object_fall_probability["block1"] == confirmed.object_fall_probability["block1"] == 6 / 16
@@ -539,7 +544,10 @@ def test_an_answer_whose_every_sample_was_rerun_is_the_reference_answer(tower):
                 Request(model=model, settings=preset("default"), query=QUERY, seed=4, check=ALWAYS, budget_s=None),
                 Context(map_fn=spy))
     assert [[t.index for t in call] for call in spy.calls[1:]] == [[1, 2], [3, 4], [5]]
-    assert p.fidelity == "escalated"
+    assert p.fidelity == "escalated" and p.self_check["escalated_because"] == ["every_sample_compared"]
+    assert describe_fidelity(p) == ("the reference physics disagreed with the fast one (every sample compared): "
+                                    "every sample rerun at the reference")
+    assert set(ESCALATED_BECAUSE) == set(ESCALATION_REASONS)  # each reason has its words
     assert p.self_check["verified_samples"] == 6 and p.self_check["disagreeing_samples"] == 1
     reference = predict(tower,
                         Request(model=model, settings=reference_settings(), query=QUERY, seed=4, check=None,

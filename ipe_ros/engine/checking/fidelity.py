@@ -65,6 +65,14 @@ from .bias import (BIAS_TAIL, Bias, bias_estimates, confirmation_samples, covera
 #: The verdicts, from best to worst for a robot about to act.
 VERDICTS = ("reference", "verified", "validated", "escalated", "unverified", "contradicted")
 
+#: Why an answer is escalated (``FidelityReport.escalated_because``): "beyond_tolerance", some outcome's
+#: bias is credibly beyond ``bias_tolerance`` (or, with it None, its differences reach
+#: ``escalate_share``) on enough same-way differences; "undecided", a bias still neither within nor
+#: beyond it when the rounds were spent (``when_undecided="escalate"``); "refined", the reruns of
+#: unhealthy rollouts alone moved some outcome by ``escalate_min_samples`` samples;
+#: "every_sample_compared", every sample already had its reference rerun and some differ (small k).
+ESCALATION_REASONS = ("beyond_tolerance", "undecided", "refined", "every_sample_compared")
+
 
 def reference_settings(horizon_s: float | None = None) -> SimSettings:
     """`paper`'s integration, ending once everything is at rest by the strict reading of rest
@@ -280,6 +288,8 @@ class FidelityReport:
     escalated_strata: an escalation of the disputed samples only: per (outcome label, fast side
         "yes"/"no") the samples on that side, all rerun at the reference (``self_check.disputed_strata``);
         () when every sample was.
+    escalated_because: why the answer was escalated (or, the budget ending the escalation,
+        contradicted), each of ``ESCALATION_REASONS`` that held, in that order.
     """
 
     verdict: str
@@ -292,6 +302,7 @@ class FidelityReport:
     validated: str = ""  # why no sample was verified (the scene is inside the validated envelope)
     rigid_reruns: int = 0
     escalated_strata: tuple[tuple[str, str, int], ...] = ()
+    escalated_because: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         return {"verdict": self.verdict, "verified_samples": self.verified_samples,
@@ -301,7 +312,8 @@ class FidelityReport:
                 **({"validated": self.validated} if self.validated else {}),
                 **({"rigid_reruns": self.rigid_reruns} if self.rigid_reruns else {}),
                 **({"escalated_strata": [{"outcome": label, "fast_says": side, "samples": n}
-                                         for label, side, n in self.escalated_strata]} if self.escalated_strata else {})}
+                                         for label, side, n in self.escalated_strata]} if self.escalated_strata else {}),
+                **({"escalated_because": list(self.escalated_because)} if self.escalated_because else {})}
 
 
 def check_request(check: SelfCheck | None) -> None:

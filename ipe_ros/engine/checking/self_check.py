@@ -7,8 +7,8 @@ import numpy as np
 
 from ..config import SimSettings
 from .bias import bias_estimates, confirmation_samples, coverage_samples, undecided_bias_samples
-from .fidelity import (FidelityReport, SelfCheck, contradicts, difference, merge, outcome_flags, outcome_labels, suspect,
-                       unhealthy, verification_count)
+from .fidelity import (ESCALATION_REASONS, FidelityReport, SelfCheck, contradicts, difference, merge, outcome_flags,
+                       outcome_labels, suspect, unhealthy, verification_count)
 from ..sampling.montecarlo import Plan
 from ..results.outcome import SampleOutcome, energy_scale_of, rigid_reruns
 from ..sampling.rollout import SampleTask
@@ -106,7 +106,9 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: d
     # the rounds are spent and some bias is still open, on the differences that would escalate it
     # were it credibly beyond the tolerance: not verified (``SelfCheck.when_undecided``)
     open_bias = check.when_undecided == "escalate" and state.undecided(compared)
-    if not state.contradicted(compared) and repair < state.at_least and not known and not open_bias:
+    because = tuple(reason for reason, held in zip(ESCALATION_REASONS, (
+        state.contradicted(compared), open_bias, repair >= state.at_least, known)) if held)
+    if not because:
         # a confirmation or a coverage rerun the budget cut off neither confirmed nor dismissed a bias
         unconfirmed = any(o.budget_stopped for o in state.checked.values())
         verdict = "verified" if first and all(i in compared for i in first) and not unconfirmed else "unverified"
@@ -118,6 +120,7 @@ def checking(tasks: list[SampleTask], outcomes: list[SampleOutcome], verified: d
     # at the reference, where what the side kept fast shows could pass (``_credibly_within``, judged
     # before the rerun and again after it); else every sample, in one round
     parts.append(("escalation", reference.name))
+    common["escalated_because"] = because
     if not known and check.bias_tolerance is not None:
         answered = yield from _escalate_disputed(state, compared, refined, parts, common)
         if answered is not None:

@@ -67,6 +67,19 @@ POLICIES = {
 }
 
 
+def _policy_names(text: str) -> list[str]:
+    """``--policies``: names split at commas, a name's own comma (\"net, verify (before)\") kept."""
+    names, pending = [], ""
+    for piece in text.split(","):
+        pending = f"{pending},{piece}" if pending else piece
+        if pending.strip() in POLICIES:
+            names.append(pending.strip())
+            pending = ""
+    if pending or not names:
+        raise argparse.ArgumentTypeError(f"unknown policy {pending.strip()!r}; choose from {', '.join(map(repr, POLICIES))}")
+    return names
+
+
 def _scenes(args) -> list[tuple[str, object, ModelConfig]]:
     path = Path(os.environ.get("IPE_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared/data/battaglia2013"))
     towers_csv = path / "stability_all_towers.csv"
@@ -106,8 +119,9 @@ def main() -> int:
     parser.add_argument("--reference-from", type=Path, default=None,
                         help="take the reference samples from this cache (same scenes, seeds and queries) instead "
                              "of simulating them again")
-    parser.add_argument("--policies", type=lambda s: s.split(","), default=None,
-                        help="replay only these policies (comma-separated names, default: all)")
+    parser.add_argument("--policies", type=_policy_names, default=None,
+                        help="replay only these policies (comma-separated names, some with a comma of their own, "
+                             "e.g. 'current,net, verify (before)'; default: all)")
     parser.add_argument("--out", default="benchmarks/results/check_policy")
     args = parser.parse_args()
     fast_settings, reference = preset("default"), reference_settings()
@@ -208,7 +222,7 @@ def _replay(stored: list, reference, draws: int = 1, draw_samples: int | None = 
                 needed = _worst_dp(fast, ref) >= NEEDS_ESCALATION_DP
                 g = per_group.setdefault(group, {"scenes": 0, "reference_samples": 0, "fast_s": 0.0, "ref_s": 0.0,
                                                  "paper_s": 0.0, "escalated": 0, "dp": [], "worst": 0.0,
-                                                 "needed": 0, "missed": 0})
+                                                 "needed": 0, "missed": 0, "because": {}})
                 per_sample_fast, per_sample_ref = fast_s / len(all_tasks), ref_s / len(all_tasks)
                 g["scenes"] += 1
                 g["reference_samples"] += len(set(used))
@@ -218,6 +232,11 @@ def _replay(stored: list, reference, draws: int = 1, draw_samples: int | None = 
                 g["escalated"] += report.verdict == "escalated"
                 g["needed"] += needed
                 g["missed"] += needed and report.verdict != "escalated"
+                if report.verdict == "escalated":  # why, and whether the draw needed it
+                    for reason in report.escalated_because:
+                        tally = g["because"].setdefault(reason, [0, 0])
+                        tally[0] += 1
+                        tally[1] += bool(needed)
                 g["dp"].append(float(dp.mean()))
                 g["worst"] = max(g["worst"], float(dp.max()))
                 scenes.append({"policy": name, "scene": scene_name, "verdict": report.verdict, "reference_samples": len(set(used)),
@@ -227,6 +246,7 @@ def _replay(stored: list, reference, draws: int = 1, draw_samples: int | None = 
                          "reference_samples_per_prediction": g["reference_samples"] / g["scenes"],
                          "speedup_vs_reference": g["paper_s"] / (g["fast_s"] + g["ref_s"]),
                          "escalated": g["escalated"], "needed": g["needed"], "missed": g["missed"],
+                         "escalated_because": {r: {"escalated": n, "needed": k} for r, (n, k) in g["because"].items()},
                          "mean_abs_dp": float(np.mean(g["dp"])), "worst_abs_dp": g["worst"]})
     return rows, scenes
 
@@ -252,12 +272,15 @@ def _write(rows: list[dict], out: Path, title: str) -> None:
     out.mkdir(parents=True, exist_ok=True)
     (out / "check_policy.json").write_text(json.dumps(rows, indent=1))
     lines = ["| policy | set | predictions | reference samples / prediction | speed-up vs reference | escalated | "
-             "needed escalating | missed | mean \\|dP\\| | worst \\|dP\\| |", "|---" * 10 + "|"]
+             "needed escalating | missed | mean \\|dP\\| | worst \\|dP\\| | escalated because (of them needed) |",
+             "|---" * 11 + "|"]
     for r in sorted(rows, key=lambda r: (r["group"] != "towers", r["group"])):
+        because = ", ".join(f"{reason} {t['escalated']} ({t['needed']})"
+                            for reason, t in sorted(r.get("escalated_because", {}).items())) or "-"
         lines.append(f"| {r['policy']} | {r['group']} | {r['scenes']} | {r['reference_samples_per_prediction']:.2f} | "
                      f"{r['speedup_vs_reference']:.1f}x | {r['escalated']} | {r['needed']} | {r['missed']} | "
                      f"{r['mean_abs_dp']:.3f} | "
-                     f"{r['worst_abs_dp']:.3f} |")
+                     f"{r['worst_abs_dp']:.3f} | {because} |")
     (out / "check_policy.md").write_text(title + "\n".join(lines) + "\n")
     print("\n".join(lines))
 

@@ -202,6 +202,20 @@ def test_check_policy_replays_every_policy_on_the_same_samples(tmp_path):
     assert drawn.returncode == 0, drawn.stderr[-3000:]
     rows = json.loads((tmp_path / "d" / "check_policy.json").read_text())
     assert {r["scenes"] for r in rows} == {3} and all(r["missed"] <= r["needed"] for r in rows)
+    # every escalation gives its reasons (each that held, so at least as many as escalations)
+    assert all(sum(t["escalated"] for t in r["escalated_because"].values()) >= r["escalated"] for r in rows)
+    # a policy's name may hold a comma of its own; an unknown one is refused by name
+    picked = subprocess.run(
+        [sys.executable, str(REPO / "benchmarks" / "check_policy.py"), "--towers", "1", "--zoo", "0", "--samples", "2",
+         "--cache", str(tmp_path / "samples.pkl"), "--policies", "current,net, verify (before)", "--out",
+         str(tmp_path / "p")], capture_output=True, text=True, timeout=600, env=ENV)
+    assert picked.returncode == 0, picked.stderr[-3000:]
+    assert [r["policy"] for r in json.loads((tmp_path / "p" / "check_policy.json").read_text())] == \
+        ["current", "net, verify (before)"]
+    unknown = subprocess.run(
+        [sys.executable, str(REPO / "benchmarks" / "check_policy.py"), "--policies", "current,lenient"],
+        capture_output=True, text=True, timeout=600, env=ENV)
+    assert unknown.returncode == 2 and "unknown policy 'lenient'; choose from 'current'" in unknown.stderr
 
 
 def test_collapse_trial_benchmark_compares_each_rule_on_columns_the_zoo_and_towers(tmp_path):

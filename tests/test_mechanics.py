@@ -90,6 +90,13 @@ def _ball(name: str, position_m, radius_m: float = 0.05, **fields) -> Body:
 #:   so at their coarser steps the block stands on 1-2 points and pivots from one to the next. A box
 #:   floor, whose contacts give the whole face every step, meets the closed form (1.008-1.010x at
 #:   1/180 s) but veers the turned slide (above) twice as far, so the plane stays.
+#: - "rigid": a block sliding on a dynamic block, in `fine` and `default`, whose boxes are plain rigid
+#:   bodies: a contact between two of them goes to Bullet's sequential-impulse solver (any contact with
+#:   a multibody, the floor included, goes to the multibody solver), whose two friction rows are each
+#:   clipped at mu N on their own, along the world's axes while nothing slides yet. Past tan theta = mu
+#:   the block slides 0.64x (0 deg) or holds (0.00-0.04x at 30-45 deg, where the box allows up to
+#:   sqrt(2) mu N); `paper`'s multibodies slide 1.00x every way. Measured in plain pybullet, either body a
+#:   multibody gives 1.00x at both steps; both plain, 0.20-0.96x.
 #: - "bounce": a landing at 2.0 m/s gives back 0.94-1.11x e^2 h in `default`. Its steps, not its
 #:   impacts: the ball's 4 ms step (its size's cap) lands it up to a step's travel (12 mm) into the
 #:   floor, from where it rises, and whence it is pushed out after the rebound (higher); and the
@@ -125,6 +132,7 @@ _known("cone", *[("slide", name, r, 120, 120) for name in PRESETS for r in (0.0,
        ("push", "paper"), ("push", "default"),
        ("turned", "paper"), ("turned", "default"))
 _known("plane", *[("incline", name, r, d) for name in ("fine", "default") for r in (0.0, 0.5) for d in (0, 30)])
+_known("rigid", *[("on a block", name, d) for name in ("fine", "default") for d in (0, 30, 45)])
 _known("bounce", *[("bounce", "default", e, 0.2) for e in (0.5, 0.64)])
 
 
@@ -232,6 +240,28 @@ def test_a_block_on_an_incline_starts_to_slide_where_tan_theta_is_mu(name, downh
     assert ratio > 0.5  # it slides (a friction box along the axes would hold it at 45 deg)
     off_deg = math.degrees(math.remainder(math.atan2(travels[29.0][1], travels[29.0][0]) - downhill, 2 * math.pi))
     _holds(abs(ratio - 1) <= 0.05 and abs(off_deg) <= 1.0, ("incline", name, restitution, downhill_deg),
+           f"{ratio:.3f}x at {off_deg:+.2f} deg")
+
+
+@pytest.mark.parametrize("name", PRESETS)
+@pytest.mark.parametrize("downhill_deg", [0, 30, 45])
+def test_a_block_on_a_block_on_an_incline_starts_to_slide_where_tan_theta_is_mu(name, downhill_deg):
+    # the same cube on a 50 kg slab (friction 0.5 x 1.0), the slab held by the floor (5.0 x 1.0): what
+    # slides is one dynamic body on another, the contact a stack's blocks make with each other
+    downhill = math.radians(downhill_deg)
+    travels = {}
+    for incline_deg in (24.0, 29.0):
+        slab = Box("slab", (1.6, 1.6, 0.1), (0.0, 0.0, 0.05), IDENTITY, friction=1.0, restitution=0.0, mass_kg=50.0)
+        cube = Box("cube", (0.1, 0.1, 0.1), (0.0, 0.0, 0.15), IDENTITY, friction=0.5, restitution=0.0, mass_kg=1.0)
+        scene = _scene(slab, cube, floor_friction=5.0, gravity=_tilted_gravity(math.radians(incline_deg), downhill),
+                       horizon_s=1.0)
+        positions, _ = _end(scene, name)
+        travels[incline_deg] = positions[1, :2] - positions[0, :2]
+    assert float(np.linalg.norm(travels[24.0])) < 0.002
+    incline = math.radians(29.0)
+    ratio = float(np.linalg.norm(travels[29.0])) / (0.5 * G * (math.sin(incline) - 0.5 * math.cos(incline)))
+    off_deg = math.degrees(math.remainder(math.atan2(travels[29.0][1], travels[29.0][0]) - downhill, 2 * math.pi))
+    _holds(abs(ratio - 1) <= 0.05 and abs(off_deg) <= 1.0, ("on a block", name, downhill_deg),
            f"{ratio:.3f}x at {off_deg:+.2f} deg")
 
 

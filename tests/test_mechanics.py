@@ -93,10 +93,10 @@ def _ball(name: str, position_m, radius_m: float = 0.05, **fields) -> Body:
 #: - "rigid": a block sliding on a dynamic block, in `fine` and `default`, whose boxes are plain rigid
 #:   bodies: a contact between two of them goes to Bullet's sequential-impulse solver (any contact with
 #:   a multibody, the floor included, goes to the multibody solver), whose two friction rows are each
-#:   clipped at mu N on their own, along the world's axes while nothing slides yet. Past tan theta = mu
-#:   the block slides 0.64x (0 deg) or holds (0.00-0.04x at 30-45 deg, where the box allows up to
-#:   sqrt(2) mu N); `paper`'s multibodies slide 1.00x every way. Measured in plain pybullet, either body a
-#:   multibody gives 1.00x at both steps; both plain, 0.20-0.96x.
+#:   clipped at mu N on their own (a box, not a cone). Past tan theta = mu the block slides 0.64x
+#:   (0 deg) or holds (0.00-0.04x at 30-45 deg); `paper`'s multibodies slide 1.00x every way. Measured
+#:   in plain pybullet, either body a multibody gives 1.00x at 1 ms and 1/180 s; both plain, 0.20-0.96x,
+#:   depending on the step and on which way the slope faces.
 #: - "bounce": a landing at 2.0 m/s gives back 0.94-1.11x e^2 h in `default`. Its steps, not its
 #:   impacts: the ball's 4 ms step (its size's cap) lands it up to a step's travel (12 mm) into the
 #:   floor, from where it rises, and whence it is pushed out after the rebound (higher); and the

@@ -9,8 +9,9 @@ reference outcomes, so each policy's verdicts, reference samples and answers are
 ``predict`` would have produced, at no new simulation. Per policy and scene set: reference samples
 per prediction, the estimated speed-up against `paper` (fast time + reference samples x their
 measured mean time, perfect balance over the workers), escalations, and the checked answer's
-mean / worst |dP(object falls)| against the full reference answer. Authors' towers need
-``../shared``; without it generated towers are used.
+mean / worst |dP(object falls)| (and |dP(object tips)| where a zoo family asks it, as zoo.py does:
+household) against the full reference answer. Authors' towers need ``../shared``; without it
+generated towers are used. ``--families`` replays some zoo families only.
 
 With ``--draws N --draw-samples k`` each policy is replayed on N random draws of k of a scene's
 samples, each a prediction of its own: simulate more samples than a prediction uses (``--zoo-samples
@@ -43,7 +44,7 @@ from ipe_ros.engine.sampling.montecarlo import MonteCarlo, drive  # noqa: E402
 from ipe_ros.engine.sampling.rollout import lost, run_sample  # noqa: E402
 from ipe_ros.engine.predict import make_tasks  # noqa: E402
 from ipe_ros.engine.checking.self_check import checking  # noqa: E402
-from ipe_ros.engine.scene.zoo import FAMILIES, scene_zoo, zoo_sigma_m  # noqa: E402
+from ipe_ros.engine.scene.zoo import FAMILIES, family_queries, scene_zoo, zoo_sigma_m  # noqa: E402
 
 POLICIES = {
     "current": DEFAULT_CHECK,
@@ -80,21 +81,35 @@ def _policy_names(text: str) -> list[str]:
     return names
 
 
+def _family_names(text: str) -> tuple[str, ...]:
+    names = tuple(n.strip() for n in text.split(","))
+    unknown = [n for n in names if n not in FAMILIES]
+    if unknown:
+        raise argparse.ArgumentTypeError(f"unknown family {unknown[0]!r}; choose from {', '.join(FAMILIES)}")
+    return names
+
+
 def _scenes(args) -> list[tuple[str, object, ModelConfig]]:
     path = Path(os.environ.get("IPE_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared/data/battaglia2013"))
     towers_csv = path / "stability_all_towers.csv"
     towers = load_scenes(towers_csv)[::5][:args.towers] if towers_csv.exists() else generate_towers(2013, args.towers)
     out = [("towers", t, ModelConfig(sigma_m=0.04, samples=args.samples)) for t in towers]
-    for family in FAMILIES:
+    for family in args.families or FAMILIES:
         for scene in scene_zoo(args.zoo_seed, args.zoo, (family,)):
             out.append((f"zoo/{family}", scene, ModelConfig(sigma_m=zoo_sigma_m(scene), samples=args.zoo_samples)))
     return out
 
 
 def object_p(outcomes) -> np.ndarray:
-    """Per object: the share of the good samples' rollouts in which it fell."""
+    """Per object: the share of the good samples' rollouts in which it fell, and in which it tipped
+    over where that was asked (the zoo's household: ``zoo.EXTRA_QUERIES``)."""
     ok = [o for o in outcomes if o.ok]
-    return np.mean([np.mean([r.fallen for r in o.rollouts], axis=0) for o in ok], axis=0)
+
+    def flags(r):
+        tipped = r.get("tipped")
+        return np.asarray(r.fallen, float) if tipped is None else np.concatenate([r.fallen, np.asarray(tipped, float)])
+
+    return np.mean([np.mean([flags(r) for r in o.rollouts], axis=0) for o in ok], axis=0)
 
 
 def main() -> int:
@@ -110,7 +125,10 @@ def main() -> int:
                              "(1: the samples as simulated): how often the check catches a bias, not on one draw")
     parser.add_argument("--draw-samples", type=int, default=None, help="samples per draw (default: all)")
     parser.add_argument("--query", type=parse_queries, default=DEFAULT_QUERIES,
-                        help="the queries asked (default: the node's and the CLI's, fall,any_fall,direction,far)")
+                        help="the queries asked (default: the node's and the CLI's, fall,any_fall,direction,far), "
+                             "and what a zoo family asks besides, as zoo.py asks it (household: tipped)")
+    parser.add_argument("--families", type=_family_names, default=None,
+                        help="only these zoo families (comma-separated; default: all)")
     parser.add_argument("--end-substeps", type=int, default=None,
                         help="the fast physics with collapse.end_substeps set to this (default: `default`'s own)")
     parser.add_argument("--cache", type=Path, default=None,
@@ -156,7 +174,9 @@ def _simulate(args, fast_settings, reference, query) -> list:
         group, scene, model = scenes[0]  # workers started and imports done before any timing
         run_tasks(make_tasks(scene, dataclasses.replace(model, samples=2), fast_settings, query, seed=0))
         for n, (group, scene, model) in enumerate(scenes):
-            tasks = make_tasks(scene, model, fast_settings, query, seed=11)
+            asked = query if not group.startswith("zoo/") else \
+                QuerySpec(queries=query.queries | family_queries(group.removeprefix("zoo/")))
+            tasks = make_tasks(scene, model, fast_settings, asked, seed=11)
             start = time.perf_counter()
             fast = run_tasks(tasks)
             fast_s = time.perf_counter() - start

@@ -216,6 +216,9 @@ def test_check_policy_replays_every_policy_on_the_same_samples(tmp_path):
         [sys.executable, str(REPO / "benchmarks" / "check_policy.py"), "--policies", "current,lenient"],
         capture_output=True, text=True, timeout=600, env=ENV)
     assert unknown.returncode == 2 and "unknown policy 'lenient'; choose from 'current'" in unknown.stderr
+    ghost = subprocess.run([sys.executable, str(REPO / "benchmarks" / "check_policy.py"), "--families", "plates,ghost"],
+                           capture_output=True, text=True, timeout=600, env=ENV)
+    assert ghost.returncode == 2 and "unknown family 'ghost'; choose from launch" in ghost.stderr
 
 
 def test_collapse_trial_benchmark_compares_each_rule_on_columns_the_zoo_and_towers(tmp_path):

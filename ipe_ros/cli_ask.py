@@ -166,7 +166,8 @@ def _table(answers: A.Answers) -> str:
         if v.stopped_by is not None:
             note += f"  [{v.decision or 'undecided'}: {v.stopped_by} after {v.samples_drawn} samples drawn]"
         if v.fidelity not in (None, "verified", "validated"):  # escalated: the reference's answer; contradicted: do not act on it
-            note += f"  ({v.fidelity})"
+            why = (v.self_check or {}).get("escalated_because", ())
+            note += f"  ({v.fidelity}{': ' + ', '.join(why) if why else ''})"
         for key, q in (v.contact_probability or {}).items():
             note += f"; P({key.replace(':', ' touches ')}) {q:.2f}"
         lines.append(f"{v.label:<32} {p:>12} {ci:>15} {v.samples:>4} {g:>14} "

@@ -589,3 +589,20 @@ def test_a_question_and_a_prediction_each_refuse_the_others_stopping_rule():
                                           r"width\); a Sequential rule decides robot questions$"):
         predict(STACK, Request(model=MODEL, settings=SETTINGS, query=QuerySpec(), stop=Sequential(Ranking()),
                                budget_s=None))
+
+
+def test_the_ask_table_says_why_a_variant_was_escalated():
+    from ipe_ros.cli_ask import _table
+    from ipe_ros.engine.actions.answers import VariantAnswer
+    from ipe_ros.engine.actions.kinds import Remove
+
+    def variant(name, fidelity, self_check):
+        return VariantAnswer(label=f"remove/{name}", action=Remove((name,)), any_fall_probability=0.5,
+                             any_fall_probability_ci95=(0.2, 0.8), object_fall_probability={"top": 0.5},
+                             direction_rad=None, samples=8, failed_samples=0, fidelity=fidelity, self_check=self_check)
+
+    table = _table(A.Answers("tower", (variant("a", "escalated", {"escalated_because": ["beyond_tolerance", "refined"]}),
+                                       variant("b", "contradicted", {}), variant("c", "verified", {})), 8, 1.0))
+    a, b, c = table.splitlines()[1:]
+    assert a.endswith("(escalated: beyond_tolerance, refined)") and b.endswith("(contradicted)")
+    assert "(" not in c.split("top 0.50")[1]

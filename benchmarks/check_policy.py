@@ -44,7 +44,7 @@ from ipe_ros.engine.sampling.montecarlo import MonteCarlo, drive  # noqa: E402
 from ipe_ros.engine.sampling.rollout import lost, run_sample  # noqa: E402
 from ipe_ros.engine.predict import make_tasks  # noqa: E402
 from ipe_ros.engine.checking.self_check import checking  # noqa: E402
-from ipe_ros.engine.scene.zoo import FAMILIES, family_queries, scene_zoo, zoo_sigma_m  # noqa: E402
+from ipe_ros.engine.scene.zoo import FAMILIES, family_of, family_queries, scene_zoo, zoo_sigma_m  # noqa: E402
 
 POLICIES = {
     "current": DEFAULT_CHECK,
@@ -174,8 +174,7 @@ def _simulate(args, fast_settings, reference, query) -> list:
         group, scene, model = scenes[0]  # workers started and imports done before any timing
         run_tasks(make_tasks(scene, dataclasses.replace(model, samples=2), fast_settings, query, seed=0))
         for n, (group, scene, model) in enumerate(scenes):
-            asked = query if not group.startswith("zoo/") else \
-                QuerySpec(queries=query.queries | family_queries(group.removeprefix("zoo/")))
+            asked = query if group == "towers" else QuerySpec(queries=query.queries | family_queries(family_of(scene)))
             tasks = make_tasks(scene, model, fast_settings, asked, seed=11)
             start = time.perf_counter()
             fast = run_tasks(tasks)

@@ -2,6 +2,7 @@
 together, each simulated in a world of its own, and the whole scene as one world once two could
 have met."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -181,3 +182,77 @@ def test_a_footprint_back_in_time_goes_on_from_there():
     tracks.add(0, footprint(0.2, 0.0))  # undone: back to t = 0.2
     with pytest.raises(simulation.IslandsMet, match=r"^two islands could have met between t = 0\.200 s and 0\.400 s$"):
         tracks.add(0, footprint(0.4, 0.9, v=0.5))
+
+
+def _plank_and_tile(tile_xy):
+    """A 1 m plank lying across the diagonal (its bounding box fills the square it spans) and a tile."""
+    half = math.sin(math.pi / 8), math.cos(math.pi / 8)
+    plank = dataclasses.replace(block("plank", 0.0, 0.0, 0.025, extents=(1.0, 0.05, 0.05)),
+                                orientation_xyzw=(0.0, 0.0, *half))
+    return floor_scene(plank, dataclasses.replace(_tile("tile", 0.0), position_m=(*tile_xy, 0.005)))
+
+
+def _tracks_of(scene, gaps: bool):
+    """Tracks of the plank (island 0) and the tile (island 1), each footprint read from a world of
+    the scene at rest."""
+    inputs = draw_sample_inputs(scene, ModelConfig(sigma_m=0.0), np.random.default_rng(0))
+    world = simulation.build_world(scene, inputs.positions_m, inputs.masses_kg, ISLANDS)
+    boxes = simulation.world.bounding_boxes(world)
+    positions, orientations = simulation.world.read_poses(world)
+    members = (np.array([0]), np.array([1]))
+    shapes = simulation.islands.ShapeGaps(lambda: simulation.build_world(
+        scene, inputs.positions_m, inputs.masses_kg, ISLANDS, slot=simulation.islands.MAX_ISLANDS), members) \
+        if gaps else None
+    tracks = simulation.islands.Tracks(2, 2.0, 0.002, shapes)
+
+    def footprint(island, t_s, speed_m_s=0.0):
+        i = members[island]
+        return simulation.islands.Footprint(t_s, boxes[i, 0], boxes[i, 1], np.array([speed_m_s]), positions[i],
+                                            orientations[i])
+    return tracks, footprint, shapes
+
+
+def test_bodies_whose_boxes_overlap_meet_only_where_their_shapes_could_have():
+    """A long body across the diagonal fills a bounding box far larger than itself (a ladle leaning
+    over a mug's rim): where the boxes overlap, the islands meet only if the shapes, grown by how
+    far each can have moved, come within the clearance."""
+    far = _plank_and_tile((0.3, -0.3))  # 0.42 m from the plank's axis, inside its bounding box
+    for gaps in (False, True):
+        tracks, footprint, shapes = _tracks_of(far, gaps)
+        try:
+            tracks.add(0, footprint(0, 0.0))
+            tracks.add(0, footprint(0, 0.15))
+            tracks.add(1, footprint(1, 0.0))
+            if not gaps:  # the boxes alone: met
+                with pytest.raises(simulation.IslandsMet):
+                    tracks.add(1, footprint(1, 0.05))
+                continue
+            tracks.add(1, footprint(1, 0.05))
+            # read at the same place, the tile went out and back on a path of up to twice the faster read's
+            # speed: at 5 m/s 0.25 m out at most, short of the plank 0.39 m away
+            tracks.add(1, footprint(1, 0.1, speed_m_s=5.0))
+            # at 10 m/s it can have gone there and back since the last read
+            with pytest.raises(simulation.IslandsMet, match=r"^two islands could have met between t = 0\.100 s and "
+                                                             r"0\.150 s$"):
+                tracks.add(1, footprint(1, 0.15, speed_m_s=10.0))
+        finally:
+            if shapes is not None:
+                shapes.close()
+    # 1 cm beside the plank's side (its centre 5.6 cm from the plank's axis), 0.3 m along it
+    along, across = 0.3 / math.sqrt(2), 0.056 / math.sqrt(2)
+    near = _plank_and_tile((along + across, along - across))
+    # read at the same place twice, the plank went out and back between: at 0.1 m/s 0.5 cm out at most
+    # (though the gap, 1 cm, is within the 0.7 cm reaches' 1.4 cm), at 0.3 m/s 1.5 cm
+    for plank_speed_m_s, meets in ((0.0, False), (0.1, False), (0.3, True)):
+        tracks, footprint, shapes = _tracks_of(near, True)
+        try:
+            tracks.add(0, footprint(0, 0.0))
+            tracks.add(0, footprint(0, 0.05, speed_m_s=plank_speed_m_s))
+            tracks.add(1, footprint(1, 0.0))
+            if meets:
+                with pytest.raises(simulation.IslandsMet):
+                    tracks.add(1, footprint(1, 0.05))
+            else:
+                tracks.add(1, footprint(1, 0.05))
+        finally:
+            shapes.close()

@@ -173,7 +173,8 @@ class SimSettings:
         paper's own engine, ODE, integrates plain rigid bodies (benchmarks/results/meshes).
     islands: groups of bodies that nothing brings together are simulated apart, each in a world of
         its own with its own step (its smallest body's, not the scene's) and its own end at rest;
-        where two could have met (each island's reach, read at every look), the sample is simulated
+        where two could have met (each island's reach, read at every look, and the bodies' own
+        shapes where their bounding boxes overlap), the sample is simulated
         again as one world (simulation/islands.py). Only groups that step at least twice as coarse
         apart are kept apart (``islands.by_step``); the others share a world. Step watches (contact,
         event queries) and "will anything fall?" keep one world.

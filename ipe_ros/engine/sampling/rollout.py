@@ -256,8 +256,12 @@ class Apart:
                  deadline_unix_s: float | None) -> simulation.RolloutEnd:
         """The islands side by side, each in a client of its own, the one furthest behind stepped on
         to its next read; raises ``simulation.IslandsMet`` once two could have met."""
+        # the whole scene's shapes, in a client beside the islands', for the pairs whose boxes overlap
+        gaps = simulation.islands.ShapeGaps(functools.partial(
+            simulation.build_world, self.scene, initial, masses_kg, settings, orientations_xyzw=initial_orn,
+            slot=simulation.islands.MAX_ISLANDS), self.groups)
         tracks = simulation.islands.Tracks(len(self.groups), settings.horizon_for(self.scene.horizon_s),
-                                           self.clearance_m)
+                                           self.clearance_m, gaps)
         trials: list = []
         rollouts: list = []
         try:
@@ -285,6 +289,7 @@ class Apart:
                     tracks.ended(behind)
             return _merged(ends, self.groups, len(initial))
         finally:
+            gaps.close()
             for trial in trials:
                 trial.close()
             for slot in range(1, len(rollouts)):  # slot 0's world is replaced by the next one built

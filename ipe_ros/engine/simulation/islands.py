@@ -11,12 +11,16 @@ mug tips its ladle onto the bowl). So the islands run side by side, each in a py
 its own, the one furthest behind in simulated time stepped on to its next read; at every read each
 body's bounding box and fastest corner speed are recorded (``Footprint``), and where each body can
 have been since the last read (``_stretch``) must not meet where any body of another island can
-have been at the same time. Once two islands could have met, their rollouts are dropped and the
-sample is simulated as one world from the start (``SimSettings.islands``).
+have been at the same time: their boxes first, then, where those overlap, their own shapes
+(``ShapeGaps``; a long body leaning across fills a box far larger than itself). Once two islands
+could have met, their rollouts are dropped and the sample is simulated as one world from the
+start (``SimSettings.islands``).
 """
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,13 +37,16 @@ MIN_STEP_GAIN = 2.0
 
 @dataclass(frozen=True)
 class Footprint:
-    """Where an island's bodies were at one read: each body's bounding box ((n, 3) corners, m), and
-    how fast its fastest corner moved ((n,) m/s)."""
+    """Where an island's bodies were at one read: each body's bounding box ((n, 3) corners, m), how
+    fast its fastest corner moved ((n,) m/s), and its pose (centre of mass (n, 3), xyzw (n, 4); None:
+    the boxes alone are known)."""
 
     t_s: float
     low_m: np.ndarray
     high_m: np.ndarray
     corner_speeds_m_s: np.ndarray
+    positions_m: np.ndarray | None = None
+    orientations_xyzw: np.ndarray | None = None
 
 
 def partition(world, velocities_m_s: np.ndarray, horizon_s: float, gap_m: float) -> list[np.ndarray]:
@@ -82,23 +89,88 @@ def by_step(groups: list[np.ndarray], steps_s: list[float]) -> list[np.ndarray]:
     return [np.sort(np.concatenate(members)) for members in islands]
 
 
-def _stretch(a: Footprint, b: Footprint, clearance_m: float) -> tuple[float, float, np.ndarray, np.ndarray]:
-    """(start, end, low (n, 3), high (n, 3)): where each body can have been between reads ``a`` and
-    ``b``. It moves from one box to the other along a path no longer than its fastest corner's speed
-    times the time (the faster of the two reads, doubled: an impact can speed it up and slow it down
-    again in between), and such a path stays within half its length of the two boxes."""
+@dataclass(frozen=True)
+class _Stretch:
+    """Where an island's bodies can have been between two reads: each within ``reach_m`` of its
+    bounding boxes (``low_m``, ``high_m``), and of its shape at either read (``poses``: the two
+    footprints' (positions, orientations), or None)."""
+
+    start_s: float
+    end_s: float
+    low_m: np.ndarray
+    high_m: np.ndarray
+    reach_m: np.ndarray
+    poses: tuple | None
+
+
+def _stretch(a: Footprint, b: Footprint, clearance_m: float) -> _Stretch:
+    """Where each body can have been between reads ``a`` and ``b``. It moves from one pose to the
+    other along a path no longer than twice its fastest corner's speed times the time (the faster of
+    the two reads, doubled: an impact can speed it up and slow it down again in between), and such a
+    path stays within half its length (the reach) of the two boxes."""
     reach = np.maximum(a.corner_speeds_m_s, b.corner_speeds_m_s) * (b.t_s - a.t_s) + clearance_m
-    return (a.t_s, b.t_s, np.minimum(a.low_m, b.low_m) - reach[:, None],
-            np.maximum(a.high_m, b.high_m) + reach[:, None])
+    poses = None if a.positions_m is None or b.positions_m is None else \
+        ((a.positions_m, a.orientations_xyzw), (b.positions_m, b.orientations_xyzw))
+    return _Stretch(a.t_s, b.t_s, np.minimum(a.low_m, b.low_m) - reach[:, None],
+                    np.maximum(a.high_m, b.high_m) + reach[:, None], reach, poses)
 
 
-def _meets(stretch: tuple[float, float, np.ndarray, np.ndarray], others: list) -> bool:
-    """Some body in ``stretch`` meets some body of another island in a stretch that overlaps it in time."""
-    start, end, low, high = stretch
-    for other_start, other_end, other_low, other_high in others:
-        if other_start <= end and start <= other_end and np.any(np.all(
-                (low[:, None, :] <= other_high[None, :, :]) & (other_low[None, :, :] <= high[:, None, :]), axis=2)):
-            return True
+class ShapeGaps:
+    """The distance between two bodies' own shapes, for pairs whose boxes overlap: a long body
+    leaning across (a ladle over a mug's rim) fills a bounding box far larger than itself. Every
+    dynamic body of the scene in one geometry world (``build``, called on the first question) that
+    is never stepped; each question moves the two to their poses. ``members``: per island, its
+    bodies' indices in the scene (``partition``'s groups)."""
+
+    def __init__(self, build, members: tuple[np.ndarray, ...]):
+        self._build, self._members, self._world = build, members, None
+
+    def distance_m(self, island_a: int, body_a: int, pose_a, island_b: int, body_b: int, pose_b,
+                   up_to_m: float) -> float:
+        """How far body ``body_a`` of ``island_a`` at ``pose_a`` ((positions, orientations) of its
+        island) is from ``body_b`` of ``island_b`` at ``pose_b``; inf beyond ``up_to_m``."""
+        from .bullet import pybullet
+
+        if self._world is None:
+            self._world = self._build()
+        p, cid = pybullet(), self._world.client
+        handles = []
+        for island, body, (positions, orientations) in ((island_a, body_a, pose_a), (island_b, body_b, pose_b)):
+            handle = self._world.dynamic_ids[int(self._members[island][body])]
+            p.resetBasePositionAndOrientation(handle, positions[body].tolist(), orientations[body].tolist(),
+                                              physicsClientId=cid)
+            handles.append(handle)
+        points = p.getClosestPoints(handles[0], handles[1], float(up_to_m), physicsClientId=cid)
+        return min((point[8] for point in points), default=math.inf)
+
+    def close(self) -> None:
+        if self._world is not None:
+            from .bullet import pybullet
+
+            pybullet().resetSimulation(physicsClientId=self._world.client)
+            self._world = None
+
+
+def _meets(island: int, stretch: _Stretch, others: list[tuple[int, _Stretch]], gaps: ShapeGaps | None) -> bool:
+    """Some body in ``stretch`` meets some body of another island in a stretch that overlaps it in
+    time: their boxes overlap, and (where ``gaps`` knows the shapes) so could the shapes. A body's
+    path between two reads is at most twice its reach long (``_stretch``), so at any moment its
+    distances from where it was at the two reads add up to that at most: two bodies can have come
+    within the clearance only if their gaps at the first reads and at the last add up to at most
+    twice their reaches together (the clearance is in the reaches)."""
+    for other_island, other in others:
+        if not (other.start_s <= stretch.end_s and stretch.start_s <= other.end_s):
+            continue
+        near = np.all((stretch.low_m[:, None, :] <= other.high_m[None, :, :])
+                      & (other.low_m[None, :, :] <= stretch.high_m[:, None, :]), axis=2)
+        for i, j in zip(*np.nonzero(near)):
+            if gaps is None or stretch.poses is None or other.poses is None:
+                return True
+            most = 2 * (stretch.reach_m[i] + other.reach_m[j])
+            first = gaps.distance_m(island, i, stretch.poses[0], other_island, j, other.poses[0], most)
+            if first <= most and first + gaps.distance_m(island, i, stretch.poses[1], other_island, j,
+                                                         other.poses[1], most - first) <= most:
+                return True
     return False
 
 
@@ -110,12 +182,12 @@ class Tracks:
     """The islands' footprints as their rollouts read them, side by side: each new stretch of one
     island is checked against every stretch the others have made so far, so that every two stretches
     that overlap in time are checked once the later of them is made, and a rollout that reaches
-    another island stops there (``IslandsMet``)."""
+    another island stops there (``IslandsMet``). ``gaps``: where boxes overlap, the shapes decide."""
 
-    def __init__(self, islands: int, horizon_s: float, clearance_m: float):
-        self._horizon_s, self._clearance_m = horizon_s, clearance_m
+    def __init__(self, islands: int, horizon_s: float, clearance_m: float, gaps: ShapeGaps | None = None):
+        self._horizon_s, self._clearance_m, self._gaps = horizon_s, clearance_m, gaps
         self._last: list[Footprint | None] = [None] * islands
-        self._stretches: list[list] = [[] for _ in range(islands)]
+        self._stretches: list[list[_Stretch]] = [[] for _ in range(islands)]
 
     def add(self, island: int, footprint: Footprint) -> None:
         """Island ``island``'s rollout read ``footprint`` (the stepper's ``on_footprint``)."""
@@ -129,11 +201,12 @@ class Tracks:
         """The island's rollout is over: at the horizon, or at rest (its bodies stay where they are
         until the horizon; the early end's own promise)."""
         last = self._last[island]
-        reach = self._clearance_m / 2
-        self._check(island, (last.t_s, max(self._horizon_s, last.t_s), last.low_m - reach, last.high_m + reach))
+        still = dataclasses.replace(last, corner_speeds_m_s=np.zeros_like(last.corner_speeds_m_s))
+        until = dataclasses.replace(still, t_s=max(self._horizon_s, last.t_s))
+        self._check(island, _stretch(still, until, self._clearance_m / 2))
 
-    def _check(self, island: int, stretch) -> None:
-        others = [s for i, stretches in enumerate(self._stretches) if i != island for s in stretches]
-        if _meets(stretch, others):
-            raise IslandsMet(f"two islands could have met between t = {stretch[0]:.3f} s and {stretch[1]:.3f} s")
+    def _check(self, island: int, stretch: _Stretch) -> None:
+        others = [(i, s) for i, stretches in enumerate(self._stretches) if i != island for s in stretches]
+        if _meets(island, stretch, others, self._gaps):
+            raise IslandsMet(f"two islands could have met between t = {stretch.start_s:.3f} s and {stretch.end_s:.3f} s")
         self._stretches[island].append(stretch)

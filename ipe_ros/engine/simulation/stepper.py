@@ -192,7 +192,7 @@ class _Rollout:
         for watch in self.watches.values():
             watch.start(world)
         start_speeds, start_spins = speeds_of(initial_velocities)
-        self._footprint(0.0, start_speeds + start_spins * self.half_diagonals_m)
+        self._footprint(0.0, start_speeds + start_spins * self.half_diagonals_m, positions, orientations)
         self.tick = 0
         self.pybullet_steps = 0  # taken so far (what a collapse trial's anchors count)
         #: a world that may bounce: the direct solver for its impacts only (simulation/impacts.py), or
@@ -322,7 +322,7 @@ class _Rollout:
         period_ticks = self.look_every if look_due else self.health_every
         corner_speeds = speeds + spins * self.half_diagonals_m
         fastest_corner_m_s = float(corner_speeds.max())
-        self._footprint(self.tick * self.dt, corner_speeds)
+        self._footprint(self.tick * self.dt, corner_speeds, positions, orientations)
         fastest_m_s = fastest_corner_m_s + self.g * period_ticks * self.dt
         self.travel_substeps = substeps_for(fastest_m_s, self.settings, self.world)
         self.fastest_m_s = fastest_m_s
@@ -339,10 +339,11 @@ class _Rollout:
         self.steps.find_contacts_ahead(fastest_m_s)
         return self._at_rest(speeds, spins, heights)
 
-    def _footprint(self, t_s: float, corner_speeds_m_s: np.ndarray) -> None:
+    def _footprint(self, t_s: float, corner_speeds_m_s: np.ndarray, positions_m, orientations_xyzw) -> None:
         if self.on_footprint is not None:
             boxes = bounding_boxes(self.world)
-            self.on_footprint(Footprint(t_s, boxes[:, 0], boxes[:, 1], np.asarray(corner_speeds_m_s, float)))
+            self.on_footprint(Footprint(t_s, boxes[:, 0], boxes[:, 1], np.asarray(corner_speeds_m_s, float),
+                                        np.array(positions_m, float), np.array(orientations_xyzw, float)))
 
     def _undo_trial(self) -> tuple:
         """The collapse steps made energy (NaN: they diverged): back to the look where they began,
@@ -440,7 +441,7 @@ class _Rollout:
         # has fallen, or can never fall, is answered whatever pose it ends in mid-collapse)
         read = self.rest.undecided if self.rest.needs_heights else None
         speeds, spins = speeds_of(velocities)
-        self._footprint(self.tick * self.dt, speeds + spins * self.half_diagonals_m)
+        self._footprint(self.tick * self.dt, speeds + spins * self.half_diagonals_m, positions, orientations)
         return RolloutEnd(positions, orientations, self.trajectory, self.tick * self.dt,
                           energy_gain_j=self.energy.max_gain_j,
                           penetration_fraction=health.deepest_penetration_fraction(self.world, self.smallest, read),

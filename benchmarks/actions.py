@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import json
 import os
 import statistics
@@ -40,7 +41,7 @@ from ipe_ros.engine import Request
 from ipe_ros.engine import actions as A  # noqa: E402
 from ipe_ros.engine.config import DEFAULT_SIGMA_M  # noqa: E402
 from ipe_ros.engine.sampling.decide import Ranking, SafeBelow, Supports, Tally  # noqa: E402
-from ipe_ros.engine.checking.fidelity import DEFAULT_CHECK  # noqa: E402
+from ipe_ros.engine.checking.fidelity import DEFAULT_CHECK, reference_settings  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 I = (0.0, 0.0, 0.0, 1.0)
@@ -128,14 +129,48 @@ def compare(rule, sequential: A.Answers, fixed: A.Answers) -> dict:
             "point_answer_differs": differ, "mean_samples_drawn": statistics.mean(drawn) if drawn else None}
 
 
-def both(name: str, target_s: float | None, run, rule, repeats: int, first=None) -> dict:
+def _reference_rollouts(answers: A.Answers) -> int:
+    """The rollouts a checked answer ran at the reference: each variant's compared (and refined)
+    samples, or, escalated, every sample it reran."""
+    total = 0
+    for v in answers.variants:
+        report = v.self_check or {}
+        total += report.get("escalated_samples", 0) if v.fidelity == "escalated" else \
+            report.get("verified_samples", 0) + report.get("refined_samples", 0)
+    return total
+
+
+def _fast_rollouts(answers: A.Answers) -> int:
+    return sum(v.samples for v in answers.variants if v.simulated)
+
+
+def check_floor(run, seq_s: float, seq_answers: A.Answers, checked_answers: A.Answers, workers: int, first) -> dict:
+    """What any check that compares one sample of each variant it checks (those not validated) with
+    the reference must add to the unchecked answer: that many reference rollouts, priced by the
+    same question answered at the reference (unchecked, once, the same seeds)."""
+    checked = [v for v in checked_answers.variants if v.fidelity not in (None, "validated", "unverified")]
+    if not checked:
+        return {"reference_rollouts": _reference_rollouts(checked_answers), "compared_variants": 0,
+                "floor_s": seq_s}
+    reference_s, reference = timed(lambda: run(True, None, reference_settings()), 1)
+    reference = reference if first is None else reference[1]
+    per_reference_s = reference_s * workers / max(1, _fast_rollouts(reference))
+    per_fast_s = seq_s * workers / max(1, _fast_rollouts(seq_answers))
+    return {"reference_rollouts": _reference_rollouts(checked_answers), "compared_variants": len(checked),
+            "reference_s": reference_s, "reference_over_fast_per_rollout": per_reference_s / per_fast_s,
+            "floor_s": seq_s + len(checked) * per_reference_s / workers}
+
+
+def both(name: str, target_s: float | None, run, rule, repeats: int, first=None, workers: int = 2) -> dict:
     """One question answered sequentially with and without the self-check and at fixed k without
-    it, on the same seeds, interleaved. ``run(sequential, check)``."""
+    it, on the same seeds, interleaved; and the check's floor (``check_floor``).
+    ``run(sequential, check, physics=settings)``."""
     checked_s, checked = timed(lambda: run(True, DEFAULT_CHECK), repeats)
     seq_s, seq = timed(lambda: run(True, None), repeats)
     fixed_s, fixed = timed(lambda: run(False, None), repeats)
     seq_answers, fixed_answers, checked_answers = (seq, fixed, checked) if first is None else \
         (seq[1], fixed[1], checked[1])
+    floor = check_floor(run, seq_s, seq_answers, checked_answers, workers, first)
     verdicts = [v.fidelity for v in checked_answers.variants if v.fidelity is not None]
     alone = fixed_answers.alone
     row = {"question": name, "target_s": target_s, "checked_s": checked_s, "sequential_s": seq_s, "fixed_s": fixed_s,
@@ -143,7 +178,8 @@ def both(name: str, target_s: float | None, run, rule, repeats: int, first=None)
            "validated_variants": verdicts.count("validated"),
            # the variants are simulated only in the samples where the scene as it is stands
            "as_is_standing": None if alone is None else alone.samples_standing,
-           "samples": fixed_answers.samples_requested, **compare(rule, seq_answers, fixed_answers)}
+           "samples": fixed_answers.samples_requested, **compare(rule, seq_answers, fixed_answers),
+           "fast_rollouts": _fast_rollouts(seq_answers), **floor}
     if first is not None:  # a ranking: the candidate each run puts first, and its fixed-k P
         chosen, best = first(seq), first(fixed)
         row["same_first_choice"] = chosen == best
@@ -173,6 +209,7 @@ def main() -> int:
             return ModelConfig(sigma_m=sigma, samples=k)
 
         supports = Supports(A.DEFAULT_SUPPORT_THRESHOLD, A.DEFAULT_SAFE_BELOW)
+        ask_both = functools.partial(both, workers=args.workers)
         block = Box(name="new", extents_m=(0.2, 0.2, 0.2), position_m=(0.0, 0.0, 0.0), orientation_xyzw=I,
                     friction=0.6, restitution=0.0, mass_kg=1.0)
         own_kind = dataclasses.replace(top_block, name="new", position_m=(0.0, 0.0, 0.0))
@@ -182,36 +219,35 @@ def main() -> int:
         # variants run in few), and a robot's (a few mm), at which it stands in most
         for sigma in (DEFAULT_SIGMA_M, args.robot_sigma) if args.robot_sigma else (DEFAULT_SIGMA_M,):
             noise = f"sigma {sigma * 1000:g} mm"
-            rows.append(both(f"support graph, {tower.name} (10 blocks), k = 16 per variant, {noise}", 1.0,
-                             lambda seq, check, sigma=sigma: A.support_graph(tower, model(16, sigma), settings,
-                                                                             sequential=seq, check=check, **kw).answers,
+            rows.append(ask_both(f"support graph, {tower.name} (10 blocks), k = 16 per variant, {noise}", 1.0,
+                             lambda seq, check, physics=settings, sigma=sigma: A.support_graph(
+                                 tower, model(16, sigma), physics, sequential=seq, check=check, **kw).answers,
                              supports, args.repeats))
-            rows.append(both(f"safe to remove the top block ({top}), k = 48, {noise}", 0.4,
-                             lambda seq, check, sigma=sigma: A.remove(tower, [top], model(48, sigma), settings,
-                                                                      safe_below=A.DEFAULT_SAFE_BELOW, sequential=seq,
-                                                                      check=check, **kw),
+            rows.append(ask_both(f"safe to remove the top block ({top}), k = 48, {noise}", 0.4,
+                             lambda seq, check, physics=settings, sigma=sigma: A.remove(
+                                 tower, [top], model(48, sigma), physics, safe_below=A.DEFAULT_SAFE_BELOW,
+                                 sequential=seq, check=check, **kw),
                              SafeBelow(A.DEFAULT_SAFE_BELOW), args.repeats))
-            rows.append(both(f"best place on the tower's top, 20 x 20 cm, 16 candidates, k = 16, {noise}", 2.0,
-                             lambda seq, check, sigma=sigma: A.best_place(tower, block, region, model(16, sigma),
-                                                                          settings, candidates=16, sequential=seq,
-                                                                          check=check, **kw),
+            rows.append(ask_both(f"best place on the tower's top, 20 x 20 cm, 16 candidates, k = 16, {noise}", 2.0,
+                             lambda seq, check, physics=settings, sigma=sigma: A.best_place(
+                                 tower, block, region, model(16, sigma), physics, candidates=16, sequential=seq,
+                                 check=check, **kw),
                              Ranking(), args.repeats, first=lambda result: result[0][0][0].position_m))
             if sigma != DEFAULT_SIGMA_M:
                 # a block of the tower's own kind: each candidate lowered onto the top is boxes at rest,
                 # inside the validated envelope (so is the 1 kg cube, 4x lighter than the blocks it rests on)
-                rows.append(both(f"best place of a block like the tower's own, 16 candidates, k = 16, {noise}", 3.0,
-                                 lambda seq, check, sigma=sigma: A.best_place(tower, own_kind, region,
-                                                                              model(16, sigma), settings,
-                                                                              candidates=16, sequential=seq,
-                                                                              check=check, **kw),
+                rows.append(ask_both(f"best place of a block like the tower's own, 16 candidates, k = 16, {noise}", 3.0,
+                                 lambda seq, check, physics=settings, sigma=sigma: A.best_place(
+                                     tower, own_kind, region, model(16, sigma), physics, candidates=16,
+                                     sequential=seq, check=check, **kw),
                                  Ranking(), args.repeats, first=lambda result: result[0][0][0].position_m))
         for n in map(int, args.heights.split(",")):
             scene = column(n)
-            rows.append(both(f"support graph, column of {n} 10 cm cubes, k = 8 per variant (one run)",
+            rows.append(ask_both(f"support graph, column of {n} 10 cm cubes, k = 8 per variant (one run)",
                              8.0 if n == 40 else None,
-                             lambda seq, check: A.support_graph(scene, ModelConfig(sigma_m=0.005, samples=8),
-                                                                settings, sequential=seq, check=check,
-                                                                **kw).answers, supports, 1))
+                             lambda seq, check, physics=settings: A.support_graph(
+                                 scene, ModelConfig(sigma_m=0.005, samples=8), physics, sequential=seq, check=check,
+                                 **kw).answers, supports, 1))
         shelves = []
         for copies in map(int, args.shelves.split(",")):
             scene = shelf(tower, copies)
@@ -242,6 +278,18 @@ def main() -> int:
                      f"{r['same_decision']} of {r['fixed_decided']} | {r['point_answer_differs']} of "
                      f"{r['fixed_undecided']}{extra} | "
                      f"{'-' if r['mean_samples_drawn'] is None else format(r['mean_samples_drawn'], '.1f')} |")
+    lines += ["", "The check's floor: a check that compares at least one sample of each variant it does not validate "
+              "adds that many reference rollouts to the unchecked (sequential) answer, each priced by the same "
+              "question answered at the reference (unchecked, once): the least the checked answer can cost with "
+              "these physics, escalating nothing. Rollouts: the fast answer's, and the checked answer's at the "
+              "reference.", "",
+              "| question | fast rollouts | reference rollouts (checked) | variants compared | reference / fast, "
+              "per rollout | floor s | self-checked s | sequential s |", "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        ratio = r.get("reference_over_fast_per_rollout")
+        lines.append(f"| {r['question']} | {r['fast_rollouts']} | {r['reference_rollouts']} | {r['compared_variants']} | "
+                     f"{'-' if ratio is None else format(ratio, '.1f') + 'x'} | {r['floor_s']:.2f} | "
+                     f"{r['checked_s']:.2f} | {r['sequential_s']:.2f} |")
     lines += ["", "One removal (k = 16) in a scene of N separate 10-block towers 10 m apart (a 3.2 m tower reaches 7.4 m: `actions.reach_m`):", "",
               "| towers | s |", "|---|---|"] + [f"| {r['towers']} | {r['seconds']:.2f} |" for r in shelves]
     (out / "actions.md").write_text("\n".join(lines) + "\n")

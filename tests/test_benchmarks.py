@@ -246,8 +246,14 @@ def test_actions_benchmark_compares_sequential_fixed_k_and_checked_answers(tmp_p
     for row in data["questions"]:
         # every decision the fixed-k interval made, the sequential run made the same
         assert row["same_decision"] == row["fixed_decided"], row
+        # the check's floor: one reference rollout at least per variant compared, priced dearer than a fast one
+        assert row["reference_rollouts"] >= row["compared_variants"] and row["floor_s"] >= row["sequential_s"], row
+        if row["compared_variants"]:
+            assert row["reference_over_fast_per_rollout"] > 1 and row["floor_s"] > row["sequential_s"], row
+    assert any(row["compared_variants"] for row in data["questions"])
     assert [r["towers"] for r in data["unrelated_towers"]] == [1]
-    assert "| question | stands |" in (tmp_path / "actions.md").read_text()
+    text = (tmp_path / "actions.md").read_text()
+    assert "| question | stands |" in text and "| question | fast rollouts |" in text
 
 
 def test_check_cost_sorts_the_checked_predictions_map_calls_into_its_parts(tmp_path):

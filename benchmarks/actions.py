@@ -281,8 +281,8 @@ def main() -> int:
     lines += ["", "The check's floor: a check that compares at least one sample of each variant it does not validate "
               "adds that many reference rollouts to the unchecked (sequential) answer, each priced by the same "
               "question answered at the reference (unchecked, once): the least the checked answer can cost with "
-              "these physics, escalating nothing. Rollouts: the fast answer's, and the checked answer's at the "
-              "reference.", "",
+              "these physics, escalating nothing (an estimate: reference rollouts that run beside fast ones are not "
+              "credited). Rollouts: the fast answer's, and the checked answer's at the reference.", "",
               "| question | fast rollouts | reference rollouts (checked) | variants compared | reference / fast, "
               "per rollout | floor s | self-checked s | sequential s |", "|---|---|---|---|---|---|---|---|"]
     for r in rows:

@@ -20,13 +20,13 @@ start (``SimSettings.islands``).
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..scene.disjoint import DisjointSets
-from .world import bounding_boxes
+from .bullet import pybullet
+from .world import bounding_boxes, gap_between_m, move_body
 
 
 #: the most islands (pybullet clients) a sample is split into: 200 scattered boxes must not open 200
@@ -129,24 +129,17 @@ class ShapeGaps:
                    up_to_m: float) -> float:
         """How far body ``body_a`` of ``island_a`` at ``pose_a`` ((positions, orientations) of its
         island) is from ``body_b`` of ``island_b`` at ``pose_b``; inf beyond ``up_to_m``."""
-        from .bullet import pybullet
-
         if self._world is None:
             self._world = self._build()
-        p, cid = pybullet(), self._world.client
         handles = []
         for island, body, (positions, orientations) in ((island_a, body_a, pose_a), (island_b, body_b, pose_b)):
             handle = self._world.dynamic_ids[int(self._members[island][body])]
-            p.resetBasePositionAndOrientation(handle, positions[body].tolist(), orientations[body].tolist(),
-                                              physicsClientId=cid)
+            move_body(self._world, handle, positions[body], orientations[body])
             handles.append(handle)
-        points = p.getClosestPoints(handles[0], handles[1], float(up_to_m), physicsClientId=cid)
-        return min((point[8] for point in points), default=math.inf)
+        return gap_between_m(self._world, handles[0], handles[1], float(up_to_m))
 
     def close(self) -> None:
         if self._world is not None:
-            from .bullet import pybullet
-
             pybullet().resetSimulation(physicsClientId=self._world.client)
             self._world = None
 

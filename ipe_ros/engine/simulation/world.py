@@ -10,6 +10,7 @@ Every other module of the simulation reaches pybullet through ``bullet.pybullet(
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -261,19 +262,21 @@ def move_body(world: World, handle: int, position_m, orientation_xyzw) -> None:
                                                [float(v) for v in orientation_xyzw], physicsClientId=world.client)
 
 
+def gap_between_m(world: World, handle: int, other: int, within_m: float) -> float:
+    """The smallest distance between bodies ``handle`` and ``other`` (negative: overlapping), or
+    inf when they are farther apart than ``within_m``."""
+    points = pybullet().getClosestPoints(handle, other, within_m, physicsClientId=world.client)
+    return min((point[8] for point in points), default=math.inf)
+
+
 def gap_to_others_m(world: World, handle: int, within_m: float) -> float:
     """The smallest distance from body ``handle`` to any other body or the support (negative:
     overlapping), or ``within_m`` when nothing is that close."""
-    p = pybullet()
-    gap = within_m
     # the world's own handles: pybullet's getNumBodies / getBodyUniqueId miss all but one of the
     # bodies a batched createMultiBody makes (identical boxes), so a probe would sink through them
-    for other in (*world.support_ids, *world.static_ids, *world.dynamic_ids):
-        if other == handle:
-            continue
-        for point in p.getClosestPoints(handle, other, within_m, physicsClientId=world.client):
-            gap = min(gap, point[8])
-    return gap
+    return min([within_m] + [gap_between_m(world, handle, other, within_m)
+                             for other in (*world.support_ids, *world.static_ids, *world.dynamic_ids)
+                             if other != handle])
 
 
 def uses_direct_solver(scene: Scene, settings: SimSettings, masses_kg) -> bool:

@@ -149,15 +149,15 @@ def check_floor(run, seq_s: float, seq_answers: A.Answers, checked_answers: A.An
     the reference must add to the unchecked answer: that many reference rollouts, priced by the
     same question answered at the reference (unchecked, once, the same seeds)."""
     checked = [v for v in checked_answers.variants if v.fidelity not in (None, "validated", "unverified")]
+    counts = {"fast_rollouts": _fast_rollouts(seq_answers), "reference_rollouts": _reference_rollouts(checked_answers),
+              "compared_variants": len(checked)}
     if not checked:
-        return {"reference_rollouts": _reference_rollouts(checked_answers), "compared_variants": 0,
-                "floor_s": seq_s}
+        return {**counts, "floor_s": seq_s}
     reference_s, reference = timed(lambda: run(True, None, reference_settings()), 1)
     reference = reference if first is None else reference[1]
     per_reference_s = reference_s * workers / max(1, _fast_rollouts(reference))
-    per_fast_s = seq_s * workers / max(1, _fast_rollouts(seq_answers))
-    return {"reference_rollouts": _reference_rollouts(checked_answers), "compared_variants": len(checked),
-            "reference_s": reference_s, "reference_over_fast_per_rollout": per_reference_s / per_fast_s,
+    per_fast_s = seq_s * workers / max(1, counts["fast_rollouts"])
+    return {**counts, "reference_s": reference_s, "reference_over_fast_per_rollout": per_reference_s / per_fast_s,
             "floor_s": seq_s + len(checked) * per_reference_s / workers}
 
 
@@ -178,8 +178,7 @@ def both(name: str, target_s: float | None, run, rule, repeats: int, first=None,
            "validated_variants": verdicts.count("validated"),
            # the variants are simulated only in the samples where the scene as it is stands
            "as_is_standing": None if alone is None else alone.samples_standing,
-           "samples": fixed_answers.samples_requested, **compare(rule, seq_answers, fixed_answers),
-           "fast_rollouts": _fast_rollouts(seq_answers), **floor}
+           "samples": fixed_answers.samples_requested, **compare(rule, seq_answers, fixed_answers), **floor}
     if first is not None:  # a ranking: the candidate each run puts first, and its fixed-k P
         chosen, best = first(seq), first(fixed)
         row["same_first_choice"] = chosen == best
